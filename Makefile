@@ -1,0 +1,48 @@
+# axdf: two commands on a fresh machine.
+#   make demo   set up (.venv, packages, Mesa EGL if missing) and run the demo job into out/demo
+#   make test   set up and run the whole test suite (CI calls this through .ci/run)
+#   make bench  set up and print the benchmark table
+PY     ?= python3
+VENV   := .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed
+DEMO   ?= poses/jobs/demo.yaml
+
+.PHONY: all setup sysdeps demo test bench golden clean
+
+all: demo
+
+setup: $(STAMP)
+
+# Mesa's EGL (llvmpipe) for headless rendering without a GPU. Installed with apt-get
+# only when the libraries are missing and we are root; otherwise print the command.
+sysdeps:
+	@if ldconfig -p 2>/dev/null | grep -q 'libEGL.so.1' && ldconfig -p 2>/dev/null | grep -q 'libEGL_mesa.so.0' \
+	   && ls /usr/lib/*/dri/swrast_dri.so >/dev/null 2>&1; then :; \
+	elif [ "$$(id -u)" = "0" ] && command -v apt-get >/dev/null; then \
+	  echo "installing Mesa EGL (libegl1 libegl-mesa0 libgl1-mesa-dri libgles2)"; \
+	  apt-get update -q && DEBIAN_FRONTEND=noninteractive apt-get install -y -q libegl1 libegl-mesa0 libgl1-mesa-dri libgles2; \
+	else \
+	  echo "warning: Mesa EGL missing; install it with: sudo apt-get install -y libegl1 libegl-mesa0 libgl1-mesa-dri libgles2" >&2; \
+	fi
+
+$(STAMP): pyproject.toml
+	@$(MAKE) --no-print-directory sysdeps
+	$(PY) -m venv $(VENV)
+	$(BIN)/python -m pip install -q --upgrade pip
+	$(BIN)/python -m pip install -q -e '.[test]'
+	@touch $@
+
+demo: $(STAMP)
+	$(BIN)/axdf run $(DEMO) --out out/demo --overwrite
+	@echo "demo results: out/demo (meshes/, frames/, stats.csv, manifest.json)"
+
+test: $(STAMP)
+	$(BIN)/python -m pytest -q tests
+
+bench: $(STAMP)
+	$(BIN)/python -m pip install -q -e '.[bench]'
+	$(BIN)/python -m axdf_cli.bench
+
+clean:
+	rm -rf out .pytest_cache

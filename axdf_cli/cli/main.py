@@ -1,0 +1,96 @@
+"""``axdf`` entry point: ``main(argv=None) -> int``; one module per subcommand.
+
+Each subcommand module has ``add_args(parser)`` and ``run(args) -> int``. Errors raised below
+the CLI become exit codes here: 2 bad input (``FILE:LINE:COL: what; allowed``), 3 the
+environment cannot do the work, 130 interrupted. No traceback reaches the user unless
+``--traceback`` is given.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import signal
+import sys
+
+from axdf_cli import __version__
+from axdf_cli.errors import AxdfError, EnvironmentProblem, InputError, Interrupted
+
+# name -> (module, help). The order is the order of `axdf --help`.
+COMMANDS = {
+    "run": ("axdf_cli.cli.run", "evaluate muscles over a pose; write meshes, stats (and frames)"),
+    "validate": ("axdf_cli.cli.validate", "check muscle, skeleton, pose and job files; write nothing"),
+}
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # argparse's own errors: exit 2 with the usage line
+        self.print_usage(sys.stderr)
+        sys.stderr.write(f"axdf: error: {message}\n")
+        raise SystemExit(2)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="axdf", description="AxDf muscle meshes from YAML muscles and poses.")
+    p.add_argument("--version", action="version", version=f"axdf {__version__}")
+    p.add_argument("--traceback", action="store_true", help=argparse.SUPPRESS)
+    sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    sub.required = True
+    for name, (modname, help_text) in COMMANDS.items():
+        mod = importlib.import_module(modname)
+        sp = sub.add_parser(name, help=help_text, description=(mod.__doc__ or help_text).strip().splitlines()[0])
+        g = sp.add_mutually_exclusive_group()
+        g.add_argument("-q", "--quiet", action="store_true", help="print only errors")
+        g.add_argument("-v", "--verbose", action="store_true", help="print more detail")
+        mod.add_args(sp)
+        sp.set_defaults(_module=mod)
+    return p
+
+
+def _on_sigterm(signum, frame):
+    raise KeyboardInterrupt
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as e:
+        return int(e.code or 0) if not isinstance(e.code, str) else 2
+    old = None
+    try:
+        old = signal.signal(signal.SIGTERM, _on_sigterm)
+    except ValueError:  # not the main thread (tests calling main in a thread)
+        pass
+    try:
+        return int(args._module.run(args) or 0)
+    except InputError as e:
+        if args.traceback:
+            raise
+        print(f"axdf: {e}" if e.where is None else str(e), file=sys.stderr)
+        return 2
+    except EnvironmentProblem as e:
+        if args.traceback:
+            raise
+        print(f"axdf: {e.problem}", file=sys.stderr)
+        if e.hint:
+            print(f"hint: {e.hint}", file=sys.stderr)
+        return 3
+    except (KeyboardInterrupt, Interrupted):
+        print("axdf: interrupted", file=sys.stderr)
+        return 130
+    except AxdfError as e:
+        if args.traceback:
+            raise
+        print(f"axdf: {e}", file=sys.stderr)
+        return e.exit_code
+    finally:
+        if old is not None:
+            signal.signal(signal.SIGTERM, old)
+
+
+def entry() -> None:
+    sys.exit(main())
+
+
+if __name__ == "__main__":
+    entry()

@@ -1,0 +1,66 @@
+"""The error hierarchy. Only the CLI layer prints errors or exits.
+
+- :class:`InputError`: bad input (exit 2), printed as ``FILE:LINE:COL: what is wrong; what is allowed``.
+- :class:`EnvironmentProblem`: the machine cannot do the work (exit 3), with a hint.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Mark:
+    """A position in an input file (1-based line and column)."""
+
+    file: str
+    line: int = 0
+    col: int = 0
+
+    def __str__(self) -> str:
+        if self.line <= 0:
+            return self.file
+        return f"{self.file}:{self.line}:{self.col}"
+
+
+class AxdfError(Exception):
+    exit_code = 1
+
+
+class InputError(AxdfError):
+    """Bad input: carries where (file, line, column), what is wrong, and what is allowed."""
+
+    exit_code = 2
+
+    def __init__(self, where: Mark | str | None, problem: str, allowed: str | None = None):
+        if isinstance(where, str):
+            where = Mark(where)
+        self.where = where
+        self.problem = problem
+        self.allowed = allowed
+        super().__init__(str(self))
+
+    def __str__(self) -> str:
+        text = self.problem if self.allowed is None else f"{self.problem}; {self.allowed}"
+        return f"{self.where}: {text}" if self.where is not None else text
+
+
+class UsageError(InputError):
+    """Bad command-line usage (no file position)."""
+
+    def __init__(self, problem: str, allowed: str | None = None):
+        super().__init__(None, problem, allowed)
+
+
+class EnvironmentProblem(AxdfError):
+    """The environment cannot do the work (no EGL, unwritable output, full disk)."""
+
+    exit_code = 3
+
+    def __init__(self, problem: str, hint: str | None = None):
+        self.problem = problem
+        self.hint = hint
+        super().__init__(problem if hint is None else f"{problem}\nhint: {hint}")
+
+
+class Interrupted(AxdfError):
+    exit_code = 130

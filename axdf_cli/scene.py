@@ -1,0 +1,41 @@
+"""What the renderer consumes: pure arrays, produced by ``axdf run`` or read back from a run.
+
+A :class:`Scene` fixes everything that does not change over time (topology, colours, bone
+geometry, the sequence's bounds); :class:`FrameChunk` carries a block of consecutive
+output frames (batch dimension first).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class SceneMuscle:
+    name: str
+    color: tuple[float, float, float]  # linear RGB in [0, 1]
+    faces: np.ndarray  # (T, 3) int32, counter-clockwise seen from outside
+
+
+@dataclass(frozen=True)
+class SceneBone:
+    name: str
+    vertices: np.ndarray  # (V, 3) float32 in the bone's local frame (metres)
+    faces: np.ndarray  # (T, 3) int32
+
+
+@dataclass(frozen=True)
+class Scene:
+    muscles: tuple[SceneMuscle, ...]
+    bones: tuple[SceneBone, ...]  # only bones that have a mesh
+    bounds: np.ndarray  # (2, 3) float64 world AABB of every muscle over the whole sequence
+    frames: tuple[int, ...]  # every output frame number, in order
+
+
+@dataclass(frozen=True)
+class FrameChunk:
+    frames: np.ndarray  # (C,) int frame numbers
+    positions: tuple[np.ndarray, ...]  # per muscle: (C, V_m, 3) float32 world positions
+    normals: tuple[np.ndarray, ...]  # per muscle: (C, V_m, 3) float32 unit outward normals
+    bone_world: np.ndarray  # (C, n_scene_bones, 4, 4) float64 world transform of each Scene bone

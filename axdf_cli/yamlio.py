@@ -1,0 +1,374 @@
+"""Safe YAML reading that keeps every value's file position, and a small schema reader.
+
+Documents are composed with PyYAML's ``SafeLoader`` into nodes and converted here into
+:class:`YMap` / :class:`YSeq` (a ``dict`` / ``list`` that remember the line and column of
+their keys and items). Hostile input is refused with an :class:`InputError` that names the
+position: non-UTF-8 bytes, non-standard tags (``!!python/object`` ...), alias bombs (the
+expanded document may hold at most ``YAML_MAX_NODES`` nodes), deep nesting, duplicate keys,
+and non-finite or huge numbers.
+
+:class:`Fields` reads one mapping against a schema: every read key is checked for type and
+range, and :meth:`Fields.done` reports any key that was not read as unknown, listing the
+allowed ones.
+"""
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+from typing import Any, Iterable, Sequence
+
+import yaml
+
+from axdf_cli import tolerances as tol
+from axdf_cli.errors import InputError, Mark
+
+NAME_RE = re.compile(r"^[A-Za-z0-9_.-]+$")
+NAME_ALLOWED = "names use letters, digits, '_', '.', '-' (not '.' or '..' alone)"
+
+_STD_TAGS = {
+    "tag:yaml.org,2002:str",
+    "tag:yaml.org,2002:int",
+    "tag:yaml.org,2002:float",
+    "tag:yaml.org,2002:bool",
+    "tag:yaml.org,2002:null",
+}
+_MAP_TAG = "tag:yaml.org,2002:map"
+_SEQ_TAG = "tag:yaml.org,2002:seq"
+
+
+class YMap(dict):
+    """A mapping from YAML that knows where it and each of its keys and values are."""
+
+    mark: Mark
+    key_marks: dict
+    value_marks: dict
+
+    def key_mark(self, key) -> Mark:
+        return self.key_marks.get(key, self.mark)
+
+    def value_mark(self, key) -> Mark:
+        return self.value_marks.get(key, self.mark)
+
+
+class YSeq(list):
+    """A sequence from YAML that knows where it and each of its items are."""
+
+    mark: Mark
+    item_marks: list
+
+    def item_mark(self, i: int) -> Mark:
+        return self.item_marks[i] if 0 <= i < len(self.item_marks) else self.mark
+
+
+def mark_of(value, default: Mark) -> Mark:
+    return getattr(value, "mark", default)
+
+
+def _mark(file: str, m) -> Mark:
+    return Mark(file, m.line + 1, m.column + 1)
+
+
+def read_text(path: Path, display: str | None = None) -> str:
+    """Read a UTF-8 text file; refuse binary, oversize or undecodable files with a position."""
+    display = display or str(path)
+    try:
+        data = Path(path).read_bytes()
+    except FileNotFoundError:
+        raise InputError(Mark(display), "file not found", "give an existing file") from None
+    except IsADirectoryError:
+        raise InputError(Mark(display), "is a folder, not a file", "give a YAML file") from None
+    except OSError as e:
+        raise InputError(Mark(display), f"cannot read file ({e.strerror})") from None
+    if len(data) > tol.YAML_MAX_BYTES:
+        raise InputError(Mark(display), f"file is {len(data)} bytes",
+                         f"at most {tol.YAML_MAX_BYTES} bytes are read")
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        before = data[: e.start]
+        line = before.count(b"\n") + 1
+        col = e.start - (before.rfind(b"\n") + 1) + 1
+        raise InputError(Mark(display, line, col), f"byte 0x{data[e.start]:02x} is not UTF-8",
+                         "input files must be UTF-8 text") from None
+    if "\x00" in text:
+        off = text.index("\x00")
+        line = text.count("\n", 0, off) + 1
+        col = off - (text.rfind("\n", 0, off) + 1) + 1
+        raise InputError(Mark(display, line, col), "NUL character in text", "input files must be text")
+    return text
+
+
+def load_yaml(path: Path | str, display: str | None = None) -> Any:
+    """Load one YAML document safely; return YMap/YSeq/scalars carrying positions."""
+    display = display or str(path)
+    text = read_text(Path(path), display)
+    return parse_yaml(text, display)
+
+
+def parse_yaml(text: str, display: str) -> Any:
+    loader = yaml.SafeLoader(text)
+    try:
+        node = loader.get_single_node()
+    except yaml.MarkedYAMLError as e:
+        m = e.problem_mark or e.context_mark
+        where = _mark(display, m) if m is not None else Mark(display)
+        problem = e.problem or e.context or "YAML syntax error"
+        raise InputError(where, f"YAML syntax error: {problem}", "see https://yaml.org/spec/1.2.2/") from None
+    except yaml.YAMLError as e:
+        raise InputError(Mark(display), f"YAML error: {e}") from None
+    except RecursionError:
+        raise InputError(Mark(display), "document nested too deeply",
+                         f"at most {tol.YAML_MAX_DEPTH} levels") from None
+    if node is None:
+        return None
+    conv = _Converter(loader, display)
+    try:
+        return conv.convert(node, 0)
+    finally:
+        loader.dispose()
+
+
+class _Converter:
+    def __init__(self, loader: yaml.SafeLoader, file: str):
+        self.loader = loader
+        self.file = file
+        self.count = 0
+
+    def convert(self, node, depth: int):
+        self.count += 1
+        where = _mark(self.file, node.start_mark)
+        if self.count > tol.YAML_MAX_NODES:
+            raise InputError(where, f"document expands to more than {tol.YAML_MAX_NODES} values "
+                             "(an alias bomb?)", "use fewer aliases")
+        if depth > tol.YAML_MAX_DEPTH:
+            raise InputError(where, "document nested too deeply", f"at most {tol.YAML_MAX_DEPTH} levels")
+        if isinstance(node, yaml.ScalarNode):
+            if node.tag not in _STD_TAGS:
+                raise InputError(where, f"tag {node.tag!r} is not allowed",
+                                 "plain strings, numbers, booleans and null only")
+            try:
+                value = self.loader.construct_object(node, deep=True)
+            except yaml.YAMLError as e:
+                raise InputError(where, f"bad value: {getattr(e, 'problem', e)}") from None
+            if isinstance(value, float) and not math.isfinite(value):
+                raise InputError(where, f"number {node.value!r} is not finite", "finite numbers only")
+            return value
+        if isinstance(node, yaml.SequenceNode):
+            if node.tag != _SEQ_TAG:
+                raise InputError(where, f"tag {node.tag!r} is not allowed", "plain lists only")
+            out = YSeq()
+            out.mark = where
+            out.item_marks = []
+            for item in node.value:
+                out.item_marks.append(_mark(self.file, item.start_mark))
+                out.append(self.convert(item, depth + 1))
+            return out
+        if isinstance(node, yaml.MappingNode):
+            if node.tag != _MAP_TAG:
+                raise InputError(where, f"tag {node.tag!r} is not allowed", "plain mappings only")
+            out = YMap()
+            out.mark = where
+            out.key_marks = {}
+            out.value_marks = {}
+            for knode, vnode in node.value:
+                kmark = _mark(self.file, knode.start_mark)
+                if not isinstance(knode, yaml.ScalarNode):
+                    raise InputError(kmark, "mapping key is not a plain value", "keys are names or numbers")
+                key = self.convert(knode, depth + 1)
+                if isinstance(key, (list, dict)):
+                    raise InputError(kmark, "mapping key is not a plain value", "keys are names or numbers")
+                if key in out:
+                    first = out.key_marks[key]
+                    raise InputError(kmark, f"duplicate key {key!r} (first at line {first.line})",
+                                     "each key once")
+                out.key_marks[key] = kmark
+                out.value_marks[key] = _mark(self.file, vnode.start_mark)
+                out[key] = self.convert(vnode, depth + 1)
+            return out
+        raise InputError(where, "unsupported YAML node")
+
+
+# ----------------------------------------------------------------------------- schema reading
+
+def _type_name(v) -> str:
+    if v is None:
+        return "null"
+    if isinstance(v, bool):
+        return "a boolean"
+    if isinstance(v, (int, float)):
+        return f"the number {v!r}"
+    if isinstance(v, str):
+        return f"the string {v!r}" if len(v) < 40 else "a string"
+    if isinstance(v, list):
+        return "a list"
+    if isinstance(v, dict):
+        return "a mapping"
+    return type(v).__name__
+
+
+def check_number(v, where: Mark, what: str, lo=None, hi=None, lo_open=False, integer=False) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise InputError(where, f"{what} is {_type_name(v)}",
+                         f"{what} must be {'an integer' if integer else 'a number'}")
+    if integer and not isinstance(v, int):
+        if float(v).is_integer():
+            v = int(v)
+        else:
+            raise InputError(where, f"{what} is {v!r}", f"{what} must be an integer")
+    if isinstance(v, float) and not math.isfinite(v):
+        raise InputError(where, f"{what} is not finite", "finite numbers only")
+    if abs(v) > tol.MAX_ABS_NUMBER:
+        raise InputError(where, f"{what} is {v!r}, too large", f"|{what}| <= {tol.MAX_ABS_NUMBER:g}")
+    rng = _range_text(lo, hi, lo_open)
+    if lo is not None and (v < lo or (lo_open and v == lo)):
+        raise InputError(where, f"{what} is {v!r}", f"{what} must be {rng}")
+    if hi is not None and v > hi:
+        raise InputError(where, f"{what} is {v!r}", f"{what} must be {rng}")
+    return v
+
+
+def _range_text(lo, hi, lo_open) -> str:
+    if lo is not None and hi is not None:
+        return f"in {'(' if lo_open else '['}{lo}, {hi}]"
+    if lo is not None:
+        return f"{'>' if lo_open else '>='} {lo}"
+    if hi is not None:
+        return f"<= {hi}"
+    return "a number"
+
+
+def check_name(v, where: Mark, what: str) -> str:
+    if not isinstance(v, str) or not NAME_RE.match(v) or v in (".", ".."):
+        raise InputError(where, f"{what} is {_type_name(v)}", f"{what}: {NAME_ALLOWED}")
+    return v
+
+
+def check_vector(v, where: Mark, what: str, n: int | None = None, lo=None, hi=None,
+                 lo_open=False, min_len: int = 0) -> tuple:
+    if not isinstance(v, list):
+        size = f"{n} numbers" if n else "numbers"
+        raise InputError(where, f"{what} is {_type_name(v)}", f"{what} must be a list of {size}")
+    if n is not None and len(v) != n:
+        raise InputError(where, f"{what} has {len(v)} values", f"{what} must have exactly {n}")
+    if len(v) < min_len:
+        raise InputError(where, f"{what} has {len(v)} values", f"{what} must have at least {min_len}")
+    marks = getattr(v, "item_marks", None)
+    out = []
+    for i, x in enumerate(v):
+        m = marks[i] if marks and i < len(marks) else where
+        out.append(float(check_number(x, m, f"{what}[{i}]", lo, hi, lo_open)))
+    return tuple(out)
+
+
+class Fields:
+    """Read one YAML mapping against a schema; unknown keys are errors at :meth:`done`."""
+
+    def __init__(self, value, where: Mark, what: str):
+        if not isinstance(value, dict):
+            raise InputError(mark_of(value, where), f"{what} is {_type_name(value)}", f"{what} must be a mapping")
+        self.m: YMap = value
+        self.where = getattr(value, "mark", where)
+        self.what = what
+        self.known: list[str] = []
+
+    # positions ---------------------------------------------------------------------------
+    def vmark(self, key) -> Mark:
+        return self.m.value_mark(key) if isinstance(self.m, YMap) else self.where
+
+    def kmark(self, key) -> Mark:
+        return self.m.key_mark(key) if isinstance(self.m, YMap) else self.where
+
+    # access --------------------------------------------------------------------------------
+    def has(self, key: str) -> bool:
+        self._know(key)
+        return key in self.m
+
+    def _know(self, key):
+        if key not in self.known:
+            self.known.append(key)
+
+    def raw(self, key: str, required: bool = False, default=None):
+        self._know(key)
+        if key not in self.m:
+            if required:
+                raise InputError(self.where, f"{self.what} has no {key!r}", f"{self.what} needs {key!r}")
+            return default
+        return self.m[key]
+
+    def number(self, key, default=None, required=False, lo=None, hi=None, lo_open=False, integer=False):
+        v = self.raw(key, required, None)
+        if v is None and key not in self.m:
+            return default
+        return check_number(v, self.vmark(key), key, lo, hi, lo_open, integer)
+
+    def boolean(self, key, default=None, required=False) -> bool:
+        v = self.raw(key, required, None)
+        if key not in self.m:
+            return default
+        if not isinstance(v, bool):
+            raise InputError(self.vmark(key), f"{key} is {_type_name(v)}", f"{key} must be true or false")
+        return v
+
+    def name(self, key, default=None, required=False) -> str:
+        v = self.raw(key, required, None)
+        if key not in self.m:
+            return default
+        return check_name(v, self.vmark(key), key)
+
+    def string(self, key, default=None, required=False) -> str:
+        v = self.raw(key, required, None)
+        if key not in self.m:
+            return default
+        if not isinstance(v, str) or not v:
+            raise InputError(self.vmark(key), f"{key} is {_type_name(v)}", f"{key} must be a non-empty string")
+        return v
+
+    def choice(self, key, choices: Sequence[str], default=None, required=False) -> str:
+        v = self.raw(key, required, None)
+        if key not in self.m:
+            return default
+        if v not in choices:
+            raise InputError(self.vmark(key), f"{key} is {_type_name(v)}",
+                             f"{key} is one of {', '.join(choices)}")
+        return v
+
+    def vector(self, key, n=None, default=None, required=False, lo=None, hi=None, lo_open=False,
+               min_len: int = 0):
+        v = self.raw(key, required, None)
+        if key not in self.m:
+            return default
+        return check_vector(v, self.vmark(key), key, n, lo, hi, lo_open, min_len)
+
+    def seq(self, key, default=None, required=False, min_len: int = 0) -> YSeq | None:
+        v = self.raw(key, required, None)
+        if key not in self.m:
+            return default
+        if not isinstance(v, list):
+            raise InputError(self.vmark(key), f"{key} is {_type_name(v)}", f"{key} must be a list")
+        if len(v) < min_len:
+            raise InputError(self.vmark(key), f"{key} has {len(v)} entries",
+                             f"{key} needs at least {min_len}")
+        return v
+
+    def mapping(self, key, default=None, required=False) -> YMap | None:
+        v = self.raw(key, required, None)
+        if key not in self.m:
+            return default
+        if not isinstance(v, dict):
+            raise InputError(self.vmark(key), f"{key} is {_type_name(v)}", f"{key} must be a mapping")
+        return v
+
+    def done(self, extra_allowed: Iterable[str] = ()) -> None:
+        allowed = list(self.known) + [k for k in extra_allowed if k not in self.known]
+        for key in self.m:
+            if key not in allowed:
+                raise InputError(self.kmark(key), f"unknown key {key!r} in {self.what}",
+                                 f"allowed: {', '.join(allowed)}")
+
+
+def item_marks(seq, where: Mark) -> list[Mark]:
+    marks = getattr(seq, "item_marks", None)
+    if marks is None:
+        return [where] * len(seq)
+    return marks
