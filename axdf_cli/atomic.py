@@ -1,0 +1,92 @@
+"""Files appear whole or not at all: write to a temporary name in the same folder, then rename.
+
+Errors of the machine (unwritable folder, full disk) become :class:`EnvironmentProblem`
+(exit 3) and leave no temporary file behind.
+"""
+from __future__ import annotations
+
+import contextlib
+import errno
+import hashlib
+import os
+from pathlib import Path
+from typing import Iterator
+
+from axdf_cli.errors import EnvironmentProblem
+
+TMP_PREFIX = ".axdf-tmp-"
+
+
+def _env_problem(path: Path, e: OSError) -> EnvironmentProblem:
+    if e.errno == errno.ENOSPC:
+        return EnvironmentProblem(f"{path}: no space left on device", "free disk space or choose another --out")
+    if e.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
+        return EnvironmentProblem(f"{path}: cannot write ({e.strerror})",
+                                  "choose a writable --out folder")
+    return EnvironmentProblem(f"{path}: cannot write ({e.strerror})")
+
+
+def ensure_dir(path: Path) -> None:
+    try:
+        Path(path).mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise _env_problem(Path(path), e) from None
+
+
+@contextlib.contextmanager
+def atomic_open(path: Path | str, mode: str = "wb") -> Iterator:
+    """Open a temporary file beside ``path``; on success fsync-free rename over ``path``."""
+    path = Path(path)
+    ensure_dir(path.parent)
+    tmp = path.with_name(f"{TMP_PREFIX}{os.getpid()}-{path.name}")
+    try:
+        f = open(tmp, mode)
+    except OSError as e:
+        raise _env_problem(path, e) from None
+    try:
+        with f:
+            yield f
+        os.replace(tmp, path)
+    except OSError as e:
+        _unlink(tmp)
+        raise _env_problem(path, e) from None
+    except BaseException:
+        _unlink(tmp)
+        raise
+
+
+def _unlink(p: Path) -> None:
+    try:
+        p.unlink()
+    except OSError:
+        pass
+
+
+def write_bytes(path: Path | str, data: bytes) -> str:
+    """Write ``data`` atomically; return its sha256 hex digest."""
+    with atomic_open(path, "wb") as f:
+        f.write(data)
+    return hashlib.sha256(data).hexdigest()
+
+
+def write_text(path: Path | str, text: str) -> str:
+    return write_bytes(path, text.encode("utf-8"))
+
+
+def sha256_file(path: Path | str) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def remove_stale_temporaries(folder: Path) -> int:
+    """Delete temporaries left by a killed run (used by --resume); return how many."""
+    n = 0
+    if not Path(folder).exists():
+        return 0
+    for p in Path(folder).rglob(f"{TMP_PREFIX}*"):
+        _unlink(p)
+        n += 1
+    return n
