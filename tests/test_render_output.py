@@ -144,8 +144,14 @@ def test_transparent_background_and_fixed_camera(tmp_path):
 
     png = np.asarray(Image.open(tmp_path / "frames" / "0001.png"))
     exr = read_exr(tmp_path / "frames" / "0001.exr")
-    assert np.all(png[..., 3][exr["id"] == 0][:10] <= 255)
-    assert png[0, 0, 3] == 0 and png[60, 80, 3] == 255
+    def all3x3(mask, edge):  # True where the pixel and its 8 neighbours are all in mask
+        pad = np.pad(mask, 1, constant_values=edge)
+        return np.all([pad[1 + di:121 + di, 1 + dj:161 + dj] for di in (-1, 0, 1) for dj in (-1, 0, 1)], 0)
+
+    bg = exr["id"] == 0
+    far_bg, inner = all3x3(bg, True), all3x3(~bg, False)
+    assert far_bg.any() and np.all(png[..., 3][far_bg] == 0) and np.all(exr["A"][far_bg] == 0)
+    assert inner.any() and np.all(png[..., 3][inner] == 255)
     cam = json.loads((tmp_path / "camera.json").read_text())
     mats = [fr["cameras"][0]["world_to_camera"] for fr in cam["frames"]]
     assert all(m == mats[0] for m in mats)  # no jumping without orbit
