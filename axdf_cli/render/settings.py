@@ -223,3 +223,17 @@ def _background_flag(text: str) -> tuple[float, float, float, float]:
     if len(vals) == 3:
         vals.append(1.0)
     return tuple(vals)
+
+
+def settings_to_dict(s: RenderSettings) -> dict:
+    """The settings as the job file's ``render:`` mapping (for the manifest; re-read by
+    :func:`parse_render_settings`). The EGL device and library are machine choices: omitted."""
+    d = {"enabled": s.enabled, "size": list(s.size), "fov": s.fov, "orbit": s.orbit,
+         "wireframe": s.wireframe, "background": list(s.background), "bones": s.bones,
+         "supersample": s.supersample}
+    if s.camera is not None:
+        d["camera"] = {"position": list(s.camera.position), "target": list(s.camera.target),
+                       "up": list(s.camera.up), "fov": s.camera.fov}
+    else:
+        d["view"] = s.view
+    return d
