@@ -39,6 +39,7 @@ class RunPlan:
     inputs: dict  # display path -> sha256
     render: object = None  # render settings (or None: no rendering)
     warnings: list = field(default_factory=list)
+    bone_meshes: dict = field(default_factory=dict)  # bone index -> (vertices (V,3) f4, faces (T,3) i4, file bytes)
 
     @property
     def names(self) -> list[str]:
@@ -103,13 +104,35 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
     fmt = fmt_arg or (job.format if job is not None else None) or "ply"
     out = Path(out_arg or (job.out if job is not None and job.out else None) or "out/run")
 
+    bone_meshes = {i: load_bone_mesh(b.mesh, pose.skeleton_path) for i, b in enumerate(skel.bones) if b.mesh}
+
     inputs = {}
     srcs = ([job.source] if job is not None else []) + [pose.source, pose.skeleton_path] + [str(f) for f in files]
     srcs += sorted({b.mesh for b in skel.bones if b.mesh})
     for s in srcs:
         if Path(s).is_file():
             inputs[_display(Path(s))] = atomic.sha256_file(s)
-    return RunPlan(pose, specs, models, frames, fmt, out, inputs, warnings=warnings)
+    return RunPlan(pose, specs, models, frames, fmt, out, inputs, warnings=warnings, bone_meshes=bone_meshes)
+
+
+def load_bone_mesh(path: str, skeleton_file: str):
+    """Read a bone's PLY (any PLY triangle mesh) → (vertices, faces, bytes); bad files are input errors."""
+    from axdf_cli.render.runio import read_ply
+
+    where = Mark(skeleton_file)
+    try:
+        data = Path(path).read_bytes()
+        v, _, f = read_ply(Path(path))
+    except OSError as e:
+        raise InputError(where, f"bone mesh {path} cannot be read ({e.strerror})",
+                         "a PLY file relative to the skeleton file") from None
+    except (ValueError, KeyError, IndexError, UnicodeDecodeError) as e:
+        raise InputError(Mark(str(path)), f"not a readable PLY mesh ({e})", "a binary little-endian PLY triangle mesh") from None
+    if len(f) and (f.min() < 0 or f.max() >= len(v)):
+        raise InputError(Mark(str(path)), "face indices out of range", "indices below the vertex count")
+    if not np.isfinite(v).all():
+        raise InputError(Mark(str(path)), "non-finite vertex coordinates", "finite numbers only")
+    return np.ascontiguousarray(v, dtype=np.float32), f.astype(np.int32), data
 
 
 # ----------------------------------------------------------------------------- evaluation
@@ -308,14 +331,8 @@ def execute(plan: RunPlan, *, resume: bool = False, overwrite: bool = False, pro
         raise InputError(None, f"{len(warnings)} warning(s) with --strict: {warnings[0]}",
                          "fix the inputs or run without --strict")
 
-    for b in bones:
-        if b.mesh:
-            try:
-                data = Path(b.mesh).read_bytes()
-            except OSError as e:
-                raise InputError(Mark(plan.pose.skeleton_path), f"bone mesh {b.mesh} cannot be read ({e.strerror})",
-                                 "a PLY file relative to the skeleton file") from None
-            writer.write(bone_mesh_relpath(b.name), data)
+    for i, (_, _, data) in sorted(plan.bone_meshes.items()):
+        writer.write(bone_mesh_relpath(bones[i].name), data)
 
     rows = [["frame", "muscle", "length", "volume", "volume_ratio", "tension", "twist", "scale", "warning"]]
     for i, frame in enumerate(plan.frames):
@@ -354,18 +371,15 @@ RENDER_CHUNK = 16  # frames per block handed to the renderer (all muscles of a f
 def render_run(plan: RunPlan, bounds: np.ndarray, progress=None) -> dict:
     """Render the plan's frames (the muscles evaluated again, block by block: evaluation is
     cheap next to rendering and this keeps memory bounded)."""
-    from axdf_cli.formats.ply import read_ply
     from axdf_cli.render import render_sequence
     from axdf_cli.scene import FrameChunk, Scene, SceneBone, SceneMuscle
 
     skel = plan.pose.skeleton
     bone_ids, scene_bones = [], []
     if plan.render.bones:
-        for i, b in enumerate(skel.bones):
-            if b.mesh:
-                v, _, f = read_ply(Path(b.mesh).read_bytes())
-                bone_ids.append(i)
-                scene_bones.append(SceneBone(b.name, np.ascontiguousarray(v), f))
+        for i, (v, f, _) in sorted(plan.bone_meshes.items()):
+            bone_ids.append(i)
+            scene_bones.append(SceneBone(skel.bones[i].name, v, f))
     scene = Scene(
         muscles=tuple(SceneMuscle(s.name, s.color, m.faces) for s, m in zip(plan.muscles, plan.models)),
         bones=tuple(scene_bones), bounds=bounds, frames=tuple(int(f) for f in plan.frames))
