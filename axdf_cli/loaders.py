@@ -315,6 +315,9 @@ def _parse_muscle(value, where: Mark, file: str, group: str = "") -> MuscleSpec:
             raise InputError(f.vmark("resolution"), f"resolution is {list(res)}",
                              "[along, around] integers in 3..4096")
         resolution = (int(r[0]), int(r[1]))
+        if resolution[0] * resolution[1] > 1_000_000:
+            raise InputError(f.vmark("resolution"), f"resolution {resolution[0]}x{resolution[1]} is too fine",
+                             "at most 1,000,000 vertices per muscle")
     weights = f.vector("weights", default=None, lo=0.0, lo_open=True)
     if weights is not None and len(weights) != len(sections):
         raise InputError(f.vmark("weights"), f"{len(weights)} weights for {len(sections)} sections",

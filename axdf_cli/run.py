@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -25,6 +26,8 @@ from axdf_cli.pose import effective_tension, parse_frames, sample_activation, sa
 from axdf_cli.skeleton import forward_kinematics, matrix_to_quaternion
 
 CHUNK_FRAMES = 128  # frames evaluated together: bounds memory for any sequence length
+EVAL_BUDGET_BYTES = 128 * 1024 * 1024  # per-muscle chunk memory budget (see chunk_frames)
+MANIFEST_INTERVAL_S = 1.0  # the in-progress manifest is rewritten at most this often
 TOP_FILES = ("manifest.json", "stats.csv", "bones.csv", "camera.json")
 
 
@@ -157,18 +160,31 @@ def twist_references(plan: RunPlan) -> np.ndarray:
     return out[plan.frames - pose.first]
 
 
-def evaluate_chunks(plan: RunPlan, chunk: int = CHUNK_FRAMES, twist_ref: np.ndarray | None = None):
-    """Yield (frame_slice, world (C, B, 4, 4), [FrameResult per muscle]) over the selected frames."""
+def chunk_frames(plan: RunPlan) -> int:
+    """Frames per evaluation chunk: at most CHUNK_FRAMES, fewer for very fine meshes, so that
+    one muscle's chunk (about 8 float64 arrays of (F, V, 3)) stays within EVAL_BUDGET_BYTES."""
+    v = max(m.n_vertices for m in plan.models)
+    return int(np.clip(EVAL_BUDGET_BYTES // (v * 3 * 8 * 8), 1, CHUNK_FRAMES))
+
+
+def evaluate_chunks(plan: RunPlan, chunk: int | None = None, twist_ref: np.ndarray | None = None):
+    """Yield (frame_slice, world (C, B, 4, 4), results) over the selected frames, where
+    ``results`` is a lazy iterator of (muscle index, FrameResult): a consumer that handles one
+    muscle at a time holds one muscle's chunk in memory, never all of them."""
     if twist_ref is None:
         twist_ref = twist_references(plan)
+    chunk = chunk or chunk_frames(plan)
     names = plan.names
     for s in range(0, len(plan.frames), chunk):
         fr = plan.frames[s:s + chunk]
         world = forward_kinematics(plan.pose.skeleton, sample_coordinates(plan.pose, fr))
         act = sample_activation(plan.pose, names, fr)
-        results = [m.evaluate(world, effective_tension(m.spec.tension, act[:, j]), twist_ref[s:s + len(fr), j])
-                   for j, m in enumerate(plan.models)]
-        yield slice(s, s + len(fr)), world, results
+
+        def results(world=world, act=act, s=s, n=len(fr)):
+            for j, m in enumerate(plan.models):
+                yield j, m.evaluate(world, effective_tension(m.spec.tension, act[:, j]), twist_ref[s:s + n, j])
+
+        yield slice(s, s + len(fr)), world, results()
 
 
 # ----------------------------------------------------------------------------- output
@@ -243,6 +259,11 @@ class OutputWriter:
         self.files[rel] = sha
 
 
+def previous_subset(previous: dict, out: Path) -> dict:
+    """The previous manifest's files that are still on disk (kept listed while resuming)."""
+    return {k: v for k, v in previous.items() if (out / k).is_file()}
+
+
 def _fmt_rows(rows: list[list]) -> str:
     return "".join(",".join(r) + "\n" for r in rows)
 
@@ -292,6 +313,7 @@ def execute(plan: RunPlan, *, resume: bool = False, overwrite: bool = False, pro
     previous = check_output_folder(out, resume, overwrite)
     atomic.ensure_dir(out)
     writer = OutputWriter(out, previous)
+    write_manifest(out, manifest_dict(plan, previous_subset(previous, out), [], complete=False))
     writers = [WRITERS[plan.fmt](m.faces, s.name) for s, m in zip(plan.muscles, plan.models)]
     nf, nm = len(plan.frames), len(plan.models)
     stats = np.zeros((nf, nm, 6))  # length, volume, ratio, tension, twist, scale
@@ -301,23 +323,38 @@ def execute(plan: RunPlan, *, resume: bool = False, overwrite: bool = False, pro
     bone_rows = np.zeros((nf, len(bones), 7))
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
-    for sl, world, results in evaluate_chunks(plan):
+    twist_ref = twist_references(plan)
+    if strict:  # evaluate everything first: with --strict, any warning stops the run before it writes
+        found = []
+        for sl, _, results in evaluate_chunks(plan, twist_ref=twist_ref):
+            for j, res in results:
+                found += [f"{plan.names[j]} frame {int(plan.frames[sl.start + i])}: {msg}" for i, msg in res.warnings]
+                bad = ~(np.isfinite(res.vertices).all(axis=(1, 2)) & np.isfinite(res.normals).all(axis=(1, 2)))
+                found += [f"{plan.names[j]} frame {int(plan.frames[sl.start + i])}: non-finite vertices"
+                          for i in np.nonzero(bad)[0]]
+        if found:
+            raise InputError(None, f"{len(found)} warning(s) with --strict; first: {found[0]}",
+                             "fix the inputs or run without --strict")
+    last_manifest = time.monotonic()
+    for sl, world, results in evaluate_chunks(plan, twist_ref=twist_ref):
         frames = plan.frames[sl]
-        for j, (res, w) in enumerate(zip(results, writers)):
+        for j, res in results:
+            w = writers[j]
             name = plan.muscles[j].name
             pos = res.vertices.astype(np.float32)
             nrm = res.normals.astype(np.float32)
             finite = np.isfinite(pos).all(axis=(1, 2)) & np.isfinite(nrm).all(axis=(1, 2))
+            for i in np.nonzero(~finite)[0]:
+                res.warnings.append((int(i), "non-finite vertices; the rest shape was written instead"))
+                pos[i] = plan.models[j].rest_vertices
+                nrm[i] = plan.models[j].rest_normals
             for i, frame in enumerate(frames):
-                if not finite[i]:
-                    res.warnings.append((i, "non-finite vertices replaced by the rest shape"))
-                    pos[i] = plan.models[j].rest_vertices
-                    nrm[i] = plan.models[j].rest_normals
                 writer.write(mesh_relpath(name, int(frame), plan.fmt), w.encode(pos[i], nrm[i]))
             lo = np.minimum(lo, pos.reshape(-1, 3).min(axis=0))
             hi = np.maximum(hi, pos.reshape(-1, 3).max(axis=0))
-            stats[sl, j] = np.stack([res.length, res.volume, res.volume / plan.models[j].v0, res.tension,
-                                     res.twist, res.scale], axis=1)
+            st = np.stack([res.length, res.volume, res.volume / plan.models[j].v0, res.tension,
+                           res.twist, res.scale], axis=1)
+            stats[sl, j] = np.where(np.isfinite(st), st, 0.0)
             for i, msg in res.warnings:
                 fi = sl.start + i
                 warn_text[fi][j] = (warn_text[fi][j] + "; " if warn_text[fi][j] else "") + msg
@@ -326,10 +363,9 @@ def execute(plan: RunPlan, *, resume: bool = False, overwrite: bool = False, pro
                 progress(len(frames))
         bone_rows[sl, :, :3] = world[:, :, :3, 3]
         bone_rows[sl, :, 3:] = matrix_to_quaternion(world[:, :, :3, :3])
-        write_manifest(out, manifest_dict(plan, writer.files, warnings, complete=False))
-    if strict and warnings:
-        raise InputError(None, f"{len(warnings)} warning(s) with --strict: {warnings[0]}",
-                         "fix the inputs or run without --strict")
+        if time.monotonic() - last_manifest >= MANIFEST_INTERVAL_S:
+            write_manifest(out, manifest_dict(plan, writer.files, warnings, complete=False))
+            last_manifest = time.monotonic()
 
     for i, (_, _, data) in sorted(plan.bone_meshes.items()):
         writer.write(bone_mesh_relpath(bones[i].name), data)
@@ -386,10 +422,19 @@ def render_run(plan: RunPlan, bounds: np.ndarray, progress=None) -> dict:
 
     def chunks():
         for sl, world, results in evaluate_chunks(plan, RENDER_CHUNK, twist_ref):
+            res = [r for _, r in results]
             yield FrameChunk(frames=plan.frames[sl],
-                             positions=tuple(r.vertices.astype(np.float32) for r in results),
-                             normals=tuple(r.normals.astype(np.float32) for r in results),
+                             positions=tuple(_finite_or_rest(r.vertices, m.rest_vertices) for r, m in zip(res, plan.models)),
+                             normals=tuple(_finite_or_rest(r.normals, m.rest_normals) for r, m in zip(res, plan.models)),
                              bone_world=world[:, bone_ids])
 
     twist_ref = twist_references(plan)
     return render_sequence(scene, chunks(), plan.render, plan.out, progress=progress)
+
+
+def _finite_or_rest(x: np.ndarray, rest: np.ndarray) -> np.ndarray:
+    """(F, V, 3) as float32, frames with non-finite values replaced by the rest shape (as written)."""
+    out = x.astype(np.float32)
+    bad = ~np.isfinite(out).all(axis=(1, 2))
+    out[bad] = rest
+    return out

@@ -118,7 +118,7 @@ def parse_yaml(text: str, display: str) -> Any:
     except yaml.YAMLError as e:
         raise InputError(Mark(display), f"YAML error: {e}") from None
     except RecursionError:
-        raise InputError(Mark(display), "document nested too deeply",
+        raise InputError(_too_deep(text, display), "document nested too deeply",
                          f"at most {tol.YAML_MAX_DEPTH} levels") from None
     if node is None:
         return None
@@ -127,6 +127,25 @@ def parse_yaml(text: str, display: str) -> Any:
         return conv.convert(node, 0)
     finally:
         loader.dispose()
+
+
+def _too_deep(text: str, display: str) -> Mark:
+    """Where nesting first exceeds the limit (the token scanner is iterative, unlike the composer)."""
+    opens = (yaml.BlockSequenceStartToken, yaml.BlockMappingStartToken,
+             yaml.FlowSequenceStartToken, yaml.FlowMappingStartToken)
+    closes = (yaml.BlockEndToken, yaml.FlowSequenceEndToken, yaml.FlowMappingEndToken)
+    depth = 0
+    try:
+        for tok in yaml.scan(text, Loader=yaml.SafeLoader):
+            if isinstance(tok, opens):
+                depth += 1
+                if depth > tol.YAML_MAX_DEPTH:
+                    return _mark(display, tok.start_mark)
+            elif isinstance(tok, closes):
+                depth -= 1
+    except yaml.YAMLError:
+        pass
+    return Mark(display, 1, 1)
 
 
 class _Converter:

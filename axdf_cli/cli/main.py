@@ -84,6 +84,15 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print(f"axdf: {e}", file=sys.stderr)
         return e.exit_code
+    except MemoryError:
+        print("axdf: out of memory; use fewer frames per run or a lower resolution", file=sys.stderr)
+        return 3
+    except Exception as e:  # a bug: say so plainly, without a traceback unless asked
+        if args.traceback:
+            raise
+        print(f"axdf: internal error: {type(e).__name__}: {e}\n"
+              "rerun with --traceback and report it", file=sys.stderr)
+        return 70
     finally:
         if old is not None:
             signal.signal(signal.SIGTERM, old)
