@@ -146,7 +146,7 @@ def _is_num(x) -> bool:
 
 def _short(v) -> str:
     s = json.dumps(v, sort_keys=True)
-    return s if len(s) <= 60 else s[:57] + "..."
+    return s if len(s) <= 80 else s[:77] + "..."
 
 
 def compare_json(a_bytes: bytes, g_bytes: bytes, tol: NumTol) -> Outcome:
