@@ -109,16 +109,16 @@ def write_exr(path: Path, channels: dict) -> None:
 
 
 def make_run(root: Path, muscles: int = 3, frames: int = 4, size: int = SIZE, fmt: str = "ply",
-             seed: int = 0) -> Path:
+             seed: int = 0, resolution: tuple[int, int] = (10, 12)) -> Path:
     """A complete synthetic run folder; the same arguments give the same bytes."""
     names = [f"m{i}" for i in range(muscles)]
     writer = write_ply if fmt == "ply" else write_obj
     for i, name in enumerate(names):
         for fr in range(frames):
-            v, n, f = tube(fr, seed + i)
+            v, n, f = tube(fr, seed + i, *resolution)
             writer(root / "meshes" / name / f"{name}_{fr:04d}.{fmt}", v, n, f)
     for fr in range(frames):
-        img = blob(size * 0.45 + fr, size * 0.5, size * 0.2)
+        img = blob(size * 0.45 + fr, size * 0.5, size * 0.2, size)
         write_png(root / "frames" / f"{fr:04d}.png", img)
         write_exr(root / "frames" / f"{fr:04d}.exr", exr_channels(img))
     rows = ["frame,muscle,length,volume,volume_ratio,tension,twist"]

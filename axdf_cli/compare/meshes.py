@@ -7,6 +7,7 @@ triangles and any other polygons compare alike.
 from __future__ import annotations
 
 import re
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -167,38 +168,66 @@ def _ply_ascii(text: str, elements) -> Mesh:
 
 
 # ----------------------------------------------------------------------------- OBJ
-_OBJ_V = re.compile(rb"^v[ \t]+(\S+)[ \t]+(\S+)[ \t]+(\S+)", re.M)
-_OBJ_VN = re.compile(rb"^vn[ \t]+(\S+)[ \t]+(\S+)[ \t]+(\S+)", re.M)
-_OBJ_F = re.compile(rb"^f[ \t]+(.*?)[ \t]*$", re.M)
-_OBJ_IDX = re.compile(rb"(-?\d+)(?:/(-?\d*)(?:/(-?\d+))?)?")
+_OBJ_V = re.compile(rb"^v[ \t]+([^\n]*)", re.M)
+_OBJ_VN = re.compile(rb"^vn[ \t]+([^\n]*)", re.M)
+_OBJ_F = re.compile(rb"^f[ \t]+([^\n]*)", re.M)
+
+
+def _parse_numbers(text: bytes, dtype, what: str) -> np.ndarray:
+    """Whitespace-separated numbers -> ``(n,)`` array at C speed; any other text is Unreadable."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # numpy warns (not raises) when it stops at bad text
+        try:
+            return np.fromstring(text, dtype=dtype, sep=" ")
+        except (ValueError, DeprecationWarning):
+            raise Unreadable(f"an OBJ {what} line is not numeric") from None
+
+
+def _obj_numbers(lines: list[bytes], what: str, dtype) -> np.ndarray:
+    """The numbers of OBJ lines (without their keyword) as ``(len(lines), k)``; every line
+    must have the same count k."""
+    if not lines:
+        return np.zeros((0, 3), dtype)
+    out = _parse_numbers(b" ".join(lines), dtype, what)
+    if out.size % len(lines):
+        raise Unreadable(f"OBJ {what} lines have different numbers of values")
+    return out.reshape(len(lines), -1)
 
 
 def read_obj(data: bytes) -> Mesh:
     """Read ``v``/``vn``/``f`` lines of an OBJ in file order. Per-vertex normals are taken
     when every face corner names the normal with its vertex's own index (``f a//a``)."""
-    try:
-        verts = np.array(_OBJ_V.findall(data), np.float64).reshape(-1, 3)
-        vn = np.array(_OBJ_VN.findall(data), np.float64).reshape(-1, 3)
-    except ValueError:
-        raise Unreadable("an OBJ 'v' or 'vn' line is not numeric") from None
+    v = _obj_numbers(_OBJ_V.findall(data), "v", np.float64)
+    if v.shape[1] < 3:
+        raise Unreadable("OBJ 'v' lines have fewer than 3 values")
+    verts = v[:, :3]  # x y z (a w or a colour may follow)
+    vn = _obj_numbers(_OBJ_VN.findall(data), "vn", np.float64)
     face_lines = _OBJ_F.findall(data)
-    sizes = np.zeros(len(face_lines), np.int64)
-    v_idx: list[bytes] = []
-    n_idx: list[bytes] = []
-    for i, line in enumerate(face_lines):
-        corners = _OBJ_IDX.findall(line)
-        sizes[i] = len(corners)
-        for c in corners:
-            v_idx.append(c[0])
-            n_idx.append(c[2])
-    flat = np.array(v_idx, np.int64) if v_idx else np.zeros(0, np.int64)
+    if not face_lines:
+        return Mesh(verts, vn if len(vn) == len(verts) and len(vn) else None,
+                    np.zeros(0, np.int64), np.zeros(0, np.int64))
+    sizes = np.array([len(line.split()) for line in face_lines], np.int64)
+    joined = b" ".join(face_lines)
+    first = joined.split(None, 1)[0]
+    # every corner written alike: a | a/t | a//n | a/t/n -> (vertex, texture, normal) columns
+    if b"//" in first:
+        text, cols = joined.replace(b"//", b" "), ("v", "n")
+    else:
+        cols = ("v", "t", "n")[: first.count(b"/") + 1]
+        text = joined.replace(b"/", b" ")
+    n_corners = int(sizes.sum())
+    idx = _parse_numbers(text, np.int64, "f")
+    if idx.size != n_corners * len(cols):
+        raise Unreadable("OBJ face corners are not all written alike (a, a/t, a//n or a/t/n)")
+    idx = idx.reshape(n_corners, len(cols))
+    flat = idx[:, 0]
     flat = np.where(flat < 0, flat + len(verts), flat - 1)  # 1-based; negative is relative
     normals = None
-    if len(vn) and n_idx and all(n_idx):
-        ni = np.array(n_idx, np.int64)
+    if "n" in cols and len(vn) == len(verts):
+        ni = idx[:, cols.index("n")]
         ni = np.where(ni < 0, ni + len(vn), ni - 1)
-        if len(vn) == len(verts) and np.array_equal(ni, flat):
-            normals = vn
+        if np.array_equal(ni, flat):
+            normals = vn[:, :3]
     return Mesh(verts, normals, sizes, flat)
 
 
