@@ -163,3 +163,28 @@ def test_bad_usage_exit_2(tmp_path, capsys):
     assert main(["compare", str(run), str(run), "--report", str(tmp_path)]) == 2
     assert main(["compare", str(run), str(run), "--fail-fraction", "2"]) == 2
     assert main(["compare", str(run), str(tmp_path / "nope"), "--tolerances", str(tmp_path / "no.yaml")]) == 2
+
+
+def test_readme_tolerance_example_loads(tmp_path):
+    from pathlib import Path
+    readme = (Path(__file__).parents[1] / "README.md").read_text()
+    block = readme.split("### Tolerance file", 1)[1].split("```yaml\n", 1)[1].split("```", 1)[0]
+    (tmp_path / "tol.yaml").write_text(block)
+    tol = T.load_tolerances(tmp_path / "tol.yaml")
+    assert tol.base == T.FileTol(png=T.PngTol(threshold=0.0196), exr=T.ExrTol(color=T.ChannelTol(0.0196, 0.02)))
+    assert tol.for_path("meshes/tiny_a/tiny_a_0001.ply").mesh.max_distance == 1e-4
+    assert tol.ignored("logs/run.log")
+
+
+def test_update_of_one_file_and_quiet_output(tmp_path, capsys):
+    v, n, f = tube(0, 0)
+    write_ply(tmp_path / "g.ply", v, n, f)
+    write_ply(tmp_path / "a.ply", v + np.float32(1e-3), n, f)
+    assert main(["compare", "-q", str(tmp_path / "a.ply"), str(tmp_path / "g.ply")]) == 1
+    out = capsys.readouterr().out
+    assert out.startswith("  FAIL    g.ply") and "SAME" not in out
+    assert main(["compare", str(tmp_path / "a.ply"), str(tmp_path / "g.ply"), "--update"]) == 0
+    assert "replaced" in capsys.readouterr().out
+    assert (tmp_path / "g.ply").read_bytes() == (tmp_path / "a.ply").read_bytes()
+    assert main(["compare", "-q", str(tmp_path / "a.ply"), str(tmp_path / "g.ply")]) == 0
+    assert capsys.readouterr().out == ""

@@ -97,10 +97,8 @@ def run(args) -> int:
     actual, golden = Path(args.actual), Path(args.golden)
     report_path = _output_path(args.report, "--report")
     junit_path = _output_path(args.junit, "--junit")
-    first_bless = args.update and not golden.exists() and actual.exists()
+    first_bless = args.update and actual.exists() and not golden.exists()  # a new golden
     if not first_bless:
-        check_paths(actual, golden)
-    elif not actual.exists():
         check_paths(actual, golden)
     diff_dir = Path(args.diff_dir) if args.diff_dir else None
     if diff_dir is None and (report_path or junit_path):

@@ -92,6 +92,7 @@ def summary(report: Report, verbose: bool = False, quiet: bool = False) -> str:
     for f in shown:
         lines.append(f"  {_LABEL[f.verdict]:<7} {f.path}")
         lines += [f"          {r}" for r in f.reasons]
+        lines += [f"          note: {n}" for n in f.notes]
         if f.diff_picture:
             lines.append(f"          picture: {f.diff_picture}")
     if len(shown) < len(failing):
