@@ -20,6 +20,7 @@ COMMANDS = {
     "run": ("axdf_cli.cli.run", "evaluate muscles over a pose; write meshes, stats (and frames)"),
     "render": ("axdf_cli.cli.render", "render preview frames and EXR data passes from a finished run"),
     "validate": ("axdf_cli.cli.validate", "check muscle, skeleton, pose and job files; write nothing"),
+    "compare": ("axdf_cli.cli.compare", "compare a run (or one file) with a golden one; exit 1 when different"),
 }
 
 

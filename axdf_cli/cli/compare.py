@@ -1,0 +1,178 @@
+"""Compare a run (or one file) with a golden one: exit 0 same, 1 different, 2 bad usage.
+
+Meshes by vertex distance with exact topology, images (PNG, EXR) by a per-pixel tolerance,
+an allowed fraction of failing pixels and a hard maximum, CSV/JSON numerically, the
+manifest's inputs and settings as likely causes, anything else byte for byte. Tolerances
+and their reasons: README.md, "Golden comparison".
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+
+from axdf_cli.atomic import write_bytes, write_text
+from axdf_cli.errors import UsageError
+
+
+def add_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("actual", metavar="ACTUAL", help="the run folder (or file) to check")
+    p.add_argument("golden", metavar="GOLDEN", help="the golden run folder (or file)")
+    p.add_argument("--report", metavar="FILE.json", help="write every file's metrics and verdict as JSON")
+    p.add_argument("--junit", metavar="FILE.xml", help="write JUnit XML, one test case per file")
+    p.add_argument("--diff-dir", metavar="DIR",
+                   help="where to write actual|golden|heat-map PNGs of failing images "
+                        "(default: REPORT-diffs/ beside --report, else beside --junit, else none)")
+    p.add_argument("--update", action="store_true",
+                   help="bless: copy ACTUAL over GOLDEN (add, replace, remove files) and list each change")
+    p.add_argument("--tolerances", metavar="FILE.yaml", help="tolerance YAML with per-glob overrides")
+    p.add_argument("--ignore", metavar="GLOB", action="append", default=[],
+                   help="leave files matching GLOB out (relative path; repeatable)")
+    g = p.add_argument_group("tolerances (override the YAML's top level; defaults in README)")
+    g.add_argument("--mesh-max", type=_nonneg, metavar="M", help="max vertex distance in metres")
+    g.add_argument("--mesh-rms", type=_nonneg, metavar="M", help="RMS vertex distance in metres")
+    g.add_argument("--pixel-threshold", type=_unit, metavar="T", help="PNG per-pixel threshold in [0, 1]")
+    g.add_argument("--fail-fraction", type=_unit, metavar="F",
+                   help="allowed fraction of failing pixels (PNG and EXR) in [0, 1]")
+    g.add_argument("--hard-max", type=_unit, metavar="T", help="PNG hard maximum per-pixel difference")
+    g.add_argument("--table-atol", type=_nonneg, metavar="A", help="CSV absolute tolerance")
+    g.add_argument("--table-rtol", type=_nonneg, metavar="R", help="CSV relative tolerance")
+
+
+def _nonneg(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not v >= 0 or v == float("inf"):
+        raise argparse.ArgumentTypeError(f"{text!r}: a finite number >= 0")
+    return v
+
+
+def _unit(text: str) -> float:
+    v = _nonneg(text)
+    if v > 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: a number in [0, 1]")
+    return v
+
+
+def _flag_changes(args) -> dict:
+    ch: dict = {}
+
+    def put(section, key, value):
+        if value is not None:
+            ch.setdefault(section, {})[key] = value
+
+    put("mesh", "max_distance", args.mesh_max)
+    put("mesh", "rms_distance", args.mesh_rms)
+    put("png", "threshold", args.pixel_threshold)
+    put("png", "fail_fraction", args.fail_fraction)
+    put("exr", "fail_fraction", args.fail_fraction)
+    put("png", "hard_max", args.hard_max)
+    put("table", "atol", args.table_atol)
+    put("table", "rtol", args.table_rtol)
+    return ch
+
+
+def _output_path(text: str | None, flag: str) -> Path | None:
+    if text is None:
+        return None
+    p = Path(text)
+    if p.is_dir():
+        raise UsageError(f"{flag} {p} is a folder", f"{flag} takes a file name")
+    return p
+
+
+def run(args) -> int:
+    from dataclasses import replace
+
+    from axdf_cli.compare import check_paths, compare_paths
+    from axdf_cli.compare.report import summary, to_json, to_junit
+    from axdf_cli.compare.tolerances import Tolerances, load_tolerances
+
+    # everything that can be bad usage is checked before anything is written
+    tol = load_tolerances(args.tolerances) if args.tolerances else Tolerances()
+    tol = replace(tol.with_flags(_flag_changes(args)), ignore=tol.ignore + tuple(args.ignore))
+    actual, golden = Path(args.actual), Path(args.golden)
+    report_path = _output_path(args.report, "--report")
+    junit_path = _output_path(args.junit, "--junit")
+    first_bless = args.update and actual.exists() and not golden.exists()  # a new golden
+    if not first_bless:
+        check_paths(actual, golden)
+    diff_dir = Path(args.diff_dir) if args.diff_dir else None
+    if diff_dir is None and (report_path or junit_path):
+        beside = report_path or junit_path
+        diff_dir = beside.with_name(beside.stem + "-diffs")
+    if diff_dir is not None and diff_dir.exists() and not diff_dir.is_dir():
+        raise UsageError(f"--diff-dir {diff_dir} is a file", "--diff-dir takes a folder")
+    exclude = [p for p in (report_path, junit_path, diff_dir) if p is not None]
+
+    if first_bless:
+        from axdf_cli.compare.bless import bless
+        changes = bless(actual, golden, tol, None, exclude)
+        _print_changes(changes, golden, args)
+        return 0
+
+    if diff_dir is not None and diff_dir.is_dir():
+        _clear_old_pictures(diff_dir)
+    progress = _progress_bar(args)
+    try:
+        report = compare_paths(actual, golden, tol, diff_dir, exclude, progress)
+    finally:
+        if progress is not None:
+            progress.close()
+    if report_path:
+        write_text(report_path, to_json(report, tol.source))
+    if junit_path:
+        write_bytes(junit_path, to_junit(report))
+    text = summary(report, verbose=args.verbose, quiet=args.quiet)
+    if text:
+        print(text)
+    if report_path and not args.quiet:
+        print(f"report: {report_path}")
+    if junit_path and not args.quiet:
+        print(f"junit: {junit_path}")
+    if args.update:
+        from axdf_cli.compare.bless import bless
+        changes = bless(actual, golden, tol, report, exclude)
+        _print_changes(changes, golden, args)
+        return 0
+    return 0 if report.passed else 1
+
+
+def _print_changes(changes, golden: Path, args) -> None:
+    for c in changes:
+        print(f"{c.action:<8} {golden / c.path if golden.is_dir() else golden}" + (f" ({c.note})" if c.note else ""))
+    n = {a: sum(1 for c in changes if c.action == a) for a in ("added", "replaced", "removed")}
+    print(f"updated golden {golden}: {n['added']} added, {n['replaced']} replaced, {n['removed']} removed")
+
+
+def _clear_old_pictures(diff_dir: Path) -> None:
+    """Pictures of an earlier comparison would mislead: remove our own *.diff.png files."""
+    for p in diff_dir.rglob("*.diff.png"):
+        try:
+            p.unlink()
+        except OSError:
+            pass
+
+
+class _Bar:
+    def __init__(self):
+        from tqdm import tqdm
+
+        self.bar = tqdm(total=0, unit="file", desc="compare", file=sys.stderr, leave=False)
+
+    def __call__(self, done: int, total: int) -> None:
+        self.bar.total = total
+        self.bar.n = done
+        self.bar.refresh()
+
+    def close(self) -> None:
+        self.bar.close()
+
+
+def _progress_bar(args):
+    if args.quiet or not sys.stderr.isatty() or os.environ.get("CI"):
+        return None
+    return _Bar()

@@ -1,0 +1,159 @@
+"""Golden-file comparison: ``compare_paths(actual, golden, tolerances) -> Report``.
+
+Two run folders (or two files) are compared file by file. Each file's kind comes from its
+name (one table, :data:`KINDS`); byte-identical files pass without being decoded. Files
+missing or extra on either side fail, listed by name. Nothing here prints; the pictures of
+failing images are written (atomically) when a ``diff_dir`` is given.
+"""
+from __future__ import annotations
+
+import io
+import os
+import time
+from pathlib import Path
+from typing import Callable, Iterable
+
+from axdf_cli.atomic import write_bytes
+from axdf_cli.compare.result import (ERROR, EXTRA, FAIL, MISSING, PASS, FileResult, Outcome, Report,
+                                     Unreadable)
+from axdf_cli.compare.tolerances import FileTol, Tolerances, as_dict
+from axdf_cli.errors import UsageError
+
+# file suffix -> kind; `manifest.json` is recognised by its whole name
+KINDS = {".ply": "mesh", ".obj": "mesh", ".png": "png", ".exr": "exr", ".csv": "table", ".json": "json"}
+MANIFEST = "manifest.json"
+
+# kind -> the FileTol section that applies (None: no numeric tolerance)
+TOL_SECTION = {"mesh": "mesh", "png": "png", "exr": "exr", "table": "table", "json": "json",
+               "manifest": None, "bytes": None}
+
+
+def kind_of(name: str) -> str:
+    base = name.rsplit("/", 1)[-1].lower()
+    if base == MANIFEST:
+        return "manifest"
+    return KINDS.get(os.path.splitext(base)[1], "bytes")
+
+
+def _compare_kind(kind: str, a: Path, g: Path, ab: bytes, gb: bytes, t: FileTol) -> Outcome:
+    if kind == "mesh":
+        from axdf_cli.compare.meshes import compare_mesh_files
+        return compare_mesh_files(ab, gb, a.suffix.lower(), g.suffix.lower(), t.mesh)
+    if kind == "png":
+        from axdf_cli.compare.images import compare_png
+        return compare_png(ab, gb, t.png)
+    if kind == "exr":
+        from axdf_cli.compare.images import compare_exr
+        return compare_exr(a, g, t.exr)
+    from axdf_cli.compare import tables
+    if kind == "table":
+        return tables.compare_csv(ab, gb, t.table)
+    if kind == "json":
+        return tables.compare_json(ab, gb, t.json)
+    if kind == "manifest":
+        return tables.compare_manifest(ab, gb)
+    return tables.compare_bytes(ab, gb)
+
+
+def list_files(root: Path, exclude: Iterable[Path] = ()) -> dict[str, Path]:
+    """Every file under ``root`` by its posix path relative to ``root``, sorted; ``exclude``
+    (this comparison's own report, JUnit file and picture folder) is left out."""
+    skip = {Path(os.path.abspath(p)) for p in exclude}
+    out: dict[str, Path] = {}
+    for dirpath, dirnames, filenames in os.walk(root):
+        d = Path(dirpath)
+        dirnames[:] = sorted(n for n in dirnames if Path(os.path.abspath(d / n)) not in skip)
+        for n in sorted(filenames):
+            p = d / n
+            if Path(os.path.abspath(p)) in skip:
+                continue
+            out[p.relative_to(root).as_posix()] = p
+    return dict(sorted(out.items()))
+
+
+def check_paths(actual: Path, golden: Path) -> str:
+    """'files' or 'folders'; a UsageError (exit 2) for a missing path or a file vs a folder."""
+    for side, p in (("ACTUAL", actual), ("GOLDEN", golden)):
+        if not p.exists():
+            raise UsageError(f"{side} {p} does not exist", "give an existing run folder or file")
+    if actual.is_dir() != golden.is_dir():
+        fd = lambda p: "a folder" if p.is_dir() else "a file"  # noqa: E731
+        raise UsageError(f"ACTUAL {actual} is {fd(actual)} but GOLDEN {golden} is {fd(golden)}",
+                         "compare two run folders or two files")
+    if actual.is_dir():
+        return "folders"
+    ka, kg = kind_of(actual.name), kind_of(golden.name)
+    if ka != kg:
+        raise UsageError(f"cannot compare a {ka} file ({actual.name}) with a {kg} file ({golden.name})",
+                         "compare two files of the same kind (PLY and OBJ meshes compare with each other)")
+    return "files"
+
+
+def compare_paths(actual: Path | str, golden: Path | str, tolerances: Tolerances | None = None,
+                  diff_dir: Path | str | None = None, exclude: Iterable[Path] = (),
+                  progress: Callable[[int, int], None] | None = None) -> Report:
+    """Compare two run folders or two files; ``progress(done, total)`` after each file."""
+    t0 = time.perf_counter()
+    tolerances = tolerances or Tolerances()
+    actual, golden = Path(actual), Path(golden)
+    mode = check_paths(actual, golden)
+    if mode == "files":
+        pairs = [(golden.name, actual, golden)]
+    else:
+        exclude = list(exclude)
+        fa = {r: p for r, p in list_files(actual, exclude).items() if not tolerances.ignored(r)}
+        fg = {r: p for r, p in list_files(golden, exclude).items() if not tolerances.ignored(r)}
+        pairs = [(r, fa.get(r), fg.get(r)) for r in sorted(set(fa) | set(fg))]
+    results: list[FileResult] = []
+    causes: list[str] = []
+    for i, (rel, a, g) in enumerate(pairs):
+        r = compare_pair(rel, a, g, tolerances, diff_dir)
+        if r.kind == "manifest":
+            causes += r.notes
+        results.append(r)
+        if progress is not None:
+            progress(i + 1, len(pairs))
+    return Report(str(actual), str(golden), tuple(results), tuple(causes), time.perf_counter() - t0)
+
+
+def compare_pair(rel: str, a: Path | None, g: Path | None, tolerances: Tolerances,
+                 diff_dir: Path | str | None = None) -> FileResult:
+    kind = kind_of(rel if a is None or g is None else g.name)
+    if g is None:
+        return FileResult(rel, kind, EXTRA, ("in actual, not in golden",))
+    if a is None:
+        return FileResult(rel, kind, MISSING, ("in golden, not in actual",))
+    t0 = time.perf_counter()
+    t = tolerances.for_path(rel)
+    section = TOL_SECTION[kind]
+    tol_dict = as_dict(t)[section] if section else None
+    try:
+        ab, gb = a.read_bytes(), g.read_bytes()
+    except OSError as e:
+        return FileResult(rel, kind, ERROR, (f"cannot read ({e.strerror}: {e.filename})",), tolerance=tol_dict)
+    if ab == gb and kind != "manifest":
+        return FileResult(rel, kind, PASS, (), (), {"identical": True}, tol_dict,
+                          seconds=time.perf_counter() - t0)
+    try:
+        out = _compare_kind(kind, a, g, ab, gb, t)
+    except Unreadable as e:
+        return FileResult(rel, kind, ERROR, (str(e),), tolerance=tol_dict, seconds=time.perf_counter() - t0)
+    picture = None
+    if out.picture is not None and diff_dir is not None:
+        picture = str(Path(diff_dir) / f"{rel}.diff.png")
+        write_bytes(picture, _png_bytes(out.picture))
+    metrics = {"identical": ab == gb} | out.metrics
+    return FileResult(rel, kind, PASS if out.ok else FAIL, out.reasons, out.notes, metrics, tol_dict,
+                      picture, time.perf_counter() - t0)
+
+
+def _png_bytes(rgb) -> bytes:
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.fromarray(rgb, "RGB").save(buf, format="PNG")
+    return buf.getvalue()
+
+
+__all__ = ["compare_paths", "compare_pair", "check_paths", "list_files", "kind_of", "KINDS",
+           "Report", "FileResult", "Tolerances"]
