@@ -253,8 +253,8 @@ sections:
 muscle: squash
 axis:
   - {bone: a, at: [0, 0, 0.2]}
-  - {bone: a, at: [0, 0, 0.3]}
-  - {bone: b, at: [0, 0, 0.1]}
+  - {bone: b, at: [0, 0, 0.0]}
+  - {bone: b, at: [0, 0, 0.0]}
 """,
 }
 
@@ -264,7 +264,7 @@ skeleton: slide.yaml
 frames: [0, 8]
 keys:
   0: {slide: 0, bend: 0}
-  2: {slide: -0.2, bend: 0}       # the squash muscle's length reaches zero
+  2: {slide: -0.1, bend: 0}       # the squash muscle's length reaches zero
   4: {slide: -0.4, bend: 0}       # and folds back on itself
   6: {slide: 0.0, bend: 179.9}    # folded axis
   8: {slide: 0.0, bend: 1440}     # far past any range
