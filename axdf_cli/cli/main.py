@@ -19,6 +19,7 @@ from axdf_cli.errors import AxdfError, EnvironmentProblem, InputError, Interrupt
 COMMANDS = {
     "run": ("axdf_cli.cli.run", "evaluate muscles over a pose; write meshes, stats (and frames)"),
     "validate": ("axdf_cli.cli.validate", "check muscle, skeleton, pose and job files; write nothing"),
+    "import": ("axdf_cli.cli.importer", "import OpenSim models and motions as skeletons, muscles and poses"),
 }
 
 
