@@ -211,3 +211,308 @@ def finite_or_raise(arr: np.ndarray, where: Mark, what: str) -> None:
 
 
 __all__ = ["load_skeleton", "parse_function", "math"]
+
+
+# ----------------------------------------------------------------------------- muscles
+
+from axdf_cli.muscle import OCT, VOLUME_MODES, AxisPoint, MuscleSpec, Section, outline_area  # noqa: E402
+
+
+def parse_color(v, where: Mark, name: str) -> tuple[float, float, float]:
+    if v is None:
+        return default_color(name)
+    if isinstance(v, str):
+        s = v.strip()
+        if len(s) == 7 and s[0] == "#":
+            try:
+                return tuple(int(s[i:i + 2], 16) / 255.0 for i in (1, 3, 5))
+            except ValueError:
+                pass
+        raise InputError(where, f"color is {v!r}", "color is [r, g, b] in 0..1 or \"#rrggbb\"")
+    return check_vector(v, where, "color", 3, 0.0, 1.0)
+
+
+def default_color(name: str) -> tuple[float, float, float]:
+    """A deterministic muscle-red hue from the name (no randomness)."""
+    import hashlib
+    import colorsys
+
+    h = int(hashlib.sha256(name.encode()).hexdigest()[:8], 16) / 0xFFFFFFFF
+    return tuple(round(c, 4) for c in colorsys.hsv_to_rgb(0.97 + 0.08 * h - (1.0 if 0.97 + 0.08 * h > 1 else 0),
+                                                           0.55 + 0.2 * h, 0.65 + 0.2 * (1 - h)))
+
+
+def _parse_muscle(value, where: Mark, file: str, group: str = "") -> MuscleSpec:
+    f = Fields(value, where, "muscle")
+    name = f.name("muscle", required=True)
+    color = parse_color(f.raw("color"), f.vmark("color"), name)
+    strength = f.number("strength", default=1.0, lo=0.0, hi=100.0, lo_open=True)
+    tension = f.number("tension", default=0.0, lo=0.0, hi=1.0)
+    volume = f.choice("volume", VOLUME_MODES, default="exact")
+    axis_seq = f.seq("axis", required=True)
+    if len(axis_seq) < 3:
+        raise InputError(f.vmark("axis"), f"axis has {len(axis_seq)} control points",
+                         "a quadratic B-spline axis needs at least 3 (default 5)")
+    if len(axis_seq) > 64:
+        raise InputError(f.vmark("axis"), f"axis has {len(axis_seq)} control points", "at most 64")
+    axis = []
+    for av, am in zip(axis_seq, item_marks(axis_seq, f.vmark("axis"))):
+        af = Fields(av, am, "axis point")
+        bone = af.name("bone", required=True)
+        at = af.vector("at", 3, required=True)
+        af.done()
+        axis.append(AxisPoint(bone, at, af.vmark("bone")))
+    sections = []
+    sec_seq = f.seq("sections", default=None)
+    radii_default = None
+    if sec_seq is None:
+        sections = [Section((k + 1) / 5.0, None) for k in range(4)]
+    else:
+        if len(sec_seq) < 2:
+            raise InputError(f.vmark("sections"), f"{len(sec_seq)} section(s)", "at least 2 sections")
+        if len(sec_seq) > 64:
+            raise InputError(f.vmark("sections"), f"{len(sec_seq)} sections", "at most 64")
+        prev = 0.0
+        for sv, sm in zip(sec_seq, item_marks(sec_seq, f.vmark("sections"))):
+            sf = Fields(sv, sm, "section")
+            t = sf.number("t", required=True, lo=0.0, hi=1.0, lo_open=True)
+            if t >= 1.0 or t <= prev:
+                raise InputError(sf.vmark("t"), f"section t is {t!r}",
+                                 f"section t values increase strictly inside (0, 1) (previous {prev})")
+            prev = t
+            if sf.has("outline"):
+                if sf.has("radii") or sf.has("angle"):
+                    raise InputError(sm, "section has both outline and radii/angle", "give one of them")
+                ol = sf.seq("outline")
+                if len(ol) != OCT:
+                    raise InputError(sf.vmark("outline"), f"outline has {len(ol)} points",
+                                     f"an outline has exactly {OCT} [v, w] points")
+                pts = [check_vector(pv, pm, "outline point", 2)
+                       for pv, pm in zip(ol, item_marks(ol, sf.vmark("outline")))]
+                area = outline_area(np.array(pts))
+                if abs(area) < 1e-12:
+                    raise InputError(sf.vmark("outline"), "outline encloses no area",
+                                     "8 points around the axis, counter-clockwise")
+                if area < 0:  # clockwise: reverse so that the surface faces outwards
+                    pts = [pts[0]] + pts[:0:-1]
+                sections.append(Section(t, None, 0.0, tuple(pts)))
+            else:
+                radii = sf.vector("radii", 2, required=True, lo=0.0, lo_open=True)
+                angle = sf.number("angle", default=0.0)
+                sections.append(Section(t, radii, angle))
+            sf.done()
+    tendons = f.vector("tendons", 2, default=(0.0, 0.0), lo=0.0, hi=0.95)
+    if sum(tendons) >= 0.95:
+        raise InputError(f.vmark("tendons"), f"tendon fractions add up to {sum(tendons):.3g}",
+                         "origin + insertion fractions < 0.95 (a belly must remain)")
+    twist = f.number("twist", default=0.0, lo=-3600.0, hi=3600.0)
+    res = f.raw("resolution")
+    if res is None:
+        resolution = (40, 24)
+    else:
+        r = check_vector(res, f.vmark("resolution"), "resolution", 2)
+        if not (3 <= r[0] <= 4096 and 3 <= r[1] <= 4096 and all(float(x).is_integer() for x in r)):
+            raise InputError(f.vmark("resolution"), f"resolution is {list(res)}",
+                             "[along, around] integers in 3..4096")
+        resolution = (int(r[0]), int(r[1]))
+    weights = f.vector("weights", default=None, lo=0.0, lo_open=True)
+    if weights is not None and len(weights) != len(sections):
+        raise InputError(f.vmark("weights"), f"{len(weights)} weights for {len(sections)} sections",
+                         "one weight per section")
+    f.done()
+    _ = radii_default
+    return MuscleSpec(name, color, tuple(axis), tuple(sections), strength, tension, volume,
+                      tendons, twist, resolution, weights, file, group)
+
+
+def load_muscle_file(path: Path | str) -> list[MuscleSpec]:
+    """One muscle (``muscle:``) or several heads (``muscles:`` list, optional ``group:``)."""
+    path = Path(path)
+    doc = load_yaml(path)
+    top = Mark(str(path), 1, 1)
+    if isinstance(doc, dict) and "muscles" in doc and "muscle" not in doc:
+        f = Fields(doc, top, "multi-head muscle file")
+        group = f.name("group", default=path.stem)
+        seq = f.seq("muscles", required=True, min_len=1)
+        f.done()
+        return [_parse_muscle(v, m, str(path), group) for v, m in zip(seq, item_marks(seq, f.vmark("muscles")))]
+    if not isinstance(doc, dict) or "muscle" not in doc:
+        raise InputError(mark_of(doc, top), "not a muscle file", "a muscle file has `muscle: NAME` or `muscles: [...]`")
+    return [_parse_muscle(doc, top, str(path))]
+
+
+# ----------------------------------------------------------------------------- poses
+
+from dataclasses import dataclass  # noqa: E402
+
+INTERPOLATIONS = ("linear", "step", "cubic")
+
+
+@dataclass(frozen=True)
+class Pose:
+    name: str
+    skeleton: Skeleton
+    fps: float
+    first: int
+    last: int
+    interpolation: str
+    keys: dict  # coord -> ((frames...), (values...))
+    activation: dict  # muscle -> ((frames...), (values...))
+    activation_marks: dict  # muscle -> Mark (to report unknown muscles)
+    source: str = ""
+    skeleton_path: str = ""
+
+    @property
+    def frames(self) -> np.ndarray:
+        return np.arange(self.first, self.last + 1)
+
+
+def load_pose(path: Path | str) -> Pose:
+    path = Path(path)
+    doc = load_yaml(path)
+    top = Mark(str(path), 1, 1)
+    f = Fields(doc, top, "pose file")
+    name = f.name("pose", required=True)
+    skel_ref = f.string("skeleton", required=True)
+    skel_path = resolve_ref(path, skel_ref, f.vmark("skeleton"))
+    if not skel_path.is_file():
+        raise InputError(f.vmark("skeleton"), f"skeleton file {skel_ref!r} not found",
+                         "a path relative to the pose file")
+    skel = load_skeleton(skel_path)
+    fps = f.number("fps", default=30.0, lo=0.0, hi=100000.0, lo_open=True)
+    fr = f.raw("frames", required=True)
+    first, last = check_vector(fr, f.vmark("frames"), "frames", 2, 0, 10_000_000)
+    if not (float(first).is_integer() and float(last).is_integer()) or last < first:
+        raise InputError(f.vmark("frames"), f"frames is {list(fr)}", "[first, last] integers with first <= last")
+    first, last = int(first), int(last)
+    interp = f.choice("interpolation", INTERPOLATIONS, default="linear")
+    keys_map = f.mapping("keys", required=True)
+    cidx = skel.coord_index
+    series: dict[str, list] = {}
+    for frame, values in keys_map.items():
+        km = keys_map.key_mark(frame)
+        fnum = check_number(frame, km, "key frame", 0, 10_000_000, integer=True)
+        vm = keys_map.value_mark(frame)
+        if not isinstance(values, dict):
+            raise InputError(vm, f"key {frame} is not a mapping", "keys: {FRAME: {COORD: value}}")
+        for coord, val in values.items():
+            cm = values.key_mark(coord) if isinstance(values, YMap) else vm
+            if coord not in cidx:
+                raise InputError(cm, f"unknown coordinate {coord!r}",
+                                 f"coordinates of skeleton {skel.name}: {', '.join(cidx)}")
+            x = check_number(val, values.value_mark(coord) if isinstance(values, YMap) else vm, coord)
+            series.setdefault(coord, []).append((fnum, float(x)))
+    act_map = f.mapping("activation", default=None)
+    activation, act_marks = {}, {}
+    if act_map is not None:
+        for muscle, curve in act_map.items():
+            mm = act_map.key_mark(muscle)
+            check_name(muscle, mm, "muscle name")
+            if not isinstance(curve, dict):
+                raise InputError(act_map.value_mark(muscle), f"activation of {muscle} is not a mapping",
+                                 "activation: {MUSCLE: {FRAME: 0..1}}")
+            pts = []
+            for frame, val in curve.items():
+                fnum = check_number(frame, curve.key_mark(frame), "activation frame", 0, 10_000_000, integer=True)
+                pts.append((fnum, float(check_number(val, curve.value_mark(frame), "activation", 0.0, 1.0))))
+            pts.sort()
+            activation[muscle] = (tuple(p[0] for p in pts), tuple(p[1] for p in pts))
+            act_marks[muscle] = mm
+    f.done()
+    keys = {}
+    for coord, pts in series.items():
+        pts.sort()
+        keys[coord] = (tuple(p[0] for p in pts), tuple(p[1] for p in pts))
+    return Pose(name, skel, float(fps), first, last, interp, keys, activation, act_marks, str(path), str(skel_path))
+
+
+# ----------------------------------------------------------------------------- jobs
+
+@dataclass(frozen=True)
+class Job:
+    source: str
+    muscles: tuple  # ((Path, Mark), ...) files, folders or globs, resolved against the job's folder
+    pose: tuple | None  # (Path, Mark)
+    out: str | None
+    format: str | None
+    frames: object  # raw frames spec or None
+    frames_mark: Mark | None
+    render: object  # raw `render:` mapping or None
+    render_mark: Mark | None
+
+
+def load_job(path: Path | str) -> Job:
+    path = Path(path)
+    doc = load_yaml(path)
+    top = Mark(str(path), 1, 1)
+    f = Fields(doc, top, "job file")
+    raw = f.raw("muscles", required=True)
+    entries = [raw] if isinstance(raw, str) else raw
+    if not isinstance(entries, list) or not entries:
+        raise InputError(f.vmark("muscles"), "muscles is empty or not a list", "a path, folder or glob, or a list of them")
+    marks = item_marks(entries, f.vmark("muscles")) if isinstance(raw, list) else [f.vmark("muscles")]
+    muscles = []
+    for e, m in zip(entries, marks):
+        if not isinstance(e, str) or not e:
+            raise InputError(m, f"muscle path is {e!r}", "a path, folder or glob relative to the job file")
+        muscles.append((resolve_ref(path, e, m), m))
+    pose_ref = f.string("pose", required=True)
+    pose = (resolve_ref(path, pose_ref, f.vmark("pose")), f.vmark("pose"))
+    out = f.string("out", default=None)
+    if out is not None and (Path(out).is_absolute() or ".." in Path(out).parts) and not POLICY.allow_outside:
+        raise InputError(f.vmark("out"), f"out {out!r} leaves the project folder tree",
+                         "a relative folder without '..' (or pass --out, or --allow-outside)")
+    from axdf_cli.formats import WRITERS
+
+    fmt = f.choice("format", tuple(WRITERS), default=None)
+    frames = f.raw("frames")
+    frames_mark = f.vmark("frames") if frames is not None else None
+    render = f.raw("render")
+    render_mark = f.vmark("render") if render is not None else None
+    f.done()
+    return Job(str(path), tuple(muscles), pose, out, fmt, frames, frames_mark, render, render_mark)
+
+
+def expand_muscle_paths(entries) -> list[Path]:
+    """Files, folders (every *.yaml below, sorted) or globs → sorted unique files."""
+    import glob as _glob
+
+    out: list[Path] = []
+    for p, mark in entries:
+        p = Path(p)
+        s = str(p)
+        if any(ch in s for ch in "*?["):
+            hits = sorted(Path(h) for h in _glob.glob(s, recursive=True) if Path(h).is_file())
+            if not hits:
+                raise InputError(mark, f"glob {s!r} matches no file", "a glob matching muscle YAML files")
+            out.extend(hits)
+        elif p.is_dir():
+            hits = sorted(x for x in p.rglob("*.yaml") if x.is_file())
+            if not hits:
+                raise InputError(mark, f"folder {s!r} holds no .yaml file", "a folder of muscle YAML files")
+            out.extend(hits)
+        elif p.is_file():
+            out.append(p)
+        else:
+            raise InputError(mark, f"muscle path {s!r} not found", "an existing file, folder or glob")
+    seen, uniq = set(), []
+    for p in out:
+        k = str(p.resolve())
+        if k not in seen:
+            seen.add(k)
+            uniq.append(p)
+    return uniq
+
+
+def detect_kind(doc) -> str | None:
+    if not isinstance(doc, dict):
+        return None
+    if "skeleton" in doc and "bones" in doc:
+        return "skeleton"
+    if "pose" in doc and "keys" in doc:
+        return "pose"
+    if "muscle" in doc or ("muscles" in doc and "pose" not in doc):
+        return "muscle"
+    if "muscles" in doc and "pose" in doc:
+        return "job"
+    return None

@@ -1,0 +1,473 @@
+"""The AxDf muscle: axis, bound cross-sections, volume, tension and the B-spline surface.
+
+Method (PAPER.md): the axis ``C(t) = sum_i N_i^2(t) p_i`` is a clamped quadratic B-spline
+whose control points ``p_i`` are fixed in bones. Each section is a closed quadratic
+B-spline of 8 control points. Every section control point P is bound once, at the rest
+pose, as (t, u, v, w): t its closest-point parameter on the rest axis, (u, v, w) its offset
+in the axis frame (T, R, S) at t, where T = C'/|C'| and (R, S) is rotation-minimizing
+(double reflection, Wang et al. 2008). Deformed, ``P' = C(t) + k (u T + v R + w S)`` in the
+new frame, rotated about T by the twist at t.
+
+Frames. The start vector R(0) is fixed in the origin bone (the bone of the first axis
+point), so a rigid motion of the skeleton moves the muscle rigidly. The insertion bone's
+roll is the signed angle at t = 1 between the propagated R(1) and the insertion bone's
+rest R(1) carried by that bone; it is spread along the axis in proportion to rest arc
+length, and kept continuous over time (past 180 degrees) by unwrapping it against a coarse
+pass over the pose's whole frame range, so that any frame subset gives the same meshes.
+
+Radial factor of a control point c: ``k_c = (1 - beta_c) + beta_c * s * tau_c`` with
+- beta_c = 1 in the belly, 0 in the tendons (``tendons: [a, b]`` fractions of rest arc length);
+- s the volume factor of the frame: ``paper`` sqrt(l0/l1) as published; ``none`` 1; ``exact``
+  the root of the mesh volume's cubic V(s) = V0 (the mesh is affine in s, so its volume is
+  exactly a cubic in s; solved by Newton to 1e-10);
+- tau_c the isometric tension law: section area multiplied by
+  ``1 + g e (2 b - 1)``, b = sin^2(pi x) over the belly (x in [0, 1]), e the effective tension,
+  g = TENSION_GAIN. The belly's middle grows, its ends give way; with ``exact`` the volume
+  solve then keeps the total volume, so the length and volume do not change and the area
+  moves towards the middle (tension 1 adds about 25% area at mid-belly).
+
+Surface: a tensor-product quadratic NURBS over the control net [origin pole (8 copies of
+C(0)), sections..., insertion pole], clamped along and closed around, tessellated at
+``resolution = (along, around)`` into a grid whose pole rows collapse to single vertices.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from axdf_cli import bspline, rmf
+from axdf_cli import tolerances as tol
+from axdf_cli.errors import InputError, Mark
+
+OCT = 8  # control points per section (the paper's choice)
+VOLUME_MODES = ("exact", "paper", "none")
+
+
+# ----------------------------------------------------------------------------- specs
+
+
+@dataclass(frozen=True)
+class AxisPoint:
+    bone: str
+    at: tuple[float, float, float]
+    mark: Mark = field(default=Mark(""), compare=False)
+
+
+@dataclass(frozen=True)
+class Section:
+    t: float
+    radii: tuple[float, float] | None  # semi-axes (m); None: default from the rest length
+    angle: float = 0.0  # degrees, direction of radii[0] from R towards S
+    outline: tuple[tuple[float, float], ...] | None = None  # 8 (v, w) control points
+
+
+@dataclass(frozen=True)
+class MuscleSpec:
+    name: str
+    color: tuple[float, float, float]
+    axis: tuple[AxisPoint, ...]
+    sections: tuple[Section, ...]
+    strength: float = 1.0
+    tension: float = 0.0
+    volume: str = "exact"
+    tendons: tuple[float, float] = (0.0, 0.0)
+    twist: float = 0.0
+    resolution: tuple[int, int] = (40, 24)
+    weights: tuple[float, ...] | None = None
+    source: str = ""
+    group: str = ""  # the multi-head muscle this head belongs to ('' for single muscles)
+
+
+def ellipse_outline(a: float, b: float, angle_deg: float) -> np.ndarray:
+    """8 control points (8, 2) whose closed quadratic B-spline touches the ellipse of
+    semi-axes (a, b), rotated by ``angle_deg``, at the 8 edge midpoints of the polygon."""
+    th = np.arange(OCT) * (2.0 * np.pi / OCT)
+    c = 1.0 / np.cos(np.pi / OCT)
+    p = np.stack([c * a * np.cos(th), c * b * np.sin(th)], axis=1)
+    ca, sa = math.cos(math.radians(angle_deg)), math.sin(math.radians(angle_deg))
+    return p @ np.array([[ca, sa], [-sa, ca]])
+
+
+def outline_area(p: np.ndarray) -> float:
+    """Signed area of a closed polygon (8, 2): positive when counter-clockwise."""
+    x, y = p[:, 0], p[:, 1]
+    return 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
+
+
+# ----------------------------------------------------------------------------- topology
+
+
+def grid_faces(along: int, around: int) -> np.ndarray:
+    """Triangles of the tessellated muscle, counter-clockwise seen from outside: (T, 3) int32.
+
+    Vertex order: origin pole (0), rings 1 .. along-2 (``around`` each), insertion pole.
+    """
+    rings = along - 2
+    last = 1 + rings * around
+    j = np.arange(around)
+    jn = (j + 1) % around
+    faces = [np.stack([np.zeros(around, np.int64), 1 + jn, 1 + j], axis=1)]
+    for i in range(rings - 1):
+        a = 1 + i * around + j
+        b = 1 + i * around + jn
+        c = 1 + (i + 1) * around + j
+        d = 1 + (i + 1) * around + jn
+        faces.append(np.stack([a, b, c], axis=1))
+        faces.append(np.stack([c, b, d], axis=1))
+    top = 1 + (rings - 1) * around
+    faces.append(np.stack([top + j, top + jn, np.full(around, last)], axis=1))
+    return np.concatenate(faces).astype(np.int32)
+
+
+def grid_to_vertices(g: np.ndarray) -> np.ndarray:
+    """(F, U, A, 3) grid with collapsed pole rows → (F, 2 + (U-2) A, 3) vertices."""
+    f, u, a, _ = g.shape
+    return np.concatenate([g[:, :1, 0], g[:, 1:-1].reshape(f, (u - 2) * a, 3), g[:, -1:, 0]], axis=1)
+
+
+def grid_volume(g: np.ndarray) -> np.ndarray:
+    """Enclosed volume of the tessellated grid surface (F, U, A, 3) → (F,) (divergence theorem)."""
+    p00 = g[:, :-1]
+    p10 = g[:, 1:]
+    p01 = np.roll(p00, -1, axis=2)
+    p11 = np.roll(p10, -1, axis=2)
+    # V = 1/6 sum over triangles (p00, p01, p10) and (p10, p01, p11) of det[a, b, c]
+    v = np.einsum("fuac,fuac->f", p00, np.cross(p01, p10)) + np.einsum("fuac,fuac->f", p10, np.cross(p01, p11))
+    return v / 6.0
+
+
+def grid_volume_cubic(a: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Coefficients (F, 4) of V(s) = c0 + c1 s + c2 s^2 + c3 s^3 for the grid a + s w (F, U, A, 3)."""
+    def tri(x0, x1, x2, y0, y1, y2):
+        # det(x0 + s y0, x1 + s y1, x2 + s y2) expanded in powers of s, summed per frame
+        p = np.cross(x1, x2)
+        q = np.cross(y1, y2)
+        r = np.cross(y1, x2) + np.cross(x1, y2)
+        c0 = np.einsum("fuac,fuac->f", x0, p)
+        c1 = np.einsum("fuac,fuac->f", y0, p) + np.einsum("fuac,fuac->f", x0, r)
+        c2 = np.einsum("fuac,fuac->f", x0, q) + np.einsum("fuac,fuac->f", y0, r)
+        c3 = np.einsum("fuac,fuac->f", y0, q)
+        return np.stack([c0, c1, c2, c3], axis=1)
+
+    a00, a10 = a[:, :-1], a[:, 1:]
+    a01, a11 = np.roll(a00, -1, axis=2), np.roll(a10, -1, axis=2)
+    w00, w10 = w[:, :-1], w[:, 1:]
+    w01, w11 = np.roll(w00, -1, axis=2), np.roll(w10, -1, axis=2)
+    return (tri(a00, a01, a10, w00, w01, w10) + tri(a10, a01, a11, w10, w01, w11)) / 6.0
+
+
+def grid_normals(g: np.ndarray) -> np.ndarray:
+    """Area-weighted outward vertex normals of the grid (F, U, A, 3), unit length."""
+    p00 = g[:, :-1]
+    p10 = g[:, 1:]
+    p01 = np.roll(p00, -1, axis=2)
+    p11 = np.roll(p10, -1, axis=2)
+    n1 = np.cross(p01 - p00, p10 - p00)  # triangle (p00, p01, p10)
+    n2 = np.cross(p01 - p10, p11 - p10)  # triangle (p10, p01, p11)
+    both = n1 + n2
+    n = np.zeros_like(g)
+    n[:, :-1] += n1 + np.roll(both, 1, axis=2)
+    n[:, 1:] += both + np.roll(n2, 1, axis=2)
+    n[:, 0] = n[:, 0].sum(axis=1, keepdims=True)  # the pole rows are one vertex each
+    n[:, -1] = n[:, -1].sum(axis=1, keepdims=True)
+    return n / np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-300)
+
+
+# ----------------------------------------------------------------------------- the model
+
+
+@dataclass
+class FrameResult:
+    """One muscle over a block of frames (batch dimension first)."""
+
+    vertices: np.ndarray  # (F, V, 3) float64
+    normals: np.ndarray  # (F, V, 3) float64
+    length: np.ndarray  # (F,) axis arc length (m)
+    volume: np.ndarray  # (F,) mesh volume (m^3)
+    scale: np.ndarray  # (F,) volume factor s
+    twist: np.ndarray  # (F,) insertion roll spread along the axis (degrees, unwrapped)
+    tension: np.ndarray  # (F,) effective tension
+    warnings: list  # [(frame index in block, message)]
+
+
+class MuscleModel:
+    """A muscle prepared for evaluation: basis matrices, binding and rest values.
+
+    Built once from a :class:`MuscleSpec`, the skeleton's bone index and the rest pose's
+    world transforms ``rest_world`` (n_bones, 4, 4); evaluated for any block of frames.
+    """
+
+    def __init__(self, spec: MuscleSpec, bone_index: dict[str, int], rest_world: np.ndarray):
+        self.spec = spec
+        n = len(spec.axis)
+        self.bones = np.array([_bone(bone_index, p) for p in spec.axis])
+        self.at = np.array([p.at for p in spec.axis], dtype=np.float64)  # (n, 3)
+        self.origin_bone = int(self.bones[0])
+        self.insertion_bone = int(self.bones[-1])
+        knots = bspline.clamped_knots(n, 2)
+        self.knots = knots
+
+        # dense samples for the RMF recurrence; and a coarse set for the twist branch
+        self.ts = np.linspace(0.0, 1.0, tol.RMF_SAMPLES_PER_SPAN * (n - 2) + 1)
+        self.Bs = bspline.basis_matrix(knots, 2, self.ts)
+        self.dBs = bspline.basis_matrix(knots, 2, self.ts, 1)
+        tc = np.linspace(0.0, 1.0, 4 * (n - 2) + 1)
+        self.Bc = bspline.basis_matrix(knots, 2, tc)
+        self.dBc = bspline.basis_matrix(knots, 2, tc, 1)
+        gt, self.gw = bspline.gauss_legendre_params(knots, 2, tol.LENGTH_GAUSS_POINTS)
+        self.dBg = bspline.basis_matrix(knots, 2, gt, 1)
+
+        rest_p = self._axis_points(rest_world[None])  # (1, n, 3)
+        self.l0 = float(self._length(rest_p)[0])
+        if not self.l0 > tol.MIN_AXIS_LENGTH:
+            raise InputError(spec.axis[0].mark, f"muscle {spec.name!r}: the rest axis has length {self.l0:.3g} m",
+                             "axis control points must not all coincide at the rest pose")
+        x, t = self._samples(rest_p, self.Bs, self.dBs)
+        r0 = rmf.any_perpendicular(t[:, 0])
+        self.r0_local = rest_world[self.origin_bone, :3, :3].T @ r0[0]
+        r = rmf.propagate(x, t, r0)
+        self.rend_local = rest_world[self.insertion_bone, :3, :3].T @ r[0, -1]
+        # rest arc length along the dense samples, as a fraction
+        seg = np.linalg.norm(np.diff(x[0], axis=0), axis=1)
+        self.arc = np.concatenate([[0.0], np.cumsum(seg)]) / max(seg.sum(), 1e-300)
+
+        # sections in the rest frame → rest world control points → binding (t, u, v, w)
+        secs = spec.sections
+        outlines = []
+        for s in secs:
+            if s.outline is not None:
+                o = np.array(s.outline, dtype=np.float64)
+            else:
+                a, b = s.radii if s.radii is not None else (0.08 * self.l0, 0.06 * self.l0)
+                o = ellipse_outline(a, b, s.angle)
+            outlines.append(o)
+        outlines = np.array(outlines) * math.sqrt(spec.strength)  # (N, 8, 2): strength scales area
+        sec_t = np.array([s.t for s in secs])
+        cp_t = np.repeat(sec_t, OCT)
+        c_rest, tt, rr, ss = self._frames_at(rest_p, x, t, r, cp_t, self._sample_index(cp_t))
+        lam = np.interp(cp_t, self.ts, self.arc)
+        tw = math.radians(spec.twist) * lam  # the muscle's own twist (rest shape)
+        ov, ow = outlines[..., 0].ravel(), outlines[..., 1].ravel()
+        cw, sw = np.cos(tw), np.sin(tw)
+        v_rot, w_rot = ov * cw - ow * sw, ov * sw + ow * cw
+        p_rest = c_rest[0] + v_rot[:, None] * rr[0] + w_rot[:, None] * ss[0]  # (8N, 3)
+        self.bind_t = self._closest_t(rest_p[0], p_rest, cp_t)
+        self.bind_j = self._sample_index(self.bind_t)
+        cb, tb, rb, sb = self._frames_at(rest_p, x, t, r, self.bind_t, self.bind_j)
+        off = p_rest - cb[0]
+        self.uvw = np.stack([np.einsum("nc,nc->n", off, tb[0]), np.einsum("nc,nc->n", off, rb[0]),
+                             np.einsum("nc,nc->n", off, sb[0])], axis=1)  # (8N, 3)
+        self.Bb = bspline.basis_matrix(knots, 2, self.bind_t)
+        self.dBb = bspline.basis_matrix(knots, 2, self.bind_t, 1)
+        self.lam = np.interp(self.bind_t, self.ts, self.arc)  # rest arc fraction of each bound point
+
+        # belly weight and tension bump per bound point
+        a0, a1 = spec.tendons
+        belly_len = max(1.0 - a0 - a1, 1e-9)
+        xb = (self.lam - a0) / belly_len
+        self.beta = ((xb >= 0.0) & (xb <= 1.0)).astype(np.float64)
+        self.bump = np.where(self.beta > 0, np.sin(np.pi * np.clip(xb, 0.0, 1.0)) ** 2, 0.0)
+
+        # surface basis: along (clamped, rational with per-row weights) x around (closed)
+        along, around = spec.resolution
+        m = len(secs) + 2
+        w = np.ones(m)
+        if spec.weights is not None:
+            w[1:-1] = spec.weights
+        bu = bspline.basis_matrix(bspline.clamped_knots(m, 2), 2, np.linspace(0.0, 1.0, along))
+        self.Bu = bspline.rational(bu, w)  # (U, m)
+        self.Bv = bspline.periodic_quadratic_basis(OCT, np.arange(around) / around)  # (A, 8)
+        self.faces = grid_faces(along, around)
+        self.n_vertices = 2 + (along - 2) * around
+
+        rest = self.evaluate(rest_world[None], np.zeros(1), reference_volume=False)
+        self.v0 = float(rest.volume[0])
+        self.rest_vertices = rest.vertices[0].astype(np.float32)
+        self.rest_normals = rest.normals[0].astype(np.float32)
+        self.rest_control_points = p_rest  # (8N, 3) world, rest pose (for tests)
+        if not self.v0 > 0:
+            raise InputError(spec.axis[0].mark, f"muscle {spec.name!r}: rest volume is {self.v0:.3g}",
+                             "sections must enclose the axis with positive radii")
+
+    # -- pieces ---------------------------------------------------------------------------
+    def _axis_points(self, world: np.ndarray) -> np.ndarray:
+        """Axis control points in world space: world (F, B, 4, 4) → (F, n, 3)."""
+        m = world[:, self.bones]  # (F, n, 4, 4)
+        # P[f,i,c] = sum_k M[f,i,c,k] at[i,k] + M[f,i,c,3]
+        return np.einsum("fick,ik->fic", m[..., :3, :3], self.at) + m[..., :3, 3]
+
+    def _samples(self, p: np.ndarray, b: np.ndarray, db: np.ndarray):
+        # X[f,s,c] = sum_i B[s,i] P[f,i,c]; likewise the derivative
+        x = np.einsum("si,fic->fsc", b, p)
+        d = np.einsum("si,fic->fsc", db, p)
+        return x, _unit(d)
+
+    def _length(self, p: np.ndarray) -> np.ndarray:
+        d = np.einsum("gi,fic->fgc", self.dBg, p)
+        return np.linalg.norm(d, axis=-1) @ self.gw
+
+    def _sample_index(self, t: np.ndarray) -> np.ndarray:
+        return np.clip(np.searchsorted(self.ts, t, side="right") - 1, 0, len(self.ts) - 1)
+
+    def _frames_at(self, p, x, t, r, tq, jq):
+        """Untwisted frames at parameters tq (Q,) from the sampled RMF: one double-reflection
+        step from sample jq. Returns C (F, Q, 3), T, R, S."""
+        b = bspline.basis_matrix(self.knots, 2, tq)
+        db = bspline.basis_matrix(self.knots, 2, tq, 1)
+        c = np.einsum("qi,fic->fqc", b, p)
+        tt = _unit(np.einsum("qi,fic->fqc", db, p))
+        rr = rmf.reflect_step(x[:, jq], t[:, jq], r[:, jq], c, tt)
+        ss = np.cross(tt, rr)
+        return c, tt, rr, ss
+
+    def _closest_t(self, p_axis: np.ndarray, pts: np.ndarray, t_guess: np.ndarray) -> np.ndarray:
+        """True closest-point parameters on the rest axis for points (Q, 3): dense search, then
+        Newton on g(t) = (P - C(t)) . C'(t) = 0."""
+        n = len(self.at)
+        td = np.linspace(0.0, 1.0, tol.BIND_DENSE_SAMPLES_PER_SPAN * (n - 2) + 1)
+        cd = bspline.basis_matrix(self.knots, 2, td) @ p_axis
+        dist = np.linalg.norm(pts[:, None, :] - cd[None], axis=-1)  # (Q, D)
+        t = td[np.argmin(dist, axis=1)]
+        for _ in range(tol.BIND_NEWTON_ITERS):
+            c = bspline.basis_matrix(self.knots, 2, t) @ p_axis
+            d1 = bspline.basis_matrix(self.knots, 2, t, 1) @ p_axis
+            d2 = bspline.basis_matrix(self.knots, 2, t, 2) @ p_axis
+            diff = pts - c
+            g = np.einsum("qc,qc->q", diff, d1)
+            dg = np.einsum("qc,qc->q", diff, d2) - np.einsum("qc,qc->q", d1, d1)
+            step = np.where(dg < 0, -g / np.where(dg < 0, dg, -1.0), 0.0)
+            t = np.clip(t + step, 0.0, 1.0)
+        return t
+
+    def end_twist(self, world: np.ndarray, coarse: bool = True) -> np.ndarray:
+        """Insertion roll (radians, wrapped to (-pi, pi]) for frames world (F, B, 4, 4): (F,)."""
+        p = self._axis_points(world)
+        b, db = (self.Bc, self.dBc) if coarse else (self.Bs, self.dBs)
+        x, t = self._samples(p, b, db)
+        r = rmf.propagate(x, t, rmf.perpendicular_unit(world[:, self.origin_bone, :3, :3] @ self.r0_local, t[:, 0]))
+        return self._roll(world, t[:, -1], r[:, -1])
+
+    def _roll(self, world, t_end, r_end):
+        target = rmf.perpendicular_unit(world[:, self.insertion_bone, :3, :3] @ self.rend_local, t_end)
+        return rmf.signed_angle(r_end, target, t_end)
+
+    # -- evaluation -----------------------------------------------------------------------
+    def evaluate(self, world: np.ndarray, tension: np.ndarray, twist_reference: np.ndarray | None = None,
+                 reference_volume: bool = True) -> FrameResult:
+        """Deform for a block of frames.
+
+        world : (F, n_bones, 4, 4) bone world transforms; tension : (F,) effective tension 0..1;
+        twist_reference : (F,) unwrapped coarse insertion roll (radians) choosing the branch of
+        the exact roll, or None (roll unwrapped within the block).
+        """
+        spec = self.spec
+        nf = world.shape[0]
+        warnings: list = []
+        p = self._axis_points(world)  # (F, n, 3)
+        x, t = self._samples(p, self.Bs, self.dBs)
+        r0 = rmf.perpendicular_unit(world[:, self.origin_bone, :3, :3] @ self.r0_local, t[:, 0])
+        r = rmf.propagate(x, t, r0)
+        theta = self._roll(world, t[:, -1], r[:, -1])
+        if twist_reference is None:
+            theta = np.unwrap(theta)
+        else:
+            theta = theta + 2.0 * np.pi * np.round((twist_reference - theta) / (2.0 * np.pi))
+
+        # bound points: position and frame at t, then the spread twist about T
+        c = np.einsum("qi,fic->fqc", self.Bb, p)
+        tt = _unit(np.einsum("qi,fic->fqc", self.dBb, p))
+        rr = rmf.reflect_step(x[:, self.bind_j], t[:, self.bind_j], r[:, self.bind_j], c, tt)
+        ss = np.cross(tt, rr)
+        ang = theta[:, None] * self.lam[None, :]  # (F, Q)
+        ca, sa = np.cos(ang)[..., None], np.sin(ang)[..., None]
+        rr, ss = ca * rr + sa * ss, ca * ss - sa * rr
+        u, v, w = self.uvw[:, 0, None], self.uvw[:, 1, None], self.uvw[:, 2, None]
+        off = u * tt + v * rr + w * ss  # (F, Q, 3) world offsets
+
+        length = self._length(p)
+        e = np.clip(np.asarray(tension, dtype=np.float64), 0.0, 1.0)
+        # tau[f,q]: radial tension factor, sqrt of the area factor 1 + g e (2 b - 1)
+        tau = np.sqrt(1.0 + tol.TENSION_GAIN * e[:, None] * (2.0 * self.bump[None, :] - 1.0) * self.beta[None, :])
+        beta = self.beta[None, :, None]
+        fixed = c + (1.0 - beta) * off  # part that does not scale
+        scaled = beta * tau[..., None] * off  # part multiplied by s
+
+        a_grid = self._tessellate(fixed, p)
+        w_grid = self._tessellate(scaled, None)
+        ratio = self.l0 / np.maximum(length, tol.MIN_AXIS_LENGTH)
+        if spec.volume == "none":
+            s = np.ones(nf)
+        elif spec.volume == "paper":
+            s = np.sqrt(ratio)
+        else:
+            s = np.sqrt(ratio)
+            if reference_volume:
+                coef = grid_volume_cubic(a_grid, w_grid)
+                s, bad = _solve_cubic(coef, self.v0, s)
+                for i in np.nonzero(bad)[0]:
+                    warnings.append((int(i), "exact volume has no solution; used the paper's scale"))
+        short = length < tol.MIN_AXIS_LENGTH
+        for i in np.nonzero(short)[0]:
+            warnings.append((int(i), f"axis length {length[i]:.3g} m is degenerate"))
+        wild = (s < tol.SCALE_MIN) | (s > tol.SCALE_MAX)
+        for i in np.nonzero(wild)[0]:
+            warnings.append((int(i), f"section scale {s[i]:.3g} clamped to [{tol.SCALE_MIN}, {tol.SCALE_MAX}]"))
+        s = np.clip(s, tol.SCALE_MIN, tol.SCALE_MAX)
+        grid = a_grid + s[:, None, None, None] * w_grid
+        normals = grid_normals(grid)
+        return FrameResult(
+            vertices=grid_to_vertices(grid),
+            normals=grid_to_vertices(normals),
+            length=length,
+            volume=grid_volume(grid),
+            scale=s,
+            twist=np.degrees(theta),
+            tension=e,
+            warnings=warnings,
+        )
+
+    def _tessellate(self, bound: np.ndarray, p: np.ndarray | None) -> np.ndarray:
+        """Surface grid (F, U, A, 3) from bound control points (F, 8N, 3); the pole rows are
+        the axis ends when ``p`` (axis control points) is given, else zero."""
+        nf = bound.shape[0]
+        net = np.zeros((nf, len(self.spec.sections) + 2, OCT, 3))
+        net[:, 1:-1] = bound.reshape(nf, -1, OCT, 3)
+        if p is not None:
+            net[:, 0] = p[:, None, 0]
+            net[:, -1] = p[:, None, -1]
+        # G[f,u,a,c] = sum_mj Bu[u,m] net[f,m,j,c] Bv[a,j]
+        tmp = np.einsum("um,fmjc->fujc", self.Bu, net)
+        return np.einsum("fujc,aj->fuac", tmp, self.Bv)
+
+
+def _bone(index: dict[str, int], p: AxisPoint) -> int:
+    if p.bone not in index:
+        known = ", ".join(sorted(index))
+        raise InputError(p.mark, f"unknown bone {p.bone!r}", f"bones of the skeleton: {known}")
+    return index[p.bone]
+
+
+def _unit(d: np.ndarray) -> np.ndarray:
+    return d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-300)
+
+
+def _solve_cubic(coef: np.ndarray, v0: float, s0: np.ndarray):
+    """Solve c0 + c1 s + c2 s^2 + c3 s^3 = v0 for s > 0 near s0 by safeguarded Newton: (F,), bad (F,)."""
+    c0, c1, c2, c3 = coef.T
+    s = s0.copy()
+    for _ in range(tol.VOLUME_SOLVE_ITERS):
+        f = ((c3 * s + c2) * s + c1) * s + c0 - v0
+        df = (3.0 * c3 * s + 2.0 * c2) * s + c1
+        ok = df > 0
+        step = np.where(ok, f / np.where(ok, df, 1.0), 0.0)
+        s_new = np.where(s - step > 0, s - step, 0.5 * s)
+        if np.all(np.abs(s_new - s) <= tol.VOLUME_SOLVE_RTOL * np.abs(s)):
+            s = s_new
+            break
+        s = s_new
+    f = ((c3 * s + c2) * s + c1) * s + c0 - v0
+    bad = ~(np.abs(f) <= 1e-6 * abs(v0)) | ~np.isfinite(s)
+    s = np.where(bad, s0, s)
+    return s, bad

@@ -1,0 +1,321 @@
+"""``axdf run``: muscles × pose → mesh sequence, stats, bones (and frames), plus a manifest.
+
+Data flow: YAML → frozen specs (:mod:`axdf_cli.loaders`) → :class:`~axdf_cli.muscle.MuscleModel`
+(basis matrices and binding, once per muscle) → batched evaluation over chunks of frames
+(batch dimension first) → writers. Every file is written atomically; the manifest is
+rewritten (atomically) after each chunk, so it is valid JSON at every moment and a killed
+run can be resumed (``--resume`` skips files whose bytes already match the manifest).
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from axdf_cli import __version__, atomic
+from axdf_cli.errors import InputError, Mark
+from axdf_cli.formats import WRITERS
+from axdf_cli.loaders import Job, Pose, expand_muscle_paths, load_muscle_file, load_pose
+from axdf_cli.muscle import MuscleModel, MuscleSpec
+from axdf_cli.pose import effective_tension, parse_frames, sample_activation, sample_coordinates
+from axdf_cli.skeleton import forward_kinematics, matrix_to_quaternion
+
+CHUNK_FRAMES = 128  # frames evaluated together: bounds memory for any sequence length
+TOP_FILES = ("manifest.json", "stats.csv", "bones.csv", "camera.json")
+
+
+@dataclass
+class RunPlan:
+    pose: Pose
+    muscles: list[MuscleSpec]
+    models: list[MuscleModel]
+    frames: np.ndarray  # (F,) selected output frames
+    fmt: str
+    out: Path
+    inputs: dict  # display path -> sha256
+    render: object = None  # render settings (or None: no rendering)
+    warnings: list = field(default_factory=list)
+
+    @property
+    def names(self) -> list[str]:
+        return [m.name for m in self.muscles]
+
+
+def _display(p: Path) -> str:
+    """A path for the manifest: relative to the current folder when below it."""
+    try:
+        return Path(os.path.relpath(Path(p).resolve(), Path.cwd().resolve())).as_posix()
+    except ValueError:
+        return Path(p).resolve().as_posix()
+
+
+def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, fmt_arg=None,
+             frames_arg=None) -> RunPlan:
+    """Load and check every input; build the muscle models. Writes nothing."""
+    if pose_arg is not None:
+        pose_path, pose_mark = Path(pose_arg), Mark(str(pose_arg))
+    elif job is not None:
+        pose_path, pose_mark = job.pose
+    else:
+        raise InputError(None, "no pose given", "give a JOB.yaml or --pose FILE")
+    if not pose_path.is_file():
+        raise InputError(pose_mark, f"pose file {str(pose_path)!r} not found", "an existing pose YAML file")
+    pose = load_pose(pose_path)
+
+    if muscle_args:
+        entries = [(Path(m), Mark(str(m))) for m in muscle_args]
+    elif job is not None:
+        entries = list(job.muscles)
+    else:
+        raise InputError(None, "no muscles given", "give a JOB.yaml or --muscles PATH ...")
+    files = expand_muscle_paths(entries)
+    specs: list[MuscleSpec] = []
+    seen: dict[str, str] = {}
+    for fpath in files:
+        for spec in load_muscle_file(fpath):
+            if spec.name in seen:
+                raise InputError(Mark(str(fpath), 1, 1), f"muscle {spec.name!r} is also defined in {seen[spec.name]}",
+                                 "muscle names are unique within a run")
+            seen[spec.name] = str(fpath)
+            specs.append(spec)
+    if not specs:
+        raise InputError(None, "no muscles found", "give muscle YAML files")
+
+    warnings = []
+    for name, mark in pose.activation_marks.items():
+        if name not in seen:
+            warnings.append(f"{mark}: activation for {name!r}, which is not in this run; ignored")
+
+    skel = pose.skeleton
+    rest = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
+    models = [MuscleModel(s, skel.bone_index, rest) for s in specs]
+
+    if frames_arg is not None:
+        frames = parse_frames(frames_arg, Mark("--frames"), pose.first, pose.last)
+    elif job is not None and job.frames is not None:
+        frames = parse_frames(job.frames, job.frames_mark, pose.first, pose.last)
+    else:
+        frames = pose.frames
+    fmt = fmt_arg or (job.format if job is not None else None) or "ply"
+    out = Path(out_arg or (job.out if job is not None and job.out else None) or "out/run")
+
+    inputs = {}
+    srcs = ([job.source] if job is not None else []) + [pose.source, pose.skeleton_path] + [str(f) for f in files]
+    srcs += sorted({b.mesh for b in skel.bones if b.mesh})
+    for s in srcs:
+        if Path(s).is_file():
+            inputs[_display(Path(s))] = atomic.sha256_file(s)
+    return RunPlan(pose, specs, models, frames, fmt, out, inputs, warnings=warnings)
+
+
+# ----------------------------------------------------------------------------- evaluation
+
+
+def twist_references(plan: RunPlan) -> np.ndarray:
+    """Unwrapped coarse insertion roll for every selected frame and muscle: (F, M) radians.
+
+    Computed over the pose's whole frame range in order, so the branch (past ±180°) of any
+    frame does not depend on which frames are selected."""
+    pose = plan.pose
+    all_frames = pose.frames
+    out = np.empty((len(all_frames), len(plan.models)))
+    prev = np.zeros(len(plan.models))
+    for s in range(0, len(all_frames), 4 * CHUNK_FRAMES):
+        fr = all_frames[s:s + 4 * CHUNK_FRAMES]
+        world = forward_kinematics(pose.skeleton, sample_coordinates(pose, fr))
+        for j, m in enumerate(plan.models):
+            th = np.unwrap(np.concatenate([[prev[j]], m.end_twist(world)]))[1:]
+            out[s:s + len(fr), j] = th
+            prev[j] = th[-1]
+    return out[plan.frames - pose.first]
+
+
+def evaluate_chunks(plan: RunPlan, chunk: int = CHUNK_FRAMES, twist_ref: np.ndarray | None = None):
+    """Yield (frame_slice, world (C, B, 4, 4), [FrameResult per muscle]) over the selected frames."""
+    if twist_ref is None:
+        twist_ref = twist_references(plan)
+    names = plan.names
+    for s in range(0, len(plan.frames), chunk):
+        fr = plan.frames[s:s + chunk]
+        world = forward_kinematics(plan.pose.skeleton, sample_coordinates(plan.pose, fr))
+        act = sample_activation(plan.pose, names, fr)
+        results = [m.evaluate(world, effective_tension(m.spec.tension, act[:, j]), twist_ref[s:s + len(fr), j])
+                   for j, m in enumerate(plan.models)]
+        yield slice(s, s + len(fr)), world, results
+
+
+# ----------------------------------------------------------------------------- output
+
+
+def mesh_relpath(muscle: str, frame: int, fmt: str) -> str:
+    return f"meshes/{muscle}/{muscle}_{frame:04d}.{fmt}"
+
+
+def check_output_folder(out: Path, resume: bool, overwrite: bool) -> dict:
+    """Refuse a non-empty OUT unless --resume or --overwrite; return the files of a previous
+    manifest (for --resume)."""
+    if out.exists() and not out.is_dir():
+        raise InputError(None, f"--out {out} exists and is not a folder", "give a folder")
+    if not out.exists() or not any(out.iterdir()):
+        return {}
+    if resume:
+        man = out / "manifest.json"
+        try:
+            prev = json.loads(man.read_text())
+            atomic.remove_stale_temporaries(out)
+            return dict(prev.get("files", {}))
+        except (OSError, ValueError):
+            atomic.remove_stale_temporaries(out)
+            return {}
+    if overwrite:
+        for sub in ("meshes", "frames"):
+            shutil.rmtree(out / sub, ignore_errors=True)
+        for name in TOP_FILES:
+            try:
+                (out / name).unlink()
+            except FileNotFoundError:
+                pass
+        atomic.remove_stale_temporaries(out)
+        return {}
+    raise InputError(None, f"output folder {out} is not empty",
+                     "pass --resume to finish an interrupted run, --overwrite to replace it, or another --out")
+
+
+class OutputWriter:
+    """Writes files atomically, records their sha256, skips identical files on resume."""
+
+    def __init__(self, out: Path, previous: dict):
+        self.out = out
+        self.previous = previous
+        self.files: dict[str, str] = {}
+        self.skipped = 0
+
+    def write(self, rel: str, data: bytes) -> None:
+        import hashlib
+
+        sha = hashlib.sha256(data).hexdigest()
+        path = self.out / rel
+        if self.previous.get(rel) == sha and path.is_file() and path.stat().st_size == len(data) \
+                and atomic.sha256_file(path) == sha:
+            self.skipped += 1
+        else:
+            atomic.write_bytes(path, data)
+        self.files[rel] = sha
+
+
+def _fmt_rows(rows: list[list]) -> str:
+    return "".join(",".join(r) + "\n" for r in rows)
+
+
+def _g(x: float) -> str:
+    return f"{x + 0.0:.9g}"
+
+
+def manifest_dict(plan: RunPlan, files: dict, warnings: list, complete: bool, extra: dict | None = None) -> dict:
+    m = {
+        "tool": "axdf",
+        "version": __version__,
+        "complete": complete,
+        "inputs": dict(sorted(plan.inputs.items())),
+        "settings": {
+            "format": plan.fmt,
+            "pose": plan.pose.name,
+            "skeleton": plan.pose.skeleton.name,
+            "fps": plan.pose.fps,
+            "frames": [int(f) for f in plan.frames],
+            "render": None,
+        },
+        "muscles": [
+            {"name": s.name, "group": s.group, "color": [round(c, 6) for c in s.color], "source": _display(Path(s.source)),
+             "volume": s.volume, "vertices": int(m.n_vertices), "faces": int(len(m.faces)),
+             "rest_length": round(m.l0, 12), "rest_volume": float(f"{m.v0:.12g}")}
+            for s, m in zip(plan.muscles, plan.models)
+        ],
+        "bones": [{"name": b.name, "mesh": _display(Path(b.mesh)) if b.mesh else None}
+                  for b in plan.pose.skeleton.bones],
+        "warnings": warnings,
+        "files": dict(sorted(files.items())),
+    }
+    if extra:
+        m.update(extra)
+    return m
+
+
+def write_manifest(out: Path, manifest: dict) -> None:
+    atomic.write_text(out / "manifest.json", json.dumps(manifest, indent=1, sort_keys=False) + "\n")
+
+
+def execute(plan: RunPlan, *, resume: bool = False, overwrite: bool = False, progress=None,
+            strict: bool = False) -> dict:
+    """Run the plan; return a summary dict. ``progress(n)`` is called with muscle-frames done."""
+    out = plan.out
+    previous = check_output_folder(out, resume, overwrite)
+    atomic.ensure_dir(out)
+    writer = OutputWriter(out, previous)
+    writers = [WRITERS[plan.fmt](m.faces, s.name) for s, m in zip(plan.muscles, plan.models)]
+    nf, nm = len(plan.frames), len(plan.models)
+    stats = np.zeros((nf, nm, 6))  # length, volume, ratio, tension, twist, scale
+    warn_text = [[""] * nm for _ in range(nf)]
+    warnings: list[str] = list(plan.warnings)
+    bones = plan.pose.skeleton.bones
+    bone_rows = np.zeros((nf, len(bones), 7))
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    for sl, world, results in evaluate_chunks(plan):
+        frames = plan.frames[sl]
+        for j, (res, w) in enumerate(zip(results, writers)):
+            name = plan.muscles[j].name
+            pos = res.vertices.astype(np.float32)
+            nrm = res.normals.astype(np.float32)
+            finite = np.isfinite(pos).all(axis=(1, 2)) & np.isfinite(nrm).all(axis=(1, 2))
+            for i, frame in enumerate(frames):
+                if not finite[i]:
+                    res.warnings.append((i, "non-finite vertices replaced by the rest shape"))
+                    pos[i] = plan.models[j].rest_vertices
+                    nrm[i] = plan.models[j].rest_normals
+                writer.write(mesh_relpath(name, int(frame), plan.fmt), w.encode(pos[i], nrm[i]))
+            lo = np.minimum(lo, pos.reshape(-1, 3).min(axis=0))
+            hi = np.maximum(hi, pos.reshape(-1, 3).max(axis=0))
+            stats[sl, j] = np.stack([res.length, res.volume, res.volume / plan.models[j].v0, res.tension,
+                                     res.twist, res.scale], axis=1)
+            for i, msg in res.warnings:
+                fi = sl.start + i
+                warn_text[fi][j] = (warn_text[fi][j] + "; " if warn_text[fi][j] else "") + msg
+                warnings.append(f"{name} frame {int(plan.frames[fi])}: {msg}")
+            if progress:
+                progress(len(frames))
+        bone_rows[sl, :, :3] = world[:, :, :3, 3]
+        bone_rows[sl, :, 3:] = matrix_to_quaternion(world[:, :, :3, :3])
+        write_manifest(out, manifest_dict(plan, writer.files, warnings, complete=False))
+    if strict and warnings:
+        raise InputError(None, f"{len(warnings)} warning(s) with --strict: {warnings[0]}",
+                         "fix the inputs or run without --strict")
+
+    rows = [["frame", "muscle", "length", "volume", "volume_ratio", "tension", "twist", "scale", "warning"]]
+    for i, frame in enumerate(plan.frames):
+        for j, name in enumerate(plan.names):
+            rows.append([str(int(frame)), name] + [_g(x) for x in stats[i, j]] + [_csv_text(warn_text[i][j])])
+    writer.write("stats.csv", _fmt_rows(rows).encode())
+    brows = [["frame", "bone", "x", "y", "z", "qw", "qx", "qy", "qz"]]
+    for i, frame in enumerate(plan.frames):
+        for b, bone in enumerate(bones):
+            brows.append([str(int(frame)), bone.name] + [_g(x) for x in bone_rows[i, b]])
+    writer.write("bones.csv", _fmt_rows(brows).encode())
+    extra = {"bounds": [[float(f"{x:.9g}") for x in lo], [float(f"{x:.9g}") for x in hi]]}
+    write_manifest(out, manifest_dict(plan, writer.files, warnings, complete=True, extra=extra))
+    ratio = stats[..., 2]
+    return {
+        "out": str(out), "muscles": nm, "frames": nf, "files": len(writer.files), "skipped": writer.skipped,
+        "warnings": warnings, "worst_volume_error": float(np.max(np.abs(ratio - 1.0))) if ratio.size else 0.0,
+        "stats": stats,
+    }
+
+
+def _csv_text(s: str) -> str:
+    if not s:
+        return ""
+    return '"' + s.replace('"', '""') + '"'
