@@ -270,32 +270,35 @@ def muscle_doc(m: Muscle, skel: Skeleton, world: np.ndarray) -> tuple[dict, dict
     """One muscle YAML document and a summary row for the import report.
 
     Sizing: PCSA = F_max / SPECIFIC_TENSION; belly volume V = PCSA × optimal fibre length.
-    Tendons: T = min(tendon_slack_length / rest path length, MAX_TENDON_FRACTION), split
+    Tendons: T = min(tendon_slack_length / rest axis length, MAX_TENDON_FRACTION), split
     ORIGIN_TENDON_SHARE : (1 - ORIGIN_TENDON_SHARE) between origin and insertion. Sections:
     one thin section inside each tendon (radius from TENDON_STRESS) and four belly sections
     evenly spread over the belly with radii BELLY_PROFILE × r, r chosen so that the radius
     profile (piecewise linear along the axis, closing at the poles) holds volume V over the
-    belly. Circular sections; ``volume: exact`` keeps the rest volume under motion.
+    belly. Section positions are chosen as fractions of the rest arc length and written as
+    curve parameters t (mapped through the rest axis). Circular sections; ``volume: exact``
+    keeps the rest volume under motion.
     """
     pts = [(p.body, p.location) for p in m.points if p.active_at_rest]
     wpts = _world_points(skel, world, pts)
     path_length = float(np.sum(np.linalg.norm(np.diff(wpts, axis=0), axis=1)))
+    axis = axis_control_points(skel, world, pts)
+    t_of, axis_length = _arc_parameter(skel, world, axis)
     pcsa = m.max_isometric_force / SPECIFIC_TENSION
     volume = pcsa * m.optimal_fiber_length
-    tendon = min(m.tendon_slack_length / path_length, MAX_TENDON_FRACTION) if path_length > 0 else 0.0
+    tendon = min(m.tendon_slack_length / axis_length, MAX_TENDON_FRACTION) if axis_length > 0 else 0.0
     t_o, t_i = ORIGIN_TENDON_SHARE * tendon, (1.0 - ORIGIN_TENDON_SHARE) * tendon
     r_t = math.sqrt(m.max_isometric_force / TENDON_STRESS / math.pi)
     belly = 1.0 - t_o - t_i
-    ts = [t_o + belly * (k + 0.5) / len(BELLY_PROFILE) for k in range(len(BELLY_PROFILE))]
-    r = _belly_radius(volume, path_length, t_o, 1.0 - t_i, ts, r_t)
+    ss = [t_o + belly * (k + 0.5) / len(BELLY_PROFILE) for k in range(len(BELLY_PROFILE))]  # arc fractions
+    r = _belly_radius(volume, axis_length, t_o, 1.0 - t_i, ss, r_t)
     sections = []
     if t_o > 0.02:
-        sections.append({"t": t_o / 2.0, "radii": [r_t, r_t], "angle": 0.0})
-    for t, f in zip(ts, BELLY_PROFILE):
-        sections.append({"t": t, "radii": [max(f * r, r_t), max(f * r, r_t)], "angle": 0.0})
+        sections.append({"t": t_of(t_o / 2.0), "radii": [r_t, r_t], "angle": 0.0})
+    for s_, f in zip(ss, BELLY_PROFILE):
+        sections.append({"t": t_of(s_), "radii": [max(f * r, r_t), max(f * r, r_t)], "angle": 0.0})
     if t_i > 0.02:
-        sections.append({"t": 1.0 - t_i / 2.0, "radii": [r_t, r_t], "angle": 0.0})
-    axis = axis_control_points(skel, world, pts)
+        sections.append({"t": t_of(1.0 - t_i / 2.0), "radii": [r_t, r_t], "angle": 0.0})
     doc = {
         "muscle": m.name,
         "color": muscle_color(m.name),
@@ -308,10 +311,33 @@ def muscle_doc(m: Muscle, skel: Skeleton, world: np.ndarray) -> tuple[dict, dict
     dropped = [p.name for p in m.points if not p.active_at_rest]
     moving = [p.name for p in m.points if p.kind == "moving"]
     row = {"muscle": m.name, "type": m.type, "path_points": len(m.points), "control_points": len(axis),
+           "rest_axis_length": axis_length,
            "conditional": conditional, "conditional_inactive_at_rest": dropped, "moving": moving,
            "wraps": list(m.wraps), "rest_path_length": path_length, "pcsa_m2": pcsa, "volume_m3": volume,
            "belly_radius": r, "tendon_radius": r_t, "tendons": [t_o, t_i]}
     return doc, row
+
+
+def _arc_parameter(skel: Skeleton, world: np.ndarray, axis) -> tuple:
+    """The rest axis' arc-length fraction → curve parameter map, and its length.
+
+    Sections are placed by curve parameter t, tendons by arc length (docs/FORMATS.md); via
+    points crowd control points (and so parameter range) where the path turns, so belly and
+    tendon positions chosen along the length are mapped to t through the rest curve."""
+    from axdf_cli import bspline
+
+    ctrl = _world_points(skel, world, axis)  # (n, 3)
+    ts = np.linspace(0.0, 1.0, 2001)
+    # C[s, c] = sum_i N[s, i] ctrl[i, c]
+    c = np.einsum("si,ic->sc", bspline.basis_matrix(bspline.clamped_knots(len(ctrl), 2), 2, ts), ctrl)
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(c, axis=0), axis=1))])
+    length = float(arc[-1])
+    frac = arc / length if length > 0 else ts
+
+    def t_of(x: float) -> float:
+        return float(np.interp(x, frac, ts))
+
+    return t_of, length
 
 
 def _belly_radius(volume: float, length: float, a: float, b: float, ts: list[float], r_t: float) -> float:
