@@ -42,6 +42,7 @@ from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError, Mark
 
 OCT = 8  # control points per section (the paper's choice)
+GRID_BLOCK = 16  # frames per block in the surface stage: its arrays stay in the CPU cache
 VOLUME_MODES = ("exact", "paper", "none")
 
 
@@ -127,52 +128,89 @@ def grid_to_vertices(g: np.ndarray) -> np.ndarray:
     return np.concatenate([g[:, :1, 0], g[:, 1:-1].reshape(f, (u - 2) * a, 3), g[:, -1:, 0]], axis=1)
 
 
+def _planar(g: np.ndarray) -> np.ndarray:
+    """(F, U, A, 3) grid → component-major (3, F, U, A + 1) with the first column repeated."""
+    c = np.moveaxis(g, -1, 0)
+    return np.concatenate([c, c[..., :1]], axis=-1)
+
+
+def _corners(g):
+    """Views of the quad corners p00, p01, p10, p11 of a planar wrapped grid (3, F, U, A+1)."""
+    return g[:, :, :-1, :-1], g[:, :, :-1, 1:], g[:, :, 1:, :-1], g[:, :, 1:, 1:]
+
+
+def _cross(a, b):
+    """Component-wise cross product of (3, ...) arrays (much faster than np.cross here)."""
+    return np.stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
+def _dot_sum(a, b) -> np.ndarray:
+    """sum over the grid of a . b for (3, F, U, A) arrays → (F,)."""
+    return (a[0] * b[0] + a[1] * b[1] + a[2] * b[2]).sum(axis=(1, 2))
+
+
+def planar_volume(g: np.ndarray) -> np.ndarray:
+    """Enclosed volume of a planar wrapped grid (3, F, U, A+1) → (F,) (divergence theorem).
+
+    Each quad is the triangles (p00, p01, p10) and (p10, p01, p11), whose signed tetrahedra
+    add up to p01 . (p10 x (p00 - p11)) / 6: one cross product per quad."""
+    p00, p01, p10, p11 = _corners(g)
+    return _dot_sum(p01, _cross(p10, p00 - p11)) / 6.0
+
+
+def planar_volume_cubic(a: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Coefficients (F, 4) of V(s) = c0 + c1 s + c2 s^2 + c3 s^3 for the grid a + s w.
+
+    V is the trilinear form p01 . (p10 x d) / 6 (d = p00 - p11) summed over quads; with
+    each argument affine in s it expands into four sums."""
+    a00, a01, a10, a11 = _corners(a)
+    w00, w01, w10, w11 = _corners(w)
+    ad, wd = a00 - a11, w00 - w11
+    p = _cross(a10, ad)
+    q = _cross(w10, wd)
+    r = _cross(w10, ad) + _cross(a10, wd)
+    return np.stack([_dot_sum(a01, p), _dot_sum(w01, p) + _dot_sum(a01, r),
+                     _dot_sum(a01, q) + _dot_sum(w01, r), _dot_sum(w01, q)], axis=1) / 6.0
+
+
+def planar_normals(g: np.ndarray) -> np.ndarray:
+    """Outward unit vertex normals (3, F, U, A) of a planar wrapped grid (3, F, U, A+1).
+
+    Ring vertices: the cross product of the central differences around and along
+    (S_v x S_u points outwards). Pole vertices: the sum of their fan triangles' normals."""
+    c = g[..., :-1]  # (3, F, U, A)
+    sv = np.roll(c[:, :, 1:-1], -1, axis=3) - np.roll(c[:, :, 1:-1], 1, axis=3)
+    su = c[:, :, 2:] - c[:, :, :-2]
+    n = np.empty_like(c)
+    n[:, :, 1:-1] = _cross(sv, su)
+    for row, nxt in ((0, 1), (-1, -2)):
+        ring = c[:, :, nxt]  # (3, F, A)
+        pole = c[:, :, row, :1]
+        fan = _cross(np.roll(ring, -1, axis=2) - pole, ring - pole).sum(axis=2)  # (3, F)
+        n[:, :, row] = (fan if row == 0 else -fan)[..., None]
+    return n / np.maximum(np.sqrt(n[0] ** 2 + n[1] ** 2 + n[2] ** 2), 1e-300)
+
+
+def planar_to_vertices(g: np.ndarray) -> np.ndarray:
+    """(3, F, U, A[+1]) grid → (3, F, V) vertices (poles once, rings in order)."""
+    c, f, u = g.shape[:3]
+    a = g.shape[3]
+    return np.concatenate([g[:, :, 0, :1], g[:, :, 1:-1, :].reshape(c, f, (u - 2) * a), g[:, :, -1, :1]], axis=2)
+
+
 def grid_volume(g: np.ndarray) -> np.ndarray:
-    """Enclosed volume of the tessellated grid surface (F, U, A, 3) → (F,) (divergence theorem)."""
-    p00 = g[:, :-1]
-    p10 = g[:, 1:]
-    p01 = np.roll(p00, -1, axis=2)
-    p11 = np.roll(p10, -1, axis=2)
-    # V = 1/6 sum over triangles (p00, p01, p10) and (p10, p01, p11) of det[a, b, c]
-    v = np.einsum("fuac,fuac->f", p00, np.cross(p01, p10)) + np.einsum("fuac,fuac->f", p10, np.cross(p01, p11))
-    return v / 6.0
+    """Enclosed volume of a grid surface (F, U, A, 3) → (F,)."""
+    return planar_volume(_planar(g))
 
 
 def grid_volume_cubic(a: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """Coefficients (F, 4) of V(s) = c0 + c1 s + c2 s^2 + c3 s^3 for the grid a + s w (F, U, A, 3)."""
-    def tri(x0, x1, x2, y0, y1, y2):
-        # det(x0 + s y0, x1 + s y1, x2 + s y2) expanded in powers of s, summed per frame
-        p = np.cross(x1, x2)
-        q = np.cross(y1, y2)
-        r = np.cross(y1, x2) + np.cross(x1, y2)
-        c0 = np.einsum("fuac,fuac->f", x0, p)
-        c1 = np.einsum("fuac,fuac->f", y0, p) + np.einsum("fuac,fuac->f", x0, r)
-        c2 = np.einsum("fuac,fuac->f", x0, q) + np.einsum("fuac,fuac->f", y0, r)
-        c3 = np.einsum("fuac,fuac->f", y0, q)
-        return np.stack([c0, c1, c2, c3], axis=1)
-
-    a00, a10 = a[:, :-1], a[:, 1:]
-    a01, a11 = np.roll(a00, -1, axis=2), np.roll(a10, -1, axis=2)
-    w00, w10 = w[:, :-1], w[:, 1:]
-    w01, w11 = np.roll(w00, -1, axis=2), np.roll(w10, -1, axis=2)
-    return (tri(a00, a01, a10, w00, w01, w10) + tri(a10, a01, a11, w10, w01, w11)) / 6.0
+    """Coefficients (F, 4) of V(s) for the grid a + s w, both (F, U, A, 3)."""
+    return planar_volume_cubic(_planar(a), _planar(w))
 
 
 def grid_normals(g: np.ndarray) -> np.ndarray:
-    """Area-weighted outward vertex normals of the grid (F, U, A, 3), unit length."""
-    p00 = g[:, :-1]
-    p10 = g[:, 1:]
-    p01 = np.roll(p00, -1, axis=2)
-    p11 = np.roll(p10, -1, axis=2)
-    n1 = np.cross(p01 - p00, p10 - p00)  # triangle (p00, p01, p10)
-    n2 = np.cross(p01 - p10, p11 - p10)  # triangle (p10, p01, p11)
-    both = n1 + n2
-    n = np.zeros_like(g)
-    n[:, :-1] += n1 + np.roll(both, 1, axis=2)
-    n[:, 1:] += both + np.roll(n2, 1, axis=2)
-    n[:, 0] = n[:, 0].sum(axis=1, keepdims=True)  # the pole rows are one vertex each
-    n[:, -1] = n[:, -1].sum(axis=1, keepdims=True)
-    return n / np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-300)
+    """Area-weighted outward unit vertex normals of the grid (F, U, A, 3)."""
+    return np.moveaxis(planar_normals(_planar(g)), 0, -1)
 
 
 # ----------------------------------------------------------------------------- the model
@@ -279,6 +317,10 @@ class MuscleModel:
         bu = bspline.basis_matrix(bspline.clamped_knots(m, 2), 2, np.linspace(0.0, 1.0, along))
         self.Bu = bspline.rational(bu, w)  # (U, m)
         self.Bv = bspline.periodic_quadratic_basis(OCT, np.arange(around) / around)  # (A, 8)
+        self.U, self.A = along, around
+        bv = np.concatenate([self.Bv, self.Bv[:1]])  # wrapped: column A repeats column 0
+        # K[(m,j),(u,a)] = Bu[u,m] Bv[a,j]
+        self.K = np.ascontiguousarray(np.einsum("um,aj->mjua", self.Bu, bv).reshape(m * OCT, along * (around + 1)))
         self.faces = grid_faces(along, around)
         self.n_vertices = 2 + (along - 2) * around
 
@@ -394,52 +436,54 @@ class MuscleModel:
         fixed = c + (1.0 - beta) * off  # part that does not scale
         scaled = beta * tau[..., None] * off  # part multiplied by s
 
-        a_grid = self._tessellate(fixed, p)
-        w_grid = self._tessellate(scaled, None)
         ratio = self.l0 / np.maximum(length, tol.MIN_AXIS_LENGTH)
-        if spec.volume == "none":
-            s = np.ones(nf)
-        elif spec.volume == "paper":
-            s = np.sqrt(ratio)
-        else:
-            s = np.sqrt(ratio)
-            if reference_volume:
-                coef = grid_volume_cubic(a_grid, w_grid)
-                s, bad = _solve_cubic(coef, self.v0, s)
-                for i in np.nonzero(bad)[0]:
-                    warnings.append((int(i), "exact volume has no solution; used the paper's scale"))
-        short = length < tol.MIN_AXIS_LENGTH
-        for i in np.nonzero(short)[0]:
+        s = np.ones(nf) if spec.volume == "none" else np.sqrt(ratio)
+        verts = np.empty((3, nf, self.n_vertices))
+        norms = np.empty((3, nf, self.n_vertices))
+        volume = np.empty(nf)
+        bad = np.zeros(nf, dtype=bool)
+        # the surface stage runs in blocks of frames that stay in cache
+        for b0 in range(0, nf, GRID_BLOCK):
+            blk = slice(b0, min(nf, b0 + GRID_BLOCK))
+            a_grid = self._tessellate(fixed[blk], p[blk])  # (3, f, U, A+1)
+            w_grid = self._tessellate(scaled[blk], None)
+            if spec.volume == "exact" and reference_volume:
+                s[blk], bad[blk] = _solve_cubic(planar_volume_cubic(a_grid, w_grid), self.v0, s[blk])
+            sb = np.clip(s[blk], tol.SCALE_MIN, tol.SCALE_MAX)
+            grid = a_grid + sb[None, :, None, None] * w_grid
+            volume[blk] = planar_volume(grid)
+            verts[:, blk] = planar_to_vertices(grid[..., :-1])
+            norms[:, blk] = planar_to_vertices(planar_normals(grid))
+        for i in np.nonzero(bad)[0]:
+            warnings.append((int(i), "exact volume has no solution; used the paper's scale"))
+        for i in np.nonzero(length < tol.MIN_AXIS_LENGTH)[0]:
             warnings.append((int(i), f"axis length {length[i]:.3g} m is degenerate"))
-        wild = (s < tol.SCALE_MIN) | (s > tol.SCALE_MAX)
-        for i in np.nonzero(wild)[0]:
+        for i in np.nonzero((s < tol.SCALE_MIN) | (s > tol.SCALE_MAX))[0]:
             warnings.append((int(i), f"section scale {s[i]:.3g} clamped to [{tol.SCALE_MIN}, {tol.SCALE_MAX}]"))
-        s = np.clip(s, tol.SCALE_MIN, tol.SCALE_MAX)
-        grid = a_grid + s[:, None, None, None] * w_grid
-        normals = grid_normals(grid)
         return FrameResult(
-            vertices=grid_to_vertices(grid),
-            normals=grid_to_vertices(normals),
+            vertices=np.moveaxis(verts, 0, -1),
+            normals=np.moveaxis(norms, 0, -1),
             length=length,
-            volume=grid_volume(grid),
-            scale=s,
+            volume=volume,
+            scale=np.clip(s, tol.SCALE_MIN, tol.SCALE_MAX),
             twist=np.degrees(theta),
             tension=e,
             warnings=warnings,
         )
 
     def _tessellate(self, bound: np.ndarray, p: np.ndarray | None) -> np.ndarray:
-        """Surface grid (F, U, A, 3) from bound control points (F, 8N, 3); the pole rows are
-        the axis ends when ``p`` (axis control points) is given, else zero."""
+        """Planar wrapped surface grid (3, F, U, A+1) from bound control points (F, 8N, 3);
+        the pole rows are the axis ends when ``p`` (axis control points) is given, else zero."""
         nf = bound.shape[0]
-        net = np.zeros((nf, len(self.spec.sections) + 2, OCT, 3))
-        net[:, 1:-1] = bound.reshape(nf, -1, OCT, 3)
+        m8 = (len(self.spec.sections) + 2) * OCT
+        net = np.zeros((3, nf, m8))
+        net[:, :, OCT:-OCT] = np.moveaxis(bound, -1, 0)
         if p is not None:
-            net[:, 0] = p[:, None, 0]
-            net[:, -1] = p[:, None, -1]
-        # G[f,u,a,c] = sum_mj Bu[u,m] net[f,m,j,c] Bv[a,j]
-        tmp = np.einsum("um,fmjc->fujc", self.Bu, net)
-        return np.einsum("fujc,aj->fuac", tmp, self.Bv)
+            net[:, :, :OCT] = np.moveaxis(p[:, 0], -1, 0)[:, :, None]
+            net[:, :, -OCT:] = np.moveaxis(p[:, -1], -1, 0)[:, :, None]
+        # G[c,f,(u,a)] = sum_(m,j) net[c,f,(m,j)] K[(m,j),(u,a)],  K = Bu (x) Bv: one GEMM
+        g = net.reshape(3 * nf, m8) @ self.K
+        return g.reshape(3, nf, self.U, self.A + 1)
 
 
 def _bone(index: dict[str, int], p: AxisPoint) -> int:

@@ -1,7 +1,9 @@
 """Sampling poses: keyed coordinates and activation curves → arrays over frames.
 
-``linear`` and ``cubic`` (natural cubic spline through the keys) interpolate between keys;
-``step`` holds each key until the next. Before the first key and after the last, a
+``linear`` and ``cubic`` interpolate between keys; ``step`` holds each key until the next.
+``cubic`` is the monotone piecewise-cubic Hermite interpolant (PCHIP, Fritsch & Carlson
+1980): smooth through the keys without overshooting them, like Blender's auto-clamped
+Bézier handles (a natural spline through sparse keys swings far past them). Before the first key and after the last, a
 curve holds that key's value. Coordinates keyed nowhere keep their rest value.
 """
 from __future__ import annotations
@@ -22,10 +24,10 @@ def interpolate(frames: np.ndarray, key_frames, key_values, mode: str) -> np.nda
         i = np.clip(np.searchsorted(kf, x, side="right") - 1, 0, len(kf) - 1)
         return kv[i]
     if mode == "cubic" and len(kf) >= 3:
-        from scipy.interpolate import CubicSpline
+        from scipy.interpolate import PchipInterpolator
 
         xc = np.clip(x, kf[0], kf[-1])
-        return CubicSpline(kf, kv, bc_type="natural")(xc)
+        return PchipInterpolator(kf, kv)(xc)
     return np.interp(x, kf, kv)
 
 

@@ -39,6 +39,7 @@ class RunPlan:
     inputs: dict  # display path -> sha256
     render: object = None  # render settings (or None: no rendering)
     warnings: list = field(default_factory=list)
+    bone_meshes: dict = field(default_factory=dict)  # bone index -> (vertices (V,3) f4, faces (T,3) i4, file bytes)
 
     @property
     def names(self) -> list[str]:
@@ -103,13 +104,35 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
     fmt = fmt_arg or (job.format if job is not None else None) or "ply"
     out = Path(out_arg or (job.out if job is not None and job.out else None) or "out/run")
 
+    bone_meshes = {i: load_bone_mesh(b.mesh, pose.skeleton_path) for i, b in enumerate(skel.bones) if b.mesh}
+
     inputs = {}
     srcs = ([job.source] if job is not None else []) + [pose.source, pose.skeleton_path] + [str(f) for f in files]
     srcs += sorted({b.mesh for b in skel.bones if b.mesh})
     for s in srcs:
         if Path(s).is_file():
             inputs[_display(Path(s))] = atomic.sha256_file(s)
-    return RunPlan(pose, specs, models, frames, fmt, out, inputs, warnings=warnings)
+    return RunPlan(pose, specs, models, frames, fmt, out, inputs, warnings=warnings, bone_meshes=bone_meshes)
+
+
+def load_bone_mesh(path: str, skeleton_file: str):
+    """Read a bone's PLY (any PLY triangle mesh) → (vertices, faces, bytes); bad files are input errors."""
+    from axdf_cli.render.runio import read_ply
+
+    where = Mark(skeleton_file)
+    try:
+        data = Path(path).read_bytes()
+        v, _, f = read_ply(Path(path))
+    except OSError as e:
+        raise InputError(where, f"bone mesh {path} cannot be read ({e.strerror})",
+                         "a PLY file relative to the skeleton file") from None
+    except (ValueError, KeyError, IndexError, UnicodeDecodeError) as e:
+        raise InputError(Mark(str(path)), f"not a readable PLY mesh ({e})", "a binary little-endian PLY triangle mesh") from None
+    if len(f) and (f.min() < 0 or f.max() >= len(v)):
+        raise InputError(Mark(str(path)), "face indices out of range", "indices below the vertex count")
+    if not np.isfinite(v).all():
+        raise InputError(Mark(str(path)), "non-finite vertex coordinates", "finite numbers only")
+    return np.ascontiguousarray(v, dtype=np.float32), f.astype(np.int32), data
 
 
 # ----------------------------------------------------------------------------- evaluation
@@ -155,6 +178,19 @@ def mesh_relpath(muscle: str, frame: int, fmt: str) -> str:
     return f"meshes/{muscle}/{muscle}_{frame:04d}.{fmt}"
 
 
+def bone_mesh_relpath(bone: str) -> str:
+    """Bone meshes are copied into the run, so that a run folder renders on its own."""
+    return f"bones/{bone}.ply"
+
+
+def render_dict(settings) -> dict | None:
+    if settings is None or not settings.enabled:
+        return None
+    from axdf_cli.render.settings import settings_to_dict
+
+    return settings_to_dict(settings)
+
+
 def check_output_folder(out: Path, resume: bool, overwrite: bool) -> dict:
     """Refuse a non-empty OUT unless --resume or --overwrite; return the files of a previous
     manifest (for --resume)."""
@@ -172,7 +208,7 @@ def check_output_folder(out: Path, resume: bool, overwrite: bool) -> dict:
             atomic.remove_stale_temporaries(out)
             return {}
     if overwrite:
-        for sub in ("meshes", "frames"):
+        for sub in ("meshes", "frames", "bones"):
             shutil.rmtree(out / sub, ignore_errors=True)
         for name in TOP_FILES:
             try:
@@ -226,16 +262,16 @@ def manifest_dict(plan: RunPlan, files: dict, warnings: list, complete: bool, ex
             "pose": plan.pose.name,
             "skeleton": plan.pose.skeleton.name,
             "fps": plan.pose.fps,
-            "frames": [int(f) for f in plan.frames],
-            "render": None,
+            "render": render_dict(plan.render),
         },
+        "frames": [int(f) for f in plan.frames],
         "muscles": [
             {"name": s.name, "group": s.group, "color": [round(c, 6) for c in s.color], "source": _display(Path(s.source)),
              "volume": s.volume, "vertices": int(m.n_vertices), "faces": int(len(m.faces)),
              "rest_length": round(m.l0, 12), "rest_volume": float(f"{m.v0:.12g}")}
             for s, m in zip(plan.muscles, plan.models)
         ],
-        "bones": [{"name": b.name, "mesh": _display(Path(b.mesh)) if b.mesh else None}
+        "bones": [{"name": b.name, "mesh": bone_mesh_relpath(b.name) if b.mesh else None}
                   for b in plan.pose.skeleton.bones],
         "warnings": warnings,
         "files": dict(sorted(files.items())),
@@ -250,7 +286,7 @@ def write_manifest(out: Path, manifest: dict) -> None:
 
 
 def execute(plan: RunPlan, *, resume: bool = False, overwrite: bool = False, progress=None,
-            strict: bool = False) -> dict:
+            strict: bool = False, render_progress=None) -> dict:
     """Run the plan; return a summary dict. ``progress(n)`` is called with muscle-frames done."""
     out = plan.out
     previous = check_output_folder(out, resume, overwrite)
@@ -295,6 +331,9 @@ def execute(plan: RunPlan, *, resume: bool = False, overwrite: bool = False, pro
         raise InputError(None, f"{len(warnings)} warning(s) with --strict: {warnings[0]}",
                          "fix the inputs or run without --strict")
 
+    for i, (_, _, data) in sorted(plan.bone_meshes.items()):
+        writer.write(bone_mesh_relpath(bones[i].name), data)
+
     rows = [["frame", "muscle", "length", "volume", "volume_ratio", "tension", "twist", "scale", "warning"]]
     for i, frame in enumerate(plan.frames):
         for j, name in enumerate(plan.names):
@@ -306,6 +345,11 @@ def execute(plan: RunPlan, *, resume: bool = False, overwrite: bool = False, pro
             brows.append([str(int(frame)), bone.name] + [_g(x) for x in bone_rows[i, b]])
     writer.write("bones.csv", _fmt_rows(brows).encode())
     extra = {"bounds": [[float(f"{x:.9g}") for x in lo], [float(f"{x:.9g}") for x in hi]]}
+    if plan.render is not None and plan.render.enabled:
+        write_manifest(out, manifest_dict(plan, writer.files, warnings, complete=False, extra=extra))
+        info = render_run(plan, np.array([lo, hi]), render_progress)
+        writer.files.update(info["files"])
+        extra["gl"] = {"renderer": info["gl_renderer"], "version": info["gl_version"]}
     write_manifest(out, manifest_dict(plan, writer.files, warnings, complete=True, extra=extra))
     ratio = stats[..., 2]
     return {
@@ -319,3 +363,33 @@ def _csv_text(s: str) -> str:
     if not s:
         return ""
     return '"' + s.replace('"', '""') + '"'
+
+
+RENDER_CHUNK = 16  # frames per block handed to the renderer (all muscles of a frame at once)
+
+
+def render_run(plan: RunPlan, bounds: np.ndarray, progress=None) -> dict:
+    """Render the plan's frames (the muscles evaluated again, block by block: evaluation is
+    cheap next to rendering and this keeps memory bounded)."""
+    from axdf_cli.render import render_sequence
+    from axdf_cli.scene import FrameChunk, Scene, SceneBone, SceneMuscle
+
+    skel = plan.pose.skeleton
+    bone_ids, scene_bones = [], []
+    if plan.render.bones:
+        for i, (v, f, _) in sorted(plan.bone_meshes.items()):
+            bone_ids.append(i)
+            scene_bones.append(SceneBone(skel.bones[i].name, v, f))
+    scene = Scene(
+        muscles=tuple(SceneMuscle(s.name, s.color, m.faces) for s, m in zip(plan.muscles, plan.models)),
+        bones=tuple(scene_bones), bounds=bounds, frames=tuple(int(f) for f in plan.frames))
+
+    def chunks():
+        for sl, world, results in evaluate_chunks(plan, RENDER_CHUNK, twist_ref):
+            yield FrameChunk(frames=plan.frames[sl],
+                             positions=tuple(r.vertices.astype(np.float32) for r in results),
+                             normals=tuple(r.normals.astype(np.float32) for r in results),
+                             bone_world=world[:, bone_ids])
+
+    twist_ref = twist_references(plan)
+    return render_sequence(scene, chunks(), plan.render, plan.out, progress=progress)

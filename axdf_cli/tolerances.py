@@ -40,3 +40,13 @@ YAML_MAX_NODES = 2_000_000
 YAML_MAX_DEPTH = 64
 # numbers whose magnitude exceeds this are refused (metres, degrees, frames alike)
 MAX_ABS_NUMBER = 1e9
+
+# Rendering (tests/test_render_output.py). A vertex projected with camera.json is checked
+# against the EXR `id` and `Z` at the pixel containing it, when that pixel's centre falls
+# inside one of the vertex's own front-facing projected triangles. The EXR depth is the
+# camera z interpolated by the rasterizer in float32 (about 1e-7 relative per operation);
+# it must match the exact depth of the triangle's plane at the pixel centre to 1e-4 relative.
+RENDER_DEPTH_RTOL = 1e-4
+# Rasterizers snap vertices to a sub-pixel grid (Mesa llvmpipe: 1/256 px); a pixel centre
+# counts as inside a triangle only when at least this far (pixels) from each of its edges.
+RENDER_EDGE_MARGIN_PX = 0.02

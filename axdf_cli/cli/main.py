@@ -18,6 +18,7 @@ from axdf_cli.errors import AxdfError, EnvironmentProblem, InputError, Interrupt
 # name -> (module, help). The order is the order of `axdf --help`.
 COMMANDS = {
     "run": ("axdf_cli.cli.run", "evaluate muscles over a pose; write meshes, stats (and frames)"),
+    "render": ("axdf_cli.cli.render", "render preview frames and EXR data passes from a finished run"),
     "validate": ("axdf_cli.cli.validate", "check muscle, skeleton, pose and job files; write nothing"),
     "import": ("axdf_cli.cli.importer", "import OpenSim models and motions as skeletons, muscles and poses"),
 }

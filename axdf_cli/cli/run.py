@@ -18,7 +18,6 @@ def add_args(p) -> None:
     g = p.add_mutually_exclusive_group()
     g.add_argument("--render", dest="render", action="store_true", default=None, help="render preview frames")
     g.add_argument("--no-render", dest="render", action="store_false", help="do not render")
-    p.add_argument("--size", metavar="WxH", help="frame size for --render, e.g. 512x512")
     p.add_argument("--jobs", type=int, default=1, metavar="N", help="worker processes (default 1)")
     g2 = p.add_mutually_exclusive_group()
     g2.add_argument("--resume", action="store_true", help="finish an interrupted run in OUT, skipping finished files")
@@ -27,6 +26,9 @@ def add_args(p) -> None:
     p.add_argument("--strict", action="store_true", help="fail (exit 2) on any per-muscle, per-frame warning")
     p.add_argument("--allow-outside", action="store_true",
                    help="allow paths inside YAML files to leave the project folder tree")
+    from axdf_cli.render.settings import add_render_args
+
+    add_render_args(p)
 
 
 def run(args) -> int:
@@ -37,6 +39,15 @@ def run(args) -> int:
     job = load_job(args.job) if args.job else None
     plan = runner.plan_run(job, muscle_args=args.muscles, pose_arg=args.pose, out_arg=args.out,
                            fmt_arg=args.format, frames_arg=args.frames)
+    from dataclasses import replace
+
+    from axdf_cli.errors import Mark
+    from axdf_cli.render.settings import parse_render_settings, settings_from_args
+
+    settings = parse_render_settings(job.render if job else None, job.render_mark if job and job.render_mark else Mark("job"))
+    if args.render is not None:
+        settings = replace(settings, enabled=args.render)
+    plan.render = settings_from_args(settings, args)
     for w in plan.warnings:
         print(f"warning: {w}", file=sys.stderr)
     total = len(plan.frames) * len(plan.models)
@@ -47,17 +58,21 @@ def run(args) -> int:
             print(f"  {s.name}: {m.n_vertices} vertices, {len(m.faces)} faces, rest length {m.l0:.4f} m, "
                   f"rest volume {m.v0 * 1e6:.2f} cm^3")
         return 0
-    bar = None
+    bar = rbar = None
     if not args.quiet and sys.stderr.isatty():
         from tqdm import tqdm
 
-        bar = tqdm(total=total, unit="mesh", file=sys.stderr, desc="axdf run")
+        bar = tqdm(total=total, unit="mesh", file=sys.stderr, desc="meshes")
+        if plan.render.enabled:
+            rbar = tqdm(total=len(plan.frames), unit="frame", file=sys.stderr, desc="frames")
     try:
         summary = runner.execute(plan, resume=args.resume, overwrite=args.overwrite,
-                                 progress=bar.update if bar else None, strict=args.strict)
+                                 progress=bar.update if bar else None, strict=args.strict,
+                                 render_progress=(lambda _f: rbar.update(1)) if rbar else None)
     finally:
-        if bar:
-            bar.close()
+        for b in (bar, rbar):
+            if b:
+                b.close()
     if not args.quiet:
         print(f"wrote {summary['files']} files ({summary['muscles']} muscles x {summary['frames']} frames) "
               f"to {summary['out']}" + (f", {summary['skipped']} already complete" if summary["skipped"] else ""))

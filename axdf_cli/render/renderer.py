@@ -1,0 +1,303 @@
+"""The moderngl renderer: muscles and bones to a shaded preview and exact data passes.
+
+Per frame and per panel (view) two passes are drawn:
+
+1. **beauty**: shaded colour at ``supersample`` times the output size into a half-float
+   RGBA target, read back and box-downsampled in numpy (float32, fixed order), which is
+   exactly repeatable, unlike driver MSAA. Shading is done in camera space: a soft
+   (wrapped Lambert) key light from upper left, a weaker fill from the right, a hemisphere
+   ambient and a small Blinn highlight; optional wireframe overlay. Colours are linear and
+   premultiplied by alpha.
+2. **data**: at the output size, one sample per pixel centre, no blending: world normal and
+   camera depth (RGBA float32) and the object id (R float32 holding exact integers below
+   2^24). Background: id 0, depth 0, normal 0.
+
+Ids: 0 = background, ``1 .. M`` = ``Scene.muscles`` in order, ``M+1 .. M+B`` = bones.
+
+Speed: each mesh's topology (index buffer) and each bone mesh are uploaded once; per frame
+only muscle positions and normals are written (one buffer write each) and each target is
+read back once.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Iterable, Iterator
+
+import numpy as np
+
+from axdf_cli.render.camera import Camera, sequence_cameras
+from axdf_cli.render.context import check_same_process
+from axdf_cli.render.settings import RenderSettings
+from axdf_cli.scene import FrameChunk, Scene
+
+BONE_COLOR = (0.78, 0.75, 0.68)  # neutral ivory, linear RGB
+WIRE_DARKEN = 0.55  # wire colour = albedo * this
+WIRE_DEPTH_BIAS = 2e-4  # NDC depth pulled towards the camera so edges win over their faces
+BACKGROUND_ID = 0
+
+_VERT = """
+#version 330
+uniform mat4 u_model;   // object to world (identity for muscles)
+uniform mat4 u_view;    // world to camera (OpenCV axes)
+uniform mat4 u_proj;    // camera to clip
+uniform float u_bias;   // NDC depth bias (wireframe)
+in vec3 in_pos;
+in vec3 in_nrm;
+out vec3 v_nrm;         // world normal
+out vec3 v_cam;         // camera-space position
+void main() {
+    vec4 w = u_model * vec4(in_pos, 1.0);
+    vec4 c = u_view * w;
+    v_cam = c.xyz;
+    v_nrm = mat3(u_model) * in_nrm;
+    gl_Position = u_proj * c;
+    gl_Position.z -= u_bias * gl_Position.w;
+}
+"""
+
+_BEAUTY_FRAG = """
+#version 330
+uniform mat4 u_view;
+uniform vec3 u_albedo;
+uniform int u_wire;
+in vec3 v_nrm;
+in vec3 v_cam;
+out vec4 f_color;
+float wrap(float x, float w) { return max((x + w) / (1.0 + w), 0.0); }
+void main() {
+    if (u_wire == 1) { f_color = vec4(u_albedo * %(wire)f, 1.0); return; }
+    vec3 n = normalize(mat3(u_view) * v_nrm);
+    vec3 e = normalize(-v_cam);               // towards the eye
+    if (dot(n, e) < 0.0) n = -n;               // inside faces seen through an opening
+    // lights in camera axes (x right, y down, z forward), pointing towards the light
+    vec3 key = normalize(vec3(-0.45, -0.65, -0.60));
+    vec3 fill = normalize(vec3(0.75, -0.10, -0.65));
+    vec3 rim = normalize(vec3(0.10, -0.60, 0.80));
+    float hemi = 0.5 - 0.5 * n.y;              // 1 facing up in the image
+    vec3 ambient = mix(vec3(0.08, 0.075, 0.07), vec3(0.22, 0.23, 0.25), hemi);
+    float d = 0.95 * wrap(dot(n, key), 0.2) + 0.25 * wrap(dot(n, fill), 0.4)
+            + 0.20 * pow(max(dot(n, rim), 0.0), 2.0);
+    vec3 h = normalize(key + e);
+    float spec = 0.18 * pow(max(dot(n, h), 0.0), 40.0);
+    vec3 c = u_albedo * (ambient + vec3(d)) + vec3(spec);
+    f_color = vec4(min(c, vec3(1.0)), 1.0);
+}
+""" % {"wire": WIRE_DARKEN}
+
+_DATA_FRAG = """
+#version 330
+uniform float u_id;
+in vec3 v_nrm;
+in vec3 v_cam;
+layout(location = 0) out vec4 f_data;  // world normal xyz, camera depth
+layout(location = 1) out vec4 f_id;
+void main() {
+    f_data = vec4(normalize(v_nrm), v_cam.z);
+    f_id = vec4(u_id, 0.0, 0.0, 0.0);
+}
+"""
+
+
+@dataclass(frozen=True)
+class FrameImages:
+    """One rendered frame (all panels of a sheet side by side)."""
+
+    frame: int
+    rgba: np.ndarray  # (H, W, 4) float32 linear, premultiplied alpha
+    depth: np.ndarray  # (H, W) float32 camera z in metres, 0 = background
+    normals: np.ndarray  # (H, W, 3) float32 world unit normals, 0 = background
+    ids: np.ndarray  # (H, W) uint32, 0 = background, 1..M muscles, M+1.. bones
+    cameras: tuple[Camera, ...]
+
+
+def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(V, 3) float32 area-weighted unit vertex normals of a (V, 3) / (T, 3) mesh."""
+    v = vertices.astype(np.float64)
+    tri = v[faces]  # (T, 3, 3)
+    fn = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])  # (T, 3), |.| = 2 area
+    n = np.zeros_like(v)
+    for k in range(3):
+        np.add.at(n, faces[:, k], fn)
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    return (n / np.where(length > 0, length, 1.0)).astype(np.float32)
+
+
+def downsample(img: np.ndarray, s: int) -> np.ndarray:
+    """Box filter: (H*s, W*s, C) -> (H, W, C) float32 mean of each s x s block.
+
+    Sums the s rows, then the s columns, of each block in a fixed order with float32
+    additions (exactly repeatable; faster than a strided ``sum(axis=(1, 3))``).
+    """
+    x = img.astype(np.float32, copy=False)
+    if s == 1:
+        return x
+    Hs, Ws, C = x.shape
+    rows = x.reshape(Hs // s, s, Ws, C)
+    acc = rows[:, 0].copy()  # (H, W*s, C)
+    for i in range(1, s):
+        acc += rows[:, i]
+    cols = acc.reshape(Hs // s, Ws // s, s, C)
+    out = cols[:, :, 0].copy()  # (H, W, C)
+    for j in range(1, s):
+        out += cols[:, :, j]
+    out *= np.float32(1.0 / (s * s))
+    return out
+
+
+def id_map(scene: Scene, bones: bool) -> dict:
+    """``camera.json``'s id table: id (as a string key) -> {kind, name}."""
+    out = {str(BACKGROUND_ID): {"kind": "background", "name": None}}
+    for i, m in enumerate(scene.muscles):
+        out[str(1 + i)] = {"kind": "muscle", "name": m.name}
+    if bones:
+        for j, b in enumerate(scene.bones):
+            out[str(1 + len(scene.muscles) + j)] = {"kind": "bone", "name": b.name}
+    return out
+
+
+class Renderer:
+    """Holds GL resources for one Scene; :meth:`render` draws one frame."""
+
+    def __init__(self, ctx, scene: Scene, settings: RenderSettings, cameras_panels: int = 1):
+        check_same_process(ctx)
+        self.ctx = ctx
+        self.scene = scene
+        self.settings = settings
+        s = settings.supersample
+        W, H = settings.size
+        self.size = (W * cameras_panels, H)
+        self.prog = ctx.program(vertex_shader=_VERT, fragment_shader=_BEAUTY_FRAG)
+        self.dprog = ctx.program(vertex_shader=_VERT, fragment_shader=_DATA_FRAG)
+        # targets
+        Wt, Ht = self.size
+        self.color_tex = ctx.texture((Wt * s, Ht * s), 4, dtype="f2")
+        self.color_fbo = ctx.framebuffer([self.color_tex], ctx.depth_renderbuffer((Wt * s, Ht * s)))
+        self.data_tex = ctx.texture((Wt, Ht), 4, dtype="f4")
+        self.id_tex = ctx.texture((Wt, Ht), 4, dtype="f4")
+        self.data_fbo = ctx.framebuffer([self.data_tex, self.id_tex], ctx.depth_renderbuffer((Wt, Ht)))
+        # muscles: topology once, dynamic positions and normals
+        self.muscles = []
+        for i, m in enumerate(scene.muscles):
+            nv = int(m.faces.max()) + 1 if len(m.faces) else 0
+            ibo = ctx.buffer(np.ascontiguousarray(m.faces, dtype=np.int32).tobytes())
+            vpos = ctx.buffer(reserve=max(nv, 1) * 12, dynamic=True)
+            vnrm = ctx.buffer(reserve=max(nv, 1) * 12, dynamic=True)
+            vao = ctx.vertex_array(self.prog, [(vpos, "3f", "in_pos"), (vnrm, "3f", "in_nrm")],
+                                   index_buffer=ibo, index_element_size=4)
+            dvao = ctx.vertex_array(self.dprog, [(vpos, "3f", "in_pos"), (vnrm, "3f", "in_nrm")],
+                                    index_buffer=ibo, index_element_size=4)
+            self.muscles.append((vpos, vnrm, vao, dvao, tuple(float(c) for c in m.color), float(1 + i)))
+        # bones: static meshes in bone-local coordinates, placed by a model matrix
+        self.bones = []
+        if settings.bones:
+            for j, b in enumerate(scene.bones):
+                v = np.ascontiguousarray(b.vertices, dtype=np.float32)
+                n = vertex_normals(v, b.faces)
+                vbo = ctx.buffer(np.concatenate([v, n], axis=1).tobytes())
+                ibo = ctx.buffer(np.ascontiguousarray(b.faces, dtype=np.int32).tobytes())
+                vao = ctx.vertex_array(self.prog, [(vbo, "3f 3f", "in_pos", "in_nrm")],
+                                       index_buffer=ibo, index_element_size=4)
+                dvao = ctx.vertex_array(self.dprog, [(vbo, "3f 3f", "in_pos", "in_nrm")],
+                                        index_buffer=ibo, index_element_size=4)
+                self.bones.append((j, vao, dvao, float(1 + len(scene.muscles) + j)))
+        self._ident = np.eye(4, dtype="f4").T.tobytes()
+
+    # ---------------------------------------------------------------------------------------
+    def _draw_all(self, prog, data: bool, bone_world: np.ndarray | None, wire: bool = False):
+        for vpos, vnrm, vao, dvao, color, ident in self.muscles:
+            prog["u_model"].write(self._ident)
+            if data:
+                prog["u_id"].value = ident
+                dvao.render()
+            else:
+                prog["u_albedo"].value = color
+                prog["u_wire"].value = int(wire)
+                vao.render()
+        for j, vao, dvao, ident in self.bones:
+            prog["u_model"].write(np.asarray(bone_world[j], dtype="f4").T.tobytes())
+            if data:
+                prog["u_id"].value = ident
+                dvao.render()
+            else:
+                prog["u_albedo"].value = BONE_COLOR
+                prog["u_wire"].value = int(wire)
+                vao.render()
+
+    def render(self, frame: int, positions, normals, bone_world: np.ndarray | None,
+               cameras: list[Camera]) -> FrameImages:
+        """Draw one frame.
+
+        ``positions`` / ``normals``: per muscle (V_m, 3) float32 world arrays;
+        ``bone_world``: (n_bones, 4, 4) float64; ``cameras``: one per panel.
+        """
+        ctx = self.ctx
+        check_same_process(ctx)
+        s = self.settings.supersample
+        for (vpos, vnrm, *_), p, n in zip(self.muscles, positions, normals):
+            vpos.write(np.ascontiguousarray(p, dtype=np.float32).tobytes())
+            vnrm.write(np.ascontiguousarray(n, dtype=np.float32).tobytes())
+        ctx.enable_only(ctx.DEPTH_TEST)
+        bg = self.settings.background
+        Wt, Ht = self.size
+        # beauty pass (supersampled)
+        self.color_fbo.use()
+        self.color_fbo.clear(bg[0] * bg[3], bg[1] * bg[3], bg[2] * bg[3], bg[3], depth=1.0)
+        for cam in cameras:
+            x0, y0, w, h = cam.viewport
+            self.color_fbo.viewport = (x0 * s, (Ht - y0 - h) * s, w * s, h * s)
+            self.prog["u_view"].write(np.asarray(cam.world_to_camera, "f4").T.tobytes())
+            self.prog["u_proj"].write(np.asarray(cam.projection_gl(), "f4").T.tobytes())
+            self.prog["u_bias"].value = 0.0
+            self._draw_all(self.prog, False, bone_world)
+            if self.settings.wireframe:
+                ctx.wireframe = True
+                ctx.line_width = float(max(1, s // 2))
+                self.prog["u_bias"].value = WIRE_DEPTH_BIAS
+                self._draw_all(self.prog, False, bone_world, wire=True)
+                ctx.wireframe = False
+        raw = self.color_fbo.read(components=4, dtype="f4", viewport=(0, 0, Wt * s, Ht * s))
+        hi = np.frombuffer(raw, dtype=np.float32).reshape(Ht * s, Wt * s, 4)[::-1]
+        rgba = downsample(hi, s)
+        # data pass (one sample per pixel centre)
+        self.data_fbo.use()
+        self.data_fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+        for cam in cameras:
+            x0, y0, w, h = cam.viewport
+            self.data_fbo.viewport = (x0, Ht - y0 - h, w, h)
+            self.dprog["u_view"].write(np.asarray(cam.world_to_camera, "f4").T.tobytes())
+            self.dprog["u_proj"].write(np.asarray(cam.projection_gl(), "f4").T.tobytes())
+            self.dprog["u_bias"].value = 0.0
+            self._draw_all(self.dprog, True, bone_world)
+        data = np.frombuffer(self.data_fbo.read(components=4, dtype="f4", attachment=0,
+                                                viewport=(0, 0, Wt, Ht)),
+                             dtype=np.float32).reshape(Ht, Wt, 4)[::-1]
+        idf = np.frombuffer(self.data_fbo.read(components=1, dtype="f4", attachment=1,
+                                               viewport=(0, 0, Wt, Ht)),
+                            dtype=np.float32).reshape(Ht, Wt)[::-1]
+        return FrameImages(frame=int(frame), rgba=rgba, depth=np.ascontiguousarray(data[..., 3]),
+                           normals=np.ascontiguousarray(data[..., :3]),
+                           ids=np.rint(idf).astype(np.uint32), cameras=tuple(cameras))
+
+    def release(self) -> None:
+        for obj in (self.color_fbo, self.data_fbo, self.color_tex, self.data_tex, self.id_tex,
+                    self.prog, self.dprog):
+            obj.release()
+
+
+def render_frames(ctx, scene: Scene, chunks: Iterable[FrameChunk], settings: RenderSettings,
+                  cameras: list[list[Camera]] | None = None) -> Iterator[FrameImages]:
+    """Render every frame of ``chunks`` (in order) with ``ctx``; yield :class:`FrameImages`."""
+    if cameras is None:
+        cameras = sequence_cameras(scene.bounds, scene.frames, settings)
+    by_frame = {int(f): cams for f, cams in zip(scene.frames, cameras)}
+    r = Renderer(ctx, scene, settings, len(cameras[0]) if cameras else 1)
+    try:
+        for chunk in chunks:
+            for c, f in enumerate(np.asarray(chunk.frames).tolist()):
+                if f not in by_frame:
+                    raise ValueError(f"frame {f} is not in Scene.frames")
+                bw = chunk.bone_world[c] if len(scene.bones) else None
+                yield r.render(f, [p[c] for p in chunk.positions], [n[c] for n in chunk.normals],
+                               bw, by_frame[f])
+    finally:
+        r.release()

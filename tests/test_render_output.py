@@ -1,0 +1,180 @@
+"""Rendered frames agree with camera.json, EXR passes are typed and exact, output repeats."""
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from render_helpers import read_exr
+
+from axdf_cli import tolerances as tol
+from axdf_cli.errors import EnvironmentProblem
+from axdf_cli.render.context import create_gl_context
+from axdf_cli.render.renderer import render_frames
+from axdf_cli.render.sequence import benchmark_fps, render_sequence
+from axdf_cli.render.settings import CameraSpec, RenderSettings
+from axdf_cli.render.synthetic import synthetic_scene
+
+SMALL = RenderSettings(enabled=True, size=(160, 120))
+
+
+def project(cam: dict, P: np.ndarray):
+    """(V, 3) world points -> (V, 2) pixel coordinates, (V,) camera depth, (V, 3) camera coords."""
+    K, M = np.array(cam["K"]), np.array(cam["world_to_camera"])
+    pc = P @ M[:3, :3].T + M[:3, 3]
+    uvw = pc @ K.T
+    return uvw[:, :2] / uvw[:, 2:3], pc[:, 2], pc
+
+
+def pixel_hits(uv: np.ndarray, z: np.ndarray, faces: np.ndarray):
+    """Which vertices have their pixel's centre inside one of their own front-facing projected
+    triangles, and the exact depth of that triangle's plane there.
+
+    uv: (V, 2) pixels, z: (V,) camera depth, faces: (T, 3). Returns (V,) bool, (V,) float64.
+    """
+    tri = uv[faces]  # (T, 3, 2)
+    centre = np.floor(tri) + 0.5  # (T, 3, 2) pixel centre of each corner's pixel
+    e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    area = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]  # (T,) < 0: front-facing (y down flips CCW)
+    d = centre - tri[:, None, 0]  # (T, 3, 2)
+    b1 = (d[..., 0] * e2[:, None, 1] - d[..., 1] * e2[:, None, 0]) / area[:, None]
+    b2 = (e1[:, None, 0] * d[..., 1] - e1[:, None, 1] * d[..., 0]) / area[:, None]
+    b0 = 1 - b1 - b2
+    # distance (pixels) from the centre to the edge opposite each corner: b_i * |area| / |edge_i|
+    edge = np.stack([np.linalg.norm(tri[:, 2] - tri[:, 1], axis=-1), np.linalg.norm(e2, axis=-1),
+                     np.linalg.norm(e1, axis=-1)], -1)  # (T, 3)
+    dist = np.stack([b0, b1, b2], -1) * np.abs(area)[:, None, None] / np.maximum(edge[:, None, :], 1e-12)
+    # GL snaps vertices to 1/256 px (Mesa: 8 sub-pixel bits); keep centres clear of that
+    inside = np.all(dist > tol.RENDER_EDGE_MARGIN_PX, axis=-1) & (area[:, None] < 0)  # (T, 3)
+    inv_z = 1 / z[faces]  # (T, 3); 1/z is affine in screen space on a plane
+    zc = 1 / (b0 * inv_z[:, None, 0] + b1 * inv_z[:, None, 1] + b2 * inv_z[:, None, 2])  # (T, 3)
+    hit = np.zeros(len(uv), bool)
+    depth = np.full(len(uv), np.nan)
+    hit[faces[inside]] = True
+    depth[faces[inside]] = zc[inside]
+    return hit, depth
+
+
+@pytest.mark.parametrize("settings", [
+    replace(SMALL, view="auto"),
+    replace(SMALL, view="sheet", size=(128, 128)),
+    replace(SMALL, view="top", supersample=2, orbit=20.0),
+    replace(SMALL, camera=CameraSpec((0.3, -0.5, 0.25), (0.0, 0.0, 0.0), fov=35.0)),
+])
+def test_vertices_land_in_their_id_mask_at_exr_depth(tmp_path, settings):
+    scene, chunks = synthetic_scene(n_muscles=3, verts=800, n_frames=3)
+    render_sequence(scene, chunks, settings, tmp_path)
+    cam = json.loads((tmp_path / "camera.json").read_text())
+    assert cam["ids"]["0"]["kind"] == "background"
+    checked = 0
+    for k, fr in enumerate(cam["frames"]):
+        exr = read_exr(tmp_path / "frames" / f"{fr['frame']:04d}.exr")
+        H, W = exr["id"].shape
+        assert (W, H) == (cam["width"], cam["height"])
+        for m, m_def in enumerate(scene.muscles):
+            mid = m + 1
+            assert cam["ids"][str(mid)] == {"kind": "muscle", "name": m_def.name}
+            P = chunks[k].positions[m][0].astype(np.float64)
+            for c in fr["cameras"]:
+                uv, z, pc = project(c, P)
+                x0, y0, w, h = c["viewport"]
+                # automatic and explicit framing keep every vertex inside its panel
+                assert np.all((uv[:, 0] > x0) & (uv[:, 0] < x0 + w) & (uv[:, 1] > y0) & (uv[:, 1] < y0 + h))
+                iu, iv = np.floor(uv[:, 0]).astype(int), np.floor(uv[:, 1]).astype(int)
+                Zpix, idpix = exr["Z"][iv, iu], exr["id"][iv, iu]
+                hit, zplane = pixel_hits(uv, z, m_def.faces)
+                # the pixel centre lies on this muscle's front surface: unless something nearer
+                # covers it, the pixel carries this muscle's id and that surface's depth
+                covered = (idpix != mid) & (idpix != 0) & (Zpix < zplane)
+                sel = hit & ~covered
+                assert np.all(idpix[sel] == mid), f"{(idpix[sel] != mid).sum()} of {sel.sum()} outside mask"
+                err = np.abs(Zpix[sel] - zplane[sel])
+                assert np.all(err <= tol.RENDER_DEPTH_RTOL * zplane[sel]), err.max()
+                # and the vertex itself is within a pixel's footprint of that depth
+                foot = z[sel] / np.array(c["K"])[0, 0]
+                assert np.all(np.abs(Zpix[sel] - z[sel]) <= 10 * foot)
+                checked += int(sel.sum())
+    assert checked > 500
+
+
+def test_exr_channels_types_and_exact_ids(tmp_path):
+    scene, chunks = synthetic_scene(n_muscles=3, verts=400, n_frames=2)
+    res = render_sequence(scene, chunks, SMALL, tmp_path)
+    assert res["gl_renderer"] and res["gl_version"]
+    assert set(res["files"]) == {"frames/0000.png", "frames/0000.exr", "frames/0001.png",
+                                 "frames/0001.exr", "camera.json"}
+    import OpenEXR
+
+    with OpenEXR.File(str(tmp_path / "frames" / "0000.exr"), separate_channels=True) as f:
+        ch = f.channels()
+        assert f.header()["compression"] == OpenEXR.ZIP_COMPRESSION
+        types = {n: c.pixels.dtype for n, c in ch.items()}
+    assert types == {"R": np.float16, "G": np.float16, "B": np.float16, "A": np.float16,
+                     "Z": np.float32, "N.X": np.float32, "N.Y": np.float32, "N.Z": np.float32,
+                     "id": np.uint32}
+    exr = read_exr(tmp_path / "frames" / "0000.exr")
+    ids = exr["id"]
+    assert set(np.unique(ids)) == {0, 1, 2, 3, 4}  # background, 3 muscles, the bone
+    bg = ids == 0
+    assert np.all(exr["Z"][bg] == 0) and np.all(exr["Z"][~bg] > 0)
+    n = np.stack([exr["N.X"], exr["N.Y"], exr["N.Z"]], -1)
+    assert np.all(n[bg] == 0)
+    assert np.abs(np.linalg.norm(n[~bg], axis=-1) - 1).max() < 1e-5
+    assert np.all(exr["A"][~bg] == 1)
+    # PNG agrees with the EXR coverage: opaque background here, so alpha 255 everywhere
+    from PIL import Image
+
+    png = np.asarray(Image.open(tmp_path / "frames" / "0000.png"))
+    assert png.shape == (120, 160, 4) and png.dtype == np.uint8 and np.all(png[..., 3] == 255)
+
+
+def test_two_renders_are_byte_identical(tmp_path):
+    scene, chunks = synthetic_scene(n_muscles=2, verts=400, n_frames=2)
+    s = replace(SMALL, wireframe=True, background=(0, 0, 0, 0))
+    a = render_sequence(scene, chunks, s, tmp_path / "a")
+    b = render_sequence(scene, chunks, s, tmp_path / "b")
+    assert a["files"] == b["files"]
+    for rel in a["files"]:
+        assert (tmp_path / "a" / rel).read_bytes() == (tmp_path / "b" / rel).read_bytes(), rel
+
+
+def test_transparent_background_and_fixed_camera(tmp_path):
+    scene, chunks = synthetic_scene(n_muscles=2, verts=300, n_frames=3)
+    render_sequence(scene, chunks, replace(SMALL, background=(0, 0, 0, 0)), tmp_path)
+    from PIL import Image
+
+    png = np.asarray(Image.open(tmp_path / "frames" / "0001.png"))
+    exr = read_exr(tmp_path / "frames" / "0001.exr")
+    def all3x3(mask, edge):  # True where the pixel and its 8 neighbours are all in mask
+        pad = np.pad(mask, 1, constant_values=edge)
+        return np.all([pad[1 + di:121 + di, 1 + dj:161 + dj] for di in (-1, 0, 1) for dj in (-1, 0, 1)], 0)
+
+    bg = exr["id"] == 0
+    far_bg, inner = all3x3(bg, True), all3x3(~bg, False)
+    assert far_bg.any() and np.all(png[..., 3][far_bg] == 0) and np.all(exr["A"][far_bg] == 0)
+    assert inner.any() and np.all(png[..., 3][inner] == 255)
+    cam = json.loads((tmp_path / "camera.json").read_text())
+    mats = [fr["cameras"][0]["world_to_camera"] for fr in cam["frames"]]
+    assert all(m == mats[0] for m in mats)  # no jumping without orbit
+
+
+def test_gl_context_has_no_error_after_rendering():
+    scene, chunks = synthetic_scene(n_muscles=2, verts=300, n_frames=2)
+    ctx = create_gl_context()
+    try:
+        imgs = list(render_frames(ctx, scene, chunks, replace(SMALL, wireframe=True)))
+        assert ctx.error == "GL_NO_ERROR"
+        assert [i.frame for i in imgs] == [0, 1]
+        assert imgs[0].rgba.shape == (120, 160, 4) and imgs[0].ids.dtype == np.uint32
+    finally:
+        ctx.release()
+
+
+def test_missing_egl_library_is_an_environment_problem():
+    with pytest.raises(EnvironmentProblem) as e:
+        create_gl_context(libegl="/nonexistent/libEGL.so.1")
+    assert "apt-get install -y libegl1 libegl-mesa0 libgl1-mesa-dri libgles2" in e.value.hint
+
+
+def test_benchmark_reports_fps(tmp_path):
+    r = benchmark_fps(size=(64, 64), n_muscles=2, verts=200, frames=2, out_dir=tmp_path)
+    assert r["frames"] == 2 and r["render_fps"] > 0 and r["write_fps"] > 0
