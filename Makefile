@@ -8,7 +8,11 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 DEMO   ?= poses/jobs/demo.yaml
 
-.PHONY: all setup sysdeps demo test bench golden clean
+# OpenSim data for `make import` (opensim-models; see README "Data credits").
+DATA   ?= ../shared/data
+OSIM   := $(DATA)/opensim
+
+.PHONY: all setup sysdeps demo test bench golden clean import
 
 all: demo
 
@@ -43,6 +47,18 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python -m pip install -q -e '.[bench]'
 	$(BIN)/python -m axdf_cli.bench
+
+# Regenerate the shipped OpenSim library: muscles/{arm26,gait2392}, poses/skeletons/{arm26,gait2392}.yaml
+# (+ meshes/), poses/arm26_flex.yaml, poses/gait2392_walk.yaml. Reports: muscles/*/IMPORT.md.
+import: $(STAMP)
+	$(BIN)/axdf import osim $(OSIM)/arm26/arm26.osim --name arm26 \
+	  --motion $(OSIM)/arm26/arm26_Kinematics_q.sto --controls $(OSIM)/arm26/arm26_controls.sto \
+	  --fps 60 --pose-name arm26_flex --out muscles/arm26 --muscles-out muscles/arm26 \
+	  --skeleton-out poses/skeletons/arm26.yaml --pose-out poses/arm26_flex.yaml
+	$(BIN)/axdf import osim $(OSIM)/gait2392/gait2392_thelen2003muscle.osim --name gait2392 \
+	  --motion $(OSIM)/gait2392/subject01_walk1_ik.mot --controls $(OSIM)/gait2392/subject01_walk1_controls.sto \
+	  --pose-name gait2392_walk --out muscles/gait2392 --muscles-out muscles/gait2392 \
+	  --skeleton-out poses/skeletons/gait2392.yaml --pose-out poses/gait2392_walk.yaml
 
 clean:
 	rm -rf out .pytest_cache

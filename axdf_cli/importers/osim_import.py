@@ -1,0 +1,371 @@
+"""``axdf import osim``: an OpenSim model (+ motion, + controls) → axdf files, in memory.
+
+:func:`build_import` reads and checks every input first and returns an :class:`ImportResult`
+holding the bytes of every output file; the CLI writes them (atomically) only when all
+inputs were good, so bad input writes nothing.
+
+Motion files (``.mot``/``.sto``) and the angle-unit rule
+--------------------------------------------------------
+Columns are matched to coordinates by name (``knee_angle_r``, or a state path
+``/jointset/knee_r/knee_angle_r/value``; ``.../speed`` columns are skipped). A column that
+names no coordinate of the model is an error. Translational coordinates are metres.
+Rotational coordinates follow the header's ``inDegrees``, unless the values contradict it:
+
+- header says degrees, but every rotational value lies within ±2π, consecutive rows never
+  step by more than 0.35 (20° if radians, a jerky 0.35° if degrees would still pass) and
+  some rotational coordinate moves by more than 0.5 over the motion → the values are
+  radians (a whole motion within ±6.3° that still moves is implausible, a 29° swing is
+  not); a warning goes to stderr and into the report. ``arm26_Kinematics_q.sto`` is such
+  a file.
+- header says radians (or says nothing), but some rotational value exceeds 2π in
+  magnitude → degrees, with a warning. With no header and values within ±2π: radians.
+
+Frames: without ``--fps`` a uniformly sampled motion keys every row at frame
+``0 .. N-1`` with ``fps = 1 / dt``; with ``--fps`` (or when the rows are not evenly spaced)
+the motion is resampled by linear interpolation at ``t0 + k / fps``.
+
+Controls (``--controls``): columns name muscles (``TRIlong``, ``glut_med1_r.excitation``,
+``/forceset/TRIlong``); other columns (reserve actuators) are listed as ignored. Values are
+linearly interpolated at each pose frame inside the controls' time span (outside it the pose
+holds the nearest key, as every axdf pose does) and clipped to 0..1 (warning when clipped).
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from axdf_cli.errors import InputError, Mark
+from axdf_cli.importers import emit
+from axdf_cli.importers.osim import Model, load_osim
+from axdf_cli.importers.storage import Table, read_storage
+from axdf_cli.importers.vtp import ply_bytes, read_vtp
+
+NAME_RE = re.compile(r"^[A-Za-z0-9_.-]+$")
+#: The angle-unit rule's thresholds (see module doc).
+RADIAN_BOUND = 2.0 * math.pi
+MAX_RADIAN_STEP = 0.35
+MIN_RADIAN_SWING = 0.5
+
+
+@dataclass
+class ImportResult:
+    files: dict[str, bytes]  # output path (as given by the layout) -> bytes
+    report: dict
+    warnings: list[str] = field(default_factory=list)
+    model: Model | None = None
+
+
+def _sha(path: Path) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def _rel(target: Path, start_dir: Path) -> str:
+    return Path(os.path.relpath(Path(target).resolve(), Path(start_dir).resolve())).as_posix()
+
+
+def safe_name(s: str) -> str:
+    s = re.sub(r"[^A-Za-z0-9_.-]+", "_", s).strip("_")
+    return s if s and s not in (".", "..") else "model"
+
+
+# ----------------------------------------------------------------------------- motion
+
+
+def coordinate_columns(table: Table, model: Model) -> tuple[list[tuple[int, str]], list[str]]:
+    """(column index, coordinate) pairs; skipped labels (speeds)."""
+    pairs, skipped = [], []
+    for i, (lab, mark) in enumerate(zip(table.labels, table.label_marks)):
+        name = lab
+        if "/" in lab:
+            parts = [p for p in lab.split("/") if p]
+            if parts and parts[-1] in ("speed", "acceleration"):
+                skipped.append(lab)
+                continue
+            if parts and parts[-1] == "value":
+                parts = parts[:-1]
+            name = parts[-1] if parts else lab
+        if name not in model.coordinates:
+            raise InputError(mark, f"unknown coordinate {lab!r}",
+                             f"coordinates of {Path(model.source).name}: " + ", ".join(model.coordinates))
+        pairs.append((i, name))
+    return pairs, skipped
+
+
+def angle_unit(table: Table, rot_cols: list[int]) -> tuple[bool, str | None]:
+    """Whether rotational columns are degrees, and a warning when the header is overruled."""
+    header = table.in_degrees
+    if not rot_cols:
+        return bool(header), None
+    v = table.data[:, rot_cols]
+    within = bool(np.all(np.abs(v) <= RADIAN_BOUND))
+    step = float(np.max(np.abs(np.diff(v, axis=0)))) if len(v) > 1 else 0.0
+    swing = float(np.max(v.max(axis=0) - v.min(axis=0)))
+    where = Mark(table.source).file
+    if header is True:
+        if within and step <= MAX_RADIAN_STEP and swing > MIN_RADIAN_SWING:
+            return False, (f"{where}: header says inDegrees=yes but every rotational value lies within ±2π "
+                           f"with steps <= {step:.3g} and a swing of {swing:.3g}: reading the values as radians")
+        return True, None
+    if not within:
+        said = "inDegrees=no" if header is False else "no inDegrees"
+        return True, (f"{where}: header says {said} but rotational values reach {float(np.abs(v).max()):.4g} "
+                      f"(beyond ±2π): reading the values as degrees")
+    return False, None
+
+
+def _frame_times(time: np.ndarray, fps: float | None) -> tuple[np.ndarray, float, bool]:
+    """Output frame times, fps, and whether rows map 1:1 to frames."""
+    if len(time) == 1:
+        return time.copy(), float(fps or 30.0), True
+    dt = np.diff(time)
+    med = float(np.median(dt))
+    if med <= 0:
+        raise InputError(Mark(""), "motion time does not advance", "increasing time")
+    uniform = bool(np.all(np.abs(dt - med) <= 1e-3 * med))
+    native = 1.0 / med
+    if abs(native - round(native)) < 1e-3 * native:
+        native = float(round(native))
+    if fps is None and uniform:
+        return time.copy(), native, True
+    fps = float(fps or native)
+    n = int(math.floor((time[-1] - time[0]) * fps + 1e-9)) + 1
+    return time[0] + np.arange(n) / fps, fps, False
+
+
+def _interp(time: np.ndarray, values: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Linear interpolation of each column of ``values`` (N, C) at ``t``; repeated times keep the last row."""
+    keep = np.append(np.diff(time) > 0, True)
+    time, values = time[keep], values[keep]
+    return np.stack([np.interp(t, time, values[:, c]) for c in range(values.shape[1])], axis=1)
+
+
+def _num(x: float) -> float | int:
+    x = float(x)
+    return int(x) if x.is_integer() and abs(x) < 2**53 else x
+
+
+def pose_doc(model: Model, motion: Table, controls: Table | None, pose_name: str, skeleton_ref: str,
+             fps: float | None, muscle_names: list[str], report: dict, warnings: list[str]) -> dict:
+    pairs, skipped = coordinate_columns(motion, model)
+    rot = [i for i, c in pairs if model.coordinates[c].type == "rotation"]
+    degrees, warn = angle_unit(motion, rot)
+    if warn:
+        warnings.append(warn)
+    times, fps, direct = _frame_times(motion.time, fps)
+    data = motion.data if direct else _interp(motion.time, motion.data, times)
+    keys: dict[int, dict] = {}
+    for f in range(len(times)):
+        row = {}
+        for i, c in pairs:
+            v = float(data[f, i])
+            if model.coordinates[c].type == "rotation" and not degrees:
+                v = math.degrees(v)
+            row[c] = v
+        keys[f] = row
+    doc = {"pose": pose_name, "skeleton": skeleton_ref, "fps": _num(fps), "frames": [0, len(times) - 1],
+           "interpolation": "linear", "keys": keys}
+    report["motion"] = {"file": Path(motion.source).name, "sha256": _sha(Path(motion.source)),
+                        "rows": int(len(motion.time)), "frames": int(len(times)), "fps": _num(fps),
+                        "resampled": not direct, "rotations_read_as": "degrees" if degrees else "radians",
+                        "header_inDegrees": motion.header.get("indegrees"), "coordinates": [c for _, c in pairs],
+                        "skipped_columns": skipped}
+    if controls is not None:
+        act: dict[str, dict] = {}
+        names = set(muscle_names)
+        ignored, clipped = [], 0
+        cols = []
+        for i, lab in enumerate(controls.labels):
+            n = lab.split("/")[-1] if "/" in lab else lab
+            for suffix in (".excitation", ".activation", "_excitation", "_activation"):
+                if n.endswith(suffix) and n[: -len(suffix)] in names:
+                    n = n[: -len(suffix)]
+            if n in names:
+                cols.append((i, n))
+            else:
+                ignored.append(lab)
+        inside = (times >= controls.time[0] - 1e-9) & (times <= controls.time[-1] + 1e-9)
+        frames = np.nonzero(inside)[0]
+        if len(frames) and cols:
+            vals = _interp(controls.time, controls.data[:, [i for i, _ in cols]], times[frames])
+            clipped = int(np.sum((vals < 0) | (vals > 1)))
+            vals = np.clip(vals, 0.0, 1.0)
+            for k, (_, n) in enumerate(cols):
+                act[n] = {int(f): float(vals[j, k]) for j, f in enumerate(frames)}
+        if clipped:
+            warnings.append(f"{controls.source}: {clipped} control values outside 0..1 were clipped")
+        if cols and not len(frames):
+            warnings.append(f"{controls.source}: the controls' time span "
+                            f"[{controls.time[0]}, {controls.time[-1]}] misses every pose frame")
+        if act:
+            doc["activation"] = {n: act[n] for n in muscle_names if n in act}
+        report["controls"] = {"file": Path(controls.source).name, "sha256": _sha(Path(controls.source)),
+                              "muscles": [n for _, n in cols], "ignored_columns": ignored, "clipped_values": clipped,
+                              "keyed_frames": [int(frames[0]), int(frames[-1])] if len(frames) else []}
+    return doc
+
+
+# ----------------------------------------------------------------------------- meshes
+
+
+def _find_mesh(model_path: Path, name: str) -> Path | None:
+    for cand in (model_path.parent / "Geometry" / name, model_path.parent / name,
+                 model_path.parent / "geometry" / name):
+        if cand.is_file():
+            return cand
+    return None
+
+
+def body_meshes(model: Model, model_path: Path, warnings: list[str], report: dict) -> dict[str, bytes]:
+    """Body → binary PLY bytes (its Mesh geometry merged, scale factors baked in)."""
+    out = {}
+    missing = []
+    for body in model.bodies.values():
+        vs, ts, base = [], [], 0
+        for ref in body.meshes:
+            p = _find_mesh(model_path, ref.file)
+            if p is None:
+                missing.append({"body": body.name, "mesh_file": ref.file, "where": str(ref.mark)})
+                continue
+            if p.suffix.lower() != ".vtp":
+                missing.append({"body": body.name, "mesh_file": ref.file, "where": str(ref.mark),
+                                "why": "only .vtp geometry is converted"})
+                continue
+            v, t = read_vtp(p)
+            vs.append(v * np.asarray(ref.scale))
+            ts.append(t + base)
+            base += len(v)
+        if vs:
+            out[body.name] = ply_bytes(np.concatenate(vs), np.concatenate(ts))
+    for m in missing:
+        warnings.append(f"{m['where']}: mesh {m['mesh_file']!r} of body {m['body']} "
+                        f"{m.get('why', 'not found beside the model or in Geometry/')}; skipped")
+    report["missing_meshes"] = missing
+    return out
+
+
+# ----------------------------------------------------------------------------- all
+
+
+def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | None = None,
+                 motion: Path | str | None = None, controls: Path | str | None = None,
+                 skeleton_out: Path | str | None = None, muscles_out: Path | str | None = None,
+                 pose_out: Path | str | None = None, meshes_out: Path | str | None = None,
+                 pose_name: str | None = None, fps: float | None = None, meshes: bool = True) -> ImportResult:
+    """Read ``model_path`` (+ motion, controls) and build every output file's bytes.
+
+    Layout (defaults under ``out_dir``): ``skeletons/NAME.yaml``, ``skeletons/meshes/NAME/*.ply``,
+    ``muscles/MUSCLE.yaml``, ``POSE.yaml`` (when a motion is given), ``import_report.json``
+    and ``IMPORT.md``. Paths written inside the files are relative to the file holding them.
+    """
+    model_path = Path(model_path)
+    out_dir = Path(out_dir)
+    if controls is not None and motion is None:
+        raise InputError(None, "--controls needs --motion", "give the motion the controls belong to")
+    model = load_osim(model_path)
+    name = name or safe_name(model.name)
+    if not NAME_RE.match(name):
+        raise InputError(None, f"name {name!r}", "names use letters, digits, '_', '.', '-'")
+    for m in model.muscles:
+        if not NAME_RE.match(m.name):
+            raise InputError(m.mark, f"muscle name {m.name!r}", "names use letters, digits, '_', '.', '-'")
+    motion_t = read_storage(motion) if motion is not None else None
+    controls_t = read_storage(controls) if controls is not None else None
+
+    skel_path = Path(skeleton_out) if skeleton_out else out_dir / "skeletons" / f"{name}.yaml"
+    mesh_dir = Path(meshes_out) if meshes_out else skel_path.parent / "meshes" / name
+    mus_dir = Path(muscles_out) if muscles_out else out_dir / "muscles"
+    pname = pose_name or (safe_name(Path(motion).stem) if motion is not None else None)
+    pose_path = (Path(pose_out) if pose_out else out_dir / f"{pname}.yaml") if motion is not None else None
+
+    warnings: list[str] = []
+    report: dict = {"source": {"model": model_path.name, "sha256": _sha(model_path), "model_name": model.name},
+                    "tool": "axdf import osim", "skeleton": name}
+    files: dict[str, bytes] = {}
+    mesh_bytes = body_meshes(model, model_path, warnings, report) if meshes else {}
+    mesh_refs = {}
+    for body, data in sorted(mesh_bytes.items()):
+        p = mesh_dir / f"{body}.ply"
+        files[str(p)] = data
+        mesh_refs[body] = _rel(p, skel_path.parent)
+
+    sdoc = emit.skeleton_doc(model, name, mesh_refs)
+    header = (f"Imported from {model_path.name} (OpenSim model {model.name!r}) by `axdf import osim`.\n"
+              "Regenerate with the importer rather than editing by hand.")
+    files[str(skel_path)] = emit.dump_yaml(sdoc, header).encode()
+    skel = emit.skeleton_from_doc(sdoc)
+    world = emit.rest_world(skel)
+
+    rows = []
+    for m in model.muscles:
+        mdoc, row = emit.muscle_doc(m, skel, world)
+        rows.append(row)
+        files[str(mus_dir / f"{m.name}.yaml")] = emit.dump_yaml(mdoc, f"{m.name}: imported from {model_path.name} "
+                                                                      f"({m.type}) by `axdf import osim`.").encode()
+    report["muscles"] = rows
+    if motion_t is not None:
+        pdoc = pose_doc(model, motion_t, controls_t, pname, _rel(skel_path, pose_path.parent), fps,
+                        [m.name for m in model.muscles], report, warnings)
+        files[str(pose_path)] = emit.dump_yaml(pdoc, f"Imported from {Path(motion).name} by `axdf import osim`.").encode()
+    report["counts"] = {"bodies": len(model.bodies), "joints": len(model.joints), "coordinates": len(model.coordinates),
+                        "muscles": len(model.muscles), "meshes": len(mesh_bytes),
+                        "path_points": sum(r["path_points"] for r in rows),
+                        "conditional_path_points": sum(len(r["conditional"]) for r in rows),
+                        "conditional_inactive_at_rest": sum(len(r["conditional_inactive_at_rest"]) for r in rows),
+                        "moving_path_points": sum(len(r["moving"]) for r in rows)}
+    inputs = [Path(x) for x in (model_path, motion, controls) if x is not None]
+    report["ignored"] = [dict(i, where=_strip_dirs(i["where"], inputs)) for i in model.ignored]
+    report["warnings"] = [_strip_dirs(w, inputs) for w in warnings]
+    for mm in report.get("missing_meshes", []):
+        mm["where"] = _strip_dirs(mm["where"], inputs)
+    report["settings"] = {"specific_tension_Pa": emit.SPECIFIC_TENSION, "tendon_stress_Pa": emit.TENDON_STRESS,
+                          "belly_profile": list(emit.BELLY_PROFILE), "origin_tendon_share": emit.ORIGIN_TENDON_SHARE,
+                          "max_tendon_fraction": emit.MAX_TENDON_FRACTION,
+                          "via_pair_fraction": emit.VIA_PAIR_FRACTION}
+    report["files"] = sorted(_rel(Path(p), out_dir) for p in files)
+    files[str(out_dir / "import_report.json")] = (json.dumps(report, indent=1, sort_keys=True) + "\n").encode()
+    files[str(out_dir / "IMPORT.md")] = import_markdown(report).encode()
+    return ImportResult(files, report, warnings, model)
+
+
+def _strip_dirs(text: str, inputs: list[Path]) -> str:
+    """No absolute paths in output files: input paths become their file names."""
+    for p in inputs:
+        text = text.replace(str(p), p.name)
+    return text
+
+
+def import_markdown(r: dict) -> str:
+    c = r["counts"]
+    lines = [f"# Import of {r['source']['model']} (`{r['skeleton']}`)", "",
+             f"Source: `{r['source']['model']}` (sha256 `{r['source']['sha256'][:16]}…`), "
+             f"OpenSim model `{r['source']['model_name']}`.", "",
+             f"- bodies {c['bodies']}, joints {c['joints']}, coordinates {c['coordinates']}, meshes {c['meshes']}",
+             f"- muscles {c['muscles']} from {c['path_points']} path points "
+             f"({c['conditional_path_points']} conditional, {c['conditional_inactive_at_rest']} of them inactive at rest "
+             f"and left out; {c['moving_path_points']} moving, placed at the rest pose)", ""]
+    if "motion" in r:
+        mo = r["motion"]
+        lines += [f"Motion: `{mo['file']}`, {mo['rows']} rows → {mo['frames']} frames at {mo['fps']} fps, "
+                  f"rotations read as {mo['rotations_read_as']} (header inDegrees={mo['header_inDegrees']}).", ""]
+    if "controls" in r:
+        co = r["controls"]
+        lines += [f"Controls: `{co['file']}`, {len(co['muscles'])} muscles; ignored columns: "
+                  f"{', '.join(co['ignored_columns']) or 'none'}.", ""]
+    lines += ["## Warnings", ""] + ([f"- {w}" for w in r["warnings"]] or ["- none"]) + [""]
+    lines += ["## Not imported", "", "| kind | name | where | why |", "|---|---|---|---|"]
+    lines += [f"| {i['kind']} | {i['name']} | {i['where']} "
+              f"| {i['why']} |" for i in r["ignored"]] or ["| – | – | – | nothing |"]
+    lines += ["", "## Muscles", "", "| muscle | path points | control points | rest path (m) | PCSA (cm²) | "
+              "belly r (mm) | tendons |", "|---|---|---|---|---|---|---|"]
+    for m in r["muscles"]:
+        lines.append(f"| {m['muscle']} | {m['path_points']} | {m['control_points']} | {m['rest_path_length']:.4f} | "
+                     f"{m['pcsa_m2'] * 1e4:.2f} | {m['belly_radius'] * 1e3:.1f} | "
+                     f"{m['tendons'][0]:.2f} / {m['tendons'][1]:.2f} |")
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,223 @@
+"""``axdf import osim`` end to end: every shipped model, poses and activation, bad input → exit 2."""
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from osim_common import (ARM, ARM_CTRL, ARM_Q, FK_MODEL, FK_Q, GAIT, GAIT_CTRL, GAIT_Q, REPO, needs_data,
+                         run_import)
+
+pytestmark = needs_data
+
+
+@pytest.fixture(autouse=True)
+def _refs_inside_tmp(tmp_path, monkeypatch):
+    """Loaders accept references inside the test's folder (as inside the project for users)."""
+    from axdf_cli import loaders
+
+    monkeypatch.setattr(loaders, "POLICY", loaders.RefPolicy([tmp_path, REPO]))
+
+
+@pytest.mark.parametrize("model,extra", [
+    (ARM, ["--motion", str(ARM_Q), "--controls", str(ARM_CTRL), "--fps", "60"]),
+    (GAIT, ["--motion", str(GAIT_Q), "--controls", str(GAIT_CTRL)]),
+    (FK_MODEL, ["--motion", str(FK_Q)]),
+], ids=["arm26", "gait2392", "gait2354"])
+def test_every_model_imports_and_loads(tmp_path, model, extra):
+    from axdf_cli.loaders import load_muscle_file, load_pose, load_skeleton
+
+    rc, out = run_import(tmp_path, model, *extra)
+    assert rc == 0
+    report = json.loads((out / "import_report.json").read_text())
+    (skel_file,) = (out / "skeletons").glob("*.yaml")
+    skel = load_skeleton(skel_file)
+    assert skel.bones[0].name == "ground" and skel.bones[0].orient == (90.0, 0.0, 0.0)
+    muscles = sorted((out / "muscles").glob("*.yaml"))
+    assert len(muscles) == report["counts"]["muscles"] == {"arm26": 6, "3DGaitModel2392": 92,
+                                                           "subject01": 54}[report["source"]["model_name"]]
+    for m in muscles:
+        load_muscle_file(m)
+    (pose_file,) = out.glob("*.yaml")
+    pose = load_pose(pose_file)
+    assert pose.skeleton.name == skel.name
+    for b in skel.bones:
+        if b.mesh is not None:
+            assert Path(b.mesh).read_bytes().startswith(b"ply\nformat binary_little_endian 1.0\n")
+    text = "".join(p.read_text() for p in out.rglob("*") if p.suffix in (".yaml", ".json", ".md"))
+    assert str(REPO.parent) not in text and str(tmp_path) not in text  # no absolute paths
+
+
+def test_import_is_deterministic(tmp_path):
+    a = run_import(tmp_path, ARM, "--motion", str(ARM_Q), "--controls", str(ARM_CTRL), out="a")[1]
+    b = run_import(tmp_path, ARM, "--motion", str(ARM_Q), "--controls", str(ARM_CTRL), out="b")[1]
+    fa = sorted(p.relative_to(a) for p in a.rglob("*") if p.is_file())
+    assert fa == sorted(p.relative_to(b) for p in b.rglob("*") if p.is_file())
+    for p in fa:
+        assert (a / p).read_bytes() == (b / p).read_bytes(), p
+
+
+def test_activation_columns_map_to_their_muscles(tmp_path):
+    from axdf_cli.importers.storage import read_storage
+    from axdf_cli.loaders import load_pose
+
+    for model, q, ctrl, fps in ((ARM, ARM_Q, ARM_CTRL, 60), (GAIT, GAIT_Q, GAIT_CTRL, None)):
+        extra = ["--motion", str(q), "--controls", str(ctrl)] + (["--fps", str(fps)] if fps else [])
+        rc, out = run_import(tmp_path, model, *extra, out=model.stem)
+        assert rc == 0
+        pose = load_pose(next(out.glob("*.yaml")))
+        report = json.loads((out / "import_report.json").read_text())
+        c = read_storage(ctrl)
+        qt = read_storage(q)
+        keep = np.append(np.diff(c.time) > 0, True)
+        mapped = 0
+        for i, lab in enumerate(c.labels):
+            muscle = lab.removesuffix(".excitation")
+            if muscle not in pose.activation:  # reserve / residual actuators, not muscles
+                assert lab in report["controls"]["ignored_columns"]
+                continue
+            frames, values = pose.activation[muscle]
+            t = qt.time[0] + np.asarray(frames) / pose.fps
+            expect = np.clip(np.interp(t, c.time[keep], c.data[keep, i]), 0, 1)
+            np.testing.assert_allclose(values, expect, atol=1e-12, err_msg=muscle)
+            mapped += 1
+        assert mapped == {"arm26": 6, "gait2392_thelen2003muscle": 92}[model.stem]
+
+
+def test_motion_values_and_angle_units(tmp_path):
+    from axdf_cli.importers.storage import read_storage
+    from axdf_cli.loaders import load_pose
+
+    rc, out = run_import(tmp_path, GAIT, "--motion", str(GAIT_Q))
+    pose = load_pose(out / "subject01_walk1_ik.yaml")
+    q = read_storage(GAIT_Q)
+    assert pose.fps == 60 and pose.last - pose.first + 1 == len(q.time)
+    frames, vals = pose.keys["knee_angle_r"]
+    np.testing.assert_array_equal(vals, q.column("knee_angle_r"))  # degrees stay degrees
+    # arm26_Kinematics_q.sto says inDegrees=yes and holds degrees (the elbow flexes 0.26 -> 90.02):
+    # as radians that would be 14 turns, so the header is believed and no warning is given.
+    rc, out = run_import(tmp_path, ARM, "--motion", str(ARM_Q), out="arm")
+    report = json.loads((out / "import_report.json").read_text())
+    assert report["motion"]["rotations_read_as"] == "degrees" and report["warnings"] == []
+
+
+def _table(path: Path, in_degrees: str, rows):
+    lines = ["Coordinates", "version=1", f"nRows={len(rows)}", "nColumns=3", f"inDegrees={in_degrees}", "endheader",
+             "time\tr_shoulder_elev\tr_elbow_flex"]
+    lines += ["\t".join(repr(float(v)) for v in r) for r in rows]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_radians_labelled_degrees_are_detected(tmp_path, capsys):
+    from axdf_cli.loaders import load_pose
+
+    t = np.linspace(0, 1, 51)
+    rows = np.stack([t, 0.1 * np.sin(t), 1.5 * t], axis=1)  # elbow 0 -> 1.5 rad
+    mot = _table(tmp_path / "rad.sto", "yes", rows)
+    rc, out = run_import(tmp_path, ARM, "--motion", str(mot))
+    assert rc == 0
+    assert "reading the values as radians" in capsys.readouterr().err
+    pose = load_pose(out / "rad.yaml")
+    np.testing.assert_allclose(pose.keys["r_elbow_flex"][1], np.degrees(1.5 * t), rtol=1e-12)
+    # and degrees labelled radians
+    rows = np.stack([t, 10 * t, 90 * t], axis=1)
+    mot = _table(tmp_path / "deg.sto", "no", rows)
+    rc, out = run_import(tmp_path, ARM, "--motion", str(mot), out="d")
+    assert "reading the values as degrees" in capsys.readouterr().err
+    np.testing.assert_allclose(load_pose(out / "deg.yaml").keys["r_elbow_flex"][1], 90 * t, rtol=1e-12)
+
+
+# ----------------------------------------------------------------------------- bad input
+
+
+def _edit(src: Path, dst: Path, old: str, new: str, count: int = 1) -> tuple[Path, int]:
+    text = src.read_text()
+    i = text.index(old)
+    dst.write_text(text.replace(old, new, count))
+    return dst, text[:i].count("\n") + 1
+
+
+def _expect_error(tmp_path, capsys, model, *extra, file: Path, line: int | None, words: str):
+    rc, out = run_import(tmp_path, model, *extra, out="bad")
+    err = capsys.readouterr().err
+    assert rc == 2, err
+    assert not out.exists(), "nothing is written on bad input"
+    m = re.search(re.escape(str(file)) + r":(\d+):(\d+): ", err)
+    assert m, err
+    if line is not None:
+        assert int(m.group(1)) == line, err
+    assert words in err
+    assert "Traceback" not in err
+
+
+def test_missing_body(tmp_path, capsys):
+    bad, line = _edit(ARM, tmp_path / "a.osim", "<socket_parent_frame>/bodyset/r_humerus</socket_parent_frame>",
+                      "<socket_parent_frame>/bodyset/r_humerusX</socket_parent_frame>")
+    _expect_error(tmp_path, capsys, bad, file=bad, line=line, words="unknown body 'r_humerusX'")
+
+
+def test_unknown_coordinate_in_joint(tmp_path, capsys):
+    bad, line = _edit(ARM, tmp_path / "a.osim", "<coordinates>r_elbow_flex</coordinates>",
+                      "<coordinates>r_elbow_flexx</coordinates>")
+    _expect_error(tmp_path, capsys, bad, file=bad, line=line, words="unknown coordinate 'r_elbow_flexx'")
+
+
+def test_malformed_number_in_model(tmp_path, capsys):
+    bad, line = _edit(ARM, tmp_path / "a.osim", "<translation>0.0061000000000000004 -0.29039999999999999",
+                      "<translation>0.0061000000000000004 -0.29O39999999999999")
+    _expect_error(tmp_path, capsys, bad, file=bad, line=line, words="malformed number")
+
+
+def test_truncated_model(tmp_path, capsys):
+    text = ARM.read_text()
+    bad = tmp_path / "a.osim"
+    bad.write_text(text[: len(text) // 2])
+    _expect_error(tmp_path, capsys, bad, file=bad, line=None, words="malformed XML")
+
+
+def test_unknown_coordinate_in_motion(tmp_path, capsys):
+    bad, line = _edit(ARM_Q, tmp_path / "q.sto", "time\tr_shoulder_elev", "time\tr_shoulder_elevation")
+    _expect_error(tmp_path, capsys, ARM, "--motion", str(bad), file=bad, line=line,
+                  words="unknown coordinate 'r_shoulder_elevation'")
+
+
+def test_malformed_and_truncated_motion(tmp_path, capsys):
+    bad, line = _edit(ARM_Q, tmp_path / "q.sto", "0.32036639", "0.32x36639")
+    _expect_error(tmp_path, capsys, ARM, "--motion", str(bad), file=bad, line=line, words="malformed number '0.32x36639'")
+    text = ARM_Q.read_text().splitlines()
+    short = tmp_path / "short.sto"
+    short.write_text("\n".join(text[:100]) + "\n")
+    _expect_error(tmp_path, capsys, ARM, "--motion", str(short), file=short, line=None, words="truncated")
+    cut = tmp_path / "cut.sto"
+    cut.write_text("\n".join(text[:100]) + "\n" + text[100][:12] + "\n")
+    _expect_error(tmp_path, capsys, ARM, "--motion", str(cut), file=cut, line=101, words="row has 1 values")
+
+
+def test_controls_need_a_motion(tmp_path, capsys):
+    rc, out = run_import(tmp_path, ARM, "--controls", str(ARM_CTRL))
+    assert rc == 2 and "--controls needs --motion" in capsys.readouterr().err
+
+
+def test_shipped_library_is_up_to_date(tmp_path):
+    """`make import` output committed in the repository equals a fresh import."""
+    lib = REPO / "muscles" / "arm26"
+    if not lib.is_dir():
+        pytest.skip("library not generated")
+    for name, model, extra in (
+        ("arm26", ARM, ["--motion", str(ARM_Q), "--controls", str(ARM_CTRL), "--fps", "60",
+                        "--pose-name", "arm26_flex"]),
+        ("gait2392", GAIT, ["--motion", str(GAIT_Q), "--controls", str(GAIT_CTRL), "--pose-name", "gait2392_walk"]),
+    ):
+        rc, out = run_import(tmp_path, model, "--name", name, *extra, out=name)
+        assert rc == 0
+        for p in (out / "muscles").glob("*.yaml"):
+            assert p.read_bytes() == (REPO / "muscles" / name / p.name).read_bytes(), p.name
+        assert (out / "skeletons" / f"{name}.yaml").read_bytes() == \
+            (REPO / "poses" / "skeletons" / f"{name}.yaml").read_bytes()
+        pose = next(out.glob("*.yaml"))
+        assert pose.read_text().replace("skeleton: skeletons/", "skeleton: skeletons/") == \
+            (REPO / "poses" / f"{pose.name}").read_text()
