@@ -39,10 +39,19 @@ $(STAMP): pyproject.toml
 
 demo: $(STAMP)
 	$(BIN)/axdf run $(DEMO) --out out/demo --overwrite
-	@echo "demo results: out/demo (meshes/, frames/, stats.csv, manifest.json)"
+	$(BIN)/axdf run poses/jobs/gait2392_walk.yaml --out out/gait2392_walk --overwrite
+	@echo "demo results: out/demo and out/gait2392_walk (meshes/, frames/, stats.csv, bones.csv, manifest.json)"
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q tests
+	@echo "golden check: a fresh run of tests/golden_job.yaml against tests/golden"
+	$(BIN)/axdf run tests/golden_job.yaml --out out/golden-check --overwrite --quiet
+	$(BIN)/axdf compare out/golden-check tests/golden --junit out/golden-junit.xml --report out/golden-report.json
+
+# Re-bless our own golden files from the current code, printing what changed.
+golden: $(STAMP)
+	$(BIN)/axdf run tests/golden_job.yaml --out out/golden-check --overwrite --quiet
+	$(BIN)/axdf compare out/golden-check tests/golden --update
 
 bench: $(STAMP)
 	$(BIN)/python -m pip install -q -e '.[bench]'

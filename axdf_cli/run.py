@@ -42,6 +42,7 @@ class RunPlan:
     inputs: dict  # display path -> sha256
     render: object = None  # render settings (or None: no rendering)
     warnings: list = field(default_factory=list)
+    notes: list = field(default_factory=list)  # remarks printed with --verbose; not warnings
     bone_meshes: dict = field(default_factory=dict)  # bone index -> (vertices (V,3) f4, faces (T,3) i4, file bytes)
 
     @property
@@ -90,9 +91,8 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
         raise InputError(None, "no muscles found", "give muscle YAML files")
 
     warnings = []
-    for name, mark in pose.activation_marks.items():
-        if name not in seen:
-            warnings.append(f"{mark}: activation for {name!r}, which is not in this run; ignored")
+    notes = [f"{mark}: activation for {name!r}, which is not in this run; ignored"
+             for name, mark in pose.activation_marks.items() if name not in seen]
 
     skel = pose.skeleton
     rest = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
@@ -115,7 +115,8 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
     for s in srcs:
         if Path(s).is_file():
             inputs[_display(Path(s))] = atomic.sha256_file(s)
-    return RunPlan(pose, specs, models, frames, fmt, out, inputs, warnings=warnings, bone_meshes=bone_meshes)
+    return RunPlan(pose, specs, models, frames, fmt, out, inputs, warnings=warnings, bone_meshes=bone_meshes,
+                   notes=notes)
 
 
 def load_bone_mesh(path: str, skeleton_file: str):

@@ -48,6 +48,9 @@ def run(args) -> int:
     if args.render is not None:
         settings = replace(settings, enabled=args.render)
     plan.render = settings_from_args(settings, args)
+    if args.verbose:
+        for n in plan.notes:
+            print(f"note: {n}", file=sys.stderr)
     for w in plan.warnings:
         print(f"warning: {w}", file=sys.stderr)
     total = len(plan.frames) * len(plan.models)
