@@ -168,7 +168,8 @@ def chunk_frames(plan: RunPlan) -> int:
     return int(np.clip(EVAL_BUDGET_BYTES // (v * 3 * 8 * 8), 1, CHUNK_FRAMES))
 
 
-def evaluate_chunks(plan: RunPlan, chunk: int | None = None, twist_ref: np.ndarray | None = None):
+def evaluate_chunks(plan: RunPlan, chunk: int | None = None, twist_ref: np.ndarray | None = None,
+                    muscles: list[int] | None = None):
     """Yield (frame_slice, world (C, B, 4, 4), results) over the selected frames, where
     ``results`` is a lazy iterator of (muscle index, FrameResult): a consumer that handles one
     muscle at a time holds one muscle's chunk in memory, never all of them."""
@@ -182,7 +183,8 @@ def evaluate_chunks(plan: RunPlan, chunk: int | None = None, twist_ref: np.ndarr
         act = sample_activation(plan.pose, names, fr)
 
         def results(world=world, act=act, s=s, n=len(fr)):
-            for j, m in enumerate(plan.models):
+            for j in (range(len(plan.models)) if muscles is None else muscles):
+                m = plan.models[j]
                 yield j, m.evaluate(world, effective_tension(m.spec.tension, act[:, j]), twist_ref[s:s + n, j])
 
         yield slice(s, s + len(fr)), world, results()
@@ -307,23 +309,100 @@ def write_manifest(out: Path, manifest: dict) -> None:
     atomic.write_text(out / "manifest.json", json.dumps(manifest, indent=1, sort_keys=False) + "\n")
 
 
+@dataclass
+class MeshPassResult:
+    """What a mesh pass over some muscles returns (picklable, for worker processes)."""
+
+    muscles: list  # muscle indices, in order
+    files: dict  # relpath -> sha256
+    stats: np.ndarray  # (F, len(muscles), 6) length, volume, ratio, tension, twist, scale
+    warnings: list  # [(frame index, muscle index, message)]
+    lo: np.ndarray  # (3,) bounds of every written vertex
+    hi: np.ndarray
+    skipped: int = 0
+
+
+def mesh_pass(plan: RunPlan, muscles: list[int], twist_ref: np.ndarray, writer: "OutputWriter",
+              progress=None, on_chunk=None) -> MeshPassResult:
+    """Evaluate and write the meshes of ``muscles`` for every selected frame, chunk by chunk."""
+    writers = {j: WRITERS[plan.fmt](plan.models[j].faces, plan.muscles[j].name) for j in muscles}
+    col = {j: k for k, j in enumerate(muscles)}
+    stats = np.zeros((len(plan.frames), len(muscles), 6))
+    warns: list = []
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    for sl, _, results in evaluate_chunks(plan, twist_ref=twist_ref, muscles=muscles):
+        frames = plan.frames[sl]
+        for j, res in results:
+            name = plan.muscles[j].name
+            pos = res.vertices.astype(np.float32)
+            nrm = res.normals.astype(np.float32)
+            finite = np.isfinite(pos).all(axis=(1, 2)) & np.isfinite(nrm).all(axis=(1, 2))
+            for i in np.nonzero(~finite)[0]:
+                res.warnings.append((int(i), "non-finite vertices; the rest shape was written instead"))
+                pos[i] = plan.models[j].rest_vertices
+                nrm[i] = plan.models[j].rest_normals
+            w = writers[j]
+            for i, frame in enumerate(frames):
+                writer.write(mesh_relpath(name, int(frame), plan.fmt), w.encode(pos[i], nrm[i]))
+            lo = np.minimum(lo, pos.reshape(-1, 3).min(axis=0))
+            hi = np.maximum(hi, pos.reshape(-1, 3).max(axis=0))
+            st = np.stack([res.length, res.volume, res.volume / plan.models[j].v0, res.tension,
+                           res.twist, res.scale], axis=1)
+            stats[sl, col[j]] = np.where(np.isfinite(st), st, 0.0)
+            warns += [(sl.start + i, j, msg) for i, msg in res.warnings]
+            if progress:
+                progress(len(frames))
+        if on_chunk:
+            on_chunk()
+    return MeshPassResult(list(muscles), writer.files, stats, warns, lo, hi, writer.skipped)
+
+
+_WORKER: dict = {}  # set in the parent just before the worker processes fork
+
+
+def _worker_pass(muscles: list[int]) -> MeshPassResult:
+    w = _WORKER
+    return mesh_pass(w["plan"], muscles, w["twist_ref"], OutputWriter(w["plan"].out, w["previous"]))
+
+
+def _parallel_mesh_pass(plan: RunPlan, jobs: int, twist_ref, previous: dict, progress) -> list[MeshPassResult]:
+    """Split the muscles over ``jobs`` forked processes (round robin: similar work each)."""
+    import multiprocessing as mp
+
+    groups = [list(range(k, len(plan.models), jobs)) for k in range(jobs)]
+    groups = [g for g in groups if g]
+    _WORKER.update(plan=plan, twist_ref=twist_ref, previous=previous)
+    pool = mp.get_context("fork").Pool(len(groups))
+    try:
+        results = []
+        for r in pool.imap(_worker_pass, groups):
+            results.append(r)
+            if progress:
+                progress(len(r.muscles) * len(plan.frames))
+        pool.close()
+        return results
+    except BaseException:
+        pool.terminate()
+        raise
+    finally:
+        pool.join()
+        _WORKER.clear()
+
+
 def execute(plan: RunPlan, *, resume: bool = False, overwrite: bool = False, progress=None,
-            strict: bool = False, render_progress=None) -> dict:
-    """Run the plan; return a summary dict. ``progress(n)`` is called with muscle-frames done."""
+            strict: bool = False, render_progress=None, jobs: int = 1) -> dict:
+    """Run the plan; return a summary dict. ``progress(n)`` is called with muscle-frames done.
+
+    With ``jobs`` > 1 the muscles are split over forked worker processes for the mesh pass;
+    the output is the same bytes. Rendering runs in this process afterwards (the GL context
+    is created after every fork)."""
     out = plan.out
     previous = check_output_folder(out, resume, overwrite)
     atomic.ensure_dir(out)
-    writer = OutputWriter(out, previous)
     write_manifest(out, manifest_dict(plan, previous_subset(previous, out), [], complete=False))
-    writers = [WRITERS[plan.fmt](m.faces, s.name) for s, m in zip(plan.muscles, plan.models)]
     nf, nm = len(plan.frames), len(plan.models)
-    stats = np.zeros((nf, nm, 6))  # length, volume, ratio, tension, twist, scale
-    warn_text = [[""] * nm for _ in range(nf)]
-    warnings: list[str] = list(plan.warnings)
     bones = plan.pose.skeleton.bones
-    bone_rows = np.zeros((nf, len(bones), 7))
-    lo = np.full(3, np.inf)
-    hi = np.full(3, -np.inf)
     twist_ref = twist_references(plan)
     if strict:  # evaluate everything first: with --strict, any warning stops the run before it writes
         found = []
@@ -336,37 +415,43 @@ def execute(plan: RunPlan, *, resume: bool = False, overwrite: bool = False, pro
         if found:
             raise InputError(None, f"{len(found)} warning(s) with --strict; first: {found[0]}",
                              "fix the inputs or run without --strict")
-    last_manifest = time.monotonic()
-    for sl, world, results in evaluate_chunks(plan, twist_ref=twist_ref):
-        frames = plan.frames[sl]
-        for j, res in results:
-            w = writers[j]
-            name = plan.muscles[j].name
-            pos = res.vertices.astype(np.float32)
-            nrm = res.normals.astype(np.float32)
-            finite = np.isfinite(pos).all(axis=(1, 2)) & np.isfinite(nrm).all(axis=(1, 2))
-            for i in np.nonzero(~finite)[0]:
-                res.warnings.append((int(i), "non-finite vertices; the rest shape was written instead"))
-                pos[i] = plan.models[j].rest_vertices
-                nrm[i] = plan.models[j].rest_normals
-            for i, frame in enumerate(frames):
-                writer.write(mesh_relpath(name, int(frame), plan.fmt), w.encode(pos[i], nrm[i]))
-            lo = np.minimum(lo, pos.reshape(-1, 3).min(axis=0))
-            hi = np.maximum(hi, pos.reshape(-1, 3).max(axis=0))
-            st = np.stack([res.length, res.volume, res.volume / plan.models[j].v0, res.tension,
-                           res.twist, res.scale], axis=1)
-            stats[sl, j] = np.where(np.isfinite(st), st, 0.0)
-            for i, msg in res.warnings:
-                fi = sl.start + i
-                warn_text[fi][j] = (warn_text[fi][j] + "; " if warn_text[fi][j] else "") + msg
-                warnings.append(f"{name} frame {int(plan.frames[fi])}: {msg}")
-            if progress:
-                progress(len(frames))
+
+    writer = OutputWriter(out, previous)
+    if jobs > 1 and nm > 1:
+        try:
+            parts = _parallel_mesh_pass(plan, min(jobs, nm), twist_ref, previous, progress)
+        except BaseException:
+            atomic.remove_stale_temporaries(out)  # a worker stopped mid-write
+            raise
+    else:
+        clock = {"t": time.monotonic()}
+
+        def checkpoint():  # the in-progress manifest, at most every MANIFEST_INTERVAL_S
+            if time.monotonic() - clock["t"] >= MANIFEST_INTERVAL_S:
+                write_manifest(out, manifest_dict(plan, writer.files, [], complete=False))
+                clock["t"] = time.monotonic()
+
+        parts = [mesh_pass(plan, list(range(nm)), twist_ref, writer, progress, checkpoint)]
+    stats = np.zeros((nf, nm, 6))
+    warn_text = [[""] * nm for _ in range(nf)]
+    lo = np.min([p.lo for p in parts], axis=0)
+    hi = np.max([p.hi for p in parts], axis=0)
+    all_warns = []
+    writer.skipped = sum(p.skipped for p in parts)  # (one pass in this process: its writer is ours)
+    for part in parts:
+        writer.files.update(part.files)
+        stats[:, part.muscles] = part.stats
+        all_warns += part.warnings
+    warnings: list[str] = list(plan.warnings)
+    for fi, j, msg in sorted(all_warns, key=lambda w: (w[0], w[1])):
+        warn_text[fi][j] = (warn_text[fi][j] + "; " if warn_text[fi][j] else "") + msg
+        warnings.append(f"{plan.names[j]} frame {int(plan.frames[fi])}: {msg}")
+    bone_rows = np.zeros((nf, len(bones), 7))
+    for s0 in range(0, nf, CHUNK_FRAMES):
+        sl = slice(s0, min(nf, s0 + CHUNK_FRAMES))
+        world = forward_kinematics(plan.pose.skeleton, sample_coordinates(plan.pose, plan.frames[sl]))
         bone_rows[sl, :, :3] = world[:, :, :3, 3]
         bone_rows[sl, :, 3:] = matrix_to_quaternion(world[:, :, :3, :3])
-        if time.monotonic() - last_manifest >= MANIFEST_INTERVAL_S:
-            write_manifest(out, manifest_dict(plan, writer.files, warnings, complete=False))
-            last_manifest = time.monotonic()
 
     for i, (_, _, data) in sorted(plan.bone_meshes.items()):
         writer.write(bone_mesh_relpath(bones[i].name), data)

@@ -303,3 +303,11 @@ def test_degenerate_poses_with_strict_exit_2_and_write_nothing(degenerate, capsy
     assert rc == 2
     assert "--strict" in capsys.readouterr().err
     assert not (degenerate / "out" / "meshes").exists()
+
+
+def test_jobs_gives_the_same_bytes_as_one_process(tmp_path, monkeypatch):
+    monkeypatch.chdir(ROOT)
+    base = ["run", "poses/jobs/demo.yaml", "--no-render", "--frames", "0:191:16"]
+    assert main(base + ["--out", str(tmp_path / "one")]) == 0
+    assert main(base + ["--out", str(tmp_path / "two"), "--jobs", "3"]) == 0
+    assert _tree(tmp_path / "one") == _tree(tmp_path / "two")

@@ -18,7 +18,8 @@ def add_args(p) -> None:
     g = p.add_mutually_exclusive_group()
     g.add_argument("--render", dest="render", action="store_true", default=None, help="render preview frames")
     g.add_argument("--no-render", dest="render", action="store_false", help="do not render")
-    p.add_argument("--jobs", type=int, default=1, metavar="N", help="worker processes (default 1)")
+    p.add_argument("--jobs", type=_positive, default=1, metavar="N",
+                   help="worker processes for the mesh pass (default 1; same output bytes)")
     g2 = p.add_mutually_exclusive_group()
     g2.add_argument("--resume", action="store_true", help="finish an interrupted run in OUT, skipping finished files")
     g2.add_argument("--overwrite", action="store_true", help="replace the outputs of an earlier run in OUT")
@@ -29,6 +30,18 @@ def add_args(p) -> None:
     from axdf_cli.render.settings import add_render_args
 
     add_render_args(p)
+
+
+def _positive(text: str) -> int:
+    import argparse
+
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if not 1 <= n <= 256:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of processes in 1..256")
+    return n
 
 
 def run(args) -> int:
@@ -70,7 +83,7 @@ def run(args) -> int:
             rbar = tqdm(total=len(plan.frames), unit="frame", file=sys.stderr, desc="frames")
     try:
         summary = runner.execute(plan, resume=args.resume, overwrite=args.overwrite,
-                                 progress=bar.update if bar else None, strict=args.strict,
+                                 progress=bar.update if bar else None, strict=args.strict, jobs=args.jobs,
                                  render_progress=(lambda _f: rbar.update(1)) if rbar else None)
     finally:
         for b in (bar, rbar):
