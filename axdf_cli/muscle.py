@@ -15,16 +15,19 @@ rest R(1) carried by that bone; it is spread along the axis in proportion to res
 length, and kept continuous over time (past 180 degrees) by unwrapping it against a coarse
 pass over the pose's whole frame range, so that any frame subset gives the same meshes.
 
-Radial factor of a control point c: ``k_c = (1 - beta_c) + beta_c * s * tau_c`` with
+Radial factor of a control point c: ``k_c = (1 - beta_c) + beta_c * K_c`` with
+``K_c = tau_c (e b_c s0 + (1 - e b_c) s)`` (= s without tension), where
 - beta_c = 1 in the belly, 0 in the tendons (``tendons: [a, b]`` fractions of rest arc length);
 - s the volume factor of the frame: ``paper`` sqrt(l0/l1) as published; ``none`` 1; ``exact``
   the root of the mesh volume's cubic V(s) = V0 (the mesh is affine in s, so its volume is
   exactly a cubic in s; solved by Newton to 1e-10);
 - tau_c the isometric tension law: section area multiplied by
   ``1 + g e (2 b - 1)``, b = sin^2(pi x) over the belly (x in [0, 1]), e the effective tension,
-  g = TENSION_GAIN. The belly's middle grows, its ends give way; with ``exact`` the volume
-  solve then keeps the total volume, so the length and volume do not change and the area
-  moves towards the middle (tension 1 adds about 25% area at mid-belly).
+  g = TENSION_GAIN. The share e*b of a belly point (its middle at full tension) keeps the
+  length-only scale s0 = sqrt(l0/l1) instead of s, so with ``exact`` only the rest (the ends)
+  gives way to keep the volume: ``k_c = tau_c (e b s0 + (1 - e b) s)`` (still affine in s).
+  Length and volume do not change; tension 1 adds 20-30% area at mid-belly on the demo
+  muscles (tests require at least 15%).
 
 Surface: a tensor-product quadratic NURBS over the control net [origin pole (8 copies of
 C(0)), sections..., insertion pole], clamped along and closed around, tessellated at
@@ -430,14 +433,18 @@ class MuscleModel:
 
         length = self._length(p)
         e = np.clip(np.asarray(tension, dtype=np.float64), 0.0, 1.0)
-        # tau[f,q]: radial tension factor, sqrt of the area factor 1 + g e (2 b - 1)
-        tau = np.sqrt(1.0 + tol.TENSION_GAIN * e[:, None] * (2.0 * self.bump[None, :] - 1.0) * self.beta[None, :])
-        beta = self.beta[None, :, None]
-        fixed = c + (1.0 - beta) * off  # part that does not scale
-        scaled = beta * tau[..., None] * off  # part multiplied by s
-
         ratio = self.l0 / np.maximum(length, tol.MIN_AXIS_LENGTH)
         s = np.ones(nf) if spec.volume == "none" else np.sqrt(ratio)
+        # Tension law. tau[f,q]: radial factor, sqrt of the area factor 1 + g e (2 b - 1).
+        # The share h = e b of each belly point (the middle, at full tension) keeps the
+        # length-only scale s0; the rest (1 - h) takes the volume scale s, so the ends give
+        # way for the middle:  k = tau (h s0 + (1 - h) s), affine in s.
+        tau = np.sqrt(1.0 + tol.TENSION_GAIN * e[:, None] * (2.0 * self.bump[None, :] - 1.0) * self.beta[None, :])
+        h = e[:, None] * self.bump[None, :]  # (F, Q)
+        beta = self.beta[None, :, None]
+        held = (beta * (tau * h * s[:, None])[..., None]) * off
+        fixed = c + (1.0 - beta) * off + held  # part that does not scale with s
+        scaled = beta * (tau * (1.0 - h))[..., None] * off  # part multiplied by s
         verts = np.empty((3, nf, self.n_vertices))
         norms = np.empty((3, nf, self.n_vertices))
         volume = np.empty(nf)
