@@ -16,6 +16,31 @@ from axdf_cli.errors import EnvironmentProblem
 
 TMP_PREFIX = ".axdf-tmp-"
 
+# Signal deferral: SIGINT/SIGTERM arriving while a file is being written and renamed are held
+# until the file is whole (the CLI's handlers call :func:`on_signal`). A write takes
+# milliseconds, so an interrupt still ends the run promptly, and never leaves a temporary.
+_state = {"depth": 0, "pending": False}
+
+
+def on_signal(signum=None, frame=None) -> None:
+    """Signal handler: raise KeyboardInterrupt now, or when the current write is done."""
+    if _state["depth"] > 0:
+        _state["pending"] = True
+        return
+    raise KeyboardInterrupt
+
+
+@contextlib.contextmanager
+def deferred_signals() -> Iterator[None]:
+    _state["depth"] += 1
+    try:
+        yield
+    finally:
+        _state["depth"] -= 1
+        if _state["depth"] == 0 and _state["pending"]:
+            _state["pending"] = False
+            raise KeyboardInterrupt
+
 
 def _env_problem(path: Path, e: OSError) -> EnvironmentProblem:
     if e.errno == errno.ENOSPC:
@@ -35,24 +60,27 @@ def ensure_dir(path: Path) -> None:
 
 @contextlib.contextmanager
 def atomic_open(path: Path | str, mode: str = "wb") -> Iterator:
-    """Open a temporary file beside ``path``; on success fsync-free rename over ``path``."""
+    """Open a temporary file beside ``path``; on success rename it over ``path``.
+
+    Interrupting signals are deferred until the file is whole or removed."""
     path = Path(path)
     ensure_dir(path.parent)
     tmp = path.with_name(f"{TMP_PREFIX}{os.getpid()}-{path.name}")
-    try:
-        f = open(tmp, mode)
-    except OSError as e:
-        raise _env_problem(path, e) from None
-    try:
-        with f:
-            yield f
-        os.replace(tmp, path)
-    except OSError as e:
-        _unlink(tmp)
-        raise _env_problem(path, e) from None
-    except BaseException:
-        _unlink(tmp)
-        raise
+    with deferred_signals():
+        try:
+            f = open(tmp, mode)
+        except OSError as e:
+            raise _env_problem(path, e) from None
+        try:
+            with f:
+                yield f
+            os.replace(tmp, path)
+        except OSError as e:
+            _unlink(tmp)
+            raise _env_problem(path, e) from None
+        except BaseException:
+            _unlink(tmp)
+            raise
 
 
 def _unlink(p: Path) -> None:

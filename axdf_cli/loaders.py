@@ -176,8 +176,13 @@ class RefPolicy:
     """
 
     def __init__(self, roots=(), allow_outside: bool = False):
-        self.roots = [Path(r).resolve() for r in roots] or [Path.cwd().resolve()]
+        self._roots = [Path(r).resolve() for r in roots]
         self.allow_outside = allow_outside
+
+    @property
+    def roots(self) -> list[Path]:
+        """The given roots, or the current folder at the time of the check."""
+        return self._roots or [Path.cwd().resolve()]
 
 
 POLICY = RefPolicy()
@@ -186,6 +191,12 @@ POLICY = RefPolicy()
 def set_ref_policy(roots, allow_outside: bool) -> None:
     global POLICY
     POLICY = RefPolicy(roots, allow_outside)
+
+
+def reset_ref_policy() -> None:
+    """Back to the default (the current folder, nothing outside): the CLI calls this after
+    each command so that library use in the same process sees no stale roots."""
+    set_ref_policy((), False)
 
 
 def resolve_ref(base_file: Path, ref: str, where: Mark) -> Path:
@@ -199,9 +210,11 @@ def resolve_ref(base_file: Path, ref: str, where: Mark) -> Path:
         raise InputError(where, f"absolute path {ref!r}",
                          "paths relative to the file that names them (or pass --allow-outside)")
     full = (base_file.parent / p).resolve()
-    if not any(full == r or r in full.parents for r in POLICY.roots):
+    # without explicit roots (library use), a file's references stay below its own folder
+    roots = POLICY._roots or [Path.cwd().resolve(), base_file.parent.resolve()]
+    if not any(full == r or r in full.parents for r in roots):
         raise InputError(where, f"path {ref!r} leaves the project folder tree",
-                         f"paths inside {', '.join(str(r) for r in POLICY.roots)} (or pass --allow-outside)")
+                         f"paths inside {', '.join(str(r) for r in roots)} (or pass --allow-outside)")
     return base_file.parent / p
 
 

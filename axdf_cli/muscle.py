@@ -266,8 +266,11 @@ class MuscleModel:
             raise InputError(spec.axis[0].mark, f"muscle {spec.name!r}: the rest axis has length {self.l0:.3g} m",
                              "axis control points must not all coincide at the rest pose")
         x, t = self._samples(rest_p, self.Bs, self.dBs)
-        r0 = rmf.any_perpendicular(t[:, 0])
-        self.r0_local = rest_world[self.origin_bone, :3, :3].T @ r0[0]
+        # the start vector is chosen in the origin bone's own axes, so the rest shape does not
+        # depend on where the skeleton stands in the world
+        r_org = rest_world[self.origin_bone, :3, :3]
+        self.r0_local = rmf.any_perpendicular(r_org.T @ t[0, 0])
+        r0 = rmf.perpendicular_unit(r_org @ self.r0_local, t[:, 0])
         r = rmf.propagate(x, t, r0)
         self.rend_local = rest_world[self.insertion_bone, :3, :3].T @ r[0, -1]
         # rest arc length along the dense samples, as a fraction

@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 _EPS = 1e-30
+STEP_RTOL = 1e-10  # steps shorter than this times the coordinates' magnitude count as none
 
 
 def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -27,7 +28,10 @@ def reflect_step(x0, t0, r0, x1, t1) -> np.ndarray:
     """
     v1 = x1 - x0
     c1 = _dot(v1, v1)[..., None]
-    ok1 = c1 > _EPS
+    # A step below rounding noise has no direction: skip that reflection (threshold relative
+    # to the coordinates' size, so a bound point that falls on a sample keeps its frame).
+    scale = np.maximum(_dot(x0, x0), _dot(x1, x1))[..., None]
+    ok1 = c1 > np.maximum(_EPS, STEP_RTOL ** 2 * scale)
     k1 = np.where(ok1, 2.0 / np.where(ok1, c1, 1.0), 0.0)
     r_l = r0 - k1 * _dot(v1, r0)[..., None] * v1
     t_l = t0 - k1 * _dot(v1, t0)[..., None] * v1
@@ -62,9 +66,11 @@ def perpendicular_unit(v: np.ndarray, t: np.ndarray) -> np.ndarray:
 
 
 def any_perpendicular(t: np.ndarray) -> np.ndarray:
-    """A unit vector ⟂ t (..., 3): the world axis least aligned with t, orthogonalised."""
+    """A unit vector ⟂ t (..., 3): the first of the X, Y, Z axes within 0.8 of orthogonal
+    (|t . axis| < 0.8, one always is), made perpendicular. Free of ties (an argmin over
+    |t| would flip between equal components on rounding)."""
     axes = np.eye(3)
-    k = np.argmin(np.abs(t), axis=-1)
+    k = np.argmax(np.abs(t) < 0.8, axis=-1)
     return perpendicular_unit(axes[k], t)
 
 

@@ -122,11 +122,43 @@ def parse_yaml(text: str, display: str) -> Any:
                          f"at most {tol.YAML_MAX_DEPTH} levels") from None
     if node is None:
         return None
+    _check_expanded_size(node, display)
     conv = _Converter(loader, display)
     try:
         return conv.convert(node, 0)
     finally:
         loader.dispose()
+
+
+def _check_expanded_size(root, display: str) -> None:
+    """Refuse documents whose aliases expand past YAML_MAX_NODES values, before expanding
+    them: sizes are counted once per distinct node (an alias bomb is refused in milliseconds)."""
+    size: dict[int, int] = {}
+    order: list = []
+    stack = [root]
+    seen: set[int] = set()
+    while stack:  # post-order without recursion
+        n = stack.pop()
+        if id(n) in seen:
+            continue
+        seen.add(id(n))
+        order.append(n)
+        if isinstance(n, yaml.SequenceNode):
+            stack.extend(n.value)
+        elif isinstance(n, yaml.MappingNode):
+            for k, v in n.value:
+                stack.extend((k, v))
+    for n in reversed(order):
+        if isinstance(n, yaml.SequenceNode):
+            total = 1 + sum(size.get(id(c), 1) for c in n.value)
+        elif isinstance(n, yaml.MappingNode):
+            total = 1 + sum(size.get(id(k), 1) + size.get(id(v), 1) for k, v in n.value)
+        else:
+            total = 1
+        size[id(n)] = total
+        if total > tol.YAML_MAX_NODES:
+            raise InputError(_mark(display, n.start_mark), f"document expands to more than {tol.YAML_MAX_NODES} "
+                             "values (an alias bomb?)", "use fewer aliases")
 
 
 def _too_deep(text: str, display: str) -> Mark:

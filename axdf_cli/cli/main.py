@@ -49,21 +49,20 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _on_sigterm(signum, frame):
-    raise KeyboardInterrupt
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
     except SystemExit as e:
         return int(e.code or 0) if not isinstance(e.code, str) else 2
-    old = None
-    try:
-        old = signal.signal(signal.SIGTERM, _on_sigterm)
-    except ValueError:  # not the main thread (tests calling main in a thread)
-        pass
+    from axdf_cli import atomic
+
+    old = {}
+    for sig in (signal.SIGINT, signal.SIGTERM):  # both end the run with 130, never mid-file
+        try:
+            old[sig] = signal.signal(sig, atomic.on_signal)
+        except ValueError:  # not the main thread (tests calling main in a thread)
+            pass
     try:
         return int(args._module.run(args) or 0)
     except InputError as e:
@@ -96,8 +95,11 @@ def main(argv: list[str] | None = None) -> int:
               "rerun with --traceback and report it", file=sys.stderr)
         return 70
     finally:
-        if old is not None:
-            signal.signal(signal.SIGTERM, old)
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
+        from axdf_cli.loaders import reset_ref_policy
+
+        reset_ref_policy()
 
 
 def entry() -> None:

@@ -51,9 +51,14 @@ def write_exr(path: Path, channels: dict) -> str:
     tmp = path.with_name(f"{atomic.TMP_PREFIX}{os.getpid()}-{path.name}")
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     try:
-        with OpenEXR.File(header, channels) as f:
-            f.write(str(tmp))
-        os.replace(tmp, path)
+        with atomic.deferred_signals():
+            try:
+                with OpenEXR.File(header, channels) as f:
+                    f.write(str(tmp))
+                os.replace(tmp, path)
+            except BaseException:
+                tmp.unlink(missing_ok=True)
+                raise
     except OSError as e:
         tmp.unlink(missing_ok=True)
         raise EnvironmentProblem(f"{path}: cannot write ({e.strerror})",
