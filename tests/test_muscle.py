@@ -501,10 +501,11 @@ def test_twist_follows_the_insertion_roll_past_180(chain_spec, chain_model, chai
 
 def test_twist_is_spread_along_the_axis(chain_spec, chain_model, chain_world, monkeypatch):
     """With a straight axis, a control point bound at rest arc fraction lam turns by
-    lam * roll about the axis (the Z axis, pointing down: roll about -Z)."""
+    lam * roll about the axis (the Z axis, pointing down: roll about -Z). (volume: none, as
+    twisting elliptic sections changes the mesh volume and ``exact`` would rescale them.)"""
     from axdf_cli.skeleton import axis_angle
 
-    model = chain_model(chain_spec)
+    model = chain_model(chain_spec, volume="none")
     rolls = np.array([0.0, 90.0, 250.0])
     cp, res = evaluate_with_control_points(model, chain_world(roll=rolls), np.zeros(3), monkeypatch)
     np.testing.assert_allclose(res.twist, rolls, rtol=0, atol=1e-9)
