@@ -14,7 +14,6 @@ straight line at rest and stays straight (and on the roll axis) when only ``stre
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 from pathlib import Path
 
 import numpy as np
@@ -81,10 +80,6 @@ CHAIN_COORDS = ("stretch", "bend", "roll")
 
 
 # ----------------------------------------------------------------------------- helpers
-
-
-def sha256(path: Path) -> str:
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
 def mesh_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
@@ -207,7 +202,6 @@ def chain_world(chain_skeleton):
 @pytest.fixture(scope="session")
 def chain_model(chain_skeleton, chain_world):
     """make(**spec_overrides) → MuscleModel of the chain muscle on the chain skeleton."""
-    from axdf_cli.loaders import load_muscle_file  # noqa: F401  (keeps import errors local)
     from axdf_cli.muscle import MuscleModel
 
     def make(spec, **overrides):
