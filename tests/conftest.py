@@ -1,5 +1,245 @@
+"""Shared fixtures: the repository root, the demo library, and a small synthetic skeleton.
+
+The synthetic ``chain`` skeleton is five bones b0..b4 stacked along -Z, 0.1 m apart at rest:
+
+- ``stretch`` (translation coordinate, rest 0) lengthens every link by ``0.1 * stretch`` m
+  through a coupled linear DOF, so the whole chain stretches *uniformly* by ``1 + stretch``;
+- ``bend`` rotates b3 (and b4 with it) about +X at b3's joint;
+- ``roll`` rotates b4 about -Z, i.e. about the muscle's own tangent at its insertion.
+
+The ``chainm`` muscle has one axis point at the origin of each bone, so its axis is a
+straight line at rest and stays straight (and on the roll axis) when only ``stretch`` and
+``roll`` move. Everything is tiny (21 x 16 vertices) so the suite stays fast.
+"""
+from __future__ import annotations
+
+import dataclasses
 import sys
 from pathlib import Path
 
-# tests import their shared helpers (compare_helpers) by module name
+import numpy as np
+import pytest
+import yaml
+
+# tests import their shared helpers (compare_helpers, render_helpers, ...) by module name
 sys.path.insert(0, str(Path(__file__).parent))
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+DEMO_MUSCLE_FILES = sorted((REPO_ROOT / "muscles" / "demo").glob("*.yaml"))
+DEMO_POSE = REPO_ROOT / "poses" / "demo.yaml"
+DEMO_JOB = REPO_ROOT / "poses" / "jobs" / "demo.yaml"
+DEMO_SKELETON = REPO_ROOT / "poses" / "skeletons" / "human_r.yaml"
+
+CHAIN_SKELETON_YAML = """\
+skeleton: chain
+coordinates:
+  stretch: {type: translation, default: 0}
+  bend: {type: rotation, default: 0}
+  roll: {type: rotation, default: 0}
+bones:
+  - name: b0
+  - name: b1
+    parent: b0
+    offset: [0, 0, -0.1]
+    dofs:
+      - {coord: stretch, type: translation, axis: [0, 0, -1], function: {linear: [0.1, 0]}}
+  - name: b2
+    parent: b1
+    offset: [0, 0, -0.1]
+    dofs:
+      - {coord: stretch, type: translation, axis: [0, 0, -1], function: {linear: [0.1, 0]}}
+  - name: b3
+    parent: b2
+    offset: [0, 0, -0.1]
+    dofs:
+      - {coord: stretch, type: translation, axis: [0, 0, -1], function: {linear: [0.1, 0]}}
+      - {coord: bend, type: rotation, axis: [1, 0, 0]}
+  - name: b4
+    parent: b3
+    offset: [0, 0, -0.1]
+    dofs:
+      - {coord: stretch, type: translation, axis: [0, 0, -1], function: {linear: [0.1, 0]}}
+      - {coord: roll, type: rotation, axis: [0, 0, -1]}
+"""
+
+CHAIN_MUSCLE_YAML = """\
+muscle: chainm
+color: [0.8, 0.2, 0.2]
+volume: exact
+axis:
+  - {bone: b0, at: [0, 0, 0]}
+  - {bone: b1, at: [0, 0, 0]}
+  - {bone: b2, at: [0, 0, 0]}
+  - {bone: b3, at: [0, 0, 0]}
+  - {bone: b4, at: [0, 0, 0]}
+sections:
+  - {t: 0.2, radii: [0.02, 0.015], angle: 0}
+  - {t: 0.4, radii: [0.025, 0.018], angle: 10}
+  - {t: 0.6, radii: [0.025, 0.018], angle: 10}
+  - {t: 0.8, radii: [0.02, 0.015], angle: 0}
+resolution: [21, 16]
+"""
+
+CHAIN_COORDS = ("stretch", "bend", "roll")
+
+
+# ----------------------------------------------------------------------------- helpers
+
+
+def mesh_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
+    """Signed volume of a closed triangle mesh (divergence theorem), in float64."""
+    v = np.asarray(vertices, dtype=np.float64)
+    a, b, c = v[faces[:, 0]], v[faces[:, 1]], v[faces[:, 2]]
+    return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
+
+
+def ring_vector_area(ring: np.ndarray) -> float:
+    """Magnitude of the vector area of a closed polygon (R, 3): its area when planar."""
+    c = ring.mean(axis=0)
+    return 0.5 * float(np.linalg.norm(np.cross(ring - c, np.roll(ring, -1, axis=0) - c).sum(axis=0)))
+
+
+def rings(vertices: np.ndarray, resolution) -> np.ndarray:
+    """Ring vertices (..., U-2, A, 3) of a tessellated muscle (poles dropped)."""
+    along, around = resolution
+    return vertices[..., 1:-1, :].reshape(*vertices.shape[:-2], along - 2, around, 3)
+
+
+def random_rigid(rng: np.random.Generator, scale: float = 1.0) -> np.ndarray:
+    """A random proper rigid motion (4, 4)."""
+    q, r = np.linalg.qr(rng.normal(size=(3, 3)))
+    q = q * np.sign(np.diag(r))
+    if np.linalg.det(q) < 0:
+        q[:, 0] = -q[:, 0]
+    m = np.eye(4)
+    m[:3, :3] = q
+    m[:3, 3] = rng.normal(size=3) * scale
+    return m
+
+
+def write_pose(folder: Path, name: str, keys: dict, frames, *, skeleton: str = "chain.yaml",
+               activation: dict | None = None, interpolation: str = "linear", fps: int = 24) -> Path:
+    doc = {"pose": name, "skeleton": skeleton, "fps": fps, "frames": list(frames),
+           "interpolation": interpolation, "keys": keys}
+    if activation:
+        doc["activation"] = activation
+    path = Path(folder) / f"{name}.yaml"
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return path
+
+
+def run_main(argv, capsys):
+    """Call the CLI in process: (exit code, stdout, stderr)."""
+    from axdf_cli.cli.main import main
+
+    capsys.readouterr()
+    rc = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return rc, out, err
+
+
+def all_files(folder: Path) -> dict[str, bytes]:
+    folder = Path(folder)
+    return {p.relative_to(folder).as_posix(): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+# ----------------------------------------------------------------------------- fixtures
+
+
+@pytest.fixture(autouse=True)
+def _restore_ref_policy(monkeypatch):
+    """`axdf` commands set the module-global path policy (loaders.POLICY) from their cwd and
+    arguments; restore it after each test so no test sees another's project root."""
+    from axdf_cli import loaders
+
+    monkeypatch.setattr(loaders, "POLICY", loaders.POLICY)
+
+
+@pytest.fixture
+def repo_root(monkeypatch) -> Path:
+    """Run the test from the repository root (the CLI resolves relative paths from there)."""
+    monkeypatch.chdir(REPO_ROOT)
+    return REPO_ROOT
+
+
+@pytest.fixture(scope="session")
+def chain_files(tmp_path_factory) -> Path:
+    """A folder holding chain.yaml (skeleton) and chainm.yaml (muscle)."""
+    d = tmp_path_factory.mktemp("chain")
+    (d / "chain.yaml").write_text(CHAIN_SKELETON_YAML)
+    (d / "chainm.yaml").write_text(CHAIN_MUSCLE_YAML)
+    return d
+
+
+@pytest.fixture(scope="session")
+def chain_skeleton(chain_files):
+    from axdf_cli.loaders import load_skeleton
+
+    return load_skeleton(chain_files / "chain.yaml")
+
+
+@pytest.fixture(scope="session")
+def chain_spec(chain_files):
+    from axdf_cli.loaders import load_muscle_file
+
+    (spec,) = load_muscle_file(chain_files / "chainm.yaml")
+    return spec
+
+
+@pytest.fixture(scope="session")
+def chain_world(chain_skeleton):
+    """world(**coords) for one or many frames: scalars or (F,) arrays → (F, 5, 4, 4)."""
+    from axdf_cli.skeleton import forward_kinematics
+
+    cidx = chain_skeleton.coord_index
+
+    def world(**coords) -> np.ndarray:
+        n = max([np.size(v) for v in coords.values()] + [1])
+        q = np.tile(chain_skeleton.rest_coordinates(), (n, 1))
+        for k, v in coords.items():
+            q[:, cidx[k]] = v
+        return forward_kinematics(chain_skeleton, q)
+
+    return world
+
+
+@pytest.fixture(scope="session")
+def chain_model(chain_skeleton, chain_world):
+    """make(**spec_overrides) → MuscleModel of the chain muscle on the chain skeleton."""
+    from axdf_cli.muscle import MuscleModel
+
+    def make(spec, **overrides):
+        spec = dataclasses.replace(spec, **overrides) if overrides else spec
+        return MuscleModel(spec, chain_skeleton.bone_index, chain_world()[0])
+
+    return make
+
+
+@pytest.fixture(scope="session")
+def demo():
+    """The demo skeleton, muscle specs and models at rest (built once)."""
+    from axdf_cli.loaders import load_muscle_file, load_pose
+    from axdf_cli.muscle import MuscleModel
+    from axdf_cli.skeleton import forward_kinematics
+
+    pose = load_pose(DEMO_POSE)
+    skel = pose.skeleton
+    rest = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
+    specs = [s for f in DEMO_MUSCLE_FILES for s in load_muscle_file(f)]
+    models = [MuscleModel(s, skel.bone_index, rest) for s in specs]
+    return dataclasses.make_dataclass("Demo", ["pose", "skel", "rest", "specs", "models"])(
+        pose, skel, rest, specs, models)
+
+
+def demo_extreme_coordinates(skel, rng: np.random.Generator, n_random: int = 12) -> np.ndarray:
+    """(F, C) coordinates: every coordinate at both ends of its range, plus random combinations."""
+    rest = skel.rest_coordinates()
+    qs = []
+    for i, c in enumerate(skel.coordinates):
+        for v in c.range:
+            q = rest.copy()
+            q[i] = v
+            qs.append(q)
+    for _ in range(n_random):
+        qs.append(np.array([rng.uniform(*c.range) for c in skel.coordinates]))
+    return np.array(qs)
