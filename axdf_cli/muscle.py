@@ -26,7 +26,7 @@ Radial factor of a control point c: ``k_c = (1 - beta_c) + beta_c * K_c`` with
   g = TENSION_GAIN. The share e*b of a belly point (its middle at full tension) keeps the
   length-only scale s0 = sqrt(l0/l1) instead of s, so with ``exact`` only the rest (the ends)
   gives way to keep the volume: ``k_c = tau_c (e b s0 + (1 - e b) s)`` (still affine in s).
-  Length and volume do not change; tension 1 adds 20-30% area at mid-belly on the demo
+  Length and volume do not change; tension 1 adds 27-39% area at mid-belly (rest pose) on the demo
   muscles (tests require at least 15%).
 
 Surface: a tensor-product quadratic NURBS over the control net [origin pole (8 copies of
@@ -176,21 +176,28 @@ def planar_volume_cubic(a: np.ndarray, w: np.ndarray) -> np.ndarray:
                      _dot_sum(a01, q) + _dot_sum(w01, r), _dot_sum(w01, q)], axis=1) / 6.0
 
 
-def planar_normals(g: np.ndarray) -> np.ndarray:
+def planar_normals(g: np.ndarray, ends: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """Outward unit vertex normals (3, F, U, A) of a planar wrapped grid (3, F, U, A+1).
 
     Ring vertices: the cross product of the central differences around and along
-    (S_v x S_u points outwards). Pole vertices: the sum of their fan triangles' normals."""
+    (S_v x S_u points outwards). Pole vertices: the axis direction out of the muscle,
+    ``ends = (-T(0), T(1))`` each (3, F), when given (a pointed end's apex faces along the
+    axis; the fan of a strongly curved end can tilt past it), else the sum of their fan
+    triangles' normals."""
     c = g[..., :-1]  # (3, F, U, A)
     sv = np.roll(c[:, :, 1:-1], -1, axis=3) - np.roll(c[:, :, 1:-1], 1, axis=3)
     su = c[:, :, 2:] - c[:, :, :-2]
     n = np.empty_like(c)
     n[:, :, 1:-1] = _cross(sv, su)
-    for row, nxt in ((0, 1), (-1, -2)):
+    for k, (row, nxt) in enumerate(((0, 1), (-1, -2))):
         ring = c[:, :, nxt]  # (3, F, A)
         pole = c[:, :, row, :1]
         fan = _cross(np.roll(ring, -1, axis=2) - pole, ring - pole).sum(axis=2)  # (3, F)
-        n[:, :, row] = (fan if row == 0 else -fan)[..., None]
+        fan = fan if row == 0 else -fan
+        if ends is not None:  # a fan tilted more than 60 degrees off the axis: use the axis
+            fan = fan / np.maximum(np.sqrt((fan * fan).sum(axis=0)), 1e-300)
+            fan = np.where((fan * ends[k]).sum(axis=0) > 0.5, fan, ends[k])
+        n[:, :, row] = fan[..., None]
     return n / np.maximum(np.sqrt(n[0] ** 2 + n[1] ** 2 + n[2] ** 2), 1e-300)
 
 
@@ -463,7 +470,8 @@ class MuscleModel:
             grid = a_grid + sb[None, :, None, None] * w_grid
             volume[blk] = planar_volume(grid)
             verts[:, blk] = planar_to_vertices(grid[..., :-1])
-            norms[:, blk] = planar_to_vertices(planar_normals(grid))
+            ends = (-np.moveaxis(t[blk, 0], -1, 0), np.moveaxis(t[blk, -1], -1, 0))
+            norms[:, blk] = planar_to_vertices(planar_normals(grid, ends))
         for i in np.nonzero(bad)[0]:
             warnings.append((int(i), "exact volume has no solution; used the paper's scale"))
         for i in np.nonzero(length < tol.MIN_AXIS_LENGTH)[0]:

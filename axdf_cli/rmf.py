@@ -37,7 +37,7 @@ def reflect_step(x0, t0, r0, x1, t1) -> np.ndarray:
     t_l = t0 - k1 * _dot(v1, t0)[..., None] * v1
     v2 = t1 - t_l
     c2 = _dot(v2, v2)[..., None]
-    ok2 = c2 > _EPS
+    ok2 = c2 > STEP_RTOL ** 2  # tangents are unit: a change below 1e-10 is rounding noise
     k2 = np.where(ok2, 2.0 / np.where(ok2, c2, 1.0), 0.0)
     r1 = r_l - k2 * _dot(v2, r_l)[..., None] * v2
     # re-orthonormalise against rounding drift (a no-op in exact arithmetic)

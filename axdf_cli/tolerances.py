@@ -32,7 +32,7 @@ SCALE_MAX = 20.0
 
 # Isometric tension law: the belly's area profile is multiplied by 1 + TENSION_GAIN*e*(2b-1),
 # b = sin^2(pi*s) over the belly; see axdf_cli/muscle.py.
-TENSION_GAIN = 0.4
+TENSION_GAIN = 0.6
 
 # YAML safety limits: hostile documents (alias bombs, deep nesting, huge files).
 YAML_MAX_BYTES = 16 * 1024 * 1024

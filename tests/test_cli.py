@@ -21,7 +21,7 @@ from axdf_cli.pose import sample_coordinates
 
 from conftest import REPO_ROOT, all_files, run_main
 
-DEMO_MUSCLES = ["biceps_brachii", "deltoid_anterior", "deltoid_middle", "deltoid_posterior",
+DEMO_MUSCLES = ["biceps_brachii", "brachioradialis", "deltoid_anterior", "deltoid_middle", "deltoid_posterior",
                 "gastrocnemius_medial", "gastrocnemius_lateral"]  # file order, then order in the file
 DEMO_BONES = ["pelvis", "femur_r", "tibia_r", "foot_r", "thorax", "scapula_r", "humerus_r", "ulna_r", "radius_r"]
 STATS_COLUMNS = ["frame", "muscle", "length", "volume", "volume_ratio", "tension", "twist", "scale", "warning"]
@@ -87,7 +87,7 @@ def test_manifest(demo_runs):
     text = (out / "manifest.json").read_text()
     man = json.loads(text)
     assert man["tool"] == "axdf" and man["complete"] is True
-    assert man["settings"]["frames"] == [0, 1, 2, 3]
+    assert man["frames"] == [0, 1, 2, 3]
     assert man["settings"]["format"] == "ply"
     # every output file (but the manifest itself) is listed with its sha256
     on_disk = {p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file()} - {"manifest.json"}
@@ -162,7 +162,7 @@ def test_run_obj_format(repo_root, tmp_path, capsys, demo):
         assert len(m.vertices) == model.n_vertices
         np.testing.assert_array_equal(m.faces, model.faces)
         assert m.is_watertight and m.volume > 0
-    assert not list((tmp_path / "o").rglob("*.ply"))
+    assert not list((tmp_path / "o" / "meshes").rglob("*.ply"))
     assert str(tmp_path / "o") in out
 
 

@@ -173,7 +173,7 @@ def test_rest_pose_through_the_pipeline_equals_rest(demo, repo_root):
     plan = runner.plan_run(load_job("poses/jobs/demo.yaml"), frames_arg="0")
     (_, world, results), = list(runner.evaluate_chunks(plan))
     np.testing.assert_allclose(world[0], demo.rest, rtol=0, atol=1e-15)
-    for spec, model, res in zip(plan.muscles, plan.models, results):
+    for spec, model, (_, res) in zip(plan.muscles, plan.models, results):
         direct = tessellate_net(model, model.rest_control_points, rest_axis_points(model, demo.rest))
         np.testing.assert_allclose(res.vertices[0], direct, rtol=0, atol=1e-12, err_msg=spec.name)
         assert res.tension[0] == 0.0
@@ -194,14 +194,6 @@ def test_rest_pose_written_by_the_cli_equals_rest(demo, repo_root, tmp_path, cap
 
 # ----------------------------------------------------------------------------- rigid motion
 
-BUG_REFLECT = pytest.mark.xfail(strict=True, reason=(
-    "BUG: rmf.reflect_step reflects in a plane of rounding noise when a bound parameter "
-    "coincides with an RMF sample (|x1-x0| ~ 1e-16 but |x1-x0|^2 > _EPS=1e-30): sections at "
-    "t = k/(32(n-2)) (e.g. 0.25, 0.5, 0.75 with 5 axis points) spin about the axis at random"))
-BUG_REST_FRAME = pytest.mark.xfail(strict=True, reason=(
-    "BUG: MuscleModel.__init__ picks the start vector R(0) with rmf.any_perpendicular in *world* "
-    "axes, so the rest shape (section orientation) depends on where the skeleton is placed"))
-
 DEMO_NAMES = [s.name for f in DEMO_MUSCLE_FILES for s in load_muscle_file(f)]
 ALIGNED_SECTIONS = tuple(Section(t, (0.02, 0.012), 15.0) for t in (0.25, 0.5, 0.75))
 
@@ -220,7 +212,7 @@ def _case(name, demo, chain_spec, chain_model, chain_world):
     return model, chain_world()[0], block
 
 
-RIGID_CASES = ([pytest.param(n, marks=BUG_REFLECT) if n == "biceps_brachii" else n for n in DEMO_NAMES]
+RIGID_CASES = ([n for n in DEMO_NAMES]
                + [f"chain-{k}" for k in ("plain", "paper", "none", "twisted", "tendons", "strong", "weights")]
                + ["chain-aligned"])
 
@@ -247,7 +239,6 @@ def test_rigid_invariance(name, demo, chain_spec, chain_model, chain_world):
         np.testing.assert_allclose(b.scale, a.scale, rtol=1e-9)
 
 
-@BUG_REFLECT
 def test_demo_biceps_has_no_frame_to_frame_jitter(demo):
     """During the demo's shoulder abduction (frames 48..94) the biceps moves smoothly: the
     largest second difference of any vertex between consecutive frames stays below 5 mm
@@ -262,7 +253,6 @@ def test_demo_biceps_has_no_frame_to_frame_jitter(demo):
     assert jitter < 5e-3, jitter
 
 
-@BUG_REST_FRAME
 @pytest.mark.parametrize("name", DEMO_NAMES)
 def test_rest_shape_is_independent_of_the_skeleton_placement(name, demo):
     """Binding a muscle on a rigidly moved rest skeleton gives the moved rest muscle."""
@@ -458,10 +448,6 @@ def test_tension_keeps_length_and_volume_and_grows_the_belly(demo, chain_spec, c
         np.testing.assert_allclose(res.vertices[:, [0, -1]], res.vertices[:1, [0, -1]].repeat(3, 0), atol=1e-15)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "BUG: tension 1 adds only ~10-14% mid-belly area (need >= 15%; muscle.py docstring claims ~25%): "
-    "the exact volume solve rescales the whole belly (s^2 ~ 0.86) and undoes most of the "
-    "1 + TENSION_GAIN*(2b-1) bump, whose peak (b=1) no section sits on"))
 def test_tension_one_adds_15_percent_mid_belly_area(demo, chain_spec, chain_model, chain_world):
     gains = {}
     for model, rest, pose_world in tension_cases(demo, chain_spec, chain_model, chain_world):
@@ -604,7 +590,7 @@ def test_pole_normals_point_away_over_the_demo_sequence(demo):
 
 
 def test_normals_agree_with_face_orientation(demo):
-    """Vertex normals are the area-weighted face normals of the written triangles."""
+    """Vertex normals agree with the area-weighted face normals of the written triangles."""
     for model in demo.models:
         res = model.evaluate(demo.rest[None], np.zeros(1))
         v, f = res.vertices[0], model.faces

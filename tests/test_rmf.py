@@ -148,10 +148,6 @@ def test_repeated_samples_do_not_produce_nan():
     assert_orthonormal(t, r, atol=1e-12)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "BUG: rmf.reflect_step tests |x1-x0|^2 > _EPS=1e-30 (absolute), so a step of rounding "
-    "noise (3e-15 m, as between a bound point and the RMF sample at the same t) defines the "
-    "first reflection plane: a noise step along r0 returns -r0 (a 180 degree flip)"))
 def test_reflect_step_over_a_rounding_noise_step_keeps_the_frame():
     """Two samples a few ulps apart at the same tangent: the frame must not turn. (Axis-
     aligned vectors keep the arithmetic exact, so the noise step stays normal to t0.)"""
