@@ -120,23 +120,15 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
 
 
 def load_bone_mesh(path: str, skeleton_file: str):
-    """Read a bone's PLY (any PLY triangle mesh) → (vertices, faces, bytes); bad files are input errors."""
-    from axdf_cli.render.runio import read_ply
+    """Read a bone's mesh (PLY or OBJ triangles) → (vertices, faces, bytes); bad files are input errors."""
+    from axdf_cli.render.runio import read_mesh_file
 
-    where = Mark(skeleton_file)
-    try:
-        data = Path(path).read_bytes()
-        v, _, f = read_ply(Path(path))
-    except OSError as e:
-        raise InputError(where, f"bone mesh {path} cannot be read ({e.strerror})",
-                         "a PLY file relative to the skeleton file") from None
-    except (ValueError, KeyError, IndexError, UnicodeDecodeError) as e:
-        raise InputError(Mark(str(path)), f"not a readable PLY mesh ({e})", "a binary little-endian PLY triangle mesh") from None
-    if len(f) and (f.min() < 0 or f.max() >= len(v)):
-        raise InputError(Mark(str(path)), "face indices out of range", "indices below the vertex count")
+    if not Path(path).is_file():
+        raise InputError(Mark(skeleton_file), f"bone mesh {path} not found", "a PLY file relative to the skeleton file")
+    v, _, f = read_mesh_file(Path(path))
     if not np.isfinite(v).all():
         raise InputError(Mark(str(path)), "non-finite vertex coordinates", "finite numbers only")
-    return np.ascontiguousarray(v, dtype=np.float32), f.astype(np.int32), data
+    return np.ascontiguousarray(v, dtype=np.float32), f, Path(path).read_bytes()
 
 
 # ----------------------------------------------------------------------------- evaluation

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Callable, Iterable
 
 from axdf_cli.atomic import write_bytes
+from axdf_cli.formats.read import MeshReadError
 from axdf_cli.compare.result import (ERROR, EXTRA, FAIL, MISSING, PASS, FileResult, Outcome, Report,
                                      Unreadable)
 from axdf_cli.compare.tolerances import FileTol, Tolerances, as_dict
@@ -136,7 +137,7 @@ def compare_pair(rel: str, a: Path | None, g: Path | None, tolerances: Tolerance
                           seconds=time.perf_counter() - t0)
     try:
         out = _compare_kind(kind, a, g, ab, gb, t)
-    except Unreadable as e:
+    except MeshReadError as e:
         return FileResult(rel, kind, ERROR, (str(e),), tolerance=tol_dict, seconds=time.perf_counter() - t0)
     picture = None
     if out.picture is not None and diff_dir is not None:

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from axdf_cli.formats.read import MeshReadError
+
 # verdicts of one file; every one but PASS fails the comparison
 PASS = "pass"  # equal within tolerance (identical bytes included)
 FAIL = "fail"  # differs beyond tolerance (or topology, size, channels differ)
@@ -12,7 +14,7 @@ ERROR = "error"  # a file could not be read (truncated, not the format its name 
 VERDICTS = (PASS, FAIL, MISSING, EXTRA, ERROR)
 
 
-class Unreadable(Exception):
+class Unreadable(MeshReadError):
     """A file cannot be read as the format its name says; becomes an ERROR verdict."""
 
 
@@ -68,5 +70,5 @@ def read_side(side: str, reader, *args):
     """Call ``reader(*args)``; an :class:`Unreadable` names the side ("actual"/"golden")."""
     try:
         return reader(*args)
-    except Unreadable as e:
+    except MeshReadError as e:
         raise Unreadable(f"{side}: {e}") from None

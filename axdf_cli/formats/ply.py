@@ -39,15 +39,9 @@ class PlyWriter:
 
 
 def read_ply(data: bytes):
-    """Read what :class:`PlyWriter` writes: positions (V, 3) f4, normals (V, 3) f4, faces (T, 3) i4."""
-    end = data.index(b"end_header\n") + len(b"end_header\n")
-    header = data[:end].decode("ascii").splitlines()
-    nv = nf = 0
-    for line in header:
-        if line.startswith("element vertex"):
-            nv = int(line.split()[-1])
-        elif line.startswith("element face"):
-            nf = int(line.split()[-1])
-    v = np.frombuffer(data, dtype="<f4", count=nv * 6, offset=end).reshape(nv, 6)
-    f = np.frombuffer(data, dtype=[("n", "u1"), ("i", "<i4", (3,))], count=nf, offset=end + nv * 24)
-    return v[:, :3], v[:, 3:], f["i"].copy()
+    """Read a triangle PLY: positions (V, 3) float32, normals (V, 3) float32 or None, faces (T, 3) int32."""
+    from axdf_cli.formats.read import read_ply as read_any, triangles
+
+    mesh = read_any(data)
+    nrm = None if mesh.normals is None else mesh.normals.astype(np.float32)
+    return mesh.vertices.astype(np.float32), nrm, triangles(mesh)

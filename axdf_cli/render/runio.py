@@ -24,83 +24,24 @@ from axdf_cli.errors import InputError, Mark
 from axdf_cli.render.settings import RenderSettings, parse_render_settings
 from axdf_cli.scene import FrameChunk, Scene, SceneBone, SceneMuscle
 
-_PLY_TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "<i2", "int16": "<i2",
-              "ushort": "<u2", "uint16": "<u2", "int": "<i4", "int32": "<i4", "uint": "<u4",
-              "uint32": "<u4", "float": "<f4", "float32": "<f4", "double": "<f8", "float64": "<f8"}
+def read_mesh_file(path: Path) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+    """A PLY or OBJ triangle mesh -> (V, 3) float32 positions, (V, 3) float32 normals or
+    None, (T, 3) int32 triangles; unreadable files are input errors."""
+    from axdf_cli.formats.read import MeshReadError, read_mesh, triangles
+
+    path = Path(path)
+    try:
+        mesh = read_mesh(path.read_bytes(), path.suffix)
+        faces = triangles(mesh)
+    except OSError as e:
+        raise InputError(Mark(str(path)), f"cannot read mesh ({e.strerror})", "an existing PLY or OBJ file") from None
+    except MeshReadError as e:
+        raise InputError(Mark(str(path)), f"not a readable mesh ({e})", "a PLY or OBJ triangle mesh") from None
+    nrm = None if mesh.normals is None else mesh.normals.astype(np.float32)
+    return mesh.vertices.astype(np.float32), nrm, faces
 
 
-def read_ply(path: Path) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
-    """Binary little-endian PLY -> (V, 3) float32 positions, (V, 3) float32 normals or None,
-    (T, 3) int32 triangles."""
-    data = Path(path).read_bytes()
-    end = data.find(b"end_header\n")
-    if not data.startswith(b"ply\n") or end < 0:
-        raise InputError(Mark(str(path)), "not a PLY file", "binary little-endian PLY")
-    header = data[:end].decode("ascii", "replace").splitlines()
-    body = end + len(b"end_header\n")
-    if "format binary_little_endian 1.0" not in header:
-        raise InputError(Mark(str(path), 2), "PLY is not binary_little_endian", "write binary little-endian PLY")
-    elements: list[list] = []  # [name, count, [(prop, type)], list_types or None]
-    for line in header:
-        t = line.split()
-        if t[:1] == ["element"]:
-            elements.append([t[1], int(t[2]), [], None])
-        elif t[:2] == ["property", "list"]:
-            elements[-1][3] = (_PLY_TYPES[t[2]], _PLY_TYPES[t[3]])
-        elif t[:1] == ["property"]:
-            elements[-1][2].append((t[2], _PLY_TYPES[t[1]]))
-    pos = nrm = faces = None
-    off = body
-    for name, count, props, lst in elements:
-        if lst is None:
-            dt = np.dtype([(p, t) for p, t in props])
-            arr = np.frombuffer(data, dt, count, off)
-            off += dt.itemsize * count
-            if name == "vertex":
-                pos = np.stack([arr["x"], arr["y"], arr["z"]], 1).astype(np.float32)
-                if {"nx", "ny", "nz"} <= set(arr.dtype.names):
-                    nrm = np.stack([arr["nx"], arr["ny"], arr["nz"]], 1).astype(np.float32)
-        else:
-            dt = np.dtype([("n", lst[0]), ("i", lst[1], 3)])
-            arr = np.frombuffer(data, dt, count, off)
-            off += dt.itemsize * count
-            if count and not np.all(arr["n"] == 3):
-                raise InputError(Mark(str(path)), "PLY faces are not all triangles", "triangle meshes only")
-            if name == "face":
-                faces = arr["i"].astype(np.int32)
-    if pos is None or faces is None:
-        raise InputError(Mark(str(path)), "PLY has no vertex or face element", "a triangle mesh")
-    return pos, nrm, faces
-
-
-def read_obj(path: Path) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
-    """Wavefront OBJ (``v``, ``vn``, triangle ``f``) -> positions, normals by vertex, faces."""
-    v, vn, f, fn = [], [], [], []
-    for line in Path(path).read_text().splitlines():
-        t = line.split()
-        if not t:
-            continue
-        if t[0] == "v":
-            v.append([float(x) for x in t[1:4]])
-        elif t[0] == "vn":
-            vn.append([float(x) for x in t[1:4]])
-        elif t[0] == "f":
-            parts = [p.split("/") for p in t[1:]]
-            if len(parts) != 3:
-                raise InputError(Mark(str(path)), "OBJ face is not a triangle", "triangle meshes only")
-            f.append([int(p[0]) - 1 for p in parts])
-            if all(len(p) == 3 and p[2] for p in parts):
-                fn.append([int(p[2]) - 1 for p in parts])
-    pos = np.asarray(v, np.float32).reshape(-1, 3)
-    faces = np.asarray(f, np.int32).reshape(-1, 3)
-    nrm = None
-    if vn and len(fn) == len(f):
-        nrm = np.zeros_like(pos)
-        nrm[faces.ravel()] = np.asarray(vn, np.float32)[np.asarray(fn).ravel()]
-    return pos, nrm, faces
-
-
-_READERS = {".ply": read_ply, ".obj": read_obj}
+_READERS = {".ply": read_mesh_file, ".obj": read_mesh_file}
 
 
 def _color(c, where: Mark) -> tuple[float, float, float]:
@@ -167,7 +108,7 @@ def load_run_scene(run_dir: Path) -> tuple[Scene, Iterator[FrameChunk], RenderSe
     bones = []
     for b in manifest.get("bones") or []:
         if b.get("mesh"):
-            v, _, faces = read_ply(run_dir / b["mesh"])
+            v, _, faces = read_mesh_file(run_dir / b["mesh"])
             bones.append(SceneBone(str(b["name"]), v, faces))
     bone_world = _read_bones_csv(run_dir / "bones.csv", frames, [b.name for b in bones])
 
