@@ -343,15 +343,27 @@ def render_fps(size=(512, 512), frames: int = 24, n_muscles: int = 6, verts: int
 
 
 def run_subprocess(args: list[str], cwd: Path = ROOT) -> dict:
-    """Run ``python -m axdf_cli ARGS``; wall time (s), exit code, peak RSS (bytes) of the child."""
-    t0 = time.perf_counter()
-    p = subprocess.Popen([sys.executable, "-m", "axdf_cli", *args], cwd=cwd,
-                         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    err = p.stderr.read()
-    _, status, usage = os.wait4(p.pid, 0)
-    p.returncode = os.waitstatus_to_exitcode(status)
-    wall = time.perf_counter() - t0
-    return {"wall": wall, "rc": p.returncode, "maxrss": usage.ru_maxrss * 1024, "stderr": err.decode(errors="replace")}
+    """Run ``python -m axdf_cli ARGS``: wall time (s), exit code, peak RSS (bytes) of the child.
+
+    The peak comes from GNU time (``/usr/bin/time -f %M``) when present: Linux carries a
+    process's peak RSS across exec, so the child of a large forked benchmark would otherwise
+    report the benchmark's own peak. Without GNU time, wait4's figure is an upper bound."""
+    cmd = [sys.executable, "-m", "axdf_cli", *args]
+    gnu_time = shutil.which("time") or ("/usr/bin/time" if Path("/usr/bin/time").is_file() else None)
+    with tempfile.TemporaryDirectory() as d:
+        report = Path(d) / "time.txt"
+        if gnu_time:
+            cmd = [gnu_time, "-f", "%M", "-o", str(report), *cmd]
+        t0 = time.perf_counter()
+        p = subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        err = p.stderr.read()
+        _, status, usage = os.wait4(p.pid, 0)
+        p.returncode = os.waitstatus_to_exitcode(status)
+        wall = time.perf_counter() - t0
+        maxrss = usage.ru_maxrss * 1024
+        if gnu_time and report.is_file():
+            maxrss = int(report.read_text().split()[-1]) * 1024
+    return {"wall": wall, "rc": p.returncode, "maxrss": maxrss, "stderr": err.decode(errors="replace")}
 
 
 def end_to_end(job: Path, out: Path, fmt: str = "ply") -> dict:
@@ -383,7 +395,7 @@ def profile_run(job: Path, out: Path, fmt: str = "ply", top: int = 0) -> dict:
     t_plan = time.perf_counter() - t0
     prof = cProfile.Profile()
     t0 = time.perf_counter()
-    prof.runcall(execute, plan, overwrite=True)
+    prof.runcall(execute, plan)
     total = time.perf_counter() - t0
     st = pstats.Stats(prof)
     # evaluation: evaluate + twist references + kinematics (those inside twist_references once)
@@ -405,7 +417,7 @@ def profile_run(job: Path, out: Path, fmt: str = "ply", top: int = 0) -> dict:
 # ----------------------------------------------------------------------------- --long
 
 LONG_SCRIPT = r"""
-import json, resource, sys, time
+import json, sys, time
 import numpy as np
 from axdf_cli.bench import stretched_pose
 from axdf_cli.loaders import load_job
@@ -426,9 +438,10 @@ for sl, world, results in evaluate_chunks(plan):
             files[f"meshes/{plan.names[j]}/{plan.names[j]}_{int(f):04d}.ply"] = "%064x" % (f * nm + j)
 dt = time.perf_counter() - t0
 manifest = json.dumps({"files": files}, indent=1)
+# VmHWM: this process's own peak (ru_maxrss would include the forking parent's, kept across exec)
+hwm = next(int(l.split()[1]) for l in open("/proc/self/status") if l.startswith("VmHWM:")) * 1024
 print(json.dumps({"seconds": dt, "muscle_frames": n * nm, "chunk": chunk_frames(plan),
-                  "manifest_bytes": len(manifest),
-                  "maxrss": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024}))
+                  "manifest_bytes": len(manifest), "maxrss": hwm}))
 """
 
 
@@ -574,7 +587,7 @@ def main(argv=None) -> int:
         table.add(f"axdf run ({e2e['muscles']} muscles x {e2e['frames']} frames)", f"{e2e['frames'] / e2e['wall']:.1f} fps",
                   f"{mf / e2e['wall']:.0f} muscle-frames/s, {e2e['wall']:.1f} s")
         table.add("axdf run peak memory", f"{e2e['maxrss'] / 2**20:.0f} MiB")
-        pr = profile_run(job, tmp / "e2e", top=15 if args.profile else 0)
+        pr = profile_run(job, tmp / "e2e-profile", top=15 if args.profile else 0)
         ev, wt = pr["evaluation"], pr["writing"]
         table.add("execute: evaluation / writing (cProfile)", f"{ev:.1f} s / {wt:.1f} s",
                   f"of {pr['total']:.1f} s (plan {pr['plan']:.1f} s)", f"{wt / max(ev, 1e-9):.2f}x",
