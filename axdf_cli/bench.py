@@ -286,41 +286,35 @@ def time_writers(model: MuscleModel, world: np.ndarray, tension: np.ndarray, fol
         d.mkdir(parents=True)
         return d
 
-    for cls in (PlyWriter, ObjWriter):
-        w = cls(model.faces, model.spec.name)
-        ext = cls.extension
-        data = [w.encode(pos[i], nrm[i]) for i in range(n)]
-        arrays = [np.frombuffer(b, dtype=np.uint8) for b in data]
-        size = float(np.mean([len(b) for b in data]))
+    writers = {cls.extension: cls(model.faces, model.spec.name) for cls in (PlyWriter, ObjWriter)}
+    arrays = {ext: [np.frombuffer(w.encode(pos[i], nrm[i]), dtype=np.uint8) for i in range(n)]
+              for ext, w in writers.items()}
 
-        def encode():
-            for i in range(n):
-                w.encode(pos[i], nrm[i])
+    # one file of every format and variant in turn, so that all meet the same state of the
+    # disk cache and of the machine's other work (writeback stalls hit all alike)
+    def variants(ext: str, i: int, dirs: dict):
+        w, name = writers[ext], f"m_{i:04d}.{ext}"
+        yield "encode", lambda: w.encode(pos[i], nrm[i])
+        yield "write", lambda: w.write(dirs["write"] / name, pos[i], nrm[i])
+        yield "write_bytes", lambda: atomic.write_bytes(dirs["write_bytes"] / name, w.encode(pos[i], nrm[i]))
+        yield "tofile", lambda: arrays[ext][i].tofile(dirs["tofile"] / name)
 
-        def write():
-            d = fresh(ext)
-            for i in range(n):
-                w.write(d / f"m_{i:04d}.{ext}", pos[i], nrm[i])
-
-        def write_bytes():
-            d = fresh(ext)
-            for i in range(n):
-                atomic.write_bytes(d / f"m_{i:04d}.{ext}", w.encode(pos[i], nrm[i]))
-
-        def tofile():
-            d = fresh(ext)
-            for i in range(n):
-                arrays[i].tofile(d / f"m_{i:04d}.{ext}")
-
-        # interleaved: every pass of every variant meets the same state of the disk cache
-        fns = {"encode": encode, "write": write, "write_bytes": write_bytes, "tofile": tofile}
-        ts: dict = {k: [] for k in fns}
-        for _ in range(max(1, repeats)):
-            for key, fn in fns.items():
-                t0 = time.perf_counter()
-                fn()
-                ts[key].append(time.perf_counter() - t0)
-        out[ext] = {"bytes": size, **{k: float(np.median(v)) / n * 1e6 for k, v in ts.items()}}
+    keys = ("encode", "write", "write_bytes", "tofile")
+    totals = {(ext, k): [] for ext in writers for k in keys}
+    for _ in range(max(1, repeats)):
+        dirs = {ext: {k: fresh(ext) for k in keys[1:]} for ext in writers}  # new files, like a run's
+        acc = dict.fromkeys(totals, 0.0)
+        for i in range(n):
+            for ext in writers:
+                for key, fn in variants(ext, i, dirs[ext]):
+                    t0 = time.perf_counter()
+                    fn()
+                    acc[ext, key] += time.perf_counter() - t0
+        for k, v in acc.items():
+            totals[k].append(v)
+    for ext in writers:
+        out[ext] = {"bytes": float(np.mean([len(a) for a in arrays[ext]])),
+                    **{k: float(np.median(totals[ext, k])) / n * 1e6 for k in keys}}
     return out
 
 
