@@ -1,7 +1,7 @@
 # axdf: two commands on a fresh machine.
 #   make demo   set up (.venv, packages, Mesa EGL if missing) and run the demo job into out/demo
 #   make test   set up and run the whole test suite (CI calls this through .ci/run)
-#   make bench  set up and print the benchmark table
+#   make bench  set up and print the benchmark table (BENCH_ARGS="--quick", "--long")
 PY     ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
@@ -55,7 +55,7 @@ golden: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python -m pip install -q -e '.[bench]'
-	$(BIN)/python -m axdf_cli.bench
+	$(BIN)/python -m axdf_cli.bench $(BENCH_ARGS)
 
 # Regenerate the shipped OpenSim library: muscles/{arm26,gait2392}, poses/skeletons/{arm26,gait2392}.yaml
 # (+ meshes/), poses/arm26_flex.yaml, poses/gait2392_walk.yaml. Reports: muscles/*/IMPORT.md.

@@ -1,0 +1,612 @@
+"""``make bench``: one table of speed figures, every figure and every limit measured in the same run.
+
+    python -m axdf_cli.bench [--quick] [--long] [--profile]
+
+Rows (medians of repeated runs timed with ``time.perf_counter``; the machine may be shared,
+so figures are noisy and only ratios taken in the same run are compared with targets):
+
+1. evaluation: µs per muscle-frame of ``MuscleModel.evaluate`` at 48x24 and 96x48, over
+   1000 frames in chunks of ``run.CHUNK_FRAMES``, for 1, 10 and 92 muscles (the gait2392
+   library and walk when shipped, else demo muscles replicated and perturbed on the demo
+   skeleton with a synthetic pose);
+2. the limit: numpy filling the same outputs (``np.copyto`` into preallocated (F, V, 3)
+   float64 vertices and normals), and evaluation / limit;
+3. a peer: the same surface tessellated by geomdl (NURBS-Python), per muscle-frame;
+4. writers: PLY and OBJ (encode; encode + atomic write) in MB/s and µs per muscle-frame,
+   against ``ndarray.tofile`` of the same bytes;
+5. rendering: frames per second at 512x512 for a demo-sized scene (``benchmark_fps``);
+6. end to end: ``axdf run`` of the largest shipped job as a subprocess (frames per second,
+   peak memory), and the split of its time between evaluation and writing (cProfile).
+
+``--long`` adds the memory check of 10,000 frames x 92 muscles streamed through
+``run.evaluate_chunks`` in a subprocess (several minutes). Helpers are importable for the
+smoke test (``tests/test_bench_smoke.py``), which runs them on a tiny case.
+"""
+from __future__ import annotations
+
+import argparse
+import cProfile
+import dataclasses
+import io
+import os
+import pstats
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from axdf_cli import atomic
+from axdf_cli.formats import ObjWriter, PlyWriter
+from axdf_cli.loaders import Pose, expand_muscle_paths, load_muscle_file, load_pose
+from axdf_cli.muscle import OCT, MuscleModel, MuscleSpec
+from axdf_cli.pose import effective_tension, sample_activation, sample_coordinates
+from axdf_cli.skeleton import forward_kinematics
+
+ROOT = Path(__file__).resolve().parent.parent
+GAIT_MUSCLES = ROOT / "muscles" / "gait2392"
+GAIT_POSE = ROOT / "poses" / "gait2392_walk.yaml"
+GAIT_JOB = ROOT / "poses" / "jobs" / "gait2392_walk.yaml"
+DEMO_MUSCLES = ROOT / "muscles" / "demo"
+DEMO_POSE = ROOT / "poses" / "demo.yaml"
+DEMO_JOB = ROOT / "poses" / "jobs" / "demo.yaml"
+RESOLUTIONS = ((48, 24), (96, 48))
+MUSCLE_COUNTS = (1, 10, 92)
+
+# targets: ratios measured in the same run
+TARGET_LIMIT = 3.0  # evaluation within 3x of numpy filling the same outputs
+TARGET_PEER = 100.0  # at least 100x faster than geomdl
+TARGET_PLY = 1.5  # PLY writing within 1.5x of ndarray.tofile of the same bytes
+TARGET_OBJ = 5.0  # OBJ within 5x of PLY
+LONG_FRAMES = 10_000
+LONG_MEMORY = 1 << 30  # 1 GiB
+
+
+def median_time(fn, repeats: int) -> float:
+    """Median wall time (s) of ``fn()`` over ``repeats`` runs."""
+    ts = []
+    for _ in range(max(1, repeats)):
+        t0 = time.perf_counter()
+        fn()
+        ts.append(time.perf_counter() - t0)
+    return float(np.median(ts))
+
+
+# ----------------------------------------------------------------------------- the case
+
+
+@dataclasses.dataclass
+class Case:
+    """Muscles, skeleton and a pose sampled over ``n_frames`` frames, in memory."""
+
+    name: str  # 'gait2392' or 'synthetic'
+    specs: list  # [MuscleSpec]
+    skeleton: object
+    rest: np.ndarray  # (B, 4, 4) rest world transforms
+    world: np.ndarray  # (F, B, 4, 4)
+    tension: np.ndarray  # (F, M) effective tension of each spec
+
+    def models(self, n_muscles: int, resolution: tuple[int, int]) -> list[MuscleModel]:
+        specs = [self.specs[i % len(self.specs)] for i in range(n_muscles)]
+        return [MuscleModel(dataclasses.replace(s, resolution=tuple(resolution)), self.skeleton.bone_index, self.rest)
+                for s in specs]
+
+
+def stretched_pose(pose: Pose, n_frames: int) -> Pose:
+    """The pose's keys spread over frames 0 .. n_frames - 1 (same motion, finer in time)."""
+    span = max(pose.last - pose.first, 1)
+    scale = (n_frames - 1) / span
+
+    def stretch(curves):
+        return {k: (tuple((f - pose.first) * scale for f in fr), vals) for k, (fr, vals) in curves.items()}
+
+    return dataclasses.replace(pose, first=0, last=n_frames - 1, keys=stretch(pose.keys),
+                               activation=stretch(pose.activation))
+
+
+def synthetic_pose(skeleton, n_frames: int) -> Pose:
+    """A smooth in-memory pose: every rotational coordinate swings within its range."""
+    keys = {}
+    kf = np.linspace(0, n_frames - 1, max(2, n_frames // 10))
+    for i, c in enumerate(skeleton.coordinates):
+        if c.type != "rotation":
+            continue
+        lo, hi = c.range if c.range is not None else (-30.0, 30.0)
+        mid, amp = 0.5 * (lo + hi), 0.4 * (hi - lo)
+        vals = mid + amp * np.sin(2 * np.pi * kf / max(n_frames, 1) * (1 + i % 3) + i)
+        keys[c.name] = (tuple(float(f) for f in kf), tuple(float(v) for v in vals))
+    return Pose("synthetic", skeleton, 60.0, 0, n_frames - 1, "linear", keys, {}, {})
+
+
+def perturbed(spec: MuscleSpec, k: int, rng: np.random.Generator) -> MuscleSpec:
+    """A copy of ``spec`` (named ``<name>_<k>``) with axis points moved by up to 5 mm and
+    sections scaled by 0.8 .. 1.2."""
+    if k == 0:
+        return spec
+    axis = tuple(dataclasses.replace(p, at=tuple(float(x) for x in np.asarray(p.at) + rng.uniform(-0.005, 0.005, 3)))
+                 for p in spec.axis)
+    f = float(rng.uniform(0.8, 1.2))
+    secs = tuple(dataclasses.replace(s, radii=None if s.radii is None else (s.radii[0] * f, s.radii[1] * f),
+                                     outline=None if s.outline is None else tuple((a * f, b * f) for a, b in s.outline))
+                 for s in spec.sections)
+    return dataclasses.replace(spec, name=f"{spec.name}_{k}", axis=axis, sections=secs)
+
+
+def load_case(n_frames: int = 1000, n_muscles: int = 92, prefer_gait: bool = True) -> Case:
+    """gait2392 muscles and walk (stretched to ``n_frames``) when shipped, else synthetic."""
+    if prefer_gait and GAIT_MUSCLES.is_dir() and GAIT_POSE.is_file():
+        pose = load_pose(GAIT_POSE)
+        specs = [s for f in expand_muscle_paths([(GAIT_MUSCLES, None)]) for s in load_muscle_file(f)]
+        name = "gait2392"
+        pose = stretched_pose(pose, n_frames)
+    else:
+        demo = load_pose(DEMO_POSE)
+        base = [s for f in expand_muscle_paths([(DEMO_MUSCLES, None)]) for s in load_muscle_file(f)]
+        rng = np.random.default_rng(7)
+        specs = [perturbed(base[i % len(base)], i // len(base), rng) for i in range(n_muscles)]
+        name = "synthetic"
+        pose = synthetic_pose(demo.skeleton, n_frames)
+    specs = specs[:n_muscles]
+    skel = pose.skeleton
+    rest = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
+    frames = np.arange(pose.first, pose.last + 1)
+    world = forward_kinematics(skel, sample_coordinates(pose, frames))
+    act = sample_activation(pose, [s.name for s in specs], frames)
+    tension = np.stack([effective_tension(s.tension, act[:, j]) for j, s in enumerate(specs)], axis=1)
+    return Case(name, specs, skel, rest, world, tension)
+
+
+# ----------------------------------------------------------------------------- evaluation
+
+
+def evaluate_all(models: list[MuscleModel], world: np.ndarray, tension: np.ndarray, chunk: int) -> None:
+    """Evaluate every model over every frame, ``chunk`` frames at a time (as ``axdf run``)."""
+    nf = world.shape[0]
+    for s in range(0, nf, chunk):
+        w = world[s:s + chunk]
+        for j, m in enumerate(models):
+            m.evaluate(w, tension[s:s + chunk, j % tension.shape[1]])
+
+
+def time_evaluation(models, world, tension, repeats: int, chunk: int | None = None) -> float:
+    """µs per muscle-frame (median of ``repeats`` passes)."""
+    from axdf_cli.run import CHUNK_FRAMES
+
+    chunk = chunk or CHUNK_FRAMES
+    evaluate_all(models, world[:chunk], tension[:chunk], chunk)  # warm-up (caches, allocator)
+    dt = median_time(lambda: evaluate_all(models, world, tension, chunk), repeats)
+    return dt / (len(models) * world.shape[0]) * 1e6
+
+
+def time_limit(n_frames: int, n_vertices: int, repeats: int) -> float:
+    """µs per muscle-frame for numpy to fill what evaluate returns: vertices and normals,
+    each a preallocated (F, V, 3) float64 array, by ``np.copyto`` from a warm source."""
+    src = np.random.default_rng(0).random((n_frames, n_vertices, 3))
+    verts = np.empty_like(src)
+    norms = np.empty_like(src)
+    np.copyto(verts, src)  # touch the pages once
+    np.copyto(norms, src)
+
+    def fill():
+        np.copyto(verts, src)
+        np.copyto(norms, src)
+
+    return median_time(fill, repeats) / n_frames * 1e6
+
+
+# ----------------------------------------------------------------------------- the peer
+
+
+def control_net(model: MuscleModel, rest_world: np.ndarray) -> np.ndarray:
+    """The rest surface's control net (m, 8, 3): origin pole, sections, insertion pole."""
+    m = rest_world[model.bones]  # (n, 4, 4)
+    # P[i,c] = sum_k M[i,c,k] at[i,k] + M[i,c,3]
+    axis = np.einsum("ick,ik->ic", m[:, :3, :3], model.at) + m[:, :3, 3]
+    secs = np.asarray(model.rest_control_points).reshape(-1, OCT, 3)
+    return np.concatenate([np.repeat(axis[:1, None], OCT, 1), secs, np.repeat(axis[-1:, None], OCT, 1)])
+
+
+def geomdl_surface(net: np.ndarray, weights=None):
+    """A degree (2, 2) geomdl surface through the net (m, 8, 3): clamped along (u), closed
+    around (v) by wrapping the first 2 control points with a uniform (unclamped) knot vector."""
+    try:
+        from geomdl import BSpline, NURBS
+    except ImportError as e:
+        raise RuntimeError("geomdl is needed for the peer benchmark: pip install geomdl (or make bench)") from e
+    m = net.shape[0]
+    wrapped = np.concatenate([net, net[:, :2]], axis=1)  # (m, 10, 3)
+    nv = wrapped.shape[1]
+    surf = NURBS.Surface() if weights is not None else BSpline.Surface()
+    surf.degree_u, surf.degree_v = 2, 2
+    if weights is not None:
+        w = np.repeat(np.concatenate([[1.0], weights, [1.0]])[:, None], nv, 1)
+        pts = np.concatenate([wrapped * w[..., None], w[..., None]], axis=-1)  # weighted (x w, y w, z w, w)
+        surf.ctrlpts_size_u, surf.ctrlpts_size_v = m, nv
+        surf.ctrlptsw = pts.reshape(-1, 4).tolist()
+    else:
+        surf.ctrlpts_size_u, surf.ctrlpts_size_v = m, nv
+        surf.ctrlpts = wrapped.reshape(-1, 3).tolist()
+    inner = np.arange(1, m - 2) / (m - 2)
+    surf.knotvector_u = [0.0, 0.0, 0.0] + inner.tolist() + [1.0, 1.0, 1.0]
+    surf.knotvector_v = (np.arange(nv + 3) / (nv + 2)).tolist()
+    return surf
+
+
+def geomdl_tessellate(surf, resolution: tuple[int, int]) -> np.ndarray:
+    """Evaluate at the axdf grid: ``along`` rows u in [0, 1] x ``around`` columns over the
+    closed v range → (U, A, 3)."""
+    along, around = resolution
+    kv = surf.knotvector_v
+    v0, v1 = kv[2], kv[len(kv) - 3]
+    us = np.linspace(0.0, 1.0, along)
+    vs = v0 + (v1 - v0) * np.arange(around) / around
+    params = [(float(u), float(v)) for u in us for v in vs]
+    return np.array(surf.evaluate_list(params)).reshape(along, around, 3)
+
+
+def time_geomdl(model: MuscleModel, rest_world: np.ndarray, n_frames: int) -> tuple[float, float]:
+    """(µs per muscle-frame, max |geomdl - axdf| at rest in metres). Each frame moves the net
+    rigidly (so that nothing is cached) and tessellates it again."""
+    net = control_net(model, rest_world)
+    w = None if model.spec.weights is None else np.asarray(model.spec.weights)
+    grid = geomdl_tessellate(geomdl_surface(net, w), model.spec.resolution)
+    ref = np.asarray(model.rest_vertices, dtype=np.float64)
+    verts = np.concatenate([grid[:1, 0], grid[1:-1].reshape(-1, 3), grid[-1:, 0]])
+    err = float(np.abs(verts - ref).max())
+    ts = []
+    for f in range(n_frames):
+        shift = np.array([0.001 * (f + 1), 0.0, 0.0])
+        t0 = time.perf_counter()
+        geomdl_tessellate(geomdl_surface(net + shift, w), model.spec.resolution)
+        ts.append(time.perf_counter() - t0)
+    return float(np.median(ts)) * 1e6, err
+
+
+# ----------------------------------------------------------------------------- writers
+
+
+def time_writers(model: MuscleModel, world: np.ndarray, tension: np.ndarray, folder: Path,
+                 n_files: int, repeats: int) -> dict:
+    """Per-file µs and bytes for PLY/OBJ encode, encode + atomic write, and tofile of the same
+    bytes, over ``n_files`` evaluated frames written to new files (as a run does)."""
+    res = model.evaluate(world[:n_files], tension[:n_files, 0])
+    pos = res.vertices.astype(np.float32)
+    nrm = res.normals.astype(np.float32)
+    n = len(pos)
+    out = {}
+    counter = [0]
+
+    def fresh(ext: str) -> Path:  # a new folder per pass: every file is new, like a run's
+        counter[0] += 1
+        d = folder / f"{ext}{counter[0]}"
+        d.mkdir(parents=True)
+        return d
+
+    writers = {cls.extension: cls(model.faces, model.spec.name) for cls in (PlyWriter, ObjWriter)}
+    arrays = {ext: [np.frombuffer(w.encode(pos[i], nrm[i]), dtype=np.uint8) for i in range(n)]
+              for ext, w in writers.items()}
+
+    # one file of every format and variant in turn, so that all meet the same state of the
+    # disk cache and of the machine's other work (writeback stalls hit all alike)
+    def variants(ext: str, i: int, dirs: dict):
+        w, name = writers[ext], f"m_{i:04d}.{ext}"
+        yield "encode", lambda: w.encode(pos[i], nrm[i])
+        yield "write", lambda: w.write(dirs["write"] / name, pos[i], nrm[i])
+        yield "write_bytes", lambda: atomic.write_bytes(dirs["write_bytes"] / name, w.encode(pos[i], nrm[i]))
+        yield "tofile", lambda: arrays[ext][i].tofile(dirs["tofile"] / name)
+
+    keys = ("encode", "write", "write_bytes", "tofile")
+    totals = {(ext, k): [] for ext in writers for k in keys}
+    for _ in range(max(1, repeats)):
+        dirs = {ext: {k: fresh(ext) for k in keys[1:]} for ext in writers}  # new files, like a run's
+        acc = dict.fromkeys(totals, 0.0)
+        for i in range(n):
+            for ext in writers:
+                for key, fn in variants(ext, i, dirs[ext]):
+                    t0 = time.perf_counter()
+                    fn()
+                    acc[ext, key] += time.perf_counter() - t0
+        for k, v in acc.items():
+            totals[k].append(v)
+    for ext in writers:
+        out[ext] = {"bytes": float(np.mean([len(a) for a in arrays[ext]])),
+                    **{k: float(np.median(totals[ext, k])) / n * 1e6 for k in keys}}
+    return out
+
+
+# ----------------------------------------------------------------------------- rendering
+
+
+def render_fps(size=(512, 512), frames: int = 24, n_muscles: int = 6, verts: int = 1106) -> dict:
+    """Frames per second of a demo-sized scene (6 muscles of 48x24, a bone); {'error': ...}
+    when no GL context can be made."""
+    from axdf_cli.errors import AxdfError
+    from axdf_cli.render import benchmark_fps
+
+    try:
+        return benchmark_fps(size=size, n_muscles=n_muscles, verts=verts, frames=frames)
+    except (AxdfError, ImportError, OSError) as e:
+        return {"error": str(e).splitlines()[0]}
+
+
+# ----------------------------------------------------------------------------- end to end
+
+
+def run_subprocess(args: list[str], cwd: Path = ROOT) -> dict:
+    """Run ``python -m axdf_cli ARGS``: wall time (s), exit code, peak RSS (bytes) of the child.
+
+    The peak comes from GNU time (``/usr/bin/time -f %M``) when present: Linux carries a
+    process's peak RSS across exec, so the child of a large forked benchmark would otherwise
+    report the benchmark's own peak. Without GNU time, wait4's figure is an upper bound."""
+    cmd = [sys.executable, "-m", "axdf_cli", *args]
+    gnu_time = shutil.which("time") or ("/usr/bin/time" if Path("/usr/bin/time").is_file() else None)
+    with tempfile.TemporaryDirectory() as d:
+        report = Path(d) / "time.txt"
+        if gnu_time:
+            cmd = [gnu_time, "-f", "%M", "-o", str(report), *cmd]
+        t0 = time.perf_counter()
+        p = subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        err = p.stderr.read()
+        _, status, usage = os.wait4(p.pid, 0)
+        p.returncode = os.waitstatus_to_exitcode(status)
+        wall = time.perf_counter() - t0
+        maxrss = usage.ru_maxrss * 1024
+        if gnu_time and report.is_file():
+            maxrss = int(report.read_text().split()[-1]) * 1024
+    return {"wall": wall, "rc": p.returncode, "maxrss": maxrss, "stderr": err.decode(errors="replace")}
+
+
+def end_to_end(job: Path, out: Path, fmt: str = "ply") -> dict:
+    """``axdf run JOB --no-render`` in a subprocess: wall time, frames, peak memory."""
+    from axdf_cli.loaders import load_job
+    from axdf_cli.run import plan_run
+
+    r = run_subprocess(["run", str(job), "--out", str(out), "--format", fmt, "--no-render", "--quiet"])
+    if r["rc"] != 0:
+        raise RuntimeError(f"axdf run {job} failed ({r['rc']}): {r['stderr'][-400:]}")
+    plan = plan_run(load_job(job), out_arg=str(out))
+    r.update(frames=len(plan.frames), muscles=len(plan.models))
+    return r
+
+
+def _cum(stats: pstats.Stats, file_end: str, func: str) -> float:
+    return sum(v[3] for (f, _, fn), v in stats.stats.items() if fn == func and f.endswith(file_end))
+
+
+def profile_run(job: Path, out: Path, fmt: str = "ply", top: int = 0) -> dict:
+    """Run ``execute`` in-process under cProfile (no rendering): seconds in evaluation (twist
+    references, kinematics, ``MuscleModel.evaluate``), in writing (encode, sha256, atomic
+    writes) and in total; ``top`` functions by own time as text."""
+    from axdf_cli.loaders import load_job
+    from axdf_cli.run import execute, plan_run
+
+    t0 = time.perf_counter()
+    plan = plan_run(load_job(job), out_arg=str(out), fmt_arg=fmt)
+    t_plan = time.perf_counter() - t0
+    prof = cProfile.Profile()
+    t0 = time.perf_counter()
+    prof.runcall(execute, plan)
+    total = time.perf_counter() - t0
+    st = pstats.Stats(prof)
+    # evaluation: evaluate + twist references + kinematics (those inside twist_references once)
+    fk_in_twist = sum(cv[3] for (f, _, fn), v in st.stats.items() if fn == "forward_kinematics"
+                      and f.endswith("skeleton.py") for (_, _, cfn), cv in v[4].items() if cfn == "twist_references")
+    ev = (_cum(st, "muscle.py", "evaluate") + _cum(st, "run.py", "twist_references")
+          + _cum(st, "skeleton.py", "forward_kinematics") - fk_in_twist)
+    enc = _cum(st, f"{fmt}.py", "encode")
+    wr = _cum(st, "run.py", "write")  # OutputWriter.write: sha256 + atomic write
+    text = ""
+    if top:
+        buf = io.StringIO()
+        pstats.Stats(prof, stream=buf).sort_stats("tottime").print_stats(top)
+        text = buf.getvalue()
+    return {"plan": t_plan, "total": total, "evaluation": ev, "writing": enc + wr, "encode": enc,
+            "muscle_frames": len(plan.frames) * len(plan.models), "top": text}
+
+
+# ----------------------------------------------------------------------------- --long
+
+LONG_SCRIPT = r"""
+import json, sys, time
+import numpy as np
+from axdf_cli.bench import stretched_pose
+from axdf_cli.loaders import load_job
+from axdf_cli.run import plan_run, evaluate_chunks, chunk_frames
+job, n = sys.argv[1], int(sys.argv[2])
+plan = plan_run(load_job(job))
+plan.pose = stretched_pose(plan.pose, n)
+plan.frames = plan.pose.frames
+nm = len(plan.models)
+stats = np.zeros((n, nm, 6))
+files = {}
+t0 = time.perf_counter()
+for sl, world, results in evaluate_chunks(plan):
+    for j, res in results:  # what execute keeps per muscle-frame: float32 meshes, stats, file list
+        pos = res.vertices.astype(np.float32); nrm = res.normals.astype(np.float32)
+        stats[sl, j, 0] = res.length; stats[sl, j, 1] = res.volume
+        for f in plan.frames[sl]:
+            files[f"meshes/{plan.names[j]}/{plan.names[j]}_{int(f):04d}.ply"] = "%064x" % (f * nm + j)
+dt = time.perf_counter() - t0
+manifest = json.dumps({"files": files}, indent=1)
+# VmHWM: this process's own peak (ru_maxrss would include the forking parent's, kept across exec)
+hwm = next(int(l.split()[1]) for l in open("/proc/self/status") if l.startswith("VmHWM:")) * 1024
+print(json.dumps({"seconds": dt, "muscle_frames": n * nm, "chunk": chunk_frames(plan),
+                  "manifest_bytes": len(manifest), "maxrss": hwm}))
+"""
+
+
+def long_memory(job: Path, n_frames: int = LONG_FRAMES) -> dict:
+    """Stream ``n_frames`` (the job's pose stretched) x all muscles through evaluate_chunks in
+    a subprocess, keeping what ``execute`` keeps (stats, the manifest's file list); peak RSS."""
+    import json
+
+    t0 = time.perf_counter()
+    p = subprocess.run([sys.executable, "-c", LONG_SCRIPT, str(job), str(n_frames)], cwd=ROOT,
+                       capture_output=True, text=True)
+    if p.returncode != 0:
+        raise RuntimeError(f"long run failed: {p.stderr[-600:]}")
+    r = json.loads(p.stdout.strip().splitlines()[-1])
+    r["wall"] = time.perf_counter() - t0
+    return r
+
+
+# ----------------------------------------------------------------------------- the table
+
+
+def _mark(ok: bool) -> str:
+    return "✓" if ok else "✗"
+
+
+class Table:
+    def __init__(self):
+        self.rows: list[tuple[str, ...]] = []
+
+    def add(self, what: str, value: str, ref: str = "", ratio: str = "", target: str = ""):
+        self.rows.append((what, value, ref, ratio, target))
+
+    def section(self, title: str):
+        self.rows.append((title,))
+
+    def text(self) -> str:
+        head = ("measure", "figure", "reference (same run)", "ratio", "target")
+        body = [r for r in self.rows if len(r) == 5]
+        widths = [max(len(head[i]), *(len(r[i]) for r in body)) for i in range(5)]
+        line = "  ".join("-" * w for w in widths)
+        fmt = lambda r: "  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip()  # noqa: E731
+        out = [fmt(head), line]
+        for r in self.rows:
+            out.append(f"[{r[0]}]" if len(r) == 1 else fmt(r))
+        return "\n".join(out)
+
+
+def _mbs(nbytes: float, us: float) -> str:
+    return f"{nbytes / us:.0f} MB/s"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m axdf_cli.bench", description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="fewer frames and repeats (about a minute)")
+    ap.add_argument("--long", action="store_true", help=f"also {LONG_FRAMES} frames x all muscles: peak memory")
+    ap.add_argument("--profile", action="store_true", help="print the top functions of the slow rows")
+    ap.add_argument("--tmp", default=None, help="folder for the written files (default: a new temporary folder)")
+    args = ap.parse_args(argv)
+
+    t_start = time.perf_counter()
+    n_frames = 200 if args.quick else 1000
+    reps = 2 if args.quick else 3
+    counts = (1, 10) if args.quick else MUSCLE_COUNTS
+    tmp = Path(tempfile.mkdtemp(prefix="axdf-bench-", dir=args.tmp))
+    table = Table()
+    profiles: list[str] = []
+    try:
+        case = load_case(n_frames, max(counts))
+        job = GAIT_JOB if case.name == "gait2392" and GAIT_JOB.is_file() else DEMO_JOB
+        print(f"axdf bench: {case.name} muscles ({len(case.specs)}), {n_frames} frames, median of {reps} runs "
+              f"(one run for 92 muscles); shared machine: figures are noisy, ratios are taken in the same run",
+              file=sys.stderr)
+
+        # 1-2. evaluation against the limit
+        table.section(f"evaluation ({case.name}, {n_frames} frames in chunks of run.CHUNK_FRAMES) vs numpy "
+                      "filling the same outputs (vertices + normals, 2 x (F, V, 3) float64)")
+        eval_us: dict = {}
+        worst_limit = 0.0
+        for res in RESOLUTIONS:
+            for nm in counts:
+                if nm > len(case.specs):
+                    continue
+                models = case.models(nm, res)
+                r = reps if nm < 92 else 1
+                us = time_evaluation(models, case.world, case.tension, r)
+                eval_us[res, nm] = us
+                nv = models[0].n_vertices
+                lim = time_limit(n_frames, nv, 5)
+                worst_limit = max(worst_limit, us / lim)
+                table.add(f"evaluate {res[0]}x{res[1]} ({nv} v), {nm} muscle{'s' if nm > 1 else ''}",
+                          f"{us:.1f} µs/mf", f"fill {lim:.2f} µs/mf", f"{us / lim:.1f}x",
+                          f"<= {TARGET_LIMIT:g}x {_mark(us / lim <= TARGET_LIMIT)}")
+                if args.profile and nm == 1:
+                    prof = cProfile.Profile()
+                    prof.runcall(evaluate_all, models, case.world, case.tension, 128)
+                    buf = io.StringIO()
+                    pstats.Stats(prof, stream=buf).sort_stats("tottime").print_stats(12)
+                    profiles.append(f"== evaluate {res} 1 muscle ==\n{buf.getvalue()}")
+
+        # 3. geomdl
+        table.section("peer: geomdl (NURBS-Python) tessellating the same surface, per muscle-frame")
+        for res in RESOLUTIONS:
+            model = case.models(1, res)[0]
+            g_us, err = time_geomdl(model, case.rest, 2 if args.quick else 3)
+            ours = eval_us[res, 1]
+            table.add(f"geomdl {res[0]}x{res[1]} (points only; max |Δ| {err:.1e} m)", f"{g_us / 1000:.1f} ms/mf",
+                      f"axdf {ours:.1f} µs/mf", f"{g_us / ours:.0f}x faster",
+                      f">= {TARGET_PEER:g}x {_mark(g_us / ours >= TARGET_PEER)}")
+
+        # 4. writers
+        model = case.models(1, RESOLUTIONS[0])[0]
+        n_files = 50 if args.quick else 200
+        wr = time_writers(model, case.world, case.tension, tmp / "writers", n_files, reps + 2)
+        ply, obj = wr["ply"], wr["obj"]
+        table.section(f"writers ({RESOLUTIONS[0][0]}x{RESOLUTIONS[0][1]}, {n_files} new files per pass) "
+                      "vs ndarray.tofile of the same bytes")
+        for ext, d in wr.items():
+            table.add(f"{ext.upper()} encode ({d['bytes'] / 1e3:.0f} kB)", f"{d['encode']:.0f} µs/mf",
+                      _mbs(d["bytes"], d["encode"]))
+            table.add(f"{ext.upper()} write(): encode + atomic write", f"{d['write']:.0f} µs/mf",
+                      f"tofile {d['tofile']:.0f} µs/mf", f"{d['write'] / d['tofile']:.2f}x",
+                      f"<= {TARGET_PLY:g}x {_mark(d['write'] / d['tofile'] <= TARGET_PLY)}" if ext == "ply" else "")
+            table.add(f"{ext.upper()} encode + atomic.write_bytes (+sha256)", f"{d['write_bytes']:.0f} µs/mf",
+                      f"tofile {d['tofile']:.0f} µs/mf", f"{d['write_bytes'] / d['tofile']:.2f}x")
+            table.add(f"{ext.upper()} write() throughput", _mbs(d["bytes"], d["write"]),
+                      f"tofile {_mbs(d['bytes'], d['tofile'])}")
+        table.add("OBJ write() vs PLY write()", f"{obj['write']:.0f} µs/mf", f"PLY {ply['write']:.0f} µs/mf",
+                  f"{obj['write'] / ply['write']:.2f}x", f"<= {TARGET_OBJ:g}x {_mark(obj['write'] / ply['write'] <= TARGET_OBJ)}")
+
+        # 5. rendering
+        table.section("rendering (benchmark_fps: 6 muscles x 1106 vertices + a bone, as the demo)")
+        rf = render_fps(frames=12 if args.quick else 24)
+        if "error" in rf:
+            table.add("render 512x512", "n/a", rf["error"][:60])
+        else:
+            table.add("render 512x512 (+ read-back)", f"{rf['render_fps']:.1f} fps",
+                      f"{rf['gl_renderer'][:40]}, supersample {rf['supersample']}")
+
+        # 6. end to end
+        table.section(f"end to end: axdf run {job.relative_to(ROOT)} --no-render (subprocess; PLY)")
+        e2e = end_to_end(job, tmp / "e2e")
+        mf = e2e["frames"] * e2e["muscles"]
+        table.add(f"axdf run ({e2e['muscles']} muscles x {e2e['frames']} frames)", f"{e2e['frames'] / e2e['wall']:.1f} fps",
+                  f"{mf / e2e['wall']:.0f} muscle-frames/s, {e2e['wall']:.1f} s")
+        table.add("axdf run peak memory", f"{e2e['maxrss'] / 2**20:.0f} MiB")
+        pr = profile_run(job, tmp / "e2e-profile", top=15 if args.profile else 0)
+        ev, wt = pr["evaluation"], pr["writing"]
+        table.add("execute: evaluation / writing (cProfile)", f"{ev:.1f} s / {wt:.1f} s",
+                  f"of {pr['total']:.1f} s (plan {pr['plan']:.1f} s)", f"{wt / max(ev, 1e-9):.2f}x",
+                  f"writing >= evaluation {_mark(wt >= ev)}")
+        if pr["top"]:
+            profiles.append(f"== execute {job.name} ==\n{pr['top']}")
+
+        # --long
+        if args.long:
+            lj = GAIT_JOB if GAIT_JOB.is_file() else DEMO_JOB
+            lr = long_memory(lj)
+            table.section(f"--long: {LONG_FRAMES} frames x all muscles through run.evaluate_chunks "
+                          "(+ stats and the manifest's file list)")
+            table.add(f"peak memory ({lr['muscle_frames']} muscle-frames, chunk {lr['chunk']})",
+                      f"{lr['maxrss'] / 2**20:.0f} MiB", f"{lr['seconds']:.0f} s evaluating",
+                      f"{lr['maxrss'] / LONG_MEMORY:.2f} of 1 GiB", f"< 1 GiB {_mark(lr['maxrss'] < LONG_MEMORY)}")
+            table.add("manifest JSON (files list only)", f"{lr['manifest_bytes'] / 2**20:.0f} MiB")
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    print(table.text())
+    print(f"(µs/mf: microseconds per muscle-frame; total bench time {time.perf_counter() - t_start:.0f} s)")
+    for p in profiles:
+        print()
+        print(p)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

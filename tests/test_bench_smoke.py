@@ -1,0 +1,58 @@
+"""The benchmark's helpers run on a tiny case (1 muscle, 5 frames): keeps axdf_cli.bench from
+rotting. No speed assertions: timings are only checked to be positive numbers."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from axdf_cli import bench
+
+
+@pytest.fixture(scope="module")
+def case():
+    return bench.load_case(n_frames=5, n_muscles=1)
+
+
+@pytest.fixture(scope="module")
+def synthetic():
+    return bench.load_case(n_frames=5, n_muscles=7, prefer_gait=False)
+
+
+def test_case_shapes(case, synthetic):
+    for c in (case, synthetic):
+        assert c.world.shape[0] == 5 and c.world.shape[2:] == (4, 4)
+        assert c.tension.shape == (5, len(c.specs))
+    assert len(synthetic.specs) == 7 and len({s.name for s in synthetic.specs}) == 7  # perturbed copies renamed
+
+
+def test_evaluation_limit_and_peer(case):
+    models = case.models(1, (8, 6))
+    assert bench.time_evaluation(models, case.world, case.tension, repeats=1, chunk=2) > 0
+    assert bench.time_limit(5, models[0].n_vertices, repeats=1) > 0
+    pytest.importorskip("geomdl")
+    us, err = bench.time_geomdl(models[0], case.rest, n_frames=1)
+    assert us > 0
+    assert err < 1e-6  # geomdl tessellates the same surface (rest vertices are float32)
+
+
+def test_writers(case, tmp_path):
+    model = case.models(1, (8, 6))[0]
+    out = bench.time_writers(model, case.world, case.tension, tmp_path, n_files=5, repeats=1)
+    for ext in ("ply", "obj"):
+        assert out[ext]["bytes"] > 0
+        assert all(out[ext][k] > 0 for k in ("encode", "write", "write_bytes", "tofile"))
+
+
+def test_long_pose_stretch_and_table():
+    from axdf_cli.loaders import load_pose
+
+    pose = load_pose(bench.DEMO_POSE)
+    long = bench.stretched_pose(pose, 1000)
+    assert (long.first, long.last) == (0, 999)
+    key = next(iter(pose.keys))
+    assert long.keys[key][1] == pose.keys[key][1]
+    t = bench.Table()
+    t.section("s")
+    t.add("a", "1 µs", "x", "2x", "✓")
+    assert "a" in t.text() and "[s]" in t.text()
+    assert np.isfinite(bench.median_time(lambda: None, 3))
