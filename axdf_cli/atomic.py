@@ -9,6 +9,7 @@ import contextlib
 import errno
 import hashlib
 import os
+import threading
 from pathlib import Path
 from typing import Iterator
 
@@ -32,6 +33,9 @@ def on_signal(signum=None, frame=None) -> None:
 
 @contextlib.contextmanager
 def deferred_signals() -> Iterator[None]:
+    if threading.current_thread() is not threading.main_thread():
+        yield  # signals only ever interrupt the main thread: nothing to defer here
+        return
     _state["depth"] += 1
     try:
         yield

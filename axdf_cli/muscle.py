@@ -45,7 +45,7 @@ from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError, Mark
 
 OCT = 8  # control points per section (the paper's choice)
-GRID_BLOCK = 16  # frames per block in the surface stage: its arrays stay in the CPU cache
+GRID_BLOCK = 32  # frames per block in the surface stage: its arrays stay in the CPU cache
 VOLUME_MODES = ("exact", "paper", "none")
 
 
@@ -331,13 +331,11 @@ class MuscleModel:
         self.Bu = bspline.rational(bu, w)  # (U, m)
         self.Bv = bspline.periodic_quadratic_basis(OCT, np.arange(around) / around)  # (A, 8)
         self.U, self.A = along, around
-        bv = np.concatenate([self.Bv, self.Bv[:1]])  # wrapped: column A repeats column 0
-        # K[(m,j),(u,a)] = Bu[u,m] Bv[a,j]
-        self.K = np.ascontiguousarray(np.einsum("um,aj->mjua", self.Bu, bv).reshape(m * OCT, along * (around + 1)))
+        self.BvT = np.ascontiguousarray(np.concatenate([self.Bv, self.Bv[:1]]).T)  # (8, A+1), wrapped
         self.faces = grid_faces(along, around)
         self.n_vertices = 2 + (along - 2) * around
 
-        rest = self.evaluate(rest_world[None], np.zeros(1), reference_volume=False)
+        rest = self.evaluate(rest_world[None], np.zeros(1), reference_volume=False, frames=(rest_p, x, t, r))
         self.v0 = float(rest.volume[0])
         self.rest_vertices = rest.vertices[0].astype(np.float32)
         self.rest_normals = rest.normals[0].astype(np.float32)
@@ -396,34 +394,46 @@ class MuscleModel:
             t = np.clip(t + step, 0.0, 1.0)
         return t
 
-    def end_twist(self, world: np.ndarray, coarse: bool = True) -> np.ndarray:
-        """Insertion roll (radians, wrapped to (-pi, pi]) for frames world (F, B, 4, 4): (F,)."""
-        p = self._axis_points(world)
-        b, db = (self.Bc, self.dBc) if coarse else (self.Bs, self.dBs)
-        x, t = self._samples(p, b, db)
-        r = rmf.propagate(x, t, rmf.perpendicular_unit(world[:, self.origin_bone, :3, :3] @ self.r0_local, t[:, 0]))
-        return self._roll(world, t[:, -1], r[:, -1])
+    def end_twist(self, world: np.ndarray, coarse: bool = True, r_end: np.ndarray | None = None) -> np.ndarray:
+        """Insertion roll (radians, wrapped to (-pi, pi]) for frames world (F, B, 4, 4): (F,).
+        ``r_end`` (F, 3): the propagated reference vector at t = 1, when already computed."""
+        _, x, t, r0 = self.rmf_inputs(world, coarse)
+        if r_end is None:
+            r_end = rmf.propagate(x, t, r0)[:, -1]
+        return self._roll(world, t[:, -1], r_end)
 
     def _roll(self, world, t_end, r_end):
         target = rmf.perpendicular_unit(world[:, self.insertion_bone, :3, :3] @ self.rend_local, t_end)
         return rmf.signed_angle(r_end, target, t_end)
 
     # -- evaluation -----------------------------------------------------------------------
+    def rmf_inputs(self, world: np.ndarray, coarse: bool = False):
+        """Axis control points (F, n, 3), samples x (F, S, 3), unit tangents t and start vectors
+        r0 (F, 3): what :func:`rmf.propagate` needs (batched over muscles by the caller)."""
+        p = self._axis_points(world)
+        b, db = (self.Bc, self.dBc) if coarse else (self.Bs, self.dBs)
+        x, t = self._samples(p, b, db)
+        r0 = rmf.perpendicular_unit(world[:, self.origin_bone, :3, :3] @ self.r0_local, t[:, 0])
+        return p, x, t, r0
+
+    def axis_frames(self, world: np.ndarray):
+        """(p, x, t, r): control points, samples, tangents and RMF reference vectors (F, S, 3)."""
+        p, x, t, r0 = self.rmf_inputs(world)
+        return p, x, t, rmf.propagate(x, t, r0)
+
     def evaluate(self, world: np.ndarray, tension: np.ndarray, twist_reference: np.ndarray | None = None,
-                 reference_volume: bool = True) -> FrameResult:
+                 reference_volume: bool = True, frames=None) -> FrameResult:
         """Deform for a block of frames.
 
         world : (F, n_bones, 4, 4) bone world transforms; tension : (F,) effective tension 0..1;
         twist_reference : (F,) unwrapped coarse insertion roll (radians) choosing the branch of
-        the exact roll, or None (roll unwrapped within the block).
+        the exact roll, or None (roll unwrapped within the block); frames : the result of
+        :meth:`axis_frames` when the caller computed it (batched over several muscles).
         """
         spec = self.spec
         nf = world.shape[0]
         warnings: list = []
-        p = self._axis_points(world)  # (F, n, 3)
-        x, t = self._samples(p, self.Bs, self.dBs)
-        r0 = rmf.perpendicular_unit(world[:, self.origin_bone, :3, :3] @ self.r0_local, t[:, 0])
-        r = rmf.propagate(x, t, r0)
+        p, x, t, r = frames if frames is not None else self.axis_frames(world)
         theta = self._roll(world, t[:, -1], r[:, -1])
         if twist_reference is None:
             theta = np.unwrap(theta)
@@ -464,11 +474,16 @@ class MuscleModel:
             blk = slice(b0, min(nf, b0 + GRID_BLOCK))
             a_grid = self._tessellate(fixed[blk], p[blk])  # (3, f, U, A+1)
             w_grid = self._tessellate(scaled[blk], None)
-            if spec.volume == "exact" and reference_volume:
-                s[blk], bad[blk] = _solve_cubic(planar_volume_cubic(a_grid, w_grid), self.v0, s[blk])
             sb = np.clip(s[blk], tol.SCALE_MIN, tol.SCALE_MAX)
+            if spec.volume == "exact" and reference_volume:
+                coef = planar_volume_cubic(a_grid, w_grid)
+                s[blk], bad[blk] = _solve_cubic(coef, self.v0, s[blk])
+                sb = np.clip(s[blk], tol.SCALE_MIN, tol.SCALE_MAX)
+                # the mesh's volume is this cubic at the final scale: no second pass over it
+                volume[blk] = ((coef[:, 3] * sb + coef[:, 2]) * sb + coef[:, 1]) * sb + coef[:, 0]
             grid = a_grid + sb[None, :, None, None] * w_grid
-            volume[blk] = planar_volume(grid)
+            if not (spec.volume == "exact" and reference_volume):
+                volume[blk] = planar_volume(grid)
             verts[:, blk] = planar_to_vertices(grid[..., :-1])
             ends = (-np.moveaxis(t[blk, 0], -1, 0), np.moveaxis(t[blk, -1], -1, 0))
             norms[:, blk] = planar_to_vertices(planar_normals(grid, ends))
@@ -493,14 +508,18 @@ class MuscleModel:
         """Planar wrapped surface grid (3, F, U, A+1) from bound control points (F, 8N, 3);
         the pole rows are the axis ends when ``p`` (axis control points) is given, else zero."""
         nf = bound.shape[0]
-        m8 = (len(self.spec.sections) + 2) * OCT
-        net = np.zeros((3, nf, m8))
-        net[:, :, OCT:-OCT] = np.moveaxis(bound, -1, 0)
+        m = len(self.spec.sections) + 2
+        net = np.zeros((m, 3, nf, OCT))
+        net[1:-1] = np.moveaxis(bound.reshape(nf, m - 2, OCT, 3), (1, 3), (0, 1))
         if p is not None:
-            net[:, :, :OCT] = np.moveaxis(p[:, 0], -1, 0)[:, :, None]
-            net[:, :, -OCT:] = np.moveaxis(p[:, -1], -1, 0)[:, :, None]
-        # G[c,f,(u,a)] = sum_(m,j) net[c,f,(m,j)] K[(m,j),(u,a)],  K = Bu (x) Bv: one GEMM
-        g = net.reshape(3 * nf, m8) @ self.K
+            net[0] = np.moveaxis(p[:, 0], -1, 0)[:, :, None]
+            net[-1] = np.moveaxis(p[:, -1], -1, 0)[:, :, None]
+        # separable: along, then around (each basis is 3 wide: a dense Bu (x) Bv is 6x the work)
+        # T[u,(c,f,j)] = sum_m Bu[u,m] net[m,(c,f,j)]
+        tmp = self.Bu @ net.reshape(m, 3 * nf * OCT)
+        # G[(c,f,u),a] = sum_j T[(c,f,u),j] Bv[a,j]   (Bv wrapped: column A repeats column 0)
+        tmp = np.ascontiguousarray(np.moveaxis(tmp.reshape(self.U, 3 * nf, OCT), 0, 1))
+        g = tmp.reshape(3 * nf * self.U, OCT) @ self.BvT
         return g.reshape(3, nf, self.U, self.A + 1)
 
 

@@ -50,13 +50,30 @@ def propagate(x: np.ndarray, t: np.ndarray, r0: np.ndarray) -> np.ndarray:
 
     x, t : (B, S, 3) sample positions and unit tangents; r0 : (B, 3) start vector ⟂ t[:, 0]
     returns r : (B, S, 3); the third axis is ``cross(t, r)``.
+
+    Everything that does not depend on r (both reflection planes, t_L) is computed for all
+    steps at once; the loop over samples only reflects r twice per step. Reflections keep
+    length and angle, so r is made unit and ⟂ t once, at the end.
     """
+    v1 = x[:, 1:] - x[:, :-1]  # (B, S-1, 3)
+    c1 = _dot(v1, v1)
+    scale = np.maximum(_dot(x[:, 1:], x[:, 1:]), _dot(x[:, :-1], x[:, :-1]))
+    k1 = np.where(c1 > np.maximum(_EPS, STEP_RTOL ** 2 * scale), 2.0 / np.where(c1 > 0, c1, 1.0), 0.0)
+    t_l = t[:, :-1] - (k1 * _dot(v1, t[:, :-1]))[..., None] * v1
+    v2 = t[:, 1:] - t_l
+    c2 = _dot(v2, v2)
+    k2 = np.where(c2 > STEP_RTOL ** 2, 2.0 / np.where(c2 > 0, c2, 1.0), 0.0)
+    a1 = k1[..., None] * v1  # r_L = r - (v1 . r) a1
+    a2 = k2[..., None] * v2  # r' = r_L - (v2 . r_L) a2
     n = x.shape[1]
     r = np.empty_like(x)
-    r[:, 0] = r0
+    r[:, 0] = cur = r0
     for i in range(n - 1):
-        r[:, i + 1] = reflect_step(x[:, i], t[:, i], r[:, i], x[:, i + 1], t[:, i + 1])
-    return r
+        cur = cur - (v1[:, i] * cur).sum(axis=1, keepdims=True) * a1[:, i]
+        cur = cur - (v2[:, i] * cur).sum(axis=1, keepdims=True) * a2[:, i]
+        r[:, i + 1] = cur
+    r -= _dot(r, t)[..., None] * t
+    return r / np.maximum(np.linalg.norm(r, axis=-1, keepdims=True), _EPS)
 
 
 def perpendicular_unit(v: np.ndarray, t: np.ndarray) -> np.ndarray:

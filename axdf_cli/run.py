@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from axdf_cli import __version__, atomic
+from axdf_cli import __version__, atomic, rmf
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.formats import WRITERS
 from axdf_cli.loaders import Job, Pose, expand_muscle_paths, load_muscle_file, load_pose
@@ -28,6 +28,7 @@ from axdf_cli.skeleton import forward_kinematics, matrix_to_quaternion
 CHUNK_FRAMES = 128  # frames evaluated together: bounds memory for any sequence length
 EVAL_BUDGET_BYTES = 128 * 1024 * 1024  # per-muscle chunk memory budget (see chunk_frames)
 MANIFEST_INTERVAL_S = 1.0  # the in-progress manifest is rewritten at most this often
+MAX_PENDING_WRITES = 64  # files queued for the writer thread (bounds memory)
 TOP_FILES = ("manifest.json", "stats.csv", "bones.csv", "camera.json")
 
 
@@ -146,11 +147,32 @@ def twist_references(plan: RunPlan) -> np.ndarray:
     for s in range(0, len(all_frames), 4 * CHUNK_FRAMES):
         fr = all_frames[s:s + 4 * CHUNK_FRAMES]
         world = forward_kinematics(pose.skeleton, sample_coordinates(pose, fr))
+        frames = batched_axis_frames(plan.models, range(len(plan.models)), world, coarse=True)
         for j, m in enumerate(plan.models):
-            th = np.unwrap(np.concatenate([[prev[j]], m.end_twist(world)]))[1:]
+            th = np.unwrap(np.concatenate([[prev[j]], m.end_twist(world, r_end=frames[j][3][:, -1])]))[1:]
             out[s:s + len(fr), j] = th
             prev[j] = th[-1]
     return out[plan.frames - pose.first]
+
+
+def batched_axis_frames(models, indices, world: np.ndarray, coarse: bool = False) -> dict:
+    """Axis frames (p, x, t, r) of several muscles at once, by muscle index. Muscles with the
+    same number of axis samples share one double-reflection recurrence, so its loop over the
+    samples runs once per group, not once per muscle (row by row the same arithmetic)."""
+    groups: dict[int, list[int]] = {}
+    for j in indices:
+        m = models[j]
+        groups.setdefault(len(m.Bc) if coarse else len(m.ts), []).append(j)
+    nf = world.shape[0]
+    out = {}
+    for js in groups.values():
+        ins = [models[j].rmf_inputs(world, coarse) for j in js]
+        r = rmf.propagate(np.concatenate([i[1] for i in ins]), np.concatenate([i[2] for i in ins]),
+                          np.concatenate([i[3] for i in ins]))
+        for k, j in enumerate(js):
+            p, x, t, _ = ins[k]
+            out[j] = (p, x, t, r[k * nf:(k + 1) * nf])
+    return out
 
 
 def chunk_frames(plan: RunPlan) -> int:
@@ -175,9 +197,12 @@ def evaluate_chunks(plan: RunPlan, chunk: int | None = None, twist_ref: np.ndarr
         act = sample_activation(plan.pose, names, fr)
 
         def results(world=world, act=act, s=s, n=len(fr)):
-            for j in (range(len(plan.models)) if muscles is None else muscles):
+            which = list(range(len(plan.models))) if muscles is None else list(muscles)
+            frames = batched_axis_frames(plan.models, which, world)
+            for j in which:
                 m = plan.models[j]
-                yield j, m.evaluate(world, effective_tension(m.spec.tension, act[:, j]), twist_ref[s:s + n, j])
+                yield j, m.evaluate(world, effective_tension(m.spec.tension, act[:, j]), twist_ref[s:s + n, j],
+                                    frames=frames.pop(j))
 
         yield slice(s, s + len(fr)), world, results()
 
@@ -233,25 +258,57 @@ def check_output_folder(out: Path, resume: bool, overwrite: bool) -> dict:
 
 
 class OutputWriter:
-    """Writes files atomically, records their sha256, skips identical files on resume."""
+    """Writes files atomically on a background thread (so writing overlaps evaluation),
+    records their sha256, and skips files whose bytes already match on resume.
+
+    :meth:`write` queues the bytes (at most MAX_PENDING_WRITES wait); :meth:`flush` waits
+    for all and re-raises a failed write's error (full disk: EnvironmentProblem) in the
+    caller. ``files`` lists what is on disk, in the order written."""
 
     def __init__(self, out: Path, previous: dict):
+        from concurrent.futures import ThreadPoolExecutor
+
         self.out = out
         self.previous = previous
         self.files: dict[str, str] = {}
         self.skipped = 0
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="axdf-writer")
+        self._pending: list = []
 
     def write(self, rel: str, data: bytes) -> None:
+        self._pending.append(self._pool.submit(self._write_now, rel, data))
+        if len(self._pending) > MAX_PENDING_WRITES:
+            self._collect(len(self._pending) - MAX_PENDING_WRITES)
+
+    def _write_now(self, rel: str, data: bytes):
         import hashlib
 
         sha = hashlib.sha256(data).hexdigest()
         path = self.out / rel
         if self.previous.get(rel) == sha and path.is_file() and path.stat().st_size == len(data) \
                 and atomic.sha256_file(path) == sha:
-            self.skipped += 1
-        else:
-            atomic.write_bytes(path, data)
-        self.files[rel] = sha
+            return rel, sha, True
+        atomic.write_bytes(path, data)
+        return rel, sha, False
+
+    def _collect(self, n: int) -> None:
+        done, self._pending = self._pending[:n], self._pending[n:]
+        for fut in done:
+            rel, sha, skipped = fut.result()
+            self.files[rel] = sha
+            self.skipped += skipped
+
+    def flush(self) -> None:
+        self._collect(len(self._pending))
+
+    def close(self, cancel: bool = False) -> None:
+        """Stop the thread: after :meth:`flush`, or (cancel) dropping queued writes; a write
+        in progress always finishes (files are whole or absent)."""
+        if cancel:
+            for fut in self._pending:
+                fut.cancel()
+            self._pending = []
+        self._pool.shutdown(wait=True)
 
 
 def previous_subset(previous: dict, out: Path) -> dict:
@@ -347,6 +404,7 @@ def mesh_pass(plan: RunPlan, muscles: list[int], twist_ref: np.ndarray, writer: 
                 progress(len(frames))
         if on_chunk:
             on_chunk()
+    writer.flush()
     return MeshPassResult(list(muscles), writer.files, stats, warns, lo, hi, writer.skipped)
 
 
@@ -355,7 +413,11 @@ _WORKER: dict = {}  # set in the parent just before the worker processes fork
 
 def _worker_pass(muscles: list[int]) -> MeshPassResult:
     w = _WORKER
-    return mesh_pass(w["plan"], muscles, w["twist_ref"], OutputWriter(w["plan"].out, w["previous"]))
+    writer = OutputWriter(w["plan"].out, w["previous"])
+    try:
+        return mesh_pass(w["plan"], muscles, w["twist_ref"], writer)
+    finally:
+        writer.close(cancel=True)
 
 
 def _parallel_mesh_pass(plan: RunPlan, jobs: int, twist_ref, previous: dict, progress) -> list[MeshPassResult]:
@@ -409,62 +471,69 @@ def execute(plan: RunPlan, *, resume: bool = False, overwrite: bool = False, pro
                              "fix the inputs or run without --strict")
 
     writer = OutputWriter(out, previous)
-    if jobs > 1 and nm > 1:
-        try:
-            parts = _parallel_mesh_pass(plan, min(jobs, nm), twist_ref, previous, progress)
-        except BaseException:
-            atomic.remove_stale_temporaries(out)  # a worker stopped mid-write
-            raise
-    else:
-        clock = {"t": time.monotonic()}
+    try:
+        if jobs > 1 and nm > 1:
+            try:
+                parts = _parallel_mesh_pass(plan, min(jobs, nm), twist_ref, previous, progress)
+            except BaseException:
+                atomic.remove_stale_temporaries(out)  # a worker stopped mid-write
+                raise
+        else:
+            clock = {"t": time.monotonic()}
 
-        def checkpoint():  # the in-progress manifest, at most every MANIFEST_INTERVAL_S
-            if time.monotonic() - clock["t"] >= MANIFEST_INTERVAL_S:
-                write_manifest(out, manifest_dict(plan, writer.files, [], complete=False))
-                clock["t"] = time.monotonic()
+            def checkpoint():  # the in-progress manifest, at most every MANIFEST_INTERVAL_S
+                if time.monotonic() - clock["t"] >= MANIFEST_INTERVAL_S:  # lists finished files only
+                    write_manifest(out, manifest_dict(plan, writer.files, [], complete=False))
+                    clock["t"] = time.monotonic()
 
-        parts = [mesh_pass(plan, list(range(nm)), twist_ref, writer, progress, checkpoint)]
-    stats = np.zeros((nf, nm, 6))
-    warn_text = [[""] * nm for _ in range(nf)]
-    lo = np.min([p.lo for p in parts], axis=0)
-    hi = np.max([p.hi for p in parts], axis=0)
-    all_warns = []
-    writer.skipped = sum(p.skipped for p in parts)  # (one pass in this process: its writer is ours)
-    for part in parts:
-        writer.files.update(part.files)
-        stats[:, part.muscles] = part.stats
-        all_warns += part.warnings
-    warnings: list[str] = list(plan.warnings)
-    for fi, j, msg in sorted(all_warns, key=lambda w: (w[0], w[1])):
-        warn_text[fi][j] = (warn_text[fi][j] + "; " if warn_text[fi][j] else "") + msg
-        warnings.append(f"{plan.names[j]} frame {int(plan.frames[fi])}: {msg}")
-    bone_rows = np.zeros((nf, len(bones), 7))
-    for s0 in range(0, nf, CHUNK_FRAMES):
-        sl = slice(s0, min(nf, s0 + CHUNK_FRAMES))
-        world = forward_kinematics(plan.pose.skeleton, sample_coordinates(plan.pose, plan.frames[sl]))
-        bone_rows[sl, :, :3] = world[:, :, :3, 3]
-        bone_rows[sl, :, 3:] = matrix_to_quaternion(world[:, :, :3, :3])
+            parts = [mesh_pass(plan, list(range(nm)), twist_ref, writer, progress, checkpoint)]
+        stats = np.zeros((nf, nm, 6))
+        warn_text = [[""] * nm for _ in range(nf)]
+        lo = np.min([p.lo for p in parts], axis=0)
+        hi = np.max([p.hi for p in parts], axis=0)
+        all_warns = []
+        writer.skipped = sum(p.skipped for p in parts)  # (one pass in this process: its writer is ours)
+        for part in parts:
+            writer.files.update(part.files)
+            stats[:, part.muscles] = part.stats
+            all_warns += part.warnings
+        warnings: list[str] = list(plan.warnings)
+        for fi, j, msg in sorted(all_warns, key=lambda w: (w[0], w[1])):
+            warn_text[fi][j] = (warn_text[fi][j] + "; " if warn_text[fi][j] else "") + msg
+            warnings.append(f"{plan.names[j]} frame {int(plan.frames[fi])}: {msg}")
+        bone_rows = np.zeros((nf, len(bones), 7))
+        for s0 in range(0, nf, CHUNK_FRAMES):
+            sl = slice(s0, min(nf, s0 + CHUNK_FRAMES))
+            world = forward_kinematics(plan.pose.skeleton, sample_coordinates(plan.pose, plan.frames[sl]))
+            bone_rows[sl, :, :3] = world[:, :, :3, 3]
+            bone_rows[sl, :, 3:] = matrix_to_quaternion(world[:, :, :3, :3])
 
-    for i, (_, _, data) in sorted(plan.bone_meshes.items()):
-        writer.write(bone_mesh_relpath(bones[i].name), data)
+        for i, (_, _, data) in sorted(plan.bone_meshes.items()):
+            writer.write(bone_mesh_relpath(bones[i].name), data)
 
-    rows = [["frame", "muscle", "length", "volume", "volume_ratio", "tension", "twist", "scale", "warning"]]
-    for i, frame in enumerate(plan.frames):
-        for j, name in enumerate(plan.names):
-            rows.append([str(int(frame)), name] + [_g(x) for x in stats[i, j]] + [_csv_text(warn_text[i][j])])
-    writer.write("stats.csv", _fmt_rows(rows).encode())
-    brows = [["frame", "bone", "x", "y", "z", "qw", "qx", "qy", "qz"]]
-    for i, frame in enumerate(plan.frames):
-        for b, bone in enumerate(bones):
-            brows.append([str(int(frame)), bone.name] + [_g(x) for x in bone_rows[i, b]])
-    writer.write("bones.csv", _fmt_rows(brows).encode())
-    extra = {"bounds": [[float(f"{x:.9g}") for x in lo], [float(f"{x:.9g}") for x in hi]]}
-    if plan.render is not None and plan.render.enabled:
-        write_manifest(out, manifest_dict(plan, writer.files, warnings, complete=False, extra=extra))
-        info = render_run(plan, np.array([lo, hi]), render_progress)
-        writer.files.update(info["files"])
-        extra["gl"] = {"renderer": info["gl_renderer"], "version": info["gl_version"]}
-    write_manifest(out, manifest_dict(plan, writer.files, warnings, complete=True, extra=extra))
+        rows = [["frame", "muscle", "length", "volume", "volume_ratio", "tension", "twist", "scale", "warning"]]
+        for i, frame in enumerate(plan.frames):
+            for j, name in enumerate(plan.names):
+                rows.append([str(int(frame)), name] + [_g(x) for x in stats[i, j]] + [_csv_text(warn_text[i][j])])
+        writer.write("stats.csv", _fmt_rows(rows).encode())
+        brows = [["frame", "bone", "x", "y", "z", "qw", "qx", "qy", "qz"]]
+        for i, frame in enumerate(plan.frames):
+            for b, bone in enumerate(bones):
+                brows.append([str(int(frame)), bone.name] + [_g(x) for x in bone_rows[i, b]])
+        writer.write("bones.csv", _fmt_rows(brows).encode())
+        extra = {"bounds": [[float(f"{x:.9g}") for x in lo], [float(f"{x:.9g}") for x in hi]]}
+        if plan.render is not None and plan.render.enabled:
+            writer.flush()
+            write_manifest(out, manifest_dict(plan, writer.files, warnings, complete=False, extra=extra))
+            info = render_run(plan, np.array([lo, hi]), render_progress)
+            writer.files.update(info["files"])
+            extra["gl"] = {"renderer": info["gl_renderer"], "version": info["gl_version"]}
+        writer.flush()
+        write_manifest(out, manifest_dict(plan, writer.files, warnings, complete=True, extra=extra))
+    except BaseException:
+        writer.close(cancel=True)
+        raise
+    writer.close()
     ratio = stats[..., 2]
     return {
         "out": str(out), "muscles": nm, "frames": nf, "files": len(writer.files), "skipped": writer.skipped,
