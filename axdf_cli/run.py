@@ -479,11 +479,16 @@ def execute(plan: RunPlan, *, resume: bool = False, overwrite: bool = False, pro
                 atomic.remove_stale_temporaries(out)  # a worker stopped mid-write
                 raise
         else:
-            clock = {"t": time.monotonic()}
+            clock = {"t": time.monotonic(), "cost": 0.0}
 
-            def checkpoint():  # the in-progress manifest, at most every MANIFEST_INTERVAL_S
-                if time.monotonic() - clock["t"] >= MANIFEST_INTERVAL_S:  # lists finished files only
+            def checkpoint():
+                # the in-progress manifest (finished files only), at most every
+                # MANIFEST_INTERVAL_S and never more than ~5% of the run's time: on a long run
+                # the file list grows to many MB
+                now = time.monotonic()
+                if now - clock["t"] >= max(MANIFEST_INTERVAL_S, 20.0 * clock["cost"]):
                     write_manifest(out, manifest_dict(plan, writer.files, [], complete=False))
+                    clock["cost"] = time.monotonic() - now
                     clock["t"] = time.monotonic()
 
             parts = [mesh_pass(plan, list(range(nm)), twist_ref, writer, progress, checkpoint)]
