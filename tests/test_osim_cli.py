@@ -35,7 +35,7 @@ def test_every_model_imports_and_loads(tmp_path, model, extra):
     report = json.loads((out / "import_report.json").read_text())
     (skel_file,) = (out / "skeletons").glob("*.yaml")
     skel = load_skeleton(skel_file)
-    assert skel.bones[0].name == "ground" and skel.bones[0].orient == (90.0, 0.0, 0.0)
+    assert skel.bones[0].name == "ground" and skel.bones[0].orient == (90.0, -90.0, 0.0)
     muscles = sorted((out / "muscles").glob("*.yaml"))
     assert len(muscles) == report["counts"]["muscles"] == {"arm26": 6, "3DGaitModel2392": 92,
                                                            "subject01": 54}[report["source"]["model_name"]]

@@ -4,7 +4,7 @@
 (degrees) and OpenSim's body centre-of-mass positions and body-fixed X-Y-Z orientations in
 ground. The imported skeleton (read back through :func:`axdf_cli.loaders.load_skeleton`)
 must reproduce them: positions within 0.5 mm, orientations within 0.05°, after undoing the
-importer's ground rotation Rx(90°) (OpenSim Y-up → axdf Z-up).
+importer's ground rotation (OpenSim Y-up, X-forward → axdf Z-up, facing -Y).
 
 The torso is special: OpenSim's reference table was evidently computed with a torso
 ``mass_center`` different from the (RRA-"adjusted") one in this model file — the difference
@@ -45,7 +45,7 @@ def fk_result(tmp_path_factory):
         coords[:, skel.coord_index[lab]] = q.column(lab)  # degrees / metres: axdf units already
     world = forward_kinematics(skel, coords)  # (F, B, 4, 4)
     undo = np.eye(4)
-    undo[:3, :3] = euler_xyz([-90.0, 0.0, 0.0])
+    undo[:3, :3] = euler_xyz([90.0, -90.0, 0.0]).T
     # W[f,b] = undo @ world[f,b]: body frames in OpenSim's ground
     w = np.einsum("ij,fbjk->fbik", undo, world)
     ref = read_storage(FK_POS)

@@ -5,7 +5,7 @@ Output is deterministic: no timestamps, no absolute paths, floats written with P
 
 Conversions (OpenSim → axdf):
 
-- World: a root bone ``ground`` with ``orient: [90, 0, 0]`` turns OpenSim's Y-up ground into
+- World: a root bone ``ground`` with ``orient: [90, -90, 0]`` turns OpenSim's Y-up, X-forward ground into
   axdf's Z-up world; every body keeps its own OpenSim frame, so path points and meshes are
   copied unchanged.
 - Joints: parent offset frame → ``offset``/``orient``; child offset frame →
@@ -142,7 +142,7 @@ def skeleton_doc(model: Model, name: str, meshes: dict[str, str]) -> dict:
         if c.range is not None:
             cd["range"] = [c.range[0] * k, c.range[1] * k]
         coords[c.name] = cd
-    bones = [{"name": "ground", "orient": [90.0, 0.0, 0.0]}]
+    bones = [{"name": "ground", "orient": [90.0, -90.0, 0.0]}]
     if "ground" in meshes:
         bones[0]["mesh"] = meshes["ground"]
     for j in model.joints:
