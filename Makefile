@@ -40,7 +40,10 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(BIN)/axdf run $(DEMO) --out out/demo --overwrite
 	$(BIN)/axdf run poses/jobs/gait2392_walk.yaml --out out/gait2392_walk --overwrite
-	@echo "demo results: out/demo and out/gait2392_walk (meshes/, frames/, stats.csv, bones.csv, manifest.json)"
+	$(BIN)/axdf run poses/jobs/paper_deltoid_arm26.yaml --out out/paper_deltoid_arm26 --overwrite
+	$(BIN)/axdf run poses/jobs/paper_gastrocnemius_gait2392.yaml --out out/paper_gastrocnemius_gait2392 --overwrite
+	@echo "demo results in out/: demo, gait2392_walk, paper_deltoid_arm26, paper_gastrocnemius_gait2392"
+	@echo "  each with meshes/, frames/ (PNG + EXR), camera.json, stats.csv, bones.csv, manifest.json"
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q tests
