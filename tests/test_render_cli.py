@@ -41,7 +41,7 @@ def test_render_command_writes_frames_and_manifest(tmp_path, axdf, capsys):
     cam = json.loads((tmp_path / "camera.json").read_text())
     assert cam["views"] == ["front", "side", "top"] and len(cam["frames"]) == 2
     manifest = json.loads((tmp_path / "manifest.json").read_text())
-    assert manifest["gl_renderer"] and "frames/0001.png" in manifest["files"]
+    assert manifest["gl"]["renderer"] and "frames/0001.png" in manifest["files"]
 
 
 def test_render_without_egl_exits_3_with_hint(tmp_path, axdf, capsys):

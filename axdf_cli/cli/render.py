@@ -59,8 +59,7 @@ def update_manifest(run_dir: Path, result: dict) -> None:
     """Record the GL renderer and the new files' sha256 in the run's manifest."""
     path = run_dir / "manifest.json"
     manifest = json.loads(path.read_text())
-    manifest["gl_renderer"] = result["gl_renderer"]
-    manifest["gl_version"] = result["gl_version"]
+    manifest["gl"] = {"renderer": result["gl_renderer"], "version": result["gl_version"]}  # as `axdf run`
     files = manifest.get("files")
     if isinstance(files, dict):
         files.update(result["files"])
