@@ -75,7 +75,17 @@ def parse_function(value, where: Mark, depth: int = 0):
 
 def load_skeleton(path: Path | str) -> Skeleton:
     path = Path(path)
-    doc = load_yaml(path)
+    return skeleton_from_document(load_yaml(path), path)
+
+
+def parse_skeleton_text(text: str, path: Path | str) -> Skeleton:
+    """A skeleton from YAML text that will live at ``path`` (mesh paths resolve from there)."""
+    from axdf_cli.yamlio import parse_yaml
+
+    return skeleton_from_document(parse_yaml(text, str(path)), Path(path))
+
+
+def skeleton_from_document(doc, path: Path) -> Skeleton:
     top = Mark(str(path), 1, 1)
     f = Fields(doc, top, "skeleton file")
     name = f.name("skeleton", required=True)

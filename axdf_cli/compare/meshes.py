@@ -6,13 +6,11 @@ triangles and any other polygons compare alike.
 """
 from __future__ import annotations
 
-import re
-from dataclasses import dataclass
 
 import numpy as np
 
-from axdf_cli.compare.result import Outcome, Unreadable, read_side
-from axdf_cli.formats.read import READERS, Mesh, MeshReadError, read_obj, read_ply  # noqa: F401
+from axdf_cli.compare.result import Outcome, read_side
+from axdf_cli.formats.read import READERS, Mesh
 from axdf_cli.compare.tolerances import MeshTol
 
 

@@ -31,8 +31,7 @@ import numpy as np
 import yaml
 
 from axdf_cli.importers.osim import Axis, FConst, FLinear, FMult, FPoly, FSpline, Model, Muscle
-from axdf_cli.skeleton import (Bone, Constant, Coordinate, Dof, Linear, Multiplier, Polynomial, Skeleton,
-                               Spline, forward_kinematics)
+from axdf_cli.skeleton import Skeleton, Spline, forward_kinematics
 
 DEG = 180.0 / math.pi
 
@@ -59,15 +58,15 @@ VIA_PAIR_FRACTION = 0.25
 
 
 def convert_function(fn, k_in: float, k_out: float):
-    """An F* function of OpenSim units → the same function of axdf units (see module doc)."""
+    """A function of OpenSim units → the same function of axdf units (see module doc)."""
     if isinstance(fn, FConst):
         return FConst(fn.value * k_out)
     if isinstance(fn, FLinear):
         return FLinear(fn.slope * k_in * k_out, fn.intercept * k_out)
     if isinstance(fn, FPoly):
         return FPoly(tuple(c * k_out * k_in ** i for i, c in enumerate(fn.coefficients)))
-    if isinstance(fn, FSpline):
-        return FSpline(tuple(x / k_in for x in fn.x), tuple(y * k_out for y in fn.y), fn.kind)
+    if isinstance(fn, Spline):
+        return FSpline(fn.x / k_in, fn.y * k_out, fn.kind)
     if isinstance(fn, FMult):
         return FMult(fn.scale, convert_function(fn.function, k_in, k_out))
     raise TypeError(f"unknown function {fn!r}")
@@ -80,25 +79,10 @@ def function_doc(fn) -> dict:
         return {"linear": [fn.slope, fn.intercept]}
     if isinstance(fn, FPoly):
         return {"polynomial": list(fn.coefficients)}
-    if isinstance(fn, FSpline):
-        return {"spline": {"x": list(fn.x), "y": list(fn.y), "kind": fn.kind}}
+    if isinstance(fn, Spline):
+        return {"spline": {"x": [float(v) for v in fn.x], "y": [float(v) for v in fn.y], "kind": fn.kind}}
     if isinstance(fn, FMult):
         return {"multiplier": {"scale": fn.scale, "function": function_doc(fn.function)}}
-    raise TypeError(f"unknown function {fn!r}")
-
-
-def function_object(fn):
-    """An F* function → the callable used by :mod:`axdf_cli.skeleton`."""
-    if isinstance(fn, FConst):
-        return Constant(fn.value)
-    if isinstance(fn, FLinear):
-        return Linear(fn.slope, fn.intercept)
-    if isinstance(fn, FPoly):
-        return Polynomial(tuple(fn.coefficients))
-    if isinstance(fn, FSpline):
-        return Spline(np.array(fn.x), np.array(fn.y), fn.kind)
-    if isinstance(fn, FMult):
-        return Multiplier(fn.scale, function_object(fn.function))
     raise TypeError(f"unknown function {fn!r}")
 
 
@@ -162,40 +146,6 @@ def skeleton_doc(model: Model, name: str, meshes: dict[str, str]) -> dict:
         doc["coordinates"] = coords
     doc["bones"] = bones
     return doc
-
-
-def skeleton_from_doc(doc: dict) -> Skeleton:
-    """The in-memory :class:`Skeleton` of a :func:`skeleton_doc` (same as loading its YAML)."""
-    coords = [Coordinate(n, c["type"], float(c.get("default", 0.0)), tuple(c["range"]) if "range" in c else None)
-              for n, c in doc.get("coordinates", {}).items()]
-    index: dict[str, int] = {}
-    bones = []
-    for b in doc["bones"]:
-        dofs = []
-        for d in b.get("dofs", []):
-            ax = np.asarray(d["axis"], dtype=np.float64)
-            ax = tuple(float(v) for v in ax / np.linalg.norm(ax))
-            fn = _doc_function(d["function"]) if "function" in d else None
-            dofs.append(Dof(d["type"], ax, d.get("coord"), fn))
-        index[b["name"]] = len(bones)
-        bones.append(Bone(b["name"], index[b["parent"]] if "parent" in b else -1,
-                          tuple(b.get("offset", (0.0, 0.0, 0.0))), tuple(b.get("orient", (0.0, 0.0, 0.0))),
-                          tuple(dofs), tuple(b.get("post_offset", (0.0, 0.0, 0.0))),
-                          tuple(b.get("post_orient", (0.0, 0.0, 0.0)))))
-    return Skeleton(doc["skeleton"], tuple(bones), tuple(coords))
-
-
-def _doc_function(d: dict):
-    (k, v), = d.items()
-    if k == "constant":
-        return Constant(v)
-    if k == "linear":
-        return Linear(*v)
-    if k == "polynomial":
-        return Polynomial(tuple(v))
-    if k == "spline":
-        return Spline(np.array(v["x"]), np.array(v["y"]), v["kind"])
-    return Multiplier(v["scale"], _doc_function(v["function"]))
 
 
 # ----------------------------------------------------------------------------- muscles

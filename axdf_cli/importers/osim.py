@@ -33,39 +33,20 @@ from pathlib import Path
 import numpy as np
 
 from axdf_cli.errors import InputError, Mark
+from axdf_cli.skeleton import Constant, Linear, Multiplier, Polynomial, Spline
 from axdf_cli.importers.xmltree import Node, parse_xml
 from axdf_cli.skeleton import euler_xyz
 
 # ----------------------------------------------------------------------------- functions
 
 
-@dataclass(frozen=True)
-class FConst:
-    value: float
+# The importer builds axdf's own function objects (axdf_cli.skeleton), in OpenSim units;
+# emit.convert_function turns them into axdf units.
+FConst, FLinear, FPoly, FMult = Constant, Linear, Polynomial, Multiplier
 
 
-@dataclass(frozen=True)
-class FLinear:
-    slope: float
-    intercept: float
-
-
-@dataclass(frozen=True)
-class FPoly:
-    coefficients: tuple[float, ...]  # increasing powers (reversed from OpenSim's order)
-
-
-@dataclass(frozen=True)
-class FSpline:
-    x: tuple[float, ...]
-    y: tuple[float, ...]
-    kind: str  # 'fmm' (SimmSpline) | 'natural' (NaturalCubicSpline)
-
-
-@dataclass(frozen=True)
-class FMult:
-    scale: float
-    function: object
+def FSpline(x, y, kind: str) -> Spline:
+    return Spline(np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64), kind)
 
 
 FUNCTION_TAGS = ("Constant", "LinearFunction", "PolynomialFunction", "SimmSpline", "NaturalCubicSpline",
@@ -282,9 +263,8 @@ def _find_function(node: Node, owner: str):
 
 
 def evaluate_function(fn, x: float) -> float:
-    """Value of an F* function at ``x`` (OpenSim units)."""
-    from axdf_cli.importers.emit import function_object
-    return float(function_object(fn)(np.array([x]))[0])
+    """Value of a function at ``x`` (OpenSim units)."""
+    return float(fn(np.array([x]))[0])
 
 
 # ----------------------------------------------------------------------------- parsing

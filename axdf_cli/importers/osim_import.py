@@ -43,6 +43,7 @@ import numpy as np
 
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.importers import emit
+from axdf_cli.loaders import parse_skeleton_text
 from axdf_cli.importers.osim import Model, load_osim
 from axdf_cli.importers.storage import Table, read_storage
 from axdf_cli.importers.vtp import ply_bytes, read_vtp
@@ -298,8 +299,9 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
     sdoc = emit.skeleton_doc(model, name, mesh_refs)
     header = (f"Imported from {model_path.name} (OpenSim model {model.name!r}) by `axdf import osim`.\n"
               "Regenerate with the importer rather than editing by hand.")
-    files[str(skel_path)] = emit.dump_yaml(sdoc, header).encode()
-    skel = emit.skeleton_from_doc(sdoc)
+    text = emit.dump_yaml(sdoc, header)
+    files[str(skel_path)] = text.encode()
+    skel = parse_skeleton_text(text, skel_path)  # the file as axdf will read it back
     world = emit.rest_world(skel)
 
     rows = []
