@@ -40,16 +40,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from axdf_cli import bspline, rmf
+from axdf_cli import bspline, kernels, rmf
 from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError, Mark
 
 OCT = 8  # control points per section (the paper's choice)
-GRID_POINTS_PER_BLOCK = 38_000  # surface stage: frames per block so that a grid array (3 x
-# block x U x (A+1) float64, ~1 MB) stays in the CPU's L2 cache (measured: 48x24 best at 32
-# frames, 96x48 at 8)
 VOLUME_MODES = ("exact", "paper", "none")
-
 
 # ----------------------------------------------------------------------------- specs
 
@@ -131,98 +127,6 @@ def grid_to_vertices(g: np.ndarray) -> np.ndarray:
     """(F, U, A, 3) grid with collapsed pole rows → (F, 2 + (U-2) A, 3) vertices."""
     f, u, a, _ = g.shape
     return np.concatenate([g[:, :1, 0], g[:, 1:-1].reshape(f, (u - 2) * a, 3), g[:, -1:, 0]], axis=1)
-
-
-def _planar(g: np.ndarray) -> np.ndarray:
-    """(F, U, A, 3) grid → component-major (3, F, U, A + 1) with the first column repeated."""
-    c = np.moveaxis(g, -1, 0)
-    return np.concatenate([c, c[..., :1]], axis=-1)
-
-
-def _corners(g):
-    """Views of the quad corners p00, p01, p10, p11 of a planar wrapped grid (3, F, U, A+1)."""
-    return g[:, :, :-1, :-1], g[:, :, :-1, 1:], g[:, :, 1:, :-1], g[:, :, 1:, 1:]
-
-
-def _cross(a, b):
-    """Component-wise cross product of (3, ...) arrays (much faster than np.cross here)."""
-    return np.stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
-
-
-def _dot_sum(a, b) -> np.ndarray:
-    """sum over the grid of a . b for (3, F, U, A) arrays → (F,)."""
-    return (a[0] * b[0] + a[1] * b[1] + a[2] * b[2]).sum(axis=(1, 2))
-
-
-def planar_volume(g: np.ndarray) -> np.ndarray:
-    """Enclosed volume of a planar wrapped grid (3, F, U, A+1) → (F,) (divergence theorem).
-
-    Each quad is the triangles (p00, p01, p10) and (p10, p01, p11), whose signed tetrahedra
-    add up to p01 . (p10 x (p00 - p11)) / 6: one cross product per quad."""
-    p00, p01, p10, p11 = _corners(g)
-    return _dot_sum(p01, _cross(p10, p00 - p11)) / 6.0
-
-
-def planar_volume_cubic(a: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """Coefficients (F, 4) of V(s) = c0 + c1 s + c2 s^2 + c3 s^3 for the grid a + s w.
-
-    V is the trilinear form p01 . (p10 x d) / 6 (d = p00 - p11) summed over quads; with
-    each argument affine in s it expands into four sums."""
-    a00, a01, a10, a11 = _corners(a)
-    w00, w01, w10, w11 = _corners(w)
-    ad, wd = a00 - a11, w00 - w11
-    p = _cross(a10, ad)
-    q = _cross(w10, wd)
-    r = _cross(w10, ad) + _cross(a10, wd)
-    return np.stack([_dot_sum(a01, p), _dot_sum(w01, p) + _dot_sum(a01, r),
-                     _dot_sum(a01, q) + _dot_sum(w01, r), _dot_sum(w01, q)], axis=1) / 6.0
-
-
-def planar_normals(g: np.ndarray, ends: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
-    """Outward unit vertex normals (3, F, U, A) of a planar wrapped grid (3, F, U, A+1).
-
-    Ring vertices: the cross product of the central differences around and along
-    (S_v x S_u points outwards). Pole vertices: the axis direction out of the muscle,
-    ``ends = (-T(0), T(1))`` each (3, F), when given (a pointed end's apex faces along the
-    axis; the fan of a strongly curved end can tilt past it), else the sum of their fan
-    triangles' normals."""
-    c = g[..., :-1]  # (3, F, U, A)
-    sv = np.roll(c[:, :, 1:-1], -1, axis=3) - np.roll(c[:, :, 1:-1], 1, axis=3)
-    su = c[:, :, 2:] - c[:, :, :-2]
-    n = np.empty_like(c)
-    n[:, :, 1:-1] = _cross(sv, su)
-    for k, (row, nxt) in enumerate(((0, 1), (-1, -2))):
-        ring = c[:, :, nxt]  # (3, F, A)
-        pole = c[:, :, row, :1]
-        fan = _cross(np.roll(ring, -1, axis=2) - pole, ring - pole).sum(axis=2)  # (3, F)
-        fan = fan if row == 0 else -fan
-        if ends is not None:  # a fan tilted more than 60 degrees off the axis: use the axis
-            fan = fan / np.maximum(np.sqrt((fan * fan).sum(axis=0)), 1e-300)
-            fan = np.where((fan * ends[k]).sum(axis=0) > 0.5, fan, ends[k])
-        n[:, :, row] = fan[..., None]
-    return n / np.maximum(np.sqrt(n[0] ** 2 + n[1] ** 2 + n[2] ** 2), 1e-300)
-
-
-def planar_to_vertices(g: np.ndarray) -> np.ndarray:
-    """(3, F, U, A[+1]) grid → (3, F, V) vertices (poles once, rings in order)."""
-    c, f, u = g.shape[:3]
-    a = g.shape[3]
-    return np.concatenate([g[:, :, 0, :1], g[:, :, 1:-1, :].reshape(c, f, (u - 2) * a), g[:, :, -1, :1]], axis=2)
-
-
-def grid_volume(g: np.ndarray) -> np.ndarray:
-    """Enclosed volume of a grid surface (F, U, A, 3) → (F,)."""
-    return planar_volume(_planar(g))
-
-
-def grid_volume_cubic(a: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """Coefficients (F, 4) of V(s) for the grid a + s w, both (F, U, A, 3)."""
-    return planar_volume_cubic(_planar(a), _planar(w))
-
-
-def grid_normals(g: np.ndarray) -> np.ndarray:
-    """Area-weighted outward unit vertex normals of the grid (F, U, A, 3)."""
-    return np.moveaxis(planar_normals(_planar(g)), 0, -1)
 
 
 # ----------------------------------------------------------------------------- the model
@@ -333,7 +237,8 @@ class MuscleModel:
         self.Bu = bspline.rational(bu, w)  # (U, m)
         self.Bv = bspline.periodic_quadratic_basis(OCT, np.arange(around) / around)  # (A, 8)
         self.U, self.A = along, around
-        self.BvT = np.ascontiguousarray(np.concatenate([self.Bv, self.Bv[:1]]).T)  # (8, A+1), wrapped
+        self.u_idx, self.u_w = kernels.sparse_rows(self.Bu)  # 3 non-zeros per row each way
+        self.v_idx, self.v_w = kernels.sparse_rows(self.Bv)
         self.faces = grid_faces(along, around)
         self.n_vertices = 2 + (along - 2) * around
 
@@ -467,29 +372,8 @@ class MuscleModel:
         held = (beta * (tau * h * s[:, None])[..., None]) * off
         fixed = c + (1.0 - beta) * off + held  # part that does not scale with s
         scaled = beta * (tau * (1.0 - h))[..., None] * off  # part multiplied by s
-        verts = np.empty((3, nf, self.n_vertices))
-        norms = np.empty((3, nf, self.n_vertices))
-        volume = np.empty(nf)
-        bad = np.zeros(nf, dtype=bool)
-        # the surface stage runs in blocks of frames that stay in cache
-        block = int(np.clip(GRID_POINTS_PER_BLOCK // (self.U * (self.A + 1)), 1, 64))
-        for b0 in range(0, nf, block):
-            blk = slice(b0, min(nf, b0 + block))
-            a_grid = self._tessellate(fixed[blk], p[blk])  # (3, f, U, A+1)
-            w_grid = self._tessellate(scaled[blk], None)
-            sb = np.clip(s[blk], tol.SCALE_MIN, tol.SCALE_MAX)
-            if spec.volume == "exact" and reference_volume:
-                coef = planar_volume_cubic(a_grid, w_grid)
-                s[blk], bad[blk] = _solve_cubic(coef, self.v0, s[blk])
-                sb = np.clip(s[blk], tol.SCALE_MIN, tol.SCALE_MAX)
-                # the mesh's volume is this cubic at the final scale: no second pass over it
-                volume[blk] = ((coef[:, 3] * sb + coef[:, 2]) * sb + coef[:, 1]) * sb + coef[:, 0]
-            grid = a_grid + sb[None, :, None, None] * w_grid
-            if not (spec.volume == "exact" and reference_volume):
-                volume[blk] = planar_volume(grid)
-            verts[:, blk] = planar_to_vertices(grid[..., :-1])
-            ends = (-np.moveaxis(t[blk, 0], -1, 0), np.moveaxis(t[blk, -1], -1, 0))
-            norms[:, blk] = planar_to_vertices(planar_normals(grid, ends))
+        verts, norms, volume, s, bad = self._surface(fixed, scaled, p, t, s,
+                                                     spec.volume == "exact" and reference_volume)
         for i in np.nonzero(bad)[0]:
             warnings.append((int(i), "exact volume has no solution; used the paper's scale"))
         for i in np.nonzero(length < tol.MIN_AXIS_LENGTH)[0]:
@@ -497,8 +381,8 @@ class MuscleModel:
         for i in np.nonzero((s < tol.SCALE_MIN) | (s > tol.SCALE_MAX))[0]:
             warnings.append((int(i), f"section scale {s[i]:.3g} clamped to [{tol.SCALE_MIN}, {tol.SCALE_MAX}]"))
         return FrameResult(
-            vertices=np.moveaxis(verts, 0, -1),
-            normals=np.moveaxis(norms, 0, -1),
+            vertices=verts,
+            normals=norms,
             length=length,
             volume=volume,
             scale=np.clip(s, tol.SCALE_MIN, tol.SCALE_MAX),
@@ -507,23 +391,26 @@ class MuscleModel:
             warnings=warnings,
         )
 
-    def _tessellate(self, bound: np.ndarray, p: np.ndarray | None) -> np.ndarray:
-        """Planar wrapped surface grid (3, F, U, A+1) from bound control points (F, 8N, 3);
-        the pole rows are the axis ends when ``p`` (axis control points) is given, else zero."""
-        nf = bound.shape[0]
-        m = len(self.spec.sections) + 2
-        net = np.zeros((m, 3, nf, OCT))
-        net[1:-1] = np.moveaxis(bound.reshape(nf, m - 2, OCT, 3), (1, 3), (0, 1))
-        if p is not None:
-            net[0] = np.moveaxis(p[:, 0], -1, 0)[:, :, None]
-            net[-1] = np.moveaxis(p[:, -1], -1, 0)[:, :, None]
-        # separable: along, then around (each basis is 3 wide: a dense Bu (x) Bv is 6x the work)
-        # T[u,(c,f,j)] = sum_m Bu[u,m] net[m,(c,f,j)]
-        tmp = self.Bu @ net.reshape(m, 3 * nf * OCT)
-        # G[(c,f,u),a] = sum_j T[(c,f,u),j] Bv[a,j]   (Bv wrapped: column A repeats column 0)
-        tmp = np.ascontiguousarray(np.moveaxis(tmp.reshape(self.U, 3 * nf, OCT), 0, 1))
-        g = tmp.reshape(3 * nf * self.U, OCT) @ self.BvT
-        return g.reshape(3, nf, self.U, self.A + 1)
+    def _surface(self, fixed: np.ndarray, scaled: np.ndarray, p: np.ndarray, t: np.ndarray,
+                 s0: np.ndarray, exact: bool):
+        """The surface stage (compiled, :func:`axdf_cli.kernels.surface_stage`): bound control
+        points fixed + s * scaled (F, 8N, 3), axis control points p (F, n, 3), sample tangents
+        t (F, S, 3), starting scales s0 (F,) → vertices (F, V, 3), normals (F, V, 3), volume
+        (F,), scale (F,), no-solution flags (F,)."""
+        nf = fixed.shape[0]
+        verts = np.empty((nf, self.n_vertices, 3))
+        norms = np.empty((nf, self.n_vertices, 3))
+        volume = np.empty(nf)
+        s = np.empty(nf)
+        bad = np.zeros(nf, dtype=np.bool_)
+        kernels.surface_stage(np.ascontiguousarray(fixed), np.ascontiguousarray(scaled),
+                              np.ascontiguousarray(p[:, 0]), np.ascontiguousarray(p[:, -1]),
+                              np.ascontiguousarray(-t[:, 0]), np.ascontiguousarray(t[:, -1]),
+                              self.u_idx, self.u_w, self.v_idx, self.v_w, bool(exact),
+                              float(getattr(self, "v0", 0.0)), np.ascontiguousarray(s0, dtype=np.float64),
+                              tol.SCALE_MIN, tol.SCALE_MAX, tol.VOLUME_SOLVE_ITERS, tol.VOLUME_SOLVE_RTOL,
+                              verts, norms, volume, s, bad)
+        return verts, norms, volume, s, bad
 
 
 def _bone(index: dict[str, int], p: AxisPoint) -> int:
@@ -535,23 +422,3 @@ def _bone(index: dict[str, int], p: AxisPoint) -> int:
 
 def _unit(d: np.ndarray) -> np.ndarray:
     return d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-300)
-
-
-def _solve_cubic(coef: np.ndarray, v0: float, s0: np.ndarray):
-    """Solve c0 + c1 s + c2 s^2 + c3 s^3 = v0 for s > 0 near s0 by safeguarded Newton: (F,), bad (F,)."""
-    c0, c1, c2, c3 = coef.T
-    s = s0.copy()
-    for _ in range(tol.VOLUME_SOLVE_ITERS):
-        f = ((c3 * s + c2) * s + c1) * s + c0 - v0
-        df = (3.0 * c3 * s + 2.0 * c2) * s + c1
-        ok = df > 0
-        step = np.where(ok, f / np.where(ok, df, 1.0), 0.0)
-        s_new = np.where(s - step > 0, s - step, 0.5 * s)
-        if np.all(np.abs(s_new - s) <= tol.VOLUME_SOLVE_RTOL * np.abs(s)):
-            s = s_new
-            break
-        s = s_new
-    f = ((c3 * s + c2) * s + c1) * s + c0 - v0
-    bad = ~(np.abs(f) <= 1e-6 * abs(v0)) | ~np.isfinite(s)
-    s = np.where(bad, s0, s)
-    return s, bad

@@ -31,19 +31,20 @@ from conftest import (CHAIN_MUSCLE_YAML, CHAIN_SKELETON_YAML, DEMO_MUSCLE_FILES,
 def evaluate_with_control_points(model, world, tension, monkeypatch, **kw):
     """Evaluate and also return the deformed section control points (F, 8N, 3).
 
-    ``evaluate`` tessellates ``fixed + s * scaled`` (two calls to ``_tessellate``); the spy
-    records both, so the control points are read from the real code path."""
+    ``evaluate`` hands ``fixed`` and ``scaled`` to its surface stage (``_surface``), which
+    tessellates ``fixed + s * scaled``; the spy records both, so the control points are read
+    from the real code path."""
     calls = []
-    orig = model._tessellate
+    orig = model._surface
 
-    def spy(bound, p):
-        calls.append(np.array(bound))
-        return orig(bound, p)
+    def spy(fixed, scaled, *args):
+        calls.append((np.array(fixed), np.array(scaled)))
+        return orig(fixed, scaled, *args)
 
-    monkeypatch.setattr(model, "_tessellate", spy)
+    monkeypatch.setattr(model, "_surface", spy)
     res = model.evaluate(world, tension, **kw)
     monkeypatch.undo()
-    fixed, scaled = calls
+    (fixed, scaled), = calls
     return fixed + res.scale[:, None, None] * scaled, res
 
 
