@@ -108,7 +108,25 @@ def test_full_disk_or_unwritable_out_exits_3_and_leaves_nothing_half_written(tmp
                 raise OSError(err, os.strerror(err), str(file))
         return real_open(file, mode, *a, **k)
 
+    real_os_open = os.open
+    real_os_write = os.write
+
+    def failing_os_open(file, flags, *a, **k):  # the writers' own path (atomic.write_parts)
+        if flags & os.O_WRONLY and str(out) in str(file):
+            calls["n"] += 1
+            if calls["n"] > 20 and err != errno.ENOSPC:
+                raise OSError(err, os.strerror(err), str(file))
+        return real_os_open(file, flags, *a, **k)
+
+    def failing_os_write(fd, data):  # a full disk fails in the middle of a write
+        if err == errno.ENOSPC and calls["n"] > 20:
+            real_os_write(fd, bytes(memoryview(data)[:100]))
+            raise OSError(err, os.strerror(err))
+        return real_os_write(fd, data)
+
     monkeypatch.setattr("builtins.open", failing_open)
+    monkeypatch.setattr(os, "open", failing_os_open)
+    monkeypatch.setattr(os, "write", failing_os_write)
     rc = main(["run", "poses/jobs/demo.yaml", "--no-render", "--frames", "0:20", "--out", str(out)])
     monkeypatch.undo()
     captured = capsys.readouterr()

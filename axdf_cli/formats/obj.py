@@ -93,9 +93,7 @@ class ObjWriter:
         """Write one frame to ``path`` atomically (the bytes :meth:`encode` gives); return the
         file's sha256 hex digest when ``sha256`` is true, else None."""
         parts = (self._head, _vertex_lines(positions, normals), self._faces)
-        with atomic.atomic_open(path, "wb") as f:
-            for part in parts:
-                f.write(part)
+        atomic.write_parts(path, parts)
         if not sha256:
             return None
         h = hashlib.sha256()

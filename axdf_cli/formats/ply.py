@@ -68,8 +68,7 @@ class PlyWriter:
         """Write one frame to ``path`` atomically (the bytes :meth:`encode` gives); return the
         file's sha256 hex digest when ``sha256`` is true, else None."""
         buf = self._fill(positions, normals)
-        with atomic.atomic_open(path, "wb") as f:
-            f.write(buf)
+        atomic.write_parts(path, (buf,))
         return hashlib.sha256(buf).hexdigest() if sha256 else None
 
 
