@@ -5,12 +5,13 @@ and job (``muscles:`` + ``pose:`` + ...). See docs/FORMATS.md.
 """
 from __future__ import annotations
 
-import math
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from axdf_cli.errors import InputError, Mark
+from axdf_cli.muscle import OCT, VOLUME_MODES, AxisPoint, MuscleSpec, Section, outline_area
 from axdf_cli.skeleton import (Bone, Constant, Coordinate, Dof, Linear, Multiplier, Polynomial,
                                Skeleton, Spline)
 from axdf_cli.yamlio import Fields, YMap, check_name, check_number, check_vector, item_marks, load_yaml, mark_of
@@ -228,17 +229,10 @@ def resolve_ref(base_file: Path, ref: str, where: Mark) -> Path:
     return base_file.parent / p
 
 
-def finite_or_raise(arr: np.ndarray, where: Mark, what: str) -> None:
-    if not np.all(np.isfinite(arr)):
-        raise InputError(where, f"{what} is not finite", "finite numbers only")
-
-
-__all__ = ["load_skeleton", "parse_function", "math"]
 
 
 # ----------------------------------------------------------------------------- muscles
 
-from axdf_cli.muscle import OCT, VOLUME_MODES, AxisPoint, MuscleSpec, Section, outline_area  # noqa: E402
 
 
 def parse_color(v, where: Mark, name: str) -> tuple[float, float, float]:
@@ -287,7 +281,6 @@ def _parse_muscle(value, where: Mark, file: str, group: str = "") -> MuscleSpec:
         axis.append(AxisPoint(bone, at, af.vmark("bone")))
     sections = []
     sec_seq = f.seq("sections", default=None)
-    radii_default = None
     if sec_seq is None:
         sections = [Section((k + 1) / 5.0, None) for k in range(4)]
     else:
@@ -346,7 +339,6 @@ def _parse_muscle(value, where: Mark, file: str, group: str = "") -> MuscleSpec:
         raise InputError(f.vmark("weights"), f"{len(weights)} weights for {len(sections)} sections",
                          "one weight per section")
     f.done()
-    _ = radii_default
     return MuscleSpec(name, color, tuple(axis), tuple(sections), strength, tension, volume,
                       tendons, twist, resolution, weights, file, group)
 
@@ -369,7 +361,6 @@ def load_muscle_file(path: Path | str) -> list[MuscleSpec]:
 
 # ----------------------------------------------------------------------------- poses
 
-from dataclasses import dataclass  # noqa: E402
 
 INTERPOLATIONS = ("linear", "step", "cubic")
 
