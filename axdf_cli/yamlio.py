@@ -72,17 +72,23 @@ def _mark(file: str, m) -> Mark:
     return Mark(file, m.line + 1, m.column + 1)
 
 
+def read_input(path: Path | str, display: str | None = None, allowed: str = "an existing file") -> bytes:
+    """The bytes of an input file; a missing, folder or unreadable file is an InputError."""
+    display = display or str(path)
+    try:
+        return Path(path).read_bytes()
+    except FileNotFoundError:
+        raise InputError(Mark(display), "file not found", allowed) from None
+    except IsADirectoryError:
+        raise InputError(Mark(display), "is a folder, not a file", allowed) from None
+    except OSError as e:
+        raise InputError(Mark(display), f"cannot read ({e.strerror})", allowed) from None
+
+
 def read_text(path: Path, display: str | None = None) -> str:
     """Read a UTF-8 text file; refuse binary, oversize or undecodable files with a position."""
     display = display or str(path)
-    try:
-        data = Path(path).read_bytes()
-    except FileNotFoundError:
-        raise InputError(Mark(display), "file not found", "give an existing file") from None
-    except IsADirectoryError:
-        raise InputError(Mark(display), "is a folder, not a file", "give a YAML file") from None
-    except OSError as e:
-        raise InputError(Mark(display), f"cannot read file ({e.strerror})") from None
+    data = read_input(path, display, "an existing YAML file")
     if len(data) > tol.YAML_MAX_BYTES:
         raise InputError(Mark(display), f"file is {len(data)} bytes",
                          f"at most {tol.YAML_MAX_BYTES} bytes are read")

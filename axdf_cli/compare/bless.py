@@ -7,12 +7,11 @@ Ignored files and this comparison's own outputs are left alone.
 from __future__ import annotations
 
 import os
-import shutil
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable
 
-from axdf_cli.atomic import atomic_open
+from axdf_cli.atomic import write_parts
 from axdf_cli.compare import list_files
 from axdf_cli.compare.result import Report
 from axdf_cli.compare.tolerances import Tolerances
@@ -27,8 +26,7 @@ class Change:
 
 
 def _copy(src: Path, dst: Path) -> None:
-    with open(src, "rb") as fi, atomic_open(dst, "wb") as fo:
-        shutil.copyfileobj(fi, fo, 1 << 20)
+    write_parts(dst, (src.read_bytes(),))
 
 
 def _same_bytes(a: Path, b: Path) -> bool:

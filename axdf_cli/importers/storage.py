@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from axdf_cli.errors import InputError, Mark
+from axdf_cli.yamlio import read_input
 
 
 @dataclass(frozen=True)
@@ -57,12 +58,7 @@ def _split(line: str) -> list[tuple[str, int]]:
 def read_storage(path: Path | str) -> Table:
     path = Path(path)
     shown = str(path)
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise InputError(Mark(shown), "file not found", "an existing .mot / .sto file") from None
-    except OSError as e:
-        raise InputError(Mark(shown), f"cannot read ({e.strerror})", "a readable file") from None
+    raw = read_input(path, shown, "an existing .mot / .sto file")
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as e:

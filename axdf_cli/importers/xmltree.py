@@ -12,6 +12,7 @@ from pathlib import Path
 from xml.parsers import expat
 
 from axdf_cli.errors import InputError, Mark
+from axdf_cli.yamlio import read_input
 
 
 @dataclass(eq=False)
@@ -55,12 +56,7 @@ def parse_xml(path: Path | str, display: str | None = None) -> Node:
     """Parse the XML file at ``path`` into a :class:`Node` tree (root element)."""
     path = Path(path)
     shown = display or str(path)
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise InputError(Mark(shown), "file not found", "an existing .osim / .vtp file") from None
-    except OSError as e:
-        raise InputError(Mark(shown), f"cannot read ({e.strerror})", "a readable file") from None
+    data = read_input(path, shown, "an existing .osim / .vtp file")
     parser = expat.ParserCreate()
     stack: list[Node] = []
     root: list[Node] = []
