@@ -530,7 +530,7 @@ def execute(plan: RunPlan, *, resume: bool = False, overwrite: bool = False, pro
         if plan.render is not None and plan.render.enabled:
             writer.flush()
             write_manifest(out, manifest_dict(plan, writer.files, warnings, complete=False, extra=extra))
-            info = render_run(plan, np.array([lo, hi]), render_progress)
+            info = render_run(plan, np.array([lo, hi]), twist_ref, render_progress)
             writer.files.update(info["files"])
             extra["gl"] = {"renderer": info["gl_renderer"], "version": info["gl_version"]}
         writer.flush()
@@ -556,7 +556,7 @@ def _csv_text(s: str) -> str:
 RENDER_CHUNK = 16  # frames per block handed to the renderer (all muscles of a frame at once)
 
 
-def render_run(plan: RunPlan, bounds: np.ndarray, progress=None) -> dict:
+def render_run(plan: RunPlan, bounds: np.ndarray, twist_ref: np.ndarray, progress=None) -> dict:
     """Render the plan's frames (the muscles evaluated again, block by block: evaluation is
     cheap next to rendering and this keeps memory bounded)."""
     from axdf_cli.render import render_sequence
@@ -580,7 +580,6 @@ def render_run(plan: RunPlan, bounds: np.ndarray, progress=None) -> dict:
                              normals=tuple(_finite_or_rest(r.normals, m.rest_normals) for r, m in zip(res, plan.models)),
                              bone_world=world[:, bone_ids])
 
-    twist_ref = twist_references(plan)
     return render_sequence(scene, chunks(), plan.render, plan.out, progress=progress)
 
 
