@@ -38,7 +38,7 @@ import numpy as np
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.importers import emit
 from axdf_cli.loaders import load_muscle_file, load_skeleton, resolve_ref
-from axdf_cli.muscle import AxisPoint, MuscleModel, MuscleSpec, Section
+from axdf_cli.muscle import AxisPoint, MuscleModel, MuscleSpec
 from axdf_cli.skeleton import Skeleton, axis_angle, euler_xyz
 from axdf_cli.yamlio import Fields, check_name, check_vector, item_marks, load_yaml
 

@@ -8,12 +8,13 @@ the imported skeleton and pose must agree to 1e-6 of the scale at several frames
 """
 from __future__ import annotations
 
-import os
 import re
 from pathlib import Path
 
 import numpy as np
 import pytest
+
+from cli_in_folder import run_cli
 
 REPO = Path(__file__).resolve().parents[1]
 CMU = REPO.parent / "shared" / "data" / "bvh" / "cmu_131_01_walk_scaled.bvh"
@@ -137,17 +138,6 @@ def reference_positions(text: str, scale: float) -> tuple[list[str], np.ndarray]
     return [j[0] for j in joints], np.stack([p[..., 0], -p[..., 2], p[..., 1]], axis=-1)
 
 
-def run_cli(tmp_path: Path, *argv: str) -> int:
-    from axdf_cli.cli.main import main
-
-    cwd = os.getcwd()
-    os.chdir(tmp_path)
-    try:
-        return main(list(argv))
-    finally:
-        os.chdir(cwd)
-
-
 def imported_positions(tmp_path: Path, out: str, frames) -> tuple[object, np.ndarray]:
     """The imported skeleton and its bones' world origins (F, B, 3) at ``frames``."""
     from axdf_cli.loaders import RefPolicy, load_pose
@@ -168,19 +158,11 @@ def imported_positions(tmp_path: Path, out: str, frames) -> tuple[object, np.nda
 # ----------------------------------------------------------------------------- tests
 
 
-def _expected_bones(names: list[str]) -> list[str]:
-    """The importer's naming rule applied to the reference's joint names."""
-    out, taken = [], {"ground"}
-    for n in names:
-        base = re.sub(r"[^A-Za-z0-9_.-]+", "_", n.removesuffix(" End Site")).strip("_")
-        base = base + "_end" if n.endswith(" End Site") else base
-        name, k = base, 1
-        while name in taken:
-            k += 1
-            name = f"{base}_{k}"
-        taken.add(name)
-        out.append(name)
-    return out
+def imported_bone_names(path: Path) -> list[str]:
+    """The importer's bone names, in the file's joint order (the reference's order too)."""
+    from axdf_cli.importers.bvh import bone_names, read_bvh
+
+    return bone_names(read_bvh(path))
 
 
 def test_small_bvh_other_channel_orders_no_root_translation(tmp_path):
@@ -190,7 +172,8 @@ def test_small_bvh_other_channel_orders_no_root_translation(tmp_path):
     frames = [0, 1, 2, 3]
     pose, world = imported_positions(tmp_path, "imp", frames)
     names, ref = reference_positions(text, 0.01)
-    bones = _expected_bones(names)
+    assert names == ["pelvis", "spine", "spine End Site", "leg.r", "foot r", "foot r End Site"]
+    bones = imported_bone_names(tmp_path / "in.bvh")
     assert bones == ["pelvis", "spine", "spine_end", "leg.r", "foot_r", "foot_r_end"]
     bi = pose.skeleton.bone_index
     got = world[:, [bi[b] for b in bones]]
@@ -207,7 +190,8 @@ def test_cmu_walk_matches_reference_fk(tmp_path):
     frames = [0, 1, 250, 500, 994]
     pose, world = imported_positions(tmp_path, "imp", frames)
     names, ref = reference_positions(text, 1.0)
-    bones = _expected_bones(names)
+    bones = imported_bone_names(CMU)
+    assert [b.removesuffix("_end") for b in bones] == [n.removesuffix(" End Site") for n in names]
     bi = pose.skeleton.bone_index
     got = world[:, [bi[b] for b in bones]]
     assert np.max(np.abs(got - ref[frames])) < 1e-6
@@ -228,7 +212,7 @@ def test_step_keeps_every_nth_row(tmp_path):
     pose, world = imported_positions(tmp_path, "imp", [0, 10, 248])
     names, ref = reference_positions(CMU.read_text(), 1.0)
     bi = pose.skeleton.bone_index
-    got = world[:, [bi[b] for b in _expected_bones(names)]]
+    got = world[:, [bi[b] for b in imported_bone_names(CMU)]]
     assert pose.fps == 30.0 and pose.last == 248
     assert np.max(np.abs(got - ref[[0, 40, 992]])) < 1e-6
 
@@ -374,3 +358,14 @@ def test_pose_flag_names_the_import_command(tmp_path, capsys, suffix, command):
     err = capsys.readouterr().err
     assert rc == 2 and command in err and str(motion) in err, err
     assert not (tmp_path / "out").exists()
+
+
+def test_crlf_file_imports_the_same(tmp_path):
+    text = small_bvh()
+    (tmp_path / "a.bvh").write_text(text)
+    (tmp_path / "b.bvh").write_bytes(text.replace("\n", "\r\n").encode())
+    for n in ("a", "b"):
+        assert run_cli(tmp_path, "import", "bvh", f"{n}.bvh", "--out", n, "--name", "s", "--scale", "cm", "-q") == 0
+    for rel in ("skeletons/s.yaml", "s.yaml"):
+        a, b = (tmp_path / "a" / rel).read_text(), (tmp_path / "b" / rel).read_text()
+        assert a.replace("a.bvh", "b.bvh") == b

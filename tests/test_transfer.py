@@ -10,12 +10,13 @@ from __future__ import annotations
 
 import json
 import os
-import re
 from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
+
+from cli_in_folder import run_cli
 
 REPO = Path(__file__).resolve().parents[1]
 HUMAN = REPO / "poses" / "skeletons" / "human_r.yaml"
@@ -25,17 +26,6 @@ CMU_MAP = REPO / "poses" / "maps" / "human_r_to_cmu.yaml"
 CMU_BVH = REPO.parent / "shared" / "data" / "bvh" / "cmu_131_01_walk_scaled.bvh"
 
 HUMAN_BONES = ["pelvis", "femur_r", "tibia_r", "foot_r", "thorax", "scapula_r", "humerus_r", "ulna_r", "radius_r"]
-
-
-def run_cli(cwd: Path, *argv: str) -> int:
-    from axdf_cli.cli.main import main
-
-    old = os.getcwd()
-    os.chdir(cwd)
-    try:
-        return main(list(argv))
-    finally:
-        os.chdir(old)
 
 
 def write_map(path: Path, entries: dict, name: str = "m") -> Path:

@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from decimal import Decimal, InvalidOperation
 from pathlib import Path
 
@@ -137,7 +137,6 @@ class _Open:
     offset: tuple | None = None
     channels: tuple = ()
     index: int = -1
-    children: list = field(default_factory=list)
 
 
 def _hierarchy(tok: _Tokens) -> list[Joint]:
@@ -146,7 +145,6 @@ def _hierarchy(tok: _Tokens) -> list[Joint]:
         raise InputError(tok.mark(w), f"file starts with {w[0]!r}", "a BVH file starts with HIERARCHY")
     joints: list[Joint] = []
     stack: list[_Open] = []
-    order: list[_Open] = []
     seen: dict[str, Mark] = {}
     kinds = "ROOT, JOINT, End Site, OFFSET, CHANNELS or '}'"
     while True:
@@ -160,7 +158,7 @@ def _hierarchy(tok: _Tokens) -> list[Joint]:
         tok.i += 1
         word = w[0]
         if word in ("ROOT", "JOINT"):
-            if word == "ROOT" and (stack or order):
+            if word == "ROOT" and (stack or joints):
                 raise InputError(tok.mark(w), "a second ROOT" if not stack else "ROOT inside a joint",
                                  "one ROOT; the other joints are JOINTs inside its braces")
             if word == "JOINT" and not stack:
@@ -258,7 +256,6 @@ def _hierarchy(tok: _Tokens) -> list[Joint]:
         o.index = len(joints)
         joints.append(None)  # filled in at its '}' (parents keep their place before children)
         stack.append(o)
-        order.append(o)
     if not joints:
         raise InputError(tok.end, "no ROOT in the hierarchy", "HIERARCHY ROOT NAME { ... }")
     return joints
