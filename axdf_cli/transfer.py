@@ -24,7 +24,8 @@ the muscle's axis control points (each point weighs as much as the others); with
 length scaled by about the same factor, the rest volume scales by about its cube. Section
 positions ``t``, tendon fractions, twist, colour, tension, strength, volume mode and
 resolution are kept. A muscle with an axis point on a bone the map does not name is skipped
-and listed in the report. The map format: docs/FORMATS.md, "Transfer map".
+and listed in the report. Files are written by the importers' emitter (numbers rounded as
+it rounds them: positions to 0.1 µm, the rest to 9 significant digits). The map format: docs/FORMATS.md, "Transfer map".
 """
 from __future__ import annotations
 
@@ -44,9 +45,6 @@ from axdf_cli.yamlio import Fields, check_name, check_vector, item_marks, load_y
 
 #: A segment shorter than this (metres) has no direction: the entry is treated as segment-less.
 MIN_SEGMENT = 1e-6
-#: Written coordinates and radii are rounded to this many decimals (0.1 nm: far below the
-#: float32 precision of the meshes, and no float noise such as 0.025000000000000005 in files).
-DECIMALS = 10
 
 
 # ----------------------------------------------------------------------------- the map
@@ -229,12 +227,12 @@ def transfer_spec(spec: MuscleSpec, tf: dict[str, PairTransform]) -> tuple[Muscl
     for p in spec.axis:
         t = tf[p.bone]
         at = t.matrix[:3, :3] @ np.asarray(p.at) + t.matrix[:3, 3]
-        axis.append(AxisPoint(t.dst, tuple(round(float(x), DECIMALS) for x in at), p.mark))
+        axis.append(AxisPoint(t.dst, tuple(float(x) for x in at), p.mark))
     k = math.exp(sum(math.log(tf[p.bone].scale) for p in spec.axis) / len(spec.axis))
     secs = []
     for s in spec.sections:
-        radii = None if s.radii is None else tuple(round(r * k, DECIMALS) for r in s.radii)
-        outline = None if s.outline is None else tuple(tuple(round(c * k, DECIMALS) for c in pt) for pt in s.outline)
+        radii = None if s.radii is None else tuple(r * k for r in s.radii)
+        outline = None if s.outline is None else tuple(tuple(c * k for c in pt) for pt in s.outline)
         secs.append(replace(s, radii=radii, outline=outline))
     return replace(spec, axis=tuple(axis), sections=tuple(secs)), [], k
 
@@ -325,6 +323,7 @@ def build_transfer(muscle_files: list[Path], skel_a: Skeleton | None, skel_b: Sk
                         for t in tf.values()],
               "muscles": rows, "skipped": skipped,
               "files": sorted(Path(p).name for p in files)}
+    report = emit.rounded(report)  # as the YAML files: no CPU-dependent last digits
     files[str(out_dir / "transfer_report.json")] = (json.dumps(report, indent=1, sort_keys=True) + "\n").encode()
     files[str(out_dir / "TRANSFER.md")] = transfer_markdown(report).encode()
     return TransferResult(files, report, skipped)

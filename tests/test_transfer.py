@@ -227,7 +227,8 @@ def test_shipped_cmu_library_is_what_make_import_writes(tmp_path):
     assert shipped == sorted(p.name for p in (tmp_path / "cmu").iterdir())
     for name in shipped:
         if name.endswith(".yaml"):
-            assert_same_yaml(tmp_path / "cmu" / name, REPO / "muscles" / "cmu" / name, 1e-9)
+            # positions are written to 0.1 µm: a value on a rounding boundary may flip by one step
+            assert_same_yaml(tmp_path / "cmu" / name, REPO / "muscles" / "cmu" / name, 1.5e-7)
     report = json.loads((tmp_path / "cmu" / "transfer_report.json").read_text())
     assert report["skipped"] == []
 
