@@ -460,11 +460,12 @@ class Job:
     muscles: tuple  # ((Path, Mark), ...) files, folders or globs, resolved against the job's folder
     pose: tuple | None  # (Path, Mark)
     out: str | None
-    format: str | None
+    format: object  # raw `format:` (a name, "ply,usd", or a list of names; checked by the run plan) or None
     frames: object  # raw frames spec or None
     frames_mark: Mark | None
     render: object  # raw `render:` mapping or None
     render_mark: Mark | None
+    format_mark: Mark | None = None
 
 
 def load_job(path: Path | str) -> Job:
@@ -488,15 +489,14 @@ def load_job(path: Path | str) -> Job:
     if out is not None and (Path(out).is_absolute() or ".." in Path(out).parts) and not POLICY.allow_outside:
         raise InputError(f.vmark("out"), f"out {out!r} leaves the project folder tree",
                          "a relative folder without '..' (or pass --out, or --allow-outside)")
-    from axdf_cli.formats import WRITERS
-
-    fmt = f.choice("format", tuple(WRITERS), default=None)
+    fmt = f.raw("format")
+    fmt_mark = f.vmark("format") if fmt is not None else None
     frames = f.raw("frames")
     frames_mark = f.vmark("frames") if frames is not None else None
     render = f.raw("render")
     render_mark = f.vmark("render") if render is not None else None
     f.done()
-    return Job(str(path), tuple(muscles), pose, out, fmt, frames, frames_mark, render, render_mark)
+    return Job(str(path), tuple(muscles), pose, out, fmt, frames, frames_mark, render, render_mark, fmt_mark)
 
 
 def expand_muscle_paths(entries) -> list[Path]:

@@ -9,6 +9,9 @@ One module for everything that knows the layout (README "What a run writes"), sh
     bones/<bone>.ply
     stats.csv, bones.csv
     frames/<frame:04d>.png|exr, camera.json
+    <fmt>/<m>.<ext>               per-sequence formats: usd/<m>.usdc, pc2/<m>.pc2, mdd/<m>.mdd,
+                                  npz/<m>.npz; pc2/<m>.ply, mdd/<m>.ply rest meshes
+    scene.usda, usd/bones.usdc    the USD stage of the run and its bone meshes
 """
 from __future__ import annotations
 
@@ -32,6 +35,21 @@ MANIFEST_KEYS = ("tool", "version", "complete", "inputs", "settings", "frames", 
 
 def mesh_relpath(muscle: str, frame: int, fmt: str) -> str:
     return f"meshes/{muscle}/{muscle}_{frame:04d}.{fmt}"
+
+
+def sequence_relpath(muscle: str, fmt: str, extension: str) -> str:
+    """A per-sequence file: one muscle, every frame."""
+    return f"{fmt}/{muscle}.{extension}"
+
+
+def rest_mesh_relpath(muscle: str, fmt: str) -> str:
+    """The rest mesh a point cache (pc2, mdd) applies to, beside it."""
+    return f"{fmt}/{muscle}.ply"
+
+
+USD_STAGE = "scene.usda"
+USD_BONES = "usd/bones.usdc"
+SEQUENCE_FOLDERS = ("usd", "pc2", "mdd", "npz")  # one per per-sequence format
 
 
 def bone_mesh_relpath(bone: str) -> str:

@@ -4,8 +4,10 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from axdf_cli.formats import WRITERS
 from axdf_cli.loaders import load_job, set_ref_policy
+
+# the --format names (axdf_cli.run.plan.format_names(), not imported here: the run package is heavy)
+FORMAT_HELP = "ply, obj (a file per frame), usd (usdc), pc2, mdd, npz (a file per muscle)"
 
 
 def add_args(p) -> None:
@@ -13,7 +15,8 @@ def add_args(p) -> None:
     p.add_argument("--muscles", nargs="+", metavar="PATH", help="muscle files, folders or globs (override the job)")
     p.add_argument("--pose", metavar="FILE", help="pose YAML (overrides the job)")
     p.add_argument("--out", metavar="DIR", help="output folder (default: the job's out, else out/run)")
-    p.add_argument("--format", choices=sorted(WRITERS), help="mesh format (default ply)")
+    p.add_argument("--format", action="append", metavar="FMT",
+                   help=f"mesh format(s): {FORMAT_HELP}; several as ply,usd or repeated (default ply)")
     p.add_argument("--frames", metavar="SPEC", help="frames to write: 0:48, 0:48:2, 3,7,10:12 (ends inclusive)")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--render", dest="render", action="store_true", default=None, help="render preview frames")
@@ -67,7 +70,7 @@ def run(args) -> int:
     total = len(plan.frames) * len(plan.models)
     if args.dry_run:
         print(f"would write {total} meshes ({len(plan.models)} muscles x {len(plan.frames)} frames, "
-              f"{plan.fmt}) to {plan.out}/meshes, plus stats.csv, bones.csv, manifest.json")
+              f"{plan.fmt}) to {plan.out}, plus stats.csv, bones.csv, manifest.json")
         for s, m in zip(plan.muscles, plan.models):
             print(f"  {s.name}: {m.n_vertices} vertices, {len(m.faces)} faces, rest length {m.l0:.4f} m, "
                   f"rest volume {m.v0 * 1e6:.2f} cm^3")

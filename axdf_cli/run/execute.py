@@ -16,12 +16,13 @@ from axdf_cli.formats import WRITERS
 from axdf_cli.run.evaluate import CHUNK_FRAMES, evaluate_chunks, finite_or_rest, twist_references
 from axdf_cli.run.plan import RunPlan, display_path
 from axdf_cli.run.pool import fork_map
-from axdf_cli.runfolder import (BONES_CSV, STATS, OutputWriter, bone_mesh_relpath, gl_record, mesh_relpath,
-                                write_manifest)
+from axdf_cli.run.sequences import SequenceFiles, sequence_formats, write_run_files
+from axdf_cli.runfolder import (BONES_CSV, SEQUENCE_FOLDERS, STATS, USD_STAGE, OutputWriter, bone_mesh_relpath,
+                                gl_record, mesh_relpath, write_manifest)
 from axdf_cli.skeleton import matrix_to_quaternion
 
 MANIFEST_INTERVAL_S = 1.0  # the in-progress manifest is rewritten at most this often
-TOP_FILES = ("manifest.json", "stats.csv", "bones.csv", "camera.json")
+TOP_FILES = ("manifest.json", "stats.csv", "bones.csv", "camera.json", USD_STAGE)
 
 
 def render_dict(settings) -> dict | None:
@@ -49,7 +50,7 @@ def check_output_folder(out: Path, resume: bool, overwrite: bool) -> dict:
             atomic.remove_stale_temporaries(out)
             return {}
     if overwrite:
-        for sub in ("meshes", "frames", "bones"):
+        for sub in ("meshes", "frames", "bones") + SEQUENCE_FOLDERS:
             shutil.rmtree(out / sub, ignore_errors=True)
         for name in TOP_FILES:
             try:
@@ -122,38 +123,54 @@ class MeshPassResult:
 
 def mesh_pass(plan: RunPlan, muscles: list[int], twist_ref: np.ndarray, writer: OutputWriter,
               progress=None, on_chunk=None, bones: bool = False) -> MeshPassResult:
-    """Evaluate and write the meshes of ``muscles`` for every selected frame, chunk by chunk;
-    with ``bones``, also return every bone's world pose (from the same kinematics)."""
-    writers = {j: WRITERS[plan.fmt](plan.models[j].faces, plan.muscles[j].name) for j in muscles}
+    """Evaluate and write the meshes of ``muscles`` for every selected frame, chunk by chunk,
+    in every selected format (per-frame files through ``writer``; per-sequence files streamed
+    by :class:`SequenceFiles` and completed at the end); with ``bones``, also return every
+    bone's world pose (from the same kinematics)."""
+    frame_formats = [f for f in plan.formats if f in WRITERS]
+    writers = {(j, f): WRITERS[f](plan.models[j].faces, plan.muscles[j].name) for j in muscles for f in frame_formats}
     col = {j: k for k, j in enumerate(muscles)}
     stats = np.zeros((len(plan.frames), len(muscles), 6))
     bone_rows = np.zeros((len(plan.frames), len(plan.pose.skeleton.bones), 7)) if bones else None
     warns: list = []
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
-    for sl, world, results in evaluate_chunks(plan, twist_ref=twist_ref, muscles=muscles):
-        frames = plan.frames[sl]
-        if bones:
-            bone_rows[sl, :, :3] = world[:, :, :3, 3]
-            bone_rows[sl, :, 3:] = matrix_to_quaternion(world[:, :, :3, :3])
-        for j, res in results:
-            name = plan.muscles[j].name
-            pos, nrm, bad = finite_or_rest(res, plan.models[j])
-            res.warnings += [(int(i), "non-finite vertices; the rest shape was written instead") for i in bad]
-            w = writers[j]
-            for i, frame in enumerate(frames):
-                writer.write(mesh_relpath(name, int(frame), plan.fmt), w.encode(pos[i], nrm[i]))
-            lo = np.minimum(lo, pos.reshape(-1, 3).min(axis=0))
-            hi = np.maximum(hi, pos.reshape(-1, 3).max(axis=0))
-            st = np.stack([res.length, res.volume, res.volume / plan.models[j].v0, res.tension,
-                           res.twist, res.scale], axis=1)
-            stats[sl, col[j]] = np.where(np.isfinite(st), st, 0.0)
-            warns += [(sl.start + i, j, msg) for i, msg in res.warnings]
-            if progress:
-                progress(len(frames))
-        if on_chunk:
-            on_chunk()
-    writer.flush()
+    seq = SequenceFiles(plan, muscles, writer.previous) if sequence_formats(plan.formats) else None
+    try:
+        for sl, world, results in evaluate_chunks(plan, twist_ref=twist_ref, muscles=muscles):
+            frames = plan.frames[sl]
+            if bones:
+                bone_rows[sl, :, :3] = world[:, :, :3, 3]
+                bone_rows[sl, :, 3:] = matrix_to_quaternion(world[:, :, :3, :3])
+            for j, res in results:
+                name = plan.muscles[j].name
+                pos, nrm, bad = finite_or_rest(res, plan.models[j])
+                res.warnings += [(int(i), "non-finite vertices; the rest shape was written instead") for i in bad]
+                for f in frame_formats:
+                    w = writers[(j, f)]
+                    for i, frame in enumerate(frames):
+                        writer.write(mesh_relpath(name, int(frame), f), w.encode(pos[i], nrm[i]))
+                if seq is not None:
+                    seq.append(j, pos, nrm)
+                lo = np.minimum(lo, pos.reshape(-1, 3).min(axis=0))
+                hi = np.maximum(hi, pos.reshape(-1, 3).max(axis=0))
+                st = np.stack([res.length, res.volume, res.volume / plan.models[j].v0, res.tension,
+                               res.twist, res.scale], axis=1)
+                stats[sl, col[j]] = np.where(np.isfinite(st), st, 0.0)
+                warns += [(sl.start + i, j, msg) for i, msg in res.warnings]
+                if progress:
+                    progress(len(frames))
+            if on_chunk:
+                on_chunk()
+        writer.flush()
+        if seq is not None:
+            files, skipped = seq.finish()
+            writer.files.update(files)
+            writer.skipped += skipped
+    except BaseException:
+        if seq is not None:
+            seq.abort()
+        raise
     return MeshPassResult(list(muscles), writer.files, stats, warns, lo, hi, writer.skipped, bone_rows)
 
 
@@ -258,6 +275,8 @@ def execute(plan: RunPlan, *, resume: bool = False, overwrite: bool = False, pro
             writer.write(bone_mesh_relpath(bones[i].name), data)
         writer.write(STATS, stats_csv(plan, stats, warn_text))
         writer.write(BONES_CSV, bones_csv(plan, parts[0].bone_rows))
+        if sequence_formats(plan.formats):
+            write_run_files(plan, writer, parts[0].bone_rows, np.array([lo, hi]))
         extra = {"bounds": [[float(f"{x:.9g}") for x in lo], [float(f"{x:.9g}") for x in hi]]}
         if plan.rendering:
             from axdf_cli.render.sequence import render_plan

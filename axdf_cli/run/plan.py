@@ -23,7 +23,7 @@ class RunPlan:
     muscles: list[MuscleSpec]
     models: list[MuscleModel]
     frames: np.ndarray  # (F,) selected output frames
-    fmt: str
+    formats: tuple  # --format names in the order given: per-frame (ply, obj) and per-sequence (usd, pc2, ...)
     out: Path
     inputs: dict  # display path -> sha256
     render: object = None  # RenderSettings (enabled or not)
@@ -34,6 +34,11 @@ class RunPlan:
     @property
     def names(self) -> list[str]:
         return [m.name for m in self.muscles]
+
+    @property
+    def fmt(self) -> str:
+        """The formats as ``--format`` takes them: ``ply`` or ``ply,usd``."""
+        return ",".join(self.formats)
 
     @property
     def rendering(self) -> bool:
@@ -105,7 +110,14 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
         frames = parse_frames(job.frames, job.frames_mark, pose.first, pose.last)
     else:
         frames = pose.frames
-    fmt = fmt_arg or (job.format if job is not None else None) or "ply"
+    if fmt_arg:
+        formats = parse_formats(fmt_arg, Mark("--format"))
+    elif job is not None and job.format is not None:
+        formats = parse_formats(job.format, job.format_mark)
+    else:
+        formats = ("ply",)
+    check_formats(formats, frames, Mark("--frames") if frames_arg is not None else
+                  (job.frames_mark if job is not None and job.frames is not None else Mark(pose.source)))
     out = Path(out_arg or (job.out if job is not None and job.out else None) or DEFAULT_OUT)
     if render is None:
         render = job_render_settings(job)
@@ -118,8 +130,61 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
     for s in srcs:
         if Path(s).is_file():
             inputs[display_path(Path(s))] = atomic.sha256_file(s)
-    return RunPlan(pose, specs, models, frames, fmt, out, inputs, render=render, warnings=warnings,
+    return RunPlan(pose, specs, models, frames, formats, out, inputs, render=render, warnings=warnings,
                    bone_meshes=bone_meshes, notes=notes)
+
+
+def format_names() -> tuple[str, ...]:
+    """Every ``--format`` value: the per-frame writers', then the per-sequence ones (and aliases)."""
+    from axdf_cli.formats import WRITERS
+    from axdf_cli.run.sequences import SEQUENCE_WRITERS
+
+    return tuple(WRITERS) + tuple(SEQUENCE_WRITERS) + tuple(FORMAT_ALIASES)
+
+
+FORMAT_ALIASES = {"usdc": "usd"}  # the USD layers are usdc; the stage is the format
+
+
+def parse_formats(value, mark: Mark) -> tuple[str, ...]:
+    """``ply``, ``ply,usd``, ``[ply, usd]`` or a list of such strings -> ('ply', 'usd'): in the
+    order given, each once, aliases resolved."""
+    items = value if isinstance(value, (list, tuple)) else [value]
+    names = format_names()
+    out: list[str] = []
+    for item in items:
+        if not isinstance(item, str):
+            raise InputError(mark, f"format is {item!r}", "a format name, a comma-separated list or a list of names")
+        for name in item.split(","):
+            name = name.strip().lower()
+            if name not in names:
+                raise InputError(mark, f"unknown format {name!r}", "one or more of " + ", ".join(names))
+            name = FORMAT_ALIASES.get(name, name)
+            if name not in out:
+                out.append(name)
+    if not out:
+        raise InputError(mark, "no format given", "one or more of " + ", ".join(names))
+    return tuple(out)
+
+
+def check_formats(formats, frames, frames_mark: Mark) -> None:
+    """What the selected formats need, checked before anything is written: evenly spaced
+    frames for point caches; Pixar's USD modules for usd (exit 3 with the install hint)."""
+    from axdf_cli.formats.pc2 import check_frames
+
+    caches = [f for f in formats if f in ("pc2", "mdd")]
+    why = check_frames(frames) if caches else None
+    if why:
+        raise InputError(frames_mark, f"frames {_frames_text(frames)} for {', '.join(caches)}",
+                         why + "; or write usd or npz, which keep any frames")
+    if "usd" in formats:
+        from axdf_cli.formats.usd import pxr
+
+        pxr()
+
+
+def _frames_text(frames) -> str:
+    f = [int(x) for x in frames]
+    return ",".join(map(str, f)) if len(f) <= 8 else ",".join(map(str, f[:8])) + ",..."
 
 
 def load_bone_mesh(path: str, skeleton_file: str):

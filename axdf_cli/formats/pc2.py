@@ -1,0 +1,124 @@
+"""Point caches: PC2 and MDD, one file per muscle holding every frame's vertex positions.
+
+A cache holds no faces: it applies to a rest mesh with the same vertex order (the run writes
+``<m>.ply`` beside each cache), e.g. Blender's Mesh Cache modifier, 3ds Max's Point Cache,
+Maya and Houdini importers.
+
+PC2 (little-endian)::
+
+    char[12] 'POINTCACHE2\\0'  int32 version = 1  int32 numPoints
+    float32 startFrame  float32 sampleRate  int32 numSamples
+    numSamples x numPoints x float32 (x, y, z)
+
+``startFrame`` is the first frame number and ``sampleRate`` the frame step between samples
+(1 for every frame; 2 for ``--frames 0:48:2``), so sample k is frame startFrame + k·sampleRate:
+the frames must be evenly spaced (:func:`check_frames`).
+
+MDD (big-endian, LightWave's layout, read by Blender's Mesh Cache)::
+
+    int32 numFrames  int32 numPoints  numFrames x float32 time (seconds: frame / fps)
+    numFrames x numPoints x float32 (x, y, z)
+
+Both are written frame after frame as the chunks arrive (the header is known up front), and
+hashed as written.
+"""
+from __future__ import annotations
+
+import struct
+from pathlib import Path
+
+import numpy as np
+
+from axdf_cli.formats.read import MeshReadError
+from axdf_cli.formats.sequence import InOrderHash, PointSequence, SequenceWriter, read_bytes, uniform_step
+
+PC2_MAGIC = b"POINTCACHE2\0"
+PC2_HEADER = struct.Struct("<12siiffi")  # magic, version, numPoints, startFrame, sampleRate, numSamples
+MDD_HEADER = struct.Struct(">ii")  # numFrames, numPoints
+
+
+def check_frames(frames) -> str | None:
+    """Why a point cache cannot hold these frames (None when it can): PC2 has one start and
+    one step, MDD's times are read the same way by most importers."""
+    if uniform_step(frames) is None:
+        return "point caches (pc2, mdd) need evenly spaced frames (one start and one step)"
+    return None
+
+
+class _CacheWriter(SequenceWriter):
+    """Frame-major caches: a fixed header, then each frame's (V, 3) float32 in ``_dtype``."""
+
+    _dtype = "<f4"
+
+    def __init__(self, path, info, faces, n_vertices):
+        super().__init__(path, info, faces, n_vertices)
+        why = check_frames(info.frames)
+        if why:
+            self.abort()
+            raise ValueError(why)
+        self._head = self._header()
+        self._hash = InOrderHash()
+        self.file.pwrite(self._head, 0)
+        self._hash.update(self._head, 0)
+
+    def _chunk(self, k0, positions, normals):
+        data = positions.astype(self._dtype, copy=False)
+        offset = len(self._head) + k0 * self.n_vertices * 12
+        self.file.pwrite(data, offset)
+        self._hash.update(data, offset)
+
+    def _close(self):
+        return self._hash.hexdigest()
+
+
+class Pc2Writer(_CacheWriter):
+    extension = "pc2"
+
+    def _header(self) -> bytes:
+        f = self.info.frames
+        return PC2_HEADER.pack(PC2_MAGIC, 1, self.n_vertices, float(f[0]), uniform_step(f), self.n_frames)
+
+
+class MddWriter(_CacheWriter):
+    extension = "mdd"
+    _dtype = ">f4"
+
+    def _header(self) -> bytes:
+        times = np.asarray(self.info.frames, np.float64) / self.info.fps
+        return MDD_HEADER.pack(self.n_frames, self.n_vertices) + times.astype(">f4").tobytes()
+
+
+def read_pc2(path: Path | str) -> PointSequence:
+    """A PC2 file -> :class:`PointSequence` (frames startFrame + k·sampleRate, no normals or faces)."""
+    data = read_bytes(path)
+    if len(data) < PC2_HEADER.size or not data.startswith(PC2_MAGIC):
+        raise MeshReadError("not a PC2 file (no 'POINTCACHE2' magic)")
+    _, version, n_points, start, rate, n_samples = PC2_HEADER.unpack_from(data)
+    if version != 1 or n_points < 0 or n_samples < 0:
+        raise MeshReadError(f"PC2 header: version {version}, {n_points} points, {n_samples} samples; "
+                            "version 1 and counts >= 0")
+    need = PC2_HEADER.size + n_samples * n_points * 12
+    if len(data) != need:
+        raise MeshReadError(f"PC2 file has {len(data)} bytes; its header says {need}")
+    pts = np.frombuffer(data, "<f4", offset=PC2_HEADER.size).reshape(n_samples, n_points, 3)
+    frames = float(start) + float(rate) * np.arange(n_samples)
+    return PointSequence(frames, pts, None, None)
+
+
+def read_mdd(path: Path | str, fps: float | None = None) -> PointSequence:
+    """An MDD file -> :class:`PointSequence`; frame numbers are time·fps when ``fps`` is
+    given, else the frame indices 0, 1, ..."""
+    data = read_bytes(path)
+    if len(data) < MDD_HEADER.size:
+        raise MeshReadError("MDD file is shorter than its header")
+    n_frames, n_points = MDD_HEADER.unpack_from(data)
+    if n_frames < 0 or n_points < 0:
+        raise MeshReadError(f"MDD header: {n_frames} frames, {n_points} points; counts >= 0")
+    head = MDD_HEADER.size + 4 * n_frames
+    need = head + n_frames * n_points * 12
+    if len(data) != need:
+        raise MeshReadError(f"MDD file has {len(data)} bytes; its header says {need}")
+    times = np.frombuffer(data, ">f4", n_frames, MDD_HEADER.size).astype(np.float64)
+    pts = np.frombuffer(data, ">f4", offset=head).reshape(n_frames, n_points, 3).astype(np.float32)
+    frames = np.rint(times * fps) if fps else np.arange(n_frames, dtype=np.float64)
+    return PointSequence(frames, pts, None, None, fps)
