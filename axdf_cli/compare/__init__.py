@@ -20,12 +20,13 @@ from axdf_cli.compare.tolerances import FileTol, Tolerances, as_dict
 from axdf_cli.errors import UsageError
 
 # file suffix -> kind; `manifest.json` is recognised by its whole name
-KINDS = {".ply": "mesh", ".obj": "mesh", ".png": "png", ".exr": "exr", ".csv": "table", ".json": "json"}
+KINDS = {".ply": "mesh", ".obj": "mesh", ".png": "png", ".exr": "exr", ".csv": "table", ".json": "json",
+         ".npz": "sequence", ".pc2": "sequence", ".mdd": "sequence", ".usdc": "sequence", ".usda": "stage"}
 MANIFEST = "manifest.json"
 
 # kind -> the FileTol section that applies (None: no numeric tolerance)
 TOL_SECTION = {"mesh": "mesh", "png": "png", "exr": "exr", "table": "table", "json": "json",
-               "manifest": None, "bytes": None}
+               "sequence": "mesh", "stage": "json", "manifest": None, "bytes": None}
 
 
 def kind_of(name: str) -> str:
@@ -39,6 +40,12 @@ def _compare_kind(kind: str, a: Path, g: Path, ab: bytes, gb: bytes, t: FileTol)
     if kind == "mesh":
         from axdf_cli.compare.meshes import compare_mesh_files
         return compare_mesh_files(ab, gb, a.suffix.lower(), g.suffix.lower(), t.mesh)
+    if kind == "sequence":
+        from axdf_cli.compare.sequences import compare_sequence_files
+        return compare_sequence_files(a, g, t.mesh)
+    if kind == "stage":
+        from axdf_cli.compare.sequences import compare_usd_layers
+        return compare_usd_layers(a, g, t.json.atol, t.json.rtol)
     if kind == "png":
         from axdf_cli.compare.images import compare_png
         return compare_png(ab, gb, t.png)

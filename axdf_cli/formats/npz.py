@@ -144,19 +144,53 @@ class NpzWriter(SequenceWriter):
 
 
 def read_npz(path: Path | str) -> PointSequence:
-    """An axdf NPZ -> :class:`PointSequence`."""
+    """An axdf NPZ -> :class:`PointSequence`; stored (uncompressed) points and normals are
+    memory-mapped, so a long sequence is read a frame at a time."""
     import zipfile
 
     try:
-        with np.load(path, allow_pickle=False) as z:
-            missing = [k for k in ENTRIES if k not in z.files]
+        with zipfile.ZipFile(path) as z:
+            names = set(z.namelist())
+            missing = [k for k in ENTRIES if k + ".npy" not in names]
             if missing:
                 raise MeshReadError(f"NPZ lacks {', '.join(missing)}; an axdf NPZ has {', '.join(ENTRIES)}")
-            a = {k: z[k] for k in ENTRIES}
+            a = {k: _entry_array(path, z, k + ".npy") for k in ENTRIES}
     except (OSError, ValueError, zipfile.BadZipFile, EOFError) as e:
+        if isinstance(e, MeshReadError):
+            raise
         raise MeshReadError(f"not a readable NPZ ({e})") from None
-    faces = a["faces"]
+    faces, pts, nrm = a["faces"], a["points"], a["normals"]
     if faces.ndim != 2 or faces.shape[1] != 3:
         raise MeshReadError(f"faces have shape {faces.shape}, expected (T, 3)")
-    return PointSequence(a["frames"].astype(np.float64), a["points"].astype(np.float32, copy=False),
-                         a["normals"].astype(np.float32, copy=False), faces.astype(np.int32), float(a["fps"]))
+    if pts.dtype.kind != "f" or nrm.dtype.kind != "f":
+        raise MeshReadError(f"points are {pts.dtype}, normals {nrm.dtype}; float arrays")
+    return PointSequence(np.asarray(a["frames"], np.float64).reshape(-1), pts, nrm, faces.astype(np.int32),
+                         float(a["fps"]))
+
+
+def _entry_array(path, z, name: str) -> np.ndarray:
+    """One ``.npy`` entry: memory-mapped when stored uncompressed in C order, else read."""
+    from numpy.lib import format as npformat
+
+    info = z.getinfo(name)
+    if info.compress_type != 0:  # deflated (np.savez_compressed): read it whole
+        with z.open(info) as f:
+            return npformat.read_array(f, allow_pickle=False)
+    with open(path, "rb") as f:
+        f.seek(info.header_offset)
+        local = f.read(_LOCAL.size)
+        if len(local) != _LOCAL.size or _LOCAL.unpack(local)[0] != 0x04034B50:
+            raise MeshReadError(f"NPZ entry {name}: bad local header")
+        n_name, n_extra = _LOCAL.unpack(local)[-2:]
+        start = info.header_offset + _LOCAL.size + n_name + n_extra  # the entry's data
+        f.seek(start)
+        version = npformat.read_magic(f)
+        reader = npformat.read_array_header_1_0 if version == (1, 0) else npformat.read_array_header_2_0
+        shape, fortran, dtype = reader(f)
+        offset = f.tell()
+    n = int(np.prod(shape, dtype=np.int64))
+    if dtype.hasobject or fortran or offset + n * dtype.itemsize > start + info.file_size:
+        raise MeshReadError(f"NPZ entry {name}: {dtype} {shape} does not fit the entry")
+    if n == 0:
+        return np.zeros(shape, dtype)
+    return np.memmap(path, dtype, "r", offset=offset, shape=shape)

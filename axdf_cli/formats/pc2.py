@@ -24,13 +24,14 @@ hashed as written.
 """
 from __future__ import annotations
 
+import os
 import struct
 from pathlib import Path
 
 import numpy as np
 
 from axdf_cli.formats.read import MeshReadError
-from axdf_cli.formats.sequence import InOrderHash, PointSequence, SequenceWriter, read_bytes, uniform_step
+from axdf_cli.formats.sequence import InOrderHash, PointSequence, SequenceWriter, uniform_step
 
 PC2_MAGIC = b"POINTCACHE2\0"
 PC2_HEADER = struct.Struct("<12siiffi")  # magic, version, numPoints, startFrame, sampleRate, numSamples
@@ -88,37 +89,51 @@ class MddWriter(_CacheWriter):
         return MDD_HEADER.pack(self.n_frames, self.n_vertices) + times.astype(">f4").tobytes()
 
 
+def _open(path: Path | str, head_size: int) -> tuple[bytes, int]:
+    """The first ``head_size`` bytes of a file and its length."""
+    try:
+        with open(path, "rb") as f:
+            return f.read(head_size), os.fstat(f.fileno()).st_size
+    except OSError as e:
+        raise MeshReadError(f"cannot read {Path(path).name} ({e.strerror})") from None
+
+
+def _frames_of(path, dtype: str, offset: int, n_frames: int, n_points: int) -> np.ndarray:
+    """(F, V, 3) float32 memory-mapped from ``offset`` (read one frame at a time by consumers)."""
+    if n_frames * n_points == 0:
+        return np.zeros((n_frames, n_points, 3), np.float32)
+    return np.memmap(path, dtype, "r", offset=offset, shape=(n_frames, n_points, 3))
+
+
 def read_pc2(path: Path | str) -> PointSequence:
-    """A PC2 file -> :class:`PointSequence` (frames startFrame + k·sampleRate, no normals or faces)."""
-    data = read_bytes(path)
-    if len(data) < PC2_HEADER.size or not data.startswith(PC2_MAGIC):
+    """A PC2 file -> :class:`PointSequence` (frames startFrame + k·sampleRate; no normals or faces)."""
+    head, size = _open(path, PC2_HEADER.size)
+    if len(head) < PC2_HEADER.size or not head.startswith(PC2_MAGIC):
         raise MeshReadError("not a PC2 file (no 'POINTCACHE2' magic)")
-    _, version, n_points, start, rate, n_samples = PC2_HEADER.unpack_from(data)
+    _, version, n_points, start, rate, n_samples = PC2_HEADER.unpack(head)
     if version != 1 or n_points < 0 or n_samples < 0:
         raise MeshReadError(f"PC2 header: version {version}, {n_points} points, {n_samples} samples; "
                             "version 1 and counts >= 0")
     need = PC2_HEADER.size + n_samples * n_points * 12
-    if len(data) != need:
-        raise MeshReadError(f"PC2 file has {len(data)} bytes; its header says {need}")
-    pts = np.frombuffer(data, "<f4", offset=PC2_HEADER.size).reshape(n_samples, n_points, 3)
+    if size != need:
+        raise MeshReadError(f"PC2 file has {size} bytes; its header says {need}")
     frames = float(start) + float(rate) * np.arange(n_samples)
-    return PointSequence(frames, pts, None, None)
+    return PointSequence(frames, _frames_of(path, "<f4", PC2_HEADER.size, n_samples, n_points), None, None)
 
 
 def read_mdd(path: Path | str, fps: float | None = None) -> PointSequence:
     """An MDD file -> :class:`PointSequence`; frame numbers are time·fps when ``fps`` is
     given, else the frame indices 0, 1, ..."""
-    data = read_bytes(path)
-    if len(data) < MDD_HEADER.size:
+    head, size = _open(path, MDD_HEADER.size)
+    if len(head) < MDD_HEADER.size:
         raise MeshReadError("MDD file is shorter than its header")
-    n_frames, n_points = MDD_HEADER.unpack_from(data)
+    n_frames, n_points = MDD_HEADER.unpack(head)
     if n_frames < 0 or n_points < 0:
         raise MeshReadError(f"MDD header: {n_frames} frames, {n_points} points; counts >= 0")
-    head = MDD_HEADER.size + 4 * n_frames
-    need = head + n_frames * n_points * 12
-    if len(data) != need:
-        raise MeshReadError(f"MDD file has {len(data)} bytes; its header says {need}")
-    times = np.frombuffer(data, ">f4", n_frames, MDD_HEADER.size).astype(np.float64)
-    pts = np.frombuffer(data, ">f4", offset=head).reshape(n_frames, n_points, 3).astype(np.float32)
+    start = MDD_HEADER.size + 4 * n_frames
+    need = start + n_frames * n_points * 12
+    if size != need:
+        raise MeshReadError(f"MDD file has {size} bytes; its header says {need}")
+    times = np.fromfile(path, ">f4", n_frames, offset=MDD_HEADER.size).astype(np.float64)
     frames = np.rint(times * fps) if fps else np.arange(n_frames, dtype=np.float64)
-    return PointSequence(frames, pts, None, None, fps)
+    return PointSequence(frames, _frames_of(path, ">f4", start, n_frames, n_points), None, None, fps)

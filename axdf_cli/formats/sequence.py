@@ -155,10 +155,3 @@ def uniform_step(frames) -> float | None:
         return 1.0
     d = np.diff(f)
     return float(d[0]) if np.all(d == d[0]) and d[0] > 0 else None
-
-
-def read_bytes(path: Path | str) -> bytes:
-    try:
-        return Path(path).read_bytes()
-    except OSError as e:
-        raise MeshReadError(f"cannot read {Path(path).name} ({e.strerror})") from None

@@ -244,10 +244,13 @@ def read_usd(path: Path | str) -> PointSequence:
     """A muscle layer (``usd/<m>.usdc``: its default prim a Mesh) -> :class:`PointSequence`
     with frames read lazily; triangles only."""
     Sdf, Usd, UsdGeom, *_ = pxr()
-    try:
-        stage = Usd.Stage.Open(str(path))
+    try:  # anonymous: never a stale copy from pxr's layer registry when the file was rewritten
+        layer = Sdf.Layer.OpenAsAnonymous(str(path))
     except Exception as e:  # pxr raises Tf.ErrorException for unreadable layers
         raise MeshReadError(f"not a readable USD layer ({str(e).strip().splitlines()[-1]})") from None
+    if layer is None:
+        raise MeshReadError("not a readable USD layer")
+    stage = Usd.Stage.Open(layer)
     prim = stage.GetDefaultPrim()
     if not prim or not prim.IsA(UsdGeom.Mesh):
         raise MeshReadError("the USD layer's default prim is not a Mesh")

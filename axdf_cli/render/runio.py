@@ -64,13 +64,84 @@ def _quat_matrix(q: np.ndarray) -> np.ndarray:
         np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1)], -2)
 
 
-def _mesh_path(run_dir: Path, name: str, frame: int) -> Path:
-    for ext in _READERS:
-        p = run_dir / mesh_relpath(name, frame, ext[1:])
-        if p.exists():
-            return p
-    raise InputError(Mark(str(run_dir / mesh_relpath(name, frame, "ply"))),
-                     "mesh file missing", "the run folder must hold every muscle's mesh for every frame")
+class _FrameFiles:
+    """A muscle written one file per frame (``meshes/<m>/<m>_<frame>.ply|obj``)."""
+
+    def __init__(self, run_dir: Path, name: str, frames):
+        self.run_dir, self.name, self.frames = run_dir, name, frames
+
+    def path(self, k: int) -> Path:
+        for ext in _READERS:
+            p = self.run_dir / mesh_relpath(self.name, self.frames[k], ext[1:])
+            if p.exists():
+                return p
+        raise InputError(Mark(str(self.run_dir / mesh_relpath(self.name, self.frames[k], "ply"))),
+                         "mesh file missing", "the run folder must hold every muscle's mesh for every frame")
+
+    def where(self, k: int) -> str:
+        return str(self.path(k))
+
+    def read(self, k: int):
+        p = self.path(k)
+        return _READERS[p.suffix](p)
+
+
+class _SequenceFile:
+    """A muscle written in a per-sequence format (npz, usd, pc2, mdd), read a frame at a time."""
+
+    def __init__(self, path: Path, seq, faces):
+        self.file, self.seq, self.faces = path, seq, faces
+
+    def where(self, k: int) -> str:
+        return f"{self.file} (frame {self.seq.frames[k]:g})"
+
+    def read(self, k: int):
+        nrm = None if self.seq.normals is None else np.asarray(self.seq.normals[k], np.float32)
+        return np.asarray(self.seq.points[k], np.float32), nrm, self.faces
+
+
+def _sequence_readers():
+    """(format, file extension, reader) of the per-sequence formats, in the order a run folder
+    is read back when it has no per-frame meshes."""
+    from axdf_cli.formats.npz import NpzWriter, read_npz
+    from axdf_cli.formats.pc2 import MddWriter, Pc2Writer, read_mdd, read_pc2
+    from axdf_cli.formats.usd import UsdWriter, read_usd
+
+    return (("npz", NpzWriter.extension, read_npz), ("pc2", Pc2Writer.extension, read_pc2),
+            ("mdd", MddWriter.extension, read_mdd), ("usd", UsdWriter.extension, read_usd))
+
+
+def muscle_frames(run_dir: Path, name: str, frames: tuple[int, ...], fps=None):
+    """Where a muscle's frames are read from: its per-frame meshes when the run has them,
+    else its first per-sequence file (npz, pc2, mdd, usd) whose frames are the run's.
+    ``.read(k)`` gives frame index k as (V, 3) float32 positions, normals or None, (T, 3) faces."""
+    from axdf_cli.formats.read import MeshReadError
+    from axdf_cli.runfolder import rest_mesh_relpath, sequence_relpath
+
+    files = _FrameFiles(run_dir, name, frames)
+    if not frames or any((run_dir / mesh_relpath(name, frames[0], e[1:])).exists() for e in _READERS):
+        return files
+    for fmt, ext, reader in _sequence_readers():
+        path = run_dir / sequence_relpath(name, fmt, ext)
+        if not path.exists():
+            continue
+        try:
+            seq = reader(path, fps) if fmt == "mdd" else reader(path)
+        except MeshReadError as e:
+            raise InputError(Mark(str(path)), f"not readable ({e})", f"a {fmt} file written by axdf run") from None
+        if len(seq.frames) != len(frames) or not np.allclose(seq.frames, frames):
+            raise InputError(Mark(str(path)), f"holds frames {_span(seq.frames)}, the manifest {_span(frames)}",
+                             "the file of the same run")
+        faces = seq.faces
+        if faces is None:  # a point cache: the topology is its rest mesh's
+            faces = read_mesh_file(run_dir / rest_mesh_relpath(name, fmt))[2]
+        return _SequenceFile(path, seq, faces)
+    return files  # no sequence either: the per-frame error names the missing file
+
+
+def _span(frames) -> str:
+    f = np.asarray(frames, np.float64)
+    return f"{f[0]:g}..{f[-1]:g} ({len(f)})" if len(f) else "none"
 
 
 def load_run_scene(run_dir: Path) -> tuple[Scene, Iterator[FrameChunk], RenderSettings]:
@@ -92,16 +163,17 @@ def load_run_scene(run_dir: Path) -> tuple[Scene, Iterator[FrameChunk], RenderSe
     colors = [_color(m.get("color", [0.7, 0.3, 0.3]), where) for m in manifest["muscles"]]
 
     # pass 1: topology from the first frame, bounds over every frame
+    fps = (manifest.get("settings") or {}).get("fps") if isinstance(manifest.get("settings"), dict) else None
+    sources = [muscle_frames(run_dir, name, frames, fps) for name in names]
     muscles, lo, hi = [], np.full(3, np.inf), np.full(3, -np.inf)
-    for name, color in zip(names, colors):
-        for k, f in enumerate(frames):
-            p = _mesh_path(run_dir, name, f)
-            pos, _, faces = _READERS[p.suffix](p)
+    for name, color, src in zip(names, colors, sources):
+        for k in range(len(frames)):
+            pos, _, faces = src.read(k)
             if k == 0:
                 muscles.append(SceneMuscle(name, color, faces))
                 nv = len(pos)
             elif len(pos) != nv:
-                raise InputError(Mark(str(p)), f"{len(pos)} vertices, frame {frames[0]} has {nv}",
+                raise InputError(Mark(src.where(k)), f"{len(pos)} vertices, frame {frames[0]} has {nv}",
                                  "every frame has the same vertex count")
             lo, hi = np.minimum(lo, pos.min(0)), np.maximum(hi, pos.max(0))
     bounds = np.stack([lo, hi]) if muscles else np.zeros((2, 3))
@@ -123,9 +195,8 @@ def load_run_scene(run_dir: Path) -> tuple[Scene, Iterator[FrameChunk], RenderSe
     def chunks() -> Iterator[FrameChunk]:
         for k, f in enumerate(frames):
             ps, ns = [], []
-            for m in muscles:
-                p = _mesh_path(run_dir, m.name, f)
-                pos, nrm, faces = _READERS[p.suffix](p)
+            for src in sources:
+                pos, nrm, faces = src.read(k)
                 if nrm is None:
                     from axdf_cli.render.renderer import vertex_normals
                     nrm = vertex_normals(pos, faces)
