@@ -8,7 +8,8 @@ relative, so the folder moves whole)::
                         time codes = the first and last frame), /axdf/muscles/<m> each
                         referencing usd/<m>.usdc, /axdf/bones/<bone> Xforms with time-sampled
                         xformOp:translate + xformOp:orient (the bone frame in the world, as in
-                        bones.csv) over their mesh (usd/bones.usdc), /axdf/camera
+                        bones.csv) over their mesh <bone>_mesh (from usd/bones.usdc),
+                        /axdf/camera (the render settings' view)
     usd/<m>.usdc        one layer per muscle: a UsdGeomMesh (default prim) with its topology
                         written once (faceVertexCounts, faceVertexIndices, rightHanded, no
                         subdivision), points, normals (vertex) and extent time-sampled at the
@@ -187,7 +188,7 @@ def write_stage(path: Path | str, frames, fps: float, muscles, bones, bone_rows:
         _samples(layer, t.GetAttr().GetPath(), frames, rows, lambda r: Gf.Vec3d(*map(float, r[:3])))
         _samples(layer, q.GetAttr().GetPath(), frames, rows, lambda r: Gf.Quatd(float(r[3]), Gf.Vec3d(*map(float, r[4:7]))))
         if ref:
-            m = stage.DefinePrim(f"{ROOT}/bones/{prim}/mesh")
+            m = stage.DefinePrim(f"{ROOT}/bones/{prim}/{prim}_mesh")
             m.GetReferences().AddReference("./" + ref, f"/bones/{prim}")
     if camera is not None:
         _camera(stage, layer, frames, camera)
