@@ -11,18 +11,19 @@ Entries (``.npy``, stored uncompressed, in this order)::
 ``np.savez`` stamps each entry with the current time, so the zip is written here: stored
 entries at offsets fixed up front (every size is known from F, V and T), the points and
 normals of each chunk written in place as they arrive (two regions of one file, each with a
-running CRC-32), the local headers, central directory and end record last, every date the
-zip epoch 1980-01-01 00:00 (same inputs, same bytes). ZIP64 records are used for any size or
+running CRC-32, computed by zlib-ng: zlib's own took as long as writing the bytes), the
+local headers, central directory and end record last, every date the zip epoch 1980-01-01
+00:00 (same inputs, same bytes). ZIP64 records are used for any size or
 offset past 4 GiB (APPNOTE 6.3.x, 4.5.3), as zipfile reads them.
 """
 from __future__ import annotations
 
 import io
 import struct
-import zlib
 from pathlib import Path
 
 import numpy as np
+from zlib_ng.zlib_ng import crc32  # zlib's CRC-32, ~5x faster (folding with carry-less multiply)
 
 from axdf_cli.formats.read import MeshReadError
 from axdf_cli.formats.sequence import PointSequence, SequenceWriter
@@ -103,8 +104,8 @@ def end_records(n_entries: int, cd_offset: int, cd_size: int) -> bytes:
 class NpzWriter(SequenceWriter):
     extension = "npz"
 
-    def __init__(self, path, info, faces, n_vertices):
-        super().__init__(path, info, faces, n_vertices)
+    def __init__(self, path, info, faces, n_vertices, sha256: bool = True):
+        super().__init__(path, info, faces, n_vertices, sha256)
         F, V = self.n_frames, self.n_vertices
         small = {"frames": np.asarray(info.frames, "<i8"), "fps": np.asarray(float(info.fps), "<f8"),
                  "faces": self.faces.astype("<i4")}
@@ -120,11 +121,11 @@ class NpzWriter(SequenceWriter):
         self._end = offset
         for k, data in payload.items():
             e = self._entries[k]
-            e.crc = zlib.crc32(data)
+            e.crc = crc32(data)
             self.file.pwrite(data, e.data_offset)
         for k in ("points", "normals"):
             e = self._entries[k]
-            e.crc = zlib.crc32(self._heads[k])
+            e.crc = crc32(self._heads[k])
             self.file.pwrite(self._heads[k], e.data_offset)
 
     def _chunk(self, k0, positions, normals):
@@ -132,7 +133,7 @@ class NpzWriter(SequenceWriter):
         for k, a in (("points", positions), ("normals", normals)):
             e = self._entries[k]
             self.file.pwrite(a, e.data_offset + len(self._heads[k]) + at)
-            e.crc = zlib.crc32(a, e.crc)  # chunks arrive in frame order: the running CRC is the entry's
+            e.crc = crc32(a, e.crc)  # chunks arrive in frame order: the running CRC is the entry's
 
     def _close(self):
         central = b""

@@ -51,25 +51,26 @@ class _CacheWriter(SequenceWriter):
 
     _dtype = "<f4"
 
-    def __init__(self, path, info, faces, n_vertices):
-        super().__init__(path, info, faces, n_vertices)
+    def __init__(self, path, info, faces, n_vertices, sha256: bool = True):
+        super().__init__(path, info, faces, n_vertices, sha256)
         why = check_frames(info.frames)
         if why:
             self.abort()
             raise ValueError(why)
         self._head = self._header()
-        self._hash = InOrderHash()
-        self.file.pwrite(self._head, 0)
-        self._hash.update(self._head, 0)
+        self._hash = InOrderHash() if sha256 else None
+        self._write(self._head, 0)
+
+    def _write(self, data, offset: int) -> None:
+        self.file.pwrite(data, offset)
+        if self._hash is not None:
+            self._hash.update(data, offset)
 
     def _chunk(self, k0, positions, normals):
-        data = positions.astype(self._dtype, copy=False)
-        offset = len(self._head) + k0 * self.n_vertices * 12
-        self.file.pwrite(data, offset)
-        self._hash.update(data, offset)
+        self._write(positions.astype(self._dtype, copy=False), len(self._head) + k0 * self.n_vertices * 12)
 
     def _close(self):
-        return self._hash.hexdigest()
+        return self._hash.hexdigest() if self._hash is not None else None
 
 
 class Pc2Writer(_CacheWriter):

@@ -35,6 +35,7 @@ from axdf_cli.formats.read import MeshReadError
 from axdf_cli.formats.sequence import PointSequence, SequenceWriter
 
 ROOT = "/axdf"
+SPOOL_BLOCK = 128  # frames read back from a muscle's spool at a time
 FOCAL_LENGTH = 50.0  # lens units (tenths of a scene unit); only aperture / focal length matters
 
 
@@ -73,13 +74,13 @@ def _metadata(stage, frames, fps: float) -> None:
     stage.SetEndTimeCode(float(frames[-1]))
 
 
-def _samples(layer, path, frames, values, make) -> None:
-    """Author ``values[k]`` at time ``frames[k]`` on the attribute ``path`` (Sdf level, one
+def _samples(layer, path, times, values, make) -> None:
+    """Author ``values[k]`` at time ``times[k]`` on the attribute ``path`` (Sdf level, one
     change block: much faster than the Usd API per sample)."""
     Sdf = pxr()[0]
     with Sdf.ChangeBlock():
-        for k, f in enumerate(frames):
-            layer.SetTimeSample(path, float(f), make(values[k]))
+        for t, v in zip(times, values):
+            layer.SetTimeSample(path, float(t), make(v))
 
 
 def _new_stage():
@@ -88,8 +89,9 @@ def _new_stage():
     return layer, Usd.Stage.Open(layer)
 
 
-def write_muscle_layer(path: Path | str, info, faces: np.ndarray, points, normals) -> None:
-    """Write one muscle's layer to ``path`` (``.usdc``): points, normals (F, V, 3) float32."""
+def write_muscle_layer(path: Path | str, info, faces: np.ndarray, blocks) -> None:
+    """Write one muscle's layer to ``path`` (``.usdc``). ``blocks`` yields the frames in order
+    as (points (C, V, 3), normals (C, V, 3)) float32 blocks."""
     Sdf, Usd, UsdGeom, Vt, Gf, _ = pxr()
     layer, stage = _new_stage()
     _metadata(stage, info.frames, info.fps)
@@ -103,11 +105,20 @@ def write_muscle_layer(path: Path | str, info, faces: np.ndarray, points, normal
     mesh.CreateDisplayColorPrimvar(UsdGeom.Tokens.constant).Set(Vt.Vec3fArray([Gf.Vec3f(*map(float, info.color))]))
     pa, na, ea = mesh.CreatePointsAttr(), mesh.CreateNormalsAttr(), mesh.CreateExtentAttr()
     mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
-    fr = info.frames
-    _samples(layer, pa.GetPath(), fr, points, lambda a: Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(a)))
-    _samples(layer, na.GetPath(), fr, normals, lambda a: Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(a)))
-    _samples(layer, ea.GetPath(), fr, points,
-             lambda a: Vt.Vec3fArray.FromNumpy(np.stack([a.min(axis=0), a.max(axis=0)]).astype(np.float32)))
+    vec3f = lambda a: Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(a))  # noqa: E731
+    k = 0
+    for points, normals in blocks:
+        times = info.frames[k:k + len(points)]
+        k += len(points)
+        # extent[f] = [min over v of points[f, v], max over v]; reduced along a contiguous
+        # last axis (numpy's reduce over the middle axis of (C, V, 3) is ~20x slower)
+        xyz = np.ascontiguousarray(points.transpose(0, 2, 1))  # (C, 3, V)
+        extent = np.stack([xyz.min(axis=2, initial=np.inf), xyz.max(axis=2, initial=-np.inf)], axis=1)
+        _samples(layer, pa.GetPath(), times, points, vec3f)
+        _samples(layer, na.GetPath(), times, normals, vec3f)
+        _samples(layer, ea.GetPath(), times, extent.astype(np.float32), vec3f)
+    if k != len(info.frames):
+        raise ValueError(f"{k} frames given for {len(info.frames)}")
     layer.Export(str(path))
 
 
@@ -117,9 +128,9 @@ class UsdWriter(SequenceWriter):
 
     extension = "usdc"
 
-    def __init__(self, path, info, faces, n_vertices):
+    def __init__(self, path, info, faces, n_vertices, sha256: bool = True):
         pxr()
-        super().__init__(path, info, faces, n_vertices)
+        super().__init__(path, info, faces, n_vertices, sha256)
         self.spool = atomic.StreamingFile(self.path.with_name(self.path.name + ".spool"))
 
     def _chunk(self, k0, positions, normals):
@@ -129,12 +140,16 @@ class UsdWriter(SequenceWriter):
 
     def _close(self):
         F, V = self.n_frames, self.n_vertices
-        if F * V:
-            data = np.memmap(self.spool.tmp, "<f4", "r", shape=(2, F, V, 3))
-        else:
-            data = np.zeros((2, F, V, 3), np.float32)
-        write_muscle_layer(self.file.tmp, self.info, self.faces, data[0], data[1])
-        del data
+        step = SPOOL_BLOCK
+
+        def blocks():  # read back with read(2) in blocks of frames: no page-by-page faults
+            for s in range(0, F, step):
+                c = min(step, F - s)
+                p = np.fromfile(self.spool.tmp, "<f4", c * V * 3, offset=s * V * 12).reshape(c, V, 3)
+                n = np.fromfile(self.spool.tmp, "<f4", c * V * 3, offset=(F + s) * V * 12).reshape(c, V, 3)
+                yield p, n
+
+        write_muscle_layer(self.file.tmp, self.info, self.faces, blocks())
         self.spool.discard()
         return None
 
