@@ -82,7 +82,8 @@ def run(args) -> int:
     try:
         summary = runner.execute(plan, resume=args.resume, overwrite=args.overwrite,
                                  progress=bar.update if bar else None, strict=args.strict, jobs=args.jobs,
-                                 render_progress=(lambda _f: rbar.update(1)) if rbar else None)
+                                 render_progress=(lambda _f: rbar.update(1)) if rbar else None,
+                                 on_note=lambda text: print(f"note: {text}", file=sys.stderr))
     finally:
         for b in (bar, rbar):
             if b:
