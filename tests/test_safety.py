@@ -264,6 +264,18 @@ def test_resume_refuses_other_inputs_or_settings(project, capsys, change):
     assert snapshot(project) == before
 
 
+def test_dry_run_makes_the_folder_checks(project, capsys):
+    assert run_main(DEMO + ["--frames", "0", "--out", "out"], capsys)[0] == 0
+    before = snapshot(project)
+    rc, _, err = run_main(DEMO + ["--frames", "0", "--out", "out", "--dry-run"], capsys)
+    assert rc == 2 and "not empty" in err
+    rc, _, err = run_main(DEMO + ["--frames", "0", "--out", "out", "--dry-run", "--resume", "--format", "obj"], capsys)
+    assert rc == 2 and "settings.format" in err
+    rc, out, err = run_main(DEMO + ["--frames", "0", "--out", "out", "--dry-run", "--overwrite"], capsys)
+    assert rc == 0 and "would write" in out
+    assert snapshot(project) == before
+
+
 def test_resume_refuses_a_folder_that_holds_no_run(project, capsys):
     out = project / "out"
     (out / "sub").mkdir(parents=True)

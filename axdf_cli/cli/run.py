@@ -66,6 +66,7 @@ def run(args) -> int:
         print(f"warning: {w}", file=sys.stderr)
     total = len(plan.frames) * len(plan.models)
     if args.dry_run:
+        runner.check_output(plan, resume=args.resume, overwrite=args.overwrite)
         print(f"would write {total} meshes ({len(plan.models)} muscles x {len(plan.frames)} frames, "
               f"{plan.fmt}) to {plan.out}/meshes, plus stats.csv, bones.csv, manifest.json")
         for s, m in zip(plan.muscles, plan.models):

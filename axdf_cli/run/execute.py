@@ -191,6 +191,15 @@ def check_resume(plan: RunPlan, previous) -> None:
                          "resume with the inputs and settings of the interrupted run, or pass --overwrite")
 
 
+def check_output(plan: RunPlan, *, resume: bool = False, overwrite: bool = False) -> runfolder.Target:
+    """The output folder's checks (reads only): what OUT holds, and for --resume that it is
+    the same run."""
+    target = runfolder.prepare(plan.out, resume=resume, overwrite=overwrite, dirs=run_dirs(plan))
+    if resume and target.previous is not None:
+        check_resume(plan, target.previous)
+    return target
+
+
 def execute(plan: RunPlan, *, resume: bool = False, overwrite: bool = False, progress=None,
             strict: bool = False, render_progress=None, jobs: int = 1, on_note=None) -> dict:
     """Run the plan; return a summary dict. ``progress(n)`` is called with muscle-frames done;
@@ -201,9 +210,7 @@ def execute(plan: RunPlan, *, resume: bool = False, overwrite: bool = False, pro
     muscles are split over forked worker processes for the mesh pass; the output is the same
     bytes. Rendering runs in this process afterwards (the GL context is created after every
     fork)."""
-    target = runfolder.prepare(plan.out, resume=resume, overwrite=overwrite, dirs=run_dirs(plan))
-    if resume and target.previous is not None:
-        check_resume(plan, target.previous)
+    target = check_output(plan, resume=resume, overwrite=overwrite)
     twist_ref = twist_references(plan)
     if strict:
         strict_check(plan, twist_ref)
