@@ -358,7 +358,11 @@ def _locate(text: str, keys: tuple) -> int:
     return i
 
 
-def describe_differences(old: Manifest, new: dict, keys=("version", "inputs", "settings", "frames")) -> list[str]:
+# what makes two runs the same run (--resume refuses to mix runs that differ in any)
+RUN_IDENTITY = ("version", "inputs", "settings", "frames")
+
+
+def describe_differences(old: Manifest, new: dict, keys=RUN_IDENTITY) -> list[str]:
     """What differs between an earlier manifest and a new one, key by key, in words."""
     out = []
     for key in keys:

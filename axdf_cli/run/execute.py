@@ -13,7 +13,7 @@ from axdf_cli.errors import InputError
 from axdf_cli.formats import WRITERS
 from axdf_cli.run.evaluate import CHUNK_FRAMES, evaluate_chunks, finite_or_rest, twist_references
 from axdf_cli.run.plan import RunPlan, display_path
-from axdf_cli.run.pool import fork_map
+from axdf_cli.run.pool import check_parent, fork_map
 from axdf_cli.runfolder import (BONES_CSV, MANIFEST_INTERVAL_S, STATS, OutputWriter, bone_mesh_relpath, describe_differences,
                                 frame_relpath, gl_record, mesh_relpath, write_manifest)
 from axdf_cli.skeleton import matrix_to_quaternion
@@ -136,7 +136,7 @@ def _mesh_worker(shared: dict, task) -> MeshPassResult:
     muscles, bones = task
     writer = OutputWriter(shared["root"], shared["previous"])
     try:
-        return mesh_pass(shared["plan"], muscles, shared["twist_ref"], writer, bones=bones)
+        return mesh_pass(shared["plan"], muscles, shared["twist_ref"], writer, on_chunk=check_parent, bones=bones)
     finally:
         writer.close(cancel=True)
 
@@ -184,9 +184,11 @@ def strict_check(plan: RunPlan, twist_ref: np.ndarray) -> None:
 
 def check_resume(plan: RunPlan, previous) -> None:
     """--resume finishes the same run only: same tool version, inputs (sha256) and settings."""
-    changed = describe_differences(previous, manifest_dict(plan, {}, [], complete=False))
+    new = manifest_dict(plan, {}, [], complete=False)
+    changed = describe_differences(previous, new)
     if changed:
-        raise InputError(previous.mark(("settings",)),
+        first = next(k for k in runfolder.RUN_IDENTITY if previous.data.get(k) != new[k])
+        raise InputError(previous.mark((first,)),
                          f"--resume would mix two runs: {'; '.join(changed)}",
                          "resume with the inputs and settings of the interrupted run, or pass --overwrite")
 
