@@ -104,9 +104,11 @@ def _refuse_link(path: Path) -> InputError:
                       "another output folder")
 
 
-def check_dirs(root: Path, rel_dirs) -> None:
+def check_dirs(root: Path, rel_dirs) -> bool:
     """Every existing folder on the way from ``root`` to each of ``rel_dirs`` is a real folder
-    (not a symbolic link, not a file). Reads only; the rest will be created below ``root``."""
+    (not a symbolic link, not a file). Reads only; the rest will be created below ``root``.
+    Returns whether every one of them exists already."""
+    whole = True
     for rel in rel_dirs:
         p = Path(root)
         for part in PurePosixPath(rel).parts:
@@ -114,16 +116,19 @@ def check_dirs(root: Path, rel_dirs) -> None:
             try:
                 st = os.lstat(p)
             except FileNotFoundError:
+                whole = False
                 break
             if stat.S_ISLNK(st.st_mode):
                 raise _refuse_link(p)
             if not stat.S_ISDIR(st.st_mode):
                 raise InputError(None, f"{p} is not a folder", "the run folder's layout needs a folder there")
+    return whole
 
 
 class Root:
-    """A folder written into. :meth:`path` gives the path of a file below it after checking,
-    once per folder, that the way there is made of real folders only."""
+    """A folder written into. :meth:`path` gives the path of a file below it after checking
+    that the way there is made of real folders only (once per folder that exists; one that
+    does not is checked again until it does, so a link made later is still caught)."""
 
     def __init__(self, path: Path):
         self.root = Path(path)
@@ -131,8 +136,7 @@ class Root:
 
     def path(self, rel: str) -> Path:
         parent = PurePosixPath(rel).parent.as_posix()
-        if parent not in self._checked:
-            check_dirs(self.root, [parent])
+        if parent not in self._checked and check_dirs(self.root, [parent]):
             self._checked.add(parent)
         return self.root / rel
 
@@ -148,7 +152,6 @@ class OutputWriter:
     def __init__(self, out: Path, previous: dict):
         from concurrent.futures import ThreadPoolExecutor
 
-        self.out = Path(out)
         self.root = Root(out)
         self.previous = previous
         self.files: dict[str, str] = {}
@@ -166,7 +169,7 @@ class OutputWriter:
         path = self.root.path(rel)
         if self.previous.get(rel) == sha and is_file_with(path, sha, len(data)):
             return rel, sha, True
-        atomic.write_bytes(path, data)
+        atomic.write_parts(path, (data,))
         return rel, sha, False
 
     def _collect(self, n: int) -> None:

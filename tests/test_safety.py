@@ -543,11 +543,14 @@ def _mutate(m: dict, case: str) -> str:
         m = [m]
     elif case == "render size":
         m["settings"]["render"] = {"size": "big"}
+    elif case == "settings string":
+        m["settings"] = "fast"
     return json.dumps(m, indent=1)
 
 
 @pytest.mark.parametrize("case", ["invalid json", "frames abc", "frames empty", "frames missing", "muscles string",
-                                  "muscle name", "files list", "sha", "not axdf", "not an object", "render size"])
+                                  "muscle name", "files list", "sha", "not axdf", "not an object", "render size",
+                                  "settings string"])
 def test_a_damaged_manifest_is_exit_2_with_its_position(small_run, capsys, project, case):
     path = small_run / "manifest.json"
     path.write_text(_mutate(json.loads(path.read_text()), case))

@@ -77,8 +77,8 @@ def run(args: argparse.Namespace) -> int:
     old = target.previous
     old_files = old.files() if old is not None else {}
     new_render = settings_to_dict(settings)
-    old_render = old.data.get("settings", {}).get("render") if old is not None and \
-        isinstance(old.data.get("settings"), dict) else None
+    old_settings = old.get(("settings",), dict, "an object", required=False, default={}) if old is not None else {}
+    old_render = old_settings.get("render")
     existing = [f for f in chosen if any(os.path.lexists(out / r) or r in old_files for r in _frame_files([f]))]
     if existing and not (args.overwrite or args.resume):
         raise UsageError(f"{len(existing)} of the frames are rendered already in {out} "
@@ -86,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
                          "pass --overwrite to render them again, --resume to finish an interrupted render, "
                          "or --frames for others")
     if old_render != new_render:
-        changed = describe_differences(old, {"settings": {**old.data.get("settings", {}), "render": new_render}},
+        changed = describe_differences(old, {"settings": {**old_settings, "render": new_render}},
                                        keys=("settings",)) if old is not None else []
         if args.resume and changed and old_render is not None:
             raise InputError(old.mark(("settings", "render")), f"--resume with other render settings: {'; '.join(changed)}",

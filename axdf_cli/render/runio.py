@@ -149,6 +149,7 @@ def load_run_scene(run_dir: Path, manifest: Manifest | None = None, frames=None
 def recorded_render_settings(m: Manifest) -> RenderSettings:
     """The render settings in a run's manifest (``settings.render``; defaults when the run was
     not rendered), enabled."""
+    m.get(("settings",), dict, "an object of the run's settings", required=False)
     raw = m.get(("settings", "render"), (dict, type(None)), "the render settings or null", required=False)
     return replace(parse_render_settings(raw, m.mark(("settings", "render"))) if raw is not None
                    else RenderSettings(), enabled=True)
