@@ -44,6 +44,7 @@ import numpy as np
 from axdf_cli import bspline, kernels, rmf
 from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError, Mark
+from axdf_cli.paths.points import PathSpec
 
 OCT = 8  # control points per section (the paper's choice)
 
@@ -102,6 +103,7 @@ class MuscleSpec:
     weights: tuple[float, ...] | None = None
     source: str = ""
     group: str = ""  # the multi-head muscle this head belongs to ('' for single muscles)
+    path: PathSpec | None = None  # a path (points, wrap surfaces) instead of fixed axis points
 
 
 def ellipse_outline(a: float, b: float, angle_deg: float) -> np.ndarray:
@@ -175,15 +177,16 @@ class MuscleModel:
     world transforms ``rest_world`` (n_bones, 4, 4); evaluated for any block of frames.
     """
 
-    def __init__(self, spec: MuscleSpec, bone_index: dict[str, int], rest_world: np.ndarray):
+    def __init__(self, spec: MuscleSpec, bone_index: dict[str, int], rest_world: np.ndarray, skeleton=None):
         """The preparation pipeline, each stage a method of its own: (1) bones and axis bases,
         (2) the rest axis and its frames, (3) the sections' rest control points, (4) their
         binding (t, u, v, w), (5) belly and tension weights, (6) the surface basis, (7) the
-        rest surface and its volume V0."""
+        rest surface and its volume V0. ``skeleton`` (its coordinates) is needed by paths with
+        moving or conditional points."""
         self.spec = spec
         self.volume_mode = VolumeMode(spec.volume)
-        self._stage_bones(bone_index)  # 1
-        self._stage_axis_bases(len(spec.axis))  # 1
+        self._stage_bones(bone_index, skeleton)  # 1
+        self._stage_axis_bases(self.n_axis)  # 1
         rest_p, x, t, r = self._stage_rest_axis(rest_world)  # 2
         p_rest, cp_t = self._stage_rest_control_points(rest_p, x, t, r)  # 3
         self._stage_binding(rest_p, x, t, r, p_rest, cp_t)  # 4
@@ -196,13 +199,26 @@ class MuscleModel:
         self.rest_normals = rest.normals[0].astype(np.float32)
         self.rest_control_points = p_rest  # (8N, 3) world, rest pose (for tests)
         if not self.v0 > 0:
-            raise InputError(spec.axis[0].mark, f"muscle {spec.name!r}: rest volume is {self.v0:.3g}",
+            raise InputError(_spec_mark(spec), f"muscle {spec.name!r}: rest volume is {self.v0:.3g}",
                              "sections must enclose the axis with positive radii")
 
     # -- preparation stages -------------------------------------------------------------
-    def _stage_bones(self, bone_index: dict[str, int]) -> None:
-        """Bone of every axis control point and the points in their bones."""
+    def _stage_bones(self, bone_index: dict[str, int], skeleton) -> None:
+        """Bone of every axis control point and the points in their bones; or the path model
+        that places the axis control points every frame."""
         spec = self.spec
+        self.rest_q = skeleton.rest_coordinates()[None] if skeleton is not None else None
+        self._last = (None, None)  # (control points, could-not-wrap flags) of the last path evaluation
+        if spec.path is not None:
+            from axdf_cli.paths.path import PathModel
+
+            self.path = PathModel(spec.path, bone_index, skeleton.coord_index if skeleton is not None else None)
+            self.n_axis = self.path.n
+            self.origin_bone = self.path.origin_bone
+            self.insertion_bone = self.path.insertion_bone
+            return
+        self.path = None
+        self.n_axis = len(spec.axis)
         self.bones = np.array([_bone(bone_index, p) for p in spec.axis])
         self.at = np.array([p.at for p in spec.axis], dtype=np.float64)  # (n, 3)
         self.origin_bone = int(self.bones[0])
@@ -226,10 +242,10 @@ class MuscleModel:
         """The rest axis: control points, rest length l0 (checked), sampled frames, the start
         vector in the origin bone, the insertion's rest reference, the rest arc fractions."""
         spec = self.spec
-        rest_p = self._axis_points(rest_world[None])  # (1, n, 3)
+        rest_p = self._axis_points(rest_world[None], self.rest_q)  # (1, n, 3)
         self.l0 = float(self._length(rest_p)[0])
         if not self.l0 > tol.MIN_AXIS_LENGTH:
-            raise InputError(spec.axis[0].mark, f"muscle {spec.name!r}: the rest axis has length {self.l0:.3g} m",
+            raise InputError(_spec_mark(spec), f"muscle {spec.name!r}: the rest axis has length {self.l0:.3g} m",
                              "axis control points must not all coincide at the rest pose")
         x, t = self._samples(rest_p, self.Bs, self.dBs)
         # the start vector is chosen in the origin bone's own axes, so the rest shape does not
@@ -308,8 +324,13 @@ class MuscleModel:
         self.n_vertices = 2 + (along - 2) * around
 
     # -- pieces ---------------------------------------------------------------------------
-    def _axis_points(self, world: np.ndarray) -> np.ndarray:
-        """Axis control points in world space: world (F, B, 4, 4) → (F, n, 3)."""
+    def _axis_points(self, world: np.ndarray, coords: np.ndarray | None = None) -> np.ndarray:
+        """Axis control points in world space: world (F, B, 4, 4) (and coordinates (F, C) for
+        paths that need them) → (F, n, 3)."""
+        if self.path is not None:
+            p, inside = self.path.control_points(world, coords)
+            self._last = (p, inside)
+            return p
         m = world[:, self.bones]  # (F, n, 4, 4)
         # P[f,i,c] = sum_k M[f,i,c,k] at[i,k] + M[f,i,c,3]
         return np.einsum("fick,ik->fic", m[..., :3, :3], self.at) + m[..., :3, 3]
@@ -319,6 +340,10 @@ class MuscleModel:
         x = np.einsum("si,fic->fsc", b, p)
         d = np.einsum("si,fic->fsc", db, p)
         return x, _unit(d)
+
+    def axis_length(self, world: np.ndarray, coords: np.ndarray | None = None) -> np.ndarray:
+        """The axis arc length (F,) for frames world (F, B, 4, 4) (and coordinates (F, C))."""
+        return self._length(self._axis_points(world, coords))
 
     def _length(self, p: np.ndarray) -> np.ndarray:
         d = np.einsum("gi,fic->fgc", self.dBg, p)
@@ -341,7 +366,7 @@ class MuscleModel:
     def _closest_t(self, p_axis: np.ndarray, pts: np.ndarray, t_guess: np.ndarray) -> np.ndarray:
         """True closest-point parameters on the rest axis for points (Q, 3): dense search, then
         Newton on g(t) = (P - C(t)) . C'(t) = 0."""
-        n = len(self.at)
+        n = self.n_axis
         td = np.linspace(0.0, 1.0, tol.BIND_DENSE_SAMPLES_PER_SPAN * (n - 2) + 1)
         cd = bspline.basis_matrix(self.knots, 2, td) @ p_axis
         dist = np.linalg.norm(pts[:, None, :] - cd[None], axis=-1)  # (Q, D)
@@ -357,10 +382,11 @@ class MuscleModel:
             t = np.clip(t + step, 0.0, 1.0)
         return t
 
-    def end_twist(self, world: np.ndarray, coarse: bool = True, r_end: np.ndarray | None = None) -> np.ndarray:
+    def end_twist(self, world: np.ndarray, coarse: bool = True, r_end: np.ndarray | None = None,
+                  coords: np.ndarray | None = None) -> np.ndarray:
         """Insertion roll (radians, wrapped to (-pi, pi]) for frames world (F, B, 4, 4): (F,).
         ``r_end`` (F, 3): the propagated reference vector at t = 1, when already computed."""
-        _, x, t, r0 = self.rmf_inputs(world, coarse)
+        _, x, t, r0 = self.rmf_inputs(world, coarse, coords)
         if r_end is None:
             r_end = rmf.propagate(x, t, r0)[:, -1]
         return self._roll(world, t[:, -1], r_end)
@@ -370,22 +396,23 @@ class MuscleModel:
         return rmf.signed_angle(r_end, target, t_end)
 
     # -- evaluation -----------------------------------------------------------------------
-    def rmf_inputs(self, world: np.ndarray, coarse: bool = False):
+    def rmf_inputs(self, world: np.ndarray, coarse: bool = False, coords: np.ndarray | None = None):
         """Axis control points (F, n, 3), samples x (F, S, 3), unit tangents t and start vectors
         r0 (F, 3): what :func:`rmf.propagate` needs (batched over muscles by the caller)."""
-        p = self._axis_points(world)
+        p = self._axis_points(world, coords)
         b, db = (self.Bc, self.dBc) if coarse else (self.Bs, self.dBs)
         x, t = self._samples(p, b, db)
         r0 = rmf.perpendicular_unit(world[:, self.origin_bone, :3, :3] @ self.r0_local, t[:, 0])
         return p, x, t, r0
 
-    def axis_frames(self, world: np.ndarray):
+    def axis_frames(self, world: np.ndarray, coords: np.ndarray | None = None):
         """(p, x, t, r): control points, samples, tangents and RMF reference vectors (F, S, 3)."""
-        p, x, t, r0 = self.rmf_inputs(world)
+        p, x, t, r0 = self.rmf_inputs(world, coords=coords)
         return p, x, t, rmf.propagate(x, t, r0)
 
     def evaluate(self, world: np.ndarray, tension: np.ndarray, twist_reference: np.ndarray | None = None,
-                 rest_volume: float | None | str = "model", frames=None) -> FrameResult:
+                 rest_volume: float | None | str = "model", frames=None,
+                 coords: np.ndarray | None = None) -> FrameResult:
         """Deform for a block of frames.
 
         world : (F, n_bones, 4, 4) bone world transforms; tension : (F,) effective tension 0..1;
@@ -393,12 +420,19 @@ class MuscleModel:
         the exact roll, or None (roll unwrapped within the block); frames : the result of
         :meth:`axis_frames` when the caller computed it (batched over several muscles);
         rest_volume : the volume V0 that ``exact`` keeps ("model": the model's own rest volume;
-        None: no target, the start scale as it is).
+        None: no target, the start scale as it is); coords : (F, C) skeleton coordinates, for
+        paths with moving or conditional points.
         """
         spec = self.spec
         nf = world.shape[0]
         warnings: list = []
-        p, x, t, r = frames if frames is not None else self.axis_frames(world)
+        p, x, t, r = frames if frames is not None else self.axis_frames(world, coords)
+        if self.path is not None:
+            inside = self._last[1] if self._last[0] is p else self.path.control_points(world, coords)[1]
+            for i in np.nonzero(inside)[0]:
+                w = self.spec.path.wraps[int(inside[i]) - 1]
+                warnings.append((int(i), f"path cannot wrap over {w.name!r}: an end point lies inside it; "
+                                         "kept the straight segment"))
         theta = self._roll(world, t[:, -1], r[:, -1])
         if twist_reference is None:
             theta = np.unwrap(theta)
@@ -473,11 +507,19 @@ class MuscleModel:
         return verts, norms, volume, s, bad
 
 
+def _spec_mark(spec: MuscleSpec) -> Mark:
+    return spec.axis[0].mark if spec.axis else spec.path.points[0].mark
+
+
 def _bone(index: dict[str, int], p: AxisPoint) -> int:
-    if p.bone not in index:
+    return _bone_of(index, p.bone, p.mark)
+
+
+def _bone_of(index: dict[str, int], bone: str, mark) -> int:
+    if bone not in index:
         known = ", ".join(sorted(index))
-        raise InputError(p.mark, f"unknown bone {p.bone!r}", f"bones of the skeleton: {known}")
-    return index[p.bone]
+        raise InputError(mark, f"unknown bone {bone!r}", f"bones of the skeleton: {known}")
+    return index[bone]
 
 
 def _unit(d: np.ndarray) -> np.ndarray:

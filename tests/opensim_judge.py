@@ -48,7 +48,6 @@ class OpenSimModel:
             if skel.coordinates[i].type == "rotation":
                 v = math.radians(v)
             c.setValue(self.state, v, False)
-        self.model.assemble(self.state) if False else None
         self.model.realizePosition(self.state)
 
     def lengths(self, skel, q: np.ndarray) -> np.ndarray:
@@ -85,8 +84,7 @@ def axdf_lengths(muscle_dir: Path, pose, frames: np.ndarray, names: list[str] | 
     world = forward_kinematics(skel, q)
     out = np.empty((len(frames), len(specs)))
     for j, s in enumerate(specs):
-        m = MuscleModel(s, skel.bone_index, rest)
-        out[:, j] = m.lengths(world, q) if hasattr(m, "lengths") else m._length(m._axis_points(world))
+        out[:, j] = MuscleModel(s, skel.bone_index, rest, skel).axis_length(world, q)
     return [s.name for s in specs], out
 
 

@@ -306,7 +306,7 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
 
     rows = []
     for m in model.muscles:
-        mdoc, row = emit.muscle_doc(m, skel, world)
+        mdoc, row = emit.muscle_doc(m, skel, world, model)
         rows.append(row)
         files[str(mus_dir / f"{m.name}.yaml")] = emit.dump_yaml(mdoc, f"{m.name}: imported from {model_path.name} "
                                                                       f"({m.type}) by `axdf import osim`.").encode()
@@ -328,8 +328,7 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
         mm["where"] = _strip_dirs(mm["where"], inputs)
     report["settings"] = {"specific_tension_Pa": emit.SPECIFIC_TENSION, "tendon_stress_Pa": emit.TENDON_STRESS,
                           "belly_profile": list(emit.BELLY_PROFILE), "origin_tendon_share": emit.ORIGIN_TENDON_SHARE,
-                          "max_tendon_fraction": emit.MAX_TENDON_FRACTION,
-                          "via_pair_fraction": emit.VIA_PAIR_FRACTION}
+                          "max_tendon_fraction": emit.MAX_TENDON_FRACTION}
     report["files"] = sorted(_rel(Path(p), out_dir) for p in files)
     files[str(out_dir / "import_report.json")] = (json.dumps(report, indent=1, sort_keys=True) + "\n").encode()
     files[str(out_dir / "IMPORT.md")] = import_markdown(report).encode()
