@@ -229,7 +229,7 @@ class MuscleModel:
         a coarse set for the twist branch, Gauss-Legendre points for the length."""
         knots = bspline.clamped_knots(n, 2)
         self.knots = knots
-        self.ts = np.linspace(0.0, 1.0, tol.RMF_SAMPLES_PER_SPAN * (n - 2) + 1)
+        self.ts = np.linspace(0.0, 1.0, tol.rmf_samples(n) + 1)
         self.Bs = bspline.basis_matrix(knots, 2, self.ts)
         self.dBs = bspline.basis_matrix(knots, 2, self.ts, 1)
         tc = np.linspace(0.0, 1.0, 4 * (n - 2) + 1)
@@ -237,6 +237,8 @@ class MuscleModel:
         self.dBc = bspline.basis_matrix(knots, 2, tc, 1)
         gt, self.gw = bspline.gauss_legendre_params(knots, 2, tol.LENGTH_GAUSS_POINTS)
         self.dBg = bspline.basis_matrix(knots, 2, gt, 1)
+        # the same bases as sparse rows (3 non-zeros each): products cost O(3), not O(n)
+        self._sparse = {id(b): kernels.sparse_rows(b) for b in (self.Bs, self.dBs, self.Bc, self.dBc, self.dBg)}
 
     def _stage_rest_axis(self, rest_world: np.ndarray):
         """The rest axis: control points, rest length l0 (checked), sampled frames, the start
@@ -295,6 +297,7 @@ class MuscleModel:
                              np.einsum("nc,nc->n", off, sb[0])], axis=1)  # (8N, 3)
         self.Bb = bspline.basis_matrix(self.knots, 2, self.bind_t)
         self.dBb = bspline.basis_matrix(self.knots, 2, self.bind_t, 1)
+        self._sparse.update({id(b): kernels.sparse_rows(b) for b in (self.Bb, self.dBb)})
         self.lam = np.interp(self.bind_t, self.ts, self.arc)  # rest arc fraction of each bound point
 
     def _stage_belly_weights(self) -> None:
@@ -335,18 +338,21 @@ class MuscleModel:
         # P[f,i,c] = sum_k M[f,i,c,k] at[i,k] + M[f,i,c,3]
         return np.einsum("fick,ik->fic", m[..., :3, :3], self.at) + m[..., :3, 3]
 
+    def _apply(self, b: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """X[f,s,c] = sum_i B[s,i] P[f,i,c] for a basis matrix of this model (sparse rows)."""
+        idx, w = self._sparse[id(b)]
+        return np.einsum("sk,fskc->fsc", w, p[:, idx])
+
     def _samples(self, p: np.ndarray, b: np.ndarray, db: np.ndarray):
         # X[f,s,c] = sum_i B[s,i] P[f,i,c]; likewise the derivative
-        x = np.einsum("si,fic->fsc", b, p)
-        d = np.einsum("si,fic->fsc", db, p)
-        return x, _unit(d)
+        return self._apply(b, p), _unit(self._apply(db, p))
 
     def axis_length(self, world: np.ndarray, coords: np.ndarray | None = None) -> np.ndarray:
         """The axis arc length (F,) for frames world (F, B, 4, 4) (and coordinates (F, C))."""
         return self._length(self._axis_points(world, coords))
 
     def _length(self, p: np.ndarray) -> np.ndarray:
-        d = np.einsum("gi,fic->fgc", self.dBg, p)
+        d = self._apply(self.dBg, p)
         return np.linalg.norm(d, axis=-1) @ self.gw
 
     def _sample_index(self, t: np.ndarray) -> np.ndarray:
@@ -440,8 +446,8 @@ class MuscleModel:
             theta = theta + 2.0 * np.pi * np.round((twist_reference - theta) / (2.0 * np.pi))
 
         # bound points: position and frame at t, then the spread twist about T
-        c = np.einsum("qi,fic->fqc", self.Bb, p)
-        tt = _unit(np.einsum("qi,fic->fqc", self.dBb, p))
+        c = self._apply(self.Bb, p)
+        tt = _unit(self._apply(self.dBb, p))
         rr = rmf.reflect_step(x[:, self.bind_j], t[:, self.bind_j], r[:, self.bind_j], c, tt)
         ss = np.cross(tt, rr)
         ang = theta[:, None] * self.lam[None, :]  # (F, Q)

@@ -381,24 +381,50 @@ def _sphere(p1, p2, radius, wrap_axis, wrap_sign, arc):
 
 @njit(cache=True)
 def _ellipsoid_closest(a, y):
-    """The point of the ellipsoid (semi-axes a) closest to y, inside or outside: the root t
-    of sum (a_i y_i / (t + a_i^2))^2 = 1 with t > -min a_i^2, by bisection then Newton."""
+    """The point of the ellipsoid (semi-axes a) closest to y, inside or outside: x_i =
+    a_i^2 y_i / (t + a_i^2) with t the largest root of F(t) = sum (a_i y_i / (t + a_i^2))^2 - 1
+    (t > -min a_i^2). F is convex and decreasing there: Newton from a point left of the root
+    (F >= 0; Eberly's start -a_k^2 + a_k |y_k| on the shortest axis k) climbs to it
+    monotonically; bisection when that start is not to the left (y_k = 0)."""
     e2 = a * a
-    lo = -np.min(e2) + 1e-15 * np.max(e2)
-    # F is decreasing on (lo, inf); find hi with F(hi) < 0
-    hi = math.sqrt(_dot(a * y, a * y)) + 1e-12
-    for _ in range(200):
-        mid = 0.5 * (lo + hi)
-        f = 0.0
+    k = 0
+    for i in range(1, 3):
+        if e2[i] < e2[k]:
+            k = i
+    t = -e2[k] + a[k] * abs(y[k])
+    f = -1.0
+    if y[k] != 0.0:
         for i in range(3):
-            f += (a[i] * y[i] / (mid + e2[i])) ** 2
-        if f > 1.0:
-            lo = mid
-        else:
-            hi = mid
-        if hi - lo <= 1e-16 * max(1.0, abs(hi)):
-            break
-    t = 0.5 * (lo + hi)
+            f += (a[i] * y[i] / (t + e2[i])) ** 2
+    if f >= 0.0:
+        for _ in range(64):
+            f = -1.0
+            df = 0.0
+            for i in range(3):
+                q = a[i] * y[i] / (t + e2[i])
+                f += q * q
+                df -= 2.0 * q * q / (t + e2[i])
+            if df == 0.0:
+                break
+            step = f / df
+            t -= step
+            if abs(step) <= 1e-15 * max(abs(t), e2[k]):
+                break
+    else:
+        lo = -e2[k]
+        hi = math.sqrt(_dot(a * y, a * y)) + 1e-12
+        for _ in range(200):
+            mid = 0.5 * (lo + hi)
+            f = 0.0
+            for i in range(3):
+                f += (a[i] * y[i] / (mid + e2[i])) ** 2
+            if f > 1.0:
+                lo = mid
+            else:
+                hi = mid
+            if hi - lo <= 1e-16 * max(1.0, abs(hi)):
+                break
+        t = 0.5 * (lo + hi)
     x = np.empty(3)
     for i in range(3):
         x[i] = e2[i] * y[i] / (t + e2[i])
