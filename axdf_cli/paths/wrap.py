@@ -380,44 +380,44 @@ def _sphere(p1, p2, radius, wrap_axis, wrap_sign, arc):
 
 
 @njit(cache=True)
-def _ellipsoid_closest(a, y):
-    """The point of the ellipsoid (semi-axes a) closest to y, inside or outside: x_i =
-    a_i^2 y_i / (t + a_i^2) with t the largest root of F(t) = sum (a_i y_i / (t + a_i^2))^2 - 1
-    (t > -min a_i^2). F is convex and decreasing there: Newton from a point left of the root
-    (F >= 0; Eberly's start -a_k^2 + a_k |y_k| on the shortest axis k) climbs to it
-    monotonically; bisection when that start is not to the left (y_k = 0)."""
-    e2 = a * a
-    k = 0
-    for i in range(1, 3):
-        if e2[i] < e2[k]:
-            k = i
-    t = -e2[k] + a[k] * abs(y[k])
-    f = -1.0
-    if y[k] != 0.0:
-        for i in range(3):
-            f += (a[i] * y[i] / (t + e2[i])) ** 2
-    if f >= 0.0:
+def _closest_xyz(a0, a1, a2, y0, y1, y2):
+    """The point of the ellipsoid (semi-axes a0, a1, a2) closest to (y0, y1, y2), inside or
+    outside, as a tuple: x_i = a_i^2 y_i / (t + a_i^2) with t the largest root of
+    F(t) = sum (a_i y_i / (t + a_i^2))^2 - 1 (t > -min a_i^2). F is convex and decreasing
+    there: Newton from a point left of the root (F >= 0; Eberly's start -a_k^2 + a_k |y_k| on
+    the shortest axis k) climbs to it monotonically; bisection when y_k = 0. Scalars only
+    (no allocation: the fan calls it 300 times per segment)."""
+    e0, e1, e2 = a0 * a0, a1 * a1, a2 * a2
+    if e0 <= e1 and e0 <= e2:
+        ek, ak, yk = e0, a0, y0
+    elif e1 <= e2:
+        ek, ak, yk = e1, a1, y1
+    else:
+        ek, ak, yk = e2, a2, y2
+    t = -ek + ak * abs(yk)
+    newton = False
+    if yk != 0.0:
+        f = (a0 * y0 / (t + e0)) ** 2 + (a1 * y1 / (t + e1)) ** 2 + (a2 * y2 / (t + e2)) ** 2 - 1.0
+        newton = f >= 0.0
+    if newton:
         for _ in range(64):
-            f = -1.0
-            df = 0.0
-            for i in range(3):
-                q = a[i] * y[i] / (t + e2[i])
-                f += q * q
-                df -= 2.0 * q * q / (t + e2[i])
+            q0 = a0 * y0 / (t + e0)
+            q1 = a1 * y1 / (t + e1)
+            q2 = a2 * y2 / (t + e2)
+            f = q0 * q0 + q1 * q1 + q2 * q2 - 1.0
+            df = -2.0 * (q0 * q0 / (t + e0) + q1 * q1 / (t + e1) + q2 * q2 / (t + e2))
             if df == 0.0:
                 break
             step = f / df
             t -= step
-            if abs(step) <= 1e-15 * max(abs(t), e2[k]):
+            if abs(step) <= 1e-15 * max(abs(t), ek):
                 break
     else:
-        lo = -e2[k]
-        hi = math.sqrt(_dot(a * y, a * y)) + 1e-12
+        lo = -ek
+        hi = math.sqrt((a0 * y0) ** 2 + (a1 * y1) ** 2 + (a2 * y2) ** 2) + 1e-12
         for _ in range(200):
             mid = 0.5 * (lo + hi)
-            f = 0.0
-            for i in range(3):
-                f += (a[i] * y[i] / (mid + e2[i])) ** 2
+            f = (a0 * y0 / (mid + e0)) ** 2 + (a1 * y1 / (mid + e1)) ** 2 + (a2 * y2 / (mid + e2)) ** 2
             if f > 1.0:
                 lo = mid
             else:
@@ -425,10 +425,13 @@ def _ellipsoid_closest(a, y):
             if hi - lo <= 1e-16 * max(1.0, abs(hi)):
                 break
         t = 0.5 * (lo + hi)
-    x = np.empty(3)
-    for i in range(3):
-        x[i] = e2[i] * y[i] / (t + e2[i])
-    return x
+    return e0 * y0 / (t + e0), e1 * y1 / (t + e1), e2 * y2 / (t + e2)
+
+
+@njit(cache=True)
+def _ellipsoid_closest(a, y):
+    x0, x1, x2 = _closest_xyz(a[0], a[1], a[2], y[0], y[1], y[2])
+    return np.array([x0, x1, x2])
 
 
 @njit(cache=True)
@@ -606,11 +609,22 @@ def _ellipsoid(p1, p2, a, wrap_axis, wrap_sign, method, arc):
             sv = sv3[best].copy()
         if method == HYBRID and mub < _MU_BLEND_MAX:
             mid = r1 + 0.5 * r1r2
-            vsum = np.zeros(3)
+            s0 = 0.0
+            s1 = 0.0
+            s2 = 0.0
             for i in range(1, _NUM_FAN - 1):
-                pt = r1 + (i / _NUM_FAN) * r1r2
-                vsum += _unit(_ellipsoid_closest(a, pt) - pt)
-            vsum = _unit(vsum)
+                ft = i / _NUM_FAN
+                q0 = r1[0] + ft * r1r2[0]
+                q1 = r1[1] + ft * r1r2[1]
+                q2 = r1[2] + ft * r1r2[2]
+                c0, c1_, c2 = _closest_xyz(a[0], a[1], a[2], q0, q1, q2)
+                d0, d1, d2 = c0 - q0, c1_ - q1, c2 - q2
+                dn_ = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+                if dn_ > 0.0:
+                    s0 += d0 / dn_
+                    s1 += d1 / dn_
+                    s2 += d2 / dn_
+            vsum = _unit(np.array([s0, s1, s2]))
             fan_c1 = mid + vsum
             if mub <= _MU_BLEND_MIN:
                 c1 = _ellipsoid_closest(a, fan_c1)
