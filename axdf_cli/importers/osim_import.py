@@ -44,6 +44,7 @@ import numpy as np
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.importers import emit
 from axdf_cli.loaders import parse_skeleton_text
+from axdf_cli.yamlio import check_name
 from axdf_cli.importers.osim import Model, load_osim
 from axdf_cli.importers.storage import Table, read_storage
 from axdf_cli.importers.vtp import ply_bytes, read_vtp
@@ -273,6 +274,15 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
     name = name or safe_name(model.name)
     if not NAME_RE.match(name):
         raise InputError(None, f"name {name!r}", "names use letters, digits, '_', '.', '-'")
+    # names become axdf names in files that do not exist yet: check them here, at the .osim line
+    for what, items in (("body", model.bodies.values()), ("coordinate", model.coordinates.values()),
+                        ("wrap object", model.wrap_objects.values())):
+        for item in items:
+            try:
+                check_name(item.name, item.mark, f"{what} name")
+            except InputError as e:
+                raise InputError(item.mark, f"{what} name {item.name!r} cannot be an axdf name",
+                                 "names use letters, digits, '_', '.', '-' (rename it in the model)") from e
     for m in model.muscles:
         if not NAME_RE.match(m.name):
             raise InputError(m.mark, f"muscle name {m.name!r}", "names use letters, digits, '_', '.', '-'")
