@@ -330,7 +330,8 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
                         "path_points": sum(r["path_points"] for r in rows),
                         "conditional_path_points": sum(len(r["conditional"]) for r in rows),
                         "conditional_inactive_at_rest": sum(len(r["conditional_inactive_at_rest"]) for r in rows),
-                        "moving_path_points": sum(len(r["moving"]) for r in rows)}
+                        "moving_path_points": sum(len(r["moving"]) for r in rows),
+                        "wrap_surfaces": sum(len(r["wraps"]) for r in rows)}
     inputs = [Path(x) for x in (model_path, motion, controls) if x is not None]
     report["ignored"] = [dict(i, where=_strip_dirs(i["where"], inputs)) for i in model.ignored]
     report["warnings"] = [_strip_dirs(w, inputs) for w in warnings]
@@ -359,8 +360,9 @@ def import_markdown(r: dict) -> str:
              f"OpenSim model `{r['source']['model_name']}`.", "",
              f"- bodies {c['bodies']}, joints {c['joints']}, coordinates {c['coordinates']}, meshes {c['meshes']}",
              f"- muscles {c['muscles']} from {c['path_points']} path points "
-             f"({c['conditional_path_points']} conditional, {c['conditional_inactive_at_rest']} of them inactive at rest "
-             f"and left out; {c['moving_path_points']} moving, placed at the rest pose)", ""]
+             f"({c['conditional_path_points']} conditional, active within their ranges, {c['conditional_inactive_at_rest']} "
+             f"of them inactive at rest; {c['moving_path_points']} moving, evaluated every frame) and "
+             f"{c.get('wrap_surfaces', 0)} wrap surfaces, wrapped every frame", ""]
     if "motion" in r:
         mo = r["motion"]
         lines += [f"Motion: `{mo['file']}`, {mo['rows']} rows → {mo['frames']} frames at {mo['fps']} fps, "
