@@ -23,16 +23,17 @@ def twist_references(plan: RunPlan) -> np.ndarray:
     prev = np.zeros(len(plan.models))
     for s in range(0, len(all_frames), 4 * CHUNK_FRAMES):
         fr = all_frames[s:s + 4 * CHUNK_FRAMES]
-        world = forward_kinematics(pose.skeleton, sample_coordinates(pose, fr))
-        frames = batched_axis_frames(plan.models, range(len(plan.models)), world, coarse=True)
+        q = sample_coordinates(pose, fr)
+        world = forward_kinematics(pose.skeleton, q)
+        frames = batched_axis_frames(plan.models, range(len(plan.models)), world, coarse=True, coords=q)
         for j, m in enumerate(plan.models):
-            th = np.unwrap(np.concatenate([[prev[j]], m.end_twist(world, r_end=frames[j][3][:, -1])]))[1:]
+            th = np.unwrap(np.concatenate([[prev[j]], m.end_twist(world, r_end=frames[j][3][:, -1], coords=q)]))[1:]
             out[s:s + len(fr), j] = th
             prev[j] = th[-1]
     return out[plan.frames - pose.first]
 
 
-def batched_axis_frames(models, indices, world: np.ndarray, coarse: bool = False) -> dict:
+def batched_axis_frames(models, indices, world: np.ndarray, coarse: bool = False, coords=None) -> dict:
     """Axis frames (p, x, t, r) of several muscles at once, by muscle index. Muscles with the
     same number of axis samples share one double-reflection recurrence, so its loop over the
     samples runs once per group, not once per muscle (row by row the same arithmetic)."""
@@ -43,7 +44,7 @@ def batched_axis_frames(models, indices, world: np.ndarray, coarse: bool = False
     nf = world.shape[0]
     out = {}
     for js in groups.values():
-        ins = [models[j].rmf_inputs(world, coarse) for j in js]
+        ins = [models[j].rmf_inputs(world, coarse, coords) for j in js]
         r = rmf.propagate(np.concatenate([i[1] for i in ins]), np.concatenate([i[2] for i in ins]),
                           np.concatenate([i[3] for i in ins]))
         for k, j in enumerate(js):
@@ -70,16 +71,17 @@ def evaluate_chunks(plan: RunPlan, chunk: int | None = None, twist_ref: np.ndarr
     names = plan.names
     for s in range(0, len(plan.frames), chunk):
         fr = plan.frames[s:s + chunk]
-        world = forward_kinematics(plan.pose.skeleton, sample_coordinates(plan.pose, fr))
+        q = sample_coordinates(plan.pose, fr)
+        world = forward_kinematics(plan.pose.skeleton, q)
         act = sample_activation(plan.pose, names, fr)
 
-        def results(world=world, act=act, s=s, n=len(fr)):
+        def results(world=world, act=act, s=s, n=len(fr), q=q):
             which = list(range(len(plan.models))) if muscles is None else list(muscles)
-            frames = batched_axis_frames(plan.models, which, world)
+            frames = batched_axis_frames(plan.models, which, world, coords=q)
             for j in which:
                 m = plan.models[j]
                 yield j, m.evaluate(world, effective_tension(m.spec.tension, act[:, j]), twist_ref[s:s + n, j],
-                                    frames=frames.pop(j))
+                                    frames=frames.pop(j), coords=q)
 
         yield slice(s, s + len(fr)), world, results()
 
