@@ -77,12 +77,14 @@ def twist_references(plan: RunPlan) -> np.ndarray:
 
 def _coarse_roll(plan: RunPlan, frames: np.ndarray) -> np.ndarray:
     """Coarse insertion roll (wrapped) of every muscle at ``frames``: (len(frames), M)."""
-    world = forward_kinematics(plan.pose.skeleton, sample_coordinates(plan.pose, frames))
-    axes = batched_axis_frames(plan.models, range(len(plan.models)), world, coarse=True)
-    return np.stack([m.end_twist(world, r_end=axes[j][3][:, -1]) for j, m in enumerate(plan.models)], axis=1)
+    q = sample_coordinates(plan.pose, frames)
+    world = forward_kinematics(plan.pose.skeleton, q)
+    axes = batched_axis_frames(plan.models, range(len(plan.models)), world, coarse=True, coords=q)
+    return np.stack([m.end_twist(world, r_end=axes[j][3][:, -1], coords=q) for j, m in enumerate(plan.models)],
+                    axis=1)
 
 
-def batched_axis_frames(models, indices, world: np.ndarray, coarse: bool = False) -> dict:
+def batched_axis_frames(models, indices, world: np.ndarray, coarse: bool = False, coords=None) -> dict:
     """Axis frames (p, x, t, r) of several muscles at once, by muscle index. Muscles with the
     same number of axis samples share one double-reflection recurrence, so its loop over the
     samples runs once per group, not once per muscle (row by row the same arithmetic)."""
@@ -93,7 +95,7 @@ def batched_axis_frames(models, indices, world: np.ndarray, coarse: bool = False
     nf = world.shape[0]
     out = {}
     for js in groups.values():
-        ins = [models[j].rmf_inputs(world, coarse) for j in js]
+        ins = [models[j].rmf_inputs(world, coarse, coords) for j in js]
         r = rmf.propagate(np.concatenate([i[1] for i in ins]), np.concatenate([i[2] for i in ins]),
                           np.concatenate([i[3] for i in ins]))
         for k, j in enumerate(js):
@@ -120,16 +122,17 @@ def evaluate_chunks(plan: RunPlan, chunk: int | None = None, twist_ref: np.ndarr
     names = plan.names
     for s in range(0, len(plan.frames), chunk):
         fr = plan.frames[s:s + chunk]
-        world = forward_kinematics(plan.pose.skeleton, sample_coordinates(plan.pose, fr))
+        q = sample_coordinates(plan.pose, fr)
+        world = forward_kinematics(plan.pose.skeleton, q)
         act = sample_activation(plan.pose, names, fr)
 
-        def results(world=world, act=act, s=s, n=len(fr)):
+        def results(world=world, act=act, s=s, n=len(fr), q=q):
             which = list(range(len(plan.models))) if muscles is None else list(muscles)
-            frames = batched_axis_frames(plan.models, which, world)
+            frames = batched_axis_frames(plan.models, which, world, coords=q)
             for j in which:
                 m = plan.models[j]
                 yield j, m.evaluate(world, effective_tension(m.spec.tension, act[:, j]), twist_ref[s:s + n, j],
-                                    frames=frames.pop(j))
+                                    frames=frames.pop(j), coords=q)
 
         yield slice(s, s + len(fr)), world, results()
 

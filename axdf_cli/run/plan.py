@@ -97,7 +97,7 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
 
     skel = pose.skeleton
     rest = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
-    models = [MuscleModel(s, skel.bone_index, rest) for s in specs]
+    models = [MuscleModel(s, skel.bone_index, rest, skel) for s in specs]
 
     if frames_arg is not None:
         frames = parse_frames(frames_arg, Mark("--frames"), pose.first, pose.last)
