@@ -9,7 +9,8 @@ import pytest
 from axdf_cli.cli.main import main
 from axdf_cli.compare import tolerances as T
 from axdf_cli.compare.images import channel_class, read_exr
-from axdf_cli.formats.read import read_obj, read_ply
+from axdf_cli.formats.obj import read_obj
+from axdf_cli.formats.ply import read_ply
 from compare_helpers import blob, exr_channels, make_run, tube, write_exr, write_obj, write_ply
 
 

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Callable, Iterable
 
 from axdf_cli.atomic import write_bytes
-from axdf_cli.formats.read import MeshReadError
+from axdf_cli.formats import MeshReadError
 from axdf_cli.compare.result import ERROR, EXTRA, FAIL, MISSING, PASS, FileResult, Outcome, Report
 from axdf_cli.compare.tolerances import FileTol, Tolerances, as_dict
 from axdf_cli.errors import UsageError

@@ -1,19 +1,12 @@
-"""Mesh comparison (PLY and OBJ): exact topology, then per-vertex distances.
-
-Small numpy readers keep the file's vertex order exactly (trimesh's OBJ loader may merge or
-split vertices by normals). Faces are kept as polygon sizes plus a flat index array, so
-triangles and any other polygons compare alike.
-"""
+"""Mesh comparison (any format of :data:`axdf_cli.formats.FORMATS`, PLY and OBJ): exact
+topology, then per-vertex distances, in the files' own vertex order."""
 from __future__ import annotations
-
 
 import numpy as np
 
 from axdf_cli.compare.result import Outcome, read_side
-from axdf_cli.formats.read import READERS, Mesh
 from axdf_cli.compare.tolerances import MeshTol
-
-
+from axdf_cli.formats import Mesh, read_mesh
 
 
 # ----------------------------------------------------------------------------- comparison
@@ -83,6 +76,6 @@ def _first_face_difference(a: Mesh, g: Mesh) -> str:
 
 
 def compare_mesh_files(a_bytes: bytes, g_bytes: bytes, a_suffix: str, g_suffix: str, tol: MeshTol) -> Outcome:
-    a = read_side("actual", READERS[a_suffix], a_bytes)
-    g = read_side("golden", READERS[g_suffix], g_bytes)
+    a = read_side("actual", read_mesh, a_bytes, a_suffix)
+    g = read_side("golden", read_mesh, g_bytes, g_suffix)
     return compare_meshes(a, g, tol)
