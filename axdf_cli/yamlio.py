@@ -103,7 +103,8 @@ _KINDS = ((stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a FIFO (named pipe)"), (s
 _CHUNK = 1 << 20
 
 
-def _not_regular(mode: int) -> str | None:
+def not_regular(mode: int) -> str | None:
+    """None for a regular file's ``st_mode``; otherwise what it is ("is a FIFO (named pipe), not a regular file")."""
     if stat.S_ISREG(mode):
         return None
     kind = next((name for test, name in _KINDS if test(mode)), "not a file")
@@ -122,14 +123,14 @@ def read_regular(path: Path | str, limit: int) -> bytes:
     while read, is refused without reading it whole). Raises :class:`FileRefused`, or
     ``OSError`` for a missing file, a symlink loop or a permission problem.
     """
-    problem = _not_regular(os.stat(path).st_mode)
+    problem = not_regular(os.stat(path).st_mode)
     if problem:
         raise FileRefused(problem)
     fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0)
                  | getattr(os, "O_CLOEXEC", 0))
     with os.fdopen(fd, "rb", buffering=0) as f:
         st = os.fstat(fd)
-        problem = _not_regular(st.st_mode)
+        problem = not_regular(st.st_mode)
         if problem:
             raise FileRefused(problem)
         if st.st_size > limit:

@@ -183,9 +183,10 @@ def test_update_of_one_file_and_quiet_output(tmp_path, capsys):
     write_ply(tmp_path / "a.ply", v + np.float32(1e-3), n, f)
     assert main(["compare", "-q", str(tmp_path / "a.ply"), str(tmp_path / "g.ply")]) == 1
     out = capsys.readouterr().out
-    assert out.startswith("  FAIL    g.ply") and "SAME" not in out
+    assert out.splitlines()[0] == "  FAIL    g.ply" and out.splitlines()[-1].startswith("DIFFERENT: 1 of 1 files")
     assert main(["compare", str(tmp_path / "a.ply"), str(tmp_path / "g.ply"), "--update"]) == 0
     assert "replaced" in capsys.readouterr().out
     assert (tmp_path / "g.ply").read_bytes() == (tmp_path / "a.ply").read_bytes()
     assert main(["compare", "-q", str(tmp_path / "a.ply"), str(tmp_path / "g.ply")]) == 0
-    assert capsys.readouterr().out == ""
+    lines = capsys.readouterr().out.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("SAME: 1 files within tolerance (1 identical)")

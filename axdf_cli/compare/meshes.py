@@ -12,9 +12,12 @@ from axdf_cli.formats import Mesh, read_mesh
 # ----------------------------------------------------------------------------- comparison
 def hausdorff(a: np.ndarray, b: np.ndarray) -> float:
     """Symmetric Hausdorff distance between two vertex sets ``(Va, 3)``, ``(Vb, 3)``
-    (nearest vertex both ways with scipy's cKDTree)."""
+    (nearest vertex both ways with scipy's cKDTree); inf when either set holds a non-finite
+    vertex (no distance to it is finite)."""
     if len(a) == 0 or len(b) == 0:
         return float("inf") if len(a) != len(b) else 0.0
+    if not (np.isfinite(a).all() and np.isfinite(b).all()):
+        return float("inf")
     from scipy.spatial import cKDTree
 
     d_ab = cKDTree(b).query(a)[0]
@@ -36,12 +39,13 @@ def compare_meshes(a: Mesh, g: Mesh, tol: MeshTol) -> Outcome:
                     f"{len(g.vertices)} vertices, {len(g.face_sizes)} faces")
         else:
             what = f"same counts but {_first_face_difference(a, g)}"
-        return Outcome(False, (f"topology differs: {what}; Hausdorff distance {h:.3g} m",), metrics)
+        reasons = [f"topology differs: {what}; Hausdorff distance {h:.3g} m"]
+        reasons += _non_finite(a, "actual") + _non_finite(g, "golden")
+        return Outcome(False, tuple(reasons), metrics)
     d = np.linalg.norm(a.vertices - g.vertices, axis=1)  # (V,)
     if len(d) == 0:
         return Outcome(True, (), metrics | {"max_distance": 0.0, "rms_distance": 0.0})
-    if not np.all(np.isfinite(a.vertices)):
-        reasons.append(f"{int(np.sum(~np.isfinite(a.vertices).all(axis=1)))} vertices are not finite")
+    reasons += _non_finite(a, "actual") + _non_finite(g, "golden")
     worst = int(np.nanargmax(d)) if np.any(np.isfinite(d)) else 0
     dmax = float(np.max(d))
     rms = float(np.sqrt(np.mean(d * d)))
@@ -62,6 +66,11 @@ def compare_meshes(a: Mesh, g: Mesh, tol: MeshTol) -> Outcome:
             reasons.append(f"normal difference {nmax:.3g} (vertex {int(np.nanargmax(dn)) if np.any(np.isfinite(dn)) else 0})"
                            f" > {tol.normal_max:g}")
     return Outcome(not reasons, tuple(reasons), metrics)
+
+
+def _non_finite(m: Mesh, side: str) -> list[str]:
+    n = int(np.sum(~np.isfinite(m.vertices).all(axis=1)))
+    return [f"{n} {side} vertices are not finite"] if n else []
 
 
 def _first_face_difference(a: Mesh, g: Mesh) -> str:
