@@ -124,6 +124,10 @@ def _hostile(case: str, actual: Path, tmp_path: Path) -> str:
     if case in ply:
         (actual / MESH).write_bytes(ply[case]())
         return MESH
+    if case == "obj face line without corners":
+        write_obj(actual.parent / "golden" / "meshes/m0/x.obj", *tube(0, 0))
+        (actual / "meshes/m0/x.obj").write_bytes(b"v 0 0 0\nf \n")
+        return "meshes/m0/x.obj"
     if case == "png bomb 30000x30000":
         (actual / "frames/0000.png").write_bytes(_png(30000, 30000))
         return "frames/0000.png"
@@ -179,7 +183,7 @@ def _hostile(case: str, actual: Path, tmp_path: Path) -> str:
 
 
 ERROR_CASES = ["ply negative element count", "ply duplicate property", "ply NaN list count",
-               "ply 0xFFFFFFFF list count", "ply ascii index beyond int64", "ply negative list length",
+               "ply 0xFFFFFFFF list count", "ply ascii index beyond int64", "ply negative list length", "obj face line without corners",
                "png bomb 30000x30000", "png 9000x9000 over the pixel limit", "png 9000x9000 on both sides",
                "exr patched dataWindow",
                "exr dataWindow bigger than the data", "json 100k deep", "json 5000-digit integer",
@@ -404,3 +408,42 @@ def test_update_still_blesses_a_plain_golden(runs, tmp_path, capsys):
     out = capsys.readouterr().out
     assert re.search(r"updated golden .*: 1 added, 2 replaced, 1 removed", out), out
     assert tree_bytes(actual) == tree_bytes(golden)
+
+
+# ----------------------------------------------------------------------------- readers, fuzzed
+def test_mesh_readers_raise_only_mesh_read_errors_on_mutated_files():
+    """Seeded mutations of a binary PLY, an ascii PLY and an OBJ (bytes flipped, hostile
+    tokens inserted, spans cut, truncation): every reader either returns a Mesh or raises
+    MeshReadError (an ERROR verdict), never another exception."""
+    import random
+
+    from axdf_cli.formats import FORMATS, MeshReadError, read_mesh
+
+    v, n, f = tube(0, 0, 4, 5)
+    ascii_ply = (b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+                 b"element face 2\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n"
+                 b"3 0 1 2\n4 0 1 2 0\n")
+    seeds = [(FORMATS["ply"].writer(f).encode(v, n), ".ply"), (ascii_ply, ".ply"),
+             (FORMATS["obj"].writer(f).encode(v, n), ".obj")]
+    tokens = [b"-1", b"4294967295", b"nan", b"1e999", b"99999999999999999999", b"0", b"list", b"float",
+              b"\n", b" ", b"//", b"/", b"-", b"f ", b"v ", b"vn ", b"element ", b"property ", b"\nf \n", b"\nv 1\n"]
+    rng = random.Random(10)
+    for _ in range(3000):
+        seed, suffix = rng.choice(seeds)
+        data = bytearray(seed)
+        for _ in range(rng.randint(1, 4)):
+            if not data:
+                break
+            op, i = rng.random(), rng.randrange(len(data))
+            if op < 0.3:
+                data[i] = rng.randrange(256)
+            elif op < 0.6:
+                data[i:i + rng.randint(0, 3)] = rng.choice(tokens)
+            elif op < 0.8:
+                del data[i:i + rng.randint(1, 20)]
+            else:
+                del data[i:]
+        try:
+            read_mesh(bytes(data), suffix)
+        except MeshReadError:
+            pass

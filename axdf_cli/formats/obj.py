@@ -150,6 +150,8 @@ def read_obj(data: bytes) -> Mesh:
         return Mesh(verts, vn if len(vn) == len(verts) and len(vn) else None,
                     np.zeros(0, np.int64), np.zeros(0, np.int64))
     sizes = np.array([len(line.split()) for line in face_lines], np.int64)
+    if sizes.min() == 0:
+        raise MeshReadError("an OBJ 'f' line names no vertex")
     joined = b" ".join(face_lines)
     first = joined.split(None, 1)[0]
     # every corner written alike: a | a/t | a//n | a/t/n -> (vertex, texture, normal) columns
