@@ -11,6 +11,7 @@ import shutil
 import threading
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
@@ -232,3 +233,88 @@ def test_a_name_that_looks_like_an_exponent_is_a_clear_error_and_works_quoted(pr
     m.write_text(text.replace("muscle: biceps_brachii", 'muscle: "1e-5"'))
     assert run_main(["validate", str(m)]) == 0
     assert "1e-5" in capsys.readouterr().out
+
+
+# ----------------------------------------------------------------------------- E: motion time and values
+ARM = OSIM / "arm26" / "arm26.osim"
+needs_arm = pytest.mark.skipif(not ARM.is_file(), reason="OpenSim data not present")
+
+
+def _mot(path: Path, times, values=None, in_degrees: str = "yes") -> Path:
+    """A .mot for arm26 (r_shoulder_elev, r_elbow_flex): one row per time."""
+    values = values if values is not None else [(10.0 * (i % 7), 20.0 + i % 5) for i in range(len(times))]
+    lines = ["arm motion", "version=1", f"nRows={len(times)}", "nColumns=3", f"inDegrees={in_degrees}", "endheader",
+             "time\tr_shoulder_elev\tr_elbow_flex"]
+    lines += [f"{t!r}\t{a!r}\t{b!r}" if not isinstance(a, str) else f"{t!r}\t{a}\t{b!r}"
+              for t, (a, b) in zip(times, values)]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def _import(tmp_path, mot: Path, *extra) -> tuple[int, str]:
+    rc = run_main(["import", "osim", str(ARM), "--motion", str(mot), "--out", str(tmp_path / "out"), "-q", *extra],
+                  timeout=60)
+    return rc, ""
+
+
+FIRST_ROW = 8  # the line of the first data row in _mot's files
+
+
+@needs_arm
+@pytest.mark.parametrize("last", [2000.0, 20000.0])
+def test_a_time_gap_is_refused_at_its_row(tmp_path, capsys, last):
+    times = [round(0.01 * i, 2) for i in range(200)] + [last]
+    mot = _mot(tmp_path / "m.mot", times)
+    assert _import(tmp_path, mot)[0] == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"{mot}:{FIRST_ROW + 200}:1: time jumps from 1.99 to {last:g} s"), err
+    assert "gap" in err and not (tmp_path / "out").exists()
+
+
+@needs_arm
+def test_a_motion_making_too_many_frames_is_refused(tmp_path, capsys):
+    mot = _mot(tmp_path / "m.mot", [0.0, 10.0, 20000.0])  # no gap (two steps), but 20000 s
+    assert _import(tmp_path, mot, "--fps", "100")[0] == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"{mot}:{FIRST_ROW + 2}:1: the motion makes 2000001 frames"), err
+    assert "at most 100000 frames" in err and not (tmp_path / "out").exists()
+
+
+@needs_arm
+def test_a_time_column_that_does_not_advance_names_the_file_and_row(tmp_path, capsys):
+    mot = _mot(tmp_path / "m.mot", [0.5] * 5)
+    assert _import(tmp_path, mot)[0] == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"{mot}:{FIRST_ROW + 1}:1: time does not advance: 4 of 4 steps are 0"), err
+
+
+@needs_arm
+@pytest.mark.parametrize("value, col", [("1e308", 6), ("-2e9", 6)])
+def test_a_huge_value_is_refused_at_import_with_its_position(tmp_path, capsys, value, col):
+    values = [(10.0, 20.0)] * 3
+    values[1] = (value, 20.0)
+    mot = _mot(tmp_path / "m.mot", [0.0, 0.01, 0.02], values)
+    assert _import(tmp_path, mot)[0] == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"{mot}:{FIRST_ROW + 1}:{col}: {value!r} is too large"), err
+
+
+@needs_arm
+def test_an_evenly_sampled_motion_with_variable_steps_still_imports_and_validates(tmp_path, capsys, monkeypatch):
+    """Steps up to GAP_FACTOR times the median are not gaps (CMC's variable steps reach 3.5)."""
+    times = np.cumsum([0.0] + [0.01] * 50 + [0.15] + [0.01] * 20)
+    mot = _mot(tmp_path / "m.mot", [round(float(t), 4) for t in times])
+    monkeypatch.chdir(tmp_path)
+    assert _import(tmp_path, mot)[0] == 0
+    (pose,) = (tmp_path / "out").glob("*.yaml")
+    assert run_main(["validate", str(pose), "--allow-outside"]) == 0
+
+
+@needs_arm
+def test_a_pose_larger_than_axdf_reads_is_refused_at_import(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(tol, "YAML_MAX_BYTES", 20_000)
+    mot = _mot(tmp_path / "m.mot", [round(0.01 * i, 2) for i in range(400)])
+    assert _import(tmp_path, mot)[0] == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"{mot}:{FIRST_ROW + 399}:1: the pose would be ") and "up to 20000 bytes" in err, err
+    assert not (tmp_path / "out").exists()
