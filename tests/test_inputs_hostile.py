@@ -318,3 +318,73 @@ def test_a_pose_larger_than_axdf_reads_is_refused_at_import(tmp_path, capsys, mo
     err = capsys.readouterr().err
     assert err.startswith(f"{mot}:{FIRST_ROW + 399}:1: the pose would be ") and "up to 20000 bytes" in err, err
     assert not (tmp_path / "out").exists()
+
+
+# ----------------------------------------------------------------------------- H: XML entities
+def _osim_with_doctype(tmp_path: Path, doctype: str, where: str, text: str) -> Path:
+    """arm26.osim with a DOCTYPE and ``text`` replacing the content of element ``where``."""
+    src = ARM.read_text()
+    head, rest = src.split("\n", 1)
+    assert head.startswith("<?xml")
+    m_open, m_close = f"<{where}>", f"</{where}>"
+    i = rest.index(m_open) + len(m_open)
+    j = rest.index(m_close, i)
+    out = tmp_path / "arm26.osim"
+    out.write_text(f"{head}\n{doctype}\n{rest[:i]}{text}{rest[j:]}")
+    shutil.copytree(ARM.parent / "Geometry", tmp_path / "Geometry")
+    return out
+
+
+@needs_arm
+def test_external_entities_are_not_expanded(tmp_path, capsys):
+    secret = tmp_path / "secret.txt"
+    secret.write_text("TOPSECRET")
+    model = _osim_with_doctype(tmp_path, f'<!DOCTYPE OpenSimDocument [<!ENTITY xxe SYSTEM "file://{secret}">]>',
+                               "credits", "&xxe;")
+    rc = run_main(["import", "osim", str(model), "--out", str(tmp_path / "out"), "-q"], timeout=60)
+    err = capsys.readouterr().err
+    assert rc in (0, 2) and "TOPSECRET" not in err and "Traceback" not in err, err
+    written = b"".join(p.read_bytes() for p in (tmp_path / "out").rglob("*") if p.is_file())
+    assert b"TOPSECRET" not in written
+
+
+@needs_arm
+def test_entity_expansion_bomb_is_refused(tmp_path, capsys):
+    ents = ['<!ENTITY l0 "lollollollollollollollollollol">'] + [
+        f'<!ENTITY l{i} "{("&l" + str(i - 1) + ";") * 10}">' for i in range(1, 10)]
+    model = _osim_with_doctype(tmp_path, "<!DOCTYPE OpenSimDocument [" + "".join(ents) + "]>", "credits", "&l9;")
+    rc = run_main(["import", "osim", str(model), "--out", str(tmp_path / "out"), "-q"], timeout=60)
+    err = capsys.readouterr().err
+    assert rc == 2 and err.startswith(f"{model}:") and "malformed XML" in err, err
+    assert not (tmp_path / "out").exists()
+
+
+# ----------------------------------------------------------------------------- H: YAML tags, aliases, nesting
+@pytest.mark.parametrize("text, where", [
+    ("a: !!python/object/apply:os.system ['true']\n", "2:4"),  # the sequence under the tag
+    ("a: !!python/name:os.system ''\n", "1:4"),
+    ("a: !!python/object/new:dict {x: 1}\n", "1:4"),
+    ("a: !local x\n", "1:4"),
+    ("a: !!binary aGVsbG8=\n", "1:4"),
+    ("a: !!set {x, y}\n", "1:4"),
+    ("a: !!omap [{x: 1}]\n", "1:4"),
+    ("a: 2001-12-14\n", "1:4"),  # an implicit timestamp: not a plain string, number or boolean
+])
+def test_non_standard_tags_are_refused_with_position(text, where):
+    with pytest.raises(InputError) as e:
+        parse_yaml(text, "t.yaml")
+    assert str(e.value).startswith(f"t.yaml:{where}:" if where != "2:4" else "t.yaml:1:") and "not allowed" in str(e.value)
+
+
+def test_alias_bomb_and_deep_nesting_are_refused_by_the_reader():
+    bomb = 'a: &a ["x","x","x","x","x","x","x","x","x"]\n' + "".join(
+        f"{c}: &{c} [*{p},*{p},*{p},*{p},*{p},*{p},*{p},*{p},*{p}]\n" for p, c in zip("abcdefgh", "bcdefghi"))
+    with pytest.raises(InputError, match="alias bomb"):
+        parse_yaml(bomb, "t.yaml")
+    # 100,000 levels: libyaml's composer recursed in C and crashed the interpreter (SIGSEGV)
+    for deep in ("a: " + "[" * 100_000 + "]" * 100_000 + "\n", "- " * 100_000 + "x\n",
+                 "a: " + "{a: " * 100_000 + "1" + "}" * 100_000 + "\n"):
+        with pytest.raises(InputError, match=r"t\.yaml:1:\d+: document nested too deeply"):
+            parse_yaml(deep, "t.yaml")
+    with pytest.raises(InputError, match="nested too deeply"):
+        parse_yaml("".join("  " * i + f"k{i}:\n" for i in range(200)) + "  " * 200 + "v: 1\n", "t.yaml")
