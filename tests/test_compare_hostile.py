@@ -13,7 +13,6 @@ import os
 import re
 import shutil
 import struct
-import threading
 import xml.etree.ElementTree as ET
 import zlib
 from pathlib import Path
@@ -21,20 +20,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from axdf_cli.cli.main import main
+from conftest import main_or_hang
 from compare_helpers import make_run, tree_bytes, tube, write_obj, write_ply
 
 MESH = "meshes/m0/m0_0000.ply"
-
-
-def run_main(args: list[str], timeout: float = 120.0) -> int:
-    """``main(args)`` in a thread: a hang fails the test instead of stalling the suite."""
-    box: dict = {}
-    t = threading.Thread(target=lambda: box.setdefault("rc", main(args)), daemon=True)
-    t.start()
-    t.join(timeout)
-    assert not t.is_alive(), f"axdf {' '.join(args)} still running after {timeout} s"
-    return box["rc"]
 
 
 @pytest.fixture
@@ -44,28 +33,17 @@ def runs(tmp_path):
             make_run(tmp_path / "golden", muscles=1, frames=2))
 
 
-def compare(tmp_path, actual, golden, *extra) -> tuple[int, dict, ET.Element, str]:
-    """Run `axdf compare` with --report and --junit; (exit code, report, JUnit root, stdout)."""
-    rpt, xml = tmp_path / "out" / "r.json", tmp_path / "out" / "r.xml"
-    rc = run_main(["compare", str(actual), str(golden), "--report", str(rpt), "--junit", str(xml), *extra])
-    return rc, json.loads(rpt.read_bytes().decode("utf-8")), ET.fromstring(xml.read_bytes()), _out.get()
-
-
-class _Out:
-    capsys = None
-
-    def get(self) -> str:
-        return self.capsys.readouterr().out if self.capsys else ""
-
-
-_out = _Out()
-
-
-@pytest.fixture(autouse=True)
-def _capture(capsys):
-    _out.capsys = capsys
-    yield
-    _out.capsys = None
+@pytest.fixture
+def compare(tmp_path, capsys):
+    """``compare(actual, golden, *flags)``: `axdf compare` with --report and --junit ->
+    (exit code, report, JUnit root, stdout)."""
+    def run(actual, golden, *extra) -> tuple[int, dict, ET.Element, str]:
+        rpt, xml = tmp_path / "out" / "r.json", tmp_path / "out" / "r.xml"
+        capsys.readouterr()
+        rc = main_or_hang(["compare", actual, golden, "--report", rpt, "--junit", xml, *extra])
+        doc = json.loads(rpt.read_bytes().decode("utf-8"))
+        return rc, doc, ET.fromstring(xml.read_bytes()), capsys.readouterr().out
+    return run
 
 
 # ----------------------------------------------------------------------------- hostile files
@@ -192,10 +170,10 @@ ERROR_CASES = ["ply negative element count", "ply duplicate property", "ply NaN 
 
 
 @pytest.mark.parametrize("case", ERROR_CASES)
-def test_one_hostile_file_is_an_error_verdict_and_the_rest_is_compared(runs, tmp_path, case):
+def test_one_hostile_file_is_an_error_verdict_and_the_rest_is_compared(runs, tmp_path, case, compare):
     actual, golden = runs
     rel = _hostile(case, actual, tmp_path)
-    rc, doc, junit, out = compare(tmp_path, actual, golden)
+    rc, doc, junit, out = compare(actual, golden)
     assert rc == 1, out
     verdicts = {f["path"]: f for f in doc["files"]}
     assert verdicts[rel]["verdict"] == "error", verdicts[rel]
@@ -210,50 +188,50 @@ def test_one_hostile_file_is_an_error_verdict_and_the_rest_is_compared(runs, tmp
     assert out.splitlines()[-3].startswith("DIFFERENT: 1 of") and "1 error" in out.splitlines()[-3]
 
 
-def test_symlink_inside_the_folder_is_followed(runs, tmp_path):
+def test_symlink_inside_the_folder_is_followed(runs, tmp_path, compare):
     actual, golden = runs
     (golden / "link.csv").write_bytes((golden / "stats.csv").read_bytes())
     (actual / "link.csv").symlink_to(actual / "stats.csv")
-    rc, doc, _, _ = compare(tmp_path, actual, golden)
+    rc, doc, _, _ = compare(actual, golden)
     assert rc == 0, doc
 
 
-def test_obj_with_nan_and_inf_against_another_topology_fails_with_reasons(tmp_path):
+def test_obj_with_nan_and_inf_against_another_topology_fails_with_reasons(tmp_path, compare):
     v, n, f = tube(0, 0)
     write_obj(tmp_path / "g.obj", v, n, f)
     bad = np.vstack([v, [[np.nan, np.inf, 0.0]]])
     write_obj(tmp_path / "a.obj", bad, np.vstack([n, [[0, 0, 1]]]), f)
-    rc, doc, _, out = compare(tmp_path, tmp_path / "a.obj", tmp_path / "g.obj")
+    rc, doc, _, out = compare(tmp_path / "a.obj", tmp_path / "g.obj")
     assert rc == 1
     (r,) = doc["files"]
     assert r["verdict"] == "fail" and "topology differs" in r["reasons"][0]
     assert "1 actual vertices are not finite" in r["reasons"] and r["metrics"]["hausdorff"] is None
 
 
-def test_png_sizes_are_compared_from_the_headers_before_decoding(runs, tmp_path):
+def test_png_sizes_are_compared_from_the_headers_before_decoding(runs, tmp_path, compare):
     """A 4000x4000 header over data that would not decode: a size mismatch (FAIL), which
     only a header-only check can report; nothing of the large image is decoded."""
     actual, golden = runs
     (actual / "frames/0000.png").write_bytes(_png(4000, 4000))
-    rc, doc, _, _ = compare(tmp_path, actual, golden)
+    rc, doc, _, _ = compare(actual, golden)
     (r,) = [f for f in doc["files"] if f["path"] == "frames/0000.png"]
     assert rc == 1 and r["verdict"] == "fail", r
     assert r["reasons"] == ["image is 4000x4000 with 4 channels vs golden 64x64 with 4 channels"]
 
 
-def test_exr_sizes_are_compared_from_the_headers(runs, tmp_path):
+def test_exr_sizes_are_compared_from_the_headers(runs, tmp_path, compare):
     actual, golden = runs
     p = actual / "frames/0000.exr"
     p.write_bytes(_exr_data_window(p.read_bytes(), 99, 99))
-    rc, doc, _, _ = compare(tmp_path, actual, golden)
+    rc, doc, _, _ = compare(actual, golden)
     (r,) = [f for f in doc["files"] if f["path"] == "frames/0000.exr"]
     assert rc == 1 and r["verdict"] == "fail" and r["reasons"] == ["image is 100x100 vs golden 64x64"], r
 
 
-def test_json_integers_beyond_float_are_compared_not_crashed(tmp_path):
+def test_json_integers_beyond_float_are_compared_not_crashed(tmp_path, compare):
     (tmp_path / "a.json").write_text('{"n": ' + "1" * 400 + ', "m": ' + "3" * 400 + "}")
     (tmp_path / "g.json").write_text('{"n": ' + "1" * 399 + '2, "m": ' + "4" * 400 + "}")
-    rc, doc, _, _ = compare(tmp_path, tmp_path / "a.json", tmp_path / "g.json")
+    rc, doc, _, _ = compare(tmp_path / "a.json", tmp_path / "g.json")
     (r,) = doc["files"]
     assert rc == 1 and r["verdict"] == "fail", r
     # n differs by 1 in 400 digits: within rtol; m differs by a 400-digit number: beyond
@@ -263,17 +241,17 @@ def test_json_integers_beyond_float_are_compared_not_crashed(tmp_path):
 def test_fifo_named_on_the_command_line_is_bad_usage(tmp_path, capsys):
     os.mkfifo(tmp_path / "a.ply")
     write_ply(tmp_path / "g.ply", *tube(0, 0))
-    assert run_main(["compare", str(tmp_path / "a.ply"), str(tmp_path / "g.ply")]) == 2
+    assert main_or_hang(["compare", str(tmp_path / "a.ply"), str(tmp_path / "g.ply")]) == 2
     assert "is not a folder or a regular file" in capsys.readouterr().err
 
 
 @pytest.mark.skipif(os.geteuid() == 0, reason="root lists any folder")
-def test_unlistable_folder_is_an_error(runs, tmp_path):
+def test_unlistable_folder_is_an_error(runs, tmp_path, compare):
     actual, golden = runs
     (actual / "locked").mkdir()
     (actual / "locked").chmod(0)
     try:
-        rc, doc, _, _ = compare(tmp_path, actual, golden)
+        rc, doc, _, _ = compare(actual, golden)
     finally:
         (actual / "locked").chmod(0o755)
     assert rc == 1 and {f["path"]: f["verdict"] for f in doc["files"]}["locked/"] == "error"
@@ -284,7 +262,7 @@ ODD_NAMES = ["ctl\x01\x1b[31mred.csv", "x]]>&<y\".txt", "tab\tname.txt", "new\nl
              "ünïcödé ✓.txt"]
 
 
-def test_reports_are_valid_for_any_file_name(runs, tmp_path):
+def test_reports_are_valid_for_any_file_name(runs, tmp_path, compare):
     actual, golden = runs
     for name in ODD_NAMES:
         (actual / name).write_bytes(b"a")
@@ -292,7 +270,7 @@ def test_reports_are_valid_for_any_file_name(runs, tmp_path):
     raw = os.fsencode(str(actual)) + b"/bad\xff\xfe.txt"  # not UTF-8: a surrogate in os.fsdecode
     with open(raw, "wb") as fh:
         fh.write(b"only in actual")
-    rc, doc, junit, out = compare(tmp_path, actual, golden)  # ET.fromstring: well-formed XML
+    rc, doc, junit, out = compare(actual, golden)  # ET.fromstring: well-formed XML
     assert rc == 1
     names = {c.get("name") for c in junit.iter("testcase")}
     assert "bad\\xff\\xfe.txt" in names and "ctl\\x01\\x1b[31mred.csv" in names and 'x]]>&<y".txt' in names
@@ -309,9 +287,9 @@ def test_quiet_prints_a_subset_of_the_default_ending_with_the_verdict(runs, tmp_
         p = actual / rel
         p.write_bytes(p.read_bytes()[:-30] + b"garbage")
     (actual / "extra.txt").write_text("x")
-    assert run_main(["compare", str(actual), str(golden)]) == 1
+    assert main_or_hang(["compare", str(actual), str(golden)]) == 1
     default = capsys.readouterr().out.splitlines()
-    assert run_main(["compare", "-q", str(actual), str(golden)]) == 1
+    assert main_or_hang(["compare", "-q", str(actual), str(golden)]) == 1
     quiet = capsys.readouterr().out.splitlines()
     assert len(quiet) < len(default) and set(quiet[:-1]) <= set(default)
     assert quiet[-1].startswith("DIFFERENT: 3 of 11 files") and quiet[-1].split(" in ")[0] == default[-1].split(" in ")[0]
@@ -332,7 +310,7 @@ def test_update_refuses_a_symlinked_folder_in_golden(runs, tmp_path, capsys):
     (golden / "meshes").symlink_to(elsewhere)
     _changed(actual)
     before, before_g = tree_bytes(elsewhere), tree_bytes(golden)
-    rc = run_main(["compare", str(actual), str(golden), "--update", "--report", str(tmp_path / "r.json")])
+    rc = main_or_hang(["compare", str(actual), str(golden), "--update", "--report", str(tmp_path / "r.json")])
     err = capsys.readouterr().err
     assert rc == 2 and "GOLDEN/meshes" in err and "symbolic link" in err, err
     assert tree_bytes(elsewhere) == before and tree_bytes(golden) == before_g
@@ -347,7 +325,7 @@ def test_update_refuses_a_file_symlink_out_of_golden(runs, tmp_path, capsys):
     (golden / "stats.csv").symlink_to(outside)
     _changed(actual)
     before = outside.read_bytes()
-    assert run_main(["compare", str(actual), str(golden), "--update"]) == 2
+    assert main_or_hang(["compare", str(actual), str(golden), "--update"]) == 2
     assert "GOLDEN/stats.csv" in capsys.readouterr().err
     assert outside.read_bytes() == before
 
@@ -362,7 +340,7 @@ def test_update_refuses_what_it_cannot_copy_from_actual(runs, tmp_path, capsys, 
         (tmp_path / "secret").write_text("s")
         (actual / "secret").symlink_to(tmp_path / "secret")
     before = tree_bytes(golden)
-    assert run_main(["compare", str(actual), str(golden), "--update"]) == 2
+    assert main_or_hang(["compare", str(actual), str(golden), "--update"]) == 2
     assert "ACTUAL/" in capsys.readouterr().err
     assert tree_bytes(golden) == before
 
@@ -385,16 +363,16 @@ def test_update_refuses_nested_folders(tmp_path, capsys, layout):
         actual, golden = outer, tmp_path / "A" / "." / ""
     before = tree_bytes(outer)
     for _ in range(2):
-        assert run_main(["compare", str(actual), str(golden), "--update"]) == 2
+        assert main_or_hang(["compare", str(actual), str(golden), "--update"]) == 2
         assert "inside" in capsys.readouterr().err
     assert tree_bytes(outer) == before
 
 
-def test_compare_leaves_a_nested_golden_out_of_the_outer_listing(tmp_path):
+def test_compare_leaves_a_nested_golden_out_of_the_outer_listing(tmp_path, compare):
     outer = make_run(tmp_path / "A", muscles=1, frames=1)
     shutil.copytree(outer, tmp_path / "copy")
     shutil.move(tmp_path / "copy", outer / "golden")
-    rc, doc, _, _ = compare(tmp_path, outer, outer / "golden")
+    rc, doc, _, _ = compare(outer, outer / "golden")
     assert rc == 0 and not any(f["path"].startswith("golden/") for f in doc["files"])
 
 
@@ -404,7 +382,7 @@ def test_update_still_blesses_a_plain_golden(runs, tmp_path, capsys):
     (golden / "old.txt").write_text("gone")
     (actual / "sub").mkdir()
     (actual / "sub" / "new.txt").write_text("new")
-    assert run_main(["compare", str(actual), str(golden), "--update"]) == 0
+    assert main_or_hang(["compare", str(actual), str(golden), "--update"]) == 0
     out = capsys.readouterr().out
     assert re.search(r"updated golden .*: 1 added, 2 replaced, 1 removed", out), out
     assert tree_bytes(actual) == tree_bytes(golden)

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import os
 import shutil
-import threading
 from pathlib import Path
 
 import numpy as np
@@ -16,22 +15,12 @@ import pytest
 import yaml
 
 from axdf_cli import tolerances as tol
-from axdf_cli.cli.main import main
 from axdf_cli.errors import InputError
 from axdf_cli.yamlio import FileRefused, parse_yaml, read_input, read_regular
+from conftest import main_or_hang
 
 ROOT = Path(__file__).resolve().parents[1]
 OSIM = ROOT.parent / "shared" / "data" / "opensim"
-
-
-def run_main(args: list[str], timeout: float = 60.0) -> int:
-    """``main(args)`` in a thread: a hang fails the test instead of stalling the suite."""
-    box: dict = {}
-    t = threading.Thread(target=lambda: box.setdefault("rc", main(args)), daemon=True)
-    t.start()
-    t.join(timeout)
-    assert not t.is_alive(), f"axdf {' '.join(args)} still running after {timeout} s (blocked on a FIFO?)"
-    return box["rc"]
 
 
 @pytest.fixture
@@ -117,7 +106,7 @@ def test_validate_refuses_non_regular_inputs_with_exit_2(project, capsys, target
         p.mkdir()
     else:
         p.symlink_to(target)
-    assert run_main(["validate", "bad.yaml"]) == 2
+    assert main_or_hang(["validate", "bad.yaml"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("bad.yaml:") and "Traceback" not in err and "internal error" not in err, err
 
@@ -135,7 +124,7 @@ def test_skeleton_reference_to_a_non_regular_file_is_exit_2_naming_it(project, c
     pose.write_text(pose.read_text().replace("skeleton: skeletons/human_r.yaml", "skeleton: skeletons/bad.yaml"))
     for args in (["validate", "poses/demo.yaml"],
                  ["run", "poses/jobs/demo.yaml", "--no-render", "--frames", "0:1", "--out", "out"]):
-        assert run_main(args) == 2
+        assert main_or_hang(args) == 2
         err = capsys.readouterr().err
         assert "bad.yaml" in err and "Traceback" not in err and "internal error" not in err, err
     assert not (project / "out").exists()
@@ -143,7 +132,7 @@ def test_skeleton_reference_to_a_non_regular_file_is_exit_2_naming_it(project, c
 
 def test_job_file_that_is_a_symlink_loop_is_exit_2(project, capsys):
     (project / "job.yaml").symlink_to(project / "job.yaml")
-    assert run_main(["run", "job.yaml", "--no-render"]) == 2
+    assert main_or_hang(["run", "job.yaml", "--no-render"]) == 2
     err = capsys.readouterr().err
     assert "job.yaml" in err and "internal error" not in err, err
 
@@ -151,7 +140,7 @@ def test_job_file_that_is_a_symlink_loop_is_exit_2(project, capsys):
 def test_oversize_yaml_is_refused_before_parsing(project, capsys, monkeypatch):
     monkeypatch.setattr(tol, "YAML_MAX_BYTES", 1000)
     (project / "big.yaml").write_text("a: 1\n" * 300)
-    assert run_main(["validate", "big.yaml"]) == 2
+    assert main_or_hang(["validate", "big.yaml"]) == 2
     assert "at most 1000 bytes" in capsys.readouterr().err
 
 
@@ -164,7 +153,7 @@ def test_import_refuses_fifo_motion_and_model(tmp_path, capsys, which):
     args = ["import", "osim", str(fifo if which == "model" else model), "--out", str(tmp_path / "out")]
     if which == "--motion":
         args += ["--motion", str(fifo)]
-    assert run_main(args) == 2
+    assert main_or_hang(args) == 2
     err = capsys.readouterr().err
     assert str(fifo) in err and "FIFO" in err, err
     assert not (tmp_path / "out").exists()
@@ -197,7 +186,7 @@ def test_exponent_numbers_through_the_real_loaders_give_the_same_meshes(project,
     """A muscle, skeleton and pose written with exponents run to the same bytes as the
     decimal originals (muscle radii, a skeleton offset, the pose's fps, a key value)."""
     args = ["run", "poses/jobs/demo.yaml", "--no-render", "--frames", "0:1", "--overwrite"]
-    assert run_main(args + ["--out", "out/a"]) == 0
+    assert main_or_hang(args + ["--out", "out/a"]) == 0
     m = project / "muscles" / "demo" / "biceps_brachii.yaml"
     m.write_text(m.read_text().replace("radii: [0.02, 0.015]", "radii: [2e-2, 15E-3]")
                  .replace("tendons: [0.15, 0.12]", "tendons: [1.5e-1, 12e-2]"))
@@ -205,8 +194,8 @@ def test_exponent_numbers_through_the_real_loaders_give_the_same_meshes(project,
     text = p.read_text()
     assert "fps: 24" in text and "16:  {knee_flexion_r: 60," in text
     p.write_text(text.replace("fps: 24", "fps: 2.4e1").replace("16:  {knee_flexion_r: 60,", "16:  {knee_flexion_r: 6e1,"))
-    assert run_main(["validate", str(m), str(p)]) == 0
-    assert run_main(args + ["--out", "out/b"]) == 0
+    assert main_or_hang(["validate", str(m), str(p)]) == 0
+    assert main_or_hang(args + ["--out", "out/b"]) == 0
     a, b = project / "out" / "a" / "meshes", project / "out" / "b" / "meshes"
     files = sorted(x.relative_to(a) for x in a.rglob("*.ply"))
     assert files and files == sorted(x.relative_to(b) for x in b.rglob("*.ply"))
@@ -227,11 +216,11 @@ def test_a_name_that_looks_like_an_exponent_is_a_clear_error_and_works_quoted(pr
     m = project / "muscles" / "demo" / "biceps_brachii.yaml"
     text = m.read_text()
     m.write_text(text.replace("muscle: biceps_brachii", "muscle: 1e-5"))
-    assert run_main(["validate", str(m)]) == 2
+    assert main_or_hang(["validate", str(m)]) == 2
     err = capsys.readouterr().err
     assert f"{m}:4:9: muscle is the number 1e-05" in err and "quote" in err, err
     m.write_text(text.replace("muscle: biceps_brachii", 'muscle: "1e-5"'))
-    assert run_main(["validate", str(m)]) == 0
+    assert main_or_hang(["validate", str(m)]) == 0
     assert "1e-5" in capsys.readouterr().out
 
 
@@ -252,7 +241,7 @@ def _mot(path: Path, times, values=None, in_degrees: str = "yes") -> Path:
 
 
 def _import(tmp_path, mot: Path, *extra) -> tuple[int, str]:
-    rc = run_main(["import", "osim", str(ARM), "--motion", str(mot), "--out", str(tmp_path / "out"), "-q", *extra],
+    rc = main_or_hang(["import", "osim", str(ARM), "--motion", str(mot), "--out", str(tmp_path / "out"), "-q", *extra],
                   timeout=60)
     return rc, ""
 
@@ -307,7 +296,7 @@ def test_an_evenly_sampled_motion_with_variable_steps_still_imports_and_validate
     monkeypatch.chdir(tmp_path)
     assert _import(tmp_path, mot)[0] == 0
     (pose,) = (tmp_path / "out").glob("*.yaml")
-    assert run_main(["validate", str(pose), "--allow-outside"]) == 0
+    assert main_or_hang(["validate", str(pose), "--allow-outside"]) == 0
 
 
 @needs_arm
@@ -341,7 +330,7 @@ def test_external_entities_are_not_expanded(tmp_path, capsys):
     secret.write_text("TOPSECRET")
     model = _osim_with_doctype(tmp_path, f'<!DOCTYPE OpenSimDocument [<!ENTITY xxe SYSTEM "file://{secret}">]>',
                                "credits", "&xxe;")
-    rc = run_main(["import", "osim", str(model), "--out", str(tmp_path / "out"), "-q"], timeout=60)
+    rc = main_or_hang(["import", "osim", str(model), "--out", str(tmp_path / "out"), "-q"], timeout=60)
     err = capsys.readouterr().err
     assert rc in (0, 2) and "TOPSECRET" not in err and "Traceback" not in err, err
     written = b"".join(p.read_bytes() for p in (tmp_path / "out").rglob("*") if p.is_file())
@@ -353,7 +342,7 @@ def test_entity_expansion_bomb_is_refused(tmp_path, capsys):
     ents = ['<!ENTITY l0 "lollollollollollollollollollol">'] + [
         f'<!ENTITY l{i} "{("&l" + str(i - 1) + ";") * 10}">' for i in range(1, 10)]
     model = _osim_with_doctype(tmp_path, "<!DOCTYPE OpenSimDocument [" + "".join(ents) + "]>", "credits", "&l9;")
-    rc = run_main(["import", "osim", str(model), "--out", str(tmp_path / "out"), "-q"], timeout=60)
+    rc = main_or_hang(["import", "osim", str(model), "--out", str(tmp_path / "out"), "-q"], timeout=60)
     err = capsys.readouterr().err
     assert rc == 2 and err.startswith(f"{model}:") and "malformed XML" in err, err
     assert not (tmp_path / "out").exists()
