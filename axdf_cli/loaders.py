@@ -385,8 +385,17 @@ class Pose:
         return np.arange(self.first, self.last + 1)
 
 
+#: Motion files that are not poses → the command that turns them into one.
+MOTION_IMPORTS = {".bvh": "axdf import bvh FILE.bvh --out DIR",
+                  ".mot": "axdf import osim MODEL.osim --motion FILE --out DIR",
+                  ".sto": "axdf import osim MODEL.osim --motion FILE --out DIR"}
+
+
 def load_pose(path: Path | str) -> Pose:
     path = Path(path)
+    if path.suffix.lower() in MOTION_IMPORTS:
+        raise InputError(Mark(str(path)), f"a {path.suffix} motion is not an axdf pose",
+                         f"import it first ({MOTION_IMPORTS[path.suffix.lower()]}) and pass the pose YAML it writes")
     doc = load_yaml(path)
     top = Mark(str(path), 1, 1)
     f = Fields(doc, top, "pose file")

@@ -171,10 +171,12 @@ def real_path(path: Path | str) -> Path:
     return Path(os.path.realpath(path))
 
 
-def read_text(path: Path, display: str | None = None) -> str:
-    """Read a UTF-8 text file; refuse binary, oversize or undecodable files with a position."""
+def read_text(path: Path, display: str | None = None, allowed: str = "an existing YAML file",
+              max_bytes: int | None = None) -> str:
+    """Read a UTF-8 text file of at most ``max_bytes`` (default ``YAML_MAX_BYTES``); refuse
+    binary, oversize or undecodable files with a position."""
     display = display or str(path)
-    data = read_input(path, display, "an existing YAML file", limit=tol.YAML_MAX_BYTES)
+    data = read_input(path, display, allowed, limit=tol.YAML_MAX_BYTES if max_bytes is None else max_bytes)
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as e:

@@ -1,7 +1,11 @@
 """An OpenSim :class:`~axdf_cli.importers.osim.Model` → axdf documents and YAML text.
 
-Output is deterministic: no timestamps, no absolute paths, floats written with Python's
-``repr`` (shortest text that reads back to the same double), keys in a fixed order.
+Output is deterministic: no timestamps, no absolute paths, keys in a fixed order. Numbers
+are written rounded to what they mean (:func:`rounded`): positions (``offset``,
+``post_offset``, an axis point's ``at``) to 0.1 µm, everything else to 9 significant digits.
+The digits beyond come from matrix products whose last bits differ between CPUs and BLAS
+builds; rounding them away keeps the files readable and (but for a rare value on a
+rounding boundary) the same on every machine.
 
 Conversions (OpenSim → axdf):
 
@@ -265,7 +269,7 @@ def muscle_doc(m: Muscle, skel: Skeleton, world: np.ndarray) -> tuple[dict, dict
            "conditional": conditional, "conditional_inactive_at_rest": dropped, "moving": moving,
            "wraps": list(m.wraps), "rest_path_length": path_length, "pcsa_m2": pcsa, "volume_m3": volume,
            "belly_radius": r, "tendon_radius": r_t, "tendons": [t_o, t_i]}
-    return doc, row
+    return doc, rounded(row)
 
 
 def _arc_parameter(skel: Skeleton, world: np.ndarray, axis) -> tuple:
@@ -317,6 +321,34 @@ def rest_world(skel: Skeleton) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------- YAML text
+
+#: Positions are rounded to this many decimals of a metre (0.1 µm): OpenSim path points and
+#: joint frames are given to 0.1 mm or coarser; float noise is ~1e-17 m.
+POSITION_DECIMALS = 7
+#: Keys whose numbers are positions in metres.
+POSITION_KEYS = frozenset({"offset", "post_offset", "at"})
+#: Significant digits of every other number (angles, radii, fractions, activations, function
+#: values): ~1e-9 relative, far below anything the model resolves and above float noise.
+SIGNIFICANT_DIGITS = 9
+
+
+def round_number(v: float, key=None) -> float:
+    """``v`` rounded to what it means: see POSITION_DECIMALS and SIGNIFICANT_DIGITS."""
+    if key in POSITION_KEYS:
+        return round(v, POSITION_DECIMALS) + 0.0  # + 0.0: no negative zero
+    return float(f"{v:.{SIGNIFICANT_DIGITS}g}") + 0.0
+
+
+def rounded(doc, key=None):
+    """A copy of a document (dicts, lists, scalars) with every float rounded by
+    :func:`round_number`; a list's numbers are rounded as its key says."""
+    if isinstance(doc, dict):
+        return {k: rounded(v, k) for k, v in doc.items()}
+    if isinstance(doc, (list, tuple)):
+        return [rounded(v, key) for v in doc]
+    if isinstance(doc, float) and math.isfinite(doc):
+        return round_number(doc, key)
+    return doc
 
 _PLAIN = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\-/]*$")
 
@@ -373,7 +405,9 @@ FLOW_CHILDREN = ("keys", "activation", "coordinates")
 
 
 def dump_yaml(doc, header: str = "") -> str:
-    """Block-style YAML with flow-style vectors and small mappings; deterministic."""
+    """Block-style YAML with flow-style vectors and small mappings, numbers :func:`rounded`;
+    deterministic."""
+    doc = rounded(doc)
     lines: list[str] = []
     if header:
         lines += ["# " + h if h else "#" for h in header.splitlines()]
