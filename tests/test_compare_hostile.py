@@ -161,7 +161,8 @@ def _hostile(case: str, actual: Path, tmp_path: Path) -> str:
 
 
 ERROR_CASES = ["ply negative element count", "ply duplicate property", "ply NaN list count",
-               "ply 0xFFFFFFFF list count", "ply ascii index beyond int64", "ply negative list length", "obj face line without corners",
+               "ply 0xFFFFFFFF list count", "ply ascii index beyond int64", "ply negative list length",
+               "obj face line without corners",
                "png bomb 30000x30000", "png 9000x9000 over the pixel limit", "png 9000x9000 on both sides",
                "exr patched dataWindow",
                "exr dataWindow bigger than the data", "json 100k deep", "json 5000-digit integer",
@@ -292,7 +293,8 @@ def test_quiet_prints_a_subset_of_the_default_ending_with_the_verdict(runs, tmp_
     assert main_or_hang(["compare", "-q", str(actual), str(golden)]) == 1
     quiet = capsys.readouterr().out.splitlines()
     assert len(quiet) < len(default) and set(quiet[:-1]) <= set(default)
-    assert quiet[-1].startswith("DIFFERENT: 3 of 11 files") and quiet[-1].split(" in ")[0] == default[-1].split(" in ")[0]
+    assert quiet[-1].startswith("DIFFERENT: 3 of 11 files")
+    assert quiet[-1].split(" in ")[0] == default[-1].split(" in ")[0]
     assert [q.split() for q in quiet[:-1]] == [["EXTRA", "extra.txt"], ["ERROR", MESH], ["FAIL", "stats.csv"]]
 
 

@@ -87,7 +87,7 @@ def _output_path(text: str | None, flag: str) -> Path | None:
 def run(args) -> int:
     from dataclasses import replace
 
-    from axdf_cli.compare import check_paths, compare_paths
+    from axdf_cli.compare import check_path, check_paths, compare_paths
     from axdf_cli.compare.report import shown, summary, to_json, to_junit
     from axdf_cli.compare.tolerances import Tolerances, load_tolerances
 
@@ -99,7 +99,7 @@ def run(args) -> int:
     junit_path = _output_path(args.junit, "--junit")
     first_bless = args.update and actual.exists() and not os.path.lexists(golden)  # a new golden
     if first_bless:
-        check_paths(actual, actual)
+        check_path("ACTUAL", actual)
     else:
         check_paths(actual, golden)
     diff_dir = Path(args.diff_dir) if args.diff_dir else None
@@ -115,7 +115,7 @@ def run(args) -> int:
 
         steps = plan_bless(actual, golden, tol, exclude)  # refusals (exit 2) before any write
     if first_bless:
-        _print_changes(apply_bless(steps, actual, golden), golden, args, shown)
+        _print_changes(apply_bless(steps, actual, golden), golden, args)
         return 0
 
     if diff_dir is not None and diff_dir.is_dir():
@@ -136,12 +136,14 @@ def run(args) -> int:
     if junit_path and not args.quiet:
         print(f"junit: {shown(str(junit_path))}")
     if steps is not None:
-        _print_changes(apply_bless(steps, actual, golden, report), golden, args, shown)
+        _print_changes(apply_bless(steps, actual, golden, report), golden, args)
         return 0
     return 0 if report.passed else 1
 
 
-def _print_changes(changes, golden: Path, args, shown) -> None:
+def _print_changes(changes, golden: Path, args) -> None:
+    from axdf_cli.compare.report import shown
+
     if not args.quiet:
         for c in changes:
             where = golden / c.path if golden.is_dir() else golden

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Callable, Iterable
 
 from axdf_cli.atomic import write_bytes
-from axdf_cli.compare.files import inside, list_files, read_compared
+from axdf_cli.compare.files import list_files, nested, read_compared
 from axdf_cli.compare.result import ERROR, EXTRA, FAIL, MISSING, PASS, FileResult, Outcome, Report, read_side
 from axdf_cli.compare.tolerances import FileTol, Tolerances, as_dict
 from axdf_cli.errors import AxdfError, UsageError
@@ -59,14 +59,19 @@ def _compare_kind(kind: str, a: Path, g: Path, ab: bytes, gb: bytes, t: FileTol)
     return tables.compare_bytes(ab, gb)
 
 
+def check_path(side: str, p: Path) -> None:
+    """A UsageError (exit 2) unless ``p`` is an existing folder or regular file."""
+    if not p.exists():
+        raise UsageError(f"{side} {p} does not exist", "give an existing run folder or file")
+    if not p.is_dir() and not p.is_file():
+        raise UsageError(f"{side} {p} is not a folder or a regular file", "compare two run folders or two files")
+
+
 def check_paths(actual: Path, golden: Path) -> str:
     """'files' or 'folders'; a UsageError (exit 2) for a missing path, a path that is neither
     a folder nor a regular file (a FIFO, a device), or a file vs a folder."""
-    for side, p in (("ACTUAL", actual), ("GOLDEN", golden)):
-        if not p.exists():
-            raise UsageError(f"{side} {p} does not exist", "give an existing run folder or file")
-        if not p.is_dir() and not p.is_file():
-            raise UsageError(f"{side} {p} is not a folder or a regular file", "compare two run folders or two files")
+    check_path("ACTUAL", actual)
+    check_path("GOLDEN", golden)
     if actual.is_dir() != golden.is_dir():
         fd = lambda p: "a folder" if p.is_dir() else "a file"  # noqa: E731
         raise UsageError(f"ACTUAL {actual} is {fd(actual)} but GOLDEN {golden} is {fd(golden)}",
@@ -78,16 +83,6 @@ def check_paths(actual: Path, golden: Path) -> str:
         raise UsageError(f"cannot compare a {ka} file ({actual.name}) with a {kg} file ({golden.name})",
                          "compare two files of the same kind (PLY and OBJ meshes compare with each other)")
     return "files"
-
-
-def nested(actual: Path, golden: Path) -> Path | None:
-    """The folder of the two that lies inside the other (or is the other), else None."""
-    ra, rg = real_path(actual), real_path(golden)
-    if inside(rg, ra):
-        return golden
-    if inside(ra, rg):
-        return actual
-    return None
 
 
 def compare_paths(actual: Path | str, golden: Path | str, tolerances: Tolerances | None = None,
@@ -112,7 +107,7 @@ def compare_paths(actual: Path | str, golden: Path | str, tolerances: Tolerances
         fg = {r: p for r, p in list_files(golden, exclude, listing_errors).items() if not tolerances.ignored(r)}
         pairs = [(r, fa.get(r), fg.get(r)) for r in sorted(set(fa) | set(fg))]
         roots = (actual, golden)
-    results: list[FileResult] = [FileResult(rel, "folder", ERROR, (why,)) for rel, why in sorted(listing_errors.items())]
+    results = [FileResult(rel, "folder", ERROR, (why,)) for rel, why in sorted(listing_errors.items())]
     causes: list[str] = []
     for i, (rel, a, g) in enumerate(pairs):
         r = compare_pair(rel, a, g, tolerances, diff_dir, roots)
@@ -178,5 +173,5 @@ def _png_bytes(rgb) -> bytes:
     return buf.getvalue()
 
 
-__all__ = ["compare_paths", "compare_pair", "check_paths", "list_files", "kind_of", "nested", "KINDS",
+__all__ = ["compare_paths", "compare_pair", "check_path", "check_paths", "list_files", "kind_of", "nested", "KINDS",
            "Report", "FileResult", "Tolerances"]

@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Iterable
 
 from axdf_cli.atomic import write_parts
-from axdf_cli.compare.files import check_compared, inside, list_files, read_compared
+from axdf_cli.compare.files import check_compared, list_files, nested, read_compared
 from axdf_cli.compare.result import Report, Unreadable
 from axdf_cli.compare.tolerances import Tolerances
 from axdf_cli.errors import EnvironmentProblem, UsageError
@@ -47,9 +47,9 @@ class Step:
 def refuse_nested(actual: Path, golden: Path) -> None:
     """UsageError when either folder is (or lies inside) the other, by real paths (golden
     may not exist yet)."""
-    ra, rg = real_path(actual), real_path(golden)
-    if inside(rg, ra) or inside(ra, rg):
-        inner, outer = (golden, actual) if inside(rg, ra) else (actual, golden)
+    inner = nested(actual, golden)
+    if inner is not None:
+        outer = actual if inner is golden else golden
         raise UsageError(f"--update: {inner} is inside {outer}",
                          "ACTUAL and GOLDEN must be separate folders (each update would copy one into itself)")
 

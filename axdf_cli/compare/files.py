@@ -32,6 +32,17 @@ def inside(path: Path, root: Path) -> bool:
     return path == root or root in path.parents
 
 
+def nested(actual: Path, golden: Path) -> Path | None:
+    """The folder of the two that is, or lies inside, the other (by real paths; either may
+    not exist yet), else None."""
+    ra, rg = real_path(actual), real_path(golden)
+    if inside(rg, ra):
+        return golden
+    if inside(ra, rg):
+        return actual
+    return None
+
+
 def list_files(root: Path, exclude: Iterable[Path] = (), errors: dict[str, str] | None = None) -> dict[str, Path]:
     """Every non-folder entry under ``root`` by its posix path relative to ``root``, sorted;
     ``exclude`` (this comparison's own report, JUnit file and picture folder, or the other
