@@ -21,28 +21,10 @@ from typing import Iterator
 import numpy as np
 
 from axdf_cli.errors import InputError, Mark
+from axdf_cli.formats import FORMATS, load_triangles
 from axdf_cli.render.settings import RenderSettings, parse_render_settings
 from axdf_cli.runfolder import MANIFEST, mesh_relpath
 from axdf_cli.scene import FrameChunk, Scene, SceneBone, SceneMuscle
-
-def read_mesh_file(path: Path) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
-    """A PLY or OBJ triangle mesh -> (V, 3) float32 positions, (V, 3) float32 normals or
-    None, (T, 3) int32 triangles; unreadable files are input errors."""
-    from axdf_cli.formats.read import MeshReadError, read_mesh, triangles
-
-    path = Path(path)
-    try:
-        mesh = read_mesh(path.read_bytes(), path.suffix)
-        faces = triangles(mesh)
-    except OSError as e:
-        raise InputError(Mark(str(path)), f"cannot read mesh ({e.strerror})", "an existing PLY or OBJ file") from None
-    except MeshReadError as e:
-        raise InputError(Mark(str(path)), f"not a readable mesh ({e})", "a PLY or OBJ triangle mesh") from None
-    nrm = None if mesh.normals is None else mesh.normals.astype(np.float32)
-    return mesh.vertices.astype(np.float32), nrm, faces
-
-
-_READERS = {".ply": read_mesh_file, ".obj": read_mesh_file}
 
 
 def _color(c, where: Mark) -> tuple[float, float, float]:
@@ -65,8 +47,8 @@ def _quat_matrix(q: np.ndarray) -> np.ndarray:
 
 
 def _mesh_path(run_dir: Path, name: str, frame: int) -> Path:
-    for ext in _READERS:
-        p = run_dir / mesh_relpath(name, frame, ext[1:])
+    for f in FORMATS.values():
+        p = run_dir / mesh_relpath(name, frame, f.name)
         if p.exists():
             return p
     raise InputError(Mark(str(run_dir / mesh_relpath(name, frame, "ply"))),
@@ -96,7 +78,7 @@ def load_run_scene(run_dir: Path) -> tuple[Scene, Iterator[FrameChunk], RenderSe
     for name, color in zip(names, colors):
         for k, f in enumerate(frames):
             p = _mesh_path(run_dir, name, f)
-            pos, _, faces = _READERS[p.suffix](p)
+            pos, _, faces = load_triangles(p)
             if k == 0:
                 muscles.append(SceneMuscle(name, color, faces))
                 nv = len(pos)
@@ -109,7 +91,7 @@ def load_run_scene(run_dir: Path) -> tuple[Scene, Iterator[FrameChunk], RenderSe
     bones = []
     for b in manifest.get("bones") or []:
         if b.get("mesh"):
-            v, _, faces = read_mesh_file(run_dir / b["mesh"])
+            v, _, faces = load_triangles(run_dir / b["mesh"])
             bones.append(SceneBone(str(b["name"]), v, faces))
     bone_world = _read_bones_csv(run_dir / "bones.csv", frames, [b.name for b in bones])
 
@@ -125,7 +107,7 @@ def load_run_scene(run_dir: Path) -> tuple[Scene, Iterator[FrameChunk], RenderSe
             ps, ns = [], []
             for m in muscles:
                 p = _mesh_path(run_dir, m.name, f)
-                pos, nrm, faces = _READERS[p.suffix](p)
+                pos, nrm, faces = load_triangles(p)
                 if nrm is None:
                     from axdf_cli.render.renderer import vertex_normals
                     nrm = vertex_normals(pos, faces)
