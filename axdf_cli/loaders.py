@@ -14,7 +14,8 @@ from axdf_cli.errors import InputError, Mark
 from axdf_cli.muscle import OCT, VOLUME_MODES, AxisPoint, MuscleSpec, Section, outline_area
 from axdf_cli.skeleton import (Bone, Constant, Coordinate, Dof, Linear, Multiplier, Polynomial,
                                Skeleton, Spline)
-from axdf_cli.yamlio import Fields, YMap, check_name, check_number, check_vector, item_marks, load_yaml, mark_of
+from axdf_cli.yamlio import (Fields, YMap, check_name, check_number, check_vector, item_marks, load_yaml,
+                             mark_of, real_path)
 
 DOF_TYPES = ("rotation", "translation")
 
@@ -187,13 +188,13 @@ class RefPolicy:
     """
 
     def __init__(self, roots=(), allow_outside: bool = False):
-        self._roots = [Path(r).resolve() for r in roots]
+        self._roots = [real_path(r) for r in roots]
         self.allow_outside = allow_outside
 
     @property
     def roots(self) -> list[Path]:
         """The given roots, or the current folder at the time of the check."""
-        return self._roots or [Path.cwd().resolve()]
+        return self._roots or [real_path(Path.cwd())]
 
 
 POLICY = RefPolicy()
@@ -220,9 +221,9 @@ def resolve_ref(base_file: Path, ref: str, where: Mark) -> Path:
     if p.is_absolute():
         raise InputError(where, f"absolute path {ref!r}",
                          "paths relative to the file that names them (or pass --allow-outside)")
-    full = (base_file.parent / p).resolve()
+    full = real_path(base_file.parent / p)
     # without explicit roots (library use), a file's references stay below its own folder
-    roots = POLICY._roots or [Path.cwd().resolve(), base_file.parent.resolve()]
+    roots = POLICY._roots or [real_path(Path.cwd()), real_path(base_file.parent)]
     if not any(full == r or r in full.parents for r in roots):
         raise InputError(where, f"path {ref!r} leaves the project folder tree",
                          f"paths inside {', '.join(str(r) for r in roots)} (or pass --allow-outside)")
@@ -626,7 +627,7 @@ def expand_muscle_paths(entries) -> list[Path]:
             raise InputError(mark, f"muscle path {s!r} not found", "an existing file, folder or glob")
     seen, uniq = set(), []
     for p in out:
-        k = str(p.resolve())
+        k = str(real_path(p))
         if k not in seen:
             seen.add(k)
             uniq.append(p)

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from axdf_cli.formats.ply import read_ply
+from axdf_cli.formats import read_triangles
 from axdf_cli.skeleton import forward_kinematics, matrix_to_quaternion
 from axdf_cli.pose import sample_coordinates
 
@@ -73,7 +73,7 @@ def test_run_meshes_share_topology_and_read_back(demo_runs, demo):
         faces0 = None
         for f in range(4):
             path = out / "meshes" / name / f"{name}_{f:04d}.ply"
-            pos, nrm, faces = read_ply(path.read_bytes())
+            pos, nrm, faces = read_triangles(path.read_bytes(), ".ply")
             assert pos.shape == (model.n_vertices, 3)
             assert np.all(np.isfinite(pos)) and np.all(np.isfinite(nrm))
             faces0 = faces if faces0 is None else faces0
@@ -376,7 +376,7 @@ def test_run_on_extreme_poses_is_finite(project, capsys):
     assert rc == 0, err
     assert "non-finite" not in err
     for p in (project / "out" / "meshes").rglob("*.ply"):
-        pos, nrm, _ = read_ply(p.read_bytes())
+        pos, nrm, _ = read_triangles(p.read_bytes(), ".ply")
         assert np.all(np.isfinite(pos)) and np.all(np.isfinite(nrm)), p
     rows = read_csv(project / "out" / "stats.csv")[1:]
     assert len(rows) == 3 * len(DEMO_MUSCLES)

@@ -46,8 +46,9 @@ def _positive(text: str) -> int:
 
 def run(args) -> int:
     from axdf_cli import run as runner
+    from axdf_cli.yamlio import real_path
 
-    roots = [Path.cwd()] + ([Path(args.job).resolve().parent] if args.job else [])
+    roots = [Path.cwd()] + ([real_path(args.job).parent] if args.job else [])
     set_ref_policy(roots, args.allow_outside)
     job = load_job(args.job) if args.job else None
     from dataclasses import replace

@@ -22,31 +22,12 @@ from typing import Iterator
 import numpy as np
 
 from axdf_cli.errors import InputError, Mark
+from axdf_cli.formats import FORMATS, load_triangles
 from axdf_cli.render.settings import RenderSettings, parse_render_settings
 from axdf_cli.runfolder import BONES_CSV, Manifest, mesh_relpath, read_run_manifest
 from axdf_cli.runfolder import plain_relpath as _plain
 from axdf_cli.yamlio import NAME_ALLOWED, NAME_RE
 from axdf_cli.scene import FrameChunk, Scene, SceneBone, SceneMuscle
-
-def read_mesh_file(path: Path) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
-    """A PLY or OBJ triangle mesh -> (V, 3) float32 positions, (V, 3) float32 normals or
-    None, (T, 3) int32 triangles; unreadable files are input errors."""
-    from axdf_cli.formats.read import MeshReadError, read_mesh, triangles
-
-    path = Path(path)
-    try:
-        mesh = read_mesh(path.read_bytes(), path.suffix)
-        faces = triangles(mesh)
-    except OSError as e:
-        raise InputError(Mark(str(path)), f"cannot read mesh ({e.strerror})", "an existing PLY or OBJ file") from None
-    except MeshReadError as e:
-        raise InputError(Mark(str(path)), f"not a readable mesh ({e})", "a PLY or OBJ triangle mesh") from None
-    nrm = None if mesh.normals is None else mesh.normals.astype(np.float32)
-    return mesh.vertices.astype(np.float32), nrm, faces
-
-
-_READERS = {".ply": read_mesh_file, ".obj": read_mesh_file}  # the formats a run's meshes can have
-
 
 def _color(c, where: Mark) -> tuple[float, float, float]:
     if isinstance(c, str) and len(c) == 7 and c.startswith("#"):
@@ -76,10 +57,9 @@ def load_run_scene(run_dir: Path, manifest: Manifest | None = None, frames=None
     m = manifest or read_run_manifest(run_dir)
     all_frames = tuple(m.frames())
     muscles_raw = m.get(("muscles",), list, "a list of {name, color, ...}")
-    fmt = m.get(("settings", "format"), str, "a mesh format: " + ", ".join(e[1:] for e in _READERS))
-    if f".{fmt}" not in _READERS:
-        raise m.error(("settings", "format"), f"unknown mesh format {fmt!r}",
-                      "a mesh format: " + ", ".join(e[1:] for e in _READERS))
+    fmt = m.get(("settings", "format"), str, "a mesh format: " + ", ".join(FORMATS))
+    if fmt not in FORMATS:
+        raise m.error(("settings", "format"), f"unknown mesh format {fmt!r}", "a mesh format: " + ", ".join(FORMATS))
     names, colors = [], []
     for i, mu in enumerate(muscles_raw):
         m.get(("muscles", i), dict, "an object {name, color, ...}")
@@ -114,7 +94,7 @@ def load_run_scene(run_dir: Path, manifest: Manifest | None = None, frames=None
     for name, color in zip(names, colors):
         for k, f in enumerate(all_frames):
             p = mesh_path(name, f)
-            pos, _, faces = read_mesh_file(p)
+            pos, _, faces = load_triangles(p)
             if k == 0:
                 muscles.append(SceneMuscle(name, color, faces))
                 nv = len(pos)
@@ -126,7 +106,7 @@ def load_run_scene(run_dir: Path, manifest: Manifest | None = None, frames=None
 
     bones = []
     for name, mesh in bone_entries:
-        v, _, faces = read_mesh_file(run_dir / mesh)
+        v, _, faces = load_triangles(run_dir / mesh)
         bones.append(SceneBone(name, v, faces))
     bone_world = _read_bones_csv(run_dir / BONES_CSV, selected, [b.name for b in bones])
     scene = Scene(tuple(muscles), tuple(bones), bounds.astype(np.float64), all_frames)
@@ -135,7 +115,7 @@ def load_run_scene(run_dir: Path, manifest: Manifest | None = None, frames=None
         for k, f in enumerate(selected):
             ps, ns = [], []
             for mu in muscles:
-                pos, nrm, faces = read_mesh_file(mesh_path(mu.name, f))
+                pos, nrm, faces = load_triangles(mesh_path(mu.name, f))
                 if nrm is None:
                     from axdf_cli.render.renderer import vertex_normals
                     nrm = vertex_normals(pos, faces)

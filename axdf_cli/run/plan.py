@@ -131,11 +131,11 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
 
 def load_bone_mesh(path: str, skeleton_file: str):
     """Read a bone's mesh (PLY or OBJ triangles) → (vertices, faces, bytes); bad files are input errors."""
-    from axdf_cli.render.runio import read_mesh_file
+    from axdf_cli.formats import load_triangles
 
     if not Path(path).is_file():
         raise InputError(Mark(skeleton_file), f"bone mesh {path} not found", "a PLY file relative to the skeleton file")
-    v, _, f = read_mesh_file(Path(path))
+    v, _, f = load_triangles(path)
     if not np.isfinite(v).all():
         raise InputError(Mark(str(path)), "non-finite vertex coordinates", "finite numbers only")
     return np.ascontiguousarray(v, dtype=np.float32), f, Path(path).read_bytes()
