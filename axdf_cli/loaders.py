@@ -587,9 +587,11 @@ def load_job(path: Path | str) -> Job:
     pose_ref = f.string("pose", required=True)
     pose = (resolve_ref(path, pose_ref, f.vmark("pose")), f.vmark("pose"))
     out = f.string("out", default=None)
-    if out is not None and (Path(out).is_absolute() or ".." in Path(out).parts) and not POLICY.allow_outside:
+    if out is not None and not POLICY.allow_outside and (
+            Path(out).is_absolute() or ".." in Path(out).parts
+            or not any(r == p or r in p.parents for p in [Path(out).resolve()] for r in POLICY.roots)):
         raise InputError(f.vmark("out"), f"out {out!r} leaves the project folder tree",
-                         "a relative folder without '..' (or pass --out, or --allow-outside)")
+                         "a relative folder without '..' or links out of the tree (or pass --out, or --allow-outside)")
     from axdf_cli.formats import WRITERS
 
     fmt = f.choice("format", tuple(WRITERS), default=None)

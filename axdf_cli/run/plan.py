@@ -106,7 +106,14 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
     else:
         frames = pose.frames
     fmt = fmt_arg or (job.format if job is not None else None) or "ply"
-    out = Path(out_arg or (job.out if job is not None and job.out else None) or DEFAULT_OUT)
+    if out_arg is not None:
+        if not str(out_arg).strip():
+            raise InputError(Mark("--out"), "the output folder is empty text", "give a folder, e.g. --out out/run")
+        out = Path(out_arg)
+    elif job is not None and job.out is not None:  # (the job reader refuses an empty one)
+        out = Path(job.out)
+    else:
+        out = Path(DEFAULT_OUT)
     if render is None:
         render = job_render_settings(job)
 
