@@ -427,3 +427,17 @@ def test_mesh_readers_raise_only_mesh_read_errors_on_mutated_files():
             read_mesh(bytes(data), suffix)
         except MeshReadError:
             pass
+
+
+def test_what_axdf_leaves_while_writing_is_not_compared(tmp_path, compare):
+    """The lock, a killed writer's temporary and a staging folder are axdf's own working
+    entries, not part of the run: they neither fail nor error a comparison."""
+    actual = make_run(tmp_path / "actual", muscles=1, frames=1)
+    golden = make_run(tmp_path / "golden", muscles=1, frames=1)
+    (actual / ".axdf-lock").write_bytes(b"")
+    (actual / "meshes" / "m0" / ".axdf-tmp-999999-m0_0000.ply").write_bytes(b"half")
+    (golden / ".axdf-new-999999" / "meshes").mkdir(parents=True)
+    (golden / ".axdf-new-999999" / "stats.csv").write_text("x\n")
+    rc, doc, _, _ = compare(actual, golden)
+    assert rc == 0, doc
+    assert not any(".axdf-" in f["path"] for f in doc["files"])

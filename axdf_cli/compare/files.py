@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Iterable
 
 from axdf_cli.compare.result import Unreadable
+from axdf_cli.runfolder import own_entry
 from axdf_cli.yamlio import FileRefused, not_regular, read_regular, real_path
 
 # The largest file a comparison reads (each side is held in memory, plus its decoded form).
@@ -47,7 +48,9 @@ def list_files(root: Path, exclude: Iterable[Path] = (), errors: dict[str, str] 
     """Every non-folder entry under ``root`` by its posix path relative to ``root``, sorted;
     ``exclude`` (this comparison's own report, JUnit file and picture folder, or the other
     run folder when one holds the other) is left out. Folders that cannot be listed go into
-    ``errors`` as ``"rel/": why``."""
+    ``errors`` as ``"rel/": why``. What axdf itself leaves while it writes (the lock,
+    temporaries, a staging folder: :func:`axdf_cli.runfolder.own_entry`) is not part of a run
+    and is left out too."""
     skip = {Path(os.path.abspath(p)) for p in exclude}
     out: dict[str, Path] = {}
 
@@ -60,7 +63,7 @@ def list_files(root: Path, exclude: Iterable[Path] = (), errors: dict[str, str] 
         d = Path(dirpath)
         keep = []
         for n in sorted(dirnames):
-            if Path(os.path.abspath(d / n)) in skip:
+            if own_entry(n) or Path(os.path.abspath(d / n)) in skip:
                 continue
             if os.path.islink(d / n):
                 filenames.append(n)  # a link to a folder: listed, not descended
@@ -68,6 +71,8 @@ def list_files(root: Path, exclude: Iterable[Path] = (), errors: dict[str, str] 
                 keep.append(n)
         dirnames[:] = keep
         for n in sorted(filenames):
+            if own_entry(n):
+                continue
             p = d / n
             if Path(os.path.abspath(p)) not in skip:
                 out[p.relative_to(root).as_posix()] = p
