@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from axdf_cli.formats.ply import read_ply
+from axdf_cli.formats import read_triangles
 
 from conftest import REPO_ROOT, run_main
 
@@ -68,7 +68,7 @@ def blender_result(tmp_path_factory):
 
 
 def _ply(run: Path, m: str, f: int) -> np.ndarray:
-    return read_ply((run / "meshes" / m / f"{m}_{f:04d}.ply").read_bytes())[0]
+    return read_triangles((run / "meshes" / m / f"{m}_{f:04d}.ply").read_bytes(), ".ply")[0]
 
 
 def _muscles(run: Path) -> list[str]:
@@ -106,7 +106,7 @@ def test_blender_moves_the_bones_as_bones_csv(blender_result):
     assert bones, "no bone meshes came through Blender's USD import"
     worst = 0.0
     for b in bones:
-        local = read_ply((run / "bones" / f"{b}.ply").read_bytes())[0].astype(np.float64)
+        local = read_triangles((run / "bones" / f"{b}.ply").read_bytes(), ".ply")[0].astype(np.float64)
         for f in SAMPLES:
             x, y, z, qw, qx, qy, qz = rows[(f, b)]
             R = _quat_matrix(np.array([qw, qx, qy, qz]))

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from axdf_cli.formats.ply import read_ply
+from axdf_cli.formats import read_triangles
 
 from conftest import REPO_ROOT, all_files, run_main
 
@@ -54,7 +54,7 @@ def _muscles(run: Path) -> list[str]:
 
 
 def _ply(run: Path, m: str, f: int):
-    return read_ply((run / "meshes" / m / f"{m}_{f:04d}.ply").read_bytes())
+    return read_triangles((run / "meshes" / m / f"{m}_{f:04d}.ply").read_bytes(), ".ply")
 
 
 # ----------------------------------------------------------------------------- layout
@@ -140,7 +140,7 @@ def test_pc2_header_points_and_rest_mesh(packed):
         pts = np.frombuffer(data, "<f4", offset=32).reshape(len(FRAME_LIST), n_points, 3)
         for k, f in enumerate(FRAME_LIST):
             np.testing.assert_array_equal(pts[k], _ply(run, m, f)[0])
-        rest_v, rest_n, rest_f = read_ply((run / "pc2" / f"{m}.ply").read_bytes())
+        rest_v, rest_n, rest_f = read_triangles((run / "pc2" / f"{m}.ply").read_bytes(), ".ply")
         np.testing.assert_array_equal(rest_f, faces)  # same topology, same vertex order
         assert (run / "pc2" / f"{m}.ply").read_bytes() == (run / "mdd" / f"{m}.ply").read_bytes()
 
@@ -212,7 +212,6 @@ def test_usd_stage_through_pxr_equals_the_ply_frames(packed):
     print(f"USD (pxr) vs PLY: max vertex error {worst:.3g} m over {len(_muscles(run))} muscles x {len(FRAME_LIST)} frames")
 
     poses = _bones_csv(run)
-    from axdf_cli.formats.ply import read_ply as rp
     for f in FRAME_LIST:
         for bone in ("femur_r", "humerus_r", "radius_r"):
             prim = stage.GetPrimAtPath(f"/axdf/bones/{bone}")
@@ -220,7 +219,7 @@ def test_usd_stage_through_pxr_equals_the_ply_frames(packed):
             row = poses[(f, bone)]
             np.testing.assert_allclose(M[:3, 3], row[:3], atol=1e-12)
             np.testing.assert_allclose(M[:3, :3], _quat_matrix(row[3:]), atol=1e-12)
-            local = rp((run / "bones" / f"{bone}.ply").read_bytes())[0]
+            local = read_triangles((run / "bones" / f"{bone}.ply").read_bytes(), ".ply")[0]
             pts = np.asarray(UsdGeom.Mesh(stage.GetPrimAtPath(f"/axdf/bones/{bone}/{bone}_mesh")).GetPointsAttr().Get())
             np.testing.assert_array_equal(pts, local)
 

@@ -4,10 +4,9 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from axdf_cli.formats import FORMATS
 from axdf_cli.loaders import load_job, set_ref_policy
 
-# the --format names (axdf_cli.run.plan.format_names(), not imported here: the run package is heavy)
-FORMAT_HELP = "ply, obj (a file per frame), usd (usdc), pc2, mdd, npz (a file per muscle)"
 
 
 def add_args(p) -> None:
@@ -16,7 +15,8 @@ def add_args(p) -> None:
     p.add_argument("--pose", metavar="FILE", help="pose YAML (overrides the job)")
     p.add_argument("--out", metavar="DIR", help="output folder (default: the job's out, else out/run)")
     p.add_argument("--format", action="append", metavar="FMT",
-                   help=f"mesh format(s): {FORMAT_HELP}; several as ply,usd or repeated (default ply)")
+                   help="mesh format(s): " + ", ".join(FORMATS) + " (ply, obj: a file per frame; the others a file "
+                        "per muscle); several as ply,usd or repeated (default ply)")
     p.add_argument("--frames", metavar="SPEC", help="frames to write: 0:48, 0:48:2, 3,7,10:12 (ends inclusive)")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--render", dest="render", action="store_true", default=None, help="render preview frames")
@@ -49,8 +49,9 @@ def _positive(text: str) -> int:
 
 def run(args) -> int:
     from axdf_cli import run as runner
+    from axdf_cli.yamlio import real_path
 
-    roots = [Path.cwd()] + ([Path(args.job).resolve().parent] if args.job else [])
+    roots = [Path.cwd()] + ([real_path(args.job).parent] if args.job else [])
     set_ref_policy(roots, args.allow_outside)
     job = load_job(args.job) if args.job else None
     from dataclasses import replace
@@ -69,6 +70,7 @@ def run(args) -> int:
         print(f"warning: {w}", file=sys.stderr)
     total = len(plan.frames) * len(plan.models)
     if args.dry_run:
+        runner.check_output(plan, resume=args.resume, overwrite=args.overwrite)
         print(f"would write {total} meshes ({len(plan.models)} muscles x {len(plan.frames)} frames, "
               f"{plan.fmt}) to {plan.out}, plus stats.csv, bones.csv, manifest.json")
         for s, m in zip(plan.muscles, plan.models):
@@ -85,7 +87,8 @@ def run(args) -> int:
     try:
         summary = runner.execute(plan, resume=args.resume, overwrite=args.overwrite,
                                  progress=bar.update if bar else None, strict=args.strict, jobs=args.jobs,
-                                 render_progress=(lambda _f: rbar.update(1)) if rbar else None)
+                                 render_progress=(lambda _f: rbar.update(1)) if rbar else None,
+                                 on_note=lambda text: print(f"note: {text}", file=sys.stderr))
     finally:
         for b in (bar, rbar):
             if b:

@@ -16,29 +16,12 @@ import numpy as np
 from axdf_cli.compare.meshes import hausdorff
 from axdf_cli.compare.result import Outcome, Unreadable
 from axdf_cli.compare.tolerances import MeshTol
-from axdf_cli.formats.read import MeshReadError
+from axdf_cli.formats import read_sequence
+from axdf_cli.formats.mesh import MeshReadError
 from axdf_cli.formats.sequence import PointSequence
 
 BLOCK_BYTES = 64 << 20  # frames compared per block: bounded memory on long sequences
 MAX_LISTED = 10
-
-
-def read_sequence(path: Path) -> PointSequence:
-    """A per-sequence file by its suffix (MDD frames as indices: both sides are read alike)."""
-    suffix = path.suffix.lower()
-    if suffix == ".npz":
-        from axdf_cli.formats.npz import read_npz
-        return read_npz(path)
-    if suffix == ".pc2":
-        from axdf_cli.formats.pc2 import read_pc2
-        return read_pc2(path)
-    if suffix == ".mdd":
-        from axdf_cli.formats.pc2 import read_mdd
-        return read_mdd(path)
-    if suffix in (".usdc", ".usda", ".usd"):
-        from axdf_cli.formats.usd import read_usd
-        return read_usd(path)
-    raise MeshReadError(f"unknown sequence format {suffix!r}; .npz, .pc2, .mdd or .usdc")
 
 
 def _side(side: str, fn, *args):
@@ -123,7 +106,7 @@ def compare_sequence_files(a: Path, g: Path, tol: MeshTol) -> Outcome:
     mesh distance tolerance."""
     if g.suffix.lower() == ".usdc" and not _is_sequence_layer(g):
         return compare_usd_layers(a, g, tol.max_distance, 0.0)
-    sa = _side("actual", read_sequence, a)
+    sa = _side("actual", read_sequence, a)  # (MDD frames as indices: both sides are read alike)
     sg = _side("golden", read_sequence, g)
     return compare_sequences(sa, sg, tol)
 

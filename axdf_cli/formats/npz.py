@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 from zlib_ng.zlib_ng import crc32  # zlib's CRC-32, ~5x faster (folding with carry-less multiply)
 
-from axdf_cli.formats.read import MeshReadError
+from axdf_cli.formats.mesh import MeshReadError
 from axdf_cli.formats.sequence import PointSequence, SequenceWriter
 
 ENTRIES = ("frames", "fps", "faces", "points", "normals")

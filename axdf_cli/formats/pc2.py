@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from axdf_cli.formats.read import MeshReadError
+from axdf_cli.formats.mesh import MeshReadError
 from axdf_cli.formats.sequence import InOrderHash, PointSequence, SequenceWriter, uniform_step
 
 PC2_MAGIC = b"POINTCACHE2\0"

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from axdf_cli import atomic
-from axdf_cli.formats.read import Mesh, MeshReadError
+from axdf_cli.formats.mesh import Mesh, MeshReadError
 
 
 @dataclass(frozen=True)

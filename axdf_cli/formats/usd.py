@@ -31,7 +31,7 @@ import numpy as np
 
 from axdf_cli import atomic
 from axdf_cli.errors import EnvironmentProblem
-from axdf_cli.formats.read import MeshReadError
+from axdf_cli.formats.mesh import MeshReadError
 from axdf_cli.formats.sequence import PointSequence, SequenceWriter
 
 ROOT = "/axdf"

@@ -1,19 +1,22 @@
 """Read a finished run folder back into a :class:`Scene` and its frames (for ``axdf render``).
 
-Kept in one place because the manifest format is not final. What is read:
+The layout and the manifest are :mod:`axdf_cli.runfolder`'s. What is read:
 
-- ``manifest.json``: ``muscles: [{name, color, ...}]`` (colour as linear ``[r, g, b]`` in
-  0..1, or sRGB ``"#rrggbb"``), ``frames: [...]``, optional ``bones: [{name, mesh}]``
-  (``mesh`` relative to the run folder, a PLY in bone-local coordinates) and optional render
-  settings under ``settings.render`` or ``render``.
+- ``manifest.json`` (an axdf run's: ``tool: axdf``): ``muscles: [{name, color, ...}]``
+  (colour as linear ``[r, g, b]`` in 0..1, or sRGB ``"#rrggbb"``), ``frames: [...]``,
+  ``settings.format`` (the meshes' formats, ``ply`` or ``ply,usd``: a folder with stale
+  files of another format reads the right ones), ``settings.fps`` (MDD times), optional ``bones: [{name, mesh}]`` (``mesh`` relative to the run
+  folder, a PLY in bone-local coordinates) and optional ``settings.render``. A damaged
+  manifest is an input error at its line and column.
 - ``meshes/<muscle>/<muscle>_<frame:04d>.ply`` (binary little-endian, float32 x y z nx ny
-  nz, int32 triangle lists) or ``.obj`` (``v``, ``vn``, ``f a//a``).
+  nz, int32 triangle lists) or ``.obj`` (``v``, ``vn``, ``f a//a``); in a run without a
+  per-frame format, each muscle's per-sequence file (``npz/<m>.npz``, ``pc2/<m>.pc2`` with
+  its rest mesh ``pc2/<m>.ply``, ``mdd/<m>.mdd``, ``usd/<m>.usdc``), read a frame at a time.
 - ``bones.csv``: ``frame,bone,x,y,z,qw,qx,qy,qz`` world pose of each bone per frame.
 """
 from __future__ import annotations
 
 import csv
-import json
 from dataclasses import replace
 from pathlib import Path
 from typing import Iterator
@@ -21,29 +24,12 @@ from typing import Iterator
 import numpy as np
 
 from axdf_cli.errors import InputError, Mark
+from axdf_cli.formats import FORMATS, MeshReadError, load_triangles, read_sequence
 from axdf_cli.render.settings import RenderSettings, parse_render_settings
-from axdf_cli.runfolder import MANIFEST, mesh_relpath
+from axdf_cli.runfolder import BONES_CSV, Manifest, mesh_relpath, read_run_manifest
+from axdf_cli.runfolder import plain_relpath as _plain
+from axdf_cli.yamlio import NAME_ALLOWED, NAME_RE
 from axdf_cli.scene import FrameChunk, Scene, SceneBone, SceneMuscle
-
-def read_mesh_file(path: Path) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
-    """A PLY or OBJ triangle mesh -> (V, 3) float32 positions, (V, 3) float32 normals or
-    None, (T, 3) int32 triangles; unreadable files are input errors."""
-    from axdf_cli.formats.read import MeshReadError, read_mesh, triangles
-
-    path = Path(path)
-    try:
-        mesh = read_mesh(path.read_bytes(), path.suffix)
-        faces = triangles(mesh)
-    except OSError as e:
-        raise InputError(Mark(str(path)), f"cannot read mesh ({e.strerror})", "an existing PLY or OBJ file") from None
-    except MeshReadError as e:
-        raise InputError(Mark(str(path)), f"not a readable mesh ({e})", "a PLY or OBJ triangle mesh") from None
-    nrm = None if mesh.normals is None else mesh.normals.astype(np.float32)
-    return mesh.vertices.astype(np.float32), nrm, faces
-
-
-_READERS = {".ply": read_mesh_file, ".obj": read_mesh_file}
-
 
 def _color(c, where: Mark) -> tuple[float, float, float]:
     if isinstance(c, str) and len(c) == 7 and c.startswith("#"):
@@ -65,78 +51,67 @@ def _quat_matrix(q: np.ndarray) -> np.ndarray:
 
 
 class _FrameFiles:
-    """A muscle written one file per frame (``meshes/<m>/<m>_<frame>.ply|obj``)."""
+    """A muscle written one file per frame (``meshes/<m>/<m>_<frame>.<fmt>``)."""
 
-    def __init__(self, run_dir: Path, name: str, frames):
-        self.run_dir, self.name, self.frames = run_dir, name, frames
+    def __init__(self, run_dir: Path, name: str, fmt: str):
+        self.run_dir, self.name, self.fmt = run_dir, name, fmt
 
-    def path(self, k: int) -> Path:
-        for ext in _READERS:
-            p = self.run_dir / mesh_relpath(self.name, self.frames[k], ext[1:])
-            if p.exists():
-                return p
-        raise InputError(Mark(str(self.run_dir / mesh_relpath(self.name, self.frames[k], "ply"))),
-                         "mesh file missing", "the run folder must hold every muscle's mesh for every frame")
+    def where(self, frame: int) -> Path:
+        p = self.run_dir / mesh_relpath(self.name, frame, self.fmt)
+        if not p.is_file():
+            raise InputError(Mark(str(p)), "mesh file missing",
+                             "the run folder must hold every muscle's mesh for every frame")
+        return p
 
-    def where(self, k: int) -> str:
-        return str(self.path(k))
-
-    def read(self, k: int):
-        p = self.path(k)
-        return _READERS[p.suffix](p)
+    def read(self, frame: int):
+        return load_triangles(self.where(frame))
 
 
 class _SequenceFile:
-    """A muscle written in a per-sequence format (npz, usd, pc2, mdd), read a frame at a time."""
+    """A muscle written in a per-sequence format (npz, pc2, mdd, usd), read a frame at a time."""
 
     def __init__(self, path: Path, seq, faces):
         self.file, self.seq, self.faces = path, seq, faces
+        self.index = {int(round(f)): k for k, f in enumerate(seq.frames)}
 
-    def where(self, k: int) -> str:
-        return f"{self.file} (frame {self.seq.frames[k]:g})"
+    def where(self, frame: int) -> str:
+        return f"{self.file} (frame {frame})"
 
-    def read(self, k: int):
+    def read(self, frame: int):
+        k = self.index[frame]
         nrm = None if self.seq.normals is None else np.asarray(self.seq.normals[k], np.float32)
         return np.asarray(self.seq.points[k], np.float32), nrm, self.faces
 
 
-def _sequence_readers():
-    """(format, file extension, reader) of the per-sequence formats, in the order a run folder
-    is read back when it has no per-frame meshes."""
-    from axdf_cli.formats.npz import NpzWriter, read_npz
-    from axdf_cli.formats.pc2 import MddWriter, Pc2Writer, read_mdd, read_pc2
-    from axdf_cli.formats.usd import UsdWriter, read_usd
-
-    return (("npz", NpzWriter.extension, read_npz), ("pc2", Pc2Writer.extension, read_pc2),
-            ("mdd", MddWriter.extension, read_mdd), ("usd", UsdWriter.extension, read_usd))
+SEQUENCE_READ_ORDER = ("npz", "pc2", "mdd", "usd")  # read back in this order of preference (fastest first)
 
 
-def muscle_frames(run_dir: Path, name: str, frames: tuple[int, ...], fps=None):
-    """Where a muscle's frames are read from: its per-frame meshes when the run has them,
-    else its first per-sequence file (npz, pc2, mdd, usd) whose frames are the run's.
-    ``.read(k)`` gives frame index k as (V, 3) float32 positions, normals or None, (T, 3) faces."""
-    from axdf_cli.formats.read import MeshReadError
+def muscle_frames(run_dir: Path, name: str, formats, frames: tuple[int, ...], fps=None):
+    """Where a muscle's frames are read from: its per-frame meshes when the run wrote a
+    per-frame format, else its per-sequence file (npz, pc2, mdd, usd: the first the run
+    wrote), whose frames must be the run's. ``.read(frame)`` gives (V, 3) float32 positions,
+    normals or None, (T, 3) faces."""
     from axdf_cli.runfolder import rest_mesh_relpath, sequence_relpath
 
-    files = _FrameFiles(run_dir, name, frames)
-    if not frames or any((run_dir / mesh_relpath(name, frames[0], e[1:])).exists() for e in _READERS):
-        return files
-    for fmt, ext, reader in _sequence_readers():
-        path = run_dir / sequence_relpath(name, fmt, ext)
-        if not path.exists():
-            continue
-        try:
-            seq = reader(path, fps) if fmt == "mdd" else reader(path)
-        except MeshReadError as e:
-            raise InputError(Mark(str(path)), f"not readable ({e})", f"a {fmt} file written by axdf run") from None
-        if len(seq.frames) != len(frames) or not np.allclose(seq.frames, frames):
-            raise InputError(Mark(str(path)), f"holds frames {_span(seq.frames)}, the manifest {_span(frames)}",
-                             "the file of the same run")
-        faces = seq.faces
-        if faces is None:  # a point cache: the topology is its rest mesh's
-            faces = read_mesh_file(run_dir / rest_mesh_relpath(name, fmt))[2]
-        return _SequenceFile(path, seq, faces)
-    return files  # no sequence either: the per-frame error names the missing file
+    for fmt in formats:
+        if FORMATS[fmt].layout == "frame":
+            return _FrameFiles(run_dir, name, fmt)
+    fmt = next(f for f in SEQUENCE_READ_ORDER if f in formats)
+    path = run_dir / sequence_relpath(name, fmt, FORMATS[fmt].writer.extension)
+    if not path.is_file() or path.is_symlink():
+        raise InputError(Mark(str(path)), "file missing (or not a regular file)",
+                         f"the run folder must hold every muscle's {fmt} file")
+    try:
+        seq = read_sequence(path) if fmt != "mdd" else FORMATS[fmt].reader(path, fps)
+    except MeshReadError as e:
+        raise InputError(Mark(str(path)), f"not readable ({e})", f"a {fmt} file written by axdf run") from None
+    if len(seq.frames) != len(frames) or not np.allclose(seq.frames, frames):
+        raise InputError(Mark(str(path)), f"holds frames {_span(seq.frames)}, the manifest {_span(frames)}",
+                         "the file of the same run")
+    faces = seq.faces
+    if faces is None:  # a point cache: the topology is its rest mesh's
+        faces = load_triangles(run_dir / rest_mesh_relpath(name, fmt))[2]
+    return _SequenceFile(path, seq, faces)
 
 
 def _span(frames) -> str:
@@ -144,59 +119,69 @@ def _span(frames) -> str:
     return f"{f[0]:g}..{f[-1]:g} ({len(f)})" if len(f) else "none"
 
 
-def load_run_scene(run_dir: Path) -> tuple[Scene, Iterator[FrameChunk], RenderSettings]:
-    """Scene, an iterator of one-frame chunks, and the run's render settings (enabled)."""
+def load_run_scene(run_dir: Path, manifest: Manifest | None = None, frames=None
+                   ) -> tuple[Scene, Iterator[FrameChunk], RenderSettings]:
+    """Scene, an iterator of one-frame chunks (of ``frames``, default every frame of the run)
+    and the run's render settings (enabled). A manifest that is not an axdf run's, or damaged,
+    is an input error at its position."""
     run_dir = Path(run_dir)
-    mpath = run_dir / MANIFEST
-    where = Mark(str(mpath))
-    try:
-        manifest = json.loads(mpath.read_text())
-    except FileNotFoundError:
-        raise InputError(where, "no manifest.json in the run folder", "give a folder written by axdf run") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise InputError(where, f"manifest.json is not JSON ({e})", "give a folder written by axdf run") from None
-    if not isinstance(manifest, dict) or not isinstance(manifest.get("muscles"), list) \
-            or not isinstance(manifest.get("frames"), list) or not manifest["frames"]:
-        raise InputError(where, "manifest.json lacks 'muscles' or 'frames'", "give a folder written by axdf run")
-    frames = tuple(int(f) for f in manifest["frames"])
-    names = [str(m["name"]) for m in manifest["muscles"]]
-    colors = [_color(m.get("color", [0.7, 0.3, 0.3]), where) for m in manifest["muscles"]]
+    m = manifest or read_run_manifest(run_dir)
+    all_frames = tuple(m.frames())
+    muscles_raw = m.get(("muscles",), list, "a list of {name, color, ...}")
+    allowed = "mesh formats, comma-separated: " + ", ".join(FORMATS)
+    formats = m.get(("settings", "format"), str, allowed).split(",")
+    if any(f not in FORMATS for f in formats):
+        raise m.error(("settings", "format"), f"unknown mesh format in {','.join(formats)!r}", allowed)
+    fps = m.get(("settings", "fps"), (int, float), "the pose's frames per second", required=False, default=None)
+    names, colors = [], []
+    for i, mu in enumerate(muscles_raw):
+        m.get(("muscles", i), dict, "an object {name, color, ...}")
+        name = m.get(("muscles", i, "name"), str, "a muscle name")
+        if not NAME_RE.match(name) or name in (".", ".."):
+            raise m.error(("muscles", i, "name"), f"{name!r} is not a muscle name", NAME_ALLOWED)
+        names.append(name)
+        colors.append(_color(mu.get("color", [0.7, 0.3, 0.3]), m.mark(("muscles", i, "color"))))
+    bones_raw = m.get(("bones",), list, "a list of {name, mesh}", required=False, default=[])
+    bone_entries = []
+    for i, b in enumerate(bones_raw):
+        m.get(("bones", i), dict, "an object {name, mesh}")
+        name = m.get(("bones", i, "name"), str, "a bone name")
+        mesh = m.get(("bones", i, "mesh"), (str, type(None)), "a path in the run folder or null",
+                     required=False, default=None)
+        if mesh is not None and not _plain(mesh):
+            raise m.error(("bones", i, "mesh"), f"{mesh!r} leaves the run folder", "a path inside the run folder")
+        if mesh:
+            bone_entries.append((name, mesh))
+    settings = recorded_render_settings(m)
+    selected = all_frames if frames is None else tuple(int(f) for f in frames)
 
     # pass 1: topology from the first frame, bounds over every frame
-    fps = (manifest.get("settings") or {}).get("fps") if isinstance(manifest.get("settings"), dict) else None
-    sources = [muscle_frames(run_dir, name, frames, fps) for name in names]
+    sources = [muscle_frames(run_dir, name, formats, all_frames, fps) for name in names]
     muscles, lo, hi = [], np.full(3, np.inf), np.full(3, -np.inf)
     for name, color, src in zip(names, colors, sources):
-        for k in range(len(frames)):
-            pos, _, faces = src.read(k)
+        for k, f in enumerate(all_frames):
+            pos, _, faces = src.read(f)
             if k == 0:
                 muscles.append(SceneMuscle(name, color, faces))
                 nv = len(pos)
             elif len(pos) != nv:
-                raise InputError(Mark(src.where(k)), f"{len(pos)} vertices, frame {frames[0]} has {nv}",
+                raise InputError(Mark(str(src.where(f))), f"{len(pos)} vertices, frame {all_frames[0]} has {nv}",
                                  "every frame has the same vertex count")
             lo, hi = np.minimum(lo, pos.min(0)), np.maximum(hi, pos.max(0))
     bounds = np.stack([lo, hi]) if muscles else np.zeros((2, 3))
 
     bones = []
-    for b in manifest.get("bones") or []:
-        if b.get("mesh"):
-            v, _, faces = read_mesh_file(run_dir / b["mesh"])
-            bones.append(SceneBone(str(b["name"]), v, faces))
-    bone_world = _read_bones_csv(run_dir / "bones.csv", frames, [b.name for b in bones])
-
-    raw = (manifest.get("settings") or {}).get("render") if isinstance(manifest.get("settings"), dict) \
-        else None
-    raw = raw if raw is not None else manifest.get("render")
-    settings = replace(parse_render_settings(raw, where) if isinstance(raw, dict) else RenderSettings(),
-                       enabled=True)
-    scene = Scene(tuple(muscles), tuple(bones), bounds.astype(np.float64), frames)
+    for name, mesh in bone_entries:
+        v, _, faces = load_triangles(run_dir / mesh)
+        bones.append(SceneBone(name, v, faces))
+    bone_world = _read_bones_csv(run_dir / BONES_CSV, selected, [b.name for b in bones])
+    scene = Scene(tuple(muscles), tuple(bones), bounds.astype(np.float64), all_frames)
 
     def chunks() -> Iterator[FrameChunk]:
-        for k, f in enumerate(frames):
+        for k, f in enumerate(selected):
             ps, ns = [], []
             for src in sources:
-                pos, nrm, faces = src.read(k)
+                pos, nrm, faces = src.read(f)
                 if nrm is None:
                     from axdf_cli.render.renderer import vertex_normals
                     nrm = vertex_normals(pos, faces)
@@ -205,6 +190,15 @@ def load_run_scene(run_dir: Path) -> tuple[Scene, Iterator[FrameChunk], RenderSe
             yield FrameChunk(np.array([f]), tuple(ps), tuple(ns), bone_world[k:k + 1])
 
     return scene, chunks(), settings
+
+
+def recorded_render_settings(m: Manifest) -> RenderSettings:
+    """The render settings in a run's manifest (``settings.render``; defaults when the run was
+    not rendered), enabled."""
+    m.get(("settings",), dict, "an object of the run's settings", required=False)
+    raw = m.get(("settings", "render"), (dict, type(None)), "the render settings or null", required=False)
+    return replace(parse_render_settings(raw, m.mark(("settings", "render"))) if raw is not None
+                   else RenderSettings(), enabled=True)
 
 
 def _read_bones_csv(path: Path, frames: tuple[int, ...], names: list[str]) -> np.ndarray:

@@ -102,7 +102,7 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
 
     skel = pose.skeleton
     rest = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
-    models = [MuscleModel(s, skel.bone_index, rest) for s in specs]
+    models = [MuscleModel(s, skel.bone_index, rest, skel) for s in specs]
 
     if frames_arg is not None:
         frames = parse_frames(frames_arg, Mark("--frames"), pose.first, pose.last)
@@ -118,7 +118,14 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
         formats = ("ply",)
     check_formats(formats, frames, Mark("--frames") if frames_arg is not None else
                   (job.frames_mark if job is not None and job.frames is not None else Mark(pose.source)))
-    out = Path(out_arg or (job.out if job is not None and job.out else None) or DEFAULT_OUT)
+    if out_arg is not None:
+        if not str(out_arg).strip():
+            raise InputError(Mark("--out"), "the output folder is empty text", "give a folder, e.g. --out out/run")
+        out = Path(out_arg)
+    elif job is not None and job.out is not None:  # (the job reader refuses an empty one)
+        out = Path(job.out)
+    else:
+        out = Path(DEFAULT_OUT)
     if render is None:
         render = job_render_settings(job)
 
@@ -135,11 +142,10 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
 
 
 def format_names() -> tuple[str, ...]:
-    """Every ``--format`` value: the per-frame writers', then the per-sequence ones (and aliases)."""
-    from axdf_cli.formats import WRITERS
-    from axdf_cli.run.sequences import SEQUENCE_WRITERS
+    """Every ``--format`` value: the formats table's names, then the aliases."""
+    from axdf_cli.formats import FORMATS
 
-    return tuple(WRITERS) + tuple(SEQUENCE_WRITERS) + tuple(FORMAT_ALIASES)
+    return tuple(FORMATS) + tuple(FORMAT_ALIASES)
 
 
 FORMAT_ALIASES = {"usdc": "usd"}  # the USD layers are usdc; the stage is the format
@@ -189,11 +195,11 @@ def _frames_text(frames) -> str:
 
 def load_bone_mesh(path: str, skeleton_file: str):
     """Read a bone's mesh (PLY or OBJ triangles) → (vertices, faces, bytes); bad files are input errors."""
-    from axdf_cli.render.runio import read_mesh_file
+    from axdf_cli.formats import load_triangles
 
     if not Path(path).is_file():
         raise InputError(Mark(skeleton_file), f"bone mesh {path} not found", "a PLY file relative to the skeleton file")
-    v, _, f = read_mesh_file(Path(path))
+    v, _, f = load_triangles(path)
     if not np.isfinite(v).all():
         raise InputError(Mark(str(path)), "non-finite vertex coordinates", "finite numbers only")
     return np.ascontiguousarray(v, dtype=np.float32), f, Path(path).read_bytes()

@@ -20,15 +20,12 @@ from pathlib import Path
 import numpy as np
 
 from axdf_cli import atomic
-from axdf_cli.formats.npz import NpzWriter
-from axdf_cli.formats.pc2 import MddWriter, Pc2Writer
+from axdf_cli.formats import FORMATS
 from axdf_cli.formats.sequence import SequenceInfo
-from axdf_cli.formats.usd import UsdWriter
-from axdf_cli.runfolder import USD_BONES, USD_STAGE, rest_mesh_relpath, sequence_relpath
+from axdf_cli.runfolder import USD_BONES, USD_STAGE, is_file_with, rest_mesh_relpath, sequence_relpath
 
-# --format name -> streaming writer of a per-sequence format
-# (to be registered in axdf_cli.formats.FORMATS with layout "sequence" once that table exists)
-SEQUENCE_WRITERS = {"usd": UsdWriter, "pc2": Pc2Writer, "mdd": MddWriter, "npz": NpzWriter}
+# --format name -> streaming writer of a per-sequence format (a view of FORMATS)
+SEQUENCE_WRITERS = {name: f.writer for name, f in FORMATS.items() if f.layout == "sequence"}
 CACHE_FORMATS = ("pc2", "mdd")  # formats without faces: a rest mesh is written beside each file
 MAX_PENDING_CHUNKS = 8  # chunks queued for the sequence thread (bounds memory)
 
@@ -41,11 +38,10 @@ def file_relpath(muscle: str, fmt: str) -> str:
     return sequence_relpath(muscle, fmt, SEQUENCE_WRITERS[fmt].extension)
 
 
-def unchanged(previous: dict, out: Path, rel: str, sha: str) -> bool:
-    """The file at ``rel`` already holds these bytes (same sha256 as the manifest says and as
-    the file on disk): ``--resume`` keeps it."""
-    path = Path(out) / rel
-    return previous.get(rel) == sha and path.is_file() and atomic.sha256_file(path) == sha
+def unchanged(previous: dict, path: Path, rel: str, sha: str) -> bool:
+    """The file ``rel`` (at ``path``) already holds these bytes (the sha256 the manifest says
+    and the file on disk has): ``--resume`` keeps it."""
+    return previous.get(rel) == sha and is_file_with(path, sha)
 
 
 class SequenceFiles:
@@ -55,8 +51,8 @@ class SequenceFiles:
     frame order); :meth:`finish` completes every file and returns ``({relpath: sha256},
     skipped)``; :meth:`abort` removes every temporary (the files stay absent)."""
 
-    def __init__(self, plan, muscles: list[int], previous: dict):
-        self.plan, self.previous = plan, previous
+    def __init__(self, plan, muscles: list[int], writer):
+        self.plan, self.previous = plan, writer.previous
         fps = float(plan.pose.fps)
         self.writers = {}
         try:
@@ -65,8 +61,9 @@ class SequenceFiles:
                 info = SequenceInfo(np.asarray(plan.frames), fps, spec.name, tuple(spec.color))
                 for fmt in sequence_formats(plan.formats):
                     rel = file_relpath(spec.name, fmt)
-                    self.writers[(j, fmt)] = (rel, SEQUENCE_WRITERS[fmt](plan.out / rel, info, model.faces,
-                                                                         model.n_vertices))
+                    path = writer.root.path(rel)  # (the way there checked for links)
+                    self.writers[(j, fmt)] = (rel, path, SEQUENCE_WRITERS[fmt](path, info, model.faces,
+                                                                               model.n_vertices))
         except BaseException:
             self.abort()
             raise
@@ -74,7 +71,7 @@ class SequenceFiles:
         self._pending: list = []
 
     def append(self, j: int, positions: np.ndarray, normals: np.ndarray) -> None:
-        ws = [w for (k, _), (_, w) in self.writers.items() if k == j]
+        ws = [w for (k, _), (_, _, w) in self.writers.items() if k == j]
         self._pending.append(self._pool.submit(_append_all, ws, positions, normals))
         while len(self._pending) > MAX_PENDING_CHUNKS:
             self._pending.pop(0).result()
@@ -84,9 +81,9 @@ class SequenceFiles:
             fut.result()
         self._pending = []
         files, skipped = {}, 0
-        for rel, w in self.writers.values():  # one at a time: one muscle's USD layer in memory
+        for rel, path, w in self.writers.values():  # one at a time: one muscle's USD layer in memory
             sha = self._pool.submit(w.close).result()
-            if unchanged(self.previous, self.plan.out, rel, sha):
+            if unchanged(self.previous, path, rel, sha):
                 w.abort()
                 skipped += 1
             else:
@@ -101,7 +98,7 @@ class SequenceFiles:
             for fut in self._pending:
                 fut.cancel()
             pool.shutdown(wait=True)
-        for _, w in self.writers.values():
+        for _, _, w in self.writers.values():
             w.abort()
 
 
@@ -158,14 +155,15 @@ def usd_camera(plan, bounds) -> dict:
 def _write_with(writer, rel: str, author) -> None:
     """A file made by a library that writes to a path (pxr): authored at a temporary name,
     renamed into place unless ``--resume`` finds it unchanged; recorded in ``writer.files``."""
-    f = atomic.StreamingFile(writer.out / rel)
+    path = writer.root.path(rel)
+    f = atomic.StreamingFile(path)
     try:
         author(f.tmp)
         sha = atomic.sha256_file(f.tmp)
     except BaseException:
         f.discard()
         raise
-    if unchanged(writer.previous, writer.out, rel, sha):
+    if unchanged(writer.previous, path, rel, sha):
         f.discard()
         writer.skipped += 1
     else:
