@@ -20,9 +20,10 @@ import numpy as np
 from axdf_cli import __version__, atomic, rmf
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.formats import WRITERS
-from axdf_cli.loaders import Job, Pose, expand_muscle_paths, load_muscle_file, load_pose
+from axdf_cli.loaders import Job, Pose, RefPolicy, expand_muscle_paths, load_muscle_file, load_pose
 from axdf_cli.muscle import MuscleModel, MuscleSpec
-from axdf_cli.pose import effective_tension, parse_frames, sample_activation, sample_coordinates
+from axdf_cli.pose import (activation_problems, effective_tension, muscle_range_warnings, parse_frames,
+                           sample_activation, sample_coordinates)
 from axdf_cli.skeleton import forward_kinematics, matrix_to_quaternion
 
 CHUNK_FRAMES = 128  # frames evaluated together: bounds memory for any sequence length
@@ -44,6 +45,7 @@ class RunPlan:
     render: object = None  # render settings (or None: no rendering)
     warnings: list = field(default_factory=list)
     notes: list = field(default_factory=list)  # remarks printed with --verbose; not warnings
+    frame_warnings: list = field(default_factory=list)  # [(frame index, muscle index, message)] known before evaluation
     bone_meshes: dict = field(default_factory=dict)  # bone index -> (vertices (V,3) f4, faces (T,3) i4, file bytes)
 
     @property
@@ -60,8 +62,10 @@ def _display(p: Path) -> str:
 
 
 def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, fmt_arg=None,
-             frames_arg=None) -> RunPlan:
-    """Load and check every input; build the muscle models. Writes nothing."""
+             frames_arg=None, policy: RefPolicy | None = None, clamp_ranges: bool = False) -> RunPlan:
+    """Load and check every input; build the muscle models. Writes nothing. ``policy``: where
+    referenced files may lie (default: the job's)."""
+    policy = policy or (job.policy if job is not None else RefPolicy())
     if pose_arg is not None:
         pose_path, pose_mark = Path(pose_arg), Mark(str(pose_arg))
     elif job is not None:
@@ -70,7 +74,11 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
         raise InputError(None, "no pose given", "give a JOB.yaml or --pose FILE")
     if not pose_path.is_file():
         raise InputError(pose_mark, f"pose file {str(pose_path)!r} not found", "an existing pose YAML file")
-    pose = load_pose(pose_path)
+    pose = load_pose(pose_path, policy)
+    if clamp_ranges:
+        from dataclasses import replace
+
+        pose = replace(pose, clamp_ranges=True)
 
     if muscle_args:
         entries = [(Path(m), Mark(str(m))) for m in muscle_args]
@@ -78,7 +86,7 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
         entries = list(job.muscles)
     else:
         raise InputError(None, "no muscles given", "give a JOB.yaml or --muscles PATH ...")
-    files = expand_muscle_paths(entries)
+    files = expand_muscle_paths(entries, policy, Path(job.source).parent if not muscle_args else None)
     specs: list[MuscleSpec] = []
     seen: dict[str, str] = {}
     for fpath in files:
@@ -91,9 +99,7 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
     if not specs:
         raise InputError(None, "no muscles found", "give muscle YAML files")
 
-    warnings = []
-    notes = [f"{mark}: activation for {name!r}, which is not in this run; ignored"
-             for name, mark in pose.activation_marks.items() if name not in seen]
+    warnings, notes = activation_problems(pose, seen)
 
     skel = pose.skeleton
     rest = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
@@ -117,7 +123,7 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
         if Path(s).is_file():
             inputs[_display(Path(s))] = atomic.sha256_file(s)
     return RunPlan(pose, specs, models, frames, fmt, out, inputs, warnings=warnings, bone_meshes=bone_meshes,
-                   notes=notes)
+                   notes=notes, frame_warnings=muscle_range_warnings(pose, frames, specs))
 
 
 def load_bone_mesh(path: str, skeleton_file: str):
@@ -127,6 +133,8 @@ def load_bone_mesh(path: str, skeleton_file: str):
     if not Path(path).is_file():
         raise InputError(Mark(skeleton_file), f"bone mesh {path} not found", "a PLY file relative to the skeleton file")
     v, _, f = read_mesh_file(Path(path))
+    if len(f) == 0:
+        raise InputError(Mark(str(path)), "bone mesh has no triangles", "a PLY or OBJ mesh with at least one triangle")
     if not np.isfinite(v).all():
         raise InputError(Mark(str(path)), "non-finite vertex coordinates", "finite numbers only")
     return np.ascontiguousarray(v, dtype=np.float32), f, Path(path).read_bytes()
@@ -459,7 +467,7 @@ def execute(plan: RunPlan, *, resume: bool = False, overwrite: bool = False, pro
     bones = plan.pose.skeleton.bones
     twist_ref = twist_references(plan)
     if strict:  # evaluate everything first: with --strict, any warning stops the run before it writes
-        found = []
+        found = [f"{plan.names[j]} frame {int(plan.frames[i])}: {msg}" for i, j, msg in plan.frame_warnings]
         for sl, _, results in evaluate_chunks(plan, twist_ref=twist_ref):
             for j, res in results:
                 found += [f"{plan.names[j]} frame {int(plan.frames[sl.start + i])}: {msg}" for i, msg in res.warnings]
@@ -496,7 +504,7 @@ def execute(plan: RunPlan, *, resume: bool = False, overwrite: bool = False, pro
         warn_text = [[""] * nm for _ in range(nf)]
         lo = np.min([p.lo for p in parts], axis=0)
         hi = np.max([p.hi for p in parts], axis=0)
-        all_warns = []
+        all_warns = list(plan.frame_warnings)
         writer.skipped = sum(p.skipped for p in parts)  # (one pass in this process: its writer is ours)
         for part in parts:
             writer.files.update(part.files)

@@ -205,6 +205,18 @@ class Skeleton:
         """(C,) float64 default values: the rest pose."""
         return np.array([c.default for c in self.coordinates], dtype=np.float64)
 
+    def moved_bones(self) -> dict[str, frozenset[int]]:
+        """Coordinate → indices of the bones it moves (those whose DOFs it drives, and their
+        descendants)."""
+        moved: dict[str, set[int]] = {c.name: set() for c in self.coordinates}
+        drivers: list[set[str]] = []  # per bone: every coordinate moving it
+        for b, bone in enumerate(self.bones):
+            own = {d.coord for d in bone.dofs if d.coord is not None}
+            drivers.append(own | (drivers[bone.parent] if bone.parent >= 0 else set()))
+            for c in drivers[b]:
+                moved[c].add(b)
+        return {c: frozenset(v) for c, v in moved.items()}
+
 
 # ----------------------------------------------------------------------------- rotations
 

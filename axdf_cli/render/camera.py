@@ -168,7 +168,7 @@ def sequence_cameras(bounds: np.ndarray, frames: tuple[int, ...] | list[int],
 def _explicit(settings: RenderSettings, corners: np.ndarray, angle: float) -> Camera:
     cam = settings.camera
     W, H = settings.size
-    target = np.asarray(cam.target, float)
+    target = np.asarray(cam.target if cam.target is not None else corners.mean(axis=0), float)
     Rz = rot_z(angle)
     pos = target + Rz @ (np.asarray(cam.position, float) - target)
     up = Rz @ np.asarray(cam.up, float)
