@@ -20,6 +20,14 @@ from axdf_cli.yamlio import nearest
 
 #: Frames sampled at once when scanning a whole sequence (bounds memory for long poses).
 SCAN_FRAMES = 65536
+#: Frames posed at once when collecting the subject's points for framing (see subject_points).
+FRAMING_CHUNK = 256
+#: Room around the bones for automatic framing: muscles lie on the bones and bulge past the
+#: hull of the posed bone meshes by up to 2.9 cm on the shipped jobs (demo brachioradialis;
+#: gait2392: 0); a mesh-less skeleton's muscles lie around its joint chain. Metres, but at most
+#: a share of the subject's largest extent (a small model gets a small pad).
+FRAMING_PAD = 0.03
+FRAMING_PAD_FRACTION = 0.05
 
 
 def interpolate(frames: np.ndarray, key_frames, key_values, mode: str) -> np.ndarray:
@@ -168,3 +176,45 @@ def parse_frames(spec, where: Mark, first: int, last: int) -> np.ndarray:
         raise InputError(where, f"frames {frames[0]}..{frames[-1]} outside the pose's [{first}, {last}]",
                          f"frames within {first}..{last}")
     return frames
+
+
+def hull_points(points: np.ndarray) -> np.ndarray:
+    """The vertices of the convex hull of ``points`` (N, 3), in index order (or, for a flat or
+    degenerate cloud, its extreme points along 26 directions): every linear function takes
+    its maximum over ``points`` on one of them."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    points = np.asarray(points, dtype=np.float64)
+    if len(points) <= 4:
+        return points
+    try:
+        return points[np.sort(ConvexHull(points).vertices)]
+    except (QhullError, ValueError):
+        d = np.array([[i, j, k] for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1) if i or j or k], float)
+        return points[np.unique(np.argmax(points @ d.T, axis=0))]
+
+
+def subject_points(pose, bone_vertices: dict) -> np.ndarray:
+    """Points (N, 3) whose convex hull holds the subject over *every* frame of the pose: each
+    bone's mesh (``bone_vertices``: bone index -> (V, 3) bone-local vertices) and every joint,
+    posed by forward kinematics (batched over frames), grown by FRAMING_PAD (at most a share
+    of the extent) each way. What a camera frames: it depends on the skeleton and the whole pose,
+    never on which frames are written or on the muscles."""
+    from axdf_cli.skeleton import forward_kinematics
+
+    skel = pose.skeleton
+    origin = np.zeros((1, 3))
+    local = [np.concatenate([hull_points(bone_vertices[b]), origin]) if b in bone_vertices else origin
+             for b in range(len(skel.bones))]  # bone-local points of each bone
+    keep = np.zeros((0, 3))
+    frames = pose.frames
+    for s in range(0, len(frames), FRAMING_CHUNK):
+        world = forward_kinematics(skel, sample_coordinates(pose, frames[s:s + FRAMING_CHUNK]))  # (C, B, 4, 4)
+        # x[c, p] = R_b[c] @ local_b[p] + t_b[c], bone by bone
+        posed = [(pts @ world[:, b, :3, :3].transpose(0, 2, 1) + world[:, b, None, :3, 3]).reshape(-1, 3)
+                 for b, pts in enumerate(local)]
+        keep = hull_points(np.concatenate([keep] + posed))
+    extent = float(np.max(keep.max(axis=0) - keep.min(axis=0)))
+    pad = max(min(FRAMING_PAD, FRAMING_PAD_FRACTION * extent), 1e-3 * FRAMING_PAD)
+    cube = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], float) * pad
+    return hull_points((keep[:, None, :] + cube[None]).reshape(-1, 3))

@@ -23,7 +23,7 @@ from axdf_cli.formats import WRITERS
 from axdf_cli.loaders import Job, Pose, RefPolicy, expand_muscle_paths, load_muscle_file, load_pose
 from axdf_cli.muscle import MuscleModel, MuscleSpec
 from axdf_cli.pose import (activation_problems, effective_tension, muscle_range_warnings, parse_frames,
-                           sample_activation, sample_coordinates)
+                           sample_activation, sample_coordinates, subject_points)
 from axdf_cli.skeleton import forward_kinematics, matrix_to_quaternion
 
 CHUNK_FRAMES = 128  # frames evaluated together: bounds memory for any sequence length
@@ -352,7 +352,8 @@ def manifest_dict(plan: RunPlan, files: dict, warnings: list, complete: bool, ex
              "rest_length": round(m.l0, 12), "rest_volume": float(f"{m.v0:.12g}")}
             for s, m in zip(plan.muscles, plan.models)
         ],
-        "bones": [{"name": b.name, "mesh": bone_mesh_relpath(b.name) if b.mesh else None}
+        "bones": [{"name": b.name, "mesh": bone_mesh_relpath(b.name) if b.mesh else None,
+                   "parent": plan.pose.skeleton.bones[b.parent].name if b.parent >= 0 else None}
                   for b in plan.pose.skeleton.bones],
         "warnings": warnings,
         "files": dict(sorted(files.items())),
@@ -534,11 +535,13 @@ def execute(plan: RunPlan, *, resume: bool = False, overwrite: bool = False, pro
             for b, bone in enumerate(bones):
                 brows.append([str(int(frame)), bone.name] + [_g(x) for x in bone_rows[i, b]])
         writer.write("bones.csv", _fmt_rows(brows).encode())
-        extra = {"bounds": [[float(f"{x:.9g}") for x in lo], [float(f"{x:.9g}") for x in hi]]}
+        frame_pts = framing(plan)
+        extra = {"bounds": [[float(f"{x:.9g}") for x in lo], [float(f"{x:.9g}") for x in hi]],
+                 "framing": {"first_frame": int(plan.pose.first), "points": frame_pts.tolist()}}
         if plan.render is not None and plan.render.enabled:
             writer.flush()
             write_manifest(out, manifest_dict(plan, writer.files, warnings, complete=False, extra=extra))
-            info = render_run(plan, np.array([lo, hi]), twist_ref, render_progress)
+            info = render_run(plan, np.array([lo, hi]), twist_ref, render_progress, frame_pts)
             writer.files.update(info["files"])
             extra["gl"] = {"renderer": info["gl_renderer"], "version": info["gl_version"]}
         writer.flush()
@@ -564,21 +567,31 @@ def _csv_text(s: str) -> str:
 RENDER_CHUNK = 16  # frames per block handed to the renderer (all muscles of a frame at once)
 
 
-def render_run(plan: RunPlan, bounds: np.ndarray, twist_ref: np.ndarray, progress=None) -> dict:
+def framing(plan: RunPlan) -> np.ndarray:
+    """What the automatic camera frames: the skeleton over the whole pose (not the muscles,
+    not the selected frames), rounded to 1 µm so that the manifest holds it exactly."""
+    pts = subject_points(plan.pose, {i: v for i, (v, _, _) in plan.bone_meshes.items()})
+    return np.round(pts, 6) + 0.0
+
+
+def render_run(plan: RunPlan, bounds: np.ndarray, twist_ref: np.ndarray, progress=None,
+               framing_points: np.ndarray | None = None) -> dict:
     """Render the plan's frames (the muscles evaluated again, block by block: evaluation is
     cheap next to rendering and this keeps memory bounded)."""
     from axdf_cli.render import render_sequence
-    from axdf_cli.scene import FrameChunk, Scene, SceneBone, SceneMuscle
+    from axdf_cli.render.renderer import bone_layout
+    from axdf_cli.scene import FrameChunk, Scene, SceneMuscle
 
     skel = plan.pose.skeleton
-    bone_ids, scene_bones = [], []
-    if plan.render.bones:
-        for i, (v, f, _) in sorted(plan.bone_meshes.items()):
-            bone_ids.append(i)
-            scene_bones.append(SceneBone(skel.bones[i].name, v, f))
+    framing_points = framing(plan) if framing_points is None else framing_points
+    shown = skel.bones if plan.render.bones else ()
+    layout = bone_layout([b.name for b in shown], [b.parent for b in shown],
+                         {i: (v, f) for i, (v, f, _) in plan.bone_meshes.items() if shown},
+                         float(np.ptp(framing_points, axis=0).max()))
     scene = Scene(
         muscles=tuple(SceneMuscle(s.name, s.color, m.faces) for s, m in zip(plan.muscles, plan.models)),
-        bones=tuple(scene_bones), bounds=bounds, frames=tuple(int(f) for f in plan.frames))
+        bones=layout.bones, bounds=bounds, frames=tuple(int(f) for f in plan.frames),
+        framing=framing_points, first_frame=int(plan.pose.first))
 
     def chunks():
         for sl, world, results in evaluate_chunks(plan, RENDER_CHUNK, twist_ref):
@@ -586,7 +599,7 @@ def render_run(plan: RunPlan, bounds: np.ndarray, twist_ref: np.ndarray, progres
             yield FrameChunk(frames=plan.frames[sl],
                              positions=tuple(_finite_or_rest(r.vertices, m.rest_vertices) for r, m in zip(res, plan.models)),
                              normals=tuple(_finite_or_rest(r.normals, m.rest_normals) for r, m in zip(res, plan.models)),
-                             bone_world=world[:, bone_ids])
+                             bone_world=layout.transforms(world))
 
     return render_sequence(scene, chunks(), plan.render, plan.out, progress=progress)
 

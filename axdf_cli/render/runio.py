@@ -22,7 +22,7 @@ import numpy as np
 
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.render.settings import RenderSettings, parse_render_settings
-from axdf_cli.scene import FrameChunk, Scene, SceneBone, SceneMuscle
+from axdf_cli.scene import FrameChunk, Scene, SceneMuscle
 
 def read_mesh_file(path: Path) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
     """A PLY or OBJ triangle mesh -> (V, 3) float32 positions, (V, 3) float32 normals or
@@ -105,19 +105,30 @@ def load_run_scene(run_dir: Path) -> tuple[Scene, Iterator[FrameChunk], RenderSe
             lo, hi = np.minimum(lo, pos.min(0)), np.maximum(hi, pos.max(0))
     bounds = np.stack([lo, hi]) if muscles else np.zeros((2, 3))
 
-    bones = []
-    for b in manifest.get("bones") or []:
+    from axdf_cli.render.renderer import bone_layout
+
+    entries = [b for b in manifest.get("bones") or [] if isinstance(b, dict)]
+    names = [str(b["name"]) for b in entries]
+    parents = [names.index(b["parent"]) if b.get("parent") in names else -1 for b in entries]
+    meshes = {}
+    for i, b in enumerate(entries):
         if b.get("mesh"):
             v, _, faces = read_mesh_file(run_dir / b["mesh"])
-            bones.append(SceneBone(str(b["name"]), v, faces))
-    bone_world = _read_bones_csv(run_dir / "bones.csv", frames, [b.name for b in bones])
+            meshes[i] = (v, faces)
+    framing = manifest.get("framing") if isinstance(manifest.get("framing"), dict) else {}
+    points = np.asarray(framing.get("points") or np.zeros((0, 3)), dtype=np.float64).reshape(-1, 3)
+    extent = float(np.ptp(points if len(points) else bounds, axis=0).max())
+    layout = bone_layout(names, parents, meshes, extent)
+    world = _read_bones_csv(run_dir / "bones.csv", frames, names if layout.bones else [])
+    bone_world = layout.transforms(world)
 
     raw = (manifest.get("settings") or {}).get("render") if isinstance(manifest.get("settings"), dict) \
         else None
     raw = raw if raw is not None else manifest.get("render")
     settings = replace(parse_render_settings(raw, where) if isinstance(raw, dict) else RenderSettings(),
                        enabled=True)
-    scene = Scene(tuple(muscles), tuple(bones), bounds.astype(np.float64), frames)
+    scene = Scene(tuple(muscles), layout.bones, bounds.astype(np.float64), frames,
+                  framing=points if len(points) else None, first_frame=framing.get("first_frame"))
 
     def chunks() -> Iterator[FrameChunk]:
         for k, f in enumerate(frames):

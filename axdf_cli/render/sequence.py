@@ -43,7 +43,7 @@ def render_sequence(scene: Scene, chunks: Iterable[FrameChunk], settings: Render
     Raises :class:`EnvironmentProblem` (exit 3) when no EGL context can be made.
     """
     out_dir = Path(out_dir)
-    cameras = sequence_cameras(scene.bounds, scene.frames, settings)
+    cameras = sequence_cameras(scene, settings)
     ctx = create_gl_context(device=settings.device, libegl=settings.egl_library)
     try:
         info = gl_info(ctx)
@@ -77,7 +77,7 @@ def benchmark_fps(size: tuple[int, int] = (512, 512), n_muscles: int = 10, verts
 
     settings = replace(settings or RenderSettings(enabled=True), size=tuple(size))
     scene, chunks = synthetic_scene(n_muscles=n_muscles, verts=verts, n_frames=frames + 1)
-    cameras = sequence_cameras(scene.bounds, scene.frames, settings)
+    cameras = sequence_cameras(scene, settings)
     ctx = create_gl_context(device=settings.device, libegl=settings.egl_library)
     try:
         info = gl_info(ctx)
