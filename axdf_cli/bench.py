@@ -394,10 +394,10 @@ def profile_run(job: Path, out: Path, fmt: str = "ply", top: int = 0) -> dict:
     # evaluation: evaluate + twist references + kinematics (those inside twist_references once)
     fk_in_twist = sum(cv[3] for (f, _, fn), v in st.stats.items() if fn == "forward_kinematics"
                       and f.endswith("skeleton.py") for (_, _, cfn), cv in v[4].items() if cfn == "twist_references")
-    ev = (_cum(st, "muscle.py", "evaluate") + _cum(st, "run.py", "twist_references")
+    ev = (_cum(st, "muscle.py", "evaluate") + _cum(st, "evaluate.py", "twist_references")
           + _cum(st, "skeleton.py", "forward_kinematics") - fk_in_twist)
     enc = _cum(st, f"{fmt}.py", "encode")
-    wr = _cum(st, "run.py", "write")  # OutputWriter.write: sha256 + atomic write
+    wr = _cum(st, "runfolder.py", "write")  # OutputWriter.write: sha256 + atomic write
     text = ""
     if top:
         buf = io.StringIO()

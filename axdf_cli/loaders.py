@@ -452,9 +452,18 @@ def _frame_key(frame, where: Mark, what: str, first: int, last: int) -> int:
     return int(f)
 
 
+#: Motion files that are not poses → the command that turns them into one.
+MOTION_IMPORTS = {".bvh": "axdf import bvh FILE.bvh --out DIR",
+                  ".mot": "axdf import osim MODEL.osim --motion FILE --out DIR",
+                  ".sto": "axdf import osim MODEL.osim --motion FILE --out DIR"}
+
+
 def load_pose(path: Path | str, policy: RefPolicy | None = None) -> Pose:
     policy = policy or RefPolicy()
     path = Path(path)
+    if path.suffix.lower() in MOTION_IMPORTS:
+        raise InputError(Mark(str(path)), f"a {path.suffix} motion is not an axdf pose",
+                         f"import it first ({MOTION_IMPORTS[path.suffix.lower()]}) and pass the pose YAML it writes")
     doc = load_yaml(path)
     top = Mark(str(path), 1, 1)
     f = Fields(doc, top, "pose file", keys=POSE_KEYS)
@@ -601,13 +610,16 @@ def expand_muscle_paths(entries, policy: RefPolicy | None = None, base: Path | N
 # ----------------------------------------------------------------------------- file kinds
 
 #: The keys that tell a file's kind (see :func:`detect_kind`).
-KIND_KEYS = ("skeleton", "bones", "pose", "keys", "muscle", "muscles")
-KINDS_ALLOWED = ("a skeleton (skeleton:, bones:), pose (pose:, keys:), muscle (muscle:) or job (muscles:, pose:)")
+KIND_KEYS = ("skeleton", "bones", "pose", "keys", "muscle", "muscles", "transfer")
+KINDS_ALLOWED = ("a skeleton (skeleton:, bones:), pose (pose:, keys:), muscle (muscle:), job (muscles:, pose:) "
+                 "or transfer map (transfer:, bones:)")
 
 
 def detect_kind(doc) -> str | None:
     if not isinstance(doc, dict):
         return None
+    if "transfer" in doc:
+        return "transfer"
     if "skeleton" in doc and "bones" in doc:
         return "skeleton"
     if "pose" in doc and "keys" in doc:

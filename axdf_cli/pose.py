@@ -196,16 +196,24 @@ def hull_points(points: np.ndarray) -> np.ndarray:
 
 def subject_points(pose, bone_vertices: dict) -> np.ndarray:
     """Points (N, 3) whose convex hull holds the subject over *every* frame of the pose: each
-    bone's mesh (``bone_vertices``: bone index -> (V, 3) bone-local vertices) and every joint,
-    posed by forward kinematics (batched over frames), grown by FRAMING_PAD (at most a share
-    of the extent) each way. What a camera frames: it depends on the skeleton and the whole pose,
-    never on which frames are written or on the muscles."""
+    bone's mesh (``bone_vertices``: bone index -> (V, 3) bone-local vertices) and its joint,
+    and the joints at both ends of every stick (:meth:`Skeleton.stick_parents`; a mesh-less
+    root such as a floating base's world origin is no part of the subject), posed by forward
+    kinematics (batched over frames), grown by FRAMING_PAD (at most a share of the extent) each
+    way. What a camera frames: it depends on the skeleton and the whole pose, never on which
+    frames are written or on the muscles."""
     from axdf_cli.skeleton import forward_kinematics
 
     skel = pose.skeleton
+    joints = set(bone_vertices)
+    for b, p in enumerate(skel.stick_parents()):
+        if p >= 0:
+            joints |= {b, p}
+    joints = joints or set(range(len(skel.bones)))
     origin = np.zeros((1, 3))
-    local = [np.concatenate([hull_points(bone_vertices[b]), origin]) if b in bone_vertices else origin
-             for b in range(len(skel.bones))]  # bone-local points of each bone
+    empty = np.zeros((0, 3))
+    local = [np.concatenate([hull_points(bone_vertices[b]) if b in bone_vertices else empty,
+                             origin if b in joints else empty]) for b in range(len(skel.bones))]
     keep = np.zeros((0, 3))
     frames = pose.frames
     for s in range(0, len(frames), FRAMING_CHUNK):

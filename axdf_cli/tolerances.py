@@ -38,6 +38,9 @@ TENSION_GAIN = 0.6
 YAML_MAX_BYTES = 16 * 1024 * 1024
 YAML_MAX_NODES = 2_000_000
 YAML_MAX_DEPTH = 64
+# BVH motion capture is text too, but long takes are large (100 channels x 100k frames is
+# ~100 MB): read up to this many bytes.
+BVH_MAX_BYTES = 512 * 1024 * 1024
 # numbers whose magnitude exceeds this are refused (metres, degrees, frames alike)
 MAX_ABS_NUMBER = 1e9
 

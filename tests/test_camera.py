@@ -150,3 +150,26 @@ def test_stick_matrices_map_the_unit_stick_between_joints():
     tri = v[f].astype(np.float64)
     vol = np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])).sum() / 6
     assert vol == pytest.approx(0.5 * 12 * math.sin(2 * math.pi / 12), rel=1e-6)
+
+
+def test_floating_base_gets_no_stick_and_the_world_origin_is_not_framed(tmp_path):
+    from axdf_cli.loaders import load_pose
+    from axdf_cli.pose import subject_points
+
+    (tmp_path / "s.yaml").write_text("""skeleton: s
+bones:
+  - name: ground
+  - name: hips
+    parent: ground
+    dofs:
+      - {coord: tx, type: translation, axis: [1, 0, 0]}
+  - name: knee
+    parent: hips
+    offset: [0, 0, -0.4]
+""")
+    (tmp_path / "p.yaml").write_text("pose: p\nskeleton: s.yaml\nframes: [0, 2]\nkeys:\n  0: {tx: 5}\n  2: {tx: 6}\n")
+    pose = load_pose(tmp_path / "p.yaml")
+    assert pose.skeleton.stick_parents() == [-1, -1, 1]  # hips floats: no stick from the origin
+    pts = subject_points(pose, {})
+    assert pts[:, 0].min() > 4.9 and pts[:, 0].max() < 6.1  # the walk, not the world origin
+    assert pts[:, 2].min() < -0.4 < 0.0 < pts[:, 2].max()

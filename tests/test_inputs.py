@@ -237,7 +237,7 @@ def test_overlong_names_are_refused_before_anything_is_written(proj, capsys):
 def test_longest_name_gives_file_names_that_fit():
     """Every file a run writes, under its temporary name too, fits 255 bytes."""
     from axdf_cli import atomic
-    from axdf_cli.run import bone_mesh_relpath, mesh_relpath
+    from axdf_cli.runfolder import bone_mesh_relpath, mesh_relpath
     from axdf_cli.yamlio import NAME_MAX
 
     name = "n" * NAME_MAX

@@ -73,7 +73,7 @@ def run(args) -> int:
         from tqdm import tqdm
 
         bar = tqdm(total=total, unit="mesh", file=sys.stderr, desc="meshes")
-        if plan.render.enabled:
+        if plan.rendering:
             rbar = tqdm(total=len(plan.frames), unit="frame", file=sys.stderr, desc="frames")
     try:
         summary = runner.execute(plan, resume=args.resume, overwrite=args.overwrite,
@@ -98,18 +98,16 @@ def plan_from_args(args):
     from dataclasses import replace
 
     from axdf_cli import run as runner
-    from axdf_cli.render.settings import RenderSettings, settings_from_args
+    from axdf_cli.render.settings import settings_from_args
 
     policy = RefPolicy.for_command([args.job, args.pose] + list(args.muscles or []), args.allow_outside)
     job = load_job(args.job, policy) if args.job else None
-    plan = runner.plan_run(job, muscle_args=args.muscles, pose_arg=args.pose, out_arg=args.out,
-                           fmt_arg=args.format, frames_arg=args.frames, policy=policy,
-                           clamp_ranges=args.clamp_ranges)
-    settings = job.render if job else RenderSettings()
+    settings = runner.job_render_settings(job)
     if args.render is not None:
         settings = replace(settings, enabled=args.render)
-    plan.render = settings_from_args(settings, args)
-    return plan
+    return runner.plan_run(job, muscle_args=args.muscles, pose_arg=args.pose, out_arg=args.out,
+                           fmt_arg=args.format, frames_arg=args.frames, render=settings_from_args(settings, args),
+                           policy=policy, clamp_ranges=args.clamp_ranges)
 
 
 def refuse_warnings(plan) -> None:

@@ -61,6 +61,11 @@ def validate_file(path: Path, policy, args) -> tuple[str, str | None, list[str]]
     if kind == "job":
         plan = _plan(job=str(path), allow_outside=args.allow_outside)
         return f"job: {len(plan.models)} muscles x {len(plan.frames)} frames", kind, _plan_warnings(plan)
+    if kind == "transfer":
+        from axdf_cli.transfer import load_map
+
+        m = load_map(path, policy=policy)
+        return f"transfer map {m.name}: {len(m.pairs)} bones, {m.skel_a.name} -> {m.skel_b.name}", kind, []
     raise loaders.kind_error(doc, Mark(str(path), 1, 1))
 
 

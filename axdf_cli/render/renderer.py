@@ -164,8 +164,9 @@ class BoneLayout:
 
 
 def bone_layout(names, parents, meshes: dict, extent: float) -> BoneLayout:
-    """``names``/``parents`` of every bone (parent -1 for the root), ``meshes``: bone index ->
-    (vertices, faces) bone-local; ``extent``: the subject's largest extent (stick radius)."""
+    """``names`` of every bone and ``parents``: the bone a stick joins it to (-1: none, see
+    :meth:`axdf_cli.skeleton.Skeleton.stick_parents`); ``meshes``: bone index -> (vertices,
+    faces) bone-local; ``extent``: the subject's largest extent (stick radius)."""
     radius = max(STICK_MIN_RADIUS, STICK_RADIUS_FRACTION * extent)
     stick_v, stick_f = unit_stick()
     bones, sources = [], []

@@ -3,8 +3,10 @@
 Kept in one place because the manifest format is not final. What is read:
 
 - ``manifest.json``: ``muscles: [{name, color, ...}]`` (colour as linear ``[r, g, b]`` in
-  0..1, or sRGB ``"#rrggbb"``), ``frames: [...]``, optional ``bones: [{name, mesh}]``
-  (``mesh`` relative to the run folder, a PLY in bone-local coordinates) and optional render
+  0..1, or sRGB ``"#rrggbb"``), ``frames: [...]``, optional ``bones: [{name, mesh, stick_from}]``
+  (``mesh`` relative to the run folder, a PLY in bone-local coordinates; ``stick_from``: the
+  bone a mesh-less bone is drawn joined to), optional ``framing`` (what the automatic camera
+  frames: ``{first_frame, points}``) and optional render
   settings under ``settings.render`` or ``render``.
 - ``meshes/<muscle>/<muscle>_<frame:04d>.ply`` (binary little-endian, float32 x y z nx ny
   nz, int32 triangle lists) or ``.obj`` (``v``, ``vn``, ``f a//a``).
@@ -22,6 +24,7 @@ import numpy as np
 
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.render.settings import RenderSettings, parse_render_settings
+from axdf_cli.runfolder import MANIFEST, mesh_relpath
 from axdf_cli.scene import FrameChunk, Scene, SceneMuscle
 
 def read_mesh_file(path: Path) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
@@ -65,17 +68,17 @@ def _quat_matrix(q: np.ndarray) -> np.ndarray:
 
 def _mesh_path(run_dir: Path, name: str, frame: int) -> Path:
     for ext in _READERS:
-        p = run_dir / "meshes" / name / f"{name}_{frame:04d}{ext}"
+        p = run_dir / mesh_relpath(name, frame, ext[1:])
         if p.exists():
             return p
-    raise InputError(Mark(str(run_dir / "meshes" / name / f"{name}_{frame:04d}.ply")),
+    raise InputError(Mark(str(run_dir / mesh_relpath(name, frame, "ply"))),
                      "mesh file missing", "the run folder must hold every muscle's mesh for every frame")
 
 
 def load_run_scene(run_dir: Path) -> tuple[Scene, Iterator[FrameChunk], RenderSettings]:
     """Scene, an iterator of one-frame chunks, and the run's render settings (enabled)."""
     run_dir = Path(run_dir)
-    mpath = run_dir / "manifest.json"
+    mpath = run_dir / MANIFEST
     where = Mark(str(mpath))
     try:
         manifest = json.loads(mpath.read_text())
@@ -109,7 +112,7 @@ def load_run_scene(run_dir: Path) -> tuple[Scene, Iterator[FrameChunk], RenderSe
 
     entries = [b for b in manifest.get("bones") or [] if isinstance(b, dict)]
     names = [str(b["name"]) for b in entries]
-    parents = [names.index(b["parent"]) if b.get("parent") in names else -1 for b in entries]
+    parents = [names.index(b["stick_from"]) if b.get("stick_from") in names else -1 for b in entries]
     meshes = {}
     for i, b in enumerate(entries):
         if b.get("mesh"):
