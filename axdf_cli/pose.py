@@ -28,6 +28,19 @@ FRAMING_CHUNK = 256
 #: a share of the subject's largest extent (a small model gets a small pad).
 FRAMING_PAD = 0.03
 FRAMING_PAD_FRACTION = 0.05
+#: A bone mesh is framed by its vertices extreme along this many directions (a Fibonacci
+#: sphere, ~0.2 rad apart: the kept points' hull lies within 0.5% of the bone's size of the
+#: mesh's hull, far inside FRAMING_PAD); it bounds the work per frame for detailed meshes.
+FRAMING_DIRECTIONS = 128
+
+
+def sphere_directions(n: int) -> np.ndarray:
+    """(n, 3) unit vectors spread evenly over the sphere (Fibonacci lattice)."""
+    k = np.arange(n) + 0.5
+    z = 1.0 - 2.0 * k / n
+    phi = np.pi * (3.0 - np.sqrt(5.0)) * k
+    r = np.sqrt(1.0 - z * z)
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
 
 
 def interpolate(frames: np.ndarray, key_frames, key_values, mode: str) -> np.ndarray:
@@ -212,7 +225,13 @@ def subject_points(pose, bone_vertices: dict) -> np.ndarray:
     joints = joints or set(range(len(skel.bones)))
     origin = np.zeros((1, 3))
     empty = np.zeros((0, 3))
-    local = [np.concatenate([hull_points(bone_vertices[b]) if b in bone_vertices else empty,
+    dirs = sphere_directions(FRAMING_DIRECTIONS)
+
+    def extremes(v):
+        v = np.asarray(v, dtype=np.float64)
+        return v[np.unique(np.argmax(v @ dirs.T, axis=0))] if len(v) else empty
+
+    local = [np.concatenate([extremes(bone_vertices[b]) if b in bone_vertices else empty,
                              origin if b in joints else empty]) for b in range(len(skel.bones))]
     keep = np.zeros((0, 3))
     frames = pose.frames
