@@ -198,22 +198,25 @@ def parse_render_settings(value, where: Mark) -> RenderSettings:
 def add_render_args(parser: argparse.ArgumentParser) -> None:
     """Render flags shared by ``axdf run`` and ``axdf render``; all default to 'not given'.
     Their values are read by the same parsers as the ``render:`` block."""
+    def rng(key):
+        return f"{RANGES[key][0]:g}..{RANGES[key][1]:g}"
+
     g = parser.add_argument_group("rendering")
-    g.add_argument("--size", metavar="WxH", help="output size in pixels per view: 512x512 or [512, 512]")
+    g.add_argument("--size", metavar="WxH", help=f"output size in pixels per view ({rng('size')}): 512x512 or [512, 512]")
     g.add_argument("--view", choices=VIEWS, help="named view (auto = three-quarter front)")
-    g.add_argument("--fov", metavar="DEG", help="vertical field of view, degrees (1..170)")
+    g.add_argument("--fov", metavar="DEG", help=f"vertical field of view, degrees ({rng('fov')})")
     g.add_argument("--camera-position", metavar="X,Y,Z", help="explicit camera position (world, metres)")
     g.add_argument("--camera-target", metavar="X,Y,Z",
                    help="point the explicit camera looks at (default: the centre of the framing)")
     g.add_argument("--camera-up", metavar="X,Y,Z", help="explicit camera's up direction (default 0,0,1)")
-    g.add_argument("--orbit", metavar="DEG", help="turntable: degrees per frame about +Z")
+    g.add_argument("--orbit", metavar="DEG", help=f"turntable: degrees per frame about +Z ({rng('orbit')})")
     g.add_argument("--wireframe", action=argparse.BooleanOptionalAction, default=None,
                    help="edge overlay")
     g.add_argument("--bones", action=argparse.BooleanOptionalAction, default=None,
                    help="draw bone meshes (sticks for bones without one)")
     g.add_argument("--background", metavar="R,G,B[,A]|transparent",
                    help="background colour (linear 0..1) or 'transparent'")
-    g.add_argument("--supersample", metavar="N", help="anti-aliasing factor 1..8")
+    g.add_argument("--supersample", metavar="N", help=f"anti-aliasing factor {rng('supersample')}")
     g.add_argument("--device", metavar="default|N", help="EGL device index")
     g.add_argument("--egl-library", metavar="PATH",
                    help="EGL library to load instead of the system's libEGL.so.1 (diagnosis)")
