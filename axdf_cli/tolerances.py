@@ -5,6 +5,18 @@
 # frame error below 1e-4 rad on every shipped muscle and on a quarter-turn helix per span
 # (tests/test_rmf.py measures it against a 16x denser reference).
 RMF_SAMPLES_PER_SPAN = 32
+# Axes with many control points (muscle paths: up to 48) have short spans that turn little:
+# beyond the first RMF_DENSE_SPANS spans, RMF_SAMPLES_PER_EXTRA_SPAN samples per span keep the
+# same frame error at a quarter of the cost (tests/test_rmf.py checks imported path muscles).
+RMF_DENSE_SPANS = 6
+RMF_SAMPLES_PER_EXTRA_SPAN = 8
+
+
+def rmf_samples(n_control_points: int) -> int:
+    """Intervals of the RMF sampling for an axis of n control points (n - 2 knot spans)."""
+    spans = n_control_points - 2
+    dense = min(spans, RMF_DENSE_SPANS)
+    return RMF_SAMPLES_PER_SPAN * dense + RMF_SAMPLES_PER_EXTRA_SPAN * (spans - dense)
 
 # The frame error the issue asks for; tests check RMF_SAMPLES_PER_SPAN achieves it.
 RMF_MAX_FRAME_ERROR_RAD = 1e-4
@@ -36,6 +48,9 @@ TENSION_GAIN = 0.6
 
 # YAML safety limits: hostile documents (alias bombs, deep nesting, huge files).
 YAML_MAX_BYTES = 16 * 1024 * 1024
+# Any other input file (.osim, .vtp, .mot/.sto, bone meshes): read whole into memory, so
+# bounded; the largest shipped one (a gait2392 bone mesh) is ~1 MB.
+INPUT_MAX_BYTES = 256 * 1024 * 1024
 YAML_MAX_NODES = 2_000_000
 YAML_MAX_DEPTH = 64
 # BVH motion capture is text too, but long takes are large (100 channels x 100k frames is

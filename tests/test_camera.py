@@ -84,7 +84,7 @@ def test_every_demo_muscle_stays_in_view(repo_root, tmp_path, capsys):
     assert rc == 0, err
     for f, cams in _cams(out).items():
         for ply in (out / "meshes").rglob(f"*_{f:04d}.ply"):
-            uv = _project(cams[0], read_ply(ply.read_bytes())[0].astype(np.float64))
+            uv = _project(cams[0], read_ply(ply.read_bytes()).vertices.astype(np.float64))
             assert uv.min() >= 0 and uv.max() <= 64, (ply.name, uv.min(), uv.max())
 
 

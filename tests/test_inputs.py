@@ -104,8 +104,8 @@ def test_clamp_ranges_flag_and_pose_key_hold_the_range_end(proj, capsys):
                      "--strict"], capsys)[0] == 0
     assert all(r["warning"] == "" for r in _stats(proj / "c"))
     assert run_main(["run", "--muscles", "m", "--pose", "edge.yaml", "--out", "e", "--no-render"], capsys)[0] == 0
-    held = read_ply((proj / "c" / "meshes" / "chainm" / "chainm_0004.ply").read_bytes())[0]
-    edge = read_ply((proj / "e" / "meshes" / "chainm" / "chainm_0000.ply").read_bytes())[0]
+    held = read_ply((proj / "c" / "meshes" / "chainm" / "chainm_0004.ply").read_bytes()).vertices
+    edge = read_ply((proj / "e" / "meshes" / "chainm" / "chainm_0000.ply").read_bytes()).vertices
     np.testing.assert_allclose(held, edge, atol=1e-6)  # -400 is held at -140
     (proj / "k.yaml").write_text(_pose({0: {"bend": 0}, 4: {"bend": -400}}, extra="clamp_ranges: true\n"))
     assert run_main(["run", "--muscles", "m", "--pose", "k.yaml", "--out", "k", "--no-render", "--strict"],

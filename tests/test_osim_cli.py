@@ -259,3 +259,20 @@ def test_shipped_library_is_up_to_date(tmp_path):
                              committed.relative_to(REPO).as_posix())
         for mesh in sorted((out / "skeletons" / "meshes" / name).glob("*.ply")):  # read and scaled only: exact
             assert mesh.read_bytes() == (REPO / "poses" / "skeletons" / "meshes" / name / mesh.name).read_bytes()
+
+
+def test_bad_body_name_points_at_the_osim_line(tmp_path, capsys):
+    """Issue 10: a body name axdf cannot use is reported at its line in the .osim, not in a
+    YAML that was never written."""
+    from osim_common import ARM, run_import
+
+    text = ARM.read_text()
+    bad = tmp_path / "bad.osim"
+    bad.write_text(text.replace('"r_humerus"', '"r humerus"').replace(">r_humerus<", ">r humerus<")
+                   .replace("/r_humerus<", "/r humerus<"))
+    line = text[:text.index('<Body name="r_humerus"')].count("\n") + 1
+    rc, out = run_import(tmp_path, bad, "--no-meshes")
+    err = capsys.readouterr().err
+    assert rc == 2
+    assert f"bad.osim:{line}:" in err and "r humerus" in err, err
+    assert not out.exists()

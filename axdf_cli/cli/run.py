@@ -62,6 +62,7 @@ def run(args) -> int:
         refuse_warnings(plan)
     total = len(plan.frames) * len(plan.models)
     if args.dry_run:
+        runner.check_output(plan, resume=args.resume, overwrite=args.overwrite)
         print(f"would write {total} meshes ({len(plan.models)} muscles x {len(plan.frames)} frames, "
               f"{plan.fmt}) to {plan.out}/meshes, plus stats.csv, bones.csv, manifest.json")
         for s, m in zip(plan.muscles, plan.models):
@@ -78,7 +79,8 @@ def run(args) -> int:
     try:
         summary = runner.execute(plan, resume=args.resume, overwrite=args.overwrite,
                                  progress=bar.update if bar else None, strict=args.strict, jobs=args.jobs,
-                                 render_progress=(lambda _f: rbar.update(1)) if rbar else None)
+                                 render_progress=(lambda _f: rbar.update(1)) if rbar else None,
+                                 on_note=lambda text: print(f"note: {text}", file=sys.stderr))
     finally:
         for b in (bar, rbar):
             if b:

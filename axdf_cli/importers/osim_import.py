@@ -22,7 +22,14 @@ Rotational coordinates follow the header's ``inDegrees``, unless the values cont
 
 Frames: without ``--fps`` a uniformly sampled motion keys every row at frame
 ``0 .. N-1`` with ``fps = 1 / dt``; with ``--fps`` (or when the rows are not evenly spaced)
-the motion is resampled by linear interpolation at ``t0 + k / fps``.
+the motion is resampled by linear interpolation at ``t0 + k / fps``. Refused, at the row
+that shows it (``FILE:LINE:COL``): a time column that does not advance (the median step is
+0), a gap (a step more than ``GAP_FACTOR`` times the median step: a motion whose last row
+jumps to 2000 s would otherwise become 200,001 interpolated frames), more than
+and more than ``MAX_MOTION_FRAMES`` frames; values beyond ``MAX_ABS_NUMBER`` are refused
+when the table is read (values read as radians lie within ±2π by the rule above, so the
+conversion to degrees cannot push them past it). The pose written must be readable by
+axdf: a pose over ``YAML_MAX_BYTES`` is refused too.
 
 Controls (``--controls``): columns name muscles (``TRIlong``, ``glut_med1_r.excitation``,
 ``/forceset/TRIlong``); other columns (reserve actuators) are listed as ignored. Values are
@@ -41,9 +48,11 @@ from pathlib import Path
 
 import numpy as np
 
+from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.importers import emit
 from axdf_cli.loaders import RefPolicy, parse_skeleton_text
+from axdf_cli.yamlio import check_name
 from axdf_cli.importers.osim import Model, load_osim
 from axdf_cli.importers.storage import Table, read_storage
 from axdf_cli.importers.vtp import ply_bytes, read_vtp
@@ -53,6 +62,12 @@ NAME_RE = re.compile(r"^[A-Za-z0-9_.-]+$")
 RADIAN_BOUND = 2.0 * math.pi
 MAX_RADIAN_STEP = 0.35
 MIN_RADIAN_SWING = 0.5
+#: A time step larger than this many median steps is a gap (refused). OpenSim's
+#: variable-step outputs (CMC controls) reach 3.5 median steps in the shipped data.
+GAP_FACTOR = 20.0
+#: At most this many pose frames per import: 100,000 frames are 28 minutes at 60 fps (the
+#: pose file's size limit, YAML_MAX_BYTES, usually binds first: ~25 values per frame).
+MAX_MOTION_FRAMES = 100_000
 
 
 @dataclass
@@ -121,22 +136,39 @@ def angle_unit(table: Table, rot_cols: list[int]) -> tuple[bool, str | None]:
     return False, None
 
 
-def _frame_times(time: np.ndarray, fps: float | None) -> tuple[np.ndarray, float, bool]:
-    """Output frame times, fps, and whether rows map 1:1 to frames."""
+def _frame_times(table: Table, fps: float | None) -> tuple[np.ndarray, float, bool]:
+    """Output frame times, fps, and whether rows map 1:1 to frames; InputErrors at the row
+    that shows a time column that does not advance, a gap, or too many frames."""
+    time = table.time
     if len(time) == 1:
         return time.copy(), float(fps or 30.0), True
     dt = np.diff(time)
     med = float(np.median(dt))
     if med <= 0:
-        raise InputError(Mark(""), "motion time does not advance", "increasing time")
+        i = int(np.argmax(dt <= 0)) + 1  # the first row that repeats the time before it
+        raise InputError(table.mark(i), f"time does not advance: {int(np.sum(dt <= 0))} of {len(dt)} steps "
+                         f"are 0 (time {time[i]:g} repeats)", "time increasing from row to row")
+    gaps = np.flatnonzero(dt > GAP_FACTOR * med)
+    if len(gaps):
+        i = int(gaps[0])
+        raise InputError(table.mark(i + 1), f"time jumps from {time[i]:g} to {time[i + 1]:g} s, "
+                         f"{dt[i] / med:.3g} times the median step {med:g} s (a gap)",
+                         f"steps up to {GAP_FACTOR:g} times the median; split the motion at the gap or fill it")
     uniform = bool(np.all(np.abs(dt - med) <= 1e-3 * med))
     native = 1.0 / med
     if abs(native - round(native)) < 1e-3 * native:
         native = float(round(native))
     if fps is None and uniform:
+        n = len(time)
+    else:
+        fps = float(fps or native)
+        n = int(math.floor((time[-1] - time[0]) * fps + 1e-9)) + 1
+    if n > MAX_MOTION_FRAMES:
+        raise InputError(table.mark(len(time) - 1), f"the motion makes {n} frames "
+                         f"({time[-1] - time[0]:g} s at {fps or native:g} fps)",
+                         f"at most {MAX_MOTION_FRAMES} frames per import; a lower --fps or a shorter motion")
+    if fps is None and uniform:
         return time.copy(), native, True
-    fps = float(fps or native)
-    n = int(math.floor((time[-1] - time[0]) * fps + 1e-9)) + 1
     return time[0] + np.arange(n) / fps, fps, False
 
 
@@ -159,7 +191,7 @@ def pose_doc(model: Model, motion: Table, controls: Table | None, pose_name: str
     degrees, warn = angle_unit(motion, rot)
     if warn:
         warnings.append(warn)
-    times, fps, direct = _frame_times(motion.time, fps)
+    times, fps, direct = _frame_times(motion, fps)
     data = motion.data if direct else _interp(motion.time, motion.data, times)
     keys: dict[int, dict] = {}
     for f in range(len(times)):
@@ -273,6 +305,15 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
     name = name or safe_name(model.name)
     if not NAME_RE.match(name):
         raise InputError(None, f"name {name!r}", "names use letters, digits, '_', '.', '-'")
+    # names become axdf names in files that do not exist yet: check them here, at the .osim line
+    for what, items in (("body", model.bodies.values()), ("coordinate", model.coordinates.values()),
+                        ("wrap object", model.wrap_objects.values())):
+        for item in items:
+            try:
+                check_name(item.name, item.mark, f"{what} name")
+            except InputError as e:
+                raise InputError(item.mark, f"{what} name {item.name!r} cannot be an axdf name",
+                                 "names use letters, digits, '_', '.', '-' (rename it in the model)") from e
     for m in model.muscles:
         if not NAME_RE.match(m.name):
             raise InputError(m.mark, f"muscle name {m.name!r}", "names use letters, digits, '_', '.', '-'")
@@ -307,7 +348,7 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
 
     rows = []
     for m in model.muscles:
-        mdoc, row = emit.muscle_doc(m, skel, world)
+        mdoc, row = emit.muscle_doc(m, skel, world, model)
         rows.append(row)
         files[str(mus_dir / f"{m.name}.yaml")] = emit.dump_yaml(mdoc, f"{m.name}: imported from {model_path.name} "
                                                                       f"({m.type}) by `axdf import osim`.").encode()
@@ -315,13 +356,19 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
     if motion_t is not None:
         pdoc = pose_doc(model, motion_t, controls_t, pname, _rel(skel_path, pose_path.parent), fps,
                         [m.name for m in model.muscles], report, warnings)
-        files[str(pose_path)] = emit.dump_yaml(pdoc, f"Imported from {Path(motion).name} by `axdf import osim`.").encode()
+        text = emit.dump_yaml(pdoc, f"Imported from {Path(motion).name} by `axdf import osim`.").encode()
+        if len(text) > tol.YAML_MAX_BYTES:
+            raise InputError(motion_t.mark(len(motion_t.time) - 1),
+                             f"the pose would be {len(text)} bytes ({len(pdoc['keys'])} frames)",
+                             f"axdf reads YAML files up to {tol.YAML_MAX_BYTES} bytes; a lower --fps or a shorter motion")
+        files[str(pose_path)] = text
     report["counts"] = {"bodies": len(model.bodies), "joints": len(model.joints), "coordinates": len(model.coordinates),
                         "muscles": len(model.muscles), "meshes": len(mesh_bytes),
                         "path_points": sum(r["path_points"] for r in rows),
                         "conditional_path_points": sum(len(r["conditional"]) for r in rows),
                         "conditional_inactive_at_rest": sum(len(r["conditional_inactive_at_rest"]) for r in rows),
-                        "moving_path_points": sum(len(r["moving"]) for r in rows)}
+                        "moving_path_points": sum(len(r["moving"]) for r in rows),
+                        "wrap_surfaces": sum(len(r["wraps"]) for r in rows)}
     inputs = [Path(x) for x in (model_path, motion, controls) if x is not None]
     report["ignored"] = [dict(i, where=_strip_dirs(i["where"], inputs)) for i in model.ignored]
     report["warnings"] = [_strip_dirs(w, inputs) for w in warnings]
@@ -329,8 +376,7 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
         mm["where"] = _strip_dirs(mm["where"], inputs)
     report["settings"] = {"specific_tension_Pa": emit.SPECIFIC_TENSION, "tendon_stress_Pa": emit.TENDON_STRESS,
                           "belly_profile": list(emit.BELLY_PROFILE), "origin_tendon_share": emit.ORIGIN_TENDON_SHARE,
-                          "max_tendon_fraction": emit.MAX_TENDON_FRACTION,
-                          "via_pair_fraction": emit.VIA_PAIR_FRACTION}
+                          "max_tendon_fraction": emit.MAX_TENDON_FRACTION}
     report["files"] = sorted(_rel(Path(p), out_dir) for p in files)
     files[str(out_dir / "import_report.json")] = (json.dumps(report, indent=1, sort_keys=True) + "\n").encode()
     files[str(out_dir / "IMPORT.md")] = import_markdown(report).encode()
@@ -351,8 +397,9 @@ def import_markdown(r: dict) -> str:
              f"OpenSim model `{r['source']['model_name']}`.", "",
              f"- bodies {c['bodies']}, joints {c['joints']}, coordinates {c['coordinates']}, meshes {c['meshes']}",
              f"- muscles {c['muscles']} from {c['path_points']} path points "
-             f"({c['conditional_path_points']} conditional, {c['conditional_inactive_at_rest']} of them inactive at rest "
-             f"and left out; {c['moving_path_points']} moving, placed at the rest pose)", ""]
+             f"({c['conditional_path_points']} conditional, active within their ranges, {c['conditional_inactive_at_rest']} "
+             f"of them inactive at rest; {c['moving_path_points']} moving, evaluated every frame) and "
+             f"{c.get('wrap_surfaces', 0)} wrap surfaces, wrapped every frame", ""]
     if "motion" in r:
         mo = r["motion"]
         lines += [f"Motion: `{mo['file']}`, {mo['rows']} rows → {mo['frames']} frames at {mo['fps']} fps, "

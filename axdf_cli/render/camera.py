@@ -185,6 +185,11 @@ def _view_axes(view: str, angle: float) -> tuple[np.ndarray, np.ndarray]:
     return fwd / np.linalg.norm(fwd), up
 
 
+def panel_count(settings: RenderSettings) -> int:
+    """Views side by side in one image: three for a sheet, else one."""
+    return len(SHEET_VIEWS) if settings.view == "sheet" and settings.camera is None else 1
+
+
 def sequence_cameras(scene, settings: RenderSettings) -> list[list[Camera]]:
     """Cameras for every frame of ``scene.frames``: ``[frame index][panel]``; fixed unless
     ``orbit`` is set (the angle counts from ``scene.first_frame``, the pose's first frame, so
