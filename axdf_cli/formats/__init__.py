@@ -61,6 +61,38 @@ assert all(f.layout in LAYOUTS and f.suffix == "." + f.writer.extension for f in
 WRITERS = {name: f.writer for name, f in FORMATS.items() if f.layout == "frame"}
 
 
+FORMAT_ALIASES = {"usdc": "usd"}  # --format usdc: the USD layers are usdc, the stage is the format
+
+
+def format_names() -> tuple[str, ...]:
+    """Every ``--format`` value: the table's names, then the aliases."""
+    return tuple(FORMATS) + tuple(FORMAT_ALIASES)
+
+
+def parse_formats(value, mark) -> tuple[str, ...]:
+    """``ply``, ``ply,usd``, ``[ply, usd]`` or a list of such strings (a flag repeated, a job's
+    ``format:``) -> ('ply', 'usd'): in the order given, each once, aliases resolved. Anything
+    else is an InputError at ``mark`` listing the names."""
+    from axdf_cli.errors import InputError
+
+    allowed = "one or more of " + ", ".join(format_names()) + " (a name, a comma-separated list or a list)"
+    items = value if isinstance(value, (list, tuple)) else [value]
+    out: list[str] = []
+    for item in items:
+        if not isinstance(item, str):
+            raise InputError(mark, f"format is {item!r}", allowed)
+        for name in item.split(","):
+            name = name.strip().lower()
+            if name not in FORMATS and name not in FORMAT_ALIASES:
+                raise InputError(mark, f"unknown format {name!r}", allowed)
+            name = FORMAT_ALIASES.get(name, name)
+            if name not in out:
+                out.append(name)
+    if not out:
+        raise InputError(mark, "no format given", allowed)
+    return tuple(out)
+
+
 def format_of(suffix: str, layout: str = "frame") -> Format:
     """The format of this ``layout`` whose files end in ``suffix`` (``.ply``,
     case-insensitive); MeshReadError for any other suffix."""
@@ -106,4 +138,5 @@ def load_triangles(path: Path | str) -> tuple[np.ndarray, np.ndarray | None, np.
 
 
 __all__ = ["FORMATS", "Format", "LAYOUTS", "WRITERS", "Mesh", "MeshReadError", "PlyWriter", "ObjWriter",
-           "format_of", "read_mesh", "read_sequence", "read_triangles", "load_triangles"]
+           "format_of", "format_names", "parse_formats", "read_mesh", "read_sequence", "read_triangles",
+           "load_triangles"]

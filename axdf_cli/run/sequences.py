@@ -107,11 +107,12 @@ def _append_all(writers, positions, normals) -> None:
         w.append(positions, normals)
 
 
-def write_run_files(plan, writer, bone_rows: np.ndarray, bounds: np.ndarray) -> None:
+def write_run_files(plan, writer, bone_rows: np.ndarray, bounds: np.ndarray, framing: np.ndarray) -> None:
     """Per-run files of the per-sequence formats, through ``writer`` (an OutputWriter: atomic,
     hashed, skipped on resume when unchanged): the point caches' rest meshes, and for USD
     ``usd/bones.usdc`` and the root stage ``scene.usda``. ``bone_rows``: (F, B, 7) x y z qw
-    qx qy qz; ``bounds``: (2, 3) of every vertex written (frames the camera)."""
+    qx qy qz; ``bounds``: (2, 3) of every vertex written; ``framing``: (N, 3) what the
+    automatic camera frames (:func:`axdf_cli.run.plan.framing`), as ``--render`` frames it."""
     from axdf_cli.formats.ply import PlyWriter
 
     for fmt in sequence_formats(plan.formats):
@@ -121,10 +122,10 @@ def write_run_files(plan, writer, bone_rows: np.ndarray, bounds: np.ndarray) -> 
                              PlyWriter(m.faces, spec.name).encode(m.rest_vertices, m.rest_normals))
     if "usd" in plan.formats:
         writer.flush()
-        _write_usd_stage(plan, writer, bone_rows, bounds)
+        _write_usd_stage(plan, writer, bone_rows, bounds, framing)
 
 
-def _write_usd_stage(plan, writer, bone_rows, bounds) -> None:
+def _write_usd_stage(plan, writer, bone_rows, bounds, framing) -> None:
     from axdf_cli.formats.usd import write_bones_layer, write_stage
 
     bones = plan.pose.skeleton.bones
@@ -134,19 +135,22 @@ def _write_usd_stage(plan, writer, bone_rows, bounds) -> None:
     with_mesh = {i for i in plan.bone_meshes}
     muscles = [(s.name, file_relpath(s.name, "usd")) for s in plan.muscles]
     bone_refs = [(b.name, USD_BONES if i in with_mesh else None) for i, b in enumerate(bones)]
-    camera = usd_camera(plan, bounds)
+    camera = usd_camera(plan, bounds, framing)
     _write_with(writer, USD_STAGE, lambda tmp: write_stage(tmp, plan.frames, float(plan.pose.fps), muscles,
                                                            bone_refs, bone_rows, camera))
 
 
-def usd_camera(plan, bounds) -> dict:
-    """The run's camera (the first panel of the render settings' view, framed on ``bounds``
-    as ``axdf run --render`` frames it), for the USD stage."""
+def usd_camera(plan, bounds, framing) -> dict:
+    """The run's camera for the USD stage: the first panel of the render settings' view, the
+    camera ``axdf run --render`` uses (framed on ``framing``)."""
     from axdf_cli.render.camera import sequence_cameras
     from axdf_cli.render.settings import RenderSettings
+    from axdf_cli.scene import Scene
 
     settings = plan.render if plan.render is not None else RenderSettings()
-    cams = sequence_cameras(np.asarray(bounds, np.float64), [int(f) for f in plan.frames], settings)
+    scene = Scene((), (), np.asarray(bounds, np.float64), tuple(int(f) for f in plan.frames),
+                  framing=framing, first_frame=int(plan.pose.first))
+    cams = sequence_cameras(scene, settings)
     first = cams[0][0]
     return {"world_to_camera": np.stack([c[0].world_to_camera for c in cams]), "K": first.K,
             "size": tuple(settings.size), "near": first.near, "far": first.far}
