@@ -446,7 +446,8 @@ def time_sequence_writers(models: list[MuscleModel], world: np.ndarray, tension:
     every file completed: headers, CRC, rename), without and with the sha256 the manifest
     records, against ``ndarray.tofile`` of the same bytes into one file (written in the same
     chunks). Medians of ``repeats`` rounds; in each round the three variants of a format run
-    back to back. The frames are evaluated once beforehand (``models`` cycled over the
+    back to back, each after ``os.sync()`` (a variant that meets the previous one's dirty
+    pages being written back is slowed by the disk, not by its own work). The frames are evaluated once beforehand (``models`` cycled over the
     muscles, each file its own)."""
     from axdf_cli.formats.sequence import SequenceInfo
     from axdf_cli.run import CHUNK_FRAMES
@@ -492,6 +493,7 @@ def time_sequence_writers(models: list[MuscleModel], world: np.ndarray, tension:
         for _ in range(max(1, repeats)):
             for key, fn in (("tofile", lambda: tofile(fmt)), ("write", lambda: write(fmt, False)),
                             ("sha256", lambda: write(fmt, True))):
+                os.sync()  # (untimed) every variant starts with no dirty pages waiting for the disk
                 t0 = time.perf_counter()
                 sizes[key] = fn()
                 t[key].append(time.perf_counter() - t0)
