@@ -551,7 +551,7 @@ def packed_rows(table: "Table", case: "Case", job: Path, tmp: Path, n_frames: in
     ``axdf run`` end to end (evaluation only, then each format) with peak memory."""
     nm = min(len(case.specs), 92)
     models = case.models(min(8, nm), RESOLUTIONS[0])
-    w = time_sequence_writers(models, case.world, case.tension, tmp / "packed", nm, 1 if quick else 2)
+    w = time_sequence_writers(models, case.world, case.tension, tmp / "packed", nm, 1 if quick else 3)
     table.section(f"packed formats: {nm} muscles x {n_frames} frames ({RESOLUTIONS[0][0]}x{RESOLUTIONS[0][1]}) "
                   "streamed in chunks as axdf run does (headers, CRC, rename; + the manifest's sha256) vs "
                   "ndarray.tofile of the same bytes into one file")
