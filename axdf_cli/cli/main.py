@@ -22,6 +22,7 @@ COMMANDS = {
     "validate": ("axdf_cli.cli.validate", "check muscle, skeleton, pose and job files; write nothing"),
     "compare": ("axdf_cli.cli.compare", "compare a run (or one file) with a golden one; exit 1 when different"),
     "import": ("axdf_cli.cli.importer", "import OpenSim models and motions as skeletons, muscles and poses"),
+    "dataset": ("axdf_cli.cli.dataset", "build data sets: sampled poses, several views, labels, one index"),
 }
 
 

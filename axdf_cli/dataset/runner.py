@@ -1,0 +1,74 @@
+"""The data set's one door into the rest of axdf: the run machinery, render settings and the
+OpenSim motion reader. Everything the data-set room needs from other rooms is imported here,
+so that when those rooms move, only this module follows them.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+
+from axdf_cli.loaders import Pose
+from axdf_cli.render.sequence import FRAME_WRITERS  # noqa: F401  (image passes: png, exr)
+from axdf_cli.render.settings import RenderSettings, parse_render_settings  # noqa: F401
+from axdf_cli.render.settings import _parse_camera as parse_camera  # noqa: F401
+from axdf_cli.run import RunPlan, evaluate_chunks, execute, load_bone_mesh, twist_references  # noqa: F401
+
+
+def sequence_plan(pose: Pose, frames: np.ndarray, muscles, models, fmt: str, out: Path, inputs: dict) -> RunPlan:
+    """A run plan for one sequence: the data set's muscles and models (built once per worker)
+    over an in-memory pose. Bone meshes are stored once for the whole data set, not per run."""
+    return RunPlan(pose=pose, muscles=list(muscles), models=list(models), frames=np.asarray(frames),
+                   fmt=fmt, out=Path(out), inputs=dict(inputs), render=None, bone_meshes={})
+
+
+def run_sequence(plan: RunPlan, resume: bool) -> dict:
+    """Write the sequence's meshes, stats.csv, bones.csv and manifest.json (``axdf run``'s own
+    code); returns its summary, whose ``stats`` is (F, M, 6) length, volume, ratio, tension,
+    twist, scale."""
+    return execute(plan, resume=resume, overwrite=not resume)
+
+
+def evaluate_for_render(plan: RunPlan, chunk: int):
+    """(frame slice, world (C, B, 4, 4), [(positions (C, V, 3) f4, normals (C, V, 3) f4) per
+    muscle]) over the plan's frames, as the run's own renderer gets them."""
+    from axdf_cli.run import _finite_or_rest
+
+    twist = twist_references(plan)
+    for sl, world, results in evaluate_chunks(plan, chunk, twist):
+        res = [(j, r) for j, r in results]
+        yield sl, world, [(_finite_or_rest(r.vertices, plan.models[j].rest_vertices),
+                           _finite_or_rest(r.normals, plan.models[j].rest_normals)) for j, r in res]
+
+
+def motion_pose(path: Path, skeleton, name: str) -> Pose:
+    """An OpenSim motion (.mot/.sto) as a Pose of ``skeleton``, read and converted by the
+    importer (columns to coordinates, the degrees/radians rule, resampling)."""
+    from axdf_cli.importers.osim_import import pose_doc
+    from axdf_cli.importers.storage import read_storage
+
+    table = read_storage(path)
+    model = SimpleNamespace(coordinates={c.name: c for c in skeleton.coordinates}, source=skeleton.source)
+    doc = pose_doc(model, table, None, name, "", None, [], {}, [])
+    series: dict = {}
+    for frame, row in doc["keys"].items():
+        for c, v in row.items():
+            series.setdefault(c, ([], []))
+            series[c][0].append(int(frame))
+            series[c][1].append(float(v))
+    keys = {c: (tuple(f), tuple(v)) for c, (f, v) in series.items()}
+    first, last = doc["frames"]
+    return Pose(name, skeleton, float(doc["fps"]), int(first), int(last), "linear", keys, {}, {},
+                str(path), skeleton.source)
+
+
+def without_meshes(skeleton):
+    """The skeleton with its bones' mesh paths dropped (the data set stores bone meshes once)."""
+    return replace(skeleton, bones=tuple(replace(b, mesh=None) for b in skeleton.bones))
+
+
+from axdf_cli.render.camera import intrinsics, look_at  # noqa: E402,F401  (camera conventions of camera.json)
+from axdf_cli.render.renderer import id_map  # noqa: E402,F401  (the EXR id pass's table)
+from axdf_cli.run import _display as display_path  # noqa: E402,F401  (paths as a run's manifest shows them)
