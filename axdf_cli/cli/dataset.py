@@ -111,10 +111,10 @@ def summary_text(res, shard) -> str:
     made = res.built
     lines = [f"{res.sequences} sequence(s), {res.samples} samples in {res.out}: {made} made, "
              f"{res.skipped} already complete, {res.seconds:.1f} s"
-             + (f" ({res.samples / res.seconds:.2f} samples/s)" if res.seconds > 0 and made else "")]
+             + (f" ({res.built_samples / res.seconds:.2f} samples/s)" if res.seconds > 0 and made else "")]
     if made:
         t = res.timing
-        per = 1000.0 / max(1, res.samples - 0)
+        per = 1000.0 / max(1, res.built_samples)
         lines.append(f"per sample (summed over workers): run (evaluate + write meshes) {t['run'] * per:.0f} ms, "
                      f"evaluate for rendering {t['evaluate'] * per:.0f} ms, render {t['render'] * per:.0f} ms, "
                      f"write images + labels {t['write'] * per:.0f} ms"

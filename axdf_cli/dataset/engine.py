@@ -16,8 +16,6 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
-
 from axdf_cli import atomic
 from axdf_cli.dataset import worker as wk
 from axdf_cli.dataset.index import write_index
@@ -36,6 +34,7 @@ class Outcome:
     built: int = 0
     skipped: int = 0  # complete already (--resume)
     samples: int = 0  # samples of this run
+    built_samples: int = 0  # samples of the sequences made now (not kept by --resume)
     seconds: float = 0.0
     timing: dict = field(default_factory=lambda: {"run": 0.0, "evaluate": 0.0, "render": 0.0, "write": 0.0})
     index: Path | None = None
@@ -115,7 +114,11 @@ def _safe_build(ctx: wk.Context, index: int, out: Path, resume: bool) -> tuple:
         return ("bug", index, f"{type(e).__name__}: {e}", None, "")
 
 
-_LOCAL: dict = {}  # the context, set in the parent just before the pool forks
+_LOCAL: dict = {}  # the context of a pool worker (set by its initializer)
+
+
+def _init_local(ctx: wk.Context) -> None:
+    _LOCAL["ctx"] = ctx
 
 
 def _local_task(index: int, out: str, resume: bool) -> tuple:
@@ -178,10 +181,13 @@ def _run_local(ctx, mine, out, jobs, resume, done) -> None:
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from concurrent.futures.process import BrokenProcessPool
 
-    # warm the compiled kernels once in the parent, so that forked workers inherit them
-    ctx.models[0].evaluate(_rest_world(ctx), np.zeros(1))
-    _LOCAL["ctx"] = ctx
-    pool = ProcessPoolExecutor(max_workers=min(jobs, len(mine)), mp_context=mp.get_context("fork"))
+    # Workers come from a fork server (a fresh interpreter), never from this process: a GL
+    # driver used here before (llvmpipe's thread pool) would hang in a forked child. Each
+    # worker receives the context once (models included, ~10 MB for 92 muscles).
+    mpc = mp.get_context("forkserver")
+    mpc.set_forkserver_preload(["axdf_cli.dataset.worker"])
+    pool = ProcessPoolExecutor(max_workers=min(jobs, len(mine)), mp_context=mpc, initializer=_init_local,
+                               initargs=(ctx,))
     pending = {pool.submit(_local_task, i, str(out), resume): i for i in mine}
     left = set(mine)
     try:
@@ -204,14 +210,6 @@ def _run_local(ctx, mine, out, jobs, resume, done) -> None:
         raise
     finally:
         pool.shutdown(wait=True)
-        _LOCAL.clear()
-
-
-def _rest_world(ctx):
-    from axdf_cli.skeleton import forward_kinematics
-
-    s = ctx.skeleton
-    return forward_kinematics(s, s.rest_coordinates()[None])
 
 
 def _run_ray(ctx, mine, out, jobs, resume, done, address, path, seed, roots, allow_outside) -> None:
@@ -274,6 +272,7 @@ def build(path: Path | str, out: Path | str, *, seed: int | None = None, jobs: i
             res.skipped += 1
         else:
             res.built += 1
+            res.built_samples += _samples(ctx, i)
             for key in res.timing:
                 res.timing[key] += timing[key]
         res.gl_renderer = res.gl_renderer or renderer

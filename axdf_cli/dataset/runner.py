@@ -12,7 +12,7 @@ import numpy as np
 
 from axdf_cli.loaders import Pose
 from axdf_cli.render.sequence import FRAME_WRITERS  # noqa: F401  (image passes: png, exr)
-from axdf_cli.render.settings import RenderSettings, parse_render_settings  # noqa: F401
+from axdf_cli.render.settings import RenderSettings, parse_render_settings, settings_to_dict  # noqa: F401
 from axdf_cli.render.settings import _parse_camera as parse_camera  # noqa: F401
 from axdf_cli.run import RunPlan, evaluate_chunks, execute, load_bone_mesh, twist_references  # noqa: F401
 

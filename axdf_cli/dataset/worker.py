@@ -90,8 +90,6 @@ def dataset_dict(ctx: Context) -> dict:
     """``dataset.json``: names, conventions, settings and the list of sequences."""
     spec, skel = ctx.spec, ctx.skeleton
     W, H = spec.render.size
-    from axdf_cli.render.settings import settings_to_dict
-
     return {
         "tool": "axdf", "version": __version__, "dataset": spec.name, "seed": spec.seed,
         "inputs": dict(sorted(ctx.inputs.items())),
@@ -104,7 +102,7 @@ def dataset_dict(ctx: Context) -> dict:
         "muscles": ctx.names,
         "views": list(spec.views),
         "image": {"width": W, "height": H, "passes": list(spec.passes)},
-        "render": settings_to_dict(spec.render),
+        "render": runner.settings_to_dict(spec.render),
         "ids": runner.id_map(ctx.scene, spec.render.bones),
         "format": spec.format,
         "shards": spec.shards,
