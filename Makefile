@@ -11,6 +11,7 @@ DEMO   ?= poses/jobs/demo.yaml
 # OpenSim data for `make import` (opensim-models; see README "Data credits").
 DATA   ?= ../shared/data
 OSIM   := $(DATA)/opensim
+BVH    := $(DATA)/bvh/cmu_131_01_walk_scaled.bvh
 
 .PHONY: all setup sysdeps demo test bench golden clean import
 
@@ -42,7 +43,8 @@ demo: $(STAMP)
 	$(BIN)/axdf run poses/jobs/gait2392_walk.yaml --out out/gait2392_walk --overwrite
 	$(BIN)/axdf run poses/jobs/paper_deltoid_arm26.yaml --out out/paper_deltoid_arm26 --overwrite
 	$(BIN)/axdf run poses/jobs/paper_gastrocnemius_gait2392.yaml --out out/paper_gastrocnemius_gait2392 --overwrite
-	@echo "demo results in out/: demo, gait2392_walk, paper_deltoid_arm26, paper_gastrocnemius_gait2392"
+	$(BIN)/axdf run poses/jobs/cmu_walk.yaml --out out/cmu_walk --overwrite
+	@echo "demo results in out/: demo, gait2392_walk, paper_deltoid_arm26, paper_gastrocnemius_gait2392, cmu_walk"
 	@echo "  each with meshes/, frames/ (PNG + EXR), camera.json, stats.csv, bones.csv, manifest.json"
 
 test: $(STAMP)
@@ -62,6 +64,8 @@ bench: $(STAMP)
 
 # Regenerate the shipped OpenSim library: muscles/{arm26,gait2392}, poses/skeletons/{arm26,gait2392}.yaml
 # (+ meshes/), poses/arm26_flex.yaml, poses/gait2392_walk.yaml. Reports: muscles/*/IMPORT.md.
+# And the CMU walk: poses/skeletons/cmu_131_01.yaml and poses/cmu_131_01_walk.yaml (BVH at 30 fps),
+# muscles/cmu/ (the demo muscles moved onto it through poses/maps/human_r_to_cmu.yaml; TRANSFER.md).
 import: $(STAMP)
 	$(BIN)/axdf import osim $(OSIM)/arm26/arm26.osim --name arm26 \
 	  --motion $(OSIM)/arm26/arm26_Kinematics_q.sto --controls $(OSIM)/arm26/arm26_controls.sto \
@@ -71,6 +75,10 @@ import: $(STAMP)
 	  --motion $(OSIM)/gait2392/subject01_walk1_ik.mot --controls $(OSIM)/gait2392/subject01_walk1_controls.sto \
 	  --pose-name gait2392_walk --out muscles/gait2392 --muscles-out muscles/gait2392 \
 	  --skeleton-out poses/skeletons/gait2392.yaml --pose-out poses/gait2392_walk.yaml
+	$(BIN)/axdf import bvh $(BVH) --name cmu_131_01 --pose-name cmu_131_01_walk --step 4 --out poses \
+	  --skeleton-out poses/skeletons/cmu_131_01.yaml --pose-out poses/cmu_131_01_walk.yaml
+	$(BIN)/axdf transfer muscles/demo --from poses/skeletons/human_r.yaml --to poses/skeletons/cmu_131_01.yaml \
+	  --map poses/maps/human_r_to_cmu.yaml --out muscles/cmu
 
 clean:
 	rm -rf out .pytest_cache

@@ -50,6 +50,10 @@ ROOT = Path(__file__).resolve().parent.parent
 GAIT_MUSCLES = ROOT / "muscles" / "gait2392"
 GAIT_POSE = ROOT / "poses" / "gait2392_walk.yaml"
 GAIT_JOB = ROOT / "poses" / "jobs" / "gait2392_walk.yaml"
+ARM_MUSCLES = ROOT / "muscles" / "arm26"
+ARM_POSE = ROOT / "poses" / "arm26_flex.yaml"
+#: Wrapping may add at most this to evaluation (issue 14).
+TARGET_WRAP = 1.5
 DEMO_MUSCLES = ROOT / "muscles" / "demo"
 DEMO_POSE = ROOT / "poses" / "demo.yaml"
 DEMO_JOB = ROOT / "poses" / "jobs" / "demo.yaml"
@@ -88,11 +92,12 @@ class Case:
     rest: np.ndarray  # (B, 4, 4) rest world transforms
     world: np.ndarray  # (F, B, 4, 4)
     tension: np.ndarray  # (F, M) effective tension of each spec
+    coords: np.ndarray | None = None  # (F, C) skeleton coordinates (moving / conditional path points)
 
     def models(self, n_muscles: int, resolution: tuple[int, int]) -> list[MuscleModel]:
         specs = [self.specs[i % len(self.specs)] for i in range(n_muscles)]
-        return [MuscleModel(dataclasses.replace(s, resolution=tuple(resolution)), self.skeleton.bone_index, self.rest)
-                for s in specs]
+        return [MuscleModel(dataclasses.replace(s, resolution=tuple(resolution)), self.skeleton.bone_index, self.rest,
+                            self.skeleton) for s in specs]
 
 
 def stretched_pose(pose: Pose, n_frames: int) -> Pose:
@@ -153,31 +158,50 @@ def load_case(n_frames: int = 1000, n_muscles: int = 92, prefer_gait: bool = Tru
     skel = pose.skeleton
     rest = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
     frames = np.arange(pose.first, pose.last + 1)
-    world = forward_kinematics(skel, sample_coordinates(pose, frames))
+    q = sample_coordinates(pose, frames)
+    world = forward_kinematics(skel, q)
     act = sample_activation(pose, [s.name for s in specs], frames)
     tension = np.stack([effective_tension(s.tension, act[:, j]) for j, s in enumerate(specs)], axis=1)
-    return Case(name, specs, skel, rest, world, tension)
+    return Case(name, specs, skel, rest, world, tension, q)
+
+
+def load_wrap_case(n_frames: int, wraps: bool = True) -> Case | None:
+    """arm26's muscles (4 of 6 wrap over cylinders and ellipsoids) over its elbow flexion,
+    stretched to ``n_frames``; with ``wraps=False`` the same paths without wrap surfaces."""
+    if not (ARM_MUSCLES.is_dir() and ARM_POSE.is_file()):
+        return None
+    pose = stretched_pose(load_pose(ARM_POSE), n_frames)
+    specs = [s for f in expand_muscle_paths([(ARM_MUSCLES, None)]) for s in load_muscle_file(f)]
+    if not wraps:
+        specs = [dataclasses.replace(s, path=dataclasses.replace(s.path, wraps=())) for s in specs]
+    skel = pose.skeleton
+    rest = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
+    q = sample_coordinates(pose, np.arange(pose.first, pose.last + 1))
+    return Case("arm26", specs, skel, rest, forward_kinematics(skel, q), np.zeros((len(q), len(specs))), q)
 
 
 # ----------------------------------------------------------------------------- evaluation
 
 
-def evaluate_all(models: list[MuscleModel], world: np.ndarray, tension: np.ndarray, chunk: int) -> None:
+def evaluate_all(models: list[MuscleModel], world: np.ndarray, tension: np.ndarray, chunk: int,
+                 coords: np.ndarray | None = None) -> None:
     """Evaluate every model over every frame, ``chunk`` frames at a time (as ``axdf run``)."""
     nf = world.shape[0]
     for s in range(0, nf, chunk):
         w = world[s:s + chunk]
+        q = coords[s:s + chunk] if coords is not None else None
         for j, m in enumerate(models):
-            m.evaluate(w, tension[s:s + chunk, j % tension.shape[1]])
+            m.evaluate(w, tension[s:s + chunk, j % tension.shape[1]], coords=q)
 
 
-def time_evaluation(models, world, tension, repeats: int, chunk: int | None = None) -> float:
+def time_evaluation(models, world, tension, repeats: int, chunk: int | None = None, coords=None) -> float:
     """µs per muscle-frame (median of ``repeats`` passes)."""
     from axdf_cli.run import CHUNK_FRAMES
 
     chunk = chunk or CHUNK_FRAMES
-    evaluate_all(models, world[:chunk], tension[:chunk], chunk)  # warm-up (caches, allocator)
-    dt = median_time(lambda: evaluate_all(models, world, tension, chunk), repeats)
+    evaluate_all(models, world[:chunk], tension[:chunk], chunk,
+                 coords[:chunk] if coords is not None else None)  # warm-up (caches, allocator)
+    dt = median_time(lambda: evaluate_all(models, world, tension, chunk, coords), repeats)
     return dt / (len(models) * world.shape[0]) * 1e6
 
 
@@ -202,9 +226,7 @@ def time_limit(n_frames: int, n_vertices: int, repeats: int) -> float:
 
 def control_net(model: MuscleModel, rest_world: np.ndarray) -> np.ndarray:
     """The rest surface's control net (m, 8, 3): origin pole, sections, insertion pole."""
-    m = rest_world[model.bones]  # (n, 4, 4)
-    # P[i,c] = sum_k M[i,c,k] at[i,k] + M[i,c,3]
-    axis = np.einsum("ick,ik->ic", m[:, :3, :3], model.at) + m[:, :3, 3]
+    axis = model._axis_points(rest_world[None], model.rest_q)[0]  # (n, 3)
     secs = np.asarray(model.rest_control_points).reshape(-1, OCT, 3)
     return np.concatenate([np.repeat(axis[:1, None], OCT, 1), secs, np.repeat(axis[-1:, None], OCT, 1)])
 
@@ -394,10 +416,10 @@ def profile_run(job: Path, out: Path, fmt: str = "ply", top: int = 0) -> dict:
     # evaluation: evaluate + twist references + kinematics (those inside twist_references once)
     fk_in_twist = sum(cv[3] for (f, _, fn), v in st.stats.items() if fn == "forward_kinematics"
                       and f.endswith("skeleton.py") for (_, _, cfn), cv in v[4].items() if cfn == "twist_references")
-    ev = (_cum(st, "muscle.py", "evaluate") + _cum(st, "run.py", "twist_references")
+    ev = (_cum(st, "muscle.py", "evaluate") + _cum(st, "evaluate.py", "twist_references")
           + _cum(st, "skeleton.py", "forward_kinematics") - fk_in_twist)
     enc = _cum(st, f"{fmt}.py", "encode")
-    wr = _cum(st, "run.py", "write")  # OutputWriter.write: sha256 + atomic write
+    wr = _cum(st, "runfolder.py", "write")  # OutputWriter.write: sha256 + atomic write
     text = ""
     if top:
         buf = io.StringIO()
@@ -519,7 +541,7 @@ def main(argv=None) -> int:
                     continue
                 models = case.models(nm, res)
                 r = reps if nm < 92 else 1
-                us = time_evaluation(models, case.world, case.tension, r)
+                us = time_evaluation(models, case.world, case.tension, r, coords=case.coords)
                 eval_us[res, nm] = us
                 nv = models[0].n_vertices
                 lim = time_limit(n_frames, nv, 5)
@@ -529,10 +551,20 @@ def main(argv=None) -> int:
                           f"<= {TARGET_LIMIT:g}x {_mark(us / lim <= TARGET_LIMIT)}")
                 if args.profile and nm == 1:
                     prof = cProfile.Profile()
-                    prof.runcall(evaluate_all, models, case.world, case.tension, 128)
+                    prof.runcall(evaluate_all, models, case.world, case.tension, 128, case.coords)
                     buf = io.StringIO()
                     pstats.Stats(prof, stream=buf).sort_stats("tottime").print_stats(12)
                     profiles.append(f"== evaluate {res} 1 muscle ==\n{buf.getvalue()}")
+
+        # 2b. wrapping
+        wc, nc = load_wrap_case(n_frames, True), load_wrap_case(n_frames, False)
+        if wc is not None:
+            table.section(f"wrapping (arm26's 6 muscles, {n_frames} frames of elbow flexion, {RESOLUTIONS[0][0]}x"
+                          f"{RESOLUTIONS[0][1]}): paths with their wrap surfaces vs the same paths without")
+            w_us = time_evaluation(wc.models(6, RESOLUTIONS[0]), wc.world, wc.tension, reps, coords=wc.coords)
+            n_us = time_evaluation(nc.models(6, RESOLUTIONS[0]), nc.world, nc.tension, reps, coords=nc.coords)
+            table.add("evaluate with wrapping", f"{w_us:.1f} µs/mf", f"without {n_us:.1f} µs/mf", f"{w_us / n_us:.2f}x",
+                      f"<= {TARGET_WRAP:g}x {_mark(w_us / n_us <= TARGET_WRAP)}")
 
         # 3. geomdl
         table.section("peer: geomdl (NURBS-Python) tessellating the same surface, per muscle-frame")

@@ -7,9 +7,9 @@ c3 s^3 over the quads, solve V(s) = V0 (``exact``), form the final grid A + s W,
 vertices, outward normals and volume. Everything for a frame stays in the CPU cache, where
 numpy needed a dozen full-size passes with temporaries (see README, Performance).
 
-Same mathematics as the numpy reference functions in :mod:`axdf_cli.muscle`
-(``planar_volume_cubic``, ``planar_normals``), which the tests compare against. Compiled
-once and cached beside the module (numba ``cache=True``); no ``fastmath``, so the same
+Same mathematics as the numpy reference formulation in ``tests/reference_surface.py``
+(``planar_volume_cubic``, ``planar_normals``), which ``tests/test_kernel.py`` compares it
+with. Compiled once and cached beside the module (numba ``cache=True``); no ``fastmath``, so the same
 inputs give the same bytes.
 """
 from __future__ import annotations
@@ -39,6 +39,197 @@ def sparse_rows(basis: np.ndarray, width: int = 3) -> tuple[np.ndarray, np.ndarr
 
 
 @njit(cache=True)
+def _fill_net(net_a, net_w, fixed, scaled, pole0, pole1, f):
+    """Stage 1: the control net of frame f, fixed part A and scaled part W (m, 8, 3): pole
+    rows (A = the axis end, W = 0) around the bound section control points."""
+    m = net_a.shape[0]
+    for j in range(8):
+        for c in range(3):
+            net_a[0, j, c] = pole0[f, c]
+            net_a[m - 1, j, c] = pole1[f, c]
+            net_w[0, j, c] = 0.0
+            net_w[m - 1, j, c] = 0.0
+    for k in range(m - 2):
+        for j in range(8):
+            for c in range(3):
+                net_a[k + 1, j, c] = fixed[f, 8 * k + j, c]
+                net_w[k + 1, j, c] = scaled[f, 8 * k + j, c]
+
+
+@njit(cache=True)
+def _tessellate(net_a, net_w, u_idx, u_w, v_idx, v_w, ta, tw, ga, gw):
+    """Stage 2: separable tessellation of both nets into grids ga, gw (U, A, 3): along
+    (T[u, j] = sum_i Bu[u, i] net[i, j]), then around (G[u, a] = sum_k Bv[a, k] T[u, k])."""
+    nu = u_idx.shape[0]
+    na = v_idx.shape[0]
+    for u in range(nu):
+        for j in range(8):
+            for c in range(3):
+                sa = 0.0
+                sw = 0.0
+                for i in range(3):
+                    wgt = u_w[u, i]
+                    sa += wgt * net_a[u_idx[u, i], j, c]
+                    sw += wgt * net_w[u_idx[u, i], j, c]
+                ta[u, j, c] = sa
+                tw[u, j, c] = sw
+    for u in range(nu):
+        for a in range(na):
+            for c in range(3):
+                sa = 0.0
+                sw = 0.0
+                for k in range(3):
+                    wgt = v_w[a, k]
+                    sa += wgt * ta[u, v_idx[a, k], c]
+                    sw += wgt * tw[u, v_idx[a, k], c]
+                ga[u, a, c] = sa
+                gw[u, a, c] = sw
+
+
+@njit(cache=True)
+def _volume_cubic(ga, gw):
+    """Stage 3: coefficients (c0, c1, c2, c3) of the mesh volume V(s) of the grid ga + s gw.
+    Each quad's two triangles give p01 . (p10 x (p00 - p11)) / 6, a trilinear form in
+    (p01, p10, p00 - p11), each affine in s."""
+    nu = ga.shape[0]
+    na = ga.shape[1]
+    c0 = 0.0
+    c1 = 0.0
+    c2 = 0.0
+    c3 = 0.0
+    for u in range(nu - 1):
+        for a in range(na):
+            a1 = a + 1 if a + 1 < na else 0
+            ax0 = ga[u, a1, 0]
+            ax1 = ga[u, a1, 1]
+            ax2 = ga[u, a1, 2]
+            wx0 = gw[u, a1, 0]
+            wx1 = gw[u, a1, 1]
+            wx2 = gw[u, a1, 2]
+            ay0 = ga[u + 1, a, 0]
+            ay1 = ga[u + 1, a, 1]
+            ay2 = ga[u + 1, a, 2]
+            wy0 = gw[u + 1, a, 0]
+            wy1 = gw[u + 1, a, 1]
+            wy2 = gw[u + 1, a, 2]
+            ad0 = ga[u, a, 0] - ga[u + 1, a1, 0]
+            ad1 = ga[u, a, 1] - ga[u + 1, a1, 1]
+            ad2 = ga[u, a, 2] - ga[u + 1, a1, 2]
+            wd0 = gw[u, a, 0] - gw[u + 1, a1, 0]
+            wd1 = gw[u, a, 1] - gw[u + 1, a1, 1]
+            wd2 = gw[u, a, 2] - gw[u + 1, a1, 2]
+            # P = ay x ad, Q = wy x wd, R = wy x ad + ay x wd
+            p0 = ay1 * ad2 - ay2 * ad1
+            p1 = ay2 * ad0 - ay0 * ad2
+            p2 = ay0 * ad1 - ay1 * ad0
+            q0 = wy1 * wd2 - wy2 * wd1
+            q1 = wy2 * wd0 - wy0 * wd2
+            q2 = wy0 * wd1 - wy1 * wd0
+            r0 = (wy1 * ad2 - wy2 * ad1) + (ay1 * wd2 - ay2 * wd1)
+            r1 = (wy2 * ad0 - wy0 * ad2) + (ay2 * wd0 - ay0 * wd2)
+            r2 = (wy0 * ad1 - wy1 * ad0) + (ay0 * wd1 - ay1 * wd0)
+            c0 += ax0 * p0 + ax1 * p1 + ax2 * p2
+            c1 += (wx0 * p0 + wx1 * p1 + wx2 * p2) + (ax0 * r0 + ax1 * r1 + ax2 * r2)
+            c2 += (ax0 * q0 + ax1 * q1 + ax2 * q2) + (wx0 * r0 + wx1 * r1 + wx2 * r2)
+            c3 += wx0 * q0 + wx1 * q1 + wx2 * q2
+    return c0 / 6.0, c1 / 6.0, c2 / 6.0, c3 / 6.0
+
+
+@njit(cache=True)
+def _solve_scale(c0, c1, c2, c3, v0, s0, iters, rtol):
+    """Stage 4 (``exact``): the root s of V(s) = v0 by safeguarded Newton from the paper's
+    scale s0 (V is a cubic: quadratic convergence). Returns (s, no_solution); s0 when none."""
+    s = s0
+    for _ in range(iters):
+        fv = ((c3 * s + c2) * s + c1) * s + c0 - v0
+        df = (3.0 * c3 * s + 2.0 * c2) * s + c1
+        step = fv / df if df > 0.0 else 0.0
+        s_new = s - step if s - step > 0.0 else 0.5 * s
+        done = abs(s_new - s) <= rtol * abs(s)
+        s = s_new
+        if done:
+            break
+    fv = ((c3 * s + c2) * s + c1) * s + c0 - v0
+    if not (abs(fv) <= 1e-6 * abs(v0)) or not np.isfinite(s):
+        return s0, True
+    return s, False
+
+
+@njit(cache=True)
+def _ring_vertices(ga, out_v, out_n, f):
+    """Stage 5: the final grid's vertices (poles collapsed) and the rings' normals."""
+    nu = ga.shape[0]
+    na = ga.shape[1]
+    last = 1 + (nu - 2) * na
+    for c in range(3):
+        out_v[f, 0, c] = ga[0, 0, c]
+        out_v[f, last, c] = ga[nu - 1, 0, c]
+    for u in range(1, nu - 1):
+        for a in range(na):
+            vi = 1 + (u - 1) * na + a
+            an = a + 1 if a + 1 < na else 0
+            ap = a - 1 if a > 0 else na - 1
+            sv0 = ga[u, an, 0] - ga[u, ap, 0]
+            sv1 = ga[u, an, 1] - ga[u, ap, 1]
+            sv2 = ga[u, an, 2] - ga[u, ap, 2]
+            su0 = ga[u + 1, a, 0] - ga[u - 1, a, 0]
+            su1 = ga[u + 1, a, 1] - ga[u - 1, a, 1]
+            su2 = ga[u + 1, a, 2] - ga[u - 1, a, 2]
+            n0 = sv1 * su2 - sv2 * su1
+            n1 = sv2 * su0 - sv0 * su2
+            n2 = sv0 * su1 - sv1 * su0
+            ln = max(np.sqrt(n0 * n0 + n1 * n1 + n2 * n2), 1e-300)
+            for c in range(3):
+                out_v[f, vi, c] = ga[u, a, c]
+            out_n[f, vi, 0] = n0 / ln
+            out_n[f, vi, 1] = n1 / ln
+            out_n[f, vi, 2] = n2 / ln
+
+
+@njit(cache=True)
+def _pole_normals(ga, end0, end1, out_n, f):
+    """Stage 6: pole normals, the fan's area-weighted normal; the axis direction where the
+    fan folds."""
+    nu = ga.shape[0]
+    na = ga.shape[1]
+    last = 1 + (nu - 2) * na
+    for side in range(2):
+        row = 0 if side == 0 else nu - 1
+        ring = 1 if side == 0 else nu - 2
+        vi = 0 if side == 0 else last
+        sign = 1.0 if side == 0 else -1.0
+        f0 = 0.0
+        f1 = 0.0
+        f2 = 0.0
+        for a in range(na):
+            an = a + 1 if a + 1 < na else 0
+            x0 = ga[ring, an, 0] - ga[row, 0, 0]
+            x1 = ga[ring, an, 1] - ga[row, 0, 1]
+            x2 = ga[ring, an, 2] - ga[row, 0, 2]
+            y0 = ga[ring, a, 0] - ga[row, 0, 0]
+            y1 = ga[ring, a, 1] - ga[row, 0, 1]
+            y2 = ga[ring, a, 2] - ga[row, 0, 2]
+            f0 += x1 * y2 - x2 * y1
+            f1 += x2 * y0 - x0 * y2
+            f2 += x0 * y1 - x1 * y0
+        ln = max(np.sqrt(f0 * f0 + f1 * f1 + f2 * f2), 1e-300)
+        f0 = sign * f0 / ln
+        f1 = sign * f1 / ln
+        f2 = sign * f2 / ln
+        e0 = end0[f, 0] if side == 0 else end1[f, 0]
+        e1 = end0[f, 1] if side == 0 else end1[f, 1]
+        e2 = end0[f, 2] if side == 0 else end1[f, 2]
+        if f0 * e0 + f1 * e1 + f2 * e2 <= 0.5:
+            le = max(np.sqrt(e0 * e0 + e1 * e1 + e2 * e2), 1e-300)
+            f0 = e0 / le
+            f1 = e1 / le
+            f2 = e2 / le
+        out_n[f, vi, 0] = f0
+        out_n[f, vi, 1] = f1
+        out_n[f, vi, 2] = f2
+
+
+@njit(cache=True)
 def surface_stage(fixed, scaled, pole0, pole1, end0, end1, u_idx, u_w, v_idx, v_w,
                   exact, v0, s_in, s_min, s_max, iters, rtol,
                   out_v, out_n, out_vol, out_s, out_bad):
@@ -52,6 +243,9 @@ def surface_stage(fixed, scaled, pole0, pole1, end0, end1, u_idx, u_w, v_idx, v_
     v_idx, v_w    : (A, 3)     around basis (closed), sparse rows over the 8 columns
     s_in          : (F,)       starting scale (the paper's sqrt(l0/l1), or 1)
     outputs       : out_v, out_n (F, V, 3) with V = 2 + (U-2) A; out_vol, out_s (F,); out_bad (F,)
+
+    The pipeline per frame: net (1), tessellation (2), volume cubic (3), scale (4, ``exact``
+    only), vertices and ring normals of A + s W (5), pole normals (6).
     """
     nf = fixed.shape[0]
     nu = u_idx.shape[0]
@@ -64,169 +258,21 @@ def surface_stage(fixed, scaled, pole0, pole1, end0, end1, u_idx, u_w, v_idx, v_
     ga = np.empty((nu, na, 3))
     gw = np.empty((nu, na, 3))
     for f in range(nf):
-        for j in range(8):
-            for c in range(3):
-                net_a[0, j, c] = pole0[f, c]
-                net_a[m - 1, j, c] = pole1[f, c]
-                net_w[0, j, c] = 0.0
-                net_w[m - 1, j, c] = 0.0
-        for k in range(m - 2):
-            for j in range(8):
-                for c in range(3):
-                    net_a[k + 1, j, c] = fixed[f, 8 * k + j, c]
-                    net_w[k + 1, j, c] = scaled[f, 8 * k + j, c]
-        # along: T[u, j] = sum_i Bu[u, i] net[i, j]
-        for u in range(nu):
-            for j in range(8):
-                for c in range(3):
-                    sa = 0.0
-                    sw = 0.0
-                    for i in range(3):
-                        wgt = u_w[u, i]
-                        sa += wgt * net_a[u_idx[u, i], j, c]
-                        sw += wgt * net_w[u_idx[u, i], j, c]
-                    ta[u, j, c] = sa
-                    tw[u, j, c] = sw
-        # around: G[u, a] = sum_k Bv[a, k] T[u, k]
-        for u in range(nu):
-            for a in range(na):
-                for c in range(3):
-                    sa = 0.0
-                    sw = 0.0
-                    for k in range(3):
-                        wgt = v_w[a, k]
-                        sa += wgt * ta[u, v_idx[a, k], c]
-                        sw += wgt * tw[u, v_idx[a, k], c]
-                    ga[u, a, c] = sa
-                    gw[u, a, c] = sw
-        # volume cubic: each quad's two triangles give p01 . (p10 x (p00 - p11)) / 6,
-        # a trilinear form in (p01, p10, p00 - p11), each affine in s
-        c0 = 0.0
-        c1 = 0.0
-        c2 = 0.0
-        c3 = 0.0
-        for u in range(nu - 1):
-            for a in range(na):
-                a1 = a + 1 if a + 1 < na else 0
-                ax0 = ga[u, a1, 0]
-                ax1 = ga[u, a1, 1]
-                ax2 = ga[u, a1, 2]
-                wx0 = gw[u, a1, 0]
-                wx1 = gw[u, a1, 1]
-                wx2 = gw[u, a1, 2]
-                ay0 = ga[u + 1, a, 0]
-                ay1 = ga[u + 1, a, 1]
-                ay2 = ga[u + 1, a, 2]
-                wy0 = gw[u + 1, a, 0]
-                wy1 = gw[u + 1, a, 1]
-                wy2 = gw[u + 1, a, 2]
-                ad0 = ga[u, a, 0] - ga[u + 1, a1, 0]
-                ad1 = ga[u, a, 1] - ga[u + 1, a1, 1]
-                ad2 = ga[u, a, 2] - ga[u + 1, a1, 2]
-                wd0 = gw[u, a, 0] - gw[u + 1, a1, 0]
-                wd1 = gw[u, a, 1] - gw[u + 1, a1, 1]
-                wd2 = gw[u, a, 2] - gw[u + 1, a1, 2]
-                # P = ay x ad, Q = wy x wd, R = wy x ad + ay x wd
-                p0 = ay1 * ad2 - ay2 * ad1
-                p1 = ay2 * ad0 - ay0 * ad2
-                p2 = ay0 * ad1 - ay1 * ad0
-                q0 = wy1 * wd2 - wy2 * wd1
-                q1 = wy2 * wd0 - wy0 * wd2
-                q2 = wy0 * wd1 - wy1 * wd0
-                r0 = (wy1 * ad2 - wy2 * ad1) + (ay1 * wd2 - ay2 * wd1)
-                r1 = (wy2 * ad0 - wy0 * ad2) + (ay2 * wd0 - ay0 * wd2)
-                r2 = (wy0 * ad1 - wy1 * ad0) + (ay0 * wd1 - ay1 * wd0)
-                c0 += ax0 * p0 + ax1 * p1 + ax2 * p2
-                c1 += (wx0 * p0 + wx1 * p1 + wx2 * p2) + (ax0 * r0 + ax1 * r1 + ax2 * r2)
-                c2 += (ax0 * q0 + ax1 * q1 + ax2 * q2) + (wx0 * r0 + wx1 * r1 + wx2 * r2)
-                c3 += wx0 * q0 + wx1 * q1 + wx2 * q2
-        c0 /= 6.0
-        c1 /= 6.0
-        c2 /= 6.0
-        c3 /= 6.0
+        _fill_net(net_a, net_w, fixed, scaled, pole0, pole1, f)
+        _tessellate(net_a, net_w, u_idx, u_w, v_idx, v_w, ta, tw, ga, gw)
+        c0, c1, c2, c3 = _volume_cubic(ga, gw)
         s0 = s_in[f]
         s = s0
         bad = False
         if exact:
-            # safeguarded Newton from the paper's scale (V is a cubic: quadratic convergence)
-            for _ in range(iters):
-                fv = ((c3 * s + c2) * s + c1) * s + c0 - v0
-                df = (3.0 * c3 * s + 2.0 * c2) * s + c1
-                step = fv / df if df > 0.0 else 0.0
-                s_new = s - step if s - step > 0.0 else 0.5 * s
-                done = abs(s_new - s) <= rtol * abs(s)
-                s = s_new
-                if done:
-                    break
-            fv = ((c3 * s + c2) * s + c1) * s + c0 - v0
-            if not (abs(fv) <= 1e-6 * abs(v0)) or not np.isfinite(s):
-                bad = True
-                s = s0
+            s, bad = _solve_scale(c0, c1, c2, c3, v0, s0, iters, rtol)
         out_bad[f] = bad
         out_s[f] = s
         sc = min(max(s, s_min), s_max)
         out_vol[f] = ((c3 * sc + c2) * sc + c1) * sc + c0
-        # final grid (in ga), vertices and ring normals
         for u in range(nu):
             for a in range(na):
                 for c in range(3):
                     ga[u, a, c] += sc * gw[u, a, c]
-        last = 1 + (nu - 2) * na
-        for c in range(3):
-            out_v[f, 0, c] = ga[0, 0, c]
-            out_v[f, last, c] = ga[nu - 1, 0, c]
-        for u in range(1, nu - 1):
-            for a in range(na):
-                vi = 1 + (u - 1) * na + a
-                an = a + 1 if a + 1 < na else 0
-                ap = a - 1 if a > 0 else na - 1
-                sv0 = ga[u, an, 0] - ga[u, ap, 0]
-                sv1 = ga[u, an, 1] - ga[u, ap, 1]
-                sv2 = ga[u, an, 2] - ga[u, ap, 2]
-                su0 = ga[u + 1, a, 0] - ga[u - 1, a, 0]
-                su1 = ga[u + 1, a, 1] - ga[u - 1, a, 1]
-                su2 = ga[u + 1, a, 2] - ga[u - 1, a, 2]
-                n0 = sv1 * su2 - sv2 * su1
-                n1 = sv2 * su0 - sv0 * su2
-                n2 = sv0 * su1 - sv1 * su0
-                ln = max(np.sqrt(n0 * n0 + n1 * n1 + n2 * n2), 1e-300)
-                for c in range(3):
-                    out_v[f, vi, c] = ga[u, a, c]
-                out_n[f, vi, 0] = n0 / ln
-                out_n[f, vi, 1] = n1 / ln
-                out_n[f, vi, 2] = n2 / ln
-        # poles: the fan's area-weighted normal; the axis direction where the fan folds
-        for side in range(2):
-            row = 0 if side == 0 else nu - 1
-            ring = 1 if side == 0 else nu - 2
-            vi = 0 if side == 0 else last
-            sign = 1.0 if side == 0 else -1.0
-            f0 = 0.0
-            f1 = 0.0
-            f2 = 0.0
-            for a in range(na):
-                an = a + 1 if a + 1 < na else 0
-                x0 = ga[ring, an, 0] - ga[row, 0, 0]
-                x1 = ga[ring, an, 1] - ga[row, 0, 1]
-                x2 = ga[ring, an, 2] - ga[row, 0, 2]
-                y0 = ga[ring, a, 0] - ga[row, 0, 0]
-                y1 = ga[ring, a, 1] - ga[row, 0, 1]
-                y2 = ga[ring, a, 2] - ga[row, 0, 2]
-                f0 += x1 * y2 - x2 * y1
-                f1 += x2 * y0 - x0 * y2
-                f2 += x0 * y1 - x1 * y0
-            ln = max(np.sqrt(f0 * f0 + f1 * f1 + f2 * f2), 1e-300)
-            f0 = sign * f0 / ln
-            f1 = sign * f1 / ln
-            f2 = sign * f2 / ln
-            e0 = end0[f, 0] if side == 0 else end1[f, 0]
-            e1 = end0[f, 1] if side == 0 else end1[f, 1]
-            e2 = end0[f, 2] if side == 0 else end1[f, 2]
-            if f0 * e0 + f1 * e1 + f2 * e2 <= 0.5:
-                le = max(np.sqrt(e0 * e0 + e1 * e1 + e2 * e2), 1e-300)
-                f0 = e0 / le
-                f1 = e1 / le
-                f2 = e2 / le
-            out_n[f, vi, 0] = f0
-            out_n[f, vi, 1] = f1
-            out_n[f, vi, 2] = f2
+        _ring_vertices(ga, out_v, out_n, f)
+        _pole_normals(ga, end0, end1, out_n, f)

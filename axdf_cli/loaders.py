@@ -266,8 +266,11 @@ def _parse_muscle(value, where: Mark, file: str, group: str = "") -> MuscleSpec:
     strength = f.number("strength", default=1.0, lo=0.0, hi=100.0, lo_open=True)
     tension = f.number("tension", default=0.0, lo=0.0, hi=1.0)
     volume = f.choice("volume", VOLUME_MODES, default="exact")
-    axis_seq = f.seq("axis", required=True)
-    if len(axis_seq) < 3:
+    path = parse_muscle_path(f) if f.has("path") else None
+    axis_seq = f.seq("axis", required=path is None, default=[])
+    if path is not None and axis_seq:
+        raise InputError(f.kmark("axis"), "muscle has both axis and path", "give one of them")
+    if path is None and len(axis_seq) < 3:
         raise InputError(f.vmark("axis"), f"axis has {len(axis_seq)} control points",
                          "a quadratic B-spline axis needs at least 3 (default 5)")
     if len(axis_seq) > 64:
@@ -340,7 +343,105 @@ def _parse_muscle(value, where: Mark, file: str, group: str = "") -> MuscleSpec:
                          "one weight per section")
     f.done()
     return MuscleSpec(name, color, tuple(axis), tuple(sections), strength, tension, volume,
-                      tendons, twist, resolution, weights, file, group)
+                      tendons, twist, resolution, weights, file, group, path)
+
+
+# ----------------------------------------------------------------------------- muscle paths and wrap surfaces
+# (a block of its own: ``path:``, ``wrap:`` and ``axis_points:`` of a muscle; docs/FORMATS.md)
+
+WRAP_SIZE_KEYS = {"cylinder": ("radius", "length"), "sphere": ("radius",), "ellipsoid": ("radii",),
+                  "torus": ("inner", "outer")}
+
+
+def parse_muscle_path(f: Fields):
+    """The muscle's ``path`` (points: fixed, ``moving``, ``active``), ``wrap`` (surfaces) and
+    ``axis_points`` → :class:`~axdf_cli.paths.PathSpec`."""
+    from axdf_cli.paths import Moving, PathPoint, PathSpec, WrapSurface
+    from axdf_cli.paths.wrap import METHODS, QUADRANTS
+
+    seq = f.seq("path", required=True)
+    if len(seq) < 2:
+        raise InputError(f.vmark("path"), f"path has {len(seq)} point(s)", "at least 2 (origin and insertion)")
+    if len(seq) > 64:
+        raise InputError(f.vmark("path"), f"path has {len(seq)} points", "at most 64")
+    points = []
+    for k, (pv, pm) in enumerate(zip(seq, item_marks(seq, f.vmark("path")))):
+        pf = Fields(pv, pm, "path point")
+        bone = pf.name("bone", required=True)
+        at = pf.vector("at", 3, default=(0.0, 0.0, 0.0))
+        moving = None
+        mv = pf.mapping("moving")
+        if mv is not None:
+            mf = Fields(mv, pf.vmark("moving"), "moving point")
+            axes = []
+            for ax in "xyz":
+                a = mf.mapping(ax)
+                if a is None:
+                    axes.append(None)
+                    continue
+                af = Fields(a, mf.vmark(ax), f"moving {ax}")
+                coord = af.name("coord", required=True)
+                fn = parse_function(af.raw("function", required=True), af.vmark("function"))
+                af.done()
+                axes.append(Moving(coord, fn))
+            mf.done()
+            if not any(axes):
+                raise InputError(pf.vmark("moving"), "moving point moves along no axis", "x, y and/or z: {coord, function}")
+            moving = tuple(axes)
+        active = None
+        av = pf.mapping("active")
+        if av is not None:
+            if k in (0, len(seq) - 1):
+                raise InputError(pf.kmark("active"), "the origin or insertion is conditional",
+                                 "only interior path points may have `active`")
+            af = Fields(av, pf.vmark("active"), "active range")
+            coord = af.name("coord", required=True)
+            lo, hi = af.vector("range", 2, required=True)
+            if hi < lo:
+                raise InputError(af.vmark("range"), f"range [{lo}, {hi}] is empty", "[low, high] with low <= high")
+            af.done()
+            active = (coord, lo, hi)
+        pf.done()
+        points.append(PathPoint(bone, at, moving, active, pf.vmark("bone")))
+    wraps = []
+    wseq = f.seq("wrap", default=[])
+    names = set()
+    for wv, wm in zip(wseq, item_marks(wseq, f.vmark("wrap"))):
+        wf = Fields(wv, wm, "wrap surface")
+        shape = wf.choice("shape", tuple(WRAP_SIZE_KEYS), required=True)
+        name = wf.name("name", default=f"{shape}{len(wraps) + 1}")
+        if name in names:
+            raise InputError(wf.vmark("name"), f"wrap surface {name!r} named twice", "unique names within a muscle")
+        names.add(name)
+        bone = wf.name("bone", required=True)
+        if shape == "ellipsoid":
+            size = wf.vector("radii", 3, required=True, lo=0.0, lo_open=True)
+        else:
+            size = tuple(wf.number(key, required=True, lo=0.0, lo_open=True) for key in WRAP_SIZE_KEYS[shape])
+        size = tuple(float(v) for v in size) + (0.0,) * (3 - len(size))
+        for key in set(k for ks in WRAP_SIZE_KEYS.values() for k in ks) - set(WRAP_SIZE_KEYS[shape]):
+            if wf.has(key):
+                raise InputError(wf.kmark(key), f"{key!r} is not a size of a {shape}",
+                                 f"a {shape} takes " + ", ".join(WRAP_SIZE_KEYS[shape]))
+        at = wf.vector("at", 3, default=(0.0, 0.0, 0.0))
+        orient = wf.vector("orient", 3, default=(0.0, 0.0, 0.0))
+        quadrant = wf.choice("quadrant", tuple(QUADRANTS), default="all")
+        method = wf.choice("method", tuple(METHODS), default="hybrid")
+        rng = wf.vector("range", 2, default=(-1, -1))
+        for v in rng:
+            if not float(v).is_integer() or not (v == -1 or 1 <= v <= len(points)):
+                raise InputError(wf.vmark("range"), f"range {list(rng)} lies outside the path ({len(points)} points)",
+                                 f"1-based path point indices 1..{len(points)}, or -1 for the path's end")
+        rng = (int(rng[0]), int(rng[1]))
+        if rng[0] > 0 and rng[1] > 0 and rng[1] <= rng[0]:
+            raise InputError(wf.vmark("range"), f"range {list(rng)} holds no segment", "first < last")
+        active = wf.boolean("active", default=True)
+        wf.done()
+        wraps.append(WrapSurface(name, bone, shape, size, at, orient, quadrant, method, rng, active, wf.vmark("shape")))
+    n = f.number("axis_points", default=0, lo=0, hi=64, integer=True)
+    if n and n < 4:
+        raise InputError(f.vmark("axis_points"), f"axis_points is {n}", "4..64 (or leave it out for the default)")
+    return PathSpec(tuple(points), tuple(wraps), int(n))
 
 
 def load_muscle_file(path: Path | str) -> list[MuscleSpec]:
@@ -384,8 +485,17 @@ class Pose:
         return np.arange(self.first, self.last + 1)
 
 
+#: Motion files that are not poses → the command that turns them into one.
+MOTION_IMPORTS = {".bvh": "axdf import bvh FILE.bvh --out DIR",
+                  ".mot": "axdf import osim MODEL.osim --motion FILE --out DIR",
+                  ".sto": "axdf import osim MODEL.osim --motion FILE --out DIR"}
+
+
 def load_pose(path: Path | str) -> Pose:
     path = Path(path)
+    if path.suffix.lower() in MOTION_IMPORTS:
+        raise InputError(Mark(str(path)), f"a {path.suffix} motion is not an axdf pose",
+                         f"import it first ({MOTION_IMPORTS[path.suffix.lower()]}) and pass the pose YAML it writes")
     doc = load_yaml(path)
     top = Mark(str(path), 1, 1)
     f = Fields(doc, top, "pose file")

@@ -37,15 +37,38 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from enum import Enum
 
 import numpy as np
 
 from axdf_cli import bspline, kernels, rmf
 from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError, Mark
+from axdf_cli.paths.points import PathSpec
 
 OCT = 8  # control points per section (the paper's choice)
-VOLUME_MODES = ("exact", "paper", "none")
+
+
+class VolumeMode(str, Enum):
+    """How sections scale with the axis length (module doc): ``exact`` keeps the mesh volume,
+    ``paper`` scales by sqrt(l0/l1) as published, ``none`` keeps the rest sections."""
+
+    EXACT = "exact"
+    PAPER = "paper"
+    NONE = "none"
+
+
+VOLUME_MODES = tuple(m.value for m in VolumeMode)
+#: Modes whose scale is solved against the rest volume (the others keep their start scale).
+SOLVED_MODES = frozenset({VolumeMode.EXACT})
+
+
+def start_scale(mode: VolumeMode, ratio: np.ndarray) -> np.ndarray:
+    """The scale a frame starts from, l0 / l1 = ``ratio`` (F,): 1 for ``none``, the paper's
+    sqrt(l0/l1) otherwise (``exact`` solves from there)."""
+    if mode is VolumeMode.NONE:
+        return np.ones_like(ratio)
+    return np.sqrt(ratio)
 
 # ----------------------------------------------------------------------------- specs
 
@@ -80,6 +103,7 @@ class MuscleSpec:
     weights: tuple[float, ...] | None = None
     source: str = ""
     group: str = ""  # the multi-head muscle this head belongs to ('' for single muscles)
+    path: PathSpec | None = None  # a path (points, wrap surfaces) instead of fixed axis points
 
 
 def ellipse_outline(a: float, b: float, angle_deg: float) -> np.ndarray:
@@ -153,18 +177,59 @@ class MuscleModel:
     world transforms ``rest_world`` (n_bones, 4, 4); evaluated for any block of frames.
     """
 
-    def __init__(self, spec: MuscleSpec, bone_index: dict[str, int], rest_world: np.ndarray):
+    def __init__(self, spec: MuscleSpec, bone_index: dict[str, int], rest_world: np.ndarray, skeleton=None):
+        """The preparation pipeline, each stage a method of its own: (1) bones and axis bases,
+        (2) the rest axis and its frames, (3) the sections' rest control points, (4) their
+        binding (t, u, v, w), (5) belly and tension weights, (6) the surface basis, (7) the
+        rest surface and its volume V0. ``skeleton`` (its coordinates) is needed by paths with
+        moving or conditional points."""
         self.spec = spec
-        n = len(spec.axis)
+        self.volume_mode = VolumeMode(spec.volume)
+        self._stage_bones(bone_index, skeleton)  # 1
+        self._stage_axis_bases(self.n_axis)  # 1
+        rest_p, x, t, r = self._stage_rest_axis(rest_world)  # 2
+        p_rest, cp_t = self._stage_rest_control_points(rest_p, x, t, r)  # 3
+        self._stage_binding(rest_p, x, t, r, p_rest, cp_t)  # 4
+        self._stage_belly_weights()  # 5
+        self._stage_surface_basis()  # 6
+        # 7: the rest surface, evaluated without a volume target, gives V0
+        rest = self.evaluate(rest_world[None], np.zeros(1), rest_volume=None, frames=(rest_p, x, t, r))
+        self.v0 = float(rest.volume[0])
+        self.rest_vertices = rest.vertices[0].astype(np.float32)
+        self.rest_normals = rest.normals[0].astype(np.float32)
+        self.rest_control_points = p_rest  # (8N, 3) world, rest pose (for tests)
+        if not self.v0 > 0:
+            raise InputError(_spec_mark(spec), f"muscle {spec.name!r}: rest volume is {self.v0:.3g}",
+                             "sections must enclose the axis with positive radii")
+
+    # -- preparation stages -------------------------------------------------------------
+    def _stage_bones(self, bone_index: dict[str, int], skeleton) -> None:
+        """Bone of every axis control point and the points in their bones; or the path model
+        that places the axis control points every frame."""
+        spec = self.spec
+        self.rest_q = skeleton.rest_coordinates()[None] if skeleton is not None else None
+        self._last = (None, None)  # (control points, could-not-wrap flags) of the last path evaluation
+        if spec.path is not None:
+            from axdf_cli.paths.path import PathModel
+
+            self.path = PathModel(spec.path, bone_index, skeleton.coord_index if skeleton is not None else None)
+            self.n_axis = self.path.n
+            self.origin_bone = self.path.origin_bone
+            self.insertion_bone = self.path.insertion_bone
+            return
+        self.path = None
+        self.n_axis = len(spec.axis)
         self.bones = np.array([_bone(bone_index, p) for p in spec.axis])
         self.at = np.array([p.at for p in spec.axis], dtype=np.float64)  # (n, 3)
         self.origin_bone = int(self.bones[0])
         self.insertion_bone = int(self.bones[-1])
+
+    def _stage_axis_bases(self, n: int) -> None:
+        """Basis matrices of the axis (n control points): dense samples for the RMF recurrence,
+        a coarse set for the twist branch, Gauss-Legendre points for the length."""
         knots = bspline.clamped_knots(n, 2)
         self.knots = knots
-
-        # dense samples for the RMF recurrence; and a coarse set for the twist branch
-        self.ts = np.linspace(0.0, 1.0, tol.RMF_SAMPLES_PER_SPAN * (n - 2) + 1)
+        self.ts = np.linspace(0.0, 1.0, tol.rmf_samples(n) + 1)
         self.Bs = bspline.basis_matrix(knots, 2, self.ts)
         self.dBs = bspline.basis_matrix(knots, 2, self.ts, 1)
         tc = np.linspace(0.0, 1.0, 4 * (n - 2) + 1)
@@ -172,11 +237,17 @@ class MuscleModel:
         self.dBc = bspline.basis_matrix(knots, 2, tc, 1)
         gt, self.gw = bspline.gauss_legendre_params(knots, 2, tol.LENGTH_GAUSS_POINTS)
         self.dBg = bspline.basis_matrix(knots, 2, gt, 1)
+        # the same bases as sparse rows (3 non-zeros each): products cost O(3), not O(n)
+        self._sparse = {id(b): kernels.sparse_rows(b) for b in (self.Bs, self.dBs, self.Bc, self.dBc, self.dBg)}
 
-        rest_p = self._axis_points(rest_world[None])  # (1, n, 3)
+    def _stage_rest_axis(self, rest_world: np.ndarray):
+        """The rest axis: control points, rest length l0 (checked), sampled frames, the start
+        vector in the origin bone, the insertion's rest reference, the rest arc fractions."""
+        spec = self.spec
+        rest_p = self._axis_points(rest_world[None], self.rest_q)  # (1, n, 3)
         self.l0 = float(self._length(rest_p)[0])
         if not self.l0 > tol.MIN_AXIS_LENGTH:
-            raise InputError(spec.axis[0].mark, f"muscle {spec.name!r}: the rest axis has length {self.l0:.3g} m",
+            raise InputError(_spec_mark(spec), f"muscle {spec.name!r}: the rest axis has length {self.l0:.3g} m",
                              "axis control points must not all coincide at the rest pose")
         x, t = self._samples(rest_p, self.Bs, self.dBs)
         # the start vector is chosen in the origin bone's own axes, so the rest shape does not
@@ -189,11 +260,14 @@ class MuscleModel:
         # rest arc length along the dense samples, as a fraction
         seg = np.linalg.norm(np.diff(x[0], axis=0), axis=1)
         self.arc = np.concatenate([[0.0], np.cumsum(seg)]) / max(seg.sum(), 1e-300)
+        return rest_p, x, t, r
 
-        # sections in the rest frame → rest world control points → binding (t, u, v, w)
-        secs = spec.sections
+    def _stage_rest_control_points(self, rest_p, x, t, r):
+        """Sections (outline x strength, own twist) placed in the rest frame: world control
+        points (8N, 3) and the curve parameter of each."""
+        spec = self.spec
         outlines = []
-        for s in secs:
+        for s in spec.sections:
             if s.outline is not None:
                 o = np.array(s.outline, dtype=np.float64)
             else:
@@ -201,7 +275,7 @@ class MuscleModel:
                 o = ellipse_outline(a, b, s.angle)
             outlines.append(o)
         outlines = np.array(outlines) * math.sqrt(spec.strength)  # (N, 8, 2): strength scales area
-        sec_t = np.array([s.t for s in secs])
+        sec_t = np.array([s.t for s in spec.sections])
         cp_t = np.repeat(sec_t, OCT)
         c_rest, tt, rr, ss = self._frames_at(rest_p, x, t, r, cp_t, self._sample_index(cp_t))
         lam = np.interp(cp_t, self.ts, self.arc)
@@ -210,26 +284,36 @@ class MuscleModel:
         cw, sw = np.cos(tw), np.sin(tw)
         v_rot, w_rot = ov * cw - ow * sw, ov * sw + ow * cw
         p_rest = c_rest[0] + v_rot[:, None] * rr[0] + w_rot[:, None] * ss[0]  # (8N, 3)
+        return p_rest, cp_t
+
+    def _stage_binding(self, rest_p, x, t, r, p_rest, cp_t) -> None:
+        """Bind every control point once: closest rest-axis parameter t and offset (u, v, w)
+        in the frame there; the bases at those t and the rest arc fraction of each."""
         self.bind_t = self._closest_t(rest_p[0], p_rest, cp_t)
         self.bind_j = self._sample_index(self.bind_t)
         cb, tb, rb, sb = self._frames_at(rest_p, x, t, r, self.bind_t, self.bind_j)
         off = p_rest - cb[0]
         self.uvw = np.stack([np.einsum("nc,nc->n", off, tb[0]), np.einsum("nc,nc->n", off, rb[0]),
                              np.einsum("nc,nc->n", off, sb[0])], axis=1)  # (8N, 3)
-        self.Bb = bspline.basis_matrix(knots, 2, self.bind_t)
-        self.dBb = bspline.basis_matrix(knots, 2, self.bind_t, 1)
+        self.Bb = bspline.basis_matrix(self.knots, 2, self.bind_t)
+        self.dBb = bspline.basis_matrix(self.knots, 2, self.bind_t, 1)
+        self._sparse.update({id(b): kernels.sparse_rows(b) for b in (self.Bb, self.dBb)})
         self.lam = np.interp(self.bind_t, self.ts, self.arc)  # rest arc fraction of each bound point
 
-        # belly weight and tension bump per bound point
-        a0, a1 = spec.tendons
+    def _stage_belly_weights(self) -> None:
+        """Belly weight beta (1 in the belly, 0 in the tendons) and tension bump per bound point."""
+        a0, a1 = self.spec.tendons
         belly_len = max(1.0 - a0 - a1, 1e-9)
         xb = (self.lam - a0) / belly_len
         self.beta = ((xb >= 0.0) & (xb <= 1.0)).astype(np.float64)
         self.bump = np.where(self.beta > 0, np.sin(np.pi * np.clip(xb, 0.0, 1.0)) ** 2, 0.0)
 
-        # surface basis: along (clamped, rational with per-row weights) x around (closed)
+    def _stage_surface_basis(self) -> None:
+        """Surface basis: along (clamped, rational with per-row weights) x around (closed),
+        as sparse rows for the compiled stage; the mesh's faces."""
+        spec = self.spec
         along, around = spec.resolution
-        m = len(secs) + 2
+        m = len(spec.sections) + 2
         w = np.ones(m)
         if spec.weights is not None:
             w[1:-1] = spec.weights
@@ -242,30 +326,33 @@ class MuscleModel:
         self.faces = grid_faces(along, around)
         self.n_vertices = 2 + (along - 2) * around
 
-        rest = self.evaluate(rest_world[None], np.zeros(1), reference_volume=False, frames=(rest_p, x, t, r))
-        self.v0 = float(rest.volume[0])
-        self.rest_vertices = rest.vertices[0].astype(np.float32)
-        self.rest_normals = rest.normals[0].astype(np.float32)
-        self.rest_control_points = p_rest  # (8N, 3) world, rest pose (for tests)
-        if not self.v0 > 0:
-            raise InputError(spec.axis[0].mark, f"muscle {spec.name!r}: rest volume is {self.v0:.3g}",
-                             "sections must enclose the axis with positive radii")
-
     # -- pieces ---------------------------------------------------------------------------
-    def _axis_points(self, world: np.ndarray) -> np.ndarray:
-        """Axis control points in world space: world (F, B, 4, 4) → (F, n, 3)."""
+    def _axis_points(self, world: np.ndarray, coords: np.ndarray | None = None) -> np.ndarray:
+        """Axis control points in world space: world (F, B, 4, 4) (and coordinates (F, C) for
+        paths that need them) → (F, n, 3)."""
+        if self.path is not None:
+            p, inside = self.path.control_points(world, coords)
+            self._last = (p, inside)
+            return p
         m = world[:, self.bones]  # (F, n, 4, 4)
         # P[f,i,c] = sum_k M[f,i,c,k] at[i,k] + M[f,i,c,3]
         return np.einsum("fick,ik->fic", m[..., :3, :3], self.at) + m[..., :3, 3]
 
+    def _apply(self, b: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """X[f,s,c] = sum_i B[s,i] P[f,i,c] for a basis matrix of this model (sparse rows)."""
+        idx, w = self._sparse[id(b)]
+        return np.einsum("sk,fskc->fsc", w, p[:, idx])
+
     def _samples(self, p: np.ndarray, b: np.ndarray, db: np.ndarray):
         # X[f,s,c] = sum_i B[s,i] P[f,i,c]; likewise the derivative
-        x = np.einsum("si,fic->fsc", b, p)
-        d = np.einsum("si,fic->fsc", db, p)
-        return x, _unit(d)
+        return self._apply(b, p), _unit(self._apply(db, p))
+
+    def axis_length(self, world: np.ndarray, coords: np.ndarray | None = None) -> np.ndarray:
+        """The axis arc length (F,) for frames world (F, B, 4, 4) (and coordinates (F, C))."""
+        return self._length(self._axis_points(world, coords))
 
     def _length(self, p: np.ndarray) -> np.ndarray:
-        d = np.einsum("gi,fic->fgc", self.dBg, p)
+        d = self._apply(self.dBg, p)
         return np.linalg.norm(d, axis=-1) @ self.gw
 
     def _sample_index(self, t: np.ndarray) -> np.ndarray:
@@ -285,7 +372,7 @@ class MuscleModel:
     def _closest_t(self, p_axis: np.ndarray, pts: np.ndarray, t_guess: np.ndarray) -> np.ndarray:
         """True closest-point parameters on the rest axis for points (Q, 3): dense search, then
         Newton on g(t) = (P - C(t)) . C'(t) = 0."""
-        n = len(self.at)
+        n = self.n_axis
         td = np.linspace(0.0, 1.0, tol.BIND_DENSE_SAMPLES_PER_SPAN * (n - 2) + 1)
         cd = bspline.basis_matrix(self.knots, 2, td) @ p_axis
         dist = np.linalg.norm(pts[:, None, :] - cd[None], axis=-1)  # (Q, D)
@@ -301,10 +388,11 @@ class MuscleModel:
             t = np.clip(t + step, 0.0, 1.0)
         return t
 
-    def end_twist(self, world: np.ndarray, coarse: bool = True, r_end: np.ndarray | None = None) -> np.ndarray:
+    def end_twist(self, world: np.ndarray, coarse: bool = True, r_end: np.ndarray | None = None,
+                  coords: np.ndarray | None = None) -> np.ndarray:
         """Insertion roll (radians, wrapped to (-pi, pi]) for frames world (F, B, 4, 4): (F,).
         ``r_end`` (F, 3): the propagated reference vector at t = 1, when already computed."""
-        _, x, t, r0 = self.rmf_inputs(world, coarse)
+        _, x, t, r0 = self.rmf_inputs(world, coarse, coords)
         if r_end is None:
             r_end = rmf.propagate(x, t, r0)[:, -1]
         return self._roll(world, t[:, -1], r_end)
@@ -314,33 +402,43 @@ class MuscleModel:
         return rmf.signed_angle(r_end, target, t_end)
 
     # -- evaluation -----------------------------------------------------------------------
-    def rmf_inputs(self, world: np.ndarray, coarse: bool = False):
+    def rmf_inputs(self, world: np.ndarray, coarse: bool = False, coords: np.ndarray | None = None):
         """Axis control points (F, n, 3), samples x (F, S, 3), unit tangents t and start vectors
         r0 (F, 3): what :func:`rmf.propagate` needs (batched over muscles by the caller)."""
-        p = self._axis_points(world)
+        p = self._axis_points(world, coords)
         b, db = (self.Bc, self.dBc) if coarse else (self.Bs, self.dBs)
         x, t = self._samples(p, b, db)
         r0 = rmf.perpendicular_unit(world[:, self.origin_bone, :3, :3] @ self.r0_local, t[:, 0])
         return p, x, t, r0
 
-    def axis_frames(self, world: np.ndarray):
+    def axis_frames(self, world: np.ndarray, coords: np.ndarray | None = None):
         """(p, x, t, r): control points, samples, tangents and RMF reference vectors (F, S, 3)."""
-        p, x, t, r0 = self.rmf_inputs(world)
+        p, x, t, r0 = self.rmf_inputs(world, coords=coords)
         return p, x, t, rmf.propagate(x, t, r0)
 
     def evaluate(self, world: np.ndarray, tension: np.ndarray, twist_reference: np.ndarray | None = None,
-                 reference_volume: bool = True, frames=None) -> FrameResult:
+                 rest_volume: float | None | str = "model", frames=None,
+                 coords: np.ndarray | None = None) -> FrameResult:
         """Deform for a block of frames.
 
         world : (F, n_bones, 4, 4) bone world transforms; tension : (F,) effective tension 0..1;
         twist_reference : (F,) unwrapped coarse insertion roll (radians) choosing the branch of
         the exact roll, or None (roll unwrapped within the block); frames : the result of
-        :meth:`axis_frames` when the caller computed it (batched over several muscles).
+        :meth:`axis_frames` when the caller computed it (batched over several muscles);
+        rest_volume : the volume V0 that ``exact`` keeps ("model": the model's own rest volume;
+        None: no target, the start scale as it is); coords : (F, C) skeleton coordinates, for
+        paths with moving or conditional points.
         """
         spec = self.spec
         nf = world.shape[0]
         warnings: list = []
-        p, x, t, r = frames if frames is not None else self.axis_frames(world)
+        p, x, t, r = frames if frames is not None else self.axis_frames(world, coords)
+        if self.path is not None:
+            inside = self._last[1] if self._last[0] is p else self.path.control_points(world, coords)[1]
+            for i in np.nonzero(inside)[0]:
+                w = self.spec.path.wraps[int(inside[i]) - 1]
+                warnings.append((int(i), f"path cannot wrap over {w.name!r}: an end point lies inside it; "
+                                         "kept the straight segment"))
         theta = self._roll(world, t[:, -1], r[:, -1])
         if twist_reference is None:
             theta = np.unwrap(theta)
@@ -348,8 +446,8 @@ class MuscleModel:
             theta = theta + 2.0 * np.pi * np.round((twist_reference - theta) / (2.0 * np.pi))
 
         # bound points: position and frame at t, then the spread twist about T
-        c = np.einsum("qi,fic->fqc", self.Bb, p)
-        tt = _unit(np.einsum("qi,fic->fqc", self.dBb, p))
+        c = self._apply(self.Bb, p)
+        tt = _unit(self._apply(self.dBb, p))
         rr = rmf.reflect_step(x[:, self.bind_j], t[:, self.bind_j], r[:, self.bind_j], c, tt)
         ss = np.cross(tt, rr)
         ang = theta[:, None] * self.lam[None, :]  # (F, Q)
@@ -361,7 +459,7 @@ class MuscleModel:
         length = self._length(p)
         e = np.clip(np.asarray(tension, dtype=np.float64), 0.0, 1.0)
         ratio = self.l0 / np.maximum(length, tol.MIN_AXIS_LENGTH)
-        s = np.ones(nf) if spec.volume == "none" else np.sqrt(ratio)
+        s = start_scale(self.volume_mode, ratio)
         # Tension law. tau[f,q]: radial factor, sqrt of the area factor 1 + g e (2 b - 1).
         # The share h = e b of each belly point (the middle, at full tension) keeps the
         # length-only scale s0; the rest (1 - h) takes the volume scale s, so the ends give
@@ -372,8 +470,10 @@ class MuscleModel:
         held = (beta * (tau * h * s[:, None])[..., None]) * off
         fixed = c + (1.0 - beta) * off + held  # part that does not scale with s
         scaled = beta * (tau * (1.0 - h))[..., None] * off  # part multiplied by s
-        verts, norms, volume, s, bad = self._surface(fixed, scaled, p, t, s,
-                                                     spec.volume == "exact" and reference_volume)
+        if isinstance(rest_volume, str):
+            rest_volume = self.v0
+        target = rest_volume if self.volume_mode in SOLVED_MODES else None
+        verts, norms, volume, s, bad = self._surface(fixed, scaled, p, t, s, target)
         for i in np.nonzero(bad)[0]:
             warnings.append((int(i), "exact volume has no solution; used the paper's scale"))
         for i in np.nonzero(length < tol.MIN_AXIS_LENGTH)[0]:
@@ -392,10 +492,10 @@ class MuscleModel:
         )
 
     def _surface(self, fixed: np.ndarray, scaled: np.ndarray, p: np.ndarray, t: np.ndarray,
-                 s0: np.ndarray, exact: bool):
+                 s0: np.ndarray, v0: float | None):
         """The surface stage (compiled, :func:`axdf_cli.kernels.surface_stage`): bound control
         points fixed + s * scaled (F, 8N, 3), axis control points p (F, n, 3), sample tangents
-        t (F, S, 3), starting scales s0 (F,) → vertices (F, V, 3), normals (F, V, 3), volume
+        t (F, S, 3), starting scales s0 (F,), the volume to keep v0 (None: keep s0) → vertices (F, V, 3), normals (F, V, 3), volume
         (F,), scale (F,), no-solution flags (F,)."""
         nf = fixed.shape[0]
         verts = np.empty((nf, self.n_vertices, 3))
@@ -406,18 +506,26 @@ class MuscleModel:
         kernels.surface_stage(np.ascontiguousarray(fixed), np.ascontiguousarray(scaled),
                               np.ascontiguousarray(p[:, 0]), np.ascontiguousarray(p[:, -1]),
                               np.ascontiguousarray(-t[:, 0]), np.ascontiguousarray(t[:, -1]),
-                              self.u_idx, self.u_w, self.v_idx, self.v_w, bool(exact),
-                              float(getattr(self, "v0", 0.0)), np.ascontiguousarray(s0, dtype=np.float64),
+                              self.u_idx, self.u_w, self.v_idx, self.v_w, v0 is not None,
+                              float(v0 or 0.0), np.ascontiguousarray(s0, dtype=np.float64),
                               tol.SCALE_MIN, tol.SCALE_MAX, tol.VOLUME_SOLVE_ITERS, tol.VOLUME_SOLVE_RTOL,
                               verts, norms, volume, s, bad)
         return verts, norms, volume, s, bad
 
 
+def _spec_mark(spec: MuscleSpec) -> Mark:
+    return spec.axis[0].mark if spec.axis else spec.path.points[0].mark
+
+
 def _bone(index: dict[str, int], p: AxisPoint) -> int:
-    if p.bone not in index:
+    return _bone_of(index, p.bone, p.mark)
+
+
+def _bone_of(index: dict[str, int], bone: str, mark) -> int:
+    if bone not in index:
         known = ", ".join(sorted(index))
-        raise InputError(p.mark, f"unknown bone {p.bone!r}", f"bones of the skeleton: {known}")
-    return index[p.bone]
+        raise InputError(mark, f"unknown bone {bone!r}", f"bones of the skeleton: {known}")
+    return index[bone]
 
 
 def _unit(d: np.ndarray) -> np.ndarray:

@@ -5,6 +5,18 @@
 # frame error below 1e-4 rad on every shipped muscle and on a quarter-turn helix per span
 # (tests/test_rmf.py measures it against a 16x denser reference).
 RMF_SAMPLES_PER_SPAN = 32
+# Axes with many control points (muscle paths: up to 48) have short spans that turn little:
+# beyond the first RMF_DENSE_SPANS spans, RMF_SAMPLES_PER_EXTRA_SPAN samples per span keep the
+# same frame error at a quarter of the cost (tests/test_rmf.py checks imported path muscles).
+RMF_DENSE_SPANS = 6
+RMF_SAMPLES_PER_EXTRA_SPAN = 8
+
+
+def rmf_samples(n_control_points: int) -> int:
+    """Intervals of the RMF sampling for an axis of n control points (n - 2 knot spans)."""
+    spans = n_control_points - 2
+    dense = min(spans, RMF_DENSE_SPANS)
+    return RMF_SAMPLES_PER_SPAN * dense + RMF_SAMPLES_PER_EXTRA_SPAN * (spans - dense)
 
 # The frame error the issue asks for; tests check RMF_SAMPLES_PER_SPAN achieves it.
 RMF_MAX_FRAME_ERROR_RAD = 1e-4
@@ -38,6 +50,9 @@ TENSION_GAIN = 0.6
 YAML_MAX_BYTES = 16 * 1024 * 1024
 YAML_MAX_NODES = 2_000_000
 YAML_MAX_DEPTH = 64
+# BVH motion capture is text too, but long takes are large (100 channels x 100k frames is
+# ~100 MB): read up to this many bytes.
+BVH_MAX_BYTES = 512 * 1024 * 1024
 # numbers whose magnitude exceeds this are refused (metres, degrees, frames alike)
 MAX_ABS_NUMBER = 1e9
 

@@ -85,13 +85,14 @@ def read_input(path: Path | str, display: str | None = None, allowed: str = "an 
         raise InputError(Mark(display), f"cannot read ({e.strerror})", allowed) from None
 
 
-def read_text(path: Path, display: str | None = None) -> str:
+def read_text(path: Path, display: str | None = None, allowed: str = "an existing YAML file",
+              max_bytes: int = tol.YAML_MAX_BYTES) -> str:
     """Read a UTF-8 text file; refuse binary, oversize or undecodable files with a position."""
     display = display or str(path)
-    data = read_input(path, display, "an existing YAML file")
-    if len(data) > tol.YAML_MAX_BYTES:
+    data = read_input(path, display, allowed)
+    if len(data) > max_bytes:
         raise InputError(Mark(display), f"file is {len(data)} bytes",
-                         f"at most {tol.YAML_MAX_BYTES} bytes are read")
+                         f"at most {max_bytes} bytes are read")
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as e:

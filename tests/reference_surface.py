@@ -121,7 +121,7 @@ def _solve_cubic(coef: np.ndarray, v0: float, s0: np.ndarray):
     return s, bad
 
 
-def reference_surface(model, fixed, scaled, p, t, s0, exact):
+def reference_surface(model, fixed, scaled, p, t, s0, v0):
     """What ``MuscleModel._surface`` computes, in numpy: (vertices, normals, volume, s, bad)."""
     nf = fixed.shape[0]
     m = len(model.spec.sections) + 2
@@ -139,7 +139,7 @@ def reference_surface(model, fixed, scaled, p, t, s0, exact):
 
     a_grid, w_grid = tess(fixed, True), tess(scaled, False)
     coef = planar_volume_cubic(a_grid, w_grid)
-    s, bad = (_solve_cubic(coef, model.v0, s0) if exact else (s0.copy(), np.zeros(nf, bool)))
+    s, bad = (_solve_cubic(coef, v0, s0) if v0 is not None else (s0.copy(), np.zeros(nf, bool)))
     sc = np.clip(s, tol.SCALE_MIN, tol.SCALE_MAX)
     grid = a_grid + sc[None, :, None, None] * w_grid
     ends = (-np.moveaxis(t[:, 0], -1, 0), np.moveaxis(t[:, -1], -1, 0))

@@ -56,3 +56,12 @@ def test_long_pose_stretch_and_table():
     t.add("a", "1 µs", "x", "2x", "✓")
     assert "a" in t.text() and "[s]" in t.text()
     assert np.isfinite(bench.median_time(lambda: None, 3))
+
+
+def test_wrapping_rows():
+    wc, nc = bench.load_wrap_case(8, True), bench.load_wrap_case(8, False)
+    if wc is None:
+        pytest.skip("arm26 library not shipped")
+    assert any(s.path.wraps for s in wc.specs) and not any(s.path.wraps for s in nc.specs)
+    for c in (wc, nc):
+        assert bench.time_evaluation(c.models(2, (8, 6)), c.world, c.tension, repeats=1, chunk=4, coords=c.coords) > 0

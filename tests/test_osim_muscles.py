@@ -1,4 +1,4 @@
-"""Imported muscles: the axis passes through origin, insertion and via points at rest."""
+"""Imported muscles: the path is the model's, and the axis follows it at rest."""
 from __future__ import annotations
 
 import numpy as np
@@ -9,7 +9,6 @@ from osim_common import ARM, GAIT, needs_data, run_import
 pytestmark = needs_data
 
 END_TOL = 1e-4  # m: the issue's bound (0.1 mm) for origin / insertion
-VIA_TOL = 1e-4  # m: via points (midpoints of control-point pairs at the knots)
 
 
 @pytest.fixture(scope="module", params=[("arm26", ARM), ("gait2392", GAIT)], ids=["arm26", "gait2392"])
@@ -33,31 +32,39 @@ def _point(world, skel, body, at):
     return (world[skel.bone_index[body]] @ np.append(at, 1.0))[:3]
 
 
-def test_axis_passes_through_origin_insertion_and_via_points(imported):
+def test_path_is_the_models_and_the_axis_follows_it(imported):
+    """Every OpenSim path point is in the YAML path (conditional ones with their range, in
+    degrees); at rest the axis starts at the origin, ends at the insertion and is as long as
+    the wrapped path (within 1%)."""
     from axdf_cli import bspline
     from axdf_cli.loaders import load_muscle_file, load_skeleton
+    from axdf_cli.paths.path import PathModel
 
     name, model, out = imported
     skel = load_skeleton(out / "skeletons" / f"{name}.yaml")
     world = _world(skel)
+    q = skel.rest_coordinates()[None]
     assert len(model.muscles) == {"arm26": 6, "gait2392": 92}[name]
     for m in model.muscles:
         (spec,) = load_muscle_file(out / "muscles" / f"{m.name}.yaml")
-        ctrl = np.array([_point(world, skel, a.bone, a.at) for a in spec.axis])  # (n, 3) world, rest
-        assert len(ctrl) >= 3
-        knots = bspline.clamped_knots(len(ctrl), 2)
-        ends = bspline.basis_matrix(knots, 2, [0.0, 1.0]) @ ctrl
+        assert not spec.axis and len(spec.path.points) == len(m.points)
+        for p, yp in zip(m.points, spec.path.points):
+            assert yp.bone == p.body and (p.moving is not None or np.allclose(yp.at, p.location)), (m.name, p.name)
+            assert (yp.active is not None) == (p.kind == "conditional")
+        assert [w.name for w in spec.path.wraps] == [w.wrap for w in m.wraps]
+        pm = PathModel(spec.path, skel.bone_index, skel.coord_index)
+        _, length, _ = pm.wrapped(world[None], q)
+        ctrl, _ = pm.control_points(world[None], q)
+        knots = bspline.clamped_knots(pm.n, 2)
+        ends = bspline.basis_matrix(knots, 2, [0.0, 1.0]) @ ctrl[0]
         active = [p for p in m.points if p.active_at_rest]
         origin = _point(world, skel, active[0].body, active[0].location)
         insertion = _point(world, skel, active[-1].body, active[-1].location)
         assert np.linalg.norm(ends[0] - origin) < END_TOL, m.name
         assert np.linalg.norm(ends[1] - insertion) < END_TOL, m.name
-        # every via point lies on the curve: at the knot between its control-point pair
-        at_knots = bspline.basis_matrix(knots, 2, np.unique(knots)) @ ctrl
-        for p in active[1:-1]:
-            x = _point(world, skel, p.body, p.location)
-            d = np.linalg.norm(at_knots - x, axis=1).min()
-            assert d < VIA_TOL, (m.name, p.name, d)
+        gt, gw = bspline.gauss_legendre_params(knots, 2, 8)
+        arc = np.linalg.norm(bspline.basis_matrix(knots, 2, gt, 1) @ ctrl[0], axis=1) @ gw
+        assert abs(arc - length[0]) / length[0] < 0.01, (m.name, arc, length[0])
 
 
 def test_muscle_sizes_follow_force_and_fibre_length(imported):

@@ -204,7 +204,9 @@ def _model_frames(model, world, per_span):
 
 def test_model_samples_use_the_documented_density(demo):
     for m in demo.models:
-        assert len(m.ts) == tol.RMF_SAMPLES_PER_SPAN * (len(m.at) - 2) + 1
+        assert len(m.ts) == tol.rmf_samples(m.n_axis) + 1
+    assert tol.rmf_samples(5) == tol.RMF_SAMPLES_PER_SPAN * 3
+    assert tol.rmf_samples(40) == tol.RMF_SAMPLES_PER_SPAN * 6 + tol.RMF_SAMPLES_PER_EXTRA_SPAN * 32
 
 
 def test_demo_axes_frame_error_at_extreme_poses(demo):

@@ -1,10 +1,15 @@
-"""Import models from other tools: ``axdf import osim MODEL.osim [--motion F] [--controls F] --out DIR``.
+"""Import models from other tools: ``axdf import osim MODEL.osim [--motion F] [--controls F] --out DIR``
+and ``axdf import bvh FILE.bvh --out DIR [--scale S]``.
 
 ``osim`` reads an OpenSim 4 model and writes an axdf skeleton (bodies, joints, coupled
 DOFs, bone meshes as PLY), one muscle file per muscle, and, given a motion, a pose (with
 muscle activation from a controls file); plus ``import_report.json`` and ``IMPORT.md``
 listing what was not imported (wrap objects, markers, ...). Nothing is written when an
 input is bad (exit 2, ``FILE:LINE:COL``).
+
+``bvh`` reads a Biovision motion-capture file and writes an axdf skeleton (Z-up, metres;
+end sites become ``<joint>_end`` tip bones) and a pose keyed at every frame; the length unit is
+guessed from the skeleton's height unless ``--scale`` gives it.
 """
 from __future__ import annotations
 
@@ -38,8 +43,25 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--fps", type=float, help="resample the motion at this frame rate (default: its own)")
     p.add_argument("--no-meshes", action="store_true", help="do not convert bone geometry")
 
+    b = sub.add_parser("bvh", help="Biovision motion capture (.bvh) → skeleton and pose",
+                       description="Import a BVH file: a skeleton (Z-up, metres) and a pose of its motion.")
+    g = b.add_mutually_exclusive_group()
+    g.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS, help="print only errors")
+    g.add_argument("-v", "--verbose", action="store_true", default=argparse.SUPPRESS, help="print more detail")
+    b.add_argument("model", metavar="FILE.bvh", type=Path)
+    b.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder (default place of both files)")
+    b.add_argument("--scale", metavar="S",
+                   help="metres per file unit: a number, or m, cm, mm, in (default: guessed from the height)")
+    b.add_argument("--step", type=int, default=1, metavar="N", help="keep every N-th motion row (fps / N)")
+    b.add_argument("--name", help="skeleton name (default: the file's name)")
+    b.add_argument("--skeleton-out", type=Path, metavar="FILE", help="skeleton YAML (default DIR/skeletons/NAME.yaml)")
+    b.add_argument("--pose-out", type=Path, metavar="FILE", help="pose YAML (default DIR/POSE.yaml)")
+    b.add_argument("--pose-name", help="pose name (default: the skeleton's name)")
+
 
 def run(args) -> int:
+    if args.source == "bvh":
+        return run_bvh(args)
     from axdf_cli.errors import UsageError
     from axdf_cli.importers.osim_import import build_import
 
@@ -69,4 +91,33 @@ def run(args) -> int:
             for path in sorted(res.files):
                 print(path)
         print(f"report: {Path(args.out) / 'IMPORT.md'}")
+    return 0
+
+
+def run_bvh(args) -> int:
+    from axdf_cli.errors import UsageError
+    from axdf_cli.importers.bvh import UNITS, build_import
+
+    scale = None
+    if args.scale is not None:
+        try:
+            scale = UNITS[args.scale] if args.scale in UNITS else float(args.scale)
+        except ValueError:
+            scale = float("nan")
+        if not (0 < scale < 1e6):
+            raise UsageError(f"--scale {args.scale}", f"a positive number of metres per unit, or one of {', '.join(UNITS)}")
+    if not 1 <= args.step <= 10000:
+        raise UsageError(f"--step {args.step}", "a whole number in 1..10000")
+    res = build_import(args.model, args.out, name=args.name, scale=scale, step=args.step,
+                       skeleton_out=args.skeleton_out, pose_out=args.pose_out, pose_name=args.pose_name)
+    for path, data in sorted(res.files.items()):
+        write_bytes(path, data)
+    if not args.quiet:
+        r = res.report
+        for line in res.notes:
+            print(line)
+        print(f"imported {args.model.name}: {r['joints']} joints, {r['end_sites']} end sites, {r['channels']} channels, "
+              f"{r['frames']} frames at {r['fps']:g} fps")
+        for path in sorted(res.files):
+            print(path)
     return 0

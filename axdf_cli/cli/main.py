@@ -21,7 +21,8 @@ COMMANDS = {
     "render": ("axdf_cli.cli.render", "render preview frames and EXR data passes from a finished run"),
     "validate": ("axdf_cli.cli.validate", "check muscle, skeleton, pose and job files; write nothing"),
     "compare": ("axdf_cli.cli.compare", "compare a run (or one file) with a golden one; exit 1 when different"),
-    "import": ("axdf_cli.cli.importer", "import OpenSim models and motions as skeletons, muscles and poses"),
+    "import": ("axdf_cli.cli.importer", "import OpenSim models and motions, or BVH motion capture, as axdf files"),
+    "transfer": ("axdf_cli.cli.transfer", "move muscles onto another skeleton through a bone map"),
     "dataset": ("axdf_cli.cli.dataset", "build data sets: sampled poses, several views, labels, one index"),
 }
 

@@ -10,9 +10,9 @@ import json
 import sys
 from pathlib import Path
 
-from axdf_cli import atomic
 from axdf_cli.errors import UsageError
 from axdf_cli.render.settings import add_render_args, settings_from_args
+from axdf_cli.runfolder import gl_record, write_manifest
 
 
 def add_args(parser: argparse.ArgumentParser) -> None:
@@ -59,10 +59,10 @@ def update_manifest(run_dir: Path, result: dict) -> None:
     """Record the GL renderer and the new files' sha256 in the run's manifest."""
     path = run_dir / "manifest.json"
     manifest = json.loads(path.read_text())
-    manifest["gl"] = {"renderer": result["gl_renderer"], "version": result["gl_version"]}  # as `axdf run`
+    manifest["gl"] = gl_record(result["gl_renderer"], result["gl_version"])
     files = manifest.get("files")
     if isinstance(files, dict):
         files.update(result["files"])
     else:
         manifest["files"] = dict(result["files"])
-    atomic.write_text(path, json.dumps(manifest, indent=1, sort_keys=True) + "\n")
+    write_manifest(run_dir, manifest)

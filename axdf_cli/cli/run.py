@@ -50,17 +50,15 @@ def run(args) -> int:
     roots = [Path.cwd()] + ([Path(args.job).resolve().parent] if args.job else [])
     set_ref_policy(roots, args.allow_outside)
     job = load_job(args.job) if args.job else None
-    plan = runner.plan_run(job, muscle_args=args.muscles, pose_arg=args.pose, out_arg=args.out,
-                           fmt_arg=args.format, frames_arg=args.frames)
     from dataclasses import replace
 
-    from axdf_cli.errors import Mark
-    from axdf_cli.render.settings import parse_render_settings, settings_from_args
+    from axdf_cli.render.settings import settings_from_args
 
-    settings = parse_render_settings(job.render if job else None, job.render_mark if job and job.render_mark else Mark("job"))
+    settings = runner.job_render_settings(job)
     if args.render is not None:
         settings = replace(settings, enabled=args.render)
-    plan.render = settings_from_args(settings, args)
+    plan = runner.plan_run(job, muscle_args=args.muscles, pose_arg=args.pose, out_arg=args.out,
+                           fmt_arg=args.format, frames_arg=args.frames, render=settings_from_args(settings, args))
     if args.verbose:
         for n in plan.notes:
             print(f"note: {n}", file=sys.stderr)
@@ -79,7 +77,7 @@ def run(args) -> int:
         from tqdm import tqdm
 
         bar = tqdm(total=total, unit="mesh", file=sys.stderr, desc="meshes")
-        if plan.render.enabled:
+        if plan.rendering:
             rbar = tqdm(total=len(plan.frames), unit="frame", file=sys.stderr, desc="frames")
     try:
         summary = runner.execute(plan, resume=args.resume, overwrite=args.overwrite,

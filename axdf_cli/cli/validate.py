@@ -34,8 +34,14 @@ def validate_file(path: Path) -> str:
         job = loaders.load_job(path)
         plan = runner.plan_run(job)
         return f"job: {len(plan.models)} muscles x {len(plan.frames)} frames"
+    if isinstance(doc, dict) and "transfer" in doc:
+        from axdf_cli.transfer import load_map
+
+        m = load_map(path)
+        return f"transfer map {m.name}: {len(m.pairs)} bones, {m.skel_a.name} -> {m.skel_b.name}"
     raise InputError(Mark(str(path), 1, 1), "unknown kind of file",
-                     "a skeleton (skeleton:, bones:), pose (pose:, keys:), muscle (muscle:) or job (muscles:, pose:)")
+                     "a skeleton (skeleton:, bones:), pose (pose:, keys:), muscle (muscle:), job (muscles:, pose:) "
+                     "or transfer map (transfer:, bones:)")
 
 
 def run(args) -> int:

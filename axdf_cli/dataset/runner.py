@@ -11,10 +11,13 @@ from types import SimpleNamespace
 import numpy as np
 
 from axdf_cli.loaders import Pose
+from axdf_cli.skeleton import forward_kinematics
 from axdf_cli.render.sequence import FRAME_WRITERS  # noqa: F401  (image passes: png, exr)
 from axdf_cli.render.settings import RenderSettings, parse_render_settings, settings_to_dict  # noqa: F401
 from axdf_cli.render.settings import _parse_camera as parse_camera  # noqa: F401
 from axdf_cli.run import RunPlan, evaluate_chunks, execute, load_bone_mesh, twist_references  # noqa: F401
+from axdf_cli.run.evaluate import finite_or_rest
+from axdf_cli.run.plan import display_path  # noqa: F401  (paths as a run's manifest shows them)
 
 
 def sequence_plan(pose: Pose, frames: np.ndarray, muscles, models, fmt: str, out: Path, inputs: dict) -> RunPlan:
@@ -34,13 +37,17 @@ def run_sequence(plan: RunPlan, resume: bool) -> dict:
 def evaluate_for_render(plan: RunPlan, chunk: int):
     """(frame slice, world (C, B, 4, 4), [(positions (C, V, 3) f4, normals (C, V, 3) f4) per
     muscle]) over the plan's frames, as the run's own renderer gets them."""
-    from axdf_cli.run import _finite_or_rest
-
     twist = twist_references(plan)
     for sl, world, results in evaluate_chunks(plan, chunk, twist):
-        res = [(j, r) for j, r in results]
-        yield sl, world, [(_finite_or_rest(r.vertices, plan.models[j].rest_vertices),
-                           _finite_or_rest(r.normals, plan.models[j].rest_normals)) for j, r in res]
+        yield sl, world, [finite_or_rest(r, plan.models[j])[:2] for j, r in results]
+
+
+def build_models(specs, skeleton) -> list:
+    """The muscle models at the skeleton's rest pose, as a run plan builds them."""
+    from axdf_cli.muscle import MuscleModel
+
+    rest = forward_kinematics(skeleton, skeleton.rest_coordinates()[None])[0]
+    return [MuscleModel(s, skeleton.bone_index, rest, skeleton) for s in specs]
 
 
 def motion_pose(path: Path, skeleton, name: str) -> Pose:
@@ -71,4 +78,3 @@ def without_meshes(skeleton):
 
 from axdf_cli.render.camera import intrinsics, look_at  # noqa: E402,F401  (camera conventions of camera.json)
 from axdf_cli.render.renderer import id_map  # noqa: E402,F401  (the EXR id pass's table)
-from axdf_cli.run import _display as display_path  # noqa: E402,F401  (paths as a run's manifest shows them)

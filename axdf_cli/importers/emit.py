@@ -1,7 +1,11 @@
 """An OpenSim :class:`~axdf_cli.importers.osim.Model` → axdf documents and YAML text.
 
-Output is deterministic: no timestamps, no absolute paths, floats written with Python's
-``repr`` (shortest text that reads back to the same double), keys in a fixed order.
+Output is deterministic: no timestamps, no absolute paths, keys in a fixed order. Numbers
+are written rounded to what they mean (:func:`rounded`): positions (``offset``,
+``post_offset``, an axis point's ``at``) to 0.1 µm, everything else to 9 significant digits.
+The digits beyond come from matrix products whose last bits differ between CPUs and BLAS
+builds; rounding them away keeps the files readable and (but for a rare value on a
+rounding boundary) the same on every machine.
 
 Conversions (OpenSim → axdf):
 
@@ -30,6 +34,7 @@ import re
 import numpy as np
 import yaml
 
+from axdf_cli.errors import InputError, Mark
 from axdf_cli.importers.osim import Axis, FConst, FLinear, FMult, FPoly, FSpline, Model, Muscle
 from axdf_cli.skeleton import Skeleton, Spline, forward_kinematics
 
@@ -49,9 +54,6 @@ MAX_TENDON_FRACTION = 0.7
 #: How the tendon (tendon_slack_length) splits between origin and insertion: insertion
 #: tendons are usually the longer ones (Achilles, quadriceps, biceps distal).
 ORIGIN_TENDON_SHARE = 0.4
-#: Half-length of the control-point pair that makes the axis pass through a via point,
-#: as a fraction of the shorter neighbouring path segment.
-VIA_PAIR_FRACTION = 0.25
 
 
 # ----------------------------------------------------------------------------- functions
@@ -167,56 +169,57 @@ def _world_points(skel: Skeleton, world: np.ndarray, pts) -> np.ndarray:
     return np.array([(world[bi[b]] @ np.append(p, 1.0))[:3] for b, p in pts])
 
 
-def axis_control_points(skel: Skeleton, world: np.ndarray, pts: list[tuple[str, tuple]]) -> list[tuple[str, list[float]]]:
-    """Path points (body, location) active at rest → clamped quadratic B-spline control points.
+def path_docs(model: Model, m: Muscle) -> tuple[list, list]:
+    """The muscle's ``path`` (every path point; moving ones with their functions in axdf
+    units, conditional ones with their ``active`` range) and ``wrap`` (its wrap surfaces,
+    copied per muscle with the path wrap's range and method) documents."""
+    path = []
+    for p in m.points:
+        d: dict = {"bone": p.body, "at": [float(v) for v in p.location]}
+        if p.moving is not None:
+            if p.frame is not None:
+                raise InputError(p.mark, f"moving point {p.name!r} of {m.name} is attached to an offset frame",
+                                 "moving points attached to a body")
+            mv = {}
+            for ax, a in zip("xyz", p.moving):
+                if a is None:
+                    continue
+                coord, fn = a
+                k_in = math.pi / 180.0 if model.coordinates[coord].type == "rotation" else 1.0
+                mv[ax] = {"coord": coord, "function": function_doc(convert_function(fn, k_in, 1.0))}
+            if mv:
+                d["moving"] = mv
+        if p.condition is not None:
+            coord, lo, hi = p.condition
+            k = DEG if model.coordinates[coord].type == "rotation" else 1.0
+            d["active"] = {"coord": coord, "range": [lo * k, hi * k]}
+        path.append(d)
+    wraps = []
+    for pw in m.wraps:
+        w = model.wrap_objects[pw.wrap]
+        d = {"name": w.name, "shape": w.shape, "bone": w.body}
+        if w.shape == "cylinder":
+            d.update(radius=w.size[0], length=w.size[1])
+        elif w.shape == "sphere":
+            d["radius"] = w.size[0]
+        elif w.shape == "ellipsoid":
+            d["radii"] = list(w.size)
+        else:
+            d.update(inner=w.size[0], outer=w.size[1])
+        d["at"] = list(w.translation)
+        d["orient"] = _deg(w.rotation)
+        d["quadrant"] = w.quadrant
+        if w.shape == "ellipsoid":
+            d["method"] = pw.method
+        if pw.range != (-1, -1):
+            d["range"] = list(pw.range)
+        if not w.active:
+            d["active"] = False
+        wraps.append(d)
+    return path, wraps
 
-    - First and last control points are the origin and insertion (the clamped curve
-      interpolates its end control points).
-    - Each via point V (interior path point) becomes a pair ``V - h·d``, ``V + h·d`` in V's own
-      body, with ``d`` the unit direction from the previous to the next path point and ``h``
-      = VIA_PAIR_FRACTION × the shorter neighbouring segment. On a uniform clamped quadratic
-      B-spline the curve passes through the midpoint of two consecutive control points at
-      the knot between them, so the axis passes exactly through V, tangent to ``d``.
-    - A two-point path gets two inner points at 1/3 (in the origin's body) and 2/3 (in the
-      insertion's body) of the straight line: 4 control points, a straight rest axis.
-    - Consecutive path points closer than 0.1 mm are merged (the first is kept).
-    """
-    bi = skel.bone_index
-    w = _world_points(skel, world, pts)
-    keep = [0]
-    for i in range(1, len(pts)):
-        if np.linalg.norm(w[i] - w[keep[-1]]) >= 1e-4:
-            keep.append(i)
-    if len(keep) == 1:
-        keep.append(len(pts) - 1)
-    elif keep[-1] != len(pts) - 1:
-        keep[-1] = len(pts) - 1  # the insertion always ends the axis
-    pts = [pts[i] for i in keep]
-    w = w[keep]
 
-    def local(body, xw):
-        m = np.linalg.inv(world[bi[body]])
-        return [float(v) for v in (m @ np.append(xw, 1.0))[:3]]
-
-    out = [(pts[0][0], [float(v) for v in pts[0][1]])]
-    if len(pts) == 2:
-        out.append((pts[0][0], local(pts[0][0], w[0] + (w[1] - w[0]) / 3.0)))
-        out.append((pts[1][0], local(pts[1][0], w[0] + 2.0 * (w[1] - w[0]) / 3.0)))
-    for i in range(1, len(pts) - 1):
-        d = w[i + 1] - w[i - 1]
-        n = np.linalg.norm(d)
-        h = VIA_PAIR_FRACTION * min(np.linalg.norm(w[i] - w[i - 1]), np.linalg.norm(w[i + 1] - w[i]))
-        if n < 1e-9:
-            out.append((pts[i][0], [float(v) for v in pts[i][1]]))
-            continue
-        d = d / n
-        out.append((pts[i][0], local(pts[i][0], w[i] - h * d)))
-        out.append((pts[i][0], local(pts[i][0], w[i] + h * d)))
-    out.append((pts[-1][0], [float(v) for v in pts[-1][1]]))
-    return out
-
-
-def muscle_doc(m: Muscle, skel: Skeleton, world: np.ndarray) -> tuple[dict, dict]:
+def muscle_doc(m: Muscle, skel: Skeleton, world: np.ndarray, model: Model | None = None) -> tuple[dict, dict]:
     """One muscle YAML document and a summary row for the import report.
 
     Sizing: PCSA = F_max / SPECIFIC_TENSION; belly volume V = PCSA × optimal fibre length.
@@ -232,8 +235,9 @@ def muscle_doc(m: Muscle, skel: Skeleton, world: np.ndarray) -> tuple[dict, dict
     pts = [(p.body, p.location) for p in m.points if p.active_at_rest]
     wpts = _world_points(skel, world, pts)
     path_length = float(np.sum(np.linalg.norm(np.diff(wpts, axis=0), axis=1)))
-    axis = axis_control_points(skel, world, pts)
-    t_of, axis_length = _arc_parameter(skel, world, axis)
+    path, wraps = path_docs(model, m)
+    rest_ctrl, path_length = _rest_path(m.name, path, wraps, skel, world)
+    t_of, axis_length = _arc_parameter_of(rest_ctrl)
     pcsa = m.max_isometric_force / SPECIFIC_TENSION
     volume = pcsa * m.optimal_fiber_length
     tendon = min(m.tendon_slack_length / axis_length, MAX_TENDON_FRACTION) if axis_length > 0 else 0.0
@@ -253,32 +257,44 @@ def muscle_doc(m: Muscle, skel: Skeleton, world: np.ndarray) -> tuple[dict, dict
         "muscle": m.name,
         "color": muscle_color(m.name),
         "volume": "exact",
-        "axis": [{"bone": b, "at": at} for b, at in axis],
+        "path": path,
+        **({"wrap": wraps} if wraps else {}),
         "sections": sections,
         "tendons": [t_o, t_i],
     }
     conditional = [p.name for p in m.points if p.kind == "conditional"]
     dropped = [p.name for p in m.points if not p.active_at_rest]
     moving = [p.name for p in m.points if p.kind == "moving"]
-    row = {"muscle": m.name, "type": m.type, "path_points": len(m.points), "control_points": len(axis),
+    row = {"muscle": m.name, "type": m.type, "path_points": len(m.points), "control_points": len(rest_ctrl),
            "rest_axis_length": axis_length,
            "conditional": conditional, "conditional_inactive_at_rest": dropped, "moving": moving,
-           "wraps": list(m.wraps), "rest_path_length": path_length, "pcsa_m2": pcsa, "volume_m3": volume,
+           "wraps": [w.wrap for w in m.wraps], "rest_path_length": path_length, "pcsa_m2": pcsa, "volume_m3": volume,
            "belly_radius": r, "tendon_radius": r_t, "tendons": [t_o, t_i]}
-    return doc, row
+    return doc, rounded(row)
 
 
-def _arc_parameter(skel: Skeleton, world: np.ndarray, axis) -> tuple:
-    """The rest axis' arc-length fraction → curve parameter map, and its length.
+def _rest_path(name: str, path: list, wraps: list, skel: Skeleton, world: np.ndarray):
+    """The path documents read back through the loader, evaluated at the rest pose: the axis
+    control points (n, 3) and the wrapped path's length."""
+    from axdf_cli.loaders import parse_muscle_path
+    from axdf_cli.paths.path import PathModel
+    from axdf_cli.yamlio import Fields
 
-    Sections are placed by curve parameter t, tendons by arc length (docs/FORMATS.md); via
-    points crowd control points (and so parameter range) where the path turns, so belly and
-    tendon positions chosen along the length are mapped to t through the rest curve."""
+    doc = {"path": path, "wrap": wraps}
+    spec = parse_muscle_path(Fields(doc, Mark(f"<{name}>"), "muscle"))
+    pm = PathModel(spec, skel.bone_index, skel.coord_index)
+    q = skel.rest_coordinates()[None]
+    _, length, _ = pm.wrapped(world[None], q)
+    ctrl, _ = pm.control_points(world[None], q)
+    return ctrl[0], float(length[0])
+
+
+def _arc_parameter_of(ctrl: np.ndarray) -> tuple:
+    """The arc-length fraction → curve parameter map of the axis with control points ctrl,
+    and its length."""
     from axdf_cli import bspline
 
-    ctrl = _world_points(skel, world, axis)  # (n, 3)
     ts = np.linspace(0.0, 1.0, 2001)
-    # C[s, c] = sum_i N[s, i] ctrl[i, c]
     c = np.einsum("si,ic->sc", bspline.basis_matrix(bspline.clamped_knots(len(ctrl), 2), 2, ts), ctrl)
     arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(c, axis=0), axis=1))])
     length = float(arc[-1])
@@ -317,6 +333,34 @@ def rest_world(skel: Skeleton) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------- YAML text
+
+#: Positions are rounded to this many decimals of a metre (0.1 µm): OpenSim path points and
+#: joint frames are given to 0.1 mm or coarser; float noise is ~1e-17 m.
+POSITION_DECIMALS = 7
+#: Keys whose numbers are positions in metres.
+POSITION_KEYS = frozenset({"offset", "post_offset", "at"})
+#: Significant digits of every other number (angles, radii, fractions, activations, function
+#: values): ~1e-9 relative, far below anything the model resolves and above float noise.
+SIGNIFICANT_DIGITS = 9
+
+
+def round_number(v: float, key=None) -> float:
+    """``v`` rounded to what it means: see POSITION_DECIMALS and SIGNIFICANT_DIGITS."""
+    if key in POSITION_KEYS:
+        return round(v, POSITION_DECIMALS) + 0.0  # + 0.0: no negative zero
+    return float(f"{v:.{SIGNIFICANT_DIGITS}g}") + 0.0
+
+
+def rounded(doc, key=None):
+    """A copy of a document (dicts, lists, scalars) with every float rounded by
+    :func:`round_number`; a list's numbers are rounded as its key says."""
+    if isinstance(doc, dict):
+        return {k: rounded(v, k) for k, v in doc.items()}
+    if isinstance(doc, (list, tuple)):
+        return [rounded(v, key) for v in doc]
+    if isinstance(doc, float) and math.isfinite(doc):
+        return round_number(doc, key)
+    return doc
 
 _PLAIN = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\-/]*$")
 
@@ -373,7 +417,9 @@ FLOW_CHILDREN = ("keys", "activation", "coordinates")
 
 
 def dump_yaml(doc, header: str = "") -> str:
-    """Block-style YAML with flow-style vectors and small mappings; deterministic."""
+    """Block-style YAML with flow-style vectors and small mappings, numbers :func:`rounded`;
+    deterministic."""
+    doc = rounded(doc)
     lines: list[str] = []
     if header:
         lines += ["# " + h if h else "#" for h in header.splitlines()]

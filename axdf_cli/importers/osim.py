@@ -129,6 +129,33 @@ class PathPoint:
     active_at_rest: bool = True
     condition: tuple[str, float, float] | None = None  # (coordinate, lo, hi) for conditional
     mark: Mark | None = None
+    #: moving points: per axis (coordinate, function of it in OpenSim units) or None (fixed)
+    moving: tuple | None = None
+    #: the offset frame between the point's frame and its body (None: the body itself)
+    frame: "Offset | None" = None
+
+
+@dataclass(frozen=True)
+class WrapObject:
+    """A wrap surface fixed in ``body``: OpenSim units (m, rad)."""
+
+    name: str
+    body: str
+    shape: str  # cylinder | sphere | ellipsoid | torus
+    size: tuple[float, float, float]
+    translation: tuple[float, float, float]
+    rotation: tuple[float, float, float]  # body-fixed X-Y-Z (rad)
+    quadrant: str
+    active: bool
+    mark: Mark
+
+
+@dataclass(frozen=True)
+class PathWrap:
+    wrap: str  # WrapObject name
+    method: str
+    range: tuple[int, int]
+    mark: Mark
 
 
 @dataclass(frozen=True)
@@ -140,7 +167,7 @@ class Muscle:
     tendon_slack_length: float
     pennation_angle: float  # rad, at optimal fibre length
     points: tuple[PathPoint, ...]  # all points, in path order (inactive ones flagged)
-    wraps: tuple[str, ...]
+    wraps: tuple[PathWrap, ...]
     mark: Mark
 
 
@@ -155,6 +182,7 @@ class Model:
     credits: str = ""
     publications: str = ""
     ignored: list[dict] = field(default_factory=list)  # {kind, name, where, why}
+    wrap_objects: dict[str, WrapObject] = field(default_factory=dict)
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -275,6 +303,7 @@ class _Parser:
         self.root = root
         self.source = source
         self.ignored: list[dict] = []
+        self.wrap_objects: dict[str, WrapObject] = {}
 
     def ignore(self, kind: str, name: str | None, node: Node, why: str):
         self.ignored.append({"kind": kind, "name": name or "", "where": f"{node.mark}", "why": why})
@@ -312,7 +341,7 @@ class _Parser:
         return Model(name, self.source, self.bodies, joints, coords, muscles,
                      (model.find("credits").text if model.find("credits") is not None else ""),
                      (model.find("publications").text if model.find("publications") is not None else ""),
-                     self.ignored)
+                     self.ignored, self.wrap_objects)
 
     # bodies ---------------------------------------------------------------
 
@@ -353,12 +382,44 @@ class _Parser:
             bodies[b.name] = Body(b.name, mc, tuple(self._meshes(b, b.name)), b.mark)
             ws = b.path("WrapObjectSet", "objects")
             for w in (ws.children if ws is not None else []):
-                self.ignore("wrap object", w.name, w, f"{w.tag} on body {b.name}: wrapping is not simulated")
+                self._wrap_object(w, b.name)
             comps = b.find("components")
             for c in (comps.children if comps is not None else []):
                 if c.tag != "PhysicalOffsetFrame":
                     self.ignore("component", c.name, c, f"{c.tag} on body {b.name}")
         return bodies
+
+    # wrap objects ---------------------------------------------------------
+
+    _WRAP_TAGS = {"WrapCylinder": "cylinder", "WrapSphere": "sphere", "WrapEllipsoid": "ellipsoid",
+                  "WrapTorus": "torus"}
+
+    def _wrap_object(self, w: Node, body: str) -> None:
+        shape = self._WRAP_TAGS.get(w.tag)
+        if shape is None:
+            self.ignore("wrap object", w.name, w, f"{w.tag} on body {body}: not a wrap surface axdf knows")
+            return
+        if not w.name or w.name in self.wrap_objects:
+            raise InputError(w.mark, f"wrap object {w.name!r} unnamed or defined twice", "unique wrap object names")
+        if shape == "cylinder":
+            size = (_numbers(_need(w, "radius", w.name), 1)[0], _numbers(_need(w, "length", w.name), 1)[0], 0.0)
+        elif shape == "sphere":
+            size = (_numbers(_need(w, "radius", w.name), 1)[0], 0.0, 0.0)
+        elif shape == "ellipsoid":
+            size = _numbers(_need(w, "dimensions", w.name), 3, "dimensions")
+        else:
+            size = (_numbers(_need(w, "inner_radius", w.name), 1)[0], _numbers(_need(w, "outer_radius", w.name), 1)[0], 0.0)
+        n = 3 if shape == "ellipsoid" else (2 if shape in ("cylinder", "torus") else 1)
+        if any(v <= 0 for v in size[:n]):
+            raise InputError(w.mark, f"{w.tag} {w.name!r} has a non-positive size {list(size[:n])}", "positive radii and lengths")
+        q = w.find("quadrant")
+        quadrant = (q.text.strip() if q is not None and q.text else "all")
+        if quadrant.lower() in ("all", "unassigned"):
+            quadrant = "all"
+        self.wrap_objects[w.name] = WrapObject(
+            w.name, body, shape, tuple(float(v) for v in size),
+            _opt_numbers(w, "translation", 3, (0.0, 0.0, 0.0)), _opt_numbers(w, "xyz_body_rotation", 3, (0.0, 0.0, 0.0)),
+            quadrant, _bool(w.find("active"), True), w.mark)
 
     # frames ---------------------------------------------------------------
 
@@ -593,8 +654,21 @@ class _Parser:
             for w in (ws.children if ws is not None else []):
                 wo = w.find("wrap_object") or w.find("socket_wrap_object")
                 wname = _last(wo.text) if wo is not None and wo.text else (w.name or "")
-                wraps.append(wname)
-                self.ignore("path wrap", f"{f.name}:{wname}", w, "wrapping is not simulated; the axis follows the path points")
+                if wname not in self.wrap_objects:
+                    raise InputError((wo or w).mark, f"path wrap of {f.name} names unknown wrap object {wname!r}",
+                                     "wrap objects of the bodies: " + ", ".join(sorted(self.wrap_objects)))
+                mn = w.find("method")
+                method = mn.text.strip() if mn is not None and mn.text else "hybrid"
+                if method not in ("hybrid", "midpoint", "axial"):
+                    raise InputError(mn.mark, f"wrap method {method!r}", "hybrid, midpoint or axial")
+                rn = w.find("range")
+                rng = tuple(int(v) for v in _numbers(rn, 2, "range")) if rn is not None and rn.text else (-1, -1)
+                npts = len(pts)
+                for v in rng:
+                    if v == 0 or v < -1 or v > npts:
+                        raise InputError(rn.mark, f"range {list(rng)} of path wrap {wname!r} lies outside the path of "
+                                         f"{f.name} ({npts} points)", f"1-based point indices 1..{npts}, or -1 for an end")
+                wraps.append(PathWrap(wname, method, rng, w.mark))
             muscles.append(Muscle(f.name, f.tag, fmax, lopt, lts, pen, tuple(pts), tuple(wraps), f.mark))
         return muscles
 
@@ -610,13 +684,16 @@ class _Parser:
                 raise InputError(p.mark, f"path point {p.name!r} of {muscle} has no <socket_parent_frame>", "a body path")
             frame = self._resolve(sf.text if "/" in sf.text else "/bodyset/" + sf.text if sf.text != "ground" else "/ground",
                                   sf, {})
+            moving = None
             if p.tag == "MovingPathPoint":
                 loc = []
+                moving = []
                 for ax, default in zip("xyz", _opt_numbers(p, "location", 3, (0.0, 0.0, 0.0))):
                     fnode = p.find(f"{ax}_location")
                     cnode = p.find(f"socket_{ax}_coordinate") or p.find(f"{ax}_coordinate")
                     if fnode is None:
                         loc.append(default)
+                        moving.append(None)
                         continue
                     fn = _find_function(fnode, f"{ax}_location")
                     if fn is None:
@@ -627,8 +704,12 @@ class _Parser:
                             raise InputError(p.mark, f"moving point {p.name!r} has no {ax} coordinate",
                                              f"<socket_{ax}_coordinate>")
                         x = self._coord(cnode).default
+                        moving.append((self._coord(cnode).name, fn))
+                    else:
+                        moving.append(None)
                     loc.append(evaluate_function(fn, x))
                 location = tuple(loc)
+                moving = tuple(moving)
                 kind, active, cond = "moving", True, None
             else:
                 location = _numbers(_need(p, "location", f"path point {p.name!r}"), 3, "location")
@@ -643,7 +724,8 @@ class _Parser:
                     active = lo <= c.default <= hi
             if not frame.is_identity:
                 location = tuple(float(v) for v in (frame.matrix() @ np.append(location, 1.0))[:3])
-            pts.append(PathPoint(p.name or "", frame.body, tuple(float(v) for v in location), kind, active, cond, p.mark))
+            pts.append(PathPoint(p.name or "", frame.body, tuple(float(v) for v in location), kind, active, cond, p.mark,
+                                 moving, None if frame.is_identity else frame))
         active = [q for q in pts if q.active_at_rest]
         if len(active) < 2:
             raise InputError(gp.mark, f"muscle {muscle!r} has {len(active)} path points active at the rest pose",

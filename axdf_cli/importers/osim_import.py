@@ -44,6 +44,7 @@ import numpy as np
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.importers import emit
 from axdf_cli.loaders import parse_skeleton_text
+from axdf_cli.yamlio import check_name
 from axdf_cli.importers.osim import Model, load_osim
 from axdf_cli.importers.storage import Table, read_storage
 from axdf_cli.importers.vtp import ply_bytes, read_vtp
@@ -273,6 +274,15 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
     name = name or safe_name(model.name)
     if not NAME_RE.match(name):
         raise InputError(None, f"name {name!r}", "names use letters, digits, '_', '.', '-'")
+    # names become axdf names in files that do not exist yet: check them here, at the .osim line
+    for what, items in (("body", model.bodies.values()), ("coordinate", model.coordinates.values()),
+                        ("wrap object", model.wrap_objects.values())):
+        for item in items:
+            try:
+                check_name(item.name, item.mark, f"{what} name")
+            except InputError as e:
+                raise InputError(item.mark, f"{what} name {item.name!r} cannot be an axdf name",
+                                 "names use letters, digits, '_', '.', '-' (rename it in the model)") from e
     for m in model.muscles:
         if not NAME_RE.match(m.name):
             raise InputError(m.mark, f"muscle name {m.name!r}", "names use letters, digits, '_', '.', '-'")
@@ -306,7 +316,7 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
 
     rows = []
     for m in model.muscles:
-        mdoc, row = emit.muscle_doc(m, skel, world)
+        mdoc, row = emit.muscle_doc(m, skel, world, model)
         rows.append(row)
         files[str(mus_dir / f"{m.name}.yaml")] = emit.dump_yaml(mdoc, f"{m.name}: imported from {model_path.name} "
                                                                       f"({m.type}) by `axdf import osim`.").encode()
@@ -320,7 +330,8 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
                         "path_points": sum(r["path_points"] for r in rows),
                         "conditional_path_points": sum(len(r["conditional"]) for r in rows),
                         "conditional_inactive_at_rest": sum(len(r["conditional_inactive_at_rest"]) for r in rows),
-                        "moving_path_points": sum(len(r["moving"]) for r in rows)}
+                        "moving_path_points": sum(len(r["moving"]) for r in rows),
+                        "wrap_surfaces": sum(len(r["wraps"]) for r in rows)}
     inputs = [Path(x) for x in (model_path, motion, controls) if x is not None]
     report["ignored"] = [dict(i, where=_strip_dirs(i["where"], inputs)) for i in model.ignored]
     report["warnings"] = [_strip_dirs(w, inputs) for w in warnings]
@@ -328,8 +339,7 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
         mm["where"] = _strip_dirs(mm["where"], inputs)
     report["settings"] = {"specific_tension_Pa": emit.SPECIFIC_TENSION, "tendon_stress_Pa": emit.TENDON_STRESS,
                           "belly_profile": list(emit.BELLY_PROFILE), "origin_tendon_share": emit.ORIGIN_TENDON_SHARE,
-                          "max_tendon_fraction": emit.MAX_TENDON_FRACTION,
-                          "via_pair_fraction": emit.VIA_PAIR_FRACTION}
+                          "max_tendon_fraction": emit.MAX_TENDON_FRACTION}
     report["files"] = sorted(_rel(Path(p), out_dir) for p in files)
     files[str(out_dir / "import_report.json")] = (json.dumps(report, indent=1, sort_keys=True) + "\n").encode()
     files[str(out_dir / "IMPORT.md")] = import_markdown(report).encode()
@@ -350,8 +360,9 @@ def import_markdown(r: dict) -> str:
              f"OpenSim model `{r['source']['model_name']}`.", "",
              f"- bodies {c['bodies']}, joints {c['joints']}, coordinates {c['coordinates']}, meshes {c['meshes']}",
              f"- muscles {c['muscles']} from {c['path_points']} path points "
-             f"({c['conditional_path_points']} conditional, {c['conditional_inactive_at_rest']} of them inactive at rest "
-             f"and left out; {c['moving_path_points']} moving, placed at the rest pose)", ""]
+             f"({c['conditional_path_points']} conditional, active within their ranges, {c['conditional_inactive_at_rest']} "
+             f"of them inactive at rest; {c['moving_path_points']} moving, evaluated every frame) and "
+             f"{c.get('wrap_surfaces', 0)} wrap surfaces, wrapped every frame", ""]
     if "motion" in r:
         mo = r["motion"]
         lines += [f"Motion: `{mo['file']}`, {mo['rows']} rows → {mo['frames']} frames at {mo['fps']} fps, "

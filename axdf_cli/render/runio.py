@@ -22,6 +22,7 @@ import numpy as np
 
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.render.settings import RenderSettings, parse_render_settings
+from axdf_cli.runfolder import MANIFEST, mesh_relpath
 from axdf_cli.scene import FrameChunk, Scene, SceneBone, SceneMuscle
 
 def read_mesh_file(path: Path) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
@@ -65,17 +66,17 @@ def _quat_matrix(q: np.ndarray) -> np.ndarray:
 
 def _mesh_path(run_dir: Path, name: str, frame: int) -> Path:
     for ext in _READERS:
-        p = run_dir / "meshes" / name / f"{name}_{frame:04d}{ext}"
+        p = run_dir / mesh_relpath(name, frame, ext[1:])
         if p.exists():
             return p
-    raise InputError(Mark(str(run_dir / "meshes" / name / f"{name}_{frame:04d}.ply")),
+    raise InputError(Mark(str(run_dir / mesh_relpath(name, frame, "ply"))),
                      "mesh file missing", "the run folder must hold every muscle's mesh for every frame")
 
 
 def load_run_scene(run_dir: Path) -> tuple[Scene, Iterator[FrameChunk], RenderSettings]:
     """Scene, an iterator of one-frame chunks, and the run's render settings (enabled)."""
     run_dir = Path(run_dir)
-    mpath = run_dir / "manifest.json"
+    mpath = run_dir / MANIFEST
     where = Mark(str(mpath))
     try:
         manifest = json.loads(mpath.read_text())

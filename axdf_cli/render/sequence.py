@@ -19,6 +19,7 @@ from axdf_cli.render.exr import exr_channels, write_exr
 from axdf_cli.render.png import write_png
 from axdf_cli.render.renderer import FrameImages, id_map, render_frames
 from axdf_cli.render.settings import RenderSettings
+from axdf_cli.runfolder import CAMERA, frame_relpath
 from axdf_cli.scene import FrameChunk, Scene
 
 
@@ -50,16 +51,45 @@ def render_sequence(scene: Scene, chunks: Iterable[FrameChunk], settings: Render
         files: dict[str, str] = {}
         for img in render_frames(ctx, scene, chunks, settings, cameras):
             for ext, writer in FRAME_WRITERS.items():
-                rel = f"frames/{img.frame:04d}.{ext}"
+                rel = frame_relpath(img.frame, ext)
                 files[rel] = writer(out_dir / rel, img)
             if progress is not None:
                 progress(img.frame)
         cam = camera_json(cameras, scene.frames, settings, id_map(scene, settings.bones))
-        files["camera.json"] = atomic.write_text(out_dir / "camera.json",
+        files[CAMERA] = atomic.write_text(out_dir / CAMERA,
                                                  json.dumps(cam, indent=1, sort_keys=True) + "\n")
     finally:
         ctx.release()
     return {"gl_renderer": info.renderer, "gl_version": info.version, "files": files}
+
+
+RENDER_CHUNK = 16  # frames per block handed to the renderer by render_plan (all muscles of a frame at once)
+
+
+def render_plan(plan, bounds, twist_ref, progress: Callable[[int], None] | None = None) -> dict:
+    """Render a run plan's frames into ``plan.out`` (``axdf run --render``): the muscles are
+    evaluated again, block by block (evaluation is cheap next to rendering and this keeps
+    memory bounded), exactly as the mesh pass wrote them."""
+    from axdf_cli.run.evaluate import evaluate_chunks, finite_or_rest
+    from axdf_cli.scene import SceneBone, SceneMuscle
+
+    skel = plan.pose.skeleton
+    bone_ids, scene_bones = [], []
+    if plan.render.bones:
+        for i, (v, f, _) in sorted(plan.bone_meshes.items()):
+            bone_ids.append(i)
+            scene_bones.append(SceneBone(skel.bones[i].name, v, f))
+    scene = Scene(
+        muscles=tuple(SceneMuscle(s.name, s.color, m.faces) for s, m in zip(plan.muscles, plan.models)),
+        bones=tuple(scene_bones), bounds=bounds, frames=tuple(int(f) for f in plan.frames))
+
+    def chunks():
+        for sl, world, results in evaluate_chunks(plan, RENDER_CHUNK, twist_ref):
+            done = [finite_or_rest(r, plan.models[j]) for j, r in results]
+            yield FrameChunk(frames=plan.frames[sl], positions=tuple(d[0] for d in done),
+                             normals=tuple(d[1] for d in done), bone_world=world[:, bone_ids])
+
+    return render_sequence(scene, chunks(), plan.render, plan.out, progress=progress)
 
 
 def benchmark_fps(size: tuple[int, int] = (512, 512), n_muscles: int = 10, verts: int = 2000,

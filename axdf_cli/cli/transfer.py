@@ -1,0 +1,54 @@
+"""Re-express muscles on another skeleton: ``axdf transfer MUSCLES --from A --to B --map MAP --out DIR``.
+
+Every muscle of MUSCLES (files, folders or globs) defined on skeleton A is moved onto
+skeleton B (``--from``/``--to``, or the map's ``from:``/``to:``) through the bone correspondence in MAP (docs/FORMATS.md, "Transfer map"): axis
+points keep their place along each bone's segment, scaled by the bones' length ratio;
+section radii scale with the muscle's bones. Muscles on bones the map does not name are
+skipped and listed (exit 0 with a warning). DIR receives one file per muscle file (same
+name), ``transfer_report.json`` and ``TRANSFER.md``. A bad map or muscle writes nothing (exit 2).
+"""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from axdf_cli.atomic import write_bytes
+
+
+def add_args(p) -> None:
+    p.add_argument("muscles", nargs="+", metavar="MUSCLES", help="muscle files, folders or globs defined on --from")
+    p.add_argument("--from", dest="skel_from", metavar="SKELETON",
+                   help="skeleton YAML the muscles use (default: the map's from:)")
+    p.add_argument("--to", dest="skel_to", metavar="SKELETON",
+                   help="skeleton YAML to move them onto (default: the map's to:)")
+    p.add_argument("--map", required=True, metavar="MAP.yaml", help="bone correspondence (docs/FORMATS.md)")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    p.add_argument("--allow-outside", action="store_true",
+                   help="allow paths inside YAML files to leave the project folder tree")
+
+
+def run(args) -> int:
+    from axdf_cli.errors import Mark
+    from axdf_cli.loaders import expand_muscle_paths, load_skeleton, set_ref_policy
+    from axdf_cli.transfer import build_transfer
+
+    set_ref_policy([Path.cwd(), Path(args.map).resolve().parent], args.allow_outside)
+    skel_a = load_skeleton(Path(args.skel_from)) if args.skel_from else None
+    skel_b = load_skeleton(Path(args.skel_to)) if args.skel_to else None
+    files = expand_muscle_paths([(Path(m), Mark(m)) for m in args.muscles])
+    res = build_transfer(files, skel_a, skel_b, Path(args.map), Path(args.out))
+    for path, data in sorted(res.files.items()):
+        write_bytes(path, data)
+    for s in res.skipped:
+        print(f"axdf: warning: {s['file']}: muscle {s['muscle']} skipped: bones without a counterpart in the map: "
+              f"{', '.join(s['bones_without_counterpart'])}", file=sys.stderr)
+    if not args.quiet:
+        r = res.report
+        print(f"transferred {len(r['muscles'])} muscles from {r['from']} to {r['to']} "
+              f"({len(r['skipped'])} skipped) into {args.out}")
+        if args.verbose:
+            for m in r["muscles"]:
+                print(f"  {m['muscle']}: rest length {m['rest_length_from']:.4f} -> {m['rest_length_to']:.4f} m, "
+                      f"radii x{m['radius_scale']:.3f}")
+        print(f"report: {Path(args.out) / 'TRANSFER.md'}")
+    return 0

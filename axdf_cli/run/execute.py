@@ -1,0 +1,287 @@
+"""Executing a plan: the mesh pass (in this process or forked workers), the tables, the
+render pass and the manifest, written into the run folder (:mod:`axdf_cli.runfolder`)."""
+from __future__ import annotations
+
+import json
+import shutil
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from axdf_cli import __version__, atomic
+from axdf_cli.errors import InputError
+from axdf_cli.formats import WRITERS
+from axdf_cli.run.evaluate import CHUNK_FRAMES, evaluate_chunks, finite_or_rest, twist_references
+from axdf_cli.run.plan import RunPlan, display_path
+from axdf_cli.run.pool import fork_map
+from axdf_cli.runfolder import (BONES_CSV, STATS, OutputWriter, bone_mesh_relpath, gl_record, mesh_relpath,
+                                write_manifest)
+from axdf_cli.skeleton import matrix_to_quaternion
+
+MANIFEST_INTERVAL_S = 1.0  # the in-progress manifest is rewritten at most this often
+TOP_FILES = ("manifest.json", "stats.csv", "bones.csv", "camera.json")
+
+
+def render_dict(settings) -> dict | None:
+    if settings is None or not settings.enabled:
+        return None
+    from axdf_cli.render.settings import settings_to_dict
+
+    return settings_to_dict(settings)
+
+
+def check_output_folder(out: Path, resume: bool, overwrite: bool) -> dict:
+    """Refuse a non-empty OUT unless --resume or --overwrite; return the files of a previous
+    manifest (for --resume)."""
+    if out.exists() and not out.is_dir():
+        raise InputError(None, f"--out {out} exists and is not a folder", "give a folder")
+    if not out.exists() or not any(out.iterdir()):
+        return {}
+    if resume:
+        man = out / "manifest.json"
+        try:
+            prev = json.loads(man.read_text())
+            atomic.remove_stale_temporaries(out)
+            return dict(prev.get("files", {}))
+        except (OSError, ValueError):
+            atomic.remove_stale_temporaries(out)
+            return {}
+    if overwrite:
+        for sub in ("meshes", "frames", "bones"):
+            shutil.rmtree(out / sub, ignore_errors=True)
+        for name in TOP_FILES:
+            try:
+                (out / name).unlink()
+            except FileNotFoundError:
+                pass
+        atomic.remove_stale_temporaries(out)
+        return {}
+    raise InputError(None, f"output folder {out} is not empty",
+                     "pass --resume to finish an interrupted run, --overwrite to replace it, or another --out")
+
+
+def previous_subset(previous: dict, out: Path) -> dict:
+    """The previous manifest's files that are still on disk (kept listed while resuming)."""
+    return {k: v for k, v in previous.items() if (out / k).is_file()}
+
+
+def _fmt_rows(rows: list[list]) -> str:
+    return "".join(",".join(r) + "\n" for r in rows)
+
+
+def _g(x: float) -> str:
+    return f"{x + 0.0:.9g}"
+
+
+def manifest_dict(plan: RunPlan, files: dict, warnings: list, complete: bool, extra: dict | None = None) -> dict:
+    m = {
+        "tool": "axdf",
+        "version": __version__,
+        "complete": complete,
+        "inputs": dict(sorted(plan.inputs.items())),
+        "settings": {
+            "format": plan.fmt,
+            "pose": plan.pose.name,
+            "skeleton": plan.pose.skeleton.name,
+            "fps": plan.pose.fps,
+            "render": render_dict(plan.render),
+        },
+        "frames": [int(f) for f in plan.frames],
+        "muscles": [
+            {"name": s.name, "group": s.group, "color": [round(c, 6) for c in s.color],
+             "source": display_path(Path(s.source)),
+             "volume": s.volume, "vertices": int(m.n_vertices), "faces": int(len(m.faces)),
+             "rest_length": round(m.l0, 12), "rest_volume": float(f"{m.v0:.12g}")}
+            for s, m in zip(plan.muscles, plan.models)
+        ],
+        "bones": [{"name": b.name, "mesh": bone_mesh_relpath(b.name) if b.mesh else None}
+                  for b in plan.pose.skeleton.bones],
+        "warnings": warnings,
+        "files": files,
+    }
+    if extra:
+        m.update(extra)
+    return m
+
+
+@dataclass
+class MeshPassResult:
+    """What a mesh pass over some muscles returns (picklable, for worker processes)."""
+
+    muscles: list  # muscle indices, in order
+    files: dict  # relpath -> sha256
+    stats: np.ndarray  # (F, len(muscles), 6) length, volume, ratio, tension, twist, scale
+    warnings: list  # [(frame index, muscle index, message)]
+    lo: np.ndarray  # (3,) bounds of every written vertex
+    hi: np.ndarray
+    skipped: int = 0
+    bone_rows: np.ndarray | None = None  # (F, B, 7) x y z qw qx qy qz, when asked for
+
+
+def mesh_pass(plan: RunPlan, muscles: list[int], twist_ref: np.ndarray, writer: OutputWriter,
+              progress=None, on_chunk=None, bones: bool = False) -> MeshPassResult:
+    """Evaluate and write the meshes of ``muscles`` for every selected frame, chunk by chunk;
+    with ``bones``, also return every bone's world pose (from the same kinematics)."""
+    writers = {j: WRITERS[plan.fmt](plan.models[j].faces, plan.muscles[j].name) for j in muscles}
+    col = {j: k for k, j in enumerate(muscles)}
+    stats = np.zeros((len(plan.frames), len(muscles), 6))
+    bone_rows = np.zeros((len(plan.frames), len(plan.pose.skeleton.bones), 7)) if bones else None
+    warns: list = []
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    for sl, world, results in evaluate_chunks(plan, twist_ref=twist_ref, muscles=muscles):
+        frames = plan.frames[sl]
+        if bones:
+            bone_rows[sl, :, :3] = world[:, :, :3, 3]
+            bone_rows[sl, :, 3:] = matrix_to_quaternion(world[:, :, :3, :3])
+        for j, res in results:
+            name = plan.muscles[j].name
+            pos, nrm, bad = finite_or_rest(res, plan.models[j])
+            res.warnings += [(int(i), "non-finite vertices; the rest shape was written instead") for i in bad]
+            w = writers[j]
+            for i, frame in enumerate(frames):
+                writer.write(mesh_relpath(name, int(frame), plan.fmt), w.encode(pos[i], nrm[i]))
+            lo = np.minimum(lo, pos.reshape(-1, 3).min(axis=0))
+            hi = np.maximum(hi, pos.reshape(-1, 3).max(axis=0))
+            st = np.stack([res.length, res.volume, res.volume / plan.models[j].v0, res.tension,
+                           res.twist, res.scale], axis=1)
+            stats[sl, col[j]] = np.where(np.isfinite(st), st, 0.0)
+            warns += [(sl.start + i, j, msg) for i, msg in res.warnings]
+            if progress:
+                progress(len(frames))
+        if on_chunk:
+            on_chunk()
+    writer.flush()
+    return MeshPassResult(list(muscles), writer.files, stats, warns, lo, hi, writer.skipped, bone_rows)
+
+
+def _mesh_worker(shared: dict, task) -> MeshPassResult:
+    muscles, bones = task
+    writer = OutputWriter(shared["plan"].out, shared["previous"])
+    try:
+        return mesh_pass(shared["plan"], muscles, shared["twist_ref"], writer, bones=bones)
+    finally:
+        writer.close(cancel=True)
+
+
+def _parallel_mesh_pass(plan: RunPlan, jobs: int, twist_ref, previous: dict, progress) -> list[MeshPassResult]:
+    """Split the muscles over ``jobs`` forked processes (round robin: similar work each); the
+    first also returns the bones' poses."""
+    groups = [list(range(k, len(plan.models), jobs)) for k in range(jobs)]
+    tasks = [(g, k == 0) for k, g in enumerate(groups) if g]
+    on_result = (lambda r: progress(len(r.muscles) * len(plan.frames))) if progress else None
+    return fork_map(_mesh_worker, tasks, {"plan": plan, "twist_ref": twist_ref, "previous": previous}, on_result)
+
+
+def stats_csv(plan: RunPlan, stats: np.ndarray, warn_text: list) -> bytes:
+    rows = [["frame", "muscle", "length", "volume", "volume_ratio", "tension", "twist", "scale", "warning"]]
+    for i, frame in enumerate(plan.frames):
+        for j, name in enumerate(plan.names):
+            rows.append([str(int(frame)), name] + [_g(x) for x in stats[i, j]] + [_csv_text(warn_text[i][j])])
+    return _fmt_rows(rows).encode()
+
+
+def bones_csv(plan: RunPlan, bone_rows: np.ndarray) -> bytes:
+    rows = [["frame", "bone", "x", "y", "z", "qw", "qx", "qy", "qz"]]
+    for i, frame in enumerate(plan.frames):
+        for b, bone in enumerate(plan.pose.skeleton.bones):
+            rows.append([str(int(frame)), bone.name] + [_g(x) for x in bone_rows[i, b]])
+    return _fmt_rows(rows).encode()
+
+
+def execute(plan: RunPlan, *, resume: bool = False, overwrite: bool = False, progress=None,
+            strict: bool = False, render_progress=None, jobs: int = 1) -> dict:
+    """Run the plan; return a summary dict. ``progress(n)`` is called with muscle-frames done.
+
+    With ``jobs`` > 1 the muscles are split over forked worker processes for the mesh pass;
+    the output is the same bytes. Rendering runs in this process afterwards (the GL context
+    is created after every fork)."""
+    out = plan.out
+    previous = check_output_folder(out, resume, overwrite)
+    atomic.ensure_dir(out)
+    write_manifest(out, manifest_dict(plan, previous_subset(previous, out), [], complete=False))
+    nf, nm = len(plan.frames), len(plan.models)
+    bones = plan.pose.skeleton.bones
+    twist_ref = twist_references(plan)
+    if strict:  # evaluate everything first: with --strict, any warning stops the run before it writes
+        found = []
+        for sl, _, results in evaluate_chunks(plan, twist_ref=twist_ref):
+            for j, res in results:
+                found += [f"{plan.names[j]} frame {int(plan.frames[sl.start + i])}: {msg}" for i, msg in res.warnings]
+                bad = ~(np.isfinite(res.vertices).all(axis=(1, 2)) & np.isfinite(res.normals).all(axis=(1, 2)))
+                found += [f"{plan.names[j]} frame {int(plan.frames[sl.start + i])}: non-finite vertices"
+                          for i in np.nonzero(bad)[0]]
+        if found:
+            raise InputError(None, f"{len(found)} warning(s) with --strict; first: {found[0]}",
+                             "fix the inputs or run without --strict")
+
+    writer = OutputWriter(out, previous)
+    try:
+        if jobs > 1 and nm > 1:
+            try:
+                parts = _parallel_mesh_pass(plan, min(jobs, nm), twist_ref, previous, progress)
+            except BaseException:
+                atomic.remove_stale_temporaries(out)  # a worker stopped mid-write
+                raise
+        else:
+            clock = {"t": time.monotonic(), "cost": 0.0}
+
+            def checkpoint():
+                # the in-progress manifest (finished files only), at most every
+                # MANIFEST_INTERVAL_S and never more than ~5% of the run's time: on a long run
+                # the file list grows to many MB
+                now = time.monotonic()
+                if now - clock["t"] >= max(MANIFEST_INTERVAL_S, 20.0 * clock["cost"]):
+                    write_manifest(out, manifest_dict(plan, writer.files, [], complete=False))
+                    clock["cost"] = time.monotonic() - now
+                    clock["t"] = time.monotonic()
+
+            parts = [mesh_pass(plan, list(range(nm)), twist_ref, writer, progress, checkpoint, bones=True)]
+        stats = np.zeros((nf, nm, 6))
+        warn_text = [[""] * nm for _ in range(nf)]
+        lo = np.min([p.lo for p in parts], axis=0)
+        hi = np.max([p.hi for p in parts], axis=0)
+        all_warns = []
+        writer.skipped = sum(p.skipped for p in parts)  # (one pass in this process: its writer is ours)
+        for part in parts:
+            writer.files.update(part.files)
+            stats[:, part.muscles] = part.stats
+            all_warns += part.warnings
+        warnings: list[str] = list(plan.warnings)
+        for fi, j, msg in sorted(all_warns, key=lambda w: (w[0], w[1])):
+            warn_text[fi][j] = (warn_text[fi][j] + "; " if warn_text[fi][j] else "") + msg
+            warnings.append(f"{plan.names[j]} frame {int(plan.frames[fi])}: {msg}")
+
+        for i, (_, _, data) in sorted(plan.bone_meshes.items()):
+            writer.write(bone_mesh_relpath(bones[i].name), data)
+        writer.write(STATS, stats_csv(plan, stats, warn_text))
+        writer.write(BONES_CSV, bones_csv(plan, parts[0].bone_rows))
+        extra = {"bounds": [[float(f"{x:.9g}") for x in lo], [float(f"{x:.9g}") for x in hi]]}
+        if plan.rendering:
+            from axdf_cli.render.sequence import render_plan
+
+            writer.flush()
+            write_manifest(out, manifest_dict(plan, writer.files, warnings, complete=False, extra=extra))
+            info = render_plan(plan, np.array([lo, hi]), twist_ref, render_progress)
+            writer.files.update(info["files"])
+            extra["gl"] = gl_record(info["gl_renderer"], info["gl_version"])
+        writer.flush()
+        write_manifest(out, manifest_dict(plan, writer.files, warnings, complete=True, extra=extra))
+    except BaseException:
+        writer.close(cancel=True)
+        raise
+    writer.close()
+    ratio = stats[..., 2]
+    return {
+        "out": str(out), "muscles": nm, "frames": nf, "files": len(writer.files), "skipped": writer.skipped,
+        "warnings": warnings, "worst_volume_error": float(np.max(np.abs(ratio - 1.0))) if ratio.size else 0.0,
+        "stats": stats,
+    }
+
+
+def _csv_text(s: str) -> str:
+    if not s:
+        return ""
+    return '"' + s.replace('"', '""') + '"'

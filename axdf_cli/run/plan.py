@@ -1,0 +1,134 @@
+"""Planning a run: load and check every input, build the muscle models. Writes nothing."""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from axdf_cli import atomic
+from axdf_cli.errors import InputError, Mark
+from axdf_cli.loaders import Job, Pose, expand_muscle_paths, load_muscle_file, load_pose
+from axdf_cli.muscle import MuscleModel, MuscleSpec
+from axdf_cli.pose import parse_frames
+from axdf_cli.skeleton import forward_kinematics
+
+DEFAULT_OUT = "out/run"
+
+
+@dataclass
+class RunPlan:
+    pose: Pose
+    muscles: list[MuscleSpec]
+    models: list[MuscleModel]
+    frames: np.ndarray  # (F,) selected output frames
+    fmt: str
+    out: Path
+    inputs: dict  # display path -> sha256
+    render: object = None  # RenderSettings (enabled or not)
+    warnings: list = field(default_factory=list)
+    notes: list = field(default_factory=list)  # remarks printed with --verbose; not warnings
+    bone_meshes: dict = field(default_factory=dict)  # bone index -> (vertices (V,3) f4, faces (T,3) i4, file bytes)
+
+    @property
+    def names(self) -> list[str]:
+        return [m.name for m in self.muscles]
+
+    @property
+    def rendering(self) -> bool:
+        return self.render is not None and self.render.enabled
+
+
+def display_path(p: Path) -> str:
+    """A path for the manifest: relative to the current folder when below it."""
+    try:
+        return Path(os.path.relpath(Path(p).resolve(), Path.cwd().resolve())).as_posix()
+    except ValueError:
+        return Path(p).resolve().as_posix()
+
+
+def job_render_settings(job: Job | None):
+    """The job's ``render:`` mapping as RenderSettings (rendering off without one)."""
+    from axdf_cli.render.settings import parse_render_settings
+
+    if job is None:
+        return parse_render_settings(None, Mark("job"))
+    return parse_render_settings(job.render, job.render_mark or Mark(job.source))
+
+
+def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, fmt_arg=None,
+             frames_arg=None, render=None) -> RunPlan:
+    """Load and check every input; build the muscle models. Writes nothing.
+
+    ``render``: the RenderSettings to use (None: the job's ``render:``)."""
+    if pose_arg is not None:
+        pose_path, pose_mark = Path(pose_arg), Mark(str(pose_arg))
+    elif job is not None:
+        pose_path, pose_mark = job.pose
+    else:
+        raise InputError(None, "no pose given", "give a JOB.yaml or --pose FILE")
+    if not pose_path.is_file():
+        raise InputError(pose_mark, f"pose file {str(pose_path)!r} not found", "an existing pose YAML file")
+    pose = load_pose(pose_path)
+
+    if muscle_args:
+        entries = [(Path(m), Mark(str(m))) for m in muscle_args]
+    elif job is not None:
+        entries = list(job.muscles)
+    else:
+        raise InputError(None, "no muscles given", "give a JOB.yaml or --muscles PATH ...")
+    files = expand_muscle_paths(entries)
+    specs: list[MuscleSpec] = []
+    seen: dict[str, str] = {}
+    for fpath in files:
+        for spec in load_muscle_file(fpath):
+            if spec.name in seen:
+                raise InputError(Mark(str(fpath), 1, 1), f"muscle {spec.name!r} is also defined in {seen[spec.name]}",
+                                 "muscle names are unique within a run")
+            seen[spec.name] = str(fpath)
+            specs.append(spec)
+    if not specs:
+        raise InputError(None, "no muscles found", "give muscle YAML files")
+
+    warnings = []
+    notes = [f"{mark}: activation for {name!r}, which is not in this run; ignored"
+             for name, mark in pose.activation_marks.items() if name not in seen]
+
+    skel = pose.skeleton
+    rest = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
+    models = [MuscleModel(s, skel.bone_index, rest, skel) for s in specs]
+
+    if frames_arg is not None:
+        frames = parse_frames(frames_arg, Mark("--frames"), pose.first, pose.last)
+    elif job is not None and job.frames is not None:
+        frames = parse_frames(job.frames, job.frames_mark, pose.first, pose.last)
+    else:
+        frames = pose.frames
+    fmt = fmt_arg or (job.format if job is not None else None) or "ply"
+    out = Path(out_arg or (job.out if job is not None and job.out else None) or DEFAULT_OUT)
+    if render is None:
+        render = job_render_settings(job)
+
+    bone_meshes = {i: load_bone_mesh(b.mesh, pose.skeleton_path) for i, b in enumerate(skel.bones) if b.mesh}
+
+    inputs = {}
+    srcs = ([job.source] if job is not None else []) + [pose.source, pose.skeleton_path] + [str(f) for f in files]
+    srcs += sorted({b.mesh for b in skel.bones if b.mesh})
+    for s in srcs:
+        if Path(s).is_file():
+            inputs[display_path(Path(s))] = atomic.sha256_file(s)
+    return RunPlan(pose, specs, models, frames, fmt, out, inputs, render=render, warnings=warnings,
+                   bone_meshes=bone_meshes, notes=notes)
+
+
+def load_bone_mesh(path: str, skeleton_file: str):
+    """Read a bone's mesh (PLY or OBJ triangles) → (vertices, faces, bytes); bad files are input errors."""
+    from axdf_cli.render.runio import read_mesh_file
+
+    if not Path(path).is_file():
+        raise InputError(Mark(skeleton_file), f"bone mesh {path} not found", "a PLY file relative to the skeleton file")
+    v, _, f = read_mesh_file(Path(path))
+    if not np.isfinite(v).all():
+        raise InputError(Mark(str(path)), "non-finite vertex coordinates", "finite numbers only")
+    return np.ascontiguousarray(v, dtype=np.float32), f, Path(path).read_bytes()

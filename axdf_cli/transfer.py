@@ -1,0 +1,347 @@
+"""Muscle transfer: muscles defined on skeleton A re-expressed on skeleton B through a bone map.
+
+Each map entry pairs a bone ``a`` of A with a bone ``b`` of B and gives each a *segment*:
+an anchor P0 and, usually, a tip P1 (rest-pose world positions; by default the bone's own
+joint and the joint of its only child away from it). A point's rest-pose world position P on
+``a`` goes to
+
+    P' = P0_b + k · R · (P - P0_a)
+
+and is stored in ``b``'s local frame. So a point keeps its fraction along the segment (joint
+to child joint) and its perpendicular offset is scaled by the same ratio of bone lengths:
+
+- ``k = |P1_b - P0_b| / |P1_a - P0_a|``, the ratio of the segment lengths, unless the entry
+  gives ``scale``; an entry without a segment on both sides (a leaf bone, a joint whose
+  children all sit on it) takes the median ``k`` of the entries that have one;
+- ``R`` the shortest rotation turning A's segment direction into B's (rest poses that differ,
+  a T-pose against an A-pose, are aligned bone by bone), then ``roll`` degrees about B's
+  segment; an entry's ``rotate: [rx, ry, rz]`` (world, body-fixed XYZ degrees, the rest
+  rotation from A's bone to B's) replaces the shortest rotation; without a segment and
+  without ``rotate``, R is the identity (both skeletons share axdf's world: Z-up, facing -Y).
+
+Section sizes: radii and outline points are multiplied by the geometric mean of ``k`` over
+the muscle's axis control points (each point weighs as much as the others); with the rest
+length scaled by about the same factor, the rest volume scales by about its cube. Section
+positions ``t``, tendon fractions, twist, colour, tension, strength, volume mode and
+resolution are kept. A muscle with an axis point on a bone the map does not name is skipped
+and listed in the report. Files are written by the importers' emitter (numbers rounded as
+it rounds them: positions to 0.1 µm, the rest to 9 significant digits). The map format: docs/FORMATS.md, "Transfer map".
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from axdf_cli.errors import InputError, Mark
+from axdf_cli.importers import emit
+from axdf_cli.loaders import load_muscle_file, load_skeleton, resolve_ref
+from axdf_cli.muscle import AxisPoint, MuscleModel, MuscleSpec
+from axdf_cli.skeleton import Skeleton, axis_angle, euler_xyz
+from axdf_cli.yamlio import Fields, check_name, check_vector, item_marks, load_yaml
+
+#: A segment shorter than this (metres) has no direction: the entry is treated as segment-less.
+MIN_SEGMENT = 1e-6
+
+
+# ----------------------------------------------------------------------------- the map
+
+
+@dataclass(frozen=True)
+class BonePair:
+    src: str  # bone of A
+    dst: str  # bone of B
+    src_segment: tuple | None  # (end, ...) with end a bone name or an (x, y, z) in src; None: default
+    dst_segment: tuple | None
+    scale: float | None
+    rotate: tuple[float, float, float] | None
+    roll: float
+    mark: Mark
+
+
+@dataclass(frozen=True)
+class BoneMap:
+    name: str
+    pairs: dict  # src bone -> BonePair
+    source: str
+    skel_a: Skeleton
+    skel_b: Skeleton
+
+
+def _segment_spec(v, where: Mark, skel: Skeleton, what: str) -> tuple:
+    if not isinstance(v, list) or not 1 <= len(v) <= 2:
+        raise InputError(where, f"{what} is not a list of 1 or 2 ends",
+                         f"{what}: [ANCHOR] or [ANCHOR, TIP], each a bone name or [x, y, z] in the entry's bone")
+    out = []
+    for x, m in zip(v, item_marks(v, where)):
+        if isinstance(x, str):
+            check_name(x, m, f"{what} bone")
+            if x not in skel.bone_index:
+                raise InputError(m, f"unknown bone {x!r} in {what}", f"bones of skeleton {skel.name}: "
+                                 + ", ".join(skel.bone_index))
+            out.append(x)
+        else:
+            out.append(check_vector(x, m, f"{what} point", 3))
+    return tuple(out)
+
+
+def load_map(path: Path | str, skel_a: Skeleton | None = None, skel_b: Skeleton | None = None) -> BoneMap:
+    """Read and check a transfer map against both skeletons (unknown bones: FILE:LINE:COL).
+
+    A skeleton not given here (``--from`` / ``--to``) is the one the map names (``from:`` /
+    ``to:``, relative to the map file)."""
+    path = Path(path)
+    doc = load_yaml(path)
+    top = Mark(str(path), 1, 1)
+    f = Fields(doc, top, "transfer map")
+    name = f.name("transfer", required=True)
+    skels = []
+    for key, given in (("from", skel_a), ("to", skel_b)):
+        ref = f.string(key, default=None)
+        if given is None:
+            if ref is None:
+                raise InputError(top, f"transfer map names no {key!r} skeleton",
+                                 f"give --{key} SKELETON, or `{key}: PATH` (relative to the map) in the map")
+            p = resolve_ref(path, ref, f.vmark(key))
+            if not p.is_file():
+                raise InputError(f.vmark(key), f"skeleton file {ref!r} not found", "a path relative to the map file")
+            given = load_skeleton(p)
+        skels.append(given)
+    skel_a, skel_b = skels
+    bones = f.mapping("bones", required=True)
+    f.done()
+    pairs = {}
+    for src, val in bones.items():
+        km, vm = bones.key_mark(src), bones.value_mark(src)
+        check_name(src, km, "bone name")
+        if src not in skel_a.bone_index:
+            raise InputError(km, f"unknown bone {src!r} of skeleton {skel_a.name} (--from)",
+                             "bones of " + skel_a.name + ": " + ", ".join(skel_a.bone_index))
+        e = Fields(_single(val, vm) if isinstance(val, str) else val, vm, f"bone {src}")
+        dst = e.name("to", required=True)
+        if dst not in skel_b.bone_index:
+            raise InputError(e.vmark("to"), f"unknown bone {dst!r} of skeleton {skel_b.name} (--to)",
+                             "bones of " + skel_b.name + ": " + ", ".join(skel_b.bone_index))
+        seg_a = _segment_spec(e.raw("segment"), e.vmark("segment"), skel_a, "segment") if e.has("segment") else None
+        seg_b = _segment_spec(e.raw("to_segment"), e.vmark("to_segment"), skel_b, "to_segment") \
+            if e.has("to_segment") else None
+        scale = e.number("scale", default=None, lo=0.0, lo_open=True)
+        rotate = e.vector("rotate", 3, default=None)
+        roll = e.number("roll", default=0.0, lo=-360.0, hi=360.0)
+        e.done()
+        pairs[src] = BonePair(src, dst, seg_a, seg_b, scale, rotate, float(roll), km)
+    return BoneMap(name, pairs, str(path), skel_a, skel_b)
+
+
+def _single(val: str, vm: Mark):
+    """``bone: OTHER`` shorthand as a mapping ``{to: OTHER}`` whose value sits at ``vm``."""
+    from axdf_cli.yamlio import YMap
+
+    m = YMap(to=val)
+    m.mark, m.key_marks, m.value_marks = vm, {"to": vm}, {"to": vm}
+    return m
+
+
+# ----------------------------------------------------------------------------- geometry
+
+
+def shortest_rotation(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """The rotation (3, 3) by the smallest angle taking unit ``u`` to unit ``v`` (identity when equal)."""
+    c = float(np.dot(u, v))
+    w = np.cross(u, v)
+    if c < -1.0 + 1e-12:  # opposite: half a turn about any axis perpendicular to u
+        a = np.cross(u, [1.0, 0.0, 0.0])
+        if np.linalg.norm(a) < 1e-6:
+            a = np.cross(u, [0.0, 1.0, 0.0])
+        return axis_angle(a / np.linalg.norm(a), np.array([math.pi]))[0]
+    k = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+    return np.eye(3) + k + k @ k / (1.0 + c)
+
+
+@dataclass(frozen=True)
+class PairTransform:
+    src: str
+    dst: str
+    matrix: np.ndarray  # (4, 4): A-bone-local homogeneous point → B-bone-local
+    scale: float  # k
+    rotation: np.ndarray  # (3, 3) world R
+    lengths: tuple[float, float] | None  # segment lengths on A and B, when both exist
+
+
+def _segment(skel: Skeleton, world: np.ndarray, bone: str, spec: tuple | None) -> tuple[np.ndarray, np.ndarray | None]:
+    """Anchor and tip (world, rest) of a bone's segment; the tip is None when there is none."""
+    bi = skel.bone_index
+    i = bi[bone]
+    if spec is None:
+        p0 = world[i, :3, 3]
+        away = [c for c, b in enumerate(skel.bones)
+                if b.parent == i and np.linalg.norm(world[c, :3, 3] - p0) > MIN_SEGMENT]
+        return p0, (world[away[0], :3, 3] if len(away) == 1 else None)
+    ends = [world[bi[e], :3, 3] if isinstance(e, str) else (world[i] @ np.append(e, 1.0))[:3] for e in spec]
+    return ends[0], (ends[1] if len(ends) == 2 else None)
+
+
+def pair_transforms(bmap: BoneMap, skel_a: Skeleton, skel_b: Skeleton) -> dict[str, PairTransform]:
+    """Every map entry's affine map from A-bone-local to B-bone-local coordinates (module doc)."""
+    wa, wb = emit.rest_world(skel_a), emit.rest_world(skel_b)
+    segs = {}
+    for p in bmap.pairs.values():
+        a0, a1 = _segment(skel_a, wa, p.src, p.src_segment)
+        b0, b1 = _segment(skel_b, wb, p.dst, p.dst_segment)
+        la = float(np.linalg.norm(a1 - a0)) if a1 is not None else 0.0
+        lb = float(np.linalg.norm(b1 - b0)) if b1 is not None else 0.0
+        both = la > MIN_SEGMENT and lb > MIN_SEGMENT
+        segs[p.src] = (a0, b0, (a1 - a0) / la if both else None, (b1 - b0) / lb if both else None,
+                       (la, lb) if both else None)
+    ratios = [s[4][1] / s[4][0] for s in segs.values() if s[4] is not None]
+    median = float(np.median(ratios)) if ratios else 1.0
+    out = {}
+    for p in bmap.pairs.values():
+        a0, b0, ua, ub, lengths = segs[p.src]
+        k = p.scale if p.scale is not None else (lengths[1] / lengths[0] if lengths else median)
+        if p.rotate is not None:
+            r = euler_xyz(p.rotate)
+        elif ua is not None:
+            r = shortest_rotation(ua, ub)
+        else:
+            r = np.eye(3)
+        if p.roll and ub is not None:
+            r = axis_angle(ub, np.radians([p.roll]))[0] @ r
+        m = np.eye(4)
+        m[:3, :3] = k * r
+        m[:3, 3] = b0 - k * r @ a0
+        ia, ib = skel_a.bone_index[p.src], skel_b.bone_index[p.dst]
+        out[p.src] = PairTransform(p.src, p.dst, np.linalg.inv(wb[ib]) @ m @ wa[ia], float(k), r, lengths)
+    return out
+
+
+def transfer_spec(spec: MuscleSpec, tf: dict[str, PairTransform]) -> tuple[MuscleSpec | None, list[str], float]:
+    """The muscle on B, the bones of A it uses that the map lacks (then None), and its radial scale."""
+    missing = sorted({p.bone for p in spec.axis if p.bone not in tf})
+    if missing:
+        return None, missing, 1.0
+    axis = []
+    for p in spec.axis:
+        t = tf[p.bone]
+        at = t.matrix[:3, :3] @ np.asarray(p.at) + t.matrix[:3, 3]
+        axis.append(AxisPoint(t.dst, tuple(float(x) for x in at), p.mark))
+    k = math.exp(sum(math.log(tf[p.bone].scale) for p in spec.axis) / len(spec.axis))
+    secs = []
+    for s in spec.sections:
+        radii = None if s.radii is None else tuple(r * k for r in s.radii)
+        outline = None if s.outline is None else tuple(tuple(c * k for c in pt) for pt in s.outline)
+        secs.append(replace(s, radii=radii, outline=outline))
+    return replace(spec, axis=tuple(axis), sections=tuple(secs)), [], k
+
+
+# ----------------------------------------------------------------------------- documents
+
+
+def _color(c: tuple) -> str | list:
+    """``#rrggbb`` when the colour is exactly one (as read from one), else the numbers."""
+    b = [round(x * 255) for x in c]
+    if all(abs(x * 255 - y) < 1e-9 for x, y in zip(c, b)):
+        return "#{:02x}{:02x}{:02x}".format(*b)
+    return [float(x) for x in c]
+
+
+def muscle_doc(spec: MuscleSpec) -> dict:
+    """One muscle's YAML document (docs/FORMATS.md, "Muscle"): every field written out."""
+    d = {"muscle": spec.name, "color": _color(spec.color), "strength": spec.strength, "tension": spec.tension,
+         "volume": spec.volume, "axis": [{"bone": p.bone, "at": list(p.at)} for p in spec.axis]}
+    if all(s.radii is not None or s.outline is not None for s in spec.sections):  # else the default sections
+        d["sections"] = [{"t": s.t, "outline": [list(p) for p in s.outline]} if s.outline is not None
+                         else {"t": s.t, "radii": list(s.radii), "angle": s.angle} for s in spec.sections]
+    d["tendons"] = list(spec.tendons)
+    d["twist"] = spec.twist
+    d["resolution"] = list(spec.resolution)
+    if spec.weights is not None:
+        d["weights"] = list(spec.weights)
+    return d
+
+
+def file_doc(specs: list[MuscleSpec]) -> dict:
+    """A muscle file: one muscle, or a ``group`` with its ``muscles`` (heads)."""
+    if len(specs) == 1 and not specs[0].group:
+        return muscle_doc(specs[0])
+    return {"group": specs[0].group, "muscles": [muscle_doc(s) for s in specs]}
+
+
+# ----------------------------------------------------------------------------- all
+
+
+@dataclass
+class TransferResult:
+    files: dict[str, bytes]  # output path -> bytes
+    report: dict
+    skipped: list[dict]
+
+
+def build_transfer(muscle_files: list[Path], skel_a: Skeleton | None, skel_b: Skeleton | None,
+                   map_path: Path | str, out_dir: Path | str) -> TransferResult:
+    """Transfer every muscle of ``muscle_files``; the output files' bytes (nothing is written here).
+    A skeleton given as None is the one the map names."""
+    out_dir = Path(out_dir)
+    bmap = load_map(map_path, skel_a, skel_b)
+    skel_a, skel_b = bmap.skel_a, bmap.skel_b
+    tf = pair_transforms(bmap, skel_a, skel_b)
+    wa, wb = emit.rest_world(skel_a), emit.rest_world(skel_b)
+    files: dict[str, bytes] = {}
+    rows, skipped = [], []
+    names: dict[str, Path] = {}
+    for path in muscle_files:
+        if path.name in names:
+            raise InputError(Mark(str(path)), f"two muscle files named {path.name} ({names[path.name]} and {path})",
+                             "muscle files with distinct names (they share the output folder)")
+        names[path.name] = path
+        specs = load_muscle_file(path)
+        kept = []
+        for spec in specs:
+            new, missing, k = transfer_spec(spec, tf)
+            if new is None:
+                skipped.append({"muscle": spec.name, "file": path.name, "bones_without_counterpart": missing})
+                continue
+            ma = MuscleModel(spec, skel_a.bone_index, wa)
+            mb = MuscleModel(new, skel_b.bone_index, wb)
+            rows.append({"muscle": spec.name, "file": path.name, "bones": sorted({f"{p.bone}->{tf[p.bone].dst}"
+                                                                               for p in spec.axis}),
+                         "radius_scale": k, "rest_length_from": ma.l0, "rest_length_to": mb.l0,
+                         "length_ratio": mb.l0 / ma.l0, "rest_volume_from": ma.v0, "rest_volume_to": mb.v0})
+            kept.append(new)
+        if kept:
+            header = (f"{path.name}: transferred from skeleton {skel_a.name} to {skel_b.name} by `axdf transfer` "
+                      f"(map {bmap.name}).\nRegenerate with axdf transfer rather than editing by hand.")
+            files[str(out_dir / path.name)] = emit.dump_yaml(file_doc(kept), header).encode()
+    report = {"tool": "axdf transfer", "map": bmap.name, "map_file": Path(bmap.source).name,
+              "from": skel_a.name, "to": skel_b.name,
+              "bones": [{"from": t.src, "to": t.dst, "scale": t.scale,
+                         "segment_lengths": list(t.lengths) if t.lengths else None,
+                         "rotation_deg": math.degrees(math.acos(max(-1.0, min(1.0, (np.trace(t.rotation) - 1) / 2))))}
+                        for t in tf.values()],
+              "muscles": rows, "skipped": skipped,
+              "files": sorted(Path(p).name for p in files)}
+    report = emit.rounded(report)  # as the YAML files: no CPU-dependent last digits
+    files[str(out_dir / "transfer_report.json")] = (json.dumps(report, indent=1, sort_keys=True) + "\n").encode()
+    files[str(out_dir / "TRANSFER.md")] = transfer_markdown(report).encode()
+    return TransferResult(files, report, skipped)
+
+
+def transfer_markdown(r: dict) -> str:
+    lines = [f"# Transfer `{r['map']}`: {r['from']} → {r['to']}", "",
+             f"Map `{r['map_file']}`; rules: `axdf_cli/transfer.py` and docs/FORMATS.md (Transfer map).", "",
+             "| bone (from) | bone (to) | scale k | segment lengths (m) | rest rotation (°) |", "|---|---|---|---|---|"]
+    for b in r["bones"]:
+        seg = "–" if b["segment_lengths"] is None else f"{b['segment_lengths'][0]:.4f} → {b['segment_lengths'][1]:.4f}"
+        lines.append(f"| {b['from']} | {b['to']} | {b['scale']:.4f} | {seg} | {b['rotation_deg']:.1f} |")
+    lines += ["", "## Muscles", "", "| muscle | file | radius scale | rest length (m) | length ratio |",
+              "|---|---|---|---|---|"]
+    for m in r["muscles"]:
+        lines.append(f"| {m['muscle']} | {m['file']} | {m['radius_scale']:.4f} | "
+                     f"{m['rest_length_from']:.4f} → {m['rest_length_to']:.4f} | {m['length_ratio']:.4f} |")
+    lines += ["", "## Skipped (bones without a counterpart)", ""]
+    lines += [f"- {s['muscle']} ({s['file']}): {', '.join(s['bones_without_counterpart'])}"
+              for s in r["skipped"]] or ["- none"]
+    return "\n".join(lines) + "\n"
