@@ -114,32 +114,32 @@ def _safe_build(ctx: wk.Context, index: int, out: Path, resume: bool) -> tuple:
         return ("bug", index, f"{type(e).__name__}: {e}", None, "")
 
 
-_LOCAL: dict = {}  # the context of a pool worker (set by its initializer)
+_CONTEXTS: dict = {}  # a worker process's contexts, by (dataset file, seed, folder)
 
 
-def _init_local(ctx: wk.Context) -> None:
-    _LOCAL["ctx"] = ctx
-
-
-def _local_task(index: int, out: str, resume: bool) -> tuple:
-    return _safe_build(_LOCAL["ctx"], index, Path(out), resume)
-
-
-_RAY_CONTEXTS: dict = {}
-
-
-def _ray_task(path: str, seed, cwd: str, roots: tuple, allow_outside: bool, out: str, index: int, resume: bool):
-    """A Ray task: the worker process builds the context once (keyed by the dataset file and
-    seed) and makes one sequence."""
+def worker_context(where: tuple) -> wk.Context:
+    """The context in a worker process (pool or Ray), built once from the dataset file: the
+    worker works in the driver's folder (manifests name inputs relative to it) under the
+    driver's path policy. ``where`` = (dataset file, seed, folder, roots, allow_outside)."""
     from axdf_cli.loaders import set_ref_policy
 
-    os.chdir(cwd)  # manifests name inputs relative to the driver's folder
+    path, seed, cwd, roots, allow_outside = where
+    os.chdir(cwd)
     set_ref_policy(roots, allow_outside)
-    key = (path, seed, cwd)
-    ctx = _RAY_CONTEXTS.get(key)
+    ctx = _CONTEXTS.get(where)
     if ctx is None:
-        ctx = _RAY_CONTEXTS[key] = wk.build_context(path, seed)
-    return _safe_build(ctx, index, Path(out), resume)
+        ctx = _CONTEXTS[where] = wk.build_context(path, seed)
+    return ctx
+
+
+def _worker_task(where: tuple, out: str, index: int, resume: bool) -> tuple:
+    """One sequence in a worker process (a pool's or a Ray task)."""
+    return _safe_build(worker_context(where), index, Path(out), resume)
+
+
+def _where(path, seed, roots, allow_outside) -> tuple:
+    return (str(Path(path).resolve()), seed, str(Path.cwd()), tuple(str(Path(r).resolve()) for r in roots),
+            bool(allow_outside))
 
 
 def _raise_failure(ctx: wk.Context, result: tuple, left: list[int]) -> None:
@@ -166,7 +166,7 @@ def _samples(ctx: wk.Context, index: int) -> int:
     return ctx.sequences[index].n_frames * len(ctx.spec.views)
 
 
-def _run_local(ctx, mine, out, jobs, resume, done) -> None:
+def _run_local(ctx, mine, out, jobs, resume, done, where) -> None:
     if jobs <= 1 or len(mine) <= 1:
         try:
             for i in mine:
@@ -183,12 +183,12 @@ def _run_local(ctx, mine, out, jobs, resume, done) -> None:
 
     # Workers come from a fork server (a fresh interpreter), never from this process: a GL
     # driver used here before (llvmpipe's thread pool) would hang in a forked child. Each
-    # worker receives the context once (models included, ~10 MB for 92 muscles).
+    # worker builds the context once from the (already checked) dataset file.
     mpc = mp.get_context("forkserver")
     mpc.set_forkserver_preload(["axdf_cli.dataset.worker"])
-    pool = ProcessPoolExecutor(max_workers=min(jobs, len(mine)), mp_context=mpc, initializer=_init_local,
-                               initargs=(ctx,))
-    pending = {pool.submit(_local_task, i, str(out), resume): i for i in mine}
+    pool = ProcessPoolExecutor(max_workers=min(jobs, len(mine)), mp_context=mpc, initializer=worker_context,
+                               initargs=(where,))
+    pending = {pool.submit(_worker_task, where, str(Path(out).resolve()), i, resume): i for i in mine}
     left = set(mine)
     try:
         while pending:
@@ -212,7 +212,7 @@ def _run_local(ctx, mine, out, jobs, resume, done) -> None:
         pool.shutdown(wait=True)
 
 
-def _run_ray(ctx, mine, out, jobs, resume, done, address, path, seed, roots, allow_outside) -> None:
+def _run_ray(ctx, mine, out, jobs, resume, done, address, where) -> None:
     try:
         import ray
     except ImportError:
@@ -225,9 +225,8 @@ def _run_ray(ctx, mine, out, jobs, resume, done, address, path, seed, roots, all
             ray.init(num_cpus=jobs, include_dashboard=False, log_to_driver=False)
         started = True
     try:
-        task = ray.remote(num_cpus=1)(_ray_task)
-        refs = {task.remote(str(Path(path).resolve()), seed, str(Path.cwd()), tuple(str(r) for r in roots),
-                            allow_outside, str(Path(out).resolve()), i, resume): i for i in mine}
+        task = ray.remote(num_cpus=1)(_worker_task)
+        refs = {task.remote(where, str(Path(out).resolve()), i, resume): i for i in mine}
         left = set(mine)
         while refs:
             ready, _ = ray.wait(list(refs), num_returns=1)
@@ -279,10 +278,11 @@ def build(path: Path | str, out: Path | str, *, seed: int | None = None, jobs: i
         if progress:
             progress(_samples(ctx, i))
 
+    where = _where(path, seed, roots, allow_outside)
     if engine == "ray":
-        _run_ray(ctx, mine, out, jobs, resume, done, address, path, seed, roots, allow_outside)
+        _run_ray(ctx, mine, out, jobs, resume, done, address, where)
     else:
-        _run_local(ctx, mine, out, jobs, resume, done)
+        _run_local(ctx, mine, out, jobs, resume, done, where)
     res.seconds = time.perf_counter() - t0
     idx, rows, missing = finish(out, ctx.dataset_json)
     res.index, res.rows, res.missing = idx, rows, missing
