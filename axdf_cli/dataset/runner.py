@@ -50,15 +50,15 @@ def build_models(specs, skeleton) -> list:
     return [MuscleModel(s, skeleton.bone_index, rest, skeleton) for s in specs]
 
 
-def motion_pose(path: Path, skeleton, name: str) -> Pose:
+def motion_pose(path: Path, skeleton, name: str, fps: float | None = None) -> Pose:
     """An OpenSim motion (.mot/.sto) as a Pose of ``skeleton``, read and converted by the
-    importer (columns to coordinates, the degrees/radians rule, resampling)."""
+    importer (columns to coordinates, the degrees/radians rule, resampling to ``fps``)."""
     from axdf_cli.importers.osim_import import pose_doc
     from axdf_cli.importers.storage import read_storage
 
     table = read_storage(path)
     model = SimpleNamespace(coordinates={c.name: c for c in skeleton.coordinates}, source=skeleton.source)
-    doc = pose_doc(model, table, None, name, "", None, [], {}, [])
+    doc = pose_doc(model, table, None, name, "", fps, [], {}, [])
     series: dict = {}
     for frame, row in doc["keys"].items():
         for c, v in row.items():

@@ -434,14 +434,16 @@ def expand_sequences(spec: DatasetSpec) -> list[Sequence]:
     return out
 
 
-_MOTION_CACHE: dict = {}
+_MOTION_CACHE: dict = {}  # motions by file, content and skeleton (a worker loads each once)
 
 
 def load_motion(spec: DatasetSpec, name: str) -> Pose:
     """The named motion as a Pose of the data set's skeleton (pose files are loaded with
     :func:`loaders.load_pose`; OpenSim motions go through the importer's reader and unit rules)."""
+    from axdf_cli.atomic import sha256_file
+
     m = spec.motions[name]
-    key = (m.path, m.kind, m.fps, spec.skeleton_path)
+    key = (m.path, sha256_file(m.path), m.kind, m.fps, spec.skeleton_path, sha256_file(spec.skeleton_path))
     if key in _MOTION_CACHE:
         return _MOTION_CACHE[key]
     skel = load_skeleton(spec.skeleton_path)
@@ -453,7 +455,7 @@ def load_motion(spec: DatasetSpec, name: str) -> Pose:
     else:
         from axdf_cli.dataset.runner import motion_pose
 
-        pose = motion_pose(Path(m.path), skel, name)
+        pose = motion_pose(Path(m.path), skel, name, m.fps)
     _MOTION_CACHE[key] = pose
     return pose
 
