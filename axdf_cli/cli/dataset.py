@@ -116,8 +116,8 @@ def summary_text(res, shard) -> str:
         t = res.timing
         per = 1000.0 / max(1, res.built_samples)
         lines.append(f"per sample (summed over workers): run (evaluate + write meshes) {t['run'] * per:.0f} ms, "
-                     f"evaluate for rendering {t['evaluate'] * per:.0f} ms, render {t['render'] * per:.0f} ms, "
-                     f"write images + labels {t['write'] * per:.0f} ms"
+                     f"read meshes back {t['read'] * per:.0f} ms, render {t['render'] * per:.0f} ms, "
+                     f"labels + write images {t['write'] * per:.0f} ms"
                      + (f"; {res.gl_renderer}" if res.gl_renderer else ""))
     if res.index is not None:
         lines.append(f"index: {res.index} ({res.rows} samples)")

@@ -36,7 +36,7 @@ class Outcome:
     samples: int = 0  # samples of this run
     built_samples: int = 0  # samples of the sequences made now (not kept by --resume)
     seconds: float = 0.0
-    timing: dict = field(default_factory=lambda: {"run": 0.0, "evaluate": 0.0, "render": 0.0, "write": 0.0})
+    timing: dict = field(default_factory=lambda: {"run": 0.0, "read": 0.0, "render": 0.0, "write": 0.0})
     index: Path | None = None
     rows: int = 0
     missing: list = field(default_factory=list)  # sequences of the data set not complete yet
@@ -124,6 +124,9 @@ def worker_context(where: tuple) -> wk.Context:
     from axdf_cli.loaders import set_ref_policy
 
     path, seed, cwd, roots, allow_outside = where
+    # the workers are the parallelism: each renders with one llvmpipe thread (Mesa's default is
+    # one per core, which oversubscribes the cores N workers share); a value you set is kept
+    os.environ.setdefault("LP_NUM_THREADS", "1")
     os.chdir(cwd)
     set_ref_policy(roots, allow_outside)
     ctx = _CONTEXTS.get(where)

@@ -16,7 +16,6 @@ from axdf_cli.render.sequence import FRAME_WRITERS  # noqa: F401  (image passes:
 from axdf_cli.render.settings import RenderSettings, parse_render_settings, settings_to_dict  # noqa: F401
 from axdf_cli.render.settings import _parse_camera as parse_camera  # noqa: F401
 from axdf_cli.run import RunPlan, evaluate_chunks, execute, load_bone_mesh, twist_references  # noqa: F401
-from axdf_cli.run.evaluate import finite_or_rest
 from axdf_cli.run.plan import display_path  # noqa: F401  (paths as a run's manifest shows them)
 
 
@@ -34,12 +33,19 @@ def run_sequence(plan: RunPlan, resume: bool) -> dict:
     return execute(plan, resume=resume, overwrite=not resume)
 
 
-def evaluate_for_render(plan: RunPlan, chunk: int):
-    """(frame slice, world (C, B, 4, 4), [(positions (C, V, 3) f4, normals (C, V, 3) f4) per
-    muscle]) over the plan's frames, as the run's own renderer gets them."""
-    twist = twist_references(plan)
-    for sl, world, results in evaluate_chunks(plan, chunk, twist):
-        yield sl, world, [finite_or_rest(r, plan.models[j])[:2] for j, r in results]
+def written_meshes(plan: RunPlan, frame: int) -> tuple[list, list]:
+    """The muscles of one frame as the run wrote them: per muscle (V, 3) float32 positions and
+    normals, read back from the run folder (cheaper than evaluating again, and exactly what
+    was written)."""
+    from axdf_cli.formats.read import read_mesh
+    from axdf_cli.runfolder import mesh_relpath
+
+    pos, nrm = [], []
+    for name in plan.names:
+        m = read_mesh((plan.out / mesh_relpath(name, int(frame), plan.fmt)).read_bytes(), "." + plan.fmt)
+        pos.append(m.vertices.astype(np.float32))
+        nrm.append(m.normals.astype(np.float32))
+    return pos, nrm
 
 
 def build_models(specs, skeleton) -> list:

@@ -32,7 +32,6 @@ RECORD = "sequence.json"  # written last: the sequence is complete
 DATASET_JSON = "dataset.json"
 INDEX = "index.parquet"
 LABELS = "labels.npz"
-RENDER_CHUNK = 16  # frames evaluated together for rendering
 
 
 @dataclass
@@ -180,7 +179,7 @@ def build_sequence(ctx: Context, index: int, out: Path, resume: bool) -> tuple[d
     seq = ctx.sequences[index]
     spec = ctx.spec
     folder = Path(out) / seq.name
-    timing = {"run": 0.0, "evaluate": 0.0, "render": 0.0, "write": 0.0, "skipped": 0}
+    timing = {"run": 0.0, "read": 0.0, "render": 0.0, "write": 0.0, "skipped": 0}
     if resume:
         rec = read_record(folder, ctx.digest)
         if rec is not None:
@@ -206,29 +205,26 @@ def build_sequence(ctx: Context, index: int, out: Path, resume: bool) -> tuple[d
     nf, nv = len(frames), len(views)
     visible = np.zeros((nf, nv, joints.shape[1]), bool)
     files: dict = {}
-    vr = view_renderer(ctx)
-    t_eval = time.perf_counter() - t1
-    t_render = t_write = 0.0
-    te = time.perf_counter()
-    for sl, chunk_world, res in runner.evaluate_for_render(plan, RENDER_CHUNK):
-        tr = time.perf_counter()
-        t_eval += tr - te
-        for c in range(sl.stop - sl.start):
-            fi = sl.start + c
-            cams = [view_camera(views[v], K[v], w2c[fi, v], clip[fi, v, 0], clip[fi, v, 1], spec.render.size)
-                    for v in range(nv)]
-            bw = chunk_world[c, ctx.scene_bones] if ctx.scene_bones else None
-            t_a = time.perf_counter()
-            imgs = ctx_render(vr, int(frames[fi]), res, c, bw, cams)
-            t_b = time.perf_counter()
-            depth = np.stack([im.depth for im in imgs])[None]  # (1, V, H, W)
-            visible[fi] = lab.visibility(uv[fi:fi + 1], z[fi:fi + 1], depth, spec.visibility_tolerance)[0]
-            for v, im in enumerate(imgs):
-                rel = f"views/{views[v]}"
-                files.update(write_view_images(folder / rel, rel, im, spec.passes))
-            t_render += t_b - t_a
-            t_write += time.perf_counter() - t_b
-        te = time.perf_counter()
+    t_read = t_render = 0.0
+    t_write = time.perf_counter() - t1  # labels so far
+    vr = view_renderer(ctx)  # once per process
+    for fi, frame in enumerate(frames):
+        ta = time.perf_counter()
+        pos, nrm = runner.written_meshes(plan, int(frame))
+        cams = [view_camera(views[v], K[v], w2c[fi, v], clip[fi, v, 0], clip[fi, v, 1], spec.render.size)
+                for v in range(nv)]
+        bw = world[fi, ctx.scene_bones] if ctx.scene_bones else None
+        tb = time.perf_counter()
+        imgs = vr.render(int(frame), pos, nrm, bw, cams)
+        tc = time.perf_counter()
+        depth = np.stack([im.depth for im in imgs])[None]  # (1, V, H, W)
+        visible[fi] = lab.visibility(uv[fi:fi + 1], z[fi:fi + 1], depth, spec.visibility_tolerance)[0]
+        for v, im in enumerate(imgs):
+            rel = f"views/{views[v]}"
+            files.update(write_view_images(folder / rel, rel, im, spec.passes))
+        t_read += tb - ta
+        t_render += tc - tb
+        t_write += time.perf_counter() - tc
     t2 = time.perf_counter()
     stats = summary["stats"]
     act = np.nan_to_num(sample_activation(pose, ctx.names, frames), nan=0.0)
@@ -249,9 +245,5 @@ def build_sequence(ctx: Context, index: int, out: Path, resume: bool) -> tuple[d
            "frames": [int(f) for f in frames], "views": list(views), "files": dict(sorted(files.items()))}
     atomic.write_text(folder / RECORD, json.dumps(rec, indent=1) + "\n")
     t_write += time.perf_counter() - t2
-    timing.update(evaluate=t_eval, render=t_render, write=t_write)
+    timing.update(read=t_read, render=t_render, write=t_write)
     return rec, timing
-
-
-def ctx_render(vr, frame: int, res, c: int, bone_world, cams):
-    return vr.render(frame, [p[c] for p, _ in res], [n[c] for _, n in res], bone_world, cams)
