@@ -7,7 +7,7 @@ import dataclasses
 
 import numpy as np
 import pytest
-from dataset_helpers import DATASET_YAML, write_tiny
+from dataset_helpers import BALL_R, DATASET_YAML, write_tiny
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -87,10 +87,13 @@ def test_sphere_cameras_keep_distance_elevation_and_look_at_the_target(tiny_spec
     q = np.tile(skel.rest_coordinates(), (3, 1))
     q[:, skel.coord_index["bend"]] = [0, 20, 40]
     world = forward_kinematics(skel, q)
-    joints = lab.joint_centres(skel, world)
-    target = 0.5 * (joints.reshape(-1, 3).min(0) + joints.reshape(-1, 3).max(0))
+    subject = lab.subject_points(skel, world, ctx.bone_meshes)
+    # the fixed root b0 is left out; its children's balls are in
+    assert subject.shape == (3, 4 + 4 * 8, 3)
+    np.testing.assert_allclose(subject[0, 4:12].min(0), world[0, 1, :3, 3] - BALL_R, atol=2e-3)
+    target = 0.5 * (subject.reshape(-1, 3).min(0) + subject.reshape(-1, 3).max(0))
     for k in range(20):
-        K, w2c, clip = lab.view_cameras(ctx.spec, Sequence(k, "s", 0, 3), np.arange(3), joints, world,
+        K, w2c, clip = lab.view_cameras(ctx.spec, Sequence(k, "s", 0, 3), np.arange(3), subject, world,
                                         skel.bone_index)
         assert (w2c == w2c[:1]).all()  # per: sequence
         for v in range(sph.views):

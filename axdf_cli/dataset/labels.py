@@ -12,6 +12,10 @@ of the camera, and the depth pass at its pixel is background or at most
 ``visibility_tolerance`` (default 0.1 m) in front of the joint: a joint centre lies inside
 its bones and muscles, a few centimetres behind the surface that shows it, while a limb that
 hides it is farther in front.
+
+Sphere cameras aim at the subject: with ``target: auto`` the centre of the box around the
+moving bones' joint centres and mesh boxes (:func:`subject_points`), over the sequence
+(``per: sequence``) or at the frame (``per: frame``); near and far planes keep that box.
 """
 from __future__ import annotations
 
@@ -23,7 +27,7 @@ import numpy as np
 from axdf_cli.dataset.sampling import sphere_direction, sphere_draw
 from axdf_cli.dataset.spec import DatasetSpec, Sequence
 
-FLESH_MARGIN = 0.5  # metres of flesh and bone kept inside the clip range beyond the joints' box
+FLESH_MARGIN = 0.3  # metres of flesh kept inside the clip range beyond the subject's box
 NEAR_MIN = 0.01  # metres
 
 
@@ -34,15 +38,39 @@ def joint_centres(skeleton, world: np.ndarray) -> np.ndarray:
     return np.einsum("fbij,bj->fbi", world[:, :, :3, :3], post) + world[:, :, :3, 3]
 
 
-def view_cameras(spec: DatasetSpec, seq: Sequence, frames: np.ndarray, joints: np.ndarray,
+def moving_bones(skeleton) -> list[int]:
+    """Bones that move with the pose: all but a root without DOFs (a fixed "ground" frame)."""
+    return [i for i, b in enumerate(skeleton.bones) if b.parent >= 0 or b.dofs]
+
+
+def subject_points(skeleton, world: np.ndarray, bone_meshes: dict) -> np.ndarray:
+    """(F, P, 3) world points that bound the subject: the joint centres of the moving bones and
+    the corners of their meshes' boxes (the skeleton only, never the muscles)."""
+    move = moving_bones(skeleton)
+    pts = [joint_centres(skeleton, world)[:, move]]
+    meshed = [i for i in move if i in bone_meshes]
+    if meshed:
+        lo = np.array([bone_meshes[i][0].min(0) for i in meshed], np.float64)
+        hi = np.array([bone_meshes[i][0].max(0) for i in meshed], np.float64)
+        pick = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)])  # (8, 3) corner choice
+        corners = np.where(pick[None], hi[:, None], lo[:, None])  # (Bm, 8, 3) bone-local
+        w = world[:, meshed]
+        # c[f,b,k,i] = sum_j R[f,b,i,j] corners[b,k,j] + t[f,b,i]
+        c = np.einsum("fbij,bkj->fbki", w[..., :3, :3], corners) + w[:, :, None, :3, 3]
+        pts.append(c.reshape(len(world), -1, 3))
+    return np.concatenate(pts, axis=1)
+
+
+def view_cameras(spec: DatasetSpec, seq: Sequence, frames: np.ndarray, subject: np.ndarray,
                  world: np.ndarray, bone_index: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Cameras of every view at every frame, from the skeleton only (never the muscles):
-    ``K`` (V, 3, 3), ``world_to_camera`` (F, V, 4, 4), ``clip`` (F, V, 2) near and far."""
+    ``subject`` (F, P, 3) are the points of :func:`subject_points`. Returns ``K`` (V, 3, 3),
+    ``world_to_camera`` (F, V, 4, 4), ``clip`` (F, V, 2) near and far."""
     from axdf_cli.dataset.runner import intrinsics, look_at
 
     W, H = spec.render.size
     nf = len(frames)
-    lo, hi = joints.reshape(-1, 3).min(0), joints.reshape(-1, 3).max(0)
+    lo, hi = subject.reshape(-1, 3).min(0), subject.reshape(-1, 3).max(0)
     centre = 0.5 * (lo + hi)
     radius = 0.5 * float(np.linalg.norm(hi - lo)) + FLESH_MARGIN
     up = np.array([0.0, 0.0, 1.0])
@@ -60,7 +88,7 @@ def view_cameras(spec: DatasetSpec, seq: Sequence, frames: np.ndarray, joints: n
         for fi, f in enumerate(frames):
             key = int(f) if sph.per == "frame" else 0
             if sph.target == "auto":
-                tgt = 0.5 * (joints[fi].min(0) + joints[fi].max(0)) if sph.per == "frame" else centre
+                tgt = 0.5 * (subject[fi].min(0) + subject[fi].max(0)) if sph.per == "frame" else centre
             elif isinstance(sph.target, tuple) and sph.target and sph.target[0] == "bone":
                 b = bone_index[sph.target[1]]
                 tgt = world[fi, b, :3, 3] if sph.per == "frame" else world[:, b, :3, 3].mean(0)

@@ -12,8 +12,9 @@ returns), never a file. ``uniform``: at each key frame every coordinate is drawn
 its range (the dataset file's ``coordinates:`` range, else the skeleton's; ``fixed`` ones are
 held), and frames between keys are interpolated with PCHIP, which never leaves the span of
 its keys, so every frame stays within range. ``perturb``: the base motion plus Gaussian
-noise of the given spread, drawn at key frames and interpolated linearly, then clipped to
-the range (a coordinate without any range is not clipped).
+noise of the given spread (``default`` for every rotation; a translation only when named),
+drawn at key frames and interpolated linearly, then clipped to the range (a coordinate
+without any range is not clipped).
 """
 from __future__ import annotations
 
@@ -83,7 +84,9 @@ def sample_pose(spec: DatasetSpec, seq: Sequence, skeleton, base: Pose | None, f
         pose = Pose(seq.name, skeleton, spec.fps, int(frames[0]), int(frames[-1]),
                     "cubic" if len(kf) >= 3 else "linear", keys, {}, {}, "", skeleton.source)
     else:
-        sd = np.array([entry.spread.get(c, entry.spread.get("default", 0.0)) for c in names])
+        # "default" is for rotations (degrees); a translation (metres) moves only when named
+        sd = np.array([entry.spread.get(c.name, entry.spread.get("default", 0.0) if c.type == "rotation" else 0.0)
+                       for c in skeleton.coordinates])
         # noise[k, c] ~ N(0, sd[c]) at key frame k, linear in between, held beyond the ends
         noise = np.stack([rng_for(spec.seed, STREAM_POSE, seq.index, f).standard_normal(len(names)) for f in kf]) * sd
         every = base.frames

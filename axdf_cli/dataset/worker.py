@@ -199,7 +199,8 @@ def build_sequence(ctx: Context, index: int, out: Path, resume: bool) -> tuple[d
     coords = sample_coordinates(pose, frames)
     world = forward_kinematics(ctx.skeleton, coords)
     joints = lab.joint_centres(ctx.skeleton, world)
-    K, w2c, clip = lab.view_cameras(spec, seq, frames, joints, world, ctx.skeleton.bone_index)
+    subject = lab.subject_points(ctx.skeleton, world, ctx.bone_meshes)
+    K, w2c, clip = lab.view_cameras(spec, seq, frames, subject, world, ctx.skeleton.bone_index)
     uv, z = lab.project(K, w2c, joints)
     views = spec.views
     nf, nv = len(frames), len(views)
