@@ -37,12 +37,13 @@ def written_meshes(plan: RunPlan, frame: int) -> tuple[list, list]:
     """The muscles of one frame as the run wrote them: per muscle (V, 3) float32 positions and
     normals, read back from the run folder (cheaper than evaluating again, and exactly what
     was written)."""
-    from axdf_cli.formats.read import read_mesh
+    from axdf_cli.formats import FORMATS
     from axdf_cli.runfolder import mesh_relpath
 
+    read = FORMATS[plan.fmt].reader
     pos, nrm = [], []
     for name in plan.names:
-        m = read_mesh((plan.out / mesh_relpath(name, int(frame), plan.fmt)).read_bytes(), "." + plan.fmt)
+        m = read((plan.out / mesh_relpath(name, int(frame), plan.fmt)).read_bytes())
         pos.append(m.vertices.astype(np.float32))
         nrm.append(m.normals.astype(np.float32))
     return pos, nrm
