@@ -20,6 +20,8 @@ from axdf_cli import atomic
 from axdf_cli.dataset import worker as wk
 from axdf_cli.dataset.index import write_index
 from axdf_cli.errors import AxdfError, EnvironmentProblem, InputError, Interrupted, Mark
+from axdf_cli.dataset.runner import own_entry
+from axdf_cli.yamlio import NAME_RE
 
 ENGINES = ("local", "ray")
 RAY_HINT = "pip install 'ray>=2.9' (or the project's extra: pip install -e '.[ray]')"
@@ -59,20 +61,25 @@ def prepare_out(out: Path, ctx: wk.Context, mine: list[int], resume: bool, overw
         raise InputError(None, f"--out {out} exists and is not a folder", "give a folder")
     names = [ctx.sequences[i].name for i in mine]
     dj = out / wk.DATASET_JSON
-    if out.is_dir() and any(out.iterdir()):
-        same = dj.is_file() and dj.read_bytes() == ctx.dataset_json
+    for n in names + ["bones"]:
+        if os.path.islink(out / n):
+            raise InputError(None, f"{out / n} is a link", "a data set's folders are plain folders (no links)")
+    if out.is_dir() and any(not own_entry(n) for n in os.listdir(out)):
+        old = _read_dataset_json(dj)
+        if old is None:
+            raise InputError(None, f"output folder {out} is not empty and holds no axdf data set (no dataset.json "
+                             "written by axdf)", "--overwrite and --resume only replace or finish axdf's own data "
+                             "sets; choose an empty or new output folder")
+        same = dj.read_bytes() == ctx.dataset_json
         if not same and not overwrite:
-            what = "another data set (its dataset.json differs)" if dj.is_file() else "files that are not a data set"
-            raise InputError(None, f"output folder {out} holds {what}",
+            raise InputError(None, f"output folder {out} holds another data set (its dataset.json differs: "
+                             "other inputs, settings or seed)",
                              "pass --overwrite to replace it, or another --out (shards of one data set share one --out)")
-        if not same:  # --overwrite: remove what a data set writes there, nothing else
-            old = []
-            try:
-                old = [s["name"] for s in json.loads(dj.read_text()).get("sequences", [])]
-            except (OSError, ValueError, AttributeError, TypeError):
-                pass
-            for n in sorted(set(old) | set(names)):
-                shutil.rmtree(out / n, ignore_errors=True)
+        if not same:  # --overwrite: remove what the old data set wrote there, nothing else
+            olds = [s.get("name") for s in old.get("sequences", []) if isinstance(s, dict)]
+            for n in sorted({n for n in olds if isinstance(n, str) and NAME_RE.match(n)} | set(names)):
+                if not os.path.islink(out / n):
+                    shutil.rmtree(out / n, ignore_errors=True)
             shutil.rmtree(out / "bones", ignore_errors=True)
             for f in (wk.DATASET_JSON, wk.INDEX):
                 (out / f).unlink(missing_ok=True)
@@ -86,8 +93,11 @@ def prepare_out(out: Path, ctx: wk.Context, mine: list[int], resume: bool, overw
                 for n in present:
                     shutil.rmtree(out / n)
     atomic.ensure_dir(out)
-    if resume:
-        atomic.remove_stale_temporaries(out)
+    if resume:  # temporaries of a killed build in the data set's own folders (a run cleans its own)
+        folders = [out, out / "bones"]
+        for n in names:
+            folders += [out / n] + [out / n / "views" / v for v in ctx.spec.views]
+        atomic.remove_stale_temporaries(folders)
     atomic.write_bytes(dj, ctx.dataset_json)
     for i, (_, _, data) in sorted(ctx.bone_meshes.items()):
         p = out / "bones" / f"{ctx.skeleton.bones[i].name}.ply"
@@ -96,6 +106,15 @@ def prepare_out(out: Path, ctx: wk.Context, mine: list[int], resume: bool, overw
 
 
 # ----------------------------------------------------------------------------- workers
+
+
+def _read_dataset_json(path: Path) -> dict | None:
+    """An axdf data set's dataset.json, or None when ``path`` is not one."""
+    try:
+        d = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+    return d if isinstance(d, dict) and d.get("tool") == "axdf" and "dataset" in d else None
 
 
 def _safe_build(ctx: wk.Context, index: int, out: Path, resume: bool) -> tuple:

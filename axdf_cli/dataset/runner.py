@@ -17,6 +17,7 @@ from axdf_cli.render.settings import RenderSettings, parse_render_settings, sett
 from axdf_cli.render.settings import _parse_camera as parse_camera  # noqa: F401
 from axdf_cli.run import RunPlan, evaluate_chunks, execute, load_bone_mesh, twist_references  # noqa: F401
 from axdf_cli.run.plan import display_path  # noqa: F401  (paths as a run's manifest shows them)
+from axdf_cli.runfolder import own_entry  # noqa: F401  (the lock and temporaries axdf leaves while writing)
 
 
 def sequence_plan(pose: Pose, frames: np.ndarray, muscles, models, fmt: str, out: Path, inputs: dict) -> RunPlan:
