@@ -211,3 +211,14 @@ def test_npz_bytes_are_deterministic_and_load():
     z = np.load(io.BytesIO(npz_bytes(arrays)))
     np.testing.assert_array_equal(z["a"], arrays["a"])
     assert list(z["names"]) == ["x", "yz"]
+
+
+def test_readme_loading_snippet_runs(tiny):
+    from conftest import REPO_ROOT
+
+    text = (REPO_ROOT / "README.md").read_text()
+    block = text[text.index("## Data sets"):].split("```python\n", 1)[1].split("```", 1)[0]
+    assert len(block.strip().splitlines()) <= 10
+    scope: dict = {}
+    exec(block.replace('"out/demo_small"', repr(str(tiny / "ref"))), scope)
+    assert scope["image"].shape == (48, 40, 4) and scope["uv"].shape == (5, 2) and scope["visible"].dtype == bool
