@@ -8,7 +8,6 @@ import json
 
 import numpy as np
 import pytest
-from conftest import run_main
 from dataset_helpers import BALL_R, write_tiny
 from render_helpers import read_exr
 

@@ -6,6 +6,7 @@ import re
 import sys
 from pathlib import Path
 
+from axdf_cli.cli.run import _positive
 from axdf_cli.errors import UsageError
 
 _SHARD_RE = re.compile(r"^(\d+)/(\d+)$")
@@ -40,16 +41,6 @@ def add_args(p) -> None:
         gq = sp.add_mutually_exclusive_group()
         gq.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS, help="print only errors")
         gq.add_argument("-v", "--verbose", action="store_true", default=argparse.SUPPRESS, help="print more detail")
-
-
-def _positive(text: str) -> int:
-    try:
-        n = int(text)
-    except ValueError:
-        n = 0
-    if not 1 <= n <= 256:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number of processes in 1..256")
-    return n
 
 
 def parse_shard(text: str) -> tuple[int, int]:

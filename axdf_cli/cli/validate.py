@@ -1,4 +1,4 @@
-"""Check muscle, skeleton, pose and job files with the same checks as run; write nothing."""
+"""Check muscle, skeleton, pose, job, transfer and dataset files with the same checks as run; write nothing."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -19,6 +19,12 @@ def validate_file(path: Path) -> str:
 
     doc = load_yaml(path)
     kind = loaders.detect_kind(doc)
+    if isinstance(doc, dict) and "dataset" in doc:  # (it also names muscles: look first)
+        from axdf_cli.dataset.worker import build_context
+
+        ctx = build_context(path)
+        return (f"data set {ctx.spec.name}: {len(ctx.sequences)} sequences, {len(ctx.muscles)} muscles, "
+                f"{len(ctx.spec.views)} view(s)")
     if kind == "skeleton":
         s = loaders.load_skeleton(path)
         return f"skeleton {s.name}: {len(s.bones)} bones, {len(s.coordinates)} coordinates"
@@ -40,8 +46,8 @@ def validate_file(path: Path) -> str:
         m = load_map(path)
         return f"transfer map {m.name}: {len(m.pairs)} bones, {m.skel_a.name} -> {m.skel_b.name}"
     raise InputError(Mark(str(path), 1, 1), "unknown kind of file",
-                     "a skeleton (skeleton:, bones:), pose (pose:, keys:), muscle (muscle:), job (muscles:, pose:) "
-                     "or transfer map (transfer:, bones:)")
+                     "a skeleton (skeleton:, bones:), pose (pose:, keys:), muscle (muscle:), job (muscles:, pose:), "
+                     "transfer map (transfer:, bones:) or data set (dataset:)")
 
 
 def run(args) -> int:

@@ -11,13 +11,15 @@ from types import SimpleNamespace
 import numpy as np
 
 from axdf_cli.loaders import Pose
-from axdf_cli.skeleton import forward_kinematics
+from axdf_cli.render.camera import intrinsics, look_at  # noqa: F401  (the conventions of camera.json)
+from axdf_cli.render.renderer import id_map  # noqa: F401  (the EXR id pass's table)
 from axdf_cli.render.sequence import FRAME_WRITERS  # noqa: F401  (image passes: png, exr)
 from axdf_cli.render.settings import RenderSettings, parse_render_settings, settings_to_dict  # noqa: F401
-from axdf_cli.render.settings import _parse_camera as parse_camera  # noqa: F401
-from axdf_cli.run import RunPlan, evaluate_chunks, execute, load_bone_mesh, twist_references  # noqa: F401
-from axdf_cli.run.plan import display_path  # noqa: F401  (paths as a run's manifest shows them)
+from axdf_cli.render.settings import _parse_camera as parse_camera  # noqa: F401  (a job's camera: mapping)
+from axdf_cli.run import RunPlan, evaluate_chunks, execute, load_bone_mesh  # noqa: F401
+from axdf_cli.run.plan import display_path, load_muscle_specs  # noqa: F401  (as a run's manifest shows paths)
 from axdf_cli.runfolder import own_entry  # noqa: F401  (the lock and temporaries axdf leaves while writing)
+from axdf_cli.skeleton import forward_kinematics
 
 
 def sequence_plan(pose: Pose, frames: np.ndarray, muscles, models, fmt: str, out: Path, inputs: dict) -> RunPlan:
@@ -83,6 +85,3 @@ def without_meshes(skeleton):
     """The skeleton with its bones' mesh paths dropped (the data set stores bone meshes once)."""
     return replace(skeleton, bones=tuple(replace(b, mesh=None) for b in skeleton.bones))
 
-
-from axdf_cli.render.camera import intrinsics, look_at  # noqa: E402,F401  (camera conventions of camera.json)
-from axdf_cli.render.renderer import id_map  # noqa: E402,F401  (the EXR id pass's table)

@@ -26,7 +26,7 @@ import numpy as np
 
 from axdf_cli.dataset.spec import DatasetSpec, Entry, Sequence
 from axdf_cli.loaders import Pose
-from axdf_cli.pose import interpolate, sample_coordinates
+from axdf_cli.pose import sample_coordinates
 
 STREAM_POSE = 1
 STREAM_ACTIVATION = 2

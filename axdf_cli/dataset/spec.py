@@ -9,9 +9,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from axdf_cli.dataset.runner import (FRAME_WRITERS, RenderSettings, load_muscle_specs, motion_pose, parse_camera,
+                                     parse_render_settings)
 from axdf_cli.errors import InputError, Mark
-from axdf_cli.loaders import (Pose, expand_muscle_paths, load_muscle_file, load_pose, load_skeleton,
-                              resolve_ref)
+from axdf_cli.loaders import Pose, expand_muscle_paths, load_pose, load_skeleton, resolve_ref
 from axdf_cli.yamlio import Fields, check_name, check_number, check_vector, item_marks, load_yaml, mark_of
 
 SAMPLE_MODES = ("uniform", "perturb")
@@ -154,7 +155,7 @@ def load_dataset(path: Path | str, seed: int | None = None) -> DatasetSpec:
             raise InputError(m, f"muscle path is {e!r}", "a path, folder or glob relative to the dataset file")
         entries_paths.append((resolve_ref(path, e, m), m))
     files = expand_muscle_paths(entries_paths)
-    muscle_names = _check_muscles(files, skel, f.vmark("muscles"))
+    muscle_names = [m.name for m in load_muscle_specs(files)]
 
     fps = float(f.number("fps", default=30.0, lo=0.0, hi=100000.0, lo_open=True))
     coords = _parse_coordinates(f.mapping("coordinates", default=None), f.vmark("coordinates"), skel)
@@ -186,23 +187,6 @@ def load_dataset(path: Path | str, seed: int | None = None) -> DatasetSpec:
     for m in motions.values():
         load_motion(spec, m.name)
     return spec
-
-
-def _check_muscles(files, skel, where: Mark) -> list[str]:
-    names: dict[str, str] = {}
-    for fpath in files:
-        for s in load_muscle_file(fpath):
-            if s.name in names:
-                raise InputError(Mark(str(fpath), 1, 1), f"muscle {s.name!r} is also defined in {names[s.name]}",
-                                 "muscle names are unique within a data set")
-            names[s.name] = str(fpath)
-            for p in s.axis:
-                if p.bone not in skel.bone_index:
-                    raise InputError(p.mark, f"bone {p.bone!r} is not in skeleton {skel.name}",
-                                     f"bones: {', '.join(skel.bone_index)}")
-    if not names:
-        raise InputError(where, "no muscles found", "give muscle YAML files")
-    return list(names)
 
 
 def _parse_coordinates(value, where: Mark, skel) -> dict:
@@ -343,8 +327,6 @@ def _parse_cameras(value, where: Mark, skel):
         raise InputError(where, "cameras needs one of rig or sphere",
                          "rig: [{name, position, target, up, fov}, ...] or sphere: {views, distance, ...}")
     if f.has("rig"):
-        from axdf_cli.dataset.runner import parse_camera
-
         seq = f.seq("rig", min_len=1)
         if len(seq) > MAX_VIEWS:
             raise InputError(f.vmark("rig"), f"{len(seq)} cameras", f"at most {MAX_VIEWS}")
@@ -392,8 +374,6 @@ def _parse_cameras(value, where: Mark, skel):
 
 
 def _parse_render(value, where: Mark):
-    from axdf_cli.dataset.runner import FRAME_WRITERS, RenderSettings, parse_render_settings
-
     if value is None:
         return RenderSettings(enabled=True, size=(256, 256)), tuple(FRAME_WRITERS)
     for k in RENDER_KEYS_ELSEWHERE:
@@ -453,8 +433,6 @@ def load_motion(spec: DatasetSpec, name: str) -> Pose:
             raise InputError(m.mark, f"pose {Path(m.path).name} uses skeleton {pose.skeleton_path}",
                              f"the data set's skeleton {spec.skeleton_path}")
     else:
-        from axdf_cli.dataset.runner import motion_pose
-
         pose = motion_pose(Path(m.path), skel, name, m.fps)
     _MOTION_CACHE[key] = pose
     return pose

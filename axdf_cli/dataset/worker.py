@@ -24,7 +24,7 @@ from axdf_cli.dataset import runner
 from axdf_cli.dataset.sampling import sample_pose, with_activation
 from axdf_cli.dataset.spec import (DatasetSpec, Sequence, expand_sequences, load_dataset, load_motion,
                                    motion_frames)
-from axdf_cli.loaders import load_muscle_file, load_skeleton
+from axdf_cli.loaders import load_skeleton
 from axdf_cli.pose import sample_activation, sample_coordinates
 from axdf_cli.skeleton import forward_kinematics
 
@@ -64,7 +64,7 @@ def build_context(path: Path | str, seed: int | None = None) -> Context:
 
     spec = load_dataset(path, seed)
     skel = load_skeleton(spec.skeleton_path)
-    muscles = [s for f in spec.muscle_files for s in load_muscle_file(f)]
+    muscles = runner.load_muscle_specs(spec.muscle_files)
     models = runner.build_models(muscles, skel)
     bone_meshes = {i: runner.load_bone_mesh(b.mesh, spec.skeleton_path) for i, b in enumerate(skel.bones) if b.mesh}
     srcs = [spec.source, spec.skeleton_path, *spec.muscle_files, *sorted({b.mesh for b in skel.bones if b.mesh})]

@@ -57,6 +57,22 @@ def job_render_settings(job: Job | None):
     return parse_render_settings(job.render, job.render_mark or Mark(job.source))
 
 
+def load_muscle_specs(files) -> list[MuscleSpec]:
+    """Every muscle of ``files``, in order; a name defined twice, or no muscle at all, is an error."""
+    specs: list[MuscleSpec] = []
+    seen: dict[str, str] = {}
+    for fpath in files:
+        for spec in load_muscle_file(fpath):
+            if spec.name in seen:
+                raise InputError(Mark(str(fpath), 1, 1), f"muscle {spec.name!r} is also defined in {seen[spec.name]}",
+                                 "muscle names are unique within a run")
+            seen[spec.name] = str(fpath)
+            specs.append(spec)
+    if not specs:
+        raise InputError(None, "no muscles found", "give muscle YAML files")
+    return specs
+
+
 def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, fmt_arg=None,
              frames_arg=None, render=None) -> RunPlan:
     """Load and check every input; build the muscle models. Writes nothing.
@@ -79,17 +95,8 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
     else:
         raise InputError(None, "no muscles given", "give a JOB.yaml or --muscles PATH ...")
     files = expand_muscle_paths(entries)
-    specs: list[MuscleSpec] = []
-    seen: dict[str, str] = {}
-    for fpath in files:
-        for spec in load_muscle_file(fpath):
-            if spec.name in seen:
-                raise InputError(Mark(str(fpath), 1, 1), f"muscle {spec.name!r} is also defined in {seen[spec.name]}",
-                                 "muscle names are unique within a run")
-            seen[spec.name] = str(fpath)
-            specs.append(spec)
-    if not specs:
-        raise InputError(None, "no muscles found", "give muscle YAML files")
+    specs = load_muscle_specs(files)
+    seen = {s.name for s in specs}
 
     warnings = []
     notes = [f"{mark}: activation for {name!r}, which is not in this run; ignored"
