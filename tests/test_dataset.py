@@ -135,6 +135,8 @@ def test_bad_dataset_file_exit_2_with_position_nothing_written(tiny, monkeypatch
     assert rc == 2 and "bad3.yaml:" in err and "shards" in err
     rc, _, err = run_main(["dataset", "build", "tiny.yaml", "--out", "bad_out", "--shard", "2/2"], capsys)
     assert rc == 2 and "--shard" in err and not (tiny / "bad_out").exists()
+    rc, _, err = run_main(["dataset", "build", "tiny.yaml", "--out", "bad_out", "--seed", "-1"], capsys)
+    assert rc == 2 and "--seed" in err and not (tiny / "bad_out").exists()
     (tiny / "other").mkdir(exist_ok=True)
     (tiny / "other" / "keep.txt").write_text("x")
     rc, _, err = run_main(["dataset", "build", "tiny.yaml", "--out", "other"], capsys)

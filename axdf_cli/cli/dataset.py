@@ -67,6 +67,8 @@ def _build(args) -> int:
     from axdf_cli.loaders import set_ref_policy
 
     shard = parse_shard(args.shard)
+    if args.seed is not None and not 0 <= args.seed < 2**63:
+        raise UsageError(f"--seed {args.seed}", "a whole number in 0..2^63-1")
     roots = [Path.cwd(), Path(args.dataset).resolve().parent]
     set_ref_policy(roots, args.allow_outside)
     ctx = build_context(args.dataset, args.seed)
