@@ -499,6 +499,12 @@ def dataset_rows(table: "Table", n_samples: int, tmp: Path) -> None:
               f"of {1000 / r1:.0f} ms; meshes read back {t['read']:.0f} ms")
     table.add("  (writing = the run's meshes, tables, manifest", f"{t['run'] - ev:.0f} ms",
               f"+ labels, PNG, EXR {t['write']:.0f} ms)")
+    # CPU seconds (all threads) per sample, summed over workers: on a machine shared with other
+    # jobs the wall-clock ratio above depends on their load; this does much less
+    c1 = one["timing"]["cpu"] / max(one["samples"], 1) * 1000
+    c2 = two["timing"]["cpu"] / max(two["samples"], 1) * 1000
+    table.add("CPU per sample: 1 worker / 2 workers", f"{c1:.0f} / {c2:.0f} ms",
+              f"2 idle cores: <= {2 * c1 / c2:.2f}x", f"{c2 / c1:.2f}x CPU")
 
 
 # ----------------------------------------------------------------------------- --long

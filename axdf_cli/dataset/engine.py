@@ -38,7 +38,7 @@ class Outcome:
     samples: int = 0  # samples of this run
     built_samples: int = 0  # samples of the sequences made now (not kept by --resume)
     seconds: float = 0.0
-    timing: dict = field(default_factory=lambda: {"run": 0.0, "read": 0.0, "render": 0.0, "write": 0.0})
+    timing: dict = field(default_factory=lambda: {"run": 0.0, "read": 0.0, "render": 0.0, "write": 0.0, "cpu": 0.0})
     index: Path | None = None
     rows: int = 0
     missing: list = field(default_factory=list)  # sequences of the data set not complete yet

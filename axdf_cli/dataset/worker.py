@@ -179,13 +179,13 @@ def build_sequence(ctx: Context, index: int, out: Path, resume: bool) -> tuple[d
     seq = ctx.sequences[index]
     spec = ctx.spec
     folder = Path(out) / seq.name
-    timing = {"run": 0.0, "read": 0.0, "render": 0.0, "write": 0.0, "skipped": 0}
+    timing = {"run": 0.0, "read": 0.0, "render": 0.0, "write": 0.0, "cpu": 0.0, "skipped": 0}
     if resume:
         rec = read_record(folder, ctx.digest)
         if rec is not None:
             timing["skipped"] = 1
             return rec, timing
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     pose, frames = sequence_pose(ctx, seq)
     entry = spec.entries[seq.entry]
     inputs = dict(ctx.inputs)
@@ -246,5 +246,5 @@ def build_sequence(ctx: Context, index: int, out: Path, resume: bool) -> tuple[d
            "frames": [int(f) for f in frames], "views": list(views), "files": dict(sorted(files.items()))}
     atomic.write_text(folder / RECORD, json.dumps(rec, indent=1) + "\n")
     t_write += time.perf_counter() - t2
-    timing.update(read=t_read, render=t_render, write=t_write)
+    timing.update(read=t_read, render=t_render, write=t_write, cpu=time.process_time() - c0)
     return rec, timing
