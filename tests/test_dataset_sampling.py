@@ -131,3 +131,31 @@ def test_opensim_motion_through_the_importers_reader(tmp_path, monkeypatch, caps
     (d / "walk.mot").write_text(mot.replace("\tstretch\n", "\tknee\n"))
     rc, _, err = run_main(["dataset", "build", "tiny.yaml", "--out", "o2"], capsys)
     assert rc == 2 and "walk.mot:7:" in err and "knee" in err and not (d / "o2").exists()
+
+
+def test_perturb_default_spread_moves_rotations_only(tiny_spec):
+    from axdf_cli.dataset.sampling import sample_pose
+    from axdf_cli.dataset.spec import Entry, Sequence, load_motion, motion_frames
+    from axdf_cli.pose import sample_coordinates
+
+    ctx = tiny_spec
+    spec = dataclasses.replace(ctx.spec, entries=(Entry("perturb", 1, "walk", None, None, {"default": 10.0}),))
+    base = load_motion(spec, "walk")
+    fr = motion_frames(spec, "walk")
+    q = sample_coordinates(sample_pose(spec, Sequence(0, "s", 0, len(fr)), ctx.plan_skeleton, base, fr), base.frames)
+    b = sample_coordinates(base, base.frames)
+    idx = ctx.plan_skeleton.coord_index
+    np.testing.assert_array_equal(q[:, idx["stretch"]], b[:, idx["stretch"]])  # metres: not named, not moved
+    assert np.abs(q[:, idx["bend"]] - b[:, idx["bend"]]).max() > 1.0  # degrees: the default spread
+
+
+def test_index_rows_shard_column_and_missing_passes():
+    from axdf_cli.dataset.index import index_bytes, index_rows
+
+    recs = [{"sequence": f"seq_{i:05d}", "index": i, "source": "uniform", "frames": [0, 2], "views": ["a"]}
+            for i in range(4)]
+    cols = index_rows(recs, seed=5, shards=3, passes=("png",))
+    assert cols["shard"] == [0, 0, 1, 1, 2, 2, 0, 0]
+    assert cols["frame_index"] == [0, 1] * 4 and cols["exr"] == [None] * 8
+    assert cols["png"][3] == "seq_00001/views/a/0002.png"
+    assert index_bytes(recs, 5, 3, ("png",)) == index_bytes(recs, 5, 3, ("png",))
