@@ -174,8 +174,8 @@ def _raise_failure(ctx: wk.Context, result: tuple, left: list[int]) -> None:
     rest = f"; not finished: {_names(ctx, left)}" if left else ""
     if kind == "env":
         raise EnvironmentProblem(f"{name}: {msg}{rest}", hint or "fix the cause, then rerun with --resume")
-    raise WorkerFailed(f"{name} failed: {msg}{rest}; rerun with --resume to finish (--traceback shows no more: "
-                       "run that sequence alone with --jobs 1 --shard to debug)")
+    raise WorkerFailed(f"{name} failed in a worker: {msg}{rest}; rerun with --resume to finish "
+                       "(with --jobs 1 --traceback to see where it fails)")
 
 
 def _names(ctx: wk.Context, indices: list[int], at_most: int = 8) -> str:
@@ -189,13 +189,12 @@ def _samples(ctx: wk.Context, index: int) -> int:
 
 
 def _run_local(ctx, mine, out, jobs, resume, done, where) -> None:
-    if jobs <= 1 or len(mine) <= 1:
+    if jobs <= 1 or len(mine) <= 1:  # in this process: errors propagate as they are (--traceback)
         try:
             for i in mine:
-                r = _safe_build(ctx, i, out, resume)
-                if r[0] != "ok":
-                    _raise_failure(ctx, r, [j for j in mine if j > i])
-                done(r)
+                rec, timing = wk.build_sequence(ctx, i, out, resume)
+                vr = wk._RENDERERS.get(os.getpid())
+                done(("ok", i, rec, timing, vr.info.renderer if vr else ""))
         finally:
             wk.release_renderer()
         return
