@@ -63,3 +63,19 @@ def write_tiny(folder: Path, dataset_yaml: str = DATASET_YAML) -> Path:
     (folder / "walk.yaml").write_text(WALK_YAML)
     (folder / "tiny.yaml").write_text(dataset_yaml)
     return folder / "tiny.yaml"
+
+
+def build_in(folder: Path, out: str) -> Path:
+    """``axdf dataset build tiny.yaml --out OUT`` in ``folder`` (in process, for module fixtures,
+    which cannot use monkeypatch.chdir); returns folder / out."""
+    import os
+
+    from axdf_cli.cli.main import main
+
+    cwd = os.getcwd()
+    os.chdir(folder)
+    try:
+        assert main(["dataset", "build", "tiny.yaml", "--out", out, "-q"]) == 0
+    finally:
+        os.chdir(cwd)
+    return Path(folder) / out

@@ -9,22 +9,15 @@ import shutil
 import numpy as np
 import pytest
 from conftest import all_files, run_main
-from dataset_helpers import DATASET_YAML, write_tiny
+from dataset_helpers import DATASET_YAML, build_in, write_tiny
 
 
 @pytest.fixture(scope="module")
 def tiny(tmp_path_factory):
     """The tiny data set's files, and a reference build with one worker."""
-    from axdf_cli.cli.main import main
-
     d = tmp_path_factory.mktemp("tiny")
     write_tiny(d)
-    cwd = os.getcwd()
-    os.chdir(d)
-    try:
-        assert main(["dataset", "build", "tiny.yaml", "--out", "ref", "-q"]) == 0
-    finally:
-        os.chdir(cwd)
+    build_in(d, "ref")
     return d
 
 

@@ -8,7 +8,7 @@ import json
 
 import numpy as np
 import pytest
-from dataset_helpers import BALL_R, write_tiny
+from dataset_helpers import BALL_R, build_in, write_tiny
 from render_helpers import read_exr
 
 RIG_YAML = """\
@@ -49,20 +49,10 @@ DEPTH_TOL = 2e-3  # m: a pixel centre up to ~0.7 px (5 mm) off the joint's ray s
 
 @pytest.fixture(scope="module")
 def rig(tmp_path_factory):
-    from axdf_cli.cli.main import main
-
     d = tmp_path_factory.mktemp("rig")
     write_tiny(d, RIG_YAML)
     (d / "straight.yaml").write_text(STRAIGHT_YAML)
-    import os
-
-    cwd = os.getcwd()
-    os.chdir(d)
-    try:
-        assert main(["dataset", "build", "tiny.yaml", "--out", "out", "-q"]) == 0
-    finally:
-        os.chdir(cwd)
-    return d / "out"
+    return build_in(d, "out")
 
 
 def _ball_ids(out) -> dict:
