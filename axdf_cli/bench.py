@@ -444,14 +444,12 @@ def time_dataset(n_samples: int, jobs: int, out: Path) -> dict:
     one view each; a shard 0/K of its 1000), in process: wall seconds and per-stage seconds."""
     from axdf_cli.dataset import engine
     from axdf_cli.dataset.worker import build_context
-    from axdf_cli.loaders import set_ref_policy
+    from axdf_cli.loaders import RefPolicy
 
-    set_ref_policy([ROOT, Path.cwd()], False)
-    ctx = build_context(DATASET_FILE)
+    ctx = build_context(DATASET_FILE, policy=RefPolicy.for_command([DATASET_FILE]))
     shard = (0, max(1, len(ctx.sequences) // n_samples))
     t0 = time.perf_counter()
-    res = engine.build(DATASET_FILE, out, jobs=jobs, shard=shard, roots=[ROOT, Path.cwd()], ctx=ctx,
-                       overwrite=True)
+    res = engine.build(DATASET_FILE, out, jobs=jobs, shard=shard, ctx=ctx, overwrite=True)
     return {"samples": res.built_samples, "wall": time.perf_counter() - t0, "timing": res.timing,
             "renderer": res.gl_renderer}
 
@@ -461,10 +459,9 @@ def dataset_evaluation(n_sequences: int) -> float:
     kinematics, ``evaluate``), timed alone on the data set's first sequences."""
     from axdf_cli.dataset import runner
     from axdf_cli.dataset.worker import build_context, sequence_pose
-    from axdf_cli.loaders import set_ref_policy
+    from axdf_cli.loaders import RefPolicy
 
-    set_ref_policy([ROOT, Path.cwd()], False)
-    ctx = build_context(DATASET_FILE)
+    ctx = build_context(DATASET_FILE, policy=RefPolicy.for_command([DATASET_FILE]))
     t = 0.0
     n = 0
     for seq in ctx.sequences[:n_sequences]:

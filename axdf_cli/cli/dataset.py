@@ -64,14 +64,13 @@ def run(args) -> int:
 def _build(args) -> int:
     from axdf_cli.dataset import engine
     from axdf_cli.dataset.worker import build_context
-    from axdf_cli.loaders import set_ref_policy
+    from axdf_cli.loaders import RefPolicy
 
     shard = parse_shard(args.shard)
     if args.seed is not None and not 0 <= args.seed < 2**63:
         raise UsageError(f"--seed {args.seed}", "a whole number in 0..2^63-1")
-    roots = [Path.cwd(), Path(args.dataset).resolve().parent]
-    set_ref_policy(roots, args.allow_outside)
-    ctx = build_context(args.dataset, args.seed)
+    policy = RefPolicy.for_command([args.dataset], args.allow_outside)
+    ctx = build_context(args.dataset, args.seed, policy)
     out = Path(args.out or f"out/{ctx.spec.name}")
     mine = [s for s in ctx.sequences if s.index % shard[1] == shard[0]]
     views = len(ctx.spec.views)
@@ -89,8 +88,7 @@ def _build(args) -> int:
     try:
         res = engine.build(args.dataset, out, seed=args.seed, jobs=args.jobs, shard=shard, engine=args.engine,
                            address=args.address, resume=args.resume, overwrite=args.overwrite,
-                           progress=bar.update if bar else None, roots=roots, allow_outside=args.allow_outside,
-                           ctx=ctx)
+                           progress=bar.update if bar else None, ctx=ctx)
     finally:
         if bar:
             bar.close()

@@ -139,18 +139,18 @@ _CONTEXTS: dict = {}  # a worker process's contexts, by (dataset file, seed, fol
 def worker_context(where: tuple) -> wk.Context:
     """The context in a worker process (pool or Ray), built once from the dataset file: the
     worker works in the driver's folder (manifests name inputs relative to it) under the
-    driver's path policy. ``where`` = (dataset file, seed, folder, roots, allow_outside)."""
-    from axdf_cli.loaders import set_ref_policy
+    driver's path policy. ``where`` = (dataset file, seed, folder, policy roots, allow_outside)."""
+    from axdf_cli.loaders import RefPolicy
 
     path, seed, cwd, roots, allow_outside = where
     # the workers are the parallelism: each renders with one llvmpipe thread (Mesa's default is
     # one per core, which oversubscribes the cores N workers share); a value you set is kept
     os.environ.setdefault("LP_NUM_THREADS", "1")
     os.chdir(cwd)
-    set_ref_policy(roots, allow_outside)
     ctx = _CONTEXTS.get(where)
     if ctx is None:
-        ctx = _CONTEXTS[where] = wk.build_context(path, seed)
+        policy = RefPolicy(tuple(Path(r) for r in roots), allow_outside)
+        ctx = _CONTEXTS[where] = wk.build_context(path, seed, policy)
     return ctx
 
 
@@ -159,9 +159,9 @@ def _worker_task(where: tuple, out: str, index: int, resume: bool) -> tuple:
     return _safe_build(worker_context(where), index, Path(out), resume)
 
 
-def _where(path, seed, roots, allow_outside) -> tuple:
-    return (str(Path(path).resolve()), seed, str(Path.cwd()), tuple(str(Path(r).resolve()) for r in roots),
-            bool(allow_outside))
+def _where(path, seed, policy) -> tuple:
+    return (str(Path(path).resolve()), seed, str(Path.cwd()), tuple(str(r) for r in policy.roots),
+            bool(policy.allow_outside))
 
 
 def _raise_failure(ctx: wk.Context, result: tuple, left: list[int]) -> None:
@@ -275,11 +275,12 @@ def _run_ray(ctx, mine, out, jobs, resume, done, address, where) -> None:
 
 def build(path: Path | str, out: Path | str, *, seed: int | None = None, jobs: int = 1, shard=(0, 1),
           engine: str = "local", address: str | None = None, resume: bool = False, overwrite: bool = False,
-          progress=None, roots=(), allow_outside: bool = False, ctx: wk.Context | None = None) -> Outcome:
+          progress=None, policy=None, ctx: wk.Context | None = None) -> Outcome:
     """Make this run's sequences (``shard`` = (K, N)); write the index when the whole data set
-    is complete. ``progress(samples)`` is called as sequences finish."""
+    is complete. ``progress(samples)`` is called as sequences finish; ``policy``: the command's
+    RefPolicy (the workers read the inputs with it)."""
     out = Path(out)
-    ctx = ctx or wk.build_context(path, seed)
+    ctx = ctx or wk.build_context(path, seed, policy)
     k, n = shard
     mine = [s.index for s in ctx.sequences if s.index % n == k]
     prepare_out(out, ctx, mine, resume, overwrite)
@@ -299,7 +300,7 @@ def build(path: Path | str, out: Path | str, *, seed: int | None = None, jobs: i
         if progress:
             progress(_samples(ctx, i))
 
-    where = _where(path, seed, roots, allow_outside)
+    where = _where(path, seed, ctx.spec.policy)
     if engine == "ray":
         _run_ray(ctx, mine, out, jobs, resume, done, address, where)
     else:

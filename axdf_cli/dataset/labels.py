@@ -76,7 +76,8 @@ def view_cameras(spec: DatasetSpec, seq: Sequence, frames: np.ndarray, subject: 
     up = np.array([0.0, 0.0, 1.0])
     if spec.rig is not None:
         K = np.stack([intrinsics(W, H, c.fov) for c in spec.rig])
-        w2c = np.stack([look_at(c.position, np.subtract(c.target, c.position), c.up) for c in spec.rig])
+        w2c = np.stack([look_at(c.position, np.subtract(centre if c.target is None else c.target, c.position), c.up)
+                        for c in spec.rig])
         w2c = np.broadcast_to(w2c, (nf,) + w2c.shape).copy()
         dist = np.linalg.norm(np.array([c.position for c in spec.rig]) - centre, axis=1)
         dist = np.broadcast_to(dist, (nf, len(spec.rig)))

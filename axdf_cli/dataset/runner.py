@@ -15,7 +15,7 @@ from axdf_cli.render.camera import intrinsics, look_at  # noqa: F401  (the conve
 from axdf_cli.render.renderer import id_map  # noqa: F401  (the EXR id pass's table)
 from axdf_cli.render.sequence import FRAME_WRITERS  # noqa: F401  (image passes: png, exr)
 from axdf_cli.render.settings import RenderSettings, parse_render_settings, settings_to_dict  # noqa: F401
-from axdf_cli.render.settings import _parse_camera as parse_camera  # noqa: F401  (a job's camera: mapping)
+from axdf_cli.render.settings import parse_camera  # noqa: F401  (a job's camera: mapping)
 from axdf_cli.run import RunPlan, evaluate_chunks, execute, load_bone_mesh  # noqa: F401
 from axdf_cli.run.plan import display_path, load_muscle_specs  # noqa: F401  (as a run's manifest shows paths)
 from axdf_cli.runfolder import own_entry  # noqa: F401  (the lock and temporaries axdf leaves while writing)

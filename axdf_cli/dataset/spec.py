@@ -12,7 +12,7 @@ from pathlib import Path
 from axdf_cli.dataset.runner import (FRAME_WRITERS, RenderSettings, load_muscle_specs, motion_pose, parse_camera,
                                      parse_render_settings)
 from axdf_cli.errors import InputError, Mark
-from axdf_cli.loaders import Pose, expand_muscle_paths, load_pose, load_skeleton, resolve_ref
+from axdf_cli.loaders import Pose, RefPolicy, expand_muscle_paths, load_pose, load_skeleton
 from axdf_cli.yamlio import Fields, check_name, check_number, check_vector, item_marks, load_yaml, mark_of
 
 SAMPLE_MODES = ("uniform", "perturb")
@@ -74,7 +74,7 @@ class Activation:
 class RigCamera:
     name: str
     position: tuple[float, float, float]
-    target: tuple[float, float, float]
+    target: tuple[float, float, float] | None  # None: the subject's centre (as target: auto)
     up: tuple[float, float, float]
     fov: float
 
@@ -109,6 +109,7 @@ class DatasetSpec:
     shards: int
     visibility_tolerance: float
     fps: float
+    policy: RefPolicy = field(default=RefPolicy(), compare=False)  # where referenced files may lie
 
     @property
     def views(self) -> tuple[str, ...]:
@@ -127,21 +128,22 @@ class Sequence:
     n_frames: int
 
 
-def load_dataset(path: Path | str, seed: int | None = None) -> DatasetSpec:
+def load_dataset(path: Path | str, seed: int | None = None, policy: RefPolicy | None = None) -> DatasetSpec:
     """Read and check a dataset file (and the skeleton, muscles and motions it names).
-    ``seed`` overrides the file's seed (``--seed``)."""
+    ``seed`` overrides the file's seed (``--seed``); ``policy``: where referenced files may lie."""
     path = Path(path)
+    policy = policy or RefPolicy()
     doc = load_yaml(path)
     top = Mark(str(path), 1, 1)
     f = Fields(doc, top, "dataset file")
     name = f.name("dataset", required=True)
     file_seed = int(f.number("seed", default=0, lo=0, hi=2**63 - 1, integer=True))
     skel_ref = f.string("skeleton", required=True)
-    skel_path = resolve_ref(path, skel_ref, f.vmark("skeleton"))
+    skel_path = policy.resolve(path, skel_ref, f.vmark("skeleton"), "skeleton")
     if not skel_path.is_file():
         raise InputError(f.vmark("skeleton"), f"skeleton file {skel_ref!r} not found",
                          "a skeleton YAML relative to the dataset file")
-    skel = load_skeleton(skel_path)
+    skel = load_skeleton(skel_path, policy)
 
     raw = f.raw("muscles", required=True)
     items = [raw] if isinstance(raw, str) else raw
@@ -153,13 +155,13 @@ def load_dataset(path: Path | str, seed: int | None = None) -> DatasetSpec:
     for e, m in zip(items, marks):
         if not isinstance(e, str) or not e:
             raise InputError(m, f"muscle path is {e!r}", "a path, folder or glob relative to the dataset file")
-        entries_paths.append((resolve_ref(path, e, m), m))
-    files = expand_muscle_paths(entries_paths)
+        entries_paths.append((policy.resolve(path, e, m, "muscle path"), m))
+    files = expand_muscle_paths(entries_paths, policy, path.parent)
     muscle_names = [m.name for m in load_muscle_specs(files)]
 
     fps = float(f.number("fps", default=30.0, lo=0.0, hi=100000.0, lo_open=True))
     coords = _parse_coordinates(f.mapping("coordinates", default=None), f.vmark("coordinates"), skel)
-    motions = _parse_motions(f.mapping("motions", default=None), f.vmark("motions"), path, skel_path)
+    motions = _parse_motions(f.mapping("motions", default=None), f.vmark("motions"), path, policy)
     seq_raw = f.seq("sequences", required=True, min_len=1)
     entries = tuple(_parse_entry(v, m, motions, skel, coords)
                     for v, m in zip(seq_raw, item_marks(seq_raw, f.vmark("sequences"))))
@@ -182,7 +184,7 @@ def load_dataset(path: Path | str, seed: int | None = None) -> DatasetSpec:
         raise InputError(f.vmark("sequences"), f"{total} sequences", f"at most {MAX_SEQUENCES}")
     spec = DatasetSpec(name, str(path), file_seed if seed is None else int(seed), str(skel_path),
                        tuple(str(p) for p in files), motions, entries, coords, activation, rig, sphere, render,
-                       passes, fmt, shards, tol, fps)
+                       passes, fmt, shards, tol, fps, policy)
     # every motion must load (and match the skeleton) before anything is written
     for m in motions.values():
         load_motion(spec, m.name)
@@ -219,7 +221,7 @@ def _parse_coordinates(value, where: Mark, skel) -> dict:
     return out
 
 
-def _parse_motions(value, where: Mark, path: Path, skel_path: Path) -> dict:
+def _parse_motions(value, where: Mark, path: Path, policy: RefPolicy) -> dict:
     out = {}
     if value is None:
         return out
@@ -233,7 +235,7 @@ def _parse_motions(value, where: Mark, path: Path, skel_path: Path) -> dict:
                              "{pose: FILE.yaml} or {motion: FILE.mot|.sto}")
         key = "pose" if has_pose else "motion"
         ref = mf.string(key, required=True)
-        p = resolve_ref(path, ref, mf.vmark(key))
+        p = policy.resolve(path, ref, mf.vmark(key), f"{key} file")
         if not p.is_file():
             raise InputError(mf.vmark(key), f"{key} file {ref!r} not found", "a path relative to the dataset file")
         frames = mf.raw("frames")
@@ -426,9 +428,9 @@ def load_motion(spec: DatasetSpec, name: str) -> Pose:
     key = (m.path, sha256_file(m.path), m.kind, m.fps, spec.skeleton_path, sha256_file(spec.skeleton_path))
     if key in _MOTION_CACHE:
         return _MOTION_CACHE[key]
-    skel = load_skeleton(spec.skeleton_path)
+    skel = load_skeleton(spec.skeleton_path, spec.policy)
     if m.kind == "pose":
-        pose = load_pose(m.path)
+        pose = load_pose(m.path, spec.policy)
         if Path(pose.skeleton_path).resolve() != Path(spec.skeleton_path).resolve():
             raise InputError(m.mark, f"pose {Path(m.path).name} uses skeleton {pose.skeleton_path}",
                              f"the data set's skeleton {spec.skeleton_path}")

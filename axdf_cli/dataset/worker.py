@@ -49,8 +49,6 @@ class Context:
     scene_bones: list  # bone indices of the scene's bones
     dataset_json: bytes
     digest: str
-    roots: tuple = ()
-    allow_outside: bool = False
     timing: dict = field(default_factory=dict)
 
     @property
@@ -58,12 +56,13 @@ class Context:
         return [m.name for m in self.muscles]
 
 
-def build_context(path: Path | str, seed: int | None = None) -> Context:
-    """Load and check everything (InputError on bad input); build the muscle models once."""
+def build_context(path: Path | str, seed: int | None = None, policy=None) -> Context:
+    """Load and check everything (InputError on bad input); build the muscle models once.
+    ``policy``: the command's :class:`~axdf_cli.loaders.RefPolicy` (where referenced files may lie)."""
     from axdf_cli.scene import Scene, SceneBone, SceneMuscle
 
-    spec = load_dataset(path, seed)
-    skel = load_skeleton(spec.skeleton_path)
+    spec = load_dataset(path, seed, policy)
+    skel = load_skeleton(spec.skeleton_path, spec.policy)
     muscles = runner.load_muscle_specs(spec.muscle_files)
     models = runner.build_models(muscles, skel)
     bone_meshes = {i: runner.load_bone_mesh(b.mesh, spec.skeleton_path) for i, b in enumerate(skel.bones) if b.mesh}
