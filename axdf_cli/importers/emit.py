@@ -59,8 +59,8 @@ MAX_TENDON_FRACTION = 0.7
 #: the longer ones (Achilles, quadriceps, biceps distal).
 ORIGIN_TENDON_SHARE = 0.4
 #: The belly's radius profile: (position along the belly 0..1, radius / widest radius), a
-#: spindle close to sin(πx)^0.6 that tapers into the tendons at both ends.
-BELLY_PROFILE = ((0.04, 0.35), (0.15, 0.72), (0.32, 0.95), (0.5, 1.0), (0.68, 0.95), (0.85, 0.72), (0.96, 0.35))
+#: spindle close to sin(πx)^0.3 (a long middle) that tapers into the tendons at both ends.
+BELLY_PROFILE = ((0.04, 0.45), (0.15, 0.8), (0.32, 0.97), (0.5, 1.0), (0.68, 0.97), (0.85, 0.8), (0.96, 0.45))
 #: Sections inside a free tendon, as fractions of it from its bone; a tendon shorter than
 #: MIN_TENDON_FRACTION of the path gets none (the belly tapers into the attachment).
 TENDON_SECTIONS = (0.3, 0.75)
