@@ -46,7 +46,7 @@ def deferred_signals() -> Iterator[None]:
             raise KeyboardInterrupt
 
 
-def _env_problem(path: Path, e: OSError) -> EnvironmentProblem:
+def environment_problem(path: Path, e: OSError) -> EnvironmentProblem:
     if e.errno == errno.ENOSPC:
         return EnvironmentProblem(f"{path}: no space left on device", "free disk space or choose another --out")
     if e.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
@@ -59,7 +59,7 @@ def ensure_dir(path: Path) -> None:
     try:
         Path(path).mkdir(parents=True, exist_ok=True)
     except OSError as e:
-        raise _env_problem(Path(path), e) from None
+        raise environment_problem(Path(path), e) from None
 
 
 def _unlink(p: Path) -> None:
@@ -76,7 +76,7 @@ def write_parts(path: Path | str, parts) -> None:
     30% faster than a Python file object, and faster than ``ndarray.tofile``), whole or absent,
     machine errors as exit 3, interrupting signals held until the file is done."""
     path = Path(path)
-    tmp = path.with_name(f"{TMP_PREFIX}{os.getpid()}-{path.name}")
+    tmp = temp_path(path)
     flags = os.O_WRONLY | os.O_CREAT | os.O_TRUNC
     with deferred_signals():
         try:
@@ -86,7 +86,7 @@ def write_parts(path: Path | str, parts) -> None:
                 ensure_dir(path.parent)
                 fd = os.open(tmp, flags, 0o644)
         except OSError as e:
-            raise _env_problem(path, e) from None
+            raise environment_problem(path, e) from None
         try:
             try:
                 for part in parts:
@@ -98,7 +98,7 @@ def write_parts(path: Path | str, parts) -> None:
             os.replace(tmp, path)
         except OSError as e:
             _unlink(tmp)
-            raise _env_problem(path, e) from None
+            raise environment_problem(path, e) from None
         except BaseException:
             _unlink(tmp)
             raise
@@ -122,12 +122,45 @@ def sha256_file(path: Path | str) -> str:
     return h.hexdigest()
 
 
-def remove_stale_temporaries(folder: Path) -> int:
-    """Delete temporaries left by a killed run (used by --resume); return how many."""
+def temp_path(path: Path) -> Path:
+    """The temporary a file is written to before its rename: it names the writing process."""
+    return path.with_name(f"{TMP_PREFIX}{os.getpid()}-{path.name}")
+
+
+def temp_owner(name: str) -> int | None:
+    """The process id in a temporary's (or staging folder's) name ``<prefix><pid>-...``."""
+    digits = name.split("-", 3)[2] if name.count("-") >= 2 else ""
+    return int(digits) if digits.isdigit() else None
+
+
+def pid_alive(pid: int) -> bool:
+    """Whether a process with this id runs (a zombie, killed but not yet reaped, does not)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            return f.read().rsplit(b")", 1)[1].split()[0] != b"Z"
+    except (OSError, IndexError):
+        return True
+
+
+def remove_stale_temporaries(folders) -> int:
+    """Delete the temporaries in ``folders`` (not below them) whose writing process is gone,
+    never a live process's; return how many."""
     n = 0
-    if not Path(folder).exists():
-        return 0
-    for p in Path(folder).rglob(f"{TMP_PREFIX}*"):
-        _unlink(p)
-        n += 1
+    for folder in folders:
+        try:
+            entries = list(os.scandir(folder))
+        except (FileNotFoundError, NotADirectoryError):
+            continue
+        for e in entries:
+            if e.name.startswith(TMP_PREFIX) and e.is_file(follow_symlinks=False):
+                pid = temp_owner(e.name)
+                if pid is None or not pid_alive(pid):
+                    _unlink(Path(e.path))
+                    n += 1
     return n

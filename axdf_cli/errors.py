@@ -43,6 +43,9 @@ class InputError(AxdfError):
         text = self.problem if self.allowed is None else f"{self.problem}; {self.allowed}"
         return f"{self.where}: {text}" if self.where is not None else text
 
+    def __reduce__(self):  # whole across processes (a worker's error reaches the parent)
+        return InputError, (self.where, self.problem, self.allowed)
+
 
 class UsageError(InputError):
     """Bad command-line usage (no file position)."""
@@ -60,6 +63,9 @@ class EnvironmentProblem(AxdfError):
         self.problem = problem
         self.hint = hint
         super().__init__(problem if hint is None else f"{problem}\nhint: {hint}")
+
+    def __reduce__(self):
+        return EnvironmentProblem, (self.problem, self.hint)
 
 
 class Interrupted(AxdfError):

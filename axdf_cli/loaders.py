@@ -14,7 +14,8 @@ from axdf_cli.errors import InputError, Mark
 from axdf_cli.muscle import OCT, VOLUME_MODES, AxisPoint, MuscleSpec, Section, outline_area
 from axdf_cli.skeleton import (Bone, Constant, Coordinate, Dof, Linear, Multiplier, Polynomial,
                                Skeleton, Spline)
-from axdf_cli.yamlio import Fields, YMap, check_name, check_number, check_vector, item_marks, load_yaml, mark_of
+from axdf_cli.yamlio import (Fields, YMap, check_name, check_number, check_vector, item_marks, load_yaml,
+                             mark_of, real_path)
 
 DOF_TYPES = ("rotation", "translation")
 
@@ -187,13 +188,13 @@ class RefPolicy:
     """
 
     def __init__(self, roots=(), allow_outside: bool = False):
-        self._roots = [Path(r).resolve() for r in roots]
+        self._roots = [real_path(r) for r in roots]
         self.allow_outside = allow_outside
 
     @property
     def roots(self) -> list[Path]:
         """The given roots, or the current folder at the time of the check."""
-        return self._roots or [Path.cwd().resolve()]
+        return self._roots or [real_path(Path.cwd())]
 
 
 POLICY = RefPolicy()
@@ -220,9 +221,9 @@ def resolve_ref(base_file: Path, ref: str, where: Mark) -> Path:
     if p.is_absolute():
         raise InputError(where, f"absolute path {ref!r}",
                          "paths relative to the file that names them (or pass --allow-outside)")
-    full = (base_file.parent / p).resolve()
+    full = real_path(base_file.parent / p)
     # without explicit roots (library use), a file's references stay below its own folder
-    roots = POLICY._roots or [Path.cwd().resolve(), base_file.parent.resolve()]
+    roots = POLICY._roots or [real_path(Path.cwd()), real_path(base_file.parent)]
     if not any(full == r or r in full.parents for r in roots):
         raise InputError(where, f"path {ref!r} leaves the project folder tree",
                          f"paths inside {', '.join(str(r) for r in roots)} (or pass --allow-outside)")
@@ -596,9 +597,11 @@ def load_job(path: Path | str) -> Job:
     pose_ref = f.string("pose", required=True)
     pose = (resolve_ref(path, pose_ref, f.vmark("pose")), f.vmark("pose"))
     out = f.string("out", default=None)
-    if out is not None and (Path(out).is_absolute() or ".." in Path(out).parts) and not POLICY.allow_outside:
+    if out is not None and not POLICY.allow_outside and (
+            Path(out).is_absolute() or ".." in Path(out).parts
+            or not any(r == p or r in p.parents for p in [Path(out).resolve()] for r in POLICY.roots)):
         raise InputError(f.vmark("out"), f"out {out!r} leaves the project folder tree",
-                         "a relative folder without '..' (or pass --out, or --allow-outside)")
+                         "a relative folder without '..' or links out of the tree (or pass --out, or --allow-outside)")
     from axdf_cli.formats import WRITERS
 
     fmt = f.choice("format", tuple(WRITERS), default=None)
@@ -634,7 +637,7 @@ def expand_muscle_paths(entries) -> list[Path]:
             raise InputError(mark, f"muscle path {s!r} not found", "an existing file, folder or glob")
     seen, uniq = set(), []
     for p in out:
-        k = str(p.resolve())
+        k = str(real_path(p))
         if k not in seen:
             seen.add(k)
             uniq.append(p)

@@ -1,4 +1,5 @@
-"""The run folder's layout: where each file of a run lives and how its manifest is written.
+"""The run folder: where each file of a run lives, its manifest, and the rules that keep a
+user's files safe.
 
 One module for everything that knows the layout (README "What a run writes"), shared by
 ``axdf run`` (:mod:`axdf_cli.run`), ``axdf render`` and reading a run back
@@ -9,14 +10,38 @@ One module for everything that knows the layout (README "What a run writes"), sh
     bones/<bone>.ply
     stats.csv, bones.csv
     frames/<frame:04d>.png|exr, camera.json
+    .axdf-lock                    while a run or render writes (flock); never in the manifest
+    .axdf-new-<pid>/              --overwrite builds the new run here, then swaps it in
+    .axdf-tmp-<pid>-<name>        a file being written (renamed when whole)
+
+The rules:
+
+- A folder is a *run* when its ``manifest.json`` is a JSON object with ``tool: axdf``. Only a
+  run is resumed, re-rendered or overwritten; any other non-empty folder is refused (exit 2).
+- Every check comes before the first byte is written: :func:`prepare` only reads.
+- One writer at a time: :class:`Session` holds ``flock`` on ``.axdf-lock`` for the whole run;
+  a second writer is refused (exit 3).
+- ``--overwrite`` deletes only the files the old manifest lists, and only once the new run
+  is complete (built in ``.axdf-new-<pid>/``, then :meth:`Session.commit` swaps it in).
+  Anything else in the folder stays.
+- No write or deletion goes through a symbolic link: every folder written into is checked
+  to be a real folder below OUT (:class:`Root`); a link is refused (exit 2) and named.
+- Temporaries and staging folders are removed only when the process named in them is gone.
 """
 from __future__ import annotations
 
+import errno
 import hashlib
 import json
-from pathlib import Path
+import os
+import re
+import shutil
+import stat
+from dataclasses import dataclass
+from pathlib import Path, PurePosixPath
 
 from axdf_cli import atomic
+from axdf_cli.errors import EnvironmentProblem, InputError, Mark
 
 MANIFEST = "manifest.json"
 STATS = "stats.csv"
@@ -24,6 +49,10 @@ BONES_CSV = "bones.csv"
 CAMERA = "camera.json"
 FRAME_EXTENSIONS = ("png", "exr")
 MAX_PENDING_WRITES = 64  # files queued for the writer thread (bounds memory)
+MANIFEST_INTERVAL_S = 1.0  # an in-progress manifest is rewritten at most this often
+LOCK = ".axdf-lock"
+STAGING_PREFIX = ".axdf-new-"
+LAYOUT_DIRS = ("meshes", "bones", "frames")
 
 # the manifest's keys, in the one order every writer uses (unknown keys follow, sorted)
 MANIFEST_KEYS = ("tool", "version", "complete", "inputs", "settings", "frames", "muscles", "bones",
@@ -60,6 +89,58 @@ def write_manifest(folder: Path, manifest: dict) -> None:
     atomic.write_text(Path(folder) / MANIFEST, manifest_text(manifest))
 
 
+def try_write_manifest(folder: Path, manifest: dict) -> None:
+    """Record an interrupted writer's progress when the disk still takes it (the error that
+    stopped the writer is the one reported)."""
+    try:
+        write_manifest(folder, manifest)
+    except (OSError, EnvironmentProblem):
+        pass
+
+
+def _refuse_link(path: Path) -> InputError:
+    return InputError(None, f"{path} is a symbolic link",
+                      "axdf never writes through a link out of its output folder; remove the link or choose "
+                      "another output folder")
+
+
+def check_dirs(root: Path, rel_dirs) -> bool:
+    """Every existing folder on the way from ``root`` to each of ``rel_dirs`` is a real folder
+    (not a symbolic link, not a file). Reads only; the rest will be created below ``root``.
+    Returns whether every one of them exists already."""
+    whole = True
+    for rel in rel_dirs:
+        p = Path(root)
+        for part in PurePosixPath(rel).parts:
+            p = p / part
+            try:
+                st = os.lstat(p)
+            except FileNotFoundError:
+                whole = False
+                break
+            if stat.S_ISLNK(st.st_mode):
+                raise _refuse_link(p)
+            if not stat.S_ISDIR(st.st_mode):
+                raise InputError(None, f"{p} is not a folder", "the run folder's layout needs a folder there")
+    return whole
+
+
+class Root:
+    """A folder written into. :meth:`path` gives the path of a file below it after checking
+    that the way there is made of real folders only (once per folder that exists; one that
+    does not is checked again until it does, so a link made later is still caught)."""
+
+    def __init__(self, path: Path):
+        self.root = Path(path)
+        self._checked: set = set()
+
+    def path(self, rel: str) -> Path:
+        parent = PurePosixPath(rel).parent.as_posix()
+        if parent not in self._checked and check_dirs(self.root, [parent]):
+            self._checked.add(parent)
+        return self.root / rel
+
+
 class OutputWriter:
     """Writes files atomically on a background thread (so writing overlaps evaluation),
     records their sha256, and skips files whose bytes already match on resume.
@@ -71,7 +152,7 @@ class OutputWriter:
     def __init__(self, out: Path, previous: dict):
         from concurrent.futures import ThreadPoolExecutor
 
-        self.out = Path(out)
+        self.root = Root(out)
         self.previous = previous
         self.files: dict[str, str] = {}
         self.skipped = 0
@@ -85,11 +166,10 @@ class OutputWriter:
 
     def _write_now(self, rel: str, data: bytes):
         sha = hashlib.sha256(data).hexdigest()
-        path = self.out / rel
-        if self.previous.get(rel) == sha and path.is_file() and path.stat().st_size == len(data) \
-                and atomic.sha256_file(path) == sha:
+        path = self.root.path(rel)
+        if self.previous.get(rel) == sha and is_file_with(path, sha, len(data)):
             return rel, sha, True
-        atomic.write_bytes(path, data)
+        atomic.write_parts(path, (data,))
         return rel, sha, False
 
     def _collect(self, n: int) -> None:
@@ -108,5 +188,434 @@ class OutputWriter:
         if cancel:
             for fut in self._pending:
                 fut.cancel()
-            self._pending = []
         self._pool.shutdown(wait=True)
+        done, self._pending = self._pending, []
+        for fut in done:  # (cancelled) the files that were written all the same are on disk: list them
+            if not fut.cancelled() and fut.exception() is None:
+                rel, sha, _ = fut.result()
+                self.files[rel] = sha
+
+
+def is_file_with(path: Path, sha: str, size: int | None = None) -> bool:
+    """Whether ``path`` is a regular file (not a link) holding bytes with this sha256."""
+    try:
+        st = os.lstat(path)
+    except OSError:
+        return False
+    return stat.S_ISREG(st.st_mode) and (size is None or st.st_size == size) and atomic.sha256_file(path) == sha
+
+
+# ----------------------------------------------------------------------------- the manifest, read back
+
+_WS = re.compile(r"[ \t\n\r]*")
+_HEX64 = re.compile(r"^[0-9a-f]{64}$")
+
+
+class Manifest:
+    """A manifest.json read back: ``data`` and, for error messages, the line and column of
+    any value (:meth:`mark`: located in the text only when an error needs it)."""
+
+    def __init__(self, path: Path, text: str, data: dict, sha: str = ""):
+        self.path = Path(path)
+        self.text = text
+        self.data = data
+        self.sha = sha  # of the file's bytes: unchanged bytes, unchanged run
+
+    @classmethod
+    def read(cls, path: Path) -> "Manifest":
+        where = Mark(str(path))
+        try:
+            raw = Path(path).read_bytes()
+        except FileNotFoundError:
+            raise InputError(where, "no manifest.json", "a folder written by axdf run") from None
+        except OSError as e:
+            raise InputError(where, f"cannot read ({e.strerror})", "a readable manifest.json") from None
+        try:
+            text = raw.decode("utf-8")
+        except UnicodeDecodeError as e:
+            line = raw.count(b"\n", 0, e.start) + 1
+            col = e.start - (raw.rfind(b"\n", 0, e.start) + 1) + 1
+            raise InputError(Mark(str(path), line, col), "not UTF-8 text", "a manifest.json written by axdf") from None
+        try:
+            data = json.loads(text)
+        except json.JSONDecodeError as e:
+            raise InputError(Mark(str(path), e.lineno, e.colno), f"not valid JSON ({e.msg})",
+                             "a manifest.json written by axdf") from None
+        except RecursionError:
+            raise InputError(where, "nested too deeply", "a manifest.json written by axdf") from None
+        m = cls(path, text, data, hashlib.sha256(raw).hexdigest())
+        if not isinstance(data, dict):
+            raise m.error((), f"the manifest is a JSON {_json_type(data)}", "a JSON object written by axdf")
+        return m
+
+    @property
+    def is_run(self) -> bool:
+        return self.data.get("tool") == "axdf"
+
+    def mark(self, keys=()) -> Mark:
+        """Where the value at ``keys`` (or its nearest enclosing value) starts in the file."""
+        pos = _locate(self.text, tuple(keys))
+        line = self.text.count("\n", 0, pos) + 1
+        return Mark(str(self.path), line, pos - (self.text.rfind("\n", 0, pos) + 1) + 1)
+
+    def error(self, keys, problem: str, allowed: str) -> InputError:
+        path = _key_text(keys)
+        return InputError(self.mark(keys), f"{path}: {problem}" if path else problem, allowed)
+
+    def get(self, keys, kind, what: str, required: bool = True, default=None):
+        """The value at ``keys`` when it has the JSON type ``kind`` (a type or tuple of types;
+        bool is never a number here), else an error naming its position."""
+        value = self.data
+        for i, k in enumerate(keys):
+            if isinstance(k, int):
+                missing = not isinstance(value, list) or not 0 <= k < len(value)
+            else:
+                missing = not isinstance(value, dict) or k not in value
+            if missing:
+                if not required:
+                    return default
+                raise self.error(keys[:i], f"no {k!r}", f"{_key_text(keys) or 'the manifest'} is {what}")
+            value = value[k]
+        if not _is_kind(value, kind):
+            raise self.error(keys, f"is a JSON {_json_type(value)}", f"{_key_text(keys)} is {what}")
+        return value
+
+    def files(self) -> dict:
+        """``files``: relative path -> sha256, every path a plain relative path inside the folder."""
+        files = self.get(("files",), dict, "an object of relative path -> sha256", required=False, default={})
+        for rel, sha in files.items():
+            if not plain_relpath(rel):
+                raise self.error(("files", rel), f"{rel!r} is not a plain relative path inside the folder",
+                                 "relative paths without '..', '.', links or absolute parts")
+            if not isinstance(sha, str) or not _HEX64.match(sha):
+                raise self.error(("files", rel), f"sha256 {sha!r}", "64 lowercase hex digits")
+        return dict(files)
+
+    def frames(self) -> list[int]:
+        frames = self.get(("frames",), list, "a non-empty list of frame numbers")
+        if not frames:
+            raise self.error(("frames",), "is empty", "frames is a non-empty list of frame numbers")
+        for i, f in enumerate(frames):
+            if not _is_kind(f, int):
+                raise self.error(("frames", i), f"{f!r} is not a frame number", "frames are whole numbers")
+        return [int(f) for f in frames]
+
+
+def _is_kind(value, kind) -> bool:
+    kinds = kind if isinstance(kind, tuple) else (kind,)
+    if isinstance(value, bool):
+        return bool in kinds
+    if type(value) is int and float in kinds:
+        return True
+    return isinstance(value, kinds)
+
+
+def _json_type(v) -> str:
+    return {dict: "object", list: "array", str: "string", bool: "boolean", int: "number", float: "number",
+            type(None): "null"}.get(type(v), type(v).__name__)
+
+
+def _key_text(keys) -> str:
+    out = ""
+    for k in keys:
+        out += f"[{k}]" if isinstance(k, int) else (f".{k}" if out else str(k))
+    return out
+
+
+def plain_relpath(rel) -> bool:
+    if not isinstance(rel, str) or not rel or "\\" in rel or "\x00" in rel or rel.startswith("/"):
+        return False
+    return all(part not in ("", ".", "..") for part in rel.split("/"))
+
+
+def _locate(text: str, keys: tuple) -> int:
+    """Character offset of the value at ``keys`` in JSON ``text`` (of the deepest one found)."""
+    dec = json.JSONDecoder()
+    i = _WS.match(text, 0).end()
+    try:
+        for key in keys:
+            start = i
+            if isinstance(key, str) and text.startswith("{", i):
+                i = _WS.match(text, i + 1).end()
+                while text.startswith('"', i):
+                    k, i = json.decoder.scanstring(text, i + 1)
+                    i = _WS.match(text, i).end() + 1  # the ':'
+                    i = _WS.match(text, i).end()
+                    if k == key:
+                        break
+                    i = _WS.match(text, dec.raw_decode(text, i)[1]).end()
+                    i = _WS.match(text, i + 1).end() if text.startswith(",", i) else i
+                else:
+                    return start
+            elif isinstance(key, int) and text.startswith("[", i):
+                i = _WS.match(text, i + 1).end()
+                for _ in range(key):
+                    i = _WS.match(text, dec.raw_decode(text, i)[1]).end()
+                    i = _WS.match(text, i + 1).end() if text.startswith(",", i) else i
+                if text.startswith("]", i):
+                    return start
+            else:
+                return start
+    except (ValueError, IndexError):
+        return 0
+    return i
+
+
+# what makes two runs the same run (--resume refuses to mix runs that differ in any)
+RUN_IDENTITY = ("version", "inputs", "settings", "frames")
+
+
+def describe_differences(old: Manifest, new: dict, keys=RUN_IDENTITY) -> list[str]:
+    """What differs between an earlier manifest and a new one, key by key, in words."""
+    out = []
+    for key in keys:
+        a, b = old.data.get(key), new.get(key)
+        if a == b:
+            continue
+        if isinstance(a, dict) and isinstance(b, dict):
+            for k in sorted(set(a) | set(b)):
+                if a.get(k) != b.get(k):
+                    if key == "inputs":
+                        out.append(f"input {k} " + ("is new" if k not in a else "is gone" if k not in b
+                                                     else "changed (sha256 differs)"))
+                    else:
+                        out.append(f"{key}.{k}: {_short(a.get(k))} -> {_short(b.get(k))}")
+        elif key == "frames" and isinstance(a, list) and isinstance(b, list):
+            out.append(f"frames: {_frames_text(a)} -> {_frames_text(b)}")
+        else:
+            out.append(f"{key}: {_short(a)} -> {_short(b)}")
+    return out
+
+
+def _short(v) -> str:
+    t = json.dumps(v)
+    return t if len(t) <= 60 else t[:57] + "..."
+
+
+def _frames_text(frames: list) -> str:
+    return f"{len(frames)} frames {frames[0]}..{frames[-1]}" if frames else "no frames"
+
+
+# ----------------------------------------------------------------------------- the folder: checks, lock, swap
+
+
+def own_entry(name: str) -> bool:
+    """Entries axdf makes while it writes (the lock, temporaries, a staging folder)."""
+    return name == LOCK or name.startswith(atomic.TMP_PREFIX) or name.startswith(STAGING_PREFIX)
+
+
+@dataclass(frozen=True)
+class Target:
+    """An output folder, checked: what it holds now and how it will be written."""
+
+    out: Path
+    previous: Manifest | None  # the run already there (None: the folder is absent or empty)
+    replace: bool  # --overwrite of an earlier run: build the new one beside it, swap at the end
+
+
+def read_run_manifest(folder: Path) -> Manifest:
+    """The manifest of an axdf run folder (exit 2 with its position when it is not one)."""
+    path = Path(folder) / MANIFEST
+    if os.path.islink(path):
+        raise _refuse_link(path)
+    m = Manifest.read(path)
+    if not m.is_run:
+        raise m.error(("tool",), "not written by axdf", "a manifest.json with tool 'axdf' (written by axdf run)")
+    m.files()
+    return m
+
+
+def prepare(out: Path, *, resume: bool = False, overwrite: bool = False, dirs=()) -> Target:
+    """Check an output folder before anything is written (this only reads).
+
+    Absent or empty: a new run. Holding an axdf run: refused unless ``resume`` or
+    ``overwrite``. Anything else that is not empty: refused. ``dirs``: the folders below OUT
+    that will be written into; none of them may be a link."""
+    out = Path(out)
+    try:
+        is_dir = out.is_dir()
+        entries = [n for n in os.listdir(out) if not own_entry(n)] if is_dir else None
+    except FileNotFoundError:
+        return Target(out, None, False)
+    except OSError as e:
+        raise atomic.environment_problem(out, e) from None
+    if entries is None:
+        if not out.exists():
+            return Target(out, None, False)
+        raise InputError(None, f"output folder {out} exists and is not a folder", "give a folder")
+    if not entries:
+        check_dirs(out, dirs)
+        return Target(out, None, False)
+    try:
+        previous = read_run_manifest(out)
+    except InputError:
+        if (resume or overwrite) and (out / MANIFEST).is_file():
+            raise  # a damaged manifest of what may be a run: say where
+        previous = None
+    if previous is None:
+        raise InputError(None, f"output folder {out} is not empty and holds no axdf run "
+                         "(no manifest.json with tool 'axdf')",
+                         "--overwrite and --resume only replace or finish axdf's own runs; "
+                         "choose an empty or new output folder")
+    if not (resume or overwrite):
+        raise InputError(None, f"output folder {out} is not empty (it holds an earlier run)",
+                         "pass --resume to finish an interrupted run, --overwrite to replace it, or another --out")
+    check_dirs(out, dirs)
+    return Target(out, previous, overwrite)
+
+
+def remove_stale(out: Path) -> None:
+    """Temporaries and staging folders in OUT's layout whose process is gone (never a live
+    one's, never below a link)."""
+    out = Path(out)
+    folders = [out] + [out / d for d in LAYOUT_DIRS]
+    try:
+        folders += [Path(e.path) for e in os.scandir(out / "meshes") if e.is_dir(follow_symlinks=False)]
+    except OSError:
+        pass
+    atomic.remove_stale_temporaries(folders)
+    for e in os.scandir(out):
+        if e.name.startswith(STAGING_PREFIX) and e.is_dir(follow_symlinks=False):
+            pid = atomic.temp_owner(e.name)
+            if pid is None or not atomic.pid_alive(pid):
+                shutil.rmtree(e.path, ignore_errors=True)
+
+
+class Session:
+    """The one writer in an output folder, from the lock to the final manifest.
+
+    ``with Session(target) as s``: creates OUT, takes the lock (another writer: exit 3),
+    checks that OUT is still what :func:`prepare` saw, removes stale temporaries; ``s.root``
+    is where to write (a staging folder when replacing a run). :meth:`commit` writes the
+    final manifest (and swaps a replacement in); leaving the block releases the lock and,
+    without a commit, removes the staging folder (the old run stays as it was)."""
+
+    def __init__(self, target: Target):
+        self.target = target
+        self.out = target.out
+        self.root = self.out / f"{STAGING_PREFIX}{os.getpid()}" if target.replace else self.out
+        self.previous_files = target.previous.files() if target.previous is not None and not target.replace else {}
+        self._fd = None
+
+    def __enter__(self) -> "Session":
+        atomic.ensure_dir(self.out)
+        self._lock()
+        try:
+            self._verify()
+            remove_stale(self.out)
+            if self.target.replace:
+                shutil.rmtree(self.root, ignore_errors=True)
+                atomic.ensure_dir(self.root)
+        except BaseException:
+            self._unlock()
+            raise
+        return self
+
+    def __exit__(self, *exc) -> None:
+        try:
+            if self.target.replace:
+                shutil.rmtree(self.root, ignore_errors=True)
+        finally:
+            self._unlock()
+
+    def _lock(self) -> None:
+        import fcntl
+
+        path = self.out / LOCK
+        for _ in range(8):
+            try:
+                fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644)
+            except OSError as e:
+                if e.errno == errno.ELOOP:
+                    raise _refuse_link(path) from None
+                raise atomic.environment_problem(path, e) from None
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                owner = os.read(fd, 32).decode("ascii", "replace").strip()
+                os.close(fd)
+                raise EnvironmentProblem(
+                    f"another axdf process{f' (pid {owner})' if owner.isdigit() else ''} is writing {self.out}",
+                    "wait for it to finish, or choose another output folder") from None
+            try:
+                same = os.fstat(fd).st_ino == os.stat(path, follow_symlinks=False).st_ino
+            except FileNotFoundError:
+                same = False
+            if same:
+                os.ftruncate(fd, 0)
+                os.write(fd, f"{os.getpid()}\n".encode())
+                self._fd = fd
+                return
+            os.close(fd)  # its holder removed it as we opened it: lock the file there now
+        raise EnvironmentProblem(f"cannot lock {path}", "try again")
+
+    def _unlock(self) -> None:
+        if self._fd is None:
+            return
+        try:
+            os.unlink(self.out / LOCK)
+        except OSError:
+            pass
+        os.close(self._fd)
+        self._fd = None
+
+    def _verify(self) -> None:
+        prev = self.target.previous
+        if prev is None:
+            changed = any(not own_entry(n) for n in os.listdir(self.out))
+        else:
+            try:
+                changed = hashlib.sha256((self.out / MANIFEST).read_bytes()).hexdigest() != prev.sha
+            except OSError:
+                changed = True
+        if changed:
+            raise InputError(None, f"output folder {self.out} changed while axdf was checking it",
+                             "another process wrote there; run again")
+
+    def commit(self, manifest: dict) -> None:
+        """Write the final manifest; when replacing a run, swap the new run in: the old run's
+        listed files that the new one lacks are deleted, the new files renamed into place,
+        the manifest last. Signals wait until the swap is done."""
+        write_manifest(self.root, manifest)
+        if not self.target.replace:
+            return
+        old = self.target.previous
+        old_files = old.files()
+        new_files = manifest.get("files", {})
+        with atomic.deferred_signals():
+            # while swapping, the manifest says "incomplete" and lists both runs' files: a
+            # kill here leaves a folder that --overwrite replaces again
+            write_manifest(self.out, dict(old.data, complete=False, files={**old_files, **new_files}))
+            dest = Root(self.out)
+            emptied = set()
+            try:
+                for rel in old_files:
+                    if rel not in new_files:
+                        remove_listed(dest, rel)
+                        emptied.add(PurePosixPath(rel).parent)
+                for rel in new_files:
+                    path = dest.path(rel)
+                    atomic.ensure_dir(path.parent)
+                    os.replace(self.root / rel, path)
+                os.replace(self.root / MANIFEST, self.out / MANIFEST)
+            except OSError as e:
+                raise atomic.environment_problem(self.out, e) from None
+            shutil.rmtree(self.root, ignore_errors=True)
+            for d in sorted(emptied, key=lambda p: -len(p.parts)):
+                while d.parts:  # folders the old run's files leave empty
+                    try:
+                        os.rmdir(self.out / d)
+                    except OSError:
+                        break
+                    d = d.parent
+
+
+def remove_listed(root: Root, rel: str) -> None:
+    """Delete one file a manifest lists (a link is removed, never followed)."""
+    path = root.path(rel)
+    try:
+        st = os.lstat(path)
+    except FileNotFoundError:
+        return
+    if not stat.S_ISDIR(st.st_mode):
+        os.unlink(path)

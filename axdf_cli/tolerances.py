@@ -48,6 +48,9 @@ TENSION_GAIN = 0.6
 
 # YAML safety limits: hostile documents (alias bombs, deep nesting, huge files).
 YAML_MAX_BYTES = 16 * 1024 * 1024
+# Any other input file (.osim, .vtp, .mot/.sto, bone meshes): read whole into memory, so
+# bounded; the largest shipped one (a gait2392 bone mesh) is ~1 MB.
+INPUT_MAX_BYTES = 256 * 1024 * 1024
 YAML_MAX_NODES = 2_000_000
 YAML_MAX_DEPTH = 64
 # BVH motion capture is text too, but long takes are large (100 channels x 100k frames is

@@ -14,7 +14,9 @@ allowed ones.
 from __future__ import annotations
 
 import math
+import os
 import re
+import stat
 from pathlib import Path
 from typing import Any, Iterable, Sequence
 
@@ -34,10 +36,25 @@ _STD_TAGS = {
     "tag:yaml.org,2002:null",
 }
 _MAP_TAG = "tag:yaml.org,2002:map"
-# libyaml's parser when PyYAML was built with it (10x faster on large pose files); the
-# same safe constructor and the same marks either way
-_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 _SEQ_TAG = "tag:yaml.org,2002:seq"
+_FLOAT_TAG = "tag:yaml.org,2002:float"
+
+
+class _Loader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):
+    """PyYAML's safe loader (libyaml's parser when PyYAML was built with it: 10x faster on
+    large pose files; the same safe constructor and the same marks either way), with YAML
+    1.2's floats: YAML 1.1 (PyYAML) reads ``1e-5``, ``2E3`` and ``1.0e9`` as strings
+    because its float needs a dot and a signed exponent. Registered on this class only
+    (``add_implicit_resolver`` copies the resolver table into the subclass), so PyYAML's
+    own loaders are unchanged."""
+
+
+# the exponent forms YAML 1.2's core schema reads as floats and YAML 1.1's resolver misses;
+# plain numbers with a dot and a signed exponent (1.5e-3) already resolve to floats
+_Loader.add_implicit_resolver(
+    _FLOAT_TAG, re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9][0-9_]*)[eE][-+]?[0-9]+$"),
+    list("-+0123456789."))
+_LOADER = _Loader
 
 
 class YMap(dict):
@@ -72,27 +89,94 @@ def _mark(file: str, m) -> Mark:
     return Mark(file, m.line + 1, m.column + 1)
 
 
-def read_input(path: Path | str, display: str | None = None, allowed: str = "an existing file") -> bytes:
-    """The bytes of an input file; a missing, folder or unreadable file is an InputError."""
+class FileRefused(ValueError):
+    """A path that is not a regular file (``allowed`` None: the caller says what it wanted),
+    or a file over the size limit (see :func:`read_regular`)."""
+
+    def __init__(self, problem: str, allowed: str | None = None):
+        self.problem, self.allowed = problem, allowed
+        super().__init__(problem if allowed is None else f"{problem}; {allowed}")
+
+
+_KINDS = ((stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a FIFO (named pipe)"), (stat.S_ISCHR, "a character device"),
+          (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"))
+_CHUNK = 1 << 20
+
+
+def not_regular(mode: int) -> str | None:
+    """None for a regular file's ``st_mode``; otherwise what it is ("is a FIFO (named pipe), not a regular file")."""
+    if stat.S_ISREG(mode):
+        return None
+    kind = next((name for test, name in _KINDS if test(mode)), "not a file")
+    return f"is {kind}, not a regular file"
+
+
+def read_regular(path: Path | str, limit: int) -> bytes:
+    """The bytes of the regular file at ``path``, at most ``limit`` bytes.
+
+    The one low-level reader of input files (YAML, .sto, XML, meshes) and of compared files.
+    The path is checked with ``stat`` before it is opened and the open file again with
+    ``fstat`` (no window between the check and the read): a FIFO, device, socket or folder is
+    refused (a FIFO would block forever, ``/dev/zero`` never ends). It is opened with
+    ``O_NONBLOCK`` so that even a FIFO swapped in after the check cannot block the open, and
+    read in chunks up to ``limit + 1`` bytes (a file over the limit, or one growing past it
+    while read, is refused without reading it whole). Raises :class:`FileRefused`, or
+    ``OSError`` for a missing file, a symlink loop or a permission problem.
+    """
+    problem = not_regular(os.stat(path).st_mode)
+    if problem:
+        raise FileRefused(problem)
+    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0)
+                 | getattr(os, "O_CLOEXEC", 0))
+    with os.fdopen(fd, "rb", buffering=0) as f:
+        st = os.fstat(fd)
+        problem = not_regular(st.st_mode)
+        if problem:
+            raise FileRefused(problem)
+        if st.st_size > limit:
+            raise FileRefused(f"file is {st.st_size} bytes", f"at most {limit} bytes are read")
+        parts, n = [], 0
+        want = st.st_size + 1  # one byte more than stat says: sees a file that grew
+        while n <= limit:
+            b = f.read(min(want, limit + 1 - n))
+            if not b:
+                break
+            parts.append(b)
+            n += len(b)
+            want = _CHUNK
+        if n > limit:
+            raise FileRefused(f"file is more than {limit} bytes", f"at most {limit} bytes are read")
+    return b"".join(parts)
+
+
+def read_input(path: Path | str, display: str | None = None, allowed: str = "an existing file",
+               limit: int = tol.INPUT_MAX_BYTES) -> bytes:
+    """The bytes of an input file (at most ``limit``); a missing file, a folder, a FIFO or
+    device, a symlink loop, an unreadable or oversize file is an InputError naming it."""
     display = display or str(path)
     try:
-        return Path(path).read_bytes()
+        return read_regular(path, limit)
     except FileNotFoundError:
         raise InputError(Mark(display), "file not found", allowed) from None
-    except IsADirectoryError:
-        raise InputError(Mark(display), "is a folder, not a file", allowed) from None
+    except FileRefused as e:
+        raise InputError(Mark(display), e.problem, e.allowed or allowed) from None
     except OSError as e:
-        raise InputError(Mark(display), f"cannot read ({e.strerror})", allowed) from None
+        raise InputError(Mark(display), f"cannot read ({e.strerror or e})", allowed) from None
+
+
+def real_path(path: Path | str) -> Path:
+    """``path`` absolute with symbolic links resolved as far as they go; never raises on a
+    symlink loop (``Path.resolve`` raises RuntimeError there in Python 3.11): the loop
+    stays in the path and reading it gives an InputError naming it."""
+    return Path(os.path.realpath(path))
 
 
 def read_text(path: Path, display: str | None = None, allowed: str = "an existing YAML file",
-              max_bytes: int = tol.YAML_MAX_BYTES) -> str:
-    """Read a UTF-8 text file; refuse binary, oversize or undecodable files with a position."""
+              max_bytes: int | None = None) -> str:
+    """Read a UTF-8 text file of at most ``max_bytes`` (default ``YAML_MAX_BYTES``); refuse
+    binary, oversize or undecodable files with a position."""
     display = display or str(path)
-    data = read_input(path, display, allowed)
-    if len(data) > max_bytes:
-        raise InputError(Mark(display), f"file is {len(data)} bytes",
-                         f"at most {max_bytes} bytes are read")
+    data = read_input(path, display, allowed, limit=tol.YAML_MAX_BYTES if max_bytes is None else max_bytes)
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as e:
@@ -116,9 +200,34 @@ def load_yaml(path: Path | str, display: str | None = None) -> Any:
     return parse_yaml(text, display)
 
 
+_OPEN_EVENTS = (yaml.SequenceStartEvent, yaml.MappingStartEvent)
+_CLOSE_EVENTS = (yaml.SequenceEndEvent, yaml.MappingEndEvent)
+
+
+def _check_depth(text: str, display: str) -> None:
+    """Refuse nesting deeper than YAML_MAX_DEPTH before composing: libyaml's composer
+    recurses in C, and a document nested 50,000 deep (100 KB of ``- - - ...``) crashes the
+    interpreter instead of raising. One pass over the parser's events (iterative)."""
+    loader = _LOADER(text)
+    depth = 0
+    try:
+        while loader.check_event():
+            event = loader.get_event()
+            if isinstance(event, _OPEN_EVENTS):
+                depth += 1
+                if depth > tol.YAML_MAX_DEPTH:
+                    raise InputError(_mark(display, event.start_mark), "document nested too deeply",
+                                     f"at most {tol.YAML_MAX_DEPTH} levels")
+            elif isinstance(event, _CLOSE_EVENTS):
+                depth -= 1
+    finally:
+        loader.dispose()
+
+
 def parse_yaml(text: str, display: str) -> Any:
     loader = _LOADER(text)
     try:
+        _check_depth(text, display)
         node = loader.get_single_node()
     except yaml.MarkedYAMLError as e:
         m = e.problem_mark or e.context_mark
@@ -127,9 +236,8 @@ def parse_yaml(text: str, display: str) -> Any:
         raise InputError(where, f"YAML syntax error: {problem}", "see https://yaml.org/spec/1.2.2/") from None
     except yaml.YAMLError as e:
         raise InputError(Mark(display), f"YAML error: {e}") from None
-    except RecursionError:
-        raise InputError(_too_deep(text, display), "document nested too deeply",
-                         f"at most {tol.YAML_MAX_DEPTH} levels") from None
+    except RecursionError:  # not expected after _check_depth; a last resort
+        raise InputError(Mark(display), "document nested too deeply", f"at most {tol.YAML_MAX_DEPTH} levels") from None
     if node is None:
         return None
     _check_expanded_size(node, display)
@@ -169,25 +277,6 @@ def _check_expanded_size(root, display: str) -> None:
         if total > tol.YAML_MAX_NODES:
             raise InputError(_mark(display, n.start_mark), f"document expands to more than {tol.YAML_MAX_NODES} "
                              "values (an alias bomb?)", "use fewer aliases")
-
-
-def _too_deep(text: str, display: str) -> Mark:
-    """Where nesting first exceeds the limit (the token scanner is iterative, unlike the composer)."""
-    opens = (yaml.BlockSequenceStartToken, yaml.BlockMappingStartToken,
-             yaml.FlowSequenceStartToken, yaml.FlowMappingStartToken)
-    closes = (yaml.BlockEndToken, yaml.FlowSequenceEndToken, yaml.FlowMappingEndToken)
-    depth = 0
-    try:
-        for tok in yaml.scan(text, Loader=yaml.SafeLoader):
-            if isinstance(tok, opens):
-                depth += 1
-                if depth > tol.YAML_MAX_DEPTH:
-                    return _mark(display, tok.start_mark)
-            elif isinstance(tok, closes):
-                depth -= 1
-    except yaml.YAMLError:
-        pass
-    return Mark(display, 1, 1)
 
 
 class _Converter:
@@ -301,7 +390,9 @@ def _range_text(lo, hi, lo_open) -> str:
 
 def check_name(v, where: Mark, what: str) -> str:
     if not isinstance(v, str) or not NAME_RE.match(v) or v in (".", ".."):
-        raise InputError(where, f"{what} is {_type_name(v)}", f"{what}: {NAME_ALLOWED}")
+        # YAML reads 1e-5, 12 or true as a number or boolean: a name like that needs quotes
+        quote = " (in quotes when it looks like a number or boolean)" if isinstance(v, (int, float)) else ""
+        raise InputError(where, f"{what} is {_type_name(v)}", f"{what}: {NAME_ALLOWED}{quote}")
     return v
 
 

@@ -138,6 +138,21 @@ def run_main(argv, capsys):
     return rc, out, err
 
 
+def main_or_hang(argv, timeout: float = 120.0) -> int:
+    """The CLI's exit code, called in a thread: a command that hangs (blocked on a FIFO, an
+    endless read) fails the test after ``timeout`` seconds instead of stalling the suite."""
+    import threading
+
+    from axdf_cli.cli.main import main
+
+    box: dict = {}
+    t = threading.Thread(target=lambda: box.setdefault("rc", main([str(a) for a in argv])), daemon=True)
+    t.start()
+    t.join(timeout)
+    assert not t.is_alive(), f"axdf {' '.join(map(str, argv))} still running after {timeout} s"
+    return box["rc"]
+
+
 def all_files(folder: Path) -> dict[str, bytes]:
     folder = Path(folder)
     return {p.relative_to(folder).as_posix(): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}

@@ -43,10 +43,10 @@ def write_run(run_dir: Path, n_muscles=3, verts=300, n_frames=3, render=None):
         q = matrix_to_quat(M[:3, :3])
         rows.append(",".join([str(int(ch.frames[0])), "bone"] + [repr(float(x)) for x in (*M[:3, 3], *q)]))
     (run_dir / "bones.csv").write_text("\n".join(rows) + "\n")
-    manifest = {"muscles": [{"name": m.name, "color": list(m.color)} for m in scene.muscles],
-                "frames": list(scene.frames), "bones": [{"name": "bone", "mesh": "bones/bone.ply"}]}
-    if render is not None:
-        manifest["settings"] = {"render": render}
+    manifest = {"tool": "axdf", "version": "test", "complete": True,
+                "settings": {"format": "ply", "render": render},
+                "muscles": [{"name": m.name, "color": list(m.color)} for m in scene.muscles],
+                "frames": list(scene.frames), "bones": [{"name": "bone", "mesh": "bones/bone.ply"}], "files": {}}
     (run_dir / "manifest.json").write_text(json.dumps(manifest))
     return scene, chunks
 

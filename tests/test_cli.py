@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from axdf_cli.formats.ply import read_ply
+from axdf_cli.formats import read_triangles
 from axdf_cli.skeleton import forward_kinematics, matrix_to_quaternion
 from axdf_cli.pose import sample_coordinates
 
@@ -73,7 +73,7 @@ def test_run_meshes_share_topology_and_read_back(demo_runs, demo):
         faces0 = None
         for f in range(4):
             path = out / "meshes" / name / f"{name}_{f:04d}.ply"
-            pos, nrm, faces = read_ply(path.read_bytes())
+            pos, nrm, faces = read_triangles(path.read_bytes(), ".ply")
             assert pos.shape == (model.n_vertices, 3)
             assert np.all(np.isfinite(pos)) and np.all(np.isfinite(nrm))
             faces0 = faces if faces0 is None else faces0
@@ -178,19 +178,24 @@ def test_non_empty_out_is_refused_unless_overwrite(repo_root, tmp_path, capsys):
     out = tmp_path / "o"
     out.mkdir()
     (out / "keep.txt").write_text("user data")
-    rc, _, err = run_main(["run", "poses/jobs/demo.yaml", "--out", out, "--frames", "0"], capsys)
-    assert rc == 2
-    assert "not empty" in err and "--overwrite" in err
-    assert "Traceback" not in err
-    assert sorted(p.name for p in out.iterdir()) == ["keep.txt"]
-    rc, _, err = run_main(["run", "poses/jobs/demo.yaml", "--out", out, "--frames", "0", "--overwrite", "-q"], capsys)
+    for extra in ([], ["--overwrite"], ["--resume"]):  # a folder that holds no run is never written into
+        rc, _, err = run_main(["run", "poses/jobs/demo.yaml", "--out", out, "--frames", "0", *extra], capsys)
+        assert rc == 2
+        assert "not empty" in err and "--overwrite" in err
+        assert "Traceback" not in err
+        assert sorted(p.name for p in out.iterdir()) == ["keep.txt"]
+    run_dir = tmp_path / "r"
+    rc, _, err = run_main(["run", "poses/jobs/demo.yaml", "--out", run_dir, "--frames", "0", "-q"], capsys)
     assert rc == 0, err
-    assert (out / "manifest.json").is_file()
-    # a second --overwrite run with other frames leaves no stale meshes behind
-    rc, _, err = run_main(["run", "poses/jobs/demo.yaml", "--out", out, "--frames", "1", "--overwrite", "-q"], capsys)
+    rc, _, err = run_main(["run", "poses/jobs/demo.yaml", "--out", run_dir, "--frames", "0", "-q"], capsys)
+    assert rc == 2 and "not empty" in err and "--overwrite" in err
+    (run_dir / "keep.txt").write_text("user data")
+    # a second --overwrite run with other frames leaves no stale meshes behind, and the user's file
+    rc, _, err = run_main(["run", "poses/jobs/demo.yaml", "--out", run_dir, "--frames", "1", "--overwrite", "-q"], capsys)
     assert rc == 0, err
-    assert not list(out.rglob("*_0000.ply"))
-    assert len(list(out.rglob("*_0001.ply"))) == len(DEMO_MUSCLES)
+    assert not list(run_dir.rglob("*_0000.ply"))
+    assert len(list(run_dir.rglob("*_0001.ply"))) == len(DEMO_MUSCLES)
+    assert (run_dir / "keep.txt").read_text() == "user data"
 
 
 @pytest.mark.parametrize("spec", ["0:abc", "5:2", "0:3:0", "0:9999", "-1", "", "1.5"])
@@ -371,7 +376,7 @@ def test_run_on_extreme_poses_is_finite(project, capsys):
     assert rc == 0, err
     assert "non-finite" not in err
     for p in (project / "out" / "meshes").rglob("*.ply"):
-        pos, nrm, _ = read_ply(p.read_bytes())
+        pos, nrm, _ = read_triangles(p.read_bytes(), ".ply")
         assert np.all(np.isfinite(pos)) and np.all(np.isfinite(nrm)), p
     rows = read_csv(project / "out" / "stats.csv")[1:]
     assert len(rows) == 3 * len(DEMO_MUSCLES)

@@ -35,7 +35,7 @@ def _failing(doc):
 
 
 def _read_ply_vertices(path: Path):
-    from axdf_cli.formats.read import read_ply
+    from axdf_cli.formats.ply import read_ply
     return read_ply(path.read_bytes())
 
 

@@ -1,7 +1,7 @@
 """Mesh topology and the mesh writers.
 
 The tessellation is closed and consistently wound with positive volume; PLY and OBJ files
-written by the writers read back (trimesh, ``process=False``; and ``read_ply``) to the same
+written by the writers read back (trimesh, ``process=False``; and ``read_triangles``) to the same
 vertices, normals and faces; PLY bytes are deterministic.
 """
 from __future__ import annotations
@@ -13,7 +13,7 @@ import pytest
 import trimesh
 
 from axdf_cli.formats import WRITERS, ObjWriter, PlyWriter
-from axdf_cli.formats.ply import read_ply
+from axdf_cli.formats import read_triangles
 from axdf_cli.muscle import grid_faces, grid_to_vertices
 from axdf_cli.pose import sample_coordinates
 from axdf_cli.skeleton import forward_kinematics
@@ -119,10 +119,10 @@ def test_ply_round_trip_trimesh(sample_mesh, tmp_path):
     np.testing.assert_array_equal(m2.vertices, m.vertices)
 
 
-def test_ply_round_trip_read_ply(sample_mesh):
+def test_ply_round_trip_read_triangles(sample_mesh):
     pos, nrm, faces, name = sample_mesh
     data = PlyWriter(faces, name).encode(pos, nrm)
-    p, n, f = read_ply(data)
+    p, n, f = read_triangles(data, ".ply")
     assert p.dtype == n.dtype == np.float32 and f.dtype == np.int32
     np.testing.assert_array_equal(p, pos.astype(np.float32))
     np.testing.assert_array_equal(n, nrm.astype(np.float32))

@@ -15,7 +15,7 @@ import pytest
 
 from axdf_cli import bspline
 from axdf_cli import tolerances as tol
-from axdf_cli.formats.ply import read_ply
+from axdf_cli.formats import read_triangles
 from axdf_cli.loaders import load_muscle_file
 from axdf_cli.muscle import OCT, MuscleModel, Section, ellipse_outline, grid_faces
 from axdf_cli.skeleton import forward_kinematics
@@ -186,7 +186,8 @@ def test_rest_pose_written_by_the_cli_equals_rest(demo, repo_root, tmp_path, cap
     assert rc == 0, err
     for model in demo.models:
         name = model.spec.name
-        pos, nrm, faces = read_ply((tmp_path / "o" / "meshes" / name / f"{name}_0000.ply").read_bytes())
+        ply = tmp_path / "o" / "meshes" / name / f"{name}_0000.ply"
+        pos, nrm, faces = read_triangles(ply.read_bytes(), ".ply")
         direct = tessellate_net(model, model.rest_control_points, rest_axis_points(model, demo.rest))
         np.testing.assert_allclose(pos, direct, rtol=0, atol=2e-7, err_msg=name)  # float32 rounding
         np.testing.assert_allclose(nrm, model.rest_normals, rtol=0, atol=1e-6, err_msg=name)
@@ -381,7 +382,8 @@ def test_exact_volume_on_written_meshes(chain_project, capsys):
     lengths = []
     for row in stats:
         f = int(row["frame"])
-        pos, _, faces = read_ply((chain_project / "out" / "meshes" / "chainm" / f"chainm_{f:04d}.ply").read_bytes())
+        ply = chain_project / "out" / "meshes" / "chainm" / f"chainm_{f:04d}.ply"
+        pos, _, faces = read_triangles(ply.read_bytes(), ".ply")
         assert pos.dtype == np.float32
         ratio = mesh_volume(pos, faces) / v0
         assert abs(ratio - 1.0) < tol.VOLUME_EXACT_PROMISE, (f, ratio)

@@ -237,7 +237,7 @@ def test_cmu_job_runs(tmp_path):
     """The shipped job on a few frames of the walk: finite, closed meshes; plausible lengths."""
     import csv
 
-    from axdf_cli.formats.read import read_mesh
+    from axdf_cli.formats import read_mesh
 
     rc = run_cli(REPO, "run", "poses/jobs/cmu_walk.yaml", "--out", str(tmp_path / "run"), "--frames", "0:248:62",
                  "--no-render", "-q", "--allow-outside")

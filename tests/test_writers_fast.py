@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from axdf_cli.formats import ObjWriter, PlyWriter
-from axdf_cli.formats.ply import read_ply
+from axdf_cli.formats import read_triangles
 from axdf_cli.muscle import grid_faces
 
 
@@ -98,7 +98,7 @@ def test_ply_round_trip_and_vertex_count_change():
     faces = grid_faces(6, 5)
     w = PlyWriter(faces, "m")
     p, nrm = stress_arrays(4, 2 + 4 * 5)
-    rp, rn, rf = read_ply(w.encode(p, nrm))
+    rp, rn, rf = read_triangles(w.encode(p, nrm), ".ply")
     np.testing.assert_array_equal(rp, p.astype(np.float32))
     np.testing.assert_array_equal(rn, nrm.astype(np.float32))
     np.testing.assert_array_equal(rf, faces)

@@ -87,8 +87,8 @@ def _output_path(text: str | None, flag: str) -> Path | None:
 def run(args) -> int:
     from dataclasses import replace
 
-    from axdf_cli.compare import check_paths, compare_paths
-    from axdf_cli.compare.report import summary, to_json, to_junit
+    from axdf_cli.compare import check_path, check_paths, compare_paths
+    from axdf_cli.compare.report import shown, summary, to_json, to_junit
     from axdf_cli.compare.tolerances import Tolerances, load_tolerances
 
     # everything that can be bad usage is checked before anything is written
@@ -97,8 +97,10 @@ def run(args) -> int:
     actual, golden = Path(args.actual), Path(args.golden)
     report_path = _output_path(args.report, "--report")
     junit_path = _output_path(args.junit, "--junit")
-    first_bless = args.update and actual.exists() and not golden.exists()  # a new golden
-    if not first_bless:
+    first_bless = args.update and actual.exists() and not os.path.lexists(golden)  # a new golden
+    if first_bless:
+        check_path("ACTUAL", actual)
+    else:
         check_paths(actual, golden)
     diff_dir = Path(args.diff_dir) if args.diff_dir else None
     if diff_dir is None and (report_path or junit_path):
@@ -107,11 +109,13 @@ def run(args) -> int:
     if diff_dir is not None and diff_dir.exists() and not diff_dir.is_dir():
         raise UsageError(f"--diff-dir {diff_dir} is a file", "--diff-dir takes a folder")
     exclude = [p for p in (report_path, junit_path, diff_dir) if p is not None]
+    steps = None
+    if args.update:
+        from axdf_cli.compare.bless import apply_bless, plan_bless
 
+        steps = plan_bless(actual, golden, tol, exclude)  # refusals (exit 2) before any write
     if first_bless:
-        from axdf_cli.compare.bless import bless
-        changes = bless(actual, golden, tol, None, exclude)
-        _print_changes(changes, golden, args)
+        _print_changes(apply_bless(steps, actual, golden), golden, args)
         return 0
 
     if diff_dir is not None and diff_dir.is_dir():
@@ -126,26 +130,26 @@ def run(args) -> int:
         write_text(report_path, to_json(report, tol.source))
     if junit_path:
         write_bytes(junit_path, to_junit(report))
-    text = summary(report, verbose=args.verbose, quiet=args.quiet)
-    if text:
-        print(text)
+    print(summary(report, verbose=args.verbose, quiet=args.quiet))
     if report_path and not args.quiet:
-        print(f"report: {report_path}")
+        print(f"report: {shown(str(report_path))}")
     if junit_path and not args.quiet:
-        print(f"junit: {junit_path}")
-    if args.update:
-        from axdf_cli.compare.bless import bless
-        changes = bless(actual, golden, tol, report, exclude)
-        _print_changes(changes, golden, args)
+        print(f"junit: {shown(str(junit_path))}")
+    if steps is not None:
+        _print_changes(apply_bless(steps, actual, golden, report), golden, args)
         return 0
     return 0 if report.passed else 1
 
 
 def _print_changes(changes, golden: Path, args) -> None:
-    for c in changes:
-        print(f"{c.action:<8} {golden / c.path if golden.is_dir() else golden}" + (f" ({c.note})" if c.note else ""))
+    from axdf_cli.compare.report import shown
+
+    if not args.quiet:
+        for c in changes:
+            where = golden / c.path if golden.is_dir() else golden
+            print(shown(f"{c.action:<8} {where}" + (f" ({c.note})" if c.note else "")))
     n = {a: sum(1 for c in changes if c.action == a) for a in ("added", "replaced", "removed")}
-    print(f"updated golden {golden}: {n['added']} added, {n['replaced']} replaced, {n['removed']} removed")
+    print(shown(f"updated golden {golden}: {n['added']} added, {n['replaced']} replaced, {n['removed']} removed"))
 
 
 def _clear_old_pictures(diff_dir: Path) -> None:

@@ -46,8 +46,9 @@ def _positive(text: str) -> int:
 
 def run(args) -> int:
     from axdf_cli import run as runner
+    from axdf_cli.yamlio import real_path
 
-    roots = [Path.cwd()] + ([Path(args.job).resolve().parent] if args.job else [])
+    roots = [Path.cwd()] + ([real_path(args.job).parent] if args.job else [])
     set_ref_policy(roots, args.allow_outside)
     job = load_job(args.job) if args.job else None
     from dataclasses import replace
@@ -66,6 +67,7 @@ def run(args) -> int:
         print(f"warning: {w}", file=sys.stderr)
     total = len(plan.frames) * len(plan.models)
     if args.dry_run:
+        runner.check_output(plan, resume=args.resume, overwrite=args.overwrite)
         print(f"would write {total} meshes ({len(plan.models)} muscles x {len(plan.frames)} frames, "
               f"{plan.fmt}) to {plan.out}/meshes, plus stats.csv, bones.csv, manifest.json")
         for s, m in zip(plan.muscles, plan.models):
@@ -82,7 +84,8 @@ def run(args) -> int:
     try:
         summary = runner.execute(plan, resume=args.resume, overwrite=args.overwrite,
                                  progress=bar.update if bar else None, strict=args.strict, jobs=args.jobs,
-                                 render_progress=(lambda _f: rbar.update(1)) if rbar else None)
+                                 render_progress=(lambda _f: rbar.update(1)) if rbar else None,
+                                 on_note=lambda text: print(f"note: {text}", file=sys.stderr))
     finally:
         for b in (bar, rbar):
             if b:

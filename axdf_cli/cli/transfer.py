@@ -31,8 +31,9 @@ def run(args) -> int:
     from axdf_cli.errors import Mark
     from axdf_cli.loaders import expand_muscle_paths, load_skeleton, set_ref_policy
     from axdf_cli.transfer import build_transfer
+    from axdf_cli.yamlio import real_path
 
-    set_ref_policy([Path.cwd(), Path(args.map).resolve().parent], args.allow_outside)
+    set_ref_policy([Path.cwd(), real_path(args.map).parent], args.allow_outside)
     skel_a = load_skeleton(Path(args.skel_from)) if args.skel_from else None
     skel_b = load_skeleton(Path(args.skel_to)) if args.skel_to else None
     files = expand_muscle_paths([(Path(m), Mark(m)) for m in args.muscles])

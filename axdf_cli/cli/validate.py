@@ -46,10 +46,11 @@ def validate_file(path: Path) -> str:
 
 def run(args) -> int:
     from axdf_cli.loaders import set_ref_policy
+    from axdf_cli.yamlio import real_path
 
     errors = 0
     for f in args.files:
-        set_ref_policy([Path.cwd(), Path(f).resolve().parent], args.allow_outside)
+        set_ref_policy([Path.cwd(), real_path(f).parent], args.allow_outside)
         try:
             desc = validate_file(Path(f))
         except InputError as e:

@@ -2,8 +2,10 @@
 
 Two run folders (or two files) are compared file by file. Each file's kind comes from its
 name (one table, :data:`KINDS`); byte-identical files pass without being decoded. Files
-missing or extra on either side fail, listed by name. Nothing here prints; the pictures of
-failing images are written (atomically) when a ``diff_dir`` is given.
+missing or extra on either side fail, listed by name; a file that cannot be read (not a
+regular file, a link out of the folder, a malformed or hostile file) is an ERROR verdict,
+and the comparison goes on (:mod:`axdf_cli.compare.files` says what is read). Nothing here
+prints; the pictures of failing images are written (atomically) when a ``diff_dir`` is given.
 """
 from __future__ import annotations
 
@@ -14,10 +16,12 @@ from pathlib import Path
 from typing import Callable, Iterable
 
 from axdf_cli.atomic import write_bytes
-from axdf_cli.formats.read import MeshReadError
-from axdf_cli.compare.result import ERROR, EXTRA, FAIL, MISSING, PASS, FileResult, Outcome, Report
+from axdf_cli.compare.files import list_files, nested, read_compared
+from axdf_cli.compare.result import ERROR, EXTRA, FAIL, MISSING, PASS, FileResult, Outcome, Report, read_side
 from axdf_cli.compare.tolerances import FileTol, Tolerances, as_dict
-from axdf_cli.errors import UsageError
+from axdf_cli.errors import AxdfError, UsageError
+from axdf_cli.formats import MeshReadError
+from axdf_cli.yamlio import real_path
 
 # file suffix -> kind; `manifest.json` is recognised by its whole name
 KINDS = {".ply": "mesh", ".obj": "mesh", ".png": "png", ".exr": "exr", ".csv": "table", ".json": "json"}
@@ -44,7 +48,7 @@ def _compare_kind(kind: str, a: Path, g: Path, ab: bytes, gb: bytes, t: FileTol)
         return compare_png(ab, gb, t.png)
     if kind == "exr":
         from axdf_cli.compare.images import compare_exr
-        return compare_exr(a, g, t.exr)
+        return compare_exr(ab, gb, t.exr)
     from axdf_cli.compare import tables
     if kind == "table":
         return tables.compare_csv(ab, gb, t.table)
@@ -55,27 +59,19 @@ def _compare_kind(kind: str, a: Path, g: Path, ab: bytes, gb: bytes, t: FileTol)
     return tables.compare_bytes(ab, gb)
 
 
-def list_files(root: Path, exclude: Iterable[Path] = ()) -> dict[str, Path]:
-    """Every file under ``root`` by its posix path relative to ``root``, sorted; ``exclude``
-    (this comparison's own report, JUnit file and picture folder) is left out."""
-    skip = {Path(os.path.abspath(p)) for p in exclude}
-    out: dict[str, Path] = {}
-    for dirpath, dirnames, filenames in os.walk(root):
-        d = Path(dirpath)
-        dirnames[:] = sorted(n for n in dirnames if Path(os.path.abspath(d / n)) not in skip)
-        for n in sorted(filenames):
-            p = d / n
-            if Path(os.path.abspath(p)) in skip:
-                continue
-            out[p.relative_to(root).as_posix()] = p
-    return dict(sorted(out.items()))
+def check_path(side: str, p: Path) -> None:
+    """A UsageError (exit 2) unless ``p`` is an existing folder or regular file."""
+    if not p.exists():
+        raise UsageError(f"{side} {p} does not exist", "give an existing run folder or file")
+    if not p.is_dir() and not p.is_file():
+        raise UsageError(f"{side} {p} is not a folder or a regular file", "compare two run folders or two files")
 
 
 def check_paths(actual: Path, golden: Path) -> str:
-    """'files' or 'folders'; a UsageError (exit 2) for a missing path or a file vs a folder."""
-    for side, p in (("ACTUAL", actual), ("GOLDEN", golden)):
-        if not p.exists():
-            raise UsageError(f"{side} {p} does not exist", "give an existing run folder or file")
+    """'files' or 'folders'; a UsageError (exit 2) for a missing path, a path that is neither
+    a folder nor a regular file (a FIFO, a device), or a file vs a folder."""
+    check_path("ACTUAL", actual)
+    check_path("GOLDEN", golden)
     if actual.is_dir() != golden.is_dir():
         fd = lambda p: "a folder" if p.is_dir() else "a file"  # noqa: E731
         raise UsageError(f"ACTUAL {actual} is {fd(actual)} but GOLDEN {golden} is {fd(golden)}",
@@ -92,22 +88,29 @@ def check_paths(actual: Path, golden: Path) -> str:
 def compare_paths(actual: Path | str, golden: Path | str, tolerances: Tolerances | None = None,
                   diff_dir: Path | str | None = None, exclude: Iterable[Path] = (),
                   progress: Callable[[int, int], None] | None = None) -> Report:
-    """Compare two run folders or two files; ``progress(done, total)`` after each file."""
+    """Compare two run folders or two files; ``progress(done, total)`` after each file.
+    A folder inside the other (``compare A A/golden``) is left out of the outer one's list."""
     t0 = time.perf_counter()
     tolerances = tolerances or Tolerances()
     actual, golden = Path(actual), Path(golden)
     mode = check_paths(actual, golden)
+    listing_errors: dict[str, str] = {}
     if mode == "files":
         pairs = [(golden.name, actual, golden)]
+        roots = (None, None)
     else:
         exclude = list(exclude)
-        fa = {r: p for r, p in list_files(actual, exclude).items() if not tolerances.ignored(r)}
-        fg = {r: p for r, p in list_files(golden, exclude).items() if not tolerances.ignored(r)}
+        inner = nested(actual, golden)
+        if inner is not None and real_path(actual) != real_path(golden):
+            exclude.append(inner)
+        fa = {r: p for r, p in list_files(actual, exclude, listing_errors).items() if not tolerances.ignored(r)}
+        fg = {r: p for r, p in list_files(golden, exclude, listing_errors).items() if not tolerances.ignored(r)}
         pairs = [(r, fa.get(r), fg.get(r)) for r in sorted(set(fa) | set(fg))]
-    results: list[FileResult] = []
+        roots = (actual, golden)
+    results = [FileResult(rel, "folder", ERROR, (why,)) for rel, why in sorted(listing_errors.items())]
     causes: list[str] = []
     for i, (rel, a, g) in enumerate(pairs):
-        r = compare_pair(rel, a, g, tolerances, diff_dir)
+        r = compare_pair(rel, a, g, tolerances, diff_dir, roots)
         if r.kind == "manifest":
             causes += r.notes
         results.append(r)
@@ -117,7 +120,12 @@ def compare_paths(actual: Path | str, golden: Path | str, tolerances: Tolerances
 
 
 def compare_pair(rel: str, a: Path | None, g: Path | None, tolerances: Tolerances,
-                 diff_dir: Path | str | None = None) -> FileResult:
+                 diff_dir: Path | str | None = None, roots: tuple[Path | None, Path | None] = (None, None)
+                 ) -> FileResult:
+    """One file's verdict. Whatever is in the files, this returns: an unreadable or hostile
+    file is an ERROR verdict with the reason, and so is (as a last resort, naming the
+    exception) any other failure while comparing it, so that one file never aborts the
+    comparison of a folder."""
     kind = kind_of(rel if a is None or g is None else g.name)
     if g is None:
         return FileResult(rel, kind, EXTRA, ("in actual, not in golden",))
@@ -127,21 +135,31 @@ def compare_pair(rel: str, a: Path | None, g: Path | None, tolerances: Tolerance
     t = tolerances.for_path(rel)
     section = TOL_SECTION[kind]
     tol_dict = as_dict(t)[section] if section else None
+
+    def error(reason: str) -> FileResult:
+        return FileResult(rel, kind, ERROR, (reason,), tolerance=tol_dict, seconds=time.perf_counter() - t0)
+
     try:
-        ab, gb = a.read_bytes(), g.read_bytes()
-    except OSError as e:
-        return FileResult(rel, kind, ERROR, (f"cannot read ({e.strerror}: {e.filename})",), tolerance=tol_dict)
-    if ab == gb and kind != "manifest":
-        return FileResult(rel, kind, PASS, (), (), {"identical": True}, tol_dict,
-                          seconds=time.perf_counter() - t0)
-    try:
+        ab = read_side("actual", read_compared, a, roots[0])
+        gb = read_side("golden", read_compared, g, roots[1])
+        if ab == gb and kind != "manifest":
+            return FileResult(rel, kind, PASS, (), (), {"identical": True}, tol_dict,
+                              seconds=time.perf_counter() - t0)
         out = _compare_kind(kind, a, g, ab, gb, t)
-    except MeshReadError as e:
-        return FileResult(rel, kind, ERROR, (str(e),), tolerance=tol_dict, seconds=time.perf_counter() - t0)
-    picture = None
-    if out.picture is not None and diff_dir is not None:
-        picture = str(Path(diff_dir) / f"{rel}.diff.png")
-        write_bytes(picture, _png_bytes(out.picture))
+        picture = None
+        if out.picture is not None and diff_dir is not None:
+            picture = str(Path(diff_dir) / f"{rel}.diff.png")
+            write_bytes(picture, _png_bytes(out.picture))
+    except MeshReadError as e:  # Unreadable included
+        return error(str(e))
+    except RecursionError:
+        return error("nested too deeply to compare")
+    except MemoryError:
+        return error("too large to compare in memory")
+    except AxdfError:  # the environment (a missing package, an unwritable picture folder): not this file's fault
+        raise
+    except Exception as e:  # noqa: BLE001 - the last resort: this file's verdict, not the run's
+        return error(f"could not be compared ({type(e).__name__}: {e}); please report this file")
     metrics = {"identical": ab == gb} | out.metrics
     return FileResult(rel, kind, PASS if out.ok else FAIL, out.reasons, out.notes, metrics, tol_dict,
                       picture, time.perf_counter() - t0)
@@ -155,5 +173,5 @@ def _png_bytes(rgb) -> bytes:
     return buf.getvalue()
 
 
-__all__ = ["compare_paths", "compare_pair", "check_paths", "list_files", "kind_of", "KINDS",
+__all__ = ["compare_paths", "compare_pair", "check_path", "check_paths", "list_files", "kind_of", "nested", "KINDS",
            "Report", "FileResult", "Tolerances"]

@@ -3,6 +3,16 @@
 Every file of actual that golden lacks is added, every file whose bytes differ is replaced
 (atomically), and every golden file that actual lacks is removed (empty folders with it).
 Ignored files and this comparison's own outputs are left alone.
+
+Nothing is written before everything is checked (:func:`plan_bless`, exit 2 on refusal):
+
+- one folder inside the other (``compare A A/golden --update`` would nest golden/golden one
+  level deeper each time) is refused;
+- golden is written only through real folders inside it: a symbolic link on the way to a
+  file it would write or remove (``GOLDEN/meshes -> /elsewhere``) is refused, as is a
+  non-regular file where a file would go (a FIFO, a folder);
+- every file copied from actual must be a regular file inside actual (the rules of
+  :mod:`axdf_cli.compare.files`).
 """
 from __future__ import annotations
 
@@ -12,10 +22,11 @@ from pathlib import Path
 from typing import Iterable
 
 from axdf_cli.atomic import write_parts
-from axdf_cli.compare import list_files
-from axdf_cli.compare.result import Report
+from axdf_cli.compare.files import check_compared, list_files, nested, read_compared
+from axdf_cli.compare.result import Report, Unreadable
 from axdf_cli.compare.tolerances import Tolerances
-from axdf_cli.errors import EnvironmentProblem
+from axdf_cli.errors import EnvironmentProblem, UsageError
+from axdf_cli.yamlio import real_path
 
 
 @dataclass(frozen=True)
@@ -25,47 +36,104 @@ class Change:
     note: str = ""  # for "replaced": within or beyond tolerance
 
 
-def _copy(src: Path, dst: Path) -> None:
-    write_parts(dst, (src.read_bytes(),))
+@dataclass(frozen=True)
+class Step:
+    action: str  # "add", "update" (replace when the bytes differ), "remove"
+    rel: str
+    src: Path | None  # the actual file (add, update)
+    dst: Path  # the golden file, below the real golden folder
 
 
-def _same_bytes(a: Path, b: Path) -> bool:
-    if a.stat().st_size != b.stat().st_size:
-        return False
-    return a.read_bytes() == b.read_bytes()
+def refuse_nested(actual: Path, golden: Path) -> None:
+    """UsageError when either folder is (or lies inside) the other, by real paths (golden
+    may not exist yet)."""
+    inner = nested(actual, golden)
+    if inner is not None:
+        outer = actual if inner is golden else golden
+        raise UsageError(f"--update: {inner} is inside {outer}",
+                         "ACTUAL and GOLDEN must be separate folders (each update would copy one into itself)")
+
+
+def _check_target(golden: Path, rel: str, final_regular: bool) -> None:
+    """Refuse a write or removal of ``golden/rel`` that would pass through a symbolic link
+    or land on something that is not a regular file."""
+    cur = golden
+    parts = rel.split("/")
+    for i, part in enumerate(parts):
+        cur = cur / part
+        shown = f"GOLDEN/{'/'.join(parts[:i + 1])}"
+        if os.path.islink(cur):
+            raise UsageError(f"--update: {shown} ({cur}) is a symbolic link",
+                             "--update writes only real files and folders inside GOLDEN; replace the link by a folder")
+        if not os.path.lexists(cur):
+            return
+        last = i == len(parts) - 1
+        if not last and not cur.is_dir():
+            raise UsageError(f"--update: {shown} ({cur}) is not a folder", "remove it, then update")
+        if last and final_regular and not cur.is_file():
+            raise UsageError(f"--update: {shown} ({cur}) is not a regular file", "remove it, then update")
+
+
+def plan_bless(actual: Path, golden: Path, tolerances: Tolerances, exclude: Iterable[Path] = ()) -> list[Step]:
+    """What an update would do, checked through; raises UsageError (exit 2) before anything
+    is written."""
+    if actual.is_file():
+        try:
+            check_compared(actual, None)
+        except Unreadable as e:
+            raise UsageError(f"--update: ACTUAL {actual}: {e}", "--update copies regular files") from None
+        return [Step("update" if golden.exists() else "add", golden.name, actual, golden)]
+    refuse_nested(actual, golden)
+    exclude = list(exclude)
+    fa = {r: p for r, p in list_files(actual, exclude).items() if not tolerances.ignored(r)}
+    fg = ({r: p for r, p in list_files(golden, exclude).items() if not tolerances.ignored(r)}
+          if golden.exists() else {})
+    root = real_path(golden)
+    steps: list[Step] = []
+    for rel in sorted(set(fa) | set(fg)):
+        if rel in fa:
+            try:
+                check_compared(fa[rel], actual)
+            except Unreadable as e:
+                raise UsageError(f"--update: ACTUAL/{rel} ({fa[rel]}): {e}",
+                                 "--update copies regular files inside ACTUAL") from None
+        _check_target(golden, rel, final_regular=rel in fa)
+        action = "remove" if rel not in fa else "update" if rel in fg else "add"
+        steps.append(Step(action, rel, fa.get(rel), root / rel))
+    return steps
+
+
+def apply_bless(steps: list[Step], actual: Path, golden: Path, report: Report | None = None) -> list[Change]:
+    """Carry out :func:`plan_bless`'s steps; return what changed, in path order."""
+    verdicts = {f.path: f.verdict for f in report.files} if report is not None else {}
+    root_a = None if actual.is_file() else actual
+    changes: list[Change] = []
+    for s in steps:
+        try:
+            if s.action == "remove":
+                s.dst.unlink()
+                changes.append(Change("removed", s.rel))
+                _prune(s.dst.parent, real_path(golden))
+                continue
+            data = read_compared(s.src, root_a)
+            if s.action == "update" and s.dst.stat().st_size == len(data) and read_compared(s.dst, None) == data:
+                continue
+            write_parts(s.dst, (data,))
+        except Unreadable as e:  # changed since plan_bless checked it
+            raise EnvironmentProblem(f"{s.src}: {e}") from None
+        except OSError as e:
+            raise EnvironmentProblem(f"{s.dst}: cannot {'remove' if s.action == 'remove' else 'write'} "
+                                     f"({e.strerror})") from None
+        changes.append(Change("added" if s.action == "add" else "replaced", s.rel,
+                              _note(verdicts.get(s.rel)) if s.action == "update" else ""))
+    return changes
 
 
 def bless(actual: Path, golden: Path, tolerances: Tolerances, report: Report | None = None,
           exclude: Iterable[Path] = ()) -> list[Change]:
     """Copy ``actual`` over ``golden`` (files or folders); return what changed, in path order.
     ``golden`` may not exist yet (a first bless)."""
-    verdicts = {f.path: f.verdict for f in report.files} if report is not None else {}
-    changes: list[Change] = []
-    if actual.is_file():
-        if golden.exists() and _same_bytes(actual, golden):
-            return []
-        action = "replaced" if golden.exists() else "added"
-        _copy(actual, golden)
-        return [Change(action, golden.name, _note(verdicts.get(golden.name)))]
-    exclude = list(exclude)
-    fa = {r: p for r, p in list_files(actual, exclude).items() if not tolerances.ignored(r)}
-    fg = ({r: p for r, p in list_files(golden, exclude).items() if not tolerances.ignored(r)}
-          if golden.exists() else {})
-    for rel in sorted(set(fa) | set(fg)):
-        if rel not in fa:
-            try:
-                fg[rel].unlink()
-            except OSError as e:
-                raise EnvironmentProblem(f"{fg[rel]}: cannot remove ({e.strerror})") from None
-            changes.append(Change("removed", rel))
-            _prune(fg[rel].parent, golden)
-        elif rel not in fg:
-            _copy(fa[rel], golden / rel)
-            changes.append(Change("added", rel))
-        elif not _same_bytes(fa[rel], fg[rel]):
-            _copy(fa[rel], fg[rel])
-            changes.append(Change("replaced", rel, _note(verdicts.get(rel))))
-    return changes
+    return apply_bless(plan_bless(actual, golden, tolerances, exclude), actual, golden, report)
 
 
 def _note(verdict: str | None) -> str:

@@ -15,6 +15,7 @@ white at twice the tolerance or more).
 from __future__ import annotations
 
 import io
+from pathlib import Path
 
 import numpy as np
 
@@ -30,14 +31,45 @@ PICTURE_GAP = 4  # pixels between the three panels
 
 
 # ----------------------------------------------------------------------------- reading
-def read_png(data: bytes) -> np.ndarray:
-    """PNG bytes -> ``(H, W, C) float32`` in [0, 1] (C = 1 grey, 2 grey+alpha, 3 RGB, 4 RGBA)."""
+# Images are decoded only up to this many pixels (8192 x 8192): a decoded image is held as
+# float32 per channel on both sides, with differences, so 2^26 pixels already take several
+# GB. Sizes are read from the headers first: a small file whose header claims a huge image
+# (a decompression bomb) is refused without decoding it, and two images of different sizes
+# fail without decoding either.
+MAX_IMAGE_PIXELS = 1 << 26
+
+
+def _check_pixels(w: int, h: int, what: str) -> None:
+    if w < 0 or h < 0 or w * h > MAX_IMAGE_PIXELS:
+        raise Unreadable(f"{what} header says {w}x{h} pixels; at most {MAX_IMAGE_PIXELS} pixels are decoded")
+
+
+def _open_png(data: bytes):
+    """The PIL image (header read, pixels not decoded) and its size and channel count."""
+    import warnings
+
     from PIL import Image, UnidentifiedImageError
 
     try:
-        img = Image.open(io.BytesIO(data))
-        img.load()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)  # our own limit applies
+            img = Image.open(io.BytesIO(data))
+    except Image.DecompressionBombError as e:
+        raise Unreadable(f"PNG header claims a huge image ({e})") from None
     except (UnidentifiedImageError, OSError, SyntaxError, ValueError) as e:
+        raise Unreadable(f"not a readable PNG ({e})") from None
+    w, h = img.size
+    channels = 4 if img.mode == "P" else 1 if img.mode == "1" else len(img.getbands())
+    return img, w, h, channels
+
+
+def _decode_png(img) -> np.ndarray:
+    """A PIL image -> ``(H, W, C) float32`` in [0, 1] (C = 1 grey, 2 grey+alpha, 3 RGB, 4 RGBA)."""
+    w, h = img.size
+    _check_pixels(w, h, "PNG")
+    try:
+        img.load()
+    except (OSError, SyntaxError, ValueError) as e:
         raise Unreadable(f"not a readable PNG ({e})") from None
     if img.mode == "P":
         img = img.convert("RGBA")
@@ -53,19 +85,45 @@ def read_png(data: bytes) -> np.ndarray:
     return out[:, :, None] if out.ndim == 2 else out
 
 
-def read_exr(path) -> dict[str, np.ndarray]:
-    """OpenEXR file -> {channel name: (H, W) array} in the file's pixel types (half,
-    float32, uint32), one entry per channel (R G B A not grouped)."""
+def read_png(data: bytes) -> np.ndarray:
+    """PNG bytes -> ``(H, W, C) float32`` in [0, 1] (C = 1 grey, 2 grey+alpha, 3 RGB, 4 RGBA)."""
+    return _decode_png(_open_png(data)[0])
+
+
+def _exr_file(data: bytes, header_only: bool):
     try:
         import OpenEXR
     except ImportError:
         raise EnvironmentProblem("the OpenEXR Python bindings are missing",
                                  "pip install 'OpenEXR>=3.2'") from None
+    return OpenEXR.File(io.BytesIO(data), separate_channels=True, header_only=header_only)
+
+
+def exr_size(data: bytes) -> tuple[int, int]:
+    """(width, height) from an OpenEXR header's dataWindow, without reading pixels."""
     try:
-        with OpenEXR.File(str(path), separate_channels=True) as f:
-            return {name: np.asarray(ch.pixels) for name, ch in f.channels().items()}
-    except RuntimeError as e:  # the bindings raise RuntimeError for unreadable files
+        with _exr_file(data, header_only=True) as f:
+            lo, hi = (np.asarray(x, np.int64) for x in f.header()["dataWindow"])
+    except (RuntimeError, ValueError, KeyError, TypeError) as e:
         raise Unreadable(f"not a readable OpenEXR file ({e})") from None
+    return int(hi[0] - lo[0] + 1), int(hi[1] - lo[1] + 1)
+
+
+def read_exr(data: bytes | str | Path) -> dict[str, np.ndarray]:
+    """OpenEXR bytes (or a file) -> {channel name: (H, W) array} in the file's pixel types
+    (half, float32, uint32), one entry per channel (R G B A not grouped). The header's size is
+    checked first (a patched dataWindow is refused, not allocated)."""
+    if not isinstance(data, bytes):
+        data = Path(data).read_bytes()
+    _check_pixels(*exr_size(data), "OpenEXR")
+    try:
+        with _exr_file(data, header_only=False) as f:
+            out = {name: np.asarray(ch.pixels) for name, ch in f.channels().items()}
+    except (RuntimeError, ValueError, MemoryError) as e:  # the bindings' errors for unreadable files
+        raise Unreadable(f"not a readable OpenEXR file ({type(e).__name__}: {e})") from None
+    if not out:
+        raise Unreadable("not a readable OpenEXR file (no channels)")
+    return out
 
 
 # ----------------------------------------------------------------------------- metrics
@@ -122,13 +180,16 @@ def side_by_side(actual: np.ndarray, golden: np.ndarray, heat: np.ndarray) -> np
 
 # ----------------------------------------------------------------------------- PNG
 def compare_png(a_bytes: bytes, g_bytes: bytes, tol: PngTol) -> Outcome:
-    a = read_side("actual", read_png, a_bytes)
-    g = read_side("golden", read_png, g_bytes)
-    h, w = g.shape[:2]
-    metrics: dict = {"width": w, "height": h, "channels": g.shape[2]}
-    if a.shape != g.shape:
-        return Outcome(False, (f"image is {a.shape[1]}x{a.shape[0]} with {a.shape[2]} channels vs golden "
-                               f"{w}x{h} with {g.shape[2]} channels",), metrics)
+    ai, aw, ah, ac = read_side("actual", _open_png, a_bytes)
+    gi, w, h, gc = read_side("golden", _open_png, g_bytes)
+    read_side("actual", _check_pixels, aw, ah, "PNG")
+    read_side("golden", _check_pixels, w, h, "PNG")
+    metrics: dict = {"width": w, "height": h, "channels": gc}
+    if (aw, ah, ac) != (w, h, gc):  # from the headers: nothing decoded
+        return Outcome(False, (f"image is {aw}x{ah} with {ac} channels vs golden {w}x{h} with {gc} channels",),
+                       metrics)
+    a = read_side("actual", _decode_png, ai)
+    g = read_side("golden", _decode_png, gi)
     diff = np.abs(a - g).max(axis=2)  # (H, W) worst channel per pixel
     failing = diff > tol.threshold
     n_fail = int(failing.sum())
@@ -187,9 +248,14 @@ def _channel_error(a: np.ndarray, g: np.ndarray, t: ChannelTol) -> tuple[np.ndar
     return d, ratio
 
 
-def compare_exr(a_path, g_path, tol: ExrTol) -> Outcome:
-    a = read_side("actual", read_exr, a_path)
-    g = read_side("golden", read_exr, g_path)
+def compare_exr(a_bytes: bytes, g_bytes: bytes, tol: ExrTol) -> Outcome:
+    (aw, ah), (w, h) = read_side("actual", exr_size, a_bytes), read_side("golden", exr_size, g_bytes)
+    read_side("actual", _check_pixels, aw, ah, "OpenEXR")
+    read_side("golden", _check_pixels, w, h, "OpenEXR")
+    if (aw, ah) != (w, h):  # from the headers: nothing decoded
+        return Outcome(False, (f"image is {aw}x{ah} vs golden {w}x{h}",), {"width": w, "height": h})
+    a = read_side("actual", read_exr, a_bytes)
+    g = read_side("golden", read_exr, g_bytes)
     reasons: list[str] = []
     notes: list[str] = []
     only_a, only_g = sorted(set(a) - set(g)), sorted(set(g) - set(a))

@@ -1,27 +1,23 @@
-"""Mesh comparison (PLY and OBJ): exact topology, then per-vertex distances.
-
-Small numpy readers keep the file's vertex order exactly (trimesh's OBJ loader may merge or
-split vertices by normals). Faces are kept as polygon sizes plus a flat index array, so
-triangles and any other polygons compare alike.
-"""
+"""Mesh comparison (any format of :data:`axdf_cli.formats.FORMATS`, PLY and OBJ): exact
+topology, then per-vertex distances, in the files' own vertex order."""
 from __future__ import annotations
-
 
 import numpy as np
 
 from axdf_cli.compare.result import Outcome, read_side
-from axdf_cli.formats.read import READERS, Mesh
 from axdf_cli.compare.tolerances import MeshTol
-
-
+from axdf_cli.formats import Mesh, read_mesh
 
 
 # ----------------------------------------------------------------------------- comparison
 def hausdorff(a: np.ndarray, b: np.ndarray) -> float:
     """Symmetric Hausdorff distance between two vertex sets ``(Va, 3)``, ``(Vb, 3)``
-    (nearest vertex both ways with scipy's cKDTree)."""
+    (nearest vertex both ways with scipy's cKDTree); inf when either set holds a non-finite
+    vertex (no distance to it is finite)."""
     if len(a) == 0 or len(b) == 0:
         return float("inf") if len(a) != len(b) else 0.0
+    if not (np.isfinite(a).all() and np.isfinite(b).all()):
+        return float("inf")
     from scipy.spatial import cKDTree
 
     d_ab = cKDTree(b).query(a)[0]
@@ -43,12 +39,13 @@ def compare_meshes(a: Mesh, g: Mesh, tol: MeshTol) -> Outcome:
                     f"{len(g.vertices)} vertices, {len(g.face_sizes)} faces")
         else:
             what = f"same counts but {_first_face_difference(a, g)}"
-        return Outcome(False, (f"topology differs: {what}; Hausdorff distance {h:.3g} m",), metrics)
+        reasons = [f"topology differs: {what}; Hausdorff distance {h:.3g} m"]
+        reasons += _non_finite(a, "actual") + _non_finite(g, "golden")
+        return Outcome(False, tuple(reasons), metrics)
     d = np.linalg.norm(a.vertices - g.vertices, axis=1)  # (V,)
     if len(d) == 0:
         return Outcome(True, (), metrics | {"max_distance": 0.0, "rms_distance": 0.0})
-    if not np.all(np.isfinite(a.vertices)):
-        reasons.append(f"{int(np.sum(~np.isfinite(a.vertices).all(axis=1)))} vertices are not finite")
+    reasons += _non_finite(a, "actual") + _non_finite(g, "golden")
     worst = int(np.nanargmax(d)) if np.any(np.isfinite(d)) else 0
     dmax = float(np.max(d))
     rms = float(np.sqrt(np.mean(d * d)))
@@ -71,6 +68,11 @@ def compare_meshes(a: Mesh, g: Mesh, tol: MeshTol) -> Outcome:
     return Outcome(not reasons, tuple(reasons), metrics)
 
 
+def _non_finite(m: Mesh, side: str) -> list[str]:
+    n = int(np.sum(~np.isfinite(m.vertices).all(axis=1)))
+    return [f"{n} {side} vertices are not finite"] if n else []
+
+
 def _first_face_difference(a: Mesh, g: Mesh) -> str:
     if not np.array_equal(a.face_sizes, g.face_sizes):
         i = int(np.flatnonzero(a.face_sizes != g.face_sizes)[0])
@@ -83,6 +85,6 @@ def _first_face_difference(a: Mesh, g: Mesh) -> str:
 
 
 def compare_mesh_files(a_bytes: bytes, g_bytes: bytes, a_suffix: str, g_suffix: str, tol: MeshTol) -> Outcome:
-    a = read_side("actual", READERS[a_suffix], a_bytes)
-    g = read_side("golden", READERS[g_suffix], g_bytes)
+    a = read_side("actual", read_mesh, a_bytes, a_suffix)
+    g = read_side("golden", read_mesh, g_bytes, g_suffix)
     return compare_meshes(a, g, tol)

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from axdf_cli.formats.read import MeshReadError
+from axdf_cli.formats import MeshReadError
 
 # verdicts of one file; every one but PASS fails the comparison
 PASS = "pass"  # equal within tolerance (identical bytes included)

@@ -101,6 +101,18 @@ def read_json(data: bytes):
         return json.loads(data.decode("utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as e:
         raise Unreadable(f"not valid JSON ({e})") from None
+    except ValueError as e:  # an integer of more digits than Python converts (4300)
+        raise Unreadable(f"JSON holds a number too long to read ({str(e).split(';')[0]})") from None
+    except RecursionError:
+        raise Unreadable("JSON nested too deeply to read") from None
+
+
+def _float(x) -> float:
+    """A JSON number as a float; integers beyond float's range become +-inf."""
+    try:
+        return float(x)
+    except OverflowError:
+        return math.inf if x > 0 else -math.inf
 
 
 def json_differences(a, g, tol: NumTol | None, path: str = "$", out: list | None = None,
@@ -111,11 +123,13 @@ def json_differences(a, g, tol: NumTol | None, path: str = "$", out: list | None
     out = [] if out is None else out
     if stats is not None and isinstance(a, (int, float)) and isinstance(g, (int, float)) \
             and not isinstance(a, bool) and not isinstance(g, bool):
-        d = abs(a - g) if math.isfinite(a - g) else (0.0 if a == g else math.inf)
+        d = 0.0 if a == g else _float(abs(a - g))  # exact for integers of any size
+        if math.isnan(d):
+            d = math.inf
         stats["max_abs_difference"] = max(stats.get("max_abs_difference", 0.0), d)
-        allowed = 0.0 if tol is None else tol.atol + tol.rtol * abs(g)
-        if d > allowed:
-            out.append(f"{path}: {a!r} vs golden {g!r}")
+        allowed = 0.0 if tol is None else tol.atol + tol.rtol * abs(_float(g))
+        if d > allowed or (d == allowed == math.inf):
+            out.append(f"{path}: {_short(a)} vs golden {_short(g)}")
         return out
     if isinstance(a, dict) and isinstance(g, dict):
         for k in g:

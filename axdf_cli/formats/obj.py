@@ -1,4 +1,9 @@
-"""Wavefront OBJ: ``v``, ``vn`` and ``f a//a b//b c//c`` lines (1-based), one object per file.
+"""Wavefront OBJ: the writer (``v``, ``vn`` and ``f a//a b//b c//c`` lines, 1-based, one
+object per file) and the reader (``v``/``vn``/``f`` lines in file order, at C speed).
+
+The reader keeps the file's vertex order (trimesh's OBJ loader may merge or split vertices by
+normals, so it is not used here); other lines (``o``, ``g``, ``vt``, ``usemtl`` ...) are
+skipped. Malformed files raise :class:`MeshReadError`.
 
 Coordinates are written with 6 decimals (micrometres), enough for metres-scale muscles. The
 face block is formatted once per muscle; per frame only the vertex lines are.
@@ -14,11 +19,14 @@ formatting, which gives the same bytes.
 from __future__ import annotations
 
 import hashlib
+import re
+import warnings
 from pathlib import Path
 
 import numpy as np
 
 from axdf_cli import atomic
+from axdf_cli.formats.mesh import Mesh, MeshReadError
 
 _BIG = 1000  # integer parts below this use the tables; larger ones take the % path
 
@@ -100,3 +108,69 @@ class ObjWriter:
         for part in parts:
             h.update(part)
         return h.hexdigest()
+
+
+# ----------------------------------------------------------------------------- reading
+_OBJ_V = re.compile(rb"^v[ \t]+([^\n]*)", re.M)
+_OBJ_VN = re.compile(rb"^vn[ \t]+([^\n]*)", re.M)
+_OBJ_F = re.compile(rb"^f[ \t]+([^\n]*)", re.M)
+
+
+def _parse_numbers(text: bytes, dtype, what: str) -> np.ndarray:
+    """Whitespace-separated numbers -> ``(n,)`` array at C speed; any other text is MeshReadError."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # numpy warns (not raises) when it stops at bad text
+        try:
+            return np.fromstring(text, dtype=dtype, sep=" ")
+        except (ValueError, DeprecationWarning):
+            raise MeshReadError(f"an OBJ {what} line is not numeric") from None
+
+
+def _obj_numbers(lines: list[bytes], what: str, dtype) -> np.ndarray:
+    """The numbers of OBJ lines (without their keyword) as ``(len(lines), k)``; every line
+    must have the same count k."""
+    if not lines:
+        return np.zeros((0, 3), dtype)
+    out = _parse_numbers(b" ".join(lines), dtype, what)
+    if out.size % len(lines):
+        raise MeshReadError(f"OBJ {what} lines have different numbers of values")
+    return out.reshape(len(lines), -1)
+
+
+def read_obj(data: bytes) -> Mesh:
+    """Read ``v``/``vn``/``f`` lines of an OBJ in file order. Per-vertex normals are taken
+    when every face corner names the normal with its vertex's own index (``f a//a``)."""
+    v = _obj_numbers(_OBJ_V.findall(data), "v", np.float64)
+    if v.shape[1] < 3:
+        raise MeshReadError("OBJ 'v' lines have fewer than 3 values")
+    verts = v[:, :3]  # x y z (a w or a colour may follow)
+    vn = _obj_numbers(_OBJ_VN.findall(data), "vn", np.float64)
+    face_lines = _OBJ_F.findall(data)
+    if not face_lines:
+        return Mesh(verts, vn if len(vn) == len(verts) and len(vn) else None,
+                    np.zeros(0, np.int64), np.zeros(0, np.int64))
+    sizes = np.array([len(line.split()) for line in face_lines], np.int64)
+    if sizes.min() == 0:
+        raise MeshReadError("an OBJ 'f' line names no vertex")
+    joined = b" ".join(face_lines)
+    first = joined.split(None, 1)[0]
+    # every corner written alike: a | a/t | a//n | a/t/n -> (vertex, texture, normal) columns
+    if b"//" in first:
+        text, cols = joined.replace(b"//", b" "), ("v", "n")
+    else:
+        cols = ("v", "t", "n")[: first.count(b"/") + 1]
+        text = joined.replace(b"/", b" ")
+    n_corners = int(sizes.sum())
+    idx = _parse_numbers(text, np.int64, "f")
+    if idx.size != n_corners * len(cols):
+        raise MeshReadError("OBJ face corners are not all written alike (a, a/t, a//n or a/t/n)")
+    idx = idx.reshape(n_corners, len(cols))
+    flat = idx[:, 0]
+    flat = np.where(flat < 0, flat + len(verts), flat - 1)  # 1-based; negative is relative
+    normals = None
+    if "n" in cols and len(vn) == len(verts):
+        ni = idx[:, cols.index("n")]
+        ni = np.where(ni < 0, ni + len(vn), ni - 1)
+        if np.array_equal(ni, flat):
+            normals = vn[:, :3]
+    return Mesh(verts, normals, sizes, flat)

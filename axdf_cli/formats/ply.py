@@ -1,7 +1,14 @@
-"""Binary little-endian PLY: float32 x y z nx ny nz per vertex, ``list uchar int`` faces.
+"""PLY: the writer (binary little-endian, float32 x y z nx ny nz per vertex, ``list uchar
+int`` faces) and the reader (any PLY: binary little/big endian or ascii).
 
-Read back by Blender, trimesh (``process=False``) and meshio. The header holds no timestamp
-or path, so identical meshes give identical bytes.
+What the writer writes is read back by Blender, trimesh (``process=False``) and meshio. The
+header holds no timestamp or path, so identical meshes give identical bytes.
+
+The reader keeps the file's vertex order exactly; it takes any vertex properties (x y z
+required, nx ny nz used) and ``list`` faces of any polygon size. A malformed or hostile
+header (negative or impossible counts, repeated properties, non-integer list types, list
+lengths beyond the file) is a :class:`MeshReadError`, never a numpy error: everything the
+header says is checked against the file's length before any array is made.
 
 Speed: the whole file lives in one preallocated buffer per writer (header, interleaved
 vertex block, face block formatted once); a frame only overwrites the vertex block in
@@ -16,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from axdf_cli import atomic
+from axdf_cli.formats.mesh import Mesh, MeshReadError
 
 
 class PlyWriter:
@@ -72,10 +80,154 @@ class PlyWriter:
         return hashlib.sha256(buf).hexdigest() if sha256 else None
 
 
-def read_ply(data: bytes):
-    """Read a triangle PLY: positions (V, 3) float32, normals (V, 3) float32 or None, faces (T, 3) int32."""
-    from axdf_cli.formats.read import read_ply as read_any, triangles
+# ----------------------------------------------------------------------------- reading
+_TYPES = {
+    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
+    "short": "i2", "int16": "i2", "ushort": "u2", "uint16": "u2",
+    "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
+    "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
+}
+_FORMATS = ("binary_little_endian", "binary_big_endian", "ascii")
 
-    mesh = read_any(data)
-    nrm = None if mesh.normals is None else mesh.normals.astype(np.float32)
-    return mesh.vertices.astype(np.float32), nrm, triangles(mesh)
+
+def _header(text: str) -> tuple[str | None, list[tuple[str, int, list]]]:
+    """The format and the elements ``(name, count, [(prop, type) | (prop, (count_t, item_t))])``."""
+    fmt = None
+    elements: list[tuple[str, int, list]] = []
+    for line in text.splitlines():
+        tok = line.split()
+        if not tok or tok[0] in ("ply", "comment", "obj_info"):
+            continue
+        try:
+            if tok[0] == "format":
+                fmt = tok[1]
+            elif tok[0] == "element":
+                count = int(tok[2])
+                if count < 0 or any(e[0] == tok[1] for e in elements):
+                    raise ValueError
+                elements.append((tok[1], count, []))
+            elif tok[0] == "property":
+                props = elements[-1][2]
+                if tok[1] == "list":
+                    name, t = tok[4], (_TYPES[tok[2]], _TYPES[tok[3]])
+                    if t[0][0] not in "iu" or t[1][0] not in "iu":
+                        raise ValueError  # list lengths and indices are integers
+                else:
+                    name, t = tok[2], _TYPES[tok[1]]
+                if any(p == name for p, _ in props):
+                    raise ValueError
+                props.append((name, t))
+        except (IndexError, KeyError, ValueError):
+            raise MeshReadError(f"bad PLY header line {line[:80]!r}") from None
+    return fmt, elements
+
+
+def read_ply(data: bytes) -> Mesh:
+    """Read a PLY (binary little/big endian or ascii) with a ``vertex`` element (x y z,
+    optional nx ny nz) and an optional ``face`` element (``list <count> <index>``)."""
+    end = data.find(b"end_header")
+    if not data.startswith(b"ply") or end < 0:
+        raise MeshReadError("not a PLY file (no 'ply' magic or no end_header)")
+    nl = data.find(b"\n", end)
+    if nl < 0:
+        raise MeshReadError("PLY header is not terminated")
+    body = memoryview(data)[nl + 1:]
+    fmt, elements = _header(data[:end].decode("ascii", "replace"))
+    if fmt not in _FORMATS:
+        raise MeshReadError(f"PLY format {fmt!r} is not {', '.join(_FORMATS)}")
+    for name, _, props in elements:
+        if len(props) > 1 and any(isinstance(t, tuple) for _, t in props):
+            raise MeshReadError(f"PLY element {name!r} mixes a list with other properties")
+    if fmt == "ascii":
+        arrays = _ascii_body(bytes(body).decode("ascii", "replace"), elements)
+    else:
+        arrays = _binary_body(body, elements, "<" if fmt == "binary_little_endian" else ">")
+    v = arrays.get("vertex")
+    if v is None or not all(k in v for k in "xyz"):
+        raise MeshReadError("PLY has no vertex element with x, y, z")
+    verts = np.stack([v["x"], v["y"], v["z"]], axis=1).astype(np.float64)
+    normals = None
+    if all(k in v for k in ("nx", "ny", "nz")):
+        normals = np.stack([v["nx"], v["ny"], v["nz"]], axis=1).astype(np.float64)
+    f = arrays.get("face")
+    if not f:
+        return Mesh(verts, normals, np.zeros(0, np.int64), np.zeros(0, np.int64))
+    value = next(iter(f.values()))
+    if not isinstance(value, tuple):
+        raise MeshReadError("PLY face element has no vertex index list")
+    return Mesh(verts, normals, *value)
+
+
+def _binary_body(body: memoryview, elements, order: str) -> dict[str, dict]:
+    arrays: dict[str, dict] = {}
+    pos = 0
+    for name, count, props in elements:
+        if not any(isinstance(t, tuple) for _, t in props):
+            dt = np.dtype([(p, order + t) for p, t in props])
+            need = dt.itemsize * count
+            if pos + need > len(body):
+                raise MeshReadError(f"PLY file ends inside element {name!r}")
+            rec = np.frombuffer(body, dt, count, pos)
+            pos += need
+            arrays[name] = {p: rec[p] for p, _ in props}
+            continue
+        pname, (ct, it) = props[0]
+        sizes, flat, pos = _read_lists(body, pos, count, np.dtype(order + ct), np.dtype(order + it), name)
+        arrays[name] = {pname: (sizes, flat)}
+    return arrays
+
+
+def _read_lists(body: memoryview, pos: int, count: int, ct: np.dtype, it: np.dtype, name: str):
+    """Read ``count`` lists -> sizes ``(count,)``, flat indices, the position after them.
+    Fast path when every list has the first list's length; otherwise one list at a time."""
+    if count == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), pos
+    short = MeshReadError(f"PLY file ends inside element {name!r}")
+    if pos + count * ct.itemsize > len(body):  # every list holds at least its length
+        raise short
+    k = int(np.frombuffer(body, ct, 1, pos)[0])
+    if k < 0:
+        raise MeshReadError(f"PLY element {name!r} has a list of length {k}")
+    if pos + count * (ct.itemsize + k * it.itemsize) <= len(body):
+        dt = np.dtype([("n", ct), ("i", it, (k,))])
+        rec = np.frombuffer(body, dt, count, pos)
+        if np.all(rec["n"] == k):
+            return (np.full(count, k, np.int64), rec["i"].reshape(-1).astype(np.int64),
+                    pos + dt.itemsize * count)
+    sizes = np.empty(count, np.int64)
+    chunks = []
+    for j in range(count):
+        if pos + ct.itemsize > len(body):
+            raise short
+        n = int(np.frombuffer(body, ct, 1, pos)[0])
+        pos += ct.itemsize
+        if n < 0:
+            raise MeshReadError(f"PLY element {name!r} has a list of length {n}")
+        if pos + n * it.itemsize > len(body):
+            raise short
+        chunks.append(np.frombuffer(body, it, n, pos))
+        pos += n * it.itemsize
+        sizes[j] = n
+    return sizes, np.concatenate(chunks).astype(np.int64), pos
+
+
+def _ascii_body(text: str, elements) -> dict[str, dict]:
+    lines = iter(text.splitlines())
+    arrays: dict[str, dict] = {}
+    try:
+        for name, count, props in elements:
+            rows = [next(lines).split() for _ in range(count)]
+            if props and isinstance(props[0][1], tuple):
+                sizes = np.array([int(r[0]) for r in rows], np.int64)
+                flat = np.array([int(x) for r in rows for x in r[1:1 + int(r[0])]], np.int64)
+                if len(sizes) and sizes.min() < 0:
+                    raise MeshReadError(f"PLY element {name!r} has a list of negative length")
+                arrays[name] = {props[0][0]: (sizes, flat)}
+            else:
+                a = np.array(rows, np.float64).reshape(count, len(props))
+                arrays[name] = {p: a[:, j] for j, (p, _) in enumerate(props)}
+    except MeshReadError:
+        raise
+    except (StopIteration, ValueError, IndexError, OverflowError):  # short, not numeric, beyond int64
+        raise MeshReadError("ascii PLY body is short, not numeric, or has an index beyond int64") from None
+    return arrays

@@ -22,7 +22,14 @@ Rotational coordinates follow the header's ``inDegrees``, unless the values cont
 
 Frames: without ``--fps`` a uniformly sampled motion keys every row at frame
 ``0 .. N-1`` with ``fps = 1 / dt``; with ``--fps`` (or when the rows are not evenly spaced)
-the motion is resampled by linear interpolation at ``t0 + k / fps``.
+the motion is resampled by linear interpolation at ``t0 + k / fps``. Refused, at the row
+that shows it (``FILE:LINE:COL``): a time column that does not advance (the median step is
+0), a gap (a step more than ``GAP_FACTOR`` times the median step: a motion whose last row
+jumps to 2000 s would otherwise become 200,001 interpolated frames), more than
+and more than ``MAX_MOTION_FRAMES`` frames; values beyond ``MAX_ABS_NUMBER`` are refused
+when the table is read (values read as radians lie within ±2π by the rule above, so the
+conversion to degrees cannot push them past it). The pose written must be readable by
+axdf: a pose over ``YAML_MAX_BYTES`` is refused too.
 
 Controls (``--controls``): columns name muscles (``TRIlong``, ``glut_med1_r.excitation``,
 ``/forceset/TRIlong``); other columns (reserve actuators) are listed as ignored. Values are
@@ -41,6 +48,7 @@ from pathlib import Path
 
 import numpy as np
 
+from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.importers import emit
 from axdf_cli.loaders import parse_skeleton_text
@@ -54,6 +62,12 @@ NAME_RE = re.compile(r"^[A-Za-z0-9_.-]+$")
 RADIAN_BOUND = 2.0 * math.pi
 MAX_RADIAN_STEP = 0.35
 MIN_RADIAN_SWING = 0.5
+#: A time step larger than this many median steps is a gap (refused). OpenSim's
+#: variable-step outputs (CMC controls) reach 3.5 median steps in the shipped data.
+GAP_FACTOR = 20.0
+#: At most this many pose frames per import: 100,000 frames are 28 minutes at 60 fps (the
+#: pose file's size limit, YAML_MAX_BYTES, usually binds first: ~25 values per frame).
+MAX_MOTION_FRAMES = 100_000
 
 
 @dataclass
@@ -122,22 +136,39 @@ def angle_unit(table: Table, rot_cols: list[int]) -> tuple[bool, str | None]:
     return False, None
 
 
-def _frame_times(time: np.ndarray, fps: float | None) -> tuple[np.ndarray, float, bool]:
-    """Output frame times, fps, and whether rows map 1:1 to frames."""
+def _frame_times(table: Table, fps: float | None) -> tuple[np.ndarray, float, bool]:
+    """Output frame times, fps, and whether rows map 1:1 to frames; InputErrors at the row
+    that shows a time column that does not advance, a gap, or too many frames."""
+    time = table.time
     if len(time) == 1:
         return time.copy(), float(fps or 30.0), True
     dt = np.diff(time)
     med = float(np.median(dt))
     if med <= 0:
-        raise InputError(Mark(""), "motion time does not advance", "increasing time")
+        i = int(np.argmax(dt <= 0)) + 1  # the first row that repeats the time before it
+        raise InputError(table.mark(i), f"time does not advance: {int(np.sum(dt <= 0))} of {len(dt)} steps "
+                         f"are 0 (time {time[i]:g} repeats)", "time increasing from row to row")
+    gaps = np.flatnonzero(dt > GAP_FACTOR * med)
+    if len(gaps):
+        i = int(gaps[0])
+        raise InputError(table.mark(i + 1), f"time jumps from {time[i]:g} to {time[i + 1]:g} s, "
+                         f"{dt[i] / med:.3g} times the median step {med:g} s (a gap)",
+                         f"steps up to {GAP_FACTOR:g} times the median; split the motion at the gap or fill it")
     uniform = bool(np.all(np.abs(dt - med) <= 1e-3 * med))
     native = 1.0 / med
     if abs(native - round(native)) < 1e-3 * native:
         native = float(round(native))
     if fps is None and uniform:
+        n = len(time)
+    else:
+        fps = float(fps or native)
+        n = int(math.floor((time[-1] - time[0]) * fps + 1e-9)) + 1
+    if n > MAX_MOTION_FRAMES:
+        raise InputError(table.mark(len(time) - 1), f"the motion makes {n} frames "
+                         f"({time[-1] - time[0]:g} s at {fps or native:g} fps)",
+                         f"at most {MAX_MOTION_FRAMES} frames per import; a lower --fps or a shorter motion")
+    if fps is None and uniform:
         return time.copy(), native, True
-    fps = float(fps or native)
-    n = int(math.floor((time[-1] - time[0]) * fps + 1e-9)) + 1
     return time[0] + np.arange(n) / fps, fps, False
 
 
@@ -160,7 +191,7 @@ def pose_doc(model: Model, motion: Table, controls: Table | None, pose_name: str
     degrees, warn = angle_unit(motion, rot)
     if warn:
         warnings.append(warn)
-    times, fps, direct = _frame_times(motion.time, fps)
+    times, fps, direct = _frame_times(motion, fps)
     data = motion.data if direct else _interp(motion.time, motion.data, times)
     keys: dict[int, dict] = {}
     for f in range(len(times)):
@@ -326,7 +357,12 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
     if motion_t is not None:
         pdoc = pose_doc(model, motion_t, controls_t, pname, _rel(skel_path, pose_path.parent), fps,
                         [m.name for m in model.muscles], report, warnings)
-        files[str(pose_path)] = emit.dump_yaml(pdoc, f"Imported from {Path(motion).name} by `axdf import osim`.").encode()
+        text = emit.dump_yaml(pdoc, f"Imported from {Path(motion).name} by `axdf import osim`.").encode()
+        if len(text) > tol.YAML_MAX_BYTES:
+            raise InputError(motion_t.mark(len(motion_t.time) - 1),
+                             f"the pose would be {len(text)} bytes ({len(pdoc['keys'])} frames)",
+                             f"axdf reads YAML files up to {tol.YAML_MAX_BYTES} bytes; a lower --fps or a shorter motion")
+        files[str(pose_path)] = text
     report["counts"] = {"bodies": len(model.bodies), "joints": len(model.joints), "coordinates": len(model.coordinates),
                         "muscles": len(model.muscles), "meshes": len(mesh_bytes),
                         "path_points": sum(r["path_points"] for r in rows),

@@ -2,8 +2,10 @@
 tab-separated line of column labels (the first is ``time``), then rows of numbers.
 
 Header ``key=value`` lines are kept (``inDegrees``, ``nRows``, ``nColumns``, ...). Errors name
-``FILE:LINE:COL``: no ``endheader``, a row with the wrong number of values, a malformed
-number, time that goes backwards, fewer rows than ``nRows`` says (a truncated file).
+``FILE:LINE:COL``: no ``endheader``, a row with the wrong number of values, a malformed,
+non-finite or huge number (beyond ``tolerances.MAX_ABS_NUMBER``, what axdf's YAML files
+accept), time that goes backwards, fewer rows than ``nRows`` says (a truncated file). Every
+value's line and column are kept (:meth:`Table.mark`) for later checks to point at.
 """
 from __future__ import annotations
 
@@ -13,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.yamlio import read_input
 
@@ -26,6 +29,12 @@ class Table:
     time: np.ndarray  # (N,) float64
     data: np.ndarray  # (N, C) float64
     header_mark: dict  # key -> Mark of its header line
+    row_lines: np.ndarray  # (N,) int: the 1-based line of each row
+    cell_cols: np.ndarray  # (N, C + 1) int32: the 1-based column of each value (time first)
+
+    def mark(self, row: int, col: int = -1) -> Mark:
+        """Where value ``col`` (a data column index, -1 for time) of row ``row`` is."""
+        return Mark(self.source, int(self.row_lines[row]), int(self.cell_cols[row, col + 1]))
 
     @property
     def in_degrees(self) -> bool | None:
@@ -95,7 +104,7 @@ def read_storage(path: Path | str) -> Table:
             raise InputError(m, f"column {lab!r} appears twice", "unique column labels")
         seen.add(lab)
     ncol = len(words)
-    rows, times = [], []
+    rows, times, row_lines, cell_cols = [], [], [], []
     for k in range(li + 1, len(lines)):
         line = lines[k].rstrip("\r")
         if not line.strip():
@@ -113,12 +122,17 @@ def read_storage(path: Path | str) -> Table:
                 raise InputError(Mark(shown, k + 1, c), f"malformed number {w!r}", "decimal numbers") from None
             if not math.isfinite(v):
                 raise InputError(Mark(shown, k + 1, c), f"{w!r} is not finite", "finite numbers")
+            if abs(v) > tol.MAX_ABS_NUMBER:
+                raise InputError(Mark(shown, k + 1, c), f"{w!r} is too large",
+                                 f"|value| <= {tol.MAX_ABS_NUMBER:g}, as in every axdf file")
             vals.append(v)
         if times and vals[0] < times[-1]:
             raise InputError(Mark(shown, k + 1, ws[0][1]), f"time {vals[0]} is before the previous row's {times[-1]}",
                              "non-decreasing time")
         times.append(vals[0])
         rows.append(vals[1:])
+        row_lines.append(k + 1)
+        cell_cols.append([c for _, c in ws])
     if not rows:
         raise InputError(Mark(shown, len(lines), 1), "no data rows", "at least one row after the labels")
     nrows = header.get("nrows")
@@ -131,4 +145,4 @@ def read_storage(path: Path | str) -> Table:
             raise InputError(Mark(shown, len(lines), 1), f"file ends after {len(rows)} of nRows={n} rows (truncated?)",
                              "as many rows as nRows says")
     return Table(shown, header, labels, marks, np.array(times), np.array(rows, dtype=np.float64).reshape(len(rows), -1),
-                 hmark)
+                 hmark, np.array(row_lines), np.array(cell_cols, dtype=np.int32))

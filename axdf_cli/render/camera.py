@@ -127,6 +127,11 @@ def fit_distance(corners_rel: np.ndarray, R: np.ndarray, tan_x: float, tan_y: fl
     return float(need.max())
 
 
+def panel_count(settings: RenderSettings) -> int:
+    """Views side by side in one image: three for a sheet, else one."""
+    return len(SHEET_VIEWS) if settings.view == "sheet" and settings.camera is None else 1
+
+
 def sequence_cameras(bounds: np.ndarray, frames: tuple[int, ...] | list[int],
                      settings: RenderSettings) -> list[list[Camera]]:
     """Cameras for every frame: ``[frame index][panel]``; fixed unless ``orbit`` is set."""

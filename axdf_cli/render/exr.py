@@ -48,7 +48,7 @@ def write_exr(path: Path, channels: dict) -> str:
                                  "pip install 'OpenEXR>=3.2' (make setup does this)") from None
     path = Path(path)
     atomic.ensure_dir(path.parent)
-    tmp = path.with_name(f"{atomic.TMP_PREFIX}{os.getpid()}-{path.name}")
+    tmp = atomic.temp_path(path)
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     try:
         with atomic.deferred_signals():

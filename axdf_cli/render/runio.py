@@ -1,11 +1,13 @@
 """Read a finished run folder back into a :class:`Scene` and its frames (for ``axdf render``).
 
-Kept in one place because the manifest format is not final. What is read:
+The layout and the manifest are :mod:`axdf_cli.runfolder`'s. What is read:
 
-- ``manifest.json``: ``muscles: [{name, color, ...}]`` (colour as linear ``[r, g, b]`` in
-  0..1, or sRGB ``"#rrggbb"``), ``frames: [...]``, optional ``bones: [{name, mesh}]``
-  (``mesh`` relative to the run folder, a PLY in bone-local coordinates) and optional render
-  settings under ``settings.render`` or ``render``.
+- ``manifest.json`` (an axdf run's: ``tool: axdf``): ``muscles: [{name, color, ...}]``
+  (colour as linear ``[r, g, b]`` in 0..1, or sRGB ``"#rrggbb"``), ``frames: [...]``,
+  ``settings.format`` (the meshes' format: a folder with stale files of another format
+  reads the right ones), optional ``bones: [{name, mesh}]`` (``mesh`` relative to the run
+  folder, a PLY in bone-local coordinates) and optional ``settings.render``. A damaged
+  manifest is an input error at its line and column.
 - ``meshes/<muscle>/<muscle>_<frame:04d>.ply`` (binary little-endian, float32 x y z nx ny
   nz, int32 triangle lists) or ``.obj`` (``v``, ``vn``, ``f a//a``).
 - ``bones.csv``: ``frame,bone,x,y,z,qw,qx,qy,qz`` world pose of each bone per frame.
@@ -13,7 +15,6 @@ Kept in one place because the manifest format is not final. What is read:
 from __future__ import annotations
 
 import csv
-import json
 from dataclasses import replace
 from pathlib import Path
 from typing import Iterator
@@ -21,29 +22,12 @@ from typing import Iterator
 import numpy as np
 
 from axdf_cli.errors import InputError, Mark
+from axdf_cli.formats import FORMATS, load_triangles
 from axdf_cli.render.settings import RenderSettings, parse_render_settings
-from axdf_cli.runfolder import MANIFEST, mesh_relpath
+from axdf_cli.runfolder import BONES_CSV, Manifest, mesh_relpath, read_run_manifest
+from axdf_cli.runfolder import plain_relpath as _plain
+from axdf_cli.yamlio import NAME_ALLOWED, NAME_RE
 from axdf_cli.scene import FrameChunk, Scene, SceneBone, SceneMuscle
-
-def read_mesh_file(path: Path) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
-    """A PLY or OBJ triangle mesh -> (V, 3) float32 positions, (V, 3) float32 normals or
-    None, (T, 3) int32 triangles; unreadable files are input errors."""
-    from axdf_cli.formats.read import MeshReadError, read_mesh, triangles
-
-    path = Path(path)
-    try:
-        mesh = read_mesh(path.read_bytes(), path.suffix)
-        faces = triangles(mesh)
-    except OSError as e:
-        raise InputError(Mark(str(path)), f"cannot read mesh ({e.strerror})", "an existing PLY or OBJ file") from None
-    except MeshReadError as e:
-        raise InputError(Mark(str(path)), f"not a readable mesh ({e})", "a PLY or OBJ triangle mesh") from None
-    nrm = None if mesh.normals is None else mesh.normals.astype(np.float32)
-    return mesh.vertices.astype(np.float32), nrm, faces
-
-
-_READERS = {".ply": read_mesh_file, ".obj": read_mesh_file}
-
 
 def _color(c, where: Mark) -> tuple[float, float, float]:
     if isinstance(c, str) and len(c) == 7 and c.startswith("#"):
@@ -64,68 +48,74 @@ def _quat_matrix(q: np.ndarray) -> np.ndarray:
         np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1)], -2)
 
 
-def _mesh_path(run_dir: Path, name: str, frame: int) -> Path:
-    for ext in _READERS:
-        p = run_dir / mesh_relpath(name, frame, ext[1:])
-        if p.exists():
-            return p
-    raise InputError(Mark(str(run_dir / mesh_relpath(name, frame, "ply"))),
-                     "mesh file missing", "the run folder must hold every muscle's mesh for every frame")
-
-
-def load_run_scene(run_dir: Path) -> tuple[Scene, Iterator[FrameChunk], RenderSettings]:
-    """Scene, an iterator of one-frame chunks, and the run's render settings (enabled)."""
+def load_run_scene(run_dir: Path, manifest: Manifest | None = None, frames=None
+                   ) -> tuple[Scene, Iterator[FrameChunk], RenderSettings]:
+    """Scene, an iterator of one-frame chunks (of ``frames``, default every frame of the run)
+    and the run's render settings (enabled). A manifest that is not an axdf run's, or damaged,
+    is an input error at its position."""
     run_dir = Path(run_dir)
-    mpath = run_dir / MANIFEST
-    where = Mark(str(mpath))
-    try:
-        manifest = json.loads(mpath.read_text())
-    except FileNotFoundError:
-        raise InputError(where, "no manifest.json in the run folder", "give a folder written by axdf run") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise InputError(where, f"manifest.json is not JSON ({e})", "give a folder written by axdf run") from None
-    if not isinstance(manifest, dict) or not isinstance(manifest.get("muscles"), list) \
-            or not isinstance(manifest.get("frames"), list) or not manifest["frames"]:
-        raise InputError(where, "manifest.json lacks 'muscles' or 'frames'", "give a folder written by axdf run")
-    frames = tuple(int(f) for f in manifest["frames"])
-    names = [str(m["name"]) for m in manifest["muscles"]]
-    colors = [_color(m.get("color", [0.7, 0.3, 0.3]), where) for m in manifest["muscles"]]
+    m = manifest or read_run_manifest(run_dir)
+    all_frames = tuple(m.frames())
+    muscles_raw = m.get(("muscles",), list, "a list of {name, color, ...}")
+    fmt = m.get(("settings", "format"), str, "a mesh format: " + ", ".join(FORMATS))
+    if fmt not in FORMATS:
+        raise m.error(("settings", "format"), f"unknown mesh format {fmt!r}", "a mesh format: " + ", ".join(FORMATS))
+    names, colors = [], []
+    for i, mu in enumerate(muscles_raw):
+        m.get(("muscles", i), dict, "an object {name, color, ...}")
+        name = m.get(("muscles", i, "name"), str, "a muscle name")
+        if not NAME_RE.match(name) or name in (".", ".."):
+            raise m.error(("muscles", i, "name"), f"{name!r} is not a muscle name", NAME_ALLOWED)
+        names.append(name)
+        colors.append(_color(mu.get("color", [0.7, 0.3, 0.3]), m.mark(("muscles", i, "color"))))
+    bones_raw = m.get(("bones",), list, "a list of {name, mesh}", required=False, default=[])
+    bone_entries = []
+    for i, b in enumerate(bones_raw):
+        m.get(("bones", i), dict, "an object {name, mesh}")
+        name = m.get(("bones", i, "name"), str, "a bone name")
+        mesh = m.get(("bones", i, "mesh"), (str, type(None)), "a path in the run folder or null",
+                     required=False, default=None)
+        if mesh is not None and not _plain(mesh):
+            raise m.error(("bones", i, "mesh"), f"{mesh!r} leaves the run folder", "a path inside the run folder")
+        if mesh:
+            bone_entries.append((name, mesh))
+    settings = recorded_render_settings(m)
+    selected = all_frames if frames is None else tuple(int(f) for f in frames)
+
+    def mesh_path(name: str, frame: int) -> Path:
+        p = run_dir / mesh_relpath(name, frame, fmt)
+        if not p.is_file():
+            raise InputError(Mark(str(p)), "mesh file missing",
+                             "the run folder must hold every muscle's mesh for every frame")
+        return p
 
     # pass 1: topology from the first frame, bounds over every frame
     muscles, lo, hi = [], np.full(3, np.inf), np.full(3, -np.inf)
     for name, color in zip(names, colors):
-        for k, f in enumerate(frames):
-            p = _mesh_path(run_dir, name, f)
-            pos, _, faces = _READERS[p.suffix](p)
+        for k, f in enumerate(all_frames):
+            p = mesh_path(name, f)
+            pos, _, faces = load_triangles(p)
             if k == 0:
                 muscles.append(SceneMuscle(name, color, faces))
                 nv = len(pos)
             elif len(pos) != nv:
-                raise InputError(Mark(str(p)), f"{len(pos)} vertices, frame {frames[0]} has {nv}",
+                raise InputError(Mark(str(p)), f"{len(pos)} vertices, frame {all_frames[0]} has {nv}",
                                  "every frame has the same vertex count")
             lo, hi = np.minimum(lo, pos.min(0)), np.maximum(hi, pos.max(0))
     bounds = np.stack([lo, hi]) if muscles else np.zeros((2, 3))
 
     bones = []
-    for b in manifest.get("bones") or []:
-        if b.get("mesh"):
-            v, _, faces = read_mesh_file(run_dir / b["mesh"])
-            bones.append(SceneBone(str(b["name"]), v, faces))
-    bone_world = _read_bones_csv(run_dir / "bones.csv", frames, [b.name for b in bones])
-
-    raw = (manifest.get("settings") or {}).get("render") if isinstance(manifest.get("settings"), dict) \
-        else None
-    raw = raw if raw is not None else manifest.get("render")
-    settings = replace(parse_render_settings(raw, where) if isinstance(raw, dict) else RenderSettings(),
-                       enabled=True)
-    scene = Scene(tuple(muscles), tuple(bones), bounds.astype(np.float64), frames)
+    for name, mesh in bone_entries:
+        v, _, faces = load_triangles(run_dir / mesh)
+        bones.append(SceneBone(name, v, faces))
+    bone_world = _read_bones_csv(run_dir / BONES_CSV, selected, [b.name for b in bones])
+    scene = Scene(tuple(muscles), tuple(bones), bounds.astype(np.float64), all_frames)
 
     def chunks() -> Iterator[FrameChunk]:
-        for k, f in enumerate(frames):
+        for k, f in enumerate(selected):
             ps, ns = [], []
-            for m in muscles:
-                p = _mesh_path(run_dir, m.name, f)
-                pos, nrm, faces = _READERS[p.suffix](p)
+            for mu in muscles:
+                pos, nrm, faces = load_triangles(mesh_path(mu.name, f))
                 if nrm is None:
                     from axdf_cli.render.renderer import vertex_normals
                     nrm = vertex_normals(pos, faces)
@@ -134,6 +124,15 @@ def load_run_scene(run_dir: Path) -> tuple[Scene, Iterator[FrameChunk], RenderSe
             yield FrameChunk(np.array([f]), tuple(ps), tuple(ns), bone_world[k:k + 1])
 
     return scene, chunks(), settings
+
+
+def recorded_render_settings(m: Manifest) -> RenderSettings:
+    """The render settings in a run's manifest (``settings.render``; defaults when the run was
+    not rendered), enabled."""
+    m.get(("settings",), dict, "an object of the run's settings", required=False)
+    raw = m.get(("settings", "render"), (dict, type(None)), "the render settings or null", required=False)
+    return replace(parse_render_settings(raw, m.mark(("settings", "render"))) if raw is not None
+                   else RenderSettings(), enabled=True)
 
 
 def _read_bones_csv(path: Path, frames: tuple[int, ...], names: list[str]) -> np.ndarray:

@@ -12,25 +12,76 @@ CHUNK_FRAMES = 128  # frames evaluated together: bounds memory for any sequence 
 EVAL_BUDGET_BYTES = 128 * 1024 * 1024  # per-muscle chunk memory budget (see chunk_frames)
 
 
+TWIST_MIN_STEPS = 64  # the twist reference samples a moving key interval at least this often
+TWIST_STEP_DEG = 5.0  # ... and often enough that no rotation coordinate moves more than this per step
+
+
+def twist_grid(pose, upto: int) -> np.ndarray:
+    """The frames (sorted, unique, up to ``upto``) over which the twist reference is
+    unwrapped. Fixed by the pose alone, whatever frames are selected.
+
+    Every coordinate curve is monotone between consecutive key frames (linear, step and the
+    monotone cubic all are), so the pose moves only between keys and by at most the keys'
+    difference. Each interval between consecutive key frames (the pose's first and last
+    frame included) is sampled at ``min(length, max(TWIST_MIN_STEPS, change / TWIST_STEP_DEG))``
+    evenly spaced whole frames, where change is the largest rotation-coordinate difference
+    (degrees) across it; an interval where nothing moves (and ``step`` interpolation, which
+    holds each key) needs only its ends. Short intervals are therefore sampled at every frame."""
+    knots = {pose.first, pose.last}
+    for kf, _ in pose.keys.values():
+        knots.update(k for k in kf if pose.first < k < pose.last)
+    knots = np.array(sorted(knots), dtype=np.int64)
+    knots = knots[:np.searchsorted(knots, upto, side="right") + 1]  # up to the interval holding upto
+    if len(knots) < 2:
+        return knots[knots <= upto]
+    q = sample_coordinates(pose, knots)
+    moved = np.abs(np.diff(q, axis=0))  # (K-1, C)
+    rot = [i for i, c in enumerate(pose.skeleton.coordinates) if c.type == "rotation"]
+    change = moved[:, rot].max(axis=1) if rot else np.zeros(len(knots) - 1)
+    length = np.diff(knots)
+    steps = np.minimum(length, np.maximum(TWIST_MIN_STEPS, np.ceil(change / TWIST_STEP_DEG))).astype(np.int64)
+    steps[(moved.max(axis=1) == 0) | (pose.interpolation == "step")] = 1
+    pieces = [a + (np.arange(n) * (b - a)) // n for a, b, n in zip(knots[:-1], knots[1:], steps)]
+    grid = np.unique(np.concatenate(pieces + [knots[-1:]]))
+    return grid[grid <= upto]
+
+
 def twist_references(plan: RunPlan) -> np.ndarray:
     """Unwrapped coarse insertion roll for every selected frame and muscle: (F, M) radians.
 
-    Computed over the pose's whole frame range in order, so the branch (past ±180°) of any
-    frame does not depend on which frames are selected."""
-    pose = plan.pose
-    all_frames = pose.frames
-    out = np.empty((len(all_frames), len(plan.models)))
-    prev = np.zeros(len(plan.models))
-    for s in range(0, len(all_frames), 4 * CHUNK_FRAMES):
-        fr = all_frames[s:s + 4 * CHUNK_FRAMES]
-        q = sample_coordinates(pose, fr)
-        world = forward_kinematics(pose.skeleton, q)
-        frames = batched_axis_frames(plan.models, range(len(plan.models)), world, coarse=True, coords=q)
-        for j, m in enumerate(plan.models):
-            th = np.unwrap(np.concatenate([[prev[j]], m.end_twist(world, r_end=frames[j][3][:, -1], coords=q)]))[1:]
-            out[s:s + len(fr), j] = th
-            prev[j] = th[-1]
-    return out[plan.frames - pose.first]
+    The roll is unwrapped in order over :func:`twist_grid` (the pose's key intervals,
+    sampled finely enough that it moves well under 180° per step); a selected frame takes the
+    branch nearest to the grid's last frame at or before it. The grid depends on the pose
+    only, so any ``--frames`` subset gives the same branches, hence the same meshes; the cost
+    grows with the keys and motion up to the last selected frame, not with the pose's length."""
+    pose, frames, nm = plan.pose, plan.frames, len(plan.models)
+    grid = twist_grid(pose, int(frames.max()))
+    at = np.searchsorted(grid, frames, side="right") - 1  # the grid frame each selected frame follows
+    need, where = np.unique(at, return_inverse=True)
+    th_need = np.empty((len(need), nm))
+    prev = np.zeros(nm)
+    block = 4 * CHUNK_FRAMES
+    for s in range(0, int(need[-1]) + 1, block):
+        th = np.unwrap(np.concatenate([prev[None], _coarse_roll(plan, grid[s:s + block])]), axis=0)[1:]
+        prev = th[-1]
+        k = (need >= s) & (need < s + block)
+        th_need[k] = th[need[k] - s]
+    out = th_need[where]
+    off = np.nonzero(grid[at] != frames)[0]
+    for s in range(0, len(off), block):
+        i = off[s:s + block]
+        roll = _coarse_roll(plan, frames[i])
+        out[i] = roll + 2.0 * np.pi * np.round((out[i] - roll) / (2.0 * np.pi))
+    return out
+
+
+def _coarse_roll(plan: RunPlan, frames: np.ndarray) -> np.ndarray:
+    """Coarse insertion roll (wrapped) of every muscle at ``frames``: (len(frames), M)."""
+    q = sample_coordinates(plan.pose, frames)
+    world = forward_kinematics(plan.pose.skeleton, q)
+    axes = batched_axis_frames(plan.models, range(len(plan.models)), world, coarse=True, coords=q)
+    return np.stack([m.end_twist(world, r_end=axes[j][3][:, -1], coords=q) for j, m in enumerate(plan.models)],
+                    axis=1)
 
 
 def batched_axis_frames(models, indices, world: np.ndarray, coarse: bool = False, coords=None) -> dict:

@@ -2,26 +2,22 @@
 render pass and the manifest, written into the run folder (:mod:`axdf_cli.runfolder`)."""
 from __future__ import annotations
 
-import json
-import shutil
 import time
-from dataclasses import dataclass
-from pathlib import Path
+from dataclasses import dataclass, replace
+from pathlib import Path, PurePosixPath
 
 import numpy as np
 
-from axdf_cli import __version__, atomic
+from axdf_cli import __version__, runfolder
 from axdf_cli.errors import InputError
 from axdf_cli.formats import WRITERS
 from axdf_cli.run.evaluate import CHUNK_FRAMES, evaluate_chunks, finite_or_rest, twist_references
 from axdf_cli.run.plan import RunPlan, display_path
-from axdf_cli.run.pool import fork_map
-from axdf_cli.runfolder import (BONES_CSV, STATS, OutputWriter, bone_mesh_relpath, gl_record, mesh_relpath,
-                                write_manifest)
+from axdf_cli.run.pool import check_parent, fork_map
+from axdf_cli.runfolder import (BONES_CSV, MANIFEST_INTERVAL_S, STATS, OutputWriter, bone_mesh_relpath, describe_differences,
+                                frame_relpath, gl_record, mesh_relpath, write_manifest)
 from axdf_cli.skeleton import matrix_to_quaternion
 
-MANIFEST_INTERVAL_S = 1.0  # the in-progress manifest is rewritten at most this often
-TOP_FILES = ("manifest.json", "stats.csv", "bones.csv", "camera.json")
 
 
 def render_dict(settings) -> dict | None:
@@ -32,34 +28,13 @@ def render_dict(settings) -> dict | None:
     return settings_to_dict(settings)
 
 
-def check_output_folder(out: Path, resume: bool, overwrite: bool) -> dict:
-    """Refuse a non-empty OUT unless --resume or --overwrite; return the files of a previous
-    manifest (for --resume)."""
-    if out.exists() and not out.is_dir():
-        raise InputError(None, f"--out {out} exists and is not a folder", "give a folder")
-    if not out.exists() or not any(out.iterdir()):
-        return {}
-    if resume:
-        man = out / "manifest.json"
-        try:
-            prev = json.loads(man.read_text())
-            atomic.remove_stale_temporaries(out)
-            return dict(prev.get("files", {}))
-        except (OSError, ValueError):
-            atomic.remove_stale_temporaries(out)
-            return {}
-    if overwrite:
-        for sub in ("meshes", "frames", "bones"):
-            shutil.rmtree(out / sub, ignore_errors=True)
-        for name in TOP_FILES:
-            try:
-                (out / name).unlink()
-            except FileNotFoundError:
-                pass
-        atomic.remove_stale_temporaries(out)
-        return {}
-    raise InputError(None, f"output folder {out} is not empty",
-                     "pass --resume to finish an interrupted run, --overwrite to replace it, or another --out")
+def run_dirs(plan: RunPlan) -> list[str]:
+    """The folders below OUT that the plan writes into."""
+    dirs = [PurePosixPath(mesh_relpath(n, 0, plan.fmt)).parent.as_posix() for n in plan.names]
+    dirs += [PurePosixPath(bone_mesh_relpath("b")).parent.as_posix()]
+    if plan.rendering:
+        dirs.append(PurePosixPath(frame_relpath(0, "png")).parent.as_posix())
+    return dirs
 
 
 def previous_subset(previous: dict, out: Path) -> dict:
@@ -159,20 +134,22 @@ def mesh_pass(plan: RunPlan, muscles: list[int], twist_ref: np.ndarray, writer: 
 
 def _mesh_worker(shared: dict, task) -> MeshPassResult:
     muscles, bones = task
-    writer = OutputWriter(shared["plan"].out, shared["previous"])
+    writer = OutputWriter(shared["root"], shared["previous"])
     try:
-        return mesh_pass(shared["plan"], muscles, shared["twist_ref"], writer, bones=bones)
+        return mesh_pass(shared["plan"], muscles, shared["twist_ref"], writer, on_chunk=check_parent, bones=bones)
     finally:
         writer.close(cancel=True)
 
 
-def _parallel_mesh_pass(plan: RunPlan, jobs: int, twist_ref, previous: dict, progress) -> list[MeshPassResult]:
+def _parallel_mesh_pass(plan: RunPlan, root: Path, jobs: int, twist_ref, previous: dict,
+                        progress) -> list[MeshPassResult]:
     """Split the muscles over ``jobs`` forked processes (round robin: similar work each); the
     first also returns the bones' poses."""
     groups = [list(range(k, len(plan.models), jobs)) for k in range(jobs)]
     tasks = [(g, k == 0) for k, g in enumerate(groups) if g]
     on_result = (lambda r: progress(len(r.muscles) * len(plan.frames))) if progress else None
-    return fork_map(_mesh_worker, tasks, {"plan": plan, "twist_ref": twist_ref, "previous": previous}, on_result)
+    shared = {"plan": plan, "root": root, "twist_ref": twist_ref, "previous": previous}
+    return fork_map(_mesh_worker, tasks, shared, on_result)
 
 
 def stats_csv(plan: RunPlan, stats: np.ndarray, warn_text: list) -> bytes:
@@ -191,39 +168,75 @@ def bones_csv(plan: RunPlan, bone_rows: np.ndarray) -> bytes:
     return _fmt_rows(rows).encode()
 
 
-def execute(plan: RunPlan, *, resume: bool = False, overwrite: bool = False, progress=None,
-            strict: bool = False, render_progress=None, jobs: int = 1) -> dict:
-    """Run the plan; return a summary dict. ``progress(n)`` is called with muscle-frames done.
+def strict_check(plan: RunPlan, twist_ref: np.ndarray) -> None:
+    """Evaluate everything once: with --strict, any warning stops the run before it writes."""
+    found = []
+    for sl, _, results in evaluate_chunks(plan, twist_ref=twist_ref):
+        for j, res in results:
+            found += [f"{plan.names[j]} frame {int(plan.frames[sl.start + i])}: {msg}" for i, msg in res.warnings]
+            bad = ~(np.isfinite(res.vertices).all(axis=(1, 2)) & np.isfinite(res.normals).all(axis=(1, 2)))
+            found += [f"{plan.names[j]} frame {int(plan.frames[sl.start + i])}: non-finite vertices"
+                      for i in np.nonzero(bad)[0]]
+    if found:
+        raise InputError(None, f"{len(found)} warning(s) with --strict; first: {found[0]}",
+                         "fix the inputs or run without --strict")
 
-    With ``jobs`` > 1 the muscles are split over forked worker processes for the mesh pass;
-    the output is the same bytes. Rendering runs in this process afterwards (the GL context
-    is created after every fork)."""
-    out = plan.out
-    previous = check_output_folder(out, resume, overwrite)
-    atomic.ensure_dir(out)
-    write_manifest(out, manifest_dict(plan, previous_subset(previous, out), [], complete=False))
+
+def check_resume(plan: RunPlan, previous) -> None:
+    """--resume finishes the same run only: same tool version, inputs (sha256) and settings."""
+    new = manifest_dict(plan, {}, [], complete=False)
+    changed = describe_differences(previous, new)
+    if changed:
+        first = next(k for k in runfolder.RUN_IDENTITY if previous.data.get(k) != new[k])
+        raise InputError(previous.mark((first,)),
+                         f"--resume would mix two runs: {'; '.join(changed)}",
+                         "resume with the inputs and settings of the interrupted run, or pass --overwrite")
+
+
+def check_output(plan: RunPlan, *, resume: bool = False, overwrite: bool = False) -> runfolder.Target:
+    """The output folder's checks (reads only): what OUT holds, and for --resume that it is
+    the same run."""
+    target = runfolder.prepare(plan.out, resume=resume, overwrite=overwrite, dirs=run_dirs(plan))
+    if resume and target.previous is not None:
+        check_resume(plan, target.previous)
+    return target
+
+
+def execute(plan: RunPlan, *, resume: bool = False, overwrite: bool = False, progress=None,
+            strict: bool = False, render_progress=None, jobs: int = 1, on_note=None) -> dict:
+    """Run the plan; return a summary dict. ``progress(n)`` is called with muscle-frames done;
+    ``on_note(text)`` with remarks worth printing at once (a lowered supersampling).
+
+    Every check comes first (the output folder, --resume against the earlier manifest,
+    --strict, EGL and the render size): a refused run writes nothing. With ``jobs`` > 1 the
+    muscles are split over forked worker processes for the mesh pass; the output is the same
+    bytes. Rendering runs in this process afterwards (the GL context is created after every
+    fork)."""
+    target = check_output(plan, resume=resume, overwrite=overwrite)
+    twist_ref = twist_references(plan)
+    if strict:
+        strict_check(plan, twist_ref)
+    if plan.rendering:
+        from axdf_cli.render.sequence import check_render
+
+        plan = replace(plan, render=check_render(plan.render, on_note))
+    with runfolder.Session(target) as session:
+        return _write_run(plan, session, twist_ref, progress, render_progress, jobs)
+
+
+def _write_run(plan: RunPlan, session, twist_ref, progress, render_progress, jobs: int) -> dict:
+    root = session.root
+    previous = session.previous_files
+    write_manifest(root, manifest_dict(plan, previous_subset(previous, root), [], complete=False))
     nf, nm = len(plan.frames), len(plan.models)
     bones = plan.pose.skeleton.bones
-    twist_ref = twist_references(plan)
-    if strict:  # evaluate everything first: with --strict, any warning stops the run before it writes
-        found = []
-        for sl, _, results in evaluate_chunks(plan, twist_ref=twist_ref):
-            for j, res in results:
-                found += [f"{plan.names[j]} frame {int(plan.frames[sl.start + i])}: {msg}" for i, msg in res.warnings]
-                bad = ~(np.isfinite(res.vertices).all(axis=(1, 2)) & np.isfinite(res.normals).all(axis=(1, 2)))
-                found += [f"{plan.names[j]} frame {int(plan.frames[sl.start + i])}: non-finite vertices"
-                          for i in np.nonzero(bad)[0]]
-        if found:
-            raise InputError(None, f"{len(found)} warning(s) with --strict; first: {found[0]}",
-                             "fix the inputs or run without --strict")
-
-    writer = OutputWriter(out, previous)
+    writer = OutputWriter(root, previous)
     try:
         if jobs > 1 and nm > 1:
             try:
-                parts = _parallel_mesh_pass(plan, min(jobs, nm), twist_ref, previous, progress)
+                parts = _parallel_mesh_pass(plan, root, min(jobs, nm), twist_ref, previous, progress)
             except BaseException:
-                atomic.remove_stale_temporaries(out)  # a worker stopped mid-write
+                runfolder.remove_stale(root)  # a worker killed mid-write (the others finish their file)
                 raise
         else:
             clock = {"t": time.monotonic(), "cost": 0.0}
@@ -234,7 +247,7 @@ def execute(plan: RunPlan, *, resume: bool = False, overwrite: bool = False, pro
                 # the file list grows to many MB
                 now = time.monotonic()
                 if now - clock["t"] >= max(MANIFEST_INTERVAL_S, 20.0 * clock["cost"]):
-                    write_manifest(out, manifest_dict(plan, writer.files, [], complete=False))
+                    write_manifest(root, manifest_dict(plan, writer.files, [], complete=False))
                     clock["cost"] = time.monotonic() - now
                     clock["t"] = time.monotonic()
 
@@ -263,19 +276,21 @@ def execute(plan: RunPlan, *, resume: bool = False, overwrite: bool = False, pro
             from axdf_cli.render.sequence import render_plan
 
             writer.flush()
-            write_manifest(out, manifest_dict(plan, writer.files, warnings, complete=False, extra=extra))
-            info = render_plan(plan, np.array([lo, hi]), twist_ref, render_progress)
+            write_manifest(root, manifest_dict(plan, writer.files, warnings, complete=False, extra=extra))
+            info = render_plan(plan, root, np.array([lo, hi]), twist_ref, render_progress)
             writer.files.update(info["files"])
             extra["gl"] = gl_record(info["gl_renderer"], info["gl_version"])
         writer.flush()
-        write_manifest(out, manifest_dict(plan, writer.files, warnings, complete=True, extra=extra))
+        session.commit(manifest_dict(plan, writer.files, warnings, complete=True, extra=extra))
     except BaseException:
         writer.close(cancel=True)
+        if root == plan.out:  # stopped: list what is whole, for --resume (a staging folder goes)
+            runfolder.try_write_manifest(root, manifest_dict(plan, writer.files, [], complete=False))
         raise
     writer.close()
     ratio = stats[..., 2]
     return {
-        "out": str(out), "muscles": nm, "frames": nf, "files": len(writer.files), "skipped": writer.skipped,
+        "out": str(plan.out), "muscles": nm, "frames": nf, "files": len(writer.files), "skipped": writer.skipped,
         "warnings": warnings, "worst_volume_error": float(np.max(np.abs(ratio - 1.0))) if ratio.size else 0.0,
         "stats": stats,
     }

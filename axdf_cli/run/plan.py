@@ -106,7 +106,14 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
     else:
         frames = pose.frames
     fmt = fmt_arg or (job.format if job is not None else None) or "ply"
-    out = Path(out_arg or (job.out if job is not None and job.out else None) or DEFAULT_OUT)
+    if out_arg is not None:
+        if not str(out_arg).strip():
+            raise InputError(Mark("--out"), "the output folder is empty text", "give a folder, e.g. --out out/run")
+        out = Path(out_arg)
+    elif job is not None and job.out is not None:  # (the job reader refuses an empty one)
+        out = Path(job.out)
+    else:
+        out = Path(DEFAULT_OUT)
     if render is None:
         render = job_render_settings(job)
 
@@ -124,11 +131,11 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
 
 def load_bone_mesh(path: str, skeleton_file: str):
     """Read a bone's mesh (PLY or OBJ triangles) → (vertices, faces, bytes); bad files are input errors."""
-    from axdf_cli.render.runio import read_mesh_file
+    from axdf_cli.formats import load_triangles
 
     if not Path(path).is_file():
         raise InputError(Mark(skeleton_file), f"bone mesh {path} not found", "a PLY file relative to the skeleton file")
-    v, _, f = read_mesh_file(Path(path))
+    v, _, f = load_triangles(path)
     if not np.isfinite(v).all():
         raise InputError(Mark(str(path)), "non-finite vertex coordinates", "finite numbers only")
     return np.ascontiguousarray(v, dtype=np.float32), f, Path(path).read_bytes()

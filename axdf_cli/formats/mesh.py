@@ -1,0 +1,41 @@
+"""What every mesh reader returns: a :class:`Mesh` in the file's own vertex order, or a
+:class:`MeshReadError` saying what is wrong with the file."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+class MeshReadError(ValueError):
+    """A file cannot be read as the mesh format its name says."""
+
+
+@dataclass(frozen=True)
+class Mesh:
+    """Faces are kept as polygon sizes plus a flat index array, so triangles and any other
+    polygons read (and compare) alike."""
+
+    vertices: np.ndarray  # (V, 3) float64
+    normals: np.ndarray | None  # (V, 3) float64 per-vertex normals, or None
+    face_sizes: np.ndarray  # (M,) int64 vertices per face
+    face_indices: np.ndarray  # (sum(face_sizes),) int64 zero-based vertex indices
+
+    def __post_init__(self):
+        v = self.vertices
+        if v.ndim != 2 or v.shape[1] != 3:
+            raise MeshReadError(f"vertices have shape {v.shape}, expected (V, 3)")
+        if self.normals is not None and self.normals.shape != v.shape:
+            raise MeshReadError(f"{len(self.normals)} normals for {len(v)} vertices")
+        if len(self.face_sizes) and self.face_sizes.min() < 0:
+            raise MeshReadError("a face has a negative number of corners")
+        if int(self.face_sizes.sum()) != len(self.face_indices):
+            raise MeshReadError("face sizes and indices disagree")
+        if len(self.face_indices) and (self.face_indices.min() < 0 or self.face_indices.max() >= len(v)):
+            raise MeshReadError(f"a face index is outside 0..{len(v) - 1}")
+
+    def triangles(self) -> np.ndarray:
+        """The faces as (T, 3) int32; raises MeshReadError unless every face is a triangle."""
+        if len(self.face_sizes) and not np.all(self.face_sizes == 3):
+            raise MeshReadError("faces are not all triangles")
+        return self.face_indices.reshape(-1, 3).astype(np.int32)
