@@ -204,53 +204,68 @@ def _world_points(skel: Skeleton, world: np.ndarray, pts) -> np.ndarray:
     return np.array([(world[bi[b]] @ np.append(p, 1.0))[:3] for b, p in pts])
 
 
+def point_doc(p) -> dict:
+    """One path point's document (a :class:`axdf_cli.paths.PathPoint`, axdf units)."""
+    d: dict = {"bone": p.bone, "at": [float(v) for v in p.at]}
+    mv = {ax: {"coord": a.coord, "function": function_doc(a.function)}
+          for ax, a in zip("xyz", p.moving or ()) if a is not None}
+    if mv:
+        d["moving"] = mv
+    if p.active is not None:
+        coord, lo, hi = p.active
+        d["active"] = {"coord": coord, "range": [float(lo), float(hi)]}
+    return d
+
+
+def wrap_doc(w) -> dict:
+    """One wrap surface's document (a :class:`axdf_cli.paths.WrapSurface`)."""
+    from axdf_cli.loaders import WRAP_SIZE_KEYS
+
+    d = {"name": w.name, "shape": w.shape, "bone": w.bone}
+    if w.shape == "ellipsoid":
+        d["radii"] = [float(v) for v in w.size]
+    else:
+        d.update({k: float(v) for k, v in zip(WRAP_SIZE_KEYS[w.shape], w.size)})
+    d["at"] = [float(v) for v in w.at]
+    d["orient"] = [float(v) for v in w.orient]
+    d["quadrant"] = w.quadrant
+    if w.shape == "ellipsoid":
+        d["method"] = w.method
+    if tuple(w.range) != (-1, -1):
+        d["range"] = [int(v) for v in w.range]
+    if not w.active:
+        d["active"] = False
+    return d
+
+
 def path_docs(model: Model, m: Muscle) -> tuple[list, list]:
     """The muscle's ``path`` (every path point; moving ones with their functions in axdf
     units, conditional ones with their ``active`` range) and ``wrap`` (its wrap surfaces,
     copied per muscle with the path wrap's range and method) documents."""
+    from axdf_cli.paths import Moving, PathPoint, WrapSurface
+
     path = []
     for p in m.points:
-        d: dict = {"bone": p.body, "at": [float(v) for v in p.location]}
+        moving = None
         if p.moving is not None:
             if p.frame is not None:
                 raise InputError(p.mark, f"moving point {p.name!r} of {m.name} is attached to an offset frame",
                                  "moving points attached to a body")
-            mv = {}
-            for ax, a in zip("xyz", p.moving):
-                if a is None:
-                    continue
-                coord, fn = a
-                k_in = math.pi / 180.0 if model.coordinates[coord].type == "rotation" else 1.0
-                mv[ax] = {"coord": coord, "function": function_doc(convert_function(fn, k_in, 1.0))}
-            if mv:
-                d["moving"] = mv
+            moving = tuple(None if a is None else
+                           Moving(a[0], convert_function(a[1], math.pi / 180.0 if model.coordinates[a[0]].type
+                                                         == "rotation" else 1.0, 1.0)) for a in p.moving)
+        active = None
         if p.condition is not None:
             coord, lo, hi = p.condition
             k = DEG if model.coordinates[coord].type == "rotation" else 1.0
-            d["active"] = {"coord": coord, "range": [lo * k, hi * k]}
-        path.append(d)
+            active = (coord, lo * k, hi * k)
+        path.append(point_doc(PathPoint(p.body, tuple(p.location), moving, active)))
     wraps = []
     for pw in m.wraps:
         w = model.wrap_objects[pw.wrap]
-        d = {"name": w.name, "shape": w.shape, "bone": w.body}
-        if w.shape == "cylinder":
-            d.update(radius=w.size[0], length=w.size[1])
-        elif w.shape == "sphere":
-            d["radius"] = w.size[0]
-        elif w.shape == "ellipsoid":
-            d["radii"] = list(w.size)
-        else:
-            d.update(inner=w.size[0], outer=w.size[1])
-        d["at"] = list(w.translation)
-        d["orient"] = _deg(w.rotation)
-        d["quadrant"] = w.quadrant
-        if w.shape == "ellipsoid":
-            d["method"] = pw.method
-        if pw.range != (-1, -1):
-            d["range"] = list(pw.range)
-        if not w.active:
-            d["active"] = False
-        wraps.append(d)
+        wraps.append(wrap_doc(WrapSurface(w.name, w.body, w.shape, tuple(w.size) + (0.0,) * (3 - len(w.size)),
+                                          tuple(w.translation), tuple(_deg(w.rotation)), w.quadrant, pw.method,
+                                          tuple(pw.range), w.active)))
     return path, wraps
 
 
