@@ -473,7 +473,7 @@ def belly_markdown(r: dict) -> list[str]:
     sl = [m["slenderness"] for m in ms]
     st = r["settings"]
     lines = ["", "## Bellies", "",
-             f"Law (README, \"OpenSim models\"): PCSA = max isometric force / {st['specific_tension_Pa'] / 1e6:g} MPa; "
+             f"Law (README, \"The muscle model\", Imported bellies): PCSA = max isometric force / {st['specific_tension_Pa'] / 1e6:g} MPa; "
              "belly volume = PCSA × optimal fibre length; free tendon = "
              f"{st['free_tendon_share']:g} × tendon slack length (the rest of it is aponeurosis, inside the belly), "
              "shortened where the belly would not hold its fibres (optimal fibre length × cos pennation); "
