@@ -11,13 +11,13 @@ from __future__ import annotations
 
 import csv
 import json
-import shutil
 
 import numpy as np
 import pytest
 
 from axdf_cli.formats import load_triangles
 from conftest import REPO_ROOT, run_main
+from test_paths import project  # noqa: F401 (the fixture this file's project extends)
 
 MUSCLE = """# an origin that the tibia's sphere swallows as the knee flexes
 muscle: knee_ball
@@ -37,11 +37,10 @@ MESSAGE = "path cannot wrap over 'ball': an end point lies inside it; kept the s
 
 
 @pytest.fixture
-def project(tmp_path, monkeypatch):
-    shutil.copytree(REPO_ROOT / "poses", tmp_path / "poses")
-    (tmp_path / "m.yaml").write_text(MUSCLE)
-    monkeypatch.chdir(tmp_path)
-    return tmp_path
+def inside_project(project):
+    """test_paths' project (the poses copied, the current folder there) with this muscle."""
+    (project / "m.yaml").write_text(MUSCLE)
+    return project
 
 
 def _origin_inside(frames) -> np.ndarray:
@@ -58,29 +57,29 @@ def _origin_inside(frames) -> np.ndarray:
     return np.linalg.norm(origin[:, :3] - centre[:, :3], axis=1) < 0.03
 
 
-def test_unwrappable_frames_are_finite_and_warned(project, capsys):
+def test_unwrappable_frames_are_finite_and_warned(inside_project, capsys):
     rc, out, err = run_main(["run", "--muscles", "m.yaml", "--pose", "poses/demo.yaml", "--out", "out",
                              "--no-render", "--frames", FRAMES], capsys)
     assert rc == 0, err
     frames = list(range(0, 45, 4))
     inside = _origin_inside(frames)
     assert inside.any() and not inside.all()  # the case happens, and not everywhere
-    with open(project / "out" / "stats.csv", newline="") as fh:
+    with open(inside_project / "out" / "stats.csv", newline="") as fh:
         rows = {int(r["frame"]): r for r in csv.DictReader(fh)}
     assert sorted(rows) == frames
     for f, ins in zip(frames, inside):
         assert (MESSAGE in rows[f]["warning"]) == bool(ins), (f, rows[f]["warning"])
         assert np.isfinite(float(rows[f]["length"])) and float(rows[f]["length"]) > 0.1
-        pos, _, faces = load_triangles(project / "out" / "meshes" / "knee_ball" / f"knee_ball_{f:04d}.ply")
+        pos, _, faces = load_triangles(inside_project / "out" / "meshes" / "knee_ball" / f"knee_ball_{f:04d}.ply")
         assert np.isfinite(pos).all() and len(faces) > 0
-    manifest = json.loads((project / "out" / "manifest.json").read_text())
+    manifest = json.loads((inside_project / "out" / "manifest.json").read_text())
     warned = [w for w in manifest["warnings"] if MESSAGE in w]
     assert warned == [f"knee_ball frame {f}: {MESSAGE}" for f, ins in zip(frames, inside) if ins]
 
 
-def test_unwrappable_frames_are_refused_under_strict(project, capsys):
+def test_unwrappable_frames_are_refused_under_strict(inside_project, capsys):
     rc, out, err = run_main(["run", "--muscles", "m.yaml", "--pose", "poses/demo.yaml", "--out", "out",
                              "--no-render", "--frames", FRAMES, "--strict"], capsys)
     assert rc == 2
     assert "with --strict" in err and MESSAGE in err and "Traceback" not in err
-    assert not (project / "out").exists()
+    assert not (inside_project / "out").exists()
