@@ -2,10 +2,15 @@
 
 File kinds: skeleton (``skeleton:``), pose (``pose:``), muscle (``muscle:`` or ``muscles:``)
 and job (``muscles:`` + ``pose:`` + ...). See docs/FORMATS.md.
+
+Paths written inside YAML files are resolved relative to the file that holds them and
+checked against a :class:`RefPolicy`, passed down explicitly (no global state).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+import glob
+import os
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -14,8 +19,8 @@ from axdf_cli.errors import InputError, Mark
 from axdf_cli.muscle import OCT, VOLUME_MODES, AxisPoint, MuscleSpec, Section, outline_area
 from axdf_cli.skeleton import (Bone, Constant, Coordinate, Dof, Linear, Multiplier, Polynomial,
                                Skeleton, Spline)
-from axdf_cli.yamlio import (Fields, YMap, check_name, check_number, check_vector, item_marks, load_yaml,
-                             mark_of, real_path)
+from axdf_cli.yamlio import (Fields, YMap, check_name, check_number, check_vector, did_you_mean, item_marks,
+                             load_yaml, mark_of, real_path)
 
 DOF_TYPES = ("rotation", "translation")
 
@@ -50,7 +55,7 @@ def parse_function(value, where: Mark, depth: int = 0):
     if kind == "polynomial":
         return Polynomial(check_vector(arg, at, "polynomial", min_len=1))
     if kind == "spline":
-        f = Fields(arg, at, "spline")
+        f = Fields(arg, at, "spline", keys=("x", "y", "kind"))
         x = f.vector("x", required=True, min_len=2)
         y = f.vector("y", required=True, min_len=2)
         k = f.choice("kind", ("fmm", "natural"), default="fmm")
@@ -63,7 +68,7 @@ def parse_function(value, where: Mark, depth: int = 0):
     if kind == "multiplier":
         if depth > 4:
             raise InputError(at, "multiplier nested too deeply", "at most 4 levels")
-        f = Fields(arg, at, "multiplier")
+        f = Fields(arg, at, "multiplier", keys=("scale", "function"))
         scale = f.number("scale", required=True)
         inner = parse_function(f.raw("function", required=True), f.vmark("function"), depth + 1)
         f.done()
@@ -75,44 +80,55 @@ def parse_function(value, where: Mark, depth: int = 0):
 # ----------------------------------------------------------------------------- skeleton
 
 
-def load_skeleton(path: Path | str) -> Skeleton:
+def load_skeleton(path: Path | str, policy: RefPolicy | None = None) -> Skeleton:
     path = Path(path)
-    return skeleton_from_document(load_yaml(path), path)
+    return skeleton_from_document(load_yaml(path), path, policy)
 
 
-def parse_skeleton_text(text: str, path: Path | str) -> Skeleton:
+def parse_skeleton_text(text: str, path: Path | str, policy: RefPolicy | None = None) -> Skeleton:
     """A skeleton from YAML text that will live at ``path`` (mesh paths resolve from there)."""
     from axdf_cli.yamlio import parse_yaml
 
-    return skeleton_from_document(parse_yaml(text, str(path)), Path(path))
+    return skeleton_from_document(parse_yaml(text, str(path)), Path(path), policy)
 
 
-def skeleton_from_document(doc, path: Path) -> Skeleton:
+def _check_range(rng, where: Mark, what: str):
+    if rng is not None and rng[0] > rng[1]:
+        raise InputError(where, f"{what} range is {list(rng)}", "[min, max] with min <= max")
+    return rng
+
+
+def skeleton_from_document(doc, path: Path, policy: RefPolicy | None = None) -> Skeleton:
+    policy = policy or RefPolicy()
     top = Mark(str(path), 1, 1)
-    f = Fields(doc, top, "skeleton file")
+    f = Fields(doc, top, "skeleton file", keys=("skeleton", "bones", "coordinates"))
     name = f.name("skeleton", required=True)
     bones_seq = f.seq("bones", required=True, min_len=1)
     coords_map = f.mapping("coordinates", default=None)
     f.done()
 
     declared: dict[str, Coordinate] = {}
+    ranges: dict[str, list] = {}  # coordinate -> [(range, mark)] from its declaration and its dofs
     if coords_map is not None:
         for cname, cval in coords_map.items():
             km = coords_map.key_mark(cname)
             check_name(cname, km, "coordinate name")
-            cf = Fields(cval, coords_map.value_mark(cname), f"coordinate {cname}")
+            cf = Fields(cval, coords_map.value_mark(cname), f"coordinate {cname}", keys=("type", "default", "range"))
             ctype = cf.choice("type", DOF_TYPES, required=True)
             default = cf.number("default", default=0.0)
-            rng = cf.vector("range", 2, default=None)
+            rng = _check_range(cf.vector("range", 2, default=None), cf.vmark("range"), f"coordinate {cname}")
             cf.done()
-            declared[cname] = Coordinate(cname, ctype, float(default), rng)
+            declared[cname] = Coordinate(cname, ctype, float(default), None)
+            if rng is not None:
+                ranges.setdefault(cname, []).append((rng, cf.vmark("range")))
 
     bones: list[Bone] = []
     index: dict[str, int] = {}
     used: dict[str, str] = {}  # coordinate -> type inferred from direct use
     order: list[str] = list(declared)
     for bval, bm in zip(bones_seq, item_marks(bones_seq, top)):
-        bf = Fields(bval, bm, "bone")
+        bf = Fields(bval, bm, "bone", keys=("name", "parent", "offset", "orient", "post_offset", "post_orient",
+                                            "mesh", "dofs"))
         bname = bf.name("name", required=True)
         if bname in index:
             raise InputError(bf.vmark("name"), f"bone {bname!r} defined twice", "bone names are unique")
@@ -124,7 +140,8 @@ def skeleton_from_document(doc, path: Path) -> Skeleton:
                                  "one root bone, listed first")
         elif parent_name not in index:
             raise InputError(bf.vmark("parent"), f"parent {parent_name!r} is not defined before {bname!r}",
-                             f"parents come before children; defined so far: {', '.join(index) or 'none'}")
+                             f"parents come before children; {did_you_mean(parent_name, index)}"
+                             f"defined so far: {', '.join(index) or 'none'}")
         else:
             parent = index[parent_name]
         offset = bf.vector("offset", 3, default=(0.0, 0.0, 0.0))
@@ -133,11 +150,11 @@ def skeleton_from_document(doc, path: Path) -> Skeleton:
         post_orient = bf.vector("post_orient", 3, default=(0.0, 0.0, 0.0))
         mesh = bf.string("mesh", default=None)
         if mesh is not None:
-            mesh = str(resolve_ref(path, mesh, bf.vmark("mesh")))
+            mesh = str(policy.resolve(path, mesh, bf.vmark("mesh")))
         dofs = []
         dof_seq = bf.seq("dofs", default=[])
         for dval, dm in zip(dof_seq, item_marks(dof_seq, bf.vmark("dofs"))):
-            df = Fields(dval, dm, "dof")
+            df = Fields(dval, dm, "dof", keys=("type", "axis", "coord", "function", "range"))
             dtype = df.choice("type", DOF_TYPES, required=True)
             axis = _unit_axis(df.raw("axis", required=True), df.vmark("axis"))
             coord = df.name("coord", default=None)
@@ -149,8 +166,13 @@ def skeleton_from_document(doc, path: Path) -> Skeleton:
             if coord is None and not isinstance(fn, Constant):
                 raise InputError(df.vmark("function"), "a function of no coordinate must be constant",
                                  "give coord: NAME")
-            rng = df.vector("range", 2, default=None)
+            rng = _check_range(df.vector("range", 2, default=None), df.vmark("range"), "dof")
             df.done()
+            if rng is not None:
+                if coord is None:
+                    raise InputError(df.vmark("range"), "range on a dof of no coordinate",
+                                     "a dof's range is its coordinate's range: give coord: NAME")
+                ranges.setdefault(coord, []).append((rng, df.vmark("range")))
             if coord is not None:
                 if fn is None:
                     if coord in used and used[coord] != dtype:
@@ -160,8 +182,6 @@ def skeleton_from_document(doc, path: Path) -> Skeleton:
                     if coord in declared and declared[coord].type != dtype:
                         raise InputError(df.vmark("coord"), f"coordinate {coord!r} is declared {declared[coord].type}",
                                          f"use it on a {declared[coord].type} dof or through a function")
-                    if rng is not None and coord not in declared:
-                        declared[coord] = Coordinate(coord, dtype, 0.0, rng)
                 if coord not in order:
                     order.append(coord)
             dofs.append(Dof(dtype, axis, coord, fn))
@@ -171,65 +191,96 @@ def skeleton_from_document(doc, path: Path) -> Skeleton:
 
     coords = []
     for c in order:
-        if c in declared:
-            coords.append(declared[c])
-        else:
-            coords.append(Coordinate(c, used.get(c, "rotation"), 0.0, None))
+        base = declared.get(c) or Coordinate(c, used.get(c, "rotation"), 0.0, None)
+        coords.append(Coordinate(base.name, base.type, base.default, _joint_range(c, ranges.get(c, []))))
     return Skeleton(name, tuple(bones), tuple(coords), str(path))
 
 
-class RefPolicy:
-    """Where paths written inside YAML files may point.
+def _joint_range(coord: str, given: list) -> tuple[float, float] | None:
+    """A coordinate's range: where every range given for it (declaration, dofs) overlaps."""
+    if not given:
+        return None
+    lo, hi = given[0][0]
+    for (a, b), where in given[1:]:
+        lo, hi = max(lo, a), min(hi, b)
+        if lo > hi:
+            raise InputError(where, f"range {[a, b]} of coordinate {coord!r} does not overlap its other ranges",
+                             "ranges of one coordinate (declared and on its dofs) must overlap; the tightest applies")
+    return (float(lo), float(hi))
 
-    References are resolved relative to the file that holds them. Absolute paths, and paths
-    whose resolved location is outside every root (the current folder and the folder of the
-    file given on the command line), are refused unless ``allow_outside`` is set
-    (``--allow-outside``).
+
+def _library_roots() -> tuple[Path, ...]:
+    """The shipped library (``poses/`` and ``muscles/`` beside the package, in a checkout or
+    an editable install): trusted from any folder, so a user's own pose may name a shipped
+    skeleton."""
+    here = Path(__file__).resolve().parent.parent
+    return tuple(p for p in (here / "poses", here / "muscles") if p.is_dir())
+
+
+LIBRARY_ROOTS = _library_roots()
+
+
+def _glob_base(pattern: str) -> Path:
+    """The fixed folder in front of a glob's first wildcard (``a/b/*/c.yaml`` → ``a/b``)."""
+    parts = Path(pattern).parts
+    for i, part in enumerate(parts):
+        if glob.has_magic(part):
+            return Path(*parts[:i]) if i else Path(".")
+    return Path(pattern).parent
+
+
+@dataclass(frozen=True)
+class RefPolicy:
+    """Where files read through YAML references (and a job's ``out``) may lie.
+
+    References are resolved relative to the file that holds them. A path is allowed when its
+    *real* location (symbolic links resolved: a link inside the tree to a file outside is
+    refused like the file itself) lies below a root: the current folder, the folders of the
+    files named on the command line (the user's own choice, see :meth:`for_command`) and the
+    shipped library. ``roots`` empty (library use): the current folder and the referring
+    file's own folder. ``allow_outside`` (``--allow-outside``) turns the check off.
     """
 
-    def __init__(self, roots=(), allow_outside: bool = False):
-        self._roots = [real_path(r) for r in roots]
-        self.allow_outside = allow_outside
+    roots: tuple[Path, ...] = ()
+    allow_outside: bool = False
 
-    @property
-    def roots(self) -> list[Path]:
-        """The given roots, or the current folder at the time of the check."""
-        return self._roots or [real_path(Path.cwd())]
+    @classmethod
+    def for_command(cls, named=(), allow_outside: bool = False) -> "RefPolicy":
+        """The policy of one command: roots are the current folder and, for every path named
+        on the command line, its folder (a named folder itself; a glob's fixed part)."""
+        roots = [Path.cwd()]
+        for n in named:
+            if n is None:
+                continue
+            s = str(n)
+            p = _glob_base(s) if glob.has_magic(s) else Path(s)
+            roots.append(p if p.is_dir() else p.parent)
+        return cls(tuple(dict.fromkeys(real_path(r) for r in roots)), allow_outside)
 
+    def roots_for(self, base: Path | None) -> list[Path]:
+        own = list(self.roots) or [real_path(Path.cwd())] + ([real_path(base)] if base is not None else [])
+        return own + [r for r in LIBRARY_ROOTS if r not in own]
 
-POLICY = RefPolicy()
+    def check(self, path: Path | str, where: Mark, base: Path | None = None, what: str = "path",
+              shown: str | None = None) -> None:
+        """Refuse ``path`` unless its real location lies below a root (``base``: the folder of
+        the referring file, a root when the policy has none; ``shown``: the path as written)."""
+        if self.allow_outside:
+            return
+        real = real_path(path)
+        roots = self.roots_for(base)
+        if not any(real == r or r in real.parents for r in roots):
+            link = "" if real == Path(os.path.abspath(path)) else f" (a link to {real})"
+            raise InputError(where, f"{what} {shown or repr(str(path))}{link} leaves the project folder tree",
+                             f"paths inside {', '.join(str(r) for r in roots)} (or pass --allow-outside)")
 
-
-def set_ref_policy(roots, allow_outside: bool) -> None:
-    global POLICY
-    POLICY = RefPolicy(roots, allow_outside)
-
-
-def reset_ref_policy() -> None:
-    """Back to the default (the current folder, nothing outside): the CLI calls this after
-    each command so that library use in the same process sees no stale roots."""
-    set_ref_policy((), False)
-
-
-def resolve_ref(base_file: Path, ref: str, where: Mark) -> Path:
-    """Resolve a path written in a YAML file, relative to that file's folder."""
-    if "\x00" in ref:
-        raise InputError(where, "path contains a NUL character", "plain relative paths")
-    p = Path(ref)
-    if POLICY.allow_outside:
-        return (base_file.parent / p) if not p.is_absolute() else p
-    if p.is_absolute():
-        raise InputError(where, f"absolute path {ref!r}",
-                         "paths relative to the file that names them (or pass --allow-outside)")
-    full = real_path(base_file.parent / p)
-    # without explicit roots (library use), a file's references stay below its own folder
-    roots = POLICY._roots or [real_path(Path.cwd()), real_path(base_file.parent)]
-    if not any(full == r or r in full.parents for r in roots):
-        raise InputError(where, f"path {ref!r} leaves the project folder tree",
-                         f"paths inside {', '.join(str(r) for r in roots)} (or pass --allow-outside)")
-    return base_file.parent / p
-
-
+    def resolve(self, base_file: Path, ref: str, where: Mark, what: str = "path") -> Path:
+        """A path written in ``base_file``, relative to its folder, checked (see the class doc)."""
+        if "\x00" in ref:
+            raise InputError(where, "path contains a NUL character", "plain relative paths")
+        p = Path(base_file).parent / ref  # an absolute ref replaces the folder
+        self.check(p, where, Path(base_file).parent, what, repr(ref))
+        return p
 
 
 # ----------------------------------------------------------------------------- muscles
@@ -260,8 +311,12 @@ def default_color(name: str) -> tuple[float, float, float]:
                                                            0.55 + 0.2 * h, 0.65 + 0.2 * (1 - h)))
 
 
+MUSCLE_KEYS = ("muscle", "color", "strength", "tension", "volume", "axis", "path", "wrap", "axis_points",
+               "sections", "tendons", "twist", "resolution", "weights")
+
+
 def _parse_muscle(value, where: Mark, file: str, group: str = "") -> MuscleSpec:
-    f = Fields(value, where, "muscle")
+    f = Fields(value, where, "muscle", keys=MUSCLE_KEYS)
     name = f.name("muscle", required=True)
     color = parse_color(f.raw("color"), f.vmark("color"), name)
     strength = f.number("strength", default=1.0, lo=0.0, hi=100.0, lo_open=True)
@@ -278,7 +333,7 @@ def _parse_muscle(value, where: Mark, file: str, group: str = "") -> MuscleSpec:
         raise InputError(f.vmark("axis"), f"axis has {len(axis_seq)} control points", "at most 64")
     axis = []
     for av, am in zip(axis_seq, item_marks(axis_seq, f.vmark("axis"))):
-        af = Fields(av, am, "axis point")
+        af = Fields(av, am, "axis point", keys=("bone", "at"))
         bone = af.name("bone", required=True)
         at = af.vector("at", 3, required=True)
         af.done()
@@ -294,7 +349,7 @@ def _parse_muscle(value, where: Mark, file: str, group: str = "") -> MuscleSpec:
             raise InputError(f.vmark("sections"), f"{len(sec_seq)} sections", "at most 64")
         prev = 0.0
         for sv, sm in zip(sec_seq, item_marks(sec_seq, f.vmark("sections"))):
-            sf = Fields(sv, sm, "section")
+            sf = Fields(sv, sm, "section", keys=("t", "radii", "angle", "outline"))
             t = sf.number("t", required=True, lo=0.0, hi=1.0, lo_open=True)
             if t >= 1.0 or t <= prev:
                 raise InputError(sf.vmark("t"), f"section t is {t!r}",
@@ -461,13 +516,14 @@ def parse_muscle_text(text: str, path: Path | str) -> list[MuscleSpec]:
 def muscles_from_document(doc, path: Path) -> list[MuscleSpec]:
     top = Mark(str(path), 1, 1)
     if isinstance(doc, dict) and "muscles" in doc and "muscle" not in doc:
-        f = Fields(doc, top, "multi-head muscle file")
+        f = Fields(doc, top, "multi-head muscle file", keys=("group", "muscles"))
         group = f.name("group", default=path.stem)
         seq = f.seq("muscles", required=True, min_len=1)
         f.done()
         return [_parse_muscle(v, m, str(path), group) for v, m in zip(seq, item_marks(seq, f.vmark("muscles")))]
     if not isinstance(doc, dict) or "muscle" not in doc:
-        raise InputError(mark_of(doc, top), "not a muscle file", "a muscle file has `muscle: NAME` or `muscles: [...]`")
+        raise kind_error(doc, top, "not a muscle file", "a muscle file has `muscle: NAME` or `muscles: [...]`",
+                         ("muscle", "muscles"))
     return [_parse_muscle(doc, top, str(path))]
 
 
@@ -475,6 +531,7 @@ def muscles_from_document(doc, path: Path) -> list[MuscleSpec]:
 
 
 INTERPOLATIONS = ("linear", "step", "cubic")
+POSE_KEYS = ("pose", "skeleton", "fps", "frames", "interpolation", "clamp_ranges", "keys", "activation")
 
 
 @dataclass(frozen=True)
@@ -490,10 +547,20 @@ class Pose:
     activation_marks: dict  # muscle -> Mark (to report unknown muscles)
     source: str = ""
     skeleton_path: str = ""
+    clamp_ranges: bool = False  # hold coordinates inside their skeleton ranges (else: warn)
+    key_marks: dict = field(default_factory=dict)  # coord -> Mark of its first key (for range warnings)
 
     @property
     def frames(self) -> np.ndarray:
         return np.arange(self.first, self.last + 1)
+
+
+def _frame_key(frame, where: Mark, what: str, first: int, last: int) -> int:
+    f = check_number(frame, where, what, 0, 10_000_000, integer=True)
+    if not first <= f <= last:
+        raise InputError(where, f"{what} {f} is outside the pose's frames [{first}, {last}]",
+                         f"keys at frames {first}..{last} (widen `frames` to key more)")
+    return int(f)
 
 
 #: Motion files that are not poses → the command that turns them into one.
@@ -502,21 +569,22 @@ MOTION_IMPORTS = {".bvh": "axdf import bvh FILE.bvh --out DIR",
                   ".sto": "axdf import osim MODEL.osim --motion FILE --out DIR"}
 
 
-def load_pose(path: Path | str) -> Pose:
+def load_pose(path: Path | str, policy: RefPolicy | None = None) -> Pose:
+    policy = policy or RefPolicy()
     path = Path(path)
     if path.suffix.lower() in MOTION_IMPORTS:
         raise InputError(Mark(str(path)), f"a {path.suffix} motion is not an axdf pose",
                          f"import it first ({MOTION_IMPORTS[path.suffix.lower()]}) and pass the pose YAML it writes")
     doc = load_yaml(path)
     top = Mark(str(path), 1, 1)
-    f = Fields(doc, top, "pose file")
+    f = Fields(doc, top, "pose file", keys=POSE_KEYS)
     name = f.name("pose", required=True)
     skel_ref = f.string("skeleton", required=True)
-    skel_path = resolve_ref(path, skel_ref, f.vmark("skeleton"))
+    skel_path = policy.resolve(path, skel_ref, f.vmark("skeleton"))
     if not skel_path.is_file():
         raise InputError(f.vmark("skeleton"), f"skeleton file {skel_ref!r} not found",
                          "a path relative to the pose file")
-    skel = load_skeleton(skel_path)
+    skel = load_skeleton(skel_path, policy)
     fps = f.number("fps", default=30.0, lo=0.0, hi=100000.0, lo_open=True)
     fr = f.raw("frames", required=True)
     first, last = check_vector(fr, f.vmark("frames"), "frames", 2, 0, 10_000_000)
@@ -524,12 +592,13 @@ def load_pose(path: Path | str) -> Pose:
         raise InputError(f.vmark("frames"), f"frames is {list(fr)}", "[first, last] integers with first <= last")
     first, last = int(first), int(last)
     interp = f.choice("interpolation", INTERPOLATIONS, default="linear")
+    clamp = f.boolean("clamp_ranges", default=False)
     keys_map = f.mapping("keys", required=True)
     cidx = skel.coord_index
     series: dict[str, list] = {}
+    key_marks: dict[str, Mark] = {}
     for frame, values in keys_map.items():
-        km = keys_map.key_mark(frame)
-        fnum = check_number(frame, km, "key frame", 0, 10_000_000, integer=True)
+        fnum = _frame_key(frame, keys_map.key_mark(frame), "key frame", first, last)
         vm = keys_map.value_mark(frame)
         if not isinstance(values, dict):
             raise InputError(vm, f"key {frame} is not a mapping", "keys: {FRAME: {COORD: value}}")
@@ -537,9 +606,10 @@ def load_pose(path: Path | str) -> Pose:
             cm = values.key_mark(coord) if isinstance(values, YMap) else vm
             if coord not in cidx:
                 raise InputError(cm, f"unknown coordinate {coord!r}",
-                                 f"coordinates of skeleton {skel.name}: {', '.join(cidx)}")
+                                 f"{did_you_mean(coord, cidx)}coordinates of skeleton {skel.name}: {', '.join(cidx)}")
             x = check_number(val, values.value_mark(coord) if isinstance(values, YMap) else vm, coord)
             series.setdefault(coord, []).append((fnum, float(x)))
+            key_marks.setdefault(coord, cm)
     act_map = f.mapping("activation", default=None)
     activation, act_marks = {}, {}
     if act_map is not None:
@@ -551,7 +621,7 @@ def load_pose(path: Path | str) -> Pose:
                                  "activation: {MUSCLE: {FRAME: 0..1}}")
             pts = []
             for frame, val in curve.items():
-                fnum = check_number(frame, curve.key_mark(frame), "activation frame", 0, 10_000_000, integer=True)
+                fnum = _frame_key(frame, curve.key_mark(frame), "activation frame", first, last)
                 pts.append((fnum, float(check_number(val, curve.value_mark(frame), "activation", 0.0, 1.0))))
             pts.sort()
             activation[muscle] = (tuple(p[0] for p in pts), tuple(p[1] for p in pts))
@@ -561,29 +631,37 @@ def load_pose(path: Path | str) -> Pose:
     for coord, pts in series.items():
         pts.sort()
         keys[coord] = (tuple(p[0] for p in pts), tuple(p[1] for p in pts))
-    return Pose(name, skel, float(fps), first, last, interp, keys, activation, act_marks, str(path), str(skel_path))
+    return Pose(name, skel, float(fps), first, last, interp, keys, activation, act_marks, str(path), str(skel_path),
+                clamp, key_marks)
 
 
 # ----------------------------------------------------------------------------- jobs
+
+JOB_KEYS = ("muscles", "pose", "out", "format", "frames", "render")
+
 
 @dataclass(frozen=True)
 class Job:
     source: str
     muscles: tuple  # ((Path, Mark), ...) files, folders or globs, resolved against the job's folder
     pose: tuple | None  # (Path, Mark)
-    out: str | None
+    out: Path | None  # resolved against the job's folder
     format: str | None
     frames: object  # raw frames spec or None
     frames_mark: Mark | None
-    render: object  # raw `render:` mapping or None
-    render_mark: Mark | None
+    render: object  # RenderSettings (disabled when the job has no `render:`)
+    policy: RefPolicy = RefPolicy()  # the policy the job was read with (its muscles are read with it)
 
 
-def load_job(path: Path | str) -> Job:
+def load_job(path: Path | str, policy: RefPolicy | None = None) -> Job:
+    from axdf_cli.formats import WRITERS
+    from axdf_cli.render.settings import parse_render_settings
+
+    policy = policy or RefPolicy()
     path = Path(path)
     doc = load_yaml(path)
     top = Mark(str(path), 1, 1)
-    f = Fields(doc, top, "job file")
+    f = Fields(doc, top, "job file", keys=JOB_KEYS)
     raw = f.raw("muscles", required=True)
     entries = [raw] if isinstance(raw, str) else raw
     if not isinstance(entries, list) or not entries:
@@ -593,50 +671,46 @@ def load_job(path: Path | str) -> Job:
     for e, m in zip(entries, marks):
         if not isinstance(e, str) or not e:
             raise InputError(m, f"muscle path is {e!r}", "a path, folder or glob relative to the job file")
-        muscles.append((resolve_ref(path, e, m), m))
+        muscles.append((policy.resolve(path, e, m), m))
     pose_ref = f.string("pose", required=True)
-    pose = (resolve_ref(path, pose_ref, f.vmark("pose")), f.vmark("pose"))
+    pose = (policy.resolve(path, pose_ref, f.vmark("pose")), f.vmark("pose"))
     out = f.string("out", default=None)
-    if out is not None and not POLICY.allow_outside and (
-            Path(out).is_absolute() or ".." in Path(out).parts
-            or not any(r == p or r in p.parents for p in [Path(out).resolve()] for r in POLICY.roots)):
-        raise InputError(f.vmark("out"), f"out {out!r} leaves the project folder tree",
-                         "a relative folder without '..' or links out of the tree (or pass --out, or --allow-outside)")
-    from axdf_cli.formats import WRITERS
-
+    if out is not None:
+        out = Path(os.path.normpath(policy.resolve(path, out, f.vmark("out"), "out")))
     fmt = f.choice("format", tuple(WRITERS), default=None)
     frames = f.raw("frames")
     frames_mark = f.vmark("frames") if frames is not None else None
-    render = f.raw("render")
-    render_mark = f.vmark("render") if render is not None else None
+    render = parse_render_settings(f.raw("render"), f.vmark("render") if f.has("render") else top)
     f.done()
-    return Job(str(path), tuple(muscles), pose, out, fmt, frames, frames_mark, render, render_mark)
+    return Job(str(path), tuple(muscles), pose, out, fmt, frames, frames_mark, render, policy)
 
 
-def expand_muscle_paths(entries) -> list[Path]:
-    """Files, folders (every *.yaml below, sorted) or globs → sorted unique files."""
-    import glob as _glob
-
-    out: list[Path] = []
+def expand_muscle_paths(entries, policy: RefPolicy | None = None, base: Path | None = None) -> list[Path]:
+    """Files, folders (every *.yaml below, sorted) or globs → sorted unique files. Every file
+    found is checked against ``policy`` by its real path (``base``: the folder the entries are
+    relative to, a root when the policy has none)."""
+    policy = policy or RefPolicy()
+    out: list[tuple[Path, Mark]] = []
     for p, mark in entries:
         p = Path(p)
         s = str(p)
-        if any(ch in s for ch in "*?["):
-            hits = sorted(Path(h) for h in _glob.glob(s, recursive=True) if Path(h).is_file())
+        if glob.has_magic(s):
+            hits = sorted(Path(h) for h in glob.glob(s, recursive=True) if Path(h).is_file())
             if not hits:
                 raise InputError(mark, f"glob {s!r} matches no file", "a glob matching muscle YAML files")
-            out.extend(hits)
         elif p.is_dir():
             hits = sorted(x for x in p.rglob("*.yaml") if x.is_file())
             if not hits:
                 raise InputError(mark, f"folder {s!r} holds no .yaml file", "a folder of muscle YAML files")
-            out.extend(hits)
         elif p.is_file():
-            out.append(p)
+            hits = [p]
         else:
             raise InputError(mark, f"muscle path {s!r} not found", "an existing file, folder or glob")
+        for h in hits:
+            policy.check(h, mark, base, "muscle file")
+        out.extend((h, mark) for h in hits)
     seen, uniq = set(), []
-    for p in out:
+    for p, _ in out:
         k = str(real_path(p))
         if k not in seen:
             seen.add(k)
@@ -644,9 +718,19 @@ def expand_muscle_paths(entries) -> list[Path]:
     return uniq
 
 
+# ----------------------------------------------------------------------------- file kinds
+
+#: The keys that tell a file's kind (see :func:`detect_kind`).
+KIND_KEYS = ("skeleton", "bones", "pose", "keys", "muscle", "muscles", "transfer")
+KINDS_ALLOWED = ("a skeleton (skeleton:, bones:), pose (pose:, keys:), muscle (muscle:), job (muscles:, pose:) "
+                 "or transfer map (transfer:, bones:)")
+
+
 def detect_kind(doc) -> str | None:
     if not isinstance(doc, dict):
         return None
+    if "transfer" in doc:
+        return "transfer"
     if "skeleton" in doc and "bones" in doc:
         return "skeleton"
     if "pose" in doc and "keys" in doc:
@@ -656,3 +740,18 @@ def detect_kind(doc) -> str | None:
     if "muscles" in doc and "pose" in doc:
         return "job"
     return None
+
+
+def kind_error(doc, top: Mark, problem: str = "unknown kind of file", allowed: str = KINDS_ALLOWED,
+               kind_keys=KIND_KEYS) -> InputError:
+    """The error for a file whose kind cannot be told: a top-level key close to a kind key
+    (``muscel:``) is named, with its position and the key it probably means."""
+    if isinstance(doc, dict):
+        for key in doc:
+            if key in KIND_KEYS:
+                continue
+            hint = did_you_mean(key, kind_keys)
+            if hint:
+                where = doc.key_mark(key) if isinstance(doc, YMap) else top
+                return InputError(where, f"{problem}: unknown key {key!r}", f"{hint}{allowed}")
+    return InputError(mark_of(doc, top), problem, allowed)

@@ -5,12 +5,42 @@
 1980): smooth through the keys without overshooting them, like Blender's auto-clamped
 Bézier handles (a natural spline through sparse keys swings far past them). Before the first key and after the last, a
 curve holds that key's value. Coordinates keyed nowhere keep their rest value.
+
+Ranges: a coordinate with a ``range`` (declared, or on a DOF it drives) that a pose takes
+outside it is either held at the range's end (the pose's ``clamp_ranges: true`` or
+``axdf run --clamp-ranges``) or left as keyed and reported per frame
+(:func:`range_warnings`).
 """
 from __future__ import annotations
 
 import numpy as np
 
 from axdf_cli.errors import InputError, Mark
+from axdf_cli.yamlio import nearest
+
+#: Frames sampled at once when scanning a whole sequence (bounds memory for long poses).
+SCAN_FRAMES = 65536
+#: Frames posed at once when collecting the subject's points for framing (see subject_points).
+FRAMING_CHUNK = 256
+#: Room around the bones for automatic framing: muscles lie on the bones and bulge past the
+#: hull of the posed bone meshes by up to 2.9 cm on the shipped jobs (demo brachioradialis;
+#: gait2392: 0); a mesh-less skeleton's muscles lie around its joint chain. Metres, but at most
+#: a share of the subject's largest extent (a small model gets a small pad).
+FRAMING_PAD = 0.03
+FRAMING_PAD_FRACTION = 0.05
+#: A bone mesh is framed by its vertices extreme along this many directions (a Fibonacci
+#: sphere, ~0.2 rad apart: the kept points' hull lies within 0.5% of the bone's size of the
+#: mesh's hull, far inside FRAMING_PAD); it bounds the work per frame for detailed meshes.
+FRAMING_DIRECTIONS = 128
+
+
+def sphere_directions(n: int) -> np.ndarray:
+    """(n, 3) unit vectors spread evenly over the sphere (Fibonacci lattice)."""
+    k = np.arange(n) + 0.5
+    z = 1.0 - 2.0 * k / n
+    phi = np.pi * (3.0 - np.sqrt(5.0)) * k
+    r = np.sqrt(1.0 - z * z)
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
 
 
 def interpolate(frames: np.ndarray, key_frames, key_values, mode: str) -> np.ndarray:
@@ -31,13 +61,74 @@ def interpolate(frames: np.ndarray, key_frames, key_values, mode: str) -> np.nda
     return np.interp(x, kf, kv)
 
 
-def sample_coordinates(pose, frames: np.ndarray) -> np.ndarray:
-    """Coordinates of the pose's skeleton at ``frames``: (F, C) float64, axdf units."""
+def sample_coordinates(pose, frames: np.ndarray, clamp: bool | None = None) -> np.ndarray:
+    """Coordinates of the pose's skeleton at ``frames``: (F, C) float64, axdf units; held
+    inside their ranges when ``clamp`` (default: the pose's ``clamp_ranges``)."""
     skel = pose.skeleton
+    clamp = pose.clamp_ranges if clamp is None else clamp
     q = np.broadcast_to(skel.rest_coordinates(), (len(frames), len(skel.coordinates))).copy()
     for c, (kf, kv) in pose.keys.items():
-        q[:, skel.coord_index[c]] = interpolate(frames, kf, kv, pose.interpolation)
+        i = skel.coord_index[c]
+        q[:, i] = interpolate(frames, kf, kv, pose.interpolation)
+        rng = skel.coordinates[i].range
+        if clamp and rng is not None:
+            np.clip(q[:, i], rng[0], rng[1], out=q[:, i])
     return q
+
+
+def range_warnings(pose, frames: np.ndarray) -> list[tuple[int, str, str]]:
+    """Keyed coordinates outside their ranges: ``(index into frames, coordinate, message)``
+    for every such frame and coordinate, in frame order; none when the pose clamps."""
+    skel = pose.skeleton
+    if pose.clamp_ranges:
+        return []
+    ranged = [(c, skel.coord_index[c], skel.coordinates[skel.coord_index[c]].range) for c in pose.keys
+              if skel.coordinates[skel.coord_index[c]].range is not None]
+    out = []
+    for s in range(0, len(frames), SCAN_FRAMES):
+        fr = np.asarray(frames[s:s + SCAN_FRAMES])
+        for c, i, (lo, hi) in ranged:
+            kf, kv = pose.keys[c]
+            v = interpolate(fr, kf, kv, pose.interpolation)
+            for k in np.nonzero((v < lo) | (v > hi))[0]:
+                out.append((s + int(k), c, f"{c} = {v[k]:.6g} outside its range [{lo:g}, {hi:g}]"
+                                          " (--clamp-ranges holds it inside)"))
+    out.sort(key=lambda w: w[0])
+    return out
+
+
+def muscle_range_warnings(pose, frames: np.ndarray, muscles) -> list[tuple[int, int, str]]:
+    """:func:`range_warnings` for the run's table: ``(index into frames, muscle index,
+    message)`` for each muscle with an axis point on a bone the coordinate moves."""
+    warns = range_warnings(pose, frames)
+    if not warns:
+        return []
+    moved = pose.skeleton.moved_bones()
+    bi = pose.skeleton.bone_index
+    bones = [{bi[p.bone] for p in m.axis if p.bone in bi} for m in muscles]
+    return [(fi, j, msg) for fi, c, msg in warns for j, b in enumerate(bones) if b & moved[c]]
+
+
+def activation_problems(pose, muscle_names) -> tuple[list[str], list[str]]:
+    """Activation curves for muscles that are not in the run: (warnings, notes).
+
+    A name close to a run muscle that has no curve of its own is most likely misspelt: a
+    warning naming that muscle (``--strict`` refuses it). Other names are notes: a pose
+    shared by several muscle sets (gait2392's walk, the paper's muscles) names muscles of
+    the other sets."""
+    names = list(muscle_names)
+    free = [n for n in names if n not in pose.activation]
+    warnings, notes = [], []
+    for name, mark in pose.activation_marks.items():
+        if name in names:
+            continue
+        near = nearest(name, free)
+        if near is not None:
+            warnings.append(f"{mark}: activation for {name!r}, which is not a muscle of this run; "
+                            f"did you mean {near!r}? (the curve is ignored)")
+        else:
+            notes.append(f"{mark}: activation for {name!r}, which is not in this run; ignored")
+    return warnings, notes
 
 
 def sample_activation(pose, muscle_names, frames: np.ndarray) -> np.ndarray:
@@ -58,11 +149,16 @@ def effective_tension(tension: float, activation: np.ndarray) -> np.ndarray:
 
 
 def parse_frames(spec, where: Mark, first: int, last: int) -> np.ndarray:
-    """``0:48``, ``0:48:2``, ``3,7,10:12`` (ends inclusive, as in Blender) or a list of ints → sorted
-    unique frames, all inside the pose's [first, last]."""
-    allowed = "frames are like 0:48, 0:48:2 or 3,7,10:12 (ends inclusive)"
+    """``0:48``, ``0:48:2``, ``3,7,10:12`` (ends inclusive, as in Blender), one frame number,
+    or ``[first, last]`` (a range, as a pose's ``frames``) → sorted unique frames, all inside
+    the pose's [first, last]."""
+    allowed = "frames are like 0:48, 0:48:2 or 3,7,10:12 (ends inclusive), or [first, last]"
     if isinstance(spec, (list, tuple)):
-        parts = [str(x) for x in spec]
+        if len(spec) != 2 or not all(isinstance(x, int) and not isinstance(x, bool) for x in spec):
+            raise InputError(where, f"frames is {list(spec)}",
+                             "a list is [first, last], a range as in a pose's frames; "
+                             "single frames are written as a string: '3,7,12'")
+        parts = [f"{spec[0]}:{spec[1]}"]
     elif isinstance(spec, int) and not isinstance(spec, bool):
         parts = [str(spec)]
     elif isinstance(spec, str):
@@ -93,3 +189,59 @@ def parse_frames(spec, where: Mark, first: int, last: int) -> np.ndarray:
         raise InputError(where, f"frames {frames[0]}..{frames[-1]} outside the pose's [{first}, {last}]",
                          f"frames within {first}..{last}")
     return frames
+
+
+def hull_points(points: np.ndarray) -> np.ndarray:
+    """The vertices of the convex hull of ``points`` (N, 3), in index order (or, for a flat or
+    degenerate cloud, its extreme points along 26 directions): every linear function takes
+    its maximum over ``points`` on one of them."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    points = np.asarray(points, dtype=np.float64)
+    if len(points) <= 4:
+        return points
+    try:
+        return points[np.sort(ConvexHull(points).vertices)]
+    except (QhullError, ValueError):
+        d = np.array([[i, j, k] for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1) if i or j or k], float)
+        return points[np.unique(np.argmax(points @ d.T, axis=0))]
+
+
+def subject_points(pose, bone_vertices: dict) -> np.ndarray:
+    """Points (N, 3) whose convex hull holds the subject over *every* frame of the pose: each
+    bone's mesh (``bone_vertices``: bone index -> (V, 3) bone-local vertices) and its joint,
+    and the joints at both ends of every stick (:meth:`Skeleton.stick_parents`; a mesh-less
+    root such as a floating base's world origin is no part of the subject), posed by forward
+    kinematics (batched over frames), grown by FRAMING_PAD (at most a share of the extent) each
+    way. What a camera frames: it depends on the skeleton and the whole pose, never on which
+    frames are written or on the muscles."""
+    from axdf_cli.skeleton import forward_kinematics
+
+    skel = pose.skeleton
+    joints = set(bone_vertices)
+    for b, p in enumerate(skel.stick_parents()):
+        if p >= 0:
+            joints |= {b, p}
+    joints = joints or set(range(len(skel.bones)))
+    origin = np.zeros((1, 3))
+    empty = np.zeros((0, 3))
+    dirs = sphere_directions(FRAMING_DIRECTIONS)
+
+    def extremes(v):
+        v = np.asarray(v, dtype=np.float64)
+        return v[np.unique(np.argmax(v @ dirs.T, axis=0))] if len(v) else empty
+
+    local = [np.concatenate([extremes(bone_vertices[b]) if b in bone_vertices else empty,
+                             origin if b in joints else empty]) for b in range(len(skel.bones))]
+    keep = np.zeros((0, 3))
+    frames = pose.frames
+    for s in range(0, len(frames), FRAMING_CHUNK):
+        world = forward_kinematics(skel, sample_coordinates(pose, frames[s:s + FRAMING_CHUNK]))  # (C, B, 4, 4)
+        # x[c, p] = R_b[c] @ local_b[p] + t_b[c], bone by bone
+        posed = [(pts @ world[:, b, :3, :3].transpose(0, 2, 1) + world[:, b, None, :3, 3]).reshape(-1, 3)
+                 for b, pts in enumerate(local)]
+        keep = hull_points(np.concatenate([keep] + posed))
+    extent = float(np.max(keep.max(axis=0) - keep.min(axis=0)))
+    pad = max(min(FRAMING_PAD, FRAMING_PAD_FRACTION * extent), 1e-3 * FRAMING_PAD)
+    cube = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], float) * pad
+    return hull_points((keep[:, None, :] + cube[None]).reshape(-1, 3))

@@ -28,9 +28,11 @@ class SceneBone:
 @dataclass(frozen=True)
 class Scene:
     muscles: tuple[SceneMuscle, ...]
-    bones: tuple[SceneBone, ...]  # only bones that have a mesh
-    bounds: np.ndarray  # (2, 3) float64 world AABB of every muscle over the whole sequence
+    bones: tuple[SceneBone, ...]  # bones drawn: their meshes, or sticks (render.renderer.BoneLayout)
+    bounds: np.ndarray  # (2, 3) float64 world AABB of every muscle over the written frames
     frames: tuple[int, ...]  # every output frame number, in order
+    framing: np.ndarray | None = None  # (N, 3) points the automatic camera frames (pose.subject_points)
+    first_frame: int | None = None  # the pose's first frame: where an orbit's angle is 0
 
 
 @dataclass(frozen=True)

@@ -205,6 +205,28 @@ class Skeleton:
         """(C,) float64 default values: the rest pose."""
         return np.array([c.default for c in self.coordinates], dtype=np.float64)
 
+    def stick_parents(self) -> list[int]:
+        """Per bone: its parent when the two form one segment (what a stick between their joints
+        draws), else -1: for the root, and for a bone a coordinate translates directly (a
+        floating base such as a BVH's hips, whose "segment" to the world origin is no bone)."""
+        out = []
+        for bone in self.bones:
+            free = any(d.type == "translation" and d.coord is not None and d.function is None for d in bone.dofs)
+            out.append(-1 if bone.parent < 0 or free else bone.parent)
+        return out
+
+    def moved_bones(self) -> dict[str, frozenset[int]]:
+        """Coordinate → indices of the bones it moves (those whose DOFs it drives, and their
+        descendants)."""
+        moved: dict[str, set[int]] = {c.name: set() for c in self.coordinates}
+        drivers: list[set[str]] = []  # per bone: every coordinate moving it
+        for b, bone in enumerate(self.bones):
+            own = {d.coord for d in bone.dofs if d.coord is not None}
+            drivers.append(own | (drivers[bone.parent] if bone.parent >= 0 else set()))
+            for c in drivers[b]:
+                moved[c].add(b)
+        return {c: frozenset(v) for c, v in moved.items()}
+
 
 # ----------------------------------------------------------------------------- rotations
 

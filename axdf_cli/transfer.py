@@ -48,7 +48,7 @@ import numpy as np
 
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.importers import emit
-from axdf_cli.loaders import load_muscle_file, load_skeleton, resolve_ref
+from axdf_cli.loaders import RefPolicy, load_muscle_file, load_skeleton
 from axdf_cli.muscle import AxisPoint, MuscleModel, MuscleSpec
 from axdf_cli.skeleton import Constant, Linear, Multiplier, Polynomial, Skeleton, Spline, axis_angle, euler_xyz
 from axdf_cli.yamlio import Fields, check_name, check_vector, item_marks, load_yaml
@@ -98,7 +98,8 @@ def _segment_spec(v, where: Mark, skel: Skeleton, what: str) -> tuple:
     return tuple(out)
 
 
-def load_map(path: Path | str, skel_a: Skeleton | None = None, skel_b: Skeleton | None = None) -> BoneMap:
+def load_map(path: Path | str, skel_a: Skeleton | None = None, skel_b: Skeleton | None = None,
+             policy: RefPolicy | None = None) -> BoneMap:
     """Read and check a transfer map against both skeletons (unknown bones: FILE:LINE:COL).
 
     A skeleton not given here (``--from`` / ``--to``) is the one the map names (``from:`` /
@@ -115,10 +116,10 @@ def load_map(path: Path | str, skel_a: Skeleton | None = None, skel_b: Skeleton 
             if ref is None:
                 raise InputError(top, f"transfer map names no {key!r} skeleton",
                                  f"give --{key} SKELETON, or `{key}: PATH` (relative to the map) in the map")
-            p = resolve_ref(path, ref, f.vmark(key))
+            p = (policy or RefPolicy()).resolve(path, ref, f.vmark(key))
             if not p.is_file():
                 raise InputError(f.vmark(key), f"skeleton file {ref!r} not found", "a path relative to the map file")
-            given = load_skeleton(p)
+            given = load_skeleton(p, policy)
         skels.append(given)
     skel_a, skel_b = skels
     bones = f.mapping("bones", required=True)
@@ -398,11 +399,11 @@ class TransferResult:
 
 
 def build_transfer(muscle_files: list[Path], skel_a: Skeleton | None, skel_b: Skeleton | None,
-                   map_path: Path | str, out_dir: Path | str) -> TransferResult:
+                   map_path: Path | str, out_dir: Path | str, policy: RefPolicy | None = None) -> TransferResult:
     """Transfer every muscle of ``muscle_files``; the output files' bytes (nothing is written here).
-    A skeleton given as None is the one the map names."""
+    A skeleton given as None is the one the map names (read with ``policy``)."""
     out_dir = Path(out_dir)
-    bmap = load_map(map_path, skel_a, skel_b)
+    bmap = load_map(map_path, skel_a, skel_b, policy)
     skel_a, skel_b = bmap.skel_a, bmap.skel_b
     tf = pair_transforms(bmap, skel_a, skel_b)
     wa, wb = emit.rest_world(skel_a), emit.rest_world(skel_b)

@@ -9,10 +9,13 @@ and non-finite or huge numbers.
 
 :class:`Fields` reads one mapping against a schema: every read key is checked for type and
 range, and :meth:`Fields.done` reports any key that was not read as unknown, listing the
-allowed ones.
+allowed ones. Given the schema's keys up front (``keys=``), unknown keys are reported before
+anything is read, so a misspelt key is never reported as a missing one; either way the
+nearest allowed key is suggested (``did you mean 'radii'?``).
 """
 from __future__ import annotations
 
+import difflib
 import math
 import os
 import re
@@ -26,7 +29,25 @@ from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError, Mark
 
 NAME_RE = re.compile(r"^[A-Za-z0-9_.-]+$")
-NAME_ALLOWED = "names use letters, digits, '_', '.', '-' (not '.' or '..' alone)"
+#: Longest name (characters = bytes: names are ASCII). Names become file names: the longest
+#: derived one is a temporary ``.axdf-tmp-<pid>-<muscle>_<frame>.ply`` (18 + name + 13 bytes
+#: for a frame up to 10,000,000), which must fit the usual 255-byte limit; 200 leaves room.
+NAME_MAX = 200
+NAME_ALLOWED = f"names use letters, digits, '_', '.', '-' (not '.' or '..' alone), at most {NAME_MAX} characters"
+
+
+def nearest(word, choices: Iterable[str]) -> str | None:
+    """The choice closest to ``word`` (difflib), or None when none is close."""
+    if not isinstance(word, str):
+        return None
+    hits = difflib.get_close_matches(word, [c for c in choices if isinstance(c, str)], n=1, cutoff=0.6)
+    return hits[0] if hits else None
+
+
+def did_you_mean(word, choices: Iterable[str]) -> str:
+    """``"did you mean 'x'? "`` for the nearest choice, or ``""``."""
+    near = nearest(word, choices)
+    return f"did you mean {near!r}? " if near else ""
 
 _STD_TAGS = {
     "tag:yaml.org,2002:str",
@@ -342,6 +363,8 @@ class _Converter:
 # ----------------------------------------------------------------------------- schema reading
 
 def _type_name(v) -> str:
+    if isinstance(v, str) and len(v) > NAME_MAX:
+        return f"a string of {len(v)} characters"
     if v is None:
         return "null"
     if isinstance(v, bool):
@@ -389,7 +412,7 @@ def _range_text(lo, hi, lo_open) -> str:
 
 
 def check_name(v, where: Mark, what: str) -> str:
-    if not isinstance(v, str) or not NAME_RE.match(v) or v in (".", ".."):
+    if not isinstance(v, str) or not NAME_RE.match(v) or v in (".", "..") or len(v) > NAME_MAX:
         # YAML reads 1e-5, 12 or true as a number or boolean: a name like that needs quotes
         quote = " (in quotes when it looks like a number or boolean)" if isinstance(v, (int, float)) else ""
         raise InputError(where, f"{what} is {_type_name(v)}", f"{what}: {NAME_ALLOWED}{quote}")
@@ -414,15 +437,18 @@ def check_vector(v, where: Mark, what: str, n: int | None = None, lo=None, hi=No
 
 
 class Fields:
-    """Read one YAML mapping against a schema; unknown keys are errors at :meth:`done`."""
+    """Read one YAML mapping against a schema; unknown keys are errors (see the module doc)."""
 
-    def __init__(self, value, where: Mark, what: str):
+    def __init__(self, value, where: Mark, what: str, keys: Sequence[str] | None = None):
         if not isinstance(value, dict):
             raise InputError(mark_of(value, where), f"{what} is {_type_name(value)}", f"{what} must be a mapping")
         self.m: YMap = value
         self.where = getattr(value, "mark", where)
         self.what = what
         self.known: list[str] = []
+        self.schema = None if keys is None else list(keys)
+        if self.schema is not None:
+            self._refuse_unknown(self.schema)
 
     # positions ---------------------------------------------------------------------------
     def vmark(self, key) -> Mark:
@@ -437,6 +463,8 @@ class Fields:
         return key in self.m
 
     def _know(self, key):
+        if self.schema is not None and key not in self.schema:
+            raise KeyError(f"{key!r} is not in the schema of {self.what}")  # a bug, not bad input
         if key not in self.known:
             self.known.append(key)
 
@@ -444,6 +472,12 @@ class Fields:
         self._know(key)
         if key not in self.m:
             if required:
+                # a misspelt key is reported as unknown (with its position), not as a missing one
+                unread = [k for k in self.m if k not in self.known and k not in (self.schema or ())]
+                near = nearest(key, unread)
+                if near is not None:
+                    raise InputError(self.kmark(near), f"unknown key {near!r} in {self.what}",
+                                     f"did you mean {key!r}? {self.what} needs {key!r}")
                 raise InputError(self.where, f"{self.what} has no {key!r}", f"{self.what} needs {key!r}")
             return default
         return self.m[key]
@@ -512,11 +546,13 @@ class Fields:
         return v
 
     def done(self, extra_allowed: Iterable[str] = ()) -> None:
-        allowed = list(self.known) + [k for k in extra_allowed if k not in self.known]
+        self._refuse_unknown(list(self.known) + [k for k in extra_allowed if k not in self.known])
+
+    def _refuse_unknown(self, allowed: list) -> None:
         for key in self.m:
             if key not in allowed:
                 raise InputError(self.kmark(key), f"unknown key {key!r} in {self.what}",
-                                 f"allowed: {', '.join(allowed)}")
+                                 f"{did_you_mean(key, allowed)}allowed: {', '.join(allowed)}")
 
 
 def item_marks(seq, where: Mark) -> list[Mark]:

@@ -161,15 +161,6 @@ def all_files(folder: Path) -> dict[str, bytes]:
 # ----------------------------------------------------------------------------- fixtures
 
 
-@pytest.fixture(autouse=True)
-def _restore_ref_policy(monkeypatch):
-    """`axdf` commands set the module-global path policy (loaders.POLICY) from their cwd and
-    arguments; restore it after each test so no test sees another's project root."""
-    from axdf_cli import loaders
-
-    monkeypatch.setattr(loaders, "POLICY", loaders.POLICY)
-
-
 @pytest.fixture
 def repo_root(monkeypatch) -> Path:
     """Run the test from the repository root (the CLI resolves relative paths from there)."""

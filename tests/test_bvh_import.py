@@ -141,16 +141,11 @@ def reference_positions(text: str, scale: float) -> tuple[list[str], np.ndarray]
 def imported_positions(tmp_path: Path, out: str, frames) -> tuple[object, np.ndarray]:
     """The imported skeleton and its bones' world origins (F, B, 3) at ``frames``."""
     from axdf_cli.loaders import RefPolicy, load_pose
-    from axdf_cli import loaders
     from axdf_cli.pose import sample_coordinates
     from axdf_cli.skeleton import forward_kinematics
 
-    loaders.POLICY = RefPolicy([tmp_path])
-    try:
-        (pose_file,) = (tmp_path / out).glob("*.yaml")
-        pose = load_pose(pose_file)
-    finally:
-        loaders.reset_ref_policy()
+    (pose_file,) = (tmp_path / out).glob("*.yaml")
+    pose = load_pose(pose_file, RefPolicy((tmp_path,)))
     q = sample_coordinates(pose, np.asarray(frames))
     return pose, forward_kinematics(pose.skeleton, q)[:, :, :3, 3]
 

@@ -19,8 +19,7 @@ JOB = ROOT / "poses" / "jobs" / "gait2392_walk.yaml"
 
 @pytest.fixture(scope="module")
 def whole_trial():
-    loaders.set_ref_policy([ROOT], False)
-    job = loaders.load_job(JOB)
+    job = loaders.load_job(JOB, loaders.RefPolicy((ROOT,)))
     plan = runner.plan_run(job, frames_arg="0:210")
     ratios, twists, finite = [], [], True
     for _, _, results in runner.evaluate_chunks(plan):

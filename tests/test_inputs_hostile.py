@@ -243,11 +243,7 @@ def _mot(path: Path, times, values=None, in_degrees: str = "yes") -> Path:
 @pytest.fixture
 def import_arm(tmp_path, monkeypatch):
     """``import_arm(mot, *flags)``: `axdf import osim arm26.osim --motion MOT` into tmp/out ->
-    exit code. The importer reads its skeleton back under the path policy: references inside
-    tmp_path are allowed (as inside the project for users), whatever an earlier test left."""
-    from axdf_cli import loaders
-
-    monkeypatch.setattr(loaders, "POLICY", loaders.RefPolicy([tmp_path]))
+    exit code (the path policy is an argument: no global state for a test to set)."""
 
     def run(mot: Path, *extra) -> int:
         return main_or_hang(["import", "osim", ARM, "--motion", mot, "--out", tmp_path / "out", "-q", *extra],

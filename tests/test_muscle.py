@@ -168,10 +168,10 @@ def test_rest_pose_through_the_pipeline_equals_rest(demo, repo_root):
     """Frame 0 of the demo pose is the rest pose with zero activation: every muscle equals
     its rest shape (plan_run + evaluate_chunks, the code path of `axdf run`)."""
     from axdf_cli import run as runner
-    from axdf_cli.loaders import load_job, set_ref_policy
+    from axdf_cli.loaders import RefPolicy, load_job
 
-    set_ref_policy([repo_root], allow_outside=False)  # as `axdf run` does
-    plan = runner.plan_run(load_job("poses/jobs/demo.yaml"), frames_arg="0")
+    policy = RefPolicy.for_command(["poses/jobs/demo.yaml"])  # as `axdf run` does
+    plan = runner.plan_run(load_job("poses/jobs/demo.yaml", policy), frames_arg="0")
     (_, world, results), = list(runner.evaluate_chunks(plan))
     np.testing.assert_allclose(world[0], demo.rest, rtol=0, atol=1e-15)
     for spec, model, (_, res) in zip(plan.muscles, plan.models, results):

@@ -14,14 +14,6 @@ from osim_common import (ARM, ARM_CTRL, ARM_Q, FK_MODEL, FK_Q, GAIT, GAIT_CTRL, 
 pytestmark = needs_data
 
 
-@pytest.fixture(autouse=True)
-def _refs_inside_tmp(tmp_path, monkeypatch):
-    """Loaders accept references inside the test's folder (as inside the project for users)."""
-    from axdf_cli import loaders
-
-    monkeypatch.setattr(loaders, "POLICY", loaders.RefPolicy([tmp_path, REPO]))
-
-
 @pytest.mark.parametrize("model,extra", [
     (ARM, ["--motion", str(ARM_Q), "--controls", str(ARM_CTRL), "--fps", "60"]),
     (GAIT, ["--motion", str(GAIT_Q), "--controls", str(GAIT_CTRL)]),

@@ -2,7 +2,7 @@ import argparse
 
 import pytest
 
-from axdf_cli.errors import InputError, Mark, UsageError
+from axdf_cli.errors import InputError, Mark
 from axdf_cli.render.settings import (RenderSettings, add_render_args, parse_render_settings,
                                       settings_from_args)
 from axdf_cli.yamlio import parse_yaml
@@ -58,5 +58,6 @@ def test_flags_override():
     assert s.background == (0, 0, 1, 1) and s.supersample == 1 and s.orbit == 3 and s.device == 0
     assert settings_from_args(RenderSettings(), p.parse_args([])) == RenderSettings()
     for bad in (["--size", "512"], ["--background", "red"], ["--supersample", "9"], ["--device", "x"]):
-        with pytest.raises(UsageError):
+        with pytest.raises(InputError) as e:  # named by the flag, as a YAML error by its position
             settings_from_args(RenderSettings(), p.parse_args(bad))
+        assert str(e.value).startswith(bad[0] + ": "), str(e.value)

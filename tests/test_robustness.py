@@ -206,7 +206,7 @@ def _mutate(project: Path, case: str) -> None:
     elif case == "escaping skeleton":
         path.write_text(text.replace("skeleton: skeletons/human_r.yaml", "skeleton: ../../../etc/skel.yaml"))
     elif case == "escaping out":
-        path.write_text(text.replace("out: out/demo", "out: ../../../tmp/evil"))
+        path.write_text(text.replace("out: ../../out/demo", "out: ../../../tmp/evil"))
     elif case == "huge number":
         path.write_text(text.replace("twist: 0", "twist: 1e308").replace("tendons: [0.15, 0.12]",
                                                                          "tendons: [0.15, 0.12]\ntwist: 1e308"))

@@ -152,7 +152,8 @@ def test_bones_without_counterpart_are_skipped_and_reported(tmp_path, capsys):
      "segment point has 2 values"),
     ("transfer: m\nbones:\n  femur_r: {to: RightHip, scale: -1}\n", "3:34", "scale is -1"),
     ("transfer: m\nbones:\n  femur_r: {to: RightHip, rotation: [0, 0, 0]}\n", "3:27", "unknown key 'rotation'"),
-    ("transfer: m\nbone:\n  femur_r: RightHip\n", "1:1", "transfer map has no 'bones'"),
+    ("transfer: m\nbone:\n  femur_r: RightHip\n", "2:1",  # a misspelt key: unknown, not missing
+     "unknown key 'bone' in transfer map; did you mean 'bones'?"),
     ("transfer: m\nbones: {femur_r: RightHip}\nbone: {}\n", "3:1", "unknown key 'bone' in transfer map"),
 ])
 def test_bad_map_exit_2_at_its_position(tmp_path, capsys, text, where, what):

@@ -98,9 +98,6 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         for sig, handler in old.items():
             signal.signal(sig, handler)
-        from axdf_cli.loaders import reset_ref_policy
-
-        reset_ref_policy()
 
 
 def entry() -> None:

@@ -2,10 +2,9 @@
 from __future__ import annotations
 
 import sys
-from pathlib import Path
 
 from axdf_cli.formats import WRITERS
-from axdf_cli.loaders import load_job, set_ref_policy
+from axdf_cli.loaders import RefPolicy, load_job
 
 
 def add_args(p) -> None:
@@ -25,6 +24,8 @@ def add_args(p) -> None:
     g2.add_argument("--overwrite", action="store_true", help="replace the outputs of an earlier run in OUT")
     p.add_argument("--dry-run", action="store_true", help="check inputs and print what would be written; write nothing")
     p.add_argument("--strict", action="store_true", help="fail (exit 2) on any per-muscle, per-frame warning")
+    p.add_argument("--clamp-ranges", action="store_true",
+                   help="hold coordinates inside their skeleton ranges (default: warn per frame)")
     p.add_argument("--allow-outside", action="store_true",
                    help="allow paths inside YAML files to leave the project folder tree")
     from axdf_cli.render.settings import add_render_args
@@ -46,25 +47,19 @@ def _positive(text: str) -> int:
 
 def run(args) -> int:
     from axdf_cli import run as runner
-    from axdf_cli.yamlio import real_path
 
-    roots = [Path.cwd()] + ([real_path(args.job).parent] if args.job else [])
-    set_ref_policy(roots, args.allow_outside)
-    job = load_job(args.job) if args.job else None
-    from dataclasses import replace
-
-    from axdf_cli.render.settings import settings_from_args
-
-    settings = runner.job_render_settings(job)
-    if args.render is not None:
-        settings = replace(settings, enabled=args.render)
-    plan = runner.plan_run(job, muscle_args=args.muscles, pose_arg=args.pose, out_arg=args.out,
-                           fmt_arg=args.format, frames_arg=args.frames, render=settings_from_args(settings, args))
+    plan = plan_from_args(args)
     if args.verbose:
         for n in plan.notes:
             print(f"note: {n}", file=sys.stderr)
     for w in plan.warnings:
         print(f"warning: {w}", file=sys.stderr)
+    if plan.frame_warnings and not args.quiet:
+        first = plan.frame_warnings[0]
+        print(f"warning: {len(plan.frame_warnings)} muscle-frame(s) posed outside a coordinate range, first "
+              f"frame {int(plan.frames[first[0]])}: {first[2]}", file=sys.stderr)
+    if args.strict:
+        refuse_warnings(plan)
     total = len(plan.frames) * len(plan.models)
     if args.dry_run:
         runner.check_output(plan, resume=args.resume, overwrite=args.overwrite)
@@ -97,3 +92,33 @@ def run(args) -> int:
         if summary["warnings"]:
             print(f"{len(summary['warnings'])} warning(s): see {summary['out']}/stats.csv", file=sys.stderr)
     return 0
+
+
+def plan_from_args(args):
+    """The run's plan from the command line, exactly as ``axdf run`` makes it (``axdf validate``
+    calls it too). Files named on the command line, and their folders, are trusted roots."""
+    from dataclasses import replace
+
+    from axdf_cli import run as runner
+    from axdf_cli.render.settings import settings_from_args
+
+    policy = RefPolicy.for_command([args.job, args.pose] + list(args.muscles or []), args.allow_outside)
+    job = load_job(args.job, policy) if args.job else None
+    settings = runner.job_render_settings(job)
+    if args.render is not None:
+        settings = replace(settings, enabled=args.render)
+    return runner.plan_run(job, muscle_args=args.muscles, pose_arg=args.pose, out_arg=args.out,
+                           fmt_arg=args.format, frames_arg=args.frames, render=settings_from_args(settings, args),
+                           policy=policy, clamp_ranges=args.clamp_ranges)
+
+
+def refuse_warnings(plan) -> None:
+    """``--strict``: warnings known before evaluation (misspelt activation names, coordinates
+    outside their ranges) are refused before anything is written."""
+    from axdf_cli.errors import InputError
+
+    found = list(plan.warnings) + [f"{plan.names[j]} frame {int(plan.frames[i])}: {msg}"
+                                   for i, j, msg in plan.frame_warnings]
+    if found:
+        raise InputError(None, f"{len(found)} warning(s) with --strict; first: {found[0]}",
+                         "fix the inputs or run without --strict")

@@ -30,15 +30,15 @@ def add_args(p) -> None:
 
 def run(args) -> int:
     from axdf_cli.errors import Mark
-    from axdf_cli.loaders import expand_muscle_paths, load_skeleton, set_ref_policy
+    from axdf_cli.loaders import RefPolicy, expand_muscle_paths, load_skeleton
     from axdf_cli.transfer import build_transfer
-    from axdf_cli.yamlio import real_path
 
-    set_ref_policy([Path.cwd(), real_path(args.map).parent], args.allow_outside)
-    skel_a = load_skeleton(Path(args.skel_from)) if args.skel_from else None
-    skel_b = load_skeleton(Path(args.skel_to)) if args.skel_to else None
-    files = expand_muscle_paths([(Path(m), Mark(m)) for m in args.muscles])
-    res = build_transfer(files, skel_a, skel_b, Path(args.map), Path(args.out))
+    # files named here, and their folders, are trusted roots (as for axdf run)
+    policy = RefPolicy.for_command([args.map, args.skel_from, args.skel_to] + list(args.muscles), args.allow_outside)
+    skel_a = load_skeleton(Path(args.skel_from), policy) if args.skel_from else None
+    skel_b = load_skeleton(Path(args.skel_to), policy) if args.skel_to else None
+    files = expand_muscle_paths([(Path(m), Mark(m)) for m in args.muscles], policy)
+    res = build_transfer(files, skel_a, skel_b, Path(args.map), Path(args.out), policy)
     for path, data in sorted(res.files.items()):
         write_bytes(path, data)
     for s in res.skipped:

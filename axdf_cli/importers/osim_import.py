@@ -51,7 +51,7 @@ import numpy as np
 from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.importers import emit
-from axdf_cli.loaders import parse_skeleton_text
+from axdf_cli.loaders import RefPolicy, parse_skeleton_text
 from axdf_cli.yamlio import check_name
 from axdf_cli.importers.osim import Model, load_osim
 from axdf_cli.importers.storage import Table, read_storage
@@ -344,7 +344,8 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
               "Regenerate with the importer rather than editing by hand.")
     text = emit.dump_yaml(sdoc, header)
     files[str(skel_path)] = text.encode()
-    skel = parse_skeleton_text(text, skel_path)  # the file as axdf will read it back
+    # the file as axdf will read it back; its mesh references name files this import writes
+    skel = parse_skeleton_text(text, skel_path, RefPolicy(allow_outside=True))
     world = emit.rest_world(skel)
 
     rows = []

@@ -17,9 +17,16 @@ the top-left pixel and its centre is at (0.5, 0.5); a world point P projects to
 For a sheet each panel has its own camera whose ``K`` already includes the panel's
 horizontal offset, so projected pixels are pixels of the whole sheet.
 
-Automatic framing uses ``Scene.bounds`` (every muscle over every frame): one fixed distance
-is chosen for the whole sequence (for an orbit, the largest over all its angles), so the
-camera never jumps and every muscle stays in view.
+Automatic framing frames ``Scene.framing`` (points whose hull holds the subject: the
+skeleton's bones over *every* frame of the pose, see :func:`axdf_cli.pose.subject_points`;
+``Scene.bounds`` when a scene has none): the camera depends on the skeleton, the whole pose
+and the render settings only, never on which frames are written or on the muscles, so a
+muscle edit or a ``--frames`` subset leaves every frame's camera as it was. For a fixed view
+the fit is exact and centred: the distance is the least that shows every point inside the
+image less ``FRAME_MARGIN`` at each border, and the camera is shifted sideways so that the
+projected subject sits in the middle both ways (:func:`fit_distance_view`, :func:`centre_shift`). The panels of a sheet
+share the largest of their distances (one scale). An orbit turns about the framing centre
+at one distance that fits every angle of a full turn.
 """
 from __future__ import annotations
 
@@ -31,7 +38,9 @@ import numpy as np
 from axdf_cli.render.settings import RenderSettings
 
 # Fraction of the image kept free at each border by automatic framing.
-FRAME_MARGIN = 0.06
+FRAME_MARGIN = 0.04
+# Orbit angles (degrees apart) over a full turn whose fits give an orbit's one distance.
+ORBIT_FIT_STEP = 1.0
 # Direction from the target to the camera for view "auto" (front, +X side, above).
 AUTO_FROM = (0.6, -1.0, 0.45)
 # Smallest extent (metres) used for framing, so a point-like scene still frames.
@@ -114,17 +123,66 @@ def _box_corners(bounds: np.ndarray) -> np.ndarray:
     return c + signs * half
 
 
-def fit_distance(corners_rel: np.ndarray, R: np.ndarray, tan_x: float, tan_y: float) -> float:
-    """Smallest distance along ``-forward`` from the target that shows every corner.
+def framing_points(scene) -> np.ndarray:
+    """(N, 3) world points the automatic camera frames: ``scene.framing``, else the corners
+    of ``scene.bounds``."""
+    framing = getattr(scene, "framing", None)
+    if framing is not None and len(framing):
+        return np.asarray(framing, dtype=np.float64)
+    return _box_corners(scene.bounds)
 
-    ``corners_rel``: (8, 3) corners minus the target; ``R``: (3, 3) world-to-camera rotation;
+
+def fit_distance(corners_rel: np.ndarray, R: np.ndarray, tan_x: float, tan_y: float) -> float:
+    """Smallest distance along ``-forward`` from the target that shows every point.
+
+    ``corners_rel``: (N, 3) points minus the target; ``R``: (3, 3) world-to-camera rotation;
     ``tan_x``, ``tan_y``: tangents of the half fields of view, already shrunk by the margin.
-    A corner p (camera axes) at distance D has depth D + p_z and must satisfy
+    A point p (camera axes) at distance D has depth D + p_z and must satisfy
     |p_x| <= tan_x (D + p_z) and |p_y| <= tan_y (D + p_z).
     """
-    p = corners_rel @ R.T  # (8, 3)
+    p = corners_rel @ R.T  # (N, 3)
     need = np.maximum(np.abs(p[:, 0]) / tan_x, np.abs(p[:, 1]) / tan_y) - p[:, 2]
     return float(need.max())
+
+
+def fit_distance_view(points: np.ndarray, R: np.ndarray, tan_x: float, tan_y: float) -> float:
+    """The least distance at which view rotation ``R`` can show every point (shifted sideways).
+
+    With q = R p (camera axes about the world origin) and the camera at (s_x, s_y, -D) in
+    those axes, point i is in view when |q_x - s_x| <= tan_x (q_z + D) (and alike in y). For
+    a given D the allowed s_x form the interval [max(q_x - tan_x q_z) - tan_x D,
+    min(q_x + tan_x q_z) + tan_x D], non-empty from D_x = (max(q_x - tan_x q_z) -
+    min(q_x + tan_x q_z)) / (2 tan_x) on. The least distance is max(D_x, D_y) (points in front)."""
+    q = points @ R.T
+    d_x = ((q[:, 0] - tan_x * q[:, 2]).max() - (q[:, 0] + tan_x * q[:, 2]).min()) / (2 * tan_x)
+    d_y = ((q[:, 1] - tan_y * q[:, 2]).max() - (q[:, 1] + tan_y * q[:, 2]).min()) / (2 * tan_y)
+    extent = float(np.max(points.max(axis=0) - points.min(axis=0)))
+    return float(max(d_x, d_y, float(-q[:, 2].min()) + 1e-3 * max(extent, MIN_EXTENT)))
+
+
+def centre_shift(points: np.ndarray, R: np.ndarray, dist: float, tans: tuple[float, float]) -> np.ndarray:
+    """The sideways shift (s_x, s_y) at distance ``dist`` (>= :func:`fit_distance_view`) that
+    centres the projected points: max_i u_i = -min_i u_i with u_i = (q_i - s) / (q_z,i + dist),
+    solved by bisection inside the interval where every point is in view (at its ends the
+    points touch one edge, so the balance changes sign there)."""
+    q = points @ R.T
+    depth = q[:, 2] + dist
+    out = np.empty(2)
+    for k, t in enumerate(tans):
+        lo = (q[:, k] - t * depth).max()
+        hi = (q[:, k] + t * depth).min()
+        for _ in range(60):  # the balance decreases in s
+            s = 0.5 * (lo + hi)
+            u = (q[:, k] - s) / depth
+            lo, hi = (s, hi) if u.max() + u.min() > 0 else (lo, s)
+        out[k] = 0.5 * (lo + hi)
+    return out
+
+
+def _view_axes(view: str, angle: float) -> tuple[np.ndarray, np.ndarray]:
+    Rz = rot_z(angle)
+    fwd, up = (Rz @ np.asarray(x, float) for x in VIEW_AXES[view])
+    return fwd / np.linalg.norm(fwd), up
 
 
 def panel_count(settings: RenderSettings) -> int:
@@ -132,53 +190,69 @@ def panel_count(settings: RenderSettings) -> int:
     return len(SHEET_VIEWS) if settings.view == "sheet" and settings.camera is None else 1
 
 
-def sequence_cameras(bounds: np.ndarray, frames: tuple[int, ...] | list[int],
-                     settings: RenderSettings) -> list[list[Camera]]:
-    """Cameras for every frame: ``[frame index][panel]``; fixed unless ``orbit`` is set."""
+def sequence_cameras(scene, settings: RenderSettings) -> list[list[Camera]]:
+    """Cameras for every frame of ``scene.frames``: ``[frame index][panel]``; fixed unless
+    ``orbit`` is set (the angle counts from ``scene.first_frame``, the pose's first frame, so
+    it too is the same for any subset of frames)."""
     W, H = settings.size
-    frames = list(frames)
-    first = frames[0] if frames else 0
+    frames = [int(f) for f in scene.frames]
+    first = getattr(scene, "first_frame", None)
+    first = first if first is not None else (frames[0] if frames else 0)
     angles = [settings.orbit * (f - first) for f in frames]
-    corners = _box_corners(bounds)
+    points = framing_points(scene)
     if settings.camera is not None:
-        return [[_explicit(settings, corners, a)] for a in angles]
+        return [[_explicit(settings, points, a)] for a in angles]
 
     views = SHEET_VIEWS if settings.view == "sheet" else (settings.view,)
     fov = settings.fov
     tan_y = math.tan(math.radians(fov) / 2) * (1 - 2 * FRAME_MARGIN)
     tan_x = tan_y * W / H
-    target = corners.mean(axis=0)
-    # one distance for every view, frame and orbit angle: no jumping, one scale per sheet
-    dist = MIN_EXTENT
-    for a in sorted(set(angles)) or [0.0]:
-        Rz = rot_z(a)
-        for v in views:
-            fwd, up = (Rz @ np.asarray(x) for x in VIEW_AXES[v])
-            R = look_at(np.zeros(3), fwd, up)[:3, :3]
-            dist = max(dist, fit_distance(corners - target, R, tan_x, tan_y))
-    out = []
-    for a in angles:
-        Rz = rot_z(a)
+    if settings.orbit == 0.0:
+        # fixed views: each centred on the subject, all at the largest distance (one scale)
+        rots = {v: look_at(np.zeros(3), *_view_axes(v, 0.0))[:3, :3] for v in views}
+        dist = max(fit_distance_view(points, R, tan_x, tan_y) for R in rots.values())
         panel = []
         for i, v in enumerate(views):
-            fwd, up = (Rz @ np.asarray(x) for x in VIEW_AXES[v])
-            fwd = fwd / np.linalg.norm(fwd)
+            R = rots[v]
+            shift = centre_shift(points, R, dist, (tan_x, tan_y))
+            M = np.eye(4)
+            M[:3, :3] = R
+            M[:3, 3] = -np.array([shift[0], shift[1], -dist])
+            near, far = _clip_range(M, points)
+            panel.append(Camera(v, intrinsics(W, H, fov, i * W), M, (i * W, 0, W, H), near, far))
+        return [list(panel) for _ in frames]
+    # orbit: about the framing centre, one distance fitting every angle of a full turn
+    target = 0.5 * (points.min(axis=0) + points.max(axis=0))
+    dist = MIN_EXTENT
+    for a in np.arange(0.0, 360.0, ORBIT_FIT_STEP):
+        for v in views:
+            fwd, up = _view_axes(v, float(a))
+            dist = max(dist, fit_distance(points - target, look_at(np.zeros(3), fwd, up)[:3, :3], tan_x, tan_y))
+    out = []
+    for a in angles:
+        panel = []
+        for i, v in enumerate(views):
+            fwd, up = _view_axes(v, a)
             M = look_at(target - dist * fwd, fwd, up)
-            near, far = _clip_range(M, corners)
+            near, far = _clip_range(M, points)
             panel.append(Camera(v, intrinsics(W, H, fov, i * W), M, (i * W, 0, W, H), near, far))
         out.append(panel)
     return out
 
 
-def _explicit(settings: RenderSettings, corners: np.ndarray, angle: float) -> Camera:
+def _explicit(settings: RenderSettings, points: np.ndarray, angle: float) -> Camera:
     cam = settings.camera
     W, H = settings.size
-    target = np.asarray(cam.target, float)
+    centre = 0.5 * (points.min(axis=0) + points.max(axis=0))
+    target = np.asarray(cam.target if cam.target is not None else centre, float)
     Rz = rot_z(angle)
     pos = target + Rz @ (np.asarray(cam.position, float) - target)
     up = Rz @ np.asarray(cam.up, float)
-    M = look_at(pos, target - pos, up)
-    near, far = _clip_range(M, corners)
+    fwd = target - pos
+    if np.linalg.norm(np.cross(fwd, up)) < 1e-9 * max(np.linalg.norm(fwd), 1e-12):
+        up = Rz @ np.array([0.0, 1.0, 0.0])  # looking along up (a default target straight below)
+    M = look_at(pos, fwd, up)
+    near, far = _clip_range(M, points)
     return Camera("camera", intrinsics(W, H, cam.fov), M, (0, 0, W, H), near, far)
 
 

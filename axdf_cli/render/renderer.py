@@ -14,6 +14,10 @@ Per frame and per panel (view) two passes are drawn:
 
 Ids: 0 = background, ``1 .. M`` = ``Scene.muscles`` in order, ``M+1 .. M+B`` = bones.
 
+Bones: a bone with a mesh is drawn as its mesh; a bone without one as a stick (a thin
+cylinder) from its parent's joint to its own, so a skeleton without meshes still shows
+(:class:`BoneLayout` turns a skeleton's poses into the scene bones' transforms).
+
 Speed: each mesh's topology (index buffer) and each bone mesh are uploaded once; per frame
 only muscle positions and normals are written (one buffer write each) and each target is
 read back once.
@@ -28,9 +32,12 @@ import numpy as np
 from axdf_cli.render.camera import Camera, sequence_cameras
 from axdf_cli.render.context import check_same_process
 from axdf_cli.render.settings import RenderSettings
-from axdf_cli.scene import FrameChunk, Scene
+from axdf_cli.scene import FrameChunk, Scene, SceneBone
 
 BONE_COLOR = (0.78, 0.75, 0.68)  # neutral ivory, linear RGB
+STICK_SIDES = 12  # a stick is a 12-sided cylinder with flat caps
+STICK_RADIUS_FRACTION = 0.006  # stick radius per metre of the subject's largest extent
+STICK_MIN_RADIUS = 0.002  # metres
 WIRE_DARKEN = 0.55  # wire colour = albedo * this
 WIRE_DEPTH_BIAS = 2e-4  # NDC depth pulled towards the camera so edges win over their faces
 BACKGROUND_ID = 0
@@ -122,6 +129,76 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return (n / np.where(length > 0, length, 1.0)).astype(np.float32)
 
 
+def unit_stick(sides: int = STICK_SIDES) -> tuple[np.ndarray, np.ndarray]:
+    """A closed cylinder of radius 1 from z = 0 to z = 1: (V, 3) float32, (T, 3) int32,
+    outward; sides and caps have their own vertices (crisp normals)."""
+    a = 2 * np.pi * np.arange(sides) / sides
+    ring = np.stack([np.cos(a), np.sin(a)], axis=1)
+    side = np.concatenate([np.c_[ring, np.zeros(sides)], np.c_[ring, np.ones(sides)]])  # 0..2s-1
+    caps = np.concatenate([side, [[0, 0, 0], [0, 0, 1]]])  # 2s..4s-1 rings, 4s, 4s+1 centres
+    k = np.arange(sides)
+    n = (k + 1) % sides
+    faces = [np.stack([k, n, sides + n], 1), np.stack([k, sides + n, sides + k], 1),
+             np.stack([np.full(sides, 4 * sides), 2 * sides + n, 2 * sides + k], 1),
+             np.stack([np.full(sides, 4 * sides + 1), 3 * sides + k, 3 * sides + n], 1)]
+    return np.concatenate([side, caps]).astype(np.float32), np.concatenate(faces).astype(np.int32)
+
+
+@dataclass(frozen=True)
+class BoneLayout:
+    """The scene bones of a skeleton: each bone's mesh, or for a bone without one a stick
+    from its parent's joint to its own; :meth:`transforms` poses them."""
+
+    bones: tuple[SceneBone, ...]
+    sources: tuple[tuple[int, int], ...]  # per scene bone: (bone, -1) for a mesh, (bone, parent) for a stick
+    radius: float  # stick radius, metres
+
+    def transforms(self, world: np.ndarray) -> np.ndarray:
+        """(C, n_scene_bones, 4, 4) model matrices from the skeleton's (C, B, 4, 4) world
+        transforms: a mesh's bone frame, or a stick's scaled frame along parent -> joint."""
+        out = np.empty((world.shape[0], len(self.sources), 4, 4))
+        for k, (b, parent) in enumerate(self.sources):
+            out[:, k] = world[:, b] if parent < 0 else stick_matrices(world[:, parent, :3, 3], world[:, b, :3, 3],
+                                                                      self.radius)
+        return out
+
+
+def bone_layout(names, parents, meshes: dict, extent: float) -> BoneLayout:
+    """``names`` of every bone and ``parents``: the bone a stick joins it to (-1: none, see
+    :meth:`axdf_cli.skeleton.Skeleton.stick_parents`); ``meshes``: bone index -> (vertices,
+    faces) bone-local; ``extent``: the subject's largest extent (stick radius)."""
+    radius = max(STICK_MIN_RADIUS, STICK_RADIUS_FRACTION * extent)
+    stick_v, stick_f = unit_stick()
+    bones, sources = [], []
+    for b, (name, parent) in enumerate(zip(names, parents)):
+        if b in meshes:
+            bones.append(SceneBone(name, *meshes[b]))
+            sources.append((b, -1))
+        elif parent >= 0:
+            bones.append(SceneBone(name, stick_v, stick_f))
+            sources.append((b, parent))
+    return BoneLayout(tuple(bones), tuple(sources), float(radius))
+
+
+def stick_matrices(a: np.ndarray, b: np.ndarray, radius: float) -> np.ndarray:
+    """(C, 4, 4) matrices taking :func:`unit_stick` onto cylinders of ``radius`` from ``a`` to
+    ``b`` (C, 3); a zero-length stick collapses to a point (draws nothing)."""
+    d = b - a
+    length = np.linalg.norm(d, axis=1, keepdims=True)
+    z = np.where(length > 1e-12, d / np.maximum(length, 1e-300), [0.0, 0.0, 1.0])
+    helper = np.where(np.abs(z[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    x = np.cross(helper, z)
+    x /= np.linalg.norm(x, axis=1, keepdims=True)
+    y = np.cross(z, x)
+    m = np.zeros((len(a), 4, 4))
+    m[:, :3, 0] = x * radius
+    m[:, :3, 1] = y * radius
+    m[:, :3, 2] = z * length
+    m[:, :3, 3] = a
+    m[:, 3, 3] = 1.0
+    return m
+
+
 def downsample(img: np.ndarray, s: int) -> np.ndarray:
     """Box filter: (H*s, W*s, C) -> (H, W, C) float32 mean of each s x s block.
 
@@ -191,6 +268,8 @@ class Renderer:
         self.bones = []
         if settings.bones:
             for j, b in enumerate(scene.bones):
+                if len(b.faces) == 0:
+                    continue  # nothing to draw (its id stays reserved)
                 v = np.ascontiguousarray(b.vertices, dtype=np.float32)
                 n = vertex_normals(v, b.faces)
                 vbo = ctx.buffer(np.concatenate([v, n], axis=1).tobytes())
@@ -288,7 +367,7 @@ def render_frames(ctx, scene: Scene, chunks: Iterable[FrameChunk], settings: Ren
                   cameras: list[list[Camera]] | None = None) -> Iterator[FrameImages]:
     """Render every frame of ``chunks`` (in order) with ``ctx``; yield :class:`FrameImages`."""
     if cameras is None:
-        cameras = sequence_cameras(scene.bounds, scene.frames, settings)
+        cameras = sequence_cameras(scene, settings)
     by_frame = {int(f): cams for f, cams in zip(scene.frames, cameras)}
     r = Renderer(ctx, scene, settings, len(cameras[0]) if cameras else 1)
     try:

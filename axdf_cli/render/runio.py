@@ -5,9 +5,11 @@ The layout and the manifest are :mod:`axdf_cli.runfolder`'s. What is read:
 - ``manifest.json`` (an axdf run's: ``tool: axdf``): ``muscles: [{name, color, ...}]``
   (colour as linear ``[r, g, b]`` in 0..1, or sRGB ``"#rrggbb"``), ``frames: [...]``,
   ``settings.format`` (the meshes' format: a folder with stale files of another format
-  reads the right ones), optional ``bones: [{name, mesh}]`` (``mesh`` relative to the run
-  folder, a PLY in bone-local coordinates) and optional ``settings.render``. A damaged
-  manifest is an input error at its line and column.
+  reads the right ones), optional ``bones: [{name, mesh, stick_from}]`` (``mesh`` relative to
+  the run folder, a PLY in bone-local coordinates; ``stick_from``: the bone a mesh-less bone
+  is drawn joined to), optional ``framing: {first_frame, points}`` (what the automatic
+  camera frames) and optional ``settings.render``. A damaged manifest is an input error at
+  its line and column.
 - ``meshes/<muscle>/<muscle>_<frame:04d>.ply`` (binary little-endian, float32 x y z nx ny
   nz, int32 triangle lists) or ``.obj`` (``v``, ``vn``, ``f a//a``).
 - ``bones.csv``: ``frame,bone,x,y,z,qw,qx,qy,qz`` world pose of each bone per frame.
@@ -27,7 +29,7 @@ from axdf_cli.render.settings import RenderSettings, parse_render_settings
 from axdf_cli.runfolder import BONES_CSV, Manifest, mesh_relpath, read_run_manifest
 from axdf_cli.runfolder import plain_relpath as _plain
 from axdf_cli.yamlio import NAME_ALLOWED, NAME_RE
-from axdf_cli.scene import FrameChunk, Scene, SceneBone, SceneMuscle
+from axdf_cli.scene import FrameChunk, Scene, SceneMuscle
 
 def _color(c, where: Mark) -> tuple[float, float, float]:
     if isinstance(c, str) and len(c) == 7 and c.startswith("#"):
@@ -68,17 +70,21 @@ def load_run_scene(run_dir: Path, manifest: Manifest | None = None, frames=None
             raise m.error(("muscles", i, "name"), f"{name!r} is not a muscle name", NAME_ALLOWED)
         names.append(name)
         colors.append(_color(mu.get("color", [0.7, 0.3, 0.3]), m.mark(("muscles", i, "color"))))
-    bones_raw = m.get(("bones",), list, "a list of {name, mesh}", required=False, default=[])
-    bone_entries = []
+    bones_raw = m.get(("bones",), list, "a list of {name, mesh, stick_from}", required=False, default=[])
+    bone_names, bone_meshes, stick_from = [], {}, []
     for i, b in enumerate(bones_raw):
-        m.get(("bones", i), dict, "an object {name, mesh}")
+        m.get(("bones", i), dict, "an object {name, mesh, stick_from}")
         name = m.get(("bones", i, "name"), str, "a bone name")
         mesh = m.get(("bones", i, "mesh"), (str, type(None)), "a path in the run folder or null",
                      required=False, default=None)
         if mesh is not None and not _plain(mesh):
             raise m.error(("bones", i, "mesh"), f"{mesh!r} leaves the run folder", "a path inside the run folder")
+        bone_names.append(name)
+        stick_from.append(m.get(("bones", i, "stick_from"), (str, type(None)), "a bone name or null",
+                                required=False, default=None))
         if mesh:
-            bone_entries.append((name, mesh))
+            bone_meshes[i] = mesh
+    framing, first_frame = recorded_framing(m)
     settings = recorded_render_settings(m)
     selected = all_frames if frames is None else tuple(int(f) for f in frames)
 
@@ -104,12 +110,19 @@ def load_run_scene(run_dir: Path, manifest: Manifest | None = None, frames=None
             lo, hi = np.minimum(lo, pos.min(0)), np.maximum(hi, pos.max(0))
     bounds = np.stack([lo, hi]) if muscles else np.zeros((2, 3))
 
-    bones = []
-    for name, mesh in bone_entries:
+    from axdf_cli.render.renderer import bone_layout
+
+    meshes = {}
+    for i, mesh in bone_meshes.items():
         v, _, faces = load_triangles(run_dir / mesh)
-        bones.append(SceneBone(name, v, faces))
-    bone_world = _read_bones_csv(run_dir / BONES_CSV, selected, [b.name for b in bones])
-    scene = Scene(tuple(muscles), tuple(bones), bounds.astype(np.float64), all_frames)
+        meshes[i] = (v, faces)
+    parents = [bone_names.index(s) if s in bone_names else -1 for s in stick_from]
+    extent = float(np.ptp(framing if framing is not None else bounds, axis=0).max())
+    layout = bone_layout(bone_names, parents, meshes, extent)
+    world = _read_bones_csv(run_dir / BONES_CSV, selected, bone_names if layout.bones else [])
+    bone_world = layout.transforms(world)
+    scene = Scene(tuple(muscles), layout.bones, bounds.astype(np.float64), all_frames,
+                  framing=framing, first_frame=first_frame)
 
     def chunks() -> Iterator[FrameChunk]:
         for k, f in enumerate(selected):
@@ -124,6 +137,22 @@ def load_run_scene(run_dir: Path, manifest: Manifest | None = None, frames=None
             yield FrameChunk(np.array([f]), tuple(ps), tuple(ns), bone_world[k:k + 1])
 
     return scene, chunks(), settings
+
+
+def recorded_framing(m: Manifest) -> tuple[np.ndarray | None, int | None]:
+    """The run's ``framing`` (what its automatic camera framed, so that rendering the run
+    again frames it the same way): (points (N, 3) or None, the pose's first frame or None)."""
+    if m.get(("framing",), (dict, type(None)), "{first_frame, points}", required=False) is None:
+        return None, None
+    raw = m.get(("framing", "points"), list, "a list of [x, y, z] points")
+    try:
+        pts = np.array(raw, dtype=np.float64)
+    except (TypeError, ValueError):
+        pts = np.zeros((0, 0))
+    if pts.ndim != 2 or pts.shape[1:] != (3,) or not len(pts) or not np.isfinite(pts).all():
+        raise m.error(("framing", "points"), "is not a list of [x, y, z] numbers", "the points axdf run framed")
+    first = m.get(("framing", "first_frame"), int, "the pose's first frame", required=False, default=None)
+    return pts, first
 
 
 def recorded_render_settings(m: Manifest) -> RenderSettings:

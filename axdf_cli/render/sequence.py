@@ -50,7 +50,7 @@ def render_sequence(scene: Scene, chunks: Iterable[FrameChunk], settings: Render
     path: sha256}}``. Raises :class:`EnvironmentProblem` (exit 3) when no EGL context can be made.
     """
     root = out_dir if isinstance(out_dir, Root) else Root(Path(out_dir))
-    cameras = sequence_cameras(scene.bounds, scene.frames, settings)
+    cameras = sequence_cameras(scene, settings)
     ctx = create_gl_context(device=settings.device, libegl=settings.egl_library)
     try:
         info = gl_info(ctx)
@@ -106,28 +106,35 @@ def check_render(settings: RenderSettings, on_note=None) -> RenderSettings:
 RENDER_CHUNK = 16  # frames per block handed to the renderer by render_plan (all muscles of a frame at once)
 
 
-def render_plan(plan, out_dir: Path, bounds, twist_ref, progress: Callable[[int], None] | None = None) -> dict:
+def render_plan(plan, out_dir: Path, bounds, twist_ref, progress: Callable[[int], None] | None = None,
+                framing_points=None) -> dict:
     """Render a run plan's frames into ``out_dir`` (``axdf run --render``): the muscles are
     evaluated again, block by block (evaluation is cheap next to rendering and this keeps
-    memory bounded), exactly as the mesh pass wrote them."""
+    memory bounded), exactly as the mesh pass wrote them. ``framing_points``: what the
+    automatic camera frames (default :func:`axdf_cli.run.plan.framing`)."""
+    import numpy as np
+
+    from axdf_cli.render.renderer import bone_layout
     from axdf_cli.run.evaluate import evaluate_chunks, finite_or_rest
-    from axdf_cli.scene import SceneBone, SceneMuscle
+    from axdf_cli.run.plan import framing
+    from axdf_cli.scene import SceneMuscle
 
     skel = plan.pose.skeleton
-    bone_ids, scene_bones = [], []
-    if plan.render.bones:
-        for i, (v, f, _) in sorted(plan.bone_meshes.items()):
-            bone_ids.append(i)
-            scene_bones.append(SceneBone(skel.bones[i].name, v, f))
+    framing_points = framing(plan) if framing_points is None else framing_points
+    shown = skel.bones if plan.render.bones else ()
+    layout = bone_layout([b.name for b in shown], skel.stick_parents() if shown else [],
+                         {i: (v, f) for i, (v, f, _) in plan.bone_meshes.items() if shown},
+                         float(np.ptp(framing_points, axis=0).max()))
     scene = Scene(
         muscles=tuple(SceneMuscle(s.name, s.color, m.faces) for s, m in zip(plan.muscles, plan.models)),
-        bones=tuple(scene_bones), bounds=bounds, frames=tuple(int(f) for f in plan.frames))
+        bones=layout.bones, bounds=bounds, frames=tuple(int(f) for f in plan.frames),
+        framing=framing_points, first_frame=int(plan.pose.first))
 
     def chunks():
         for sl, world, results in evaluate_chunks(plan, RENDER_CHUNK, twist_ref):
             done = [finite_or_rest(r, plan.models[j]) for j, r in results]
             yield FrameChunk(frames=plan.frames[sl], positions=tuple(d[0] for d in done),
-                             normals=tuple(d[1] for d in done), bone_world=world[:, bone_ids])
+                             normals=tuple(d[1] for d in done), bone_world=layout.transforms(world))
 
     return render_sequence(scene, chunks(), plan.render, out_dir, progress=progress)
 
@@ -147,7 +154,7 @@ def benchmark_fps(size: tuple[int, int] = (512, 512), n_muscles: int = 10, verts
 
     settings = replace(settings or RenderSettings(enabled=True), size=tuple(size))
     scene, chunks = synthetic_scene(n_muscles=n_muscles, verts=verts, n_frames=frames + 1)
-    cameras = sequence_cameras(scene.bounds, scene.frames, settings)
+    cameras = sequence_cameras(scene, settings)
     ctx = create_gl_context(device=settings.device, libegl=settings.egl_library)
     try:
         info = gl_info(ctx)

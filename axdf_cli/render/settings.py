@@ -6,21 +6,28 @@ Keys of ``render:`` (all optional; unknown keys are errors with their position):
 key             value                                        default
 ==============  ===========================================  =================================
 enabled         true / false                                 true when ``render:`` is given
-size            [W, H] output pixels (per panel for sheet)   [640, 480]
+size            [W, H] or ``WxH``: pixels (per panel: sheet)  [640, 480]
 view            auto | front | side | top | sheet            auto (three-quarter front view)
-fov             vertical field of view of named views, deg    30
+fov             vertical field of view, degrees 1..170       30
 camera          {position, target, up, fov}: explicit camera  none (automatic framing)
 orbit           turntable degrees per frame about world +Z   0 (off)
 wireframe       true / false: edge overlay                   false
 background      [r, g, b] or [r, g, b, a] linear, or         [0.8, 0.8, 0.8, 1]
                 ``transparent``
-bones           true / false: draw bone meshes               true
+bones           true / false: draw bone meshes (sticks       true
+                between joints for bones without a mesh)
 supersample     1..8: render s times larger, box-downsample  3
 device          ``default`` or an EGL device index           default
 ==============  ===========================================  =================================
 
-``camera`` and ``view`` exclude each other. In ``camera``: ``position`` and ``target`` are
-world points (metres), ``up`` defaults to [0, 0, 1], ``fov`` (vertical degrees) to 30.
+``camera`` and ``view`` exclude each other. In ``camera``: ``position`` (required) and
+``target`` are world points (metres; ``target`` defaults to the centre of the automatic
+framing), ``up`` defaults to [0, 0, 1], ``fov`` to the ``fov`` above.
+
+Every setting is read by one parser from :data:`RANGES`, for YAML values and for flags
+alike: a flag's text is read as a YAML value (``--size 512x256`` or ``--size "[512, 256]"``,
+``--background 0,0,1`` or ``"[0, 0, 1]"``), so both spellings work in both places and a bad
+value is reported the same way (``--fov: fov is 200; fov must be in [1, 170]``).
 """
 from __future__ import annotations
 
@@ -28,20 +35,31 @@ import argparse
 import re
 from dataclasses import dataclass, replace
 
-from axdf_cli.errors import InputError, Mark, UsageError
-from axdf_cli.yamlio import Fields, YMap, check_number
+from axdf_cli.errors import InputError, Mark
+from axdf_cli.yamlio import Fields, check_number, check_vector, parse_yaml
 
 VIEWS = ("auto", "front", "side", "top", "sheet")
-MAX_SIZE = 8192
-MAX_SUPERSAMPLE = 8
+
+#: The one table of ranges, for the ``render:`` block and the flags: key -> (lo, hi).
+RANGES = {
+    "size": (16, 8192),  # pixels each way
+    "fov": (1.0, 170.0),  # vertical degrees
+    "orbit": (-360.0, 360.0),  # degrees per frame
+    "supersample": (1, 8),
+    "device": (0, 255),
+    "background": (0.0, 1.0),  # linear colour channels
+}
+MAX_SIZE = RANGES["size"][1]
+MAX_SUPERSAMPLE = RANGES["supersample"][1]
+DEFAULT_FOV = 30.0
 
 
 @dataclass(frozen=True)
 class CameraSpec:
     position: tuple[float, float, float]
-    target: tuple[float, float, float]
+    target: tuple[float, float, float] | None = None  # None: the centre of the automatic framing
     up: tuple[float, float, float] = (0.0, 0.0, 1.0)
-    fov: float = 30.0  # vertical, degrees
+    fov: float = DEFAULT_FOV  # vertical, degrees
 
 
 @dataclass(frozen=True)
@@ -49,7 +67,7 @@ class RenderSettings:
     enabled: bool = False
     size: tuple[int, int] = (640, 480)  # (W, H) output pixels of one view
     view: str = "auto"
-    fov: float = 30.0  # vertical degrees for the named views
+    fov: float = DEFAULT_FOV  # vertical degrees for the named views
     camera: CameraSpec | None = None
     orbit: float = 0.0  # degrees per frame about world +Z through the target
     wireframe: bool = False
@@ -64,165 +82,223 @@ class RenderSettings:
         return self.background[3] < 1.0
 
 
-def parse_render_settings(value: YMap | None, where: Mark) -> RenderSettings:
+# ----------------------------------------------------------------------------- one parser per setting
+
+
+def _ranged(key: str, v, where: Mark, integer: bool = False):
+    lo, hi = RANGES[key]
+    return check_number(v, where, key, lo=lo, hi=hi, integer=integer)
+
+
+def _numbers_text(v):
+    """``"1,2,3"`` / ``"512x256"`` → [1.0, 2.0, 3.0] / [512.0, 256.0]; anything else unchanged."""
+    if isinstance(v, str) and re.fullmatch(r"\s*[-+0-9.eE]+(\s*[,xX]\s*[-+0-9.eE]+)+\s*", v):
+        try:
+            return [float(x) for x in re.split(r"\s*[,xX]\s*", v.strip())]
+        except ValueError:
+            return v
+    return v
+
+
+def parse_size(v, where: Mark) -> tuple[int, int]:
+    """``[W, H]`` or ``"WxH"`` (either, in YAML and on the command line)."""
+    v = _numbers_text(v)
+    allowed = f"size is exactly 2 whole numbers [W, H] or WxH, {RANGES['size'][0]}..{RANGES['size'][1]} pixels"
+    if not isinstance(v, list):
+        raise InputError(where, f"size is {v!r}", allowed)
+    if len(v) != 2:
+        raise InputError(where, f"size has {len(v)} values", allowed)
+    w, h = (_ranged("size", x, where, integer=True) for x in v)
+    return int(w), int(h)
+
+
+def parse_point(v, where: Mark, what: str) -> tuple[float, float, float]:
+    """``[x, y, z]`` or ``"x,y,z"``."""
+    return check_vector(_numbers_text(v), where, what, 3)
+
+
+def parse_background(v, where: Mark) -> tuple[float, float, float, float]:
+    if v == "transparent":
+        return (0.0, 0.0, 0.0, 0.0)
+    v = _numbers_text(v)
+    allowed = "background is [r, g, b], [r, g, b, a] (linear, 0..1), R,G,B[,A] or 'transparent'"
+    if not isinstance(v, list) or len(v) not in (3, 4):
+        raise InputError(where, f"background is {v!r}", allowed)
+    marks = getattr(v, "item_marks", None) or [where] * len(v)
+    vals = [float(_ranged("background", x, m)) for x, m in zip(v, marks)]
+    return tuple(vals + [1.0] * (4 - len(vals)))
+
+
+def parse_device(v, where: Mark) -> int | None:
+    if v == "default":
+        return None
+    if isinstance(v, str):
+        raise InputError(where, f"device is the string {v!r}", "device is 'default' or an EGL device index (0, 1, ...)")
+    return int(_ranged("device", v, where, integer=True))
+
+
+def parse_camera(value, where: Mark, fov: float = DEFAULT_FOV) -> CameraSpec:
+    f = Fields(value, where, "camera", keys=("position", "target", "up", "fov"))
+    position = parse_point(f.raw("position", required=True), f.vmark("position"), "position")
+    target = parse_point(f.raw("target"), f.vmark("target"), "target") if f.has("target") else None
+    up = parse_point(f.raw("up"), f.vmark("up"), "up") if f.has("up") else (0.0, 0.0, 1.0)
+    fov = float(_ranged("fov", f.raw("fov"), f.vmark("fov"))) if f.has("fov") else fov
+    f.done()
+    cam = CameraSpec(position=position, target=target, up=up, fov=fov)
+    check_camera(cam, f.vmark("up") if f.has("up") else f.vmark("position"), f.vmark("position"))
+    return cam
+
+
+def check_camera(cam: CameraSpec, where_up: Mark, where_pos: Mark) -> None:
+    if cam.target is None:
+        return  # checked against the framing centre when the camera is built
+    d = [p - t for p, t in zip(cam.position, cam.target)]
+    if sum(x * x for x in d) < 1e-12:
+        raise InputError(where_pos, "camera position equals its target", "put the camera away from the target")
+    up = cam.up
+    cross = (d[1] * up[2] - d[2] * up[1], d[2] * up[0] - d[0] * up[2], d[0] * up[1] - d[1] * up[0])
+    if sum(x * x for x in cross) < 1e-12 * max(sum(x * x for x in d), 1e-12):
+        raise InputError(where_up, "camera up is parallel to the viewing direction",
+                         "give an up vector not parallel to target - position")
+
+
+def parse_render_settings(value, where: Mark) -> RenderSettings:
     """Read the job file's ``render:`` mapping (None: rendering off, defaults)."""
     if value is None:
         return RenderSettings()
-    f = Fields(value, where, "render")
+    f = Fields(value, where, "render", keys=("enabled", "size", "view", "fov", "camera", "orbit", "wireframe",
+                                             "background", "bones", "supersample", "device"))
     d = RenderSettings()
     enabled = f.boolean("enabled", default=True)
-    size = d.size
-    if f.has("size"):
-        v = f.vector("size", n=2, lo=16, hi=MAX_SIZE)
-        size = _int_pair(v, f.vmark("size"), "size")
+    size = parse_size(f.raw("size"), f.vmark("size")) if f.has("size") else d.size
     view = f.choice("view", VIEWS, default=d.view)
-    fov = float(f.number("fov", default=d.fov, lo=1, hi=170))
+    fov = float(_ranged("fov", f.raw("fov"), f.vmark("fov"))) if f.has("fov") else d.fov
     camera = None
-    cam_map = f.mapping("camera")
-    if cam_map is not None:
-        if "view" in value:
+    if f.has("camera"):
+        if f.has("view"):
             raise InputError(f.kmark("camera"), "both 'camera' and 'view' are given",
                              "give an explicit camera or a named view, not both")
-        camera = _parse_camera(cam_map, f.vmark("camera"))
-    orbit = float(f.number("orbit", default=d.orbit, lo=-360, hi=360))
+        camera = parse_camera(f.raw("camera"), f.vmark("camera"), fov)
+    orbit = float(_ranged("orbit", f.raw("orbit"), f.vmark("orbit"))) if f.has("orbit") else d.orbit
     wireframe = f.boolean("wireframe", default=d.wireframe)
-    background = d.background
-    if f.has("background"):
-        background = _parse_background(f.raw("background"), f.vmark("background"))
+    background = parse_background(f.raw("background"), f.vmark("background")) if f.has("background") \
+        else d.background
     bones = f.boolean("bones", default=d.bones)
-    supersample = int(f.number("supersample", default=d.supersample, lo=1, hi=MAX_SUPERSAMPLE,
-                               integer=True))
-    device = None
-    if f.has("device"):
-        raw = f.raw("device")
-        if raw != "default":
-            if isinstance(raw, str):
-                raise InputError(f.vmark("device"), f"device is the string {raw!r}",
-                                 "device is 'default' or an EGL device index (0, 1, ...)")
-            device = int(check_number(raw, f.vmark("device"), "device", lo=0, hi=255, integer=True))
+    supersample = int(_ranged("supersample", f.raw("supersample"), f.vmark("supersample"), integer=True)) \
+        if f.has("supersample") else d.supersample
+    device = parse_device(f.raw("device"), f.vmark("device")) if f.has("device") else d.device
     f.done()
     return RenderSettings(enabled=enabled, size=size, view=view, fov=fov, camera=camera, orbit=orbit,
                           wireframe=wireframe, background=background, bones=bones,
                           supersample=supersample, device=device)
 
 
-def _int_pair(v, where: Mark, what: str) -> tuple[int, int]:
-    if not all(float(x).is_integer() for x in v):
-        raise InputError(where, f"{what} is {list(v)}", f"{what} is two whole numbers [W, H]")
-    return int(v[0]), int(v[1])
-
-
-def _parse_camera(value, where: Mark) -> CameraSpec:
-    f = Fields(value, where, "camera")
-    position = f.vector("position", n=3, required=True)
-    target = f.vector("target", n=3, required=True)
-    up = f.vector("up", n=3, default=(0.0, 0.0, 1.0))
-    fov = float(f.number("fov", default=30.0, lo=1, hi=170))
-    f.done()
-    d = [p - t for p, t in zip(position, target)]
-    if sum(x * x for x in d) < 1e-12:
-        raise InputError(f.vmark("position"), "camera position equals its target",
-                         "put the camera away from the target")
-    cross = (d[1] * up[2] - d[2] * up[1], d[2] * up[0] - d[0] * up[2], d[0] * up[1] - d[1] * up[0])
-    if sum(x * x for x in cross) < 1e-12 * max(sum(x * x for x in d), 1e-12):
-        raise InputError(f.vmark("up") if f.has("up") else f.vmark("position"),
-                         "camera up is parallel to the viewing direction",
-                         "give an up vector not parallel to target - position")
-    return CameraSpec(position=position, target=target, up=up, fov=fov)
-
-
-def _parse_background(raw, where: Mark) -> tuple[float, float, float, float]:
-    if raw == "transparent":
-        return (0.0, 0.0, 0.0, 0.0)
-    allowed = "background is [r, g, b], [r, g, b, a] (linear, 0..1) or 'transparent'"
-    if not isinstance(raw, list) or len(raw) not in (3, 4):
-        raise InputError(where, "background is not a colour", allowed)
-    marks = getattr(raw, "item_marks", None) or [where] * len(raw)
-    vals = [float(check_number(x, m, "background", lo=0, hi=1)) for x, m in zip(raw, marks)]
-    if len(vals) == 3:
-        vals.append(1.0)
-    return tuple(vals)
-
-
 # ----------------------------------------------------------------------------- command line
 
 def add_render_args(parser: argparse.ArgumentParser) -> None:
-    """Render flags shared by ``axdf run`` and ``axdf render``; all default to 'not given'."""
+    """Render flags shared by ``axdf run`` and ``axdf render``; all default to 'not given'.
+    Their values are read by the same parsers as the ``render:`` block."""
+    def rng(key):
+        return f"{RANGES[key][0]:g}..{RANGES[key][1]:g}"
+
     g = parser.add_argument_group("rendering")
-    g.add_argument("--size", metavar="WxH", help="output size in pixels per view, e.g. 512x512")
+    g.add_argument("--size", metavar="WxH", help=f"output size in pixels per view ({rng('size')}): 512x512 or [512, 512]")
     g.add_argument("--view", choices=VIEWS, help="named view (auto = three-quarter front)")
-    g.add_argument("--fov", type=float, metavar="DEG", help="vertical field of view of named views")
-    g.add_argument("--orbit", type=float, metavar="DEG", help="turntable: degrees per frame about +Z")
+    g.add_argument("--fov", metavar="DEG", help=f"vertical field of view, degrees ({rng('fov')})")
+    g.add_argument("--camera-position", metavar="X,Y,Z", help="explicit camera position (world, metres)")
+    g.add_argument("--camera-target", metavar="X,Y,Z",
+                   help="point the explicit camera looks at (default: the centre of the framing)")
+    g.add_argument("--camera-up", metavar="X,Y,Z", help="explicit camera's up direction (default 0,0,1)")
+    g.add_argument("--orbit", metavar="DEG", help=f"turntable: degrees per frame about +Z ({rng('orbit')})")
     g.add_argument("--wireframe", action=argparse.BooleanOptionalAction, default=None,
                    help="edge overlay")
     g.add_argument("--bones", action=argparse.BooleanOptionalAction, default=None,
-                   help="draw bone meshes")
+                   help="draw bone meshes (sticks for bones without one)")
     g.add_argument("--background", metavar="R,G,B[,A]|transparent",
                    help="background colour (linear 0..1) or 'transparent'")
-    g.add_argument("--supersample", type=int, metavar="N", help="anti-aliasing factor 1..8")
+    g.add_argument("--supersample", metavar="N", help=f"anti-aliasing factor {rng('supersample')}")
     g.add_argument("--device", metavar="default|N", help="EGL device index")
     g.add_argument("--egl-library", metavar="PATH",
                    help="EGL library to load instead of the system's libEGL.so.1 (diagnosis)")
 
 
-_SIZE_RE = re.compile(r"^(\d+)[xX](\d+)$")
+def _flag(args, name: str):
+    """(value read as YAML, Mark naming the flag) of a given flag, or (None, None)."""
+    text = getattr(args, name, None)
+    if text is None:
+        return None, None
+    flag = "--" + name.replace("_", "-")
+    where = Mark(flag)
+    if not isinstance(text, str):
+        return text, where
+    try:
+        value = _plain(parse_yaml(text, flag))  # positions inside a flag's text mean nothing
+    except InputError:
+        value = text
+    return (text if value is None else value), where
+
+
+def _plain(v):
+    if isinstance(v, list):
+        return [_plain(x) for x in v]
+    if isinstance(v, dict):
+        return {k: _plain(x) for k, x in v.items()}
+    return v
 
 
 def settings_from_args(settings: RenderSettings, args: argparse.Namespace) -> RenderSettings:
-    """Apply the flags of :func:`add_render_args` that were given; raise UsageError on bad ones."""
+    """Apply the flags of :func:`add_render_args` that were given; bad values are InputErrors
+    naming the flag (exit 2)."""
     s = settings
-    if getattr(args, "size", None) is not None:
-        m = _SIZE_RE.match(args.size)
-        if not m:
-            raise UsageError(f"--size {args.size!r} is not WxH", "e.g. --size 512x512")
-        w, h = int(m.group(1)), int(m.group(2))
-        if not (16 <= w <= MAX_SIZE and 16 <= h <= MAX_SIZE):
-            raise UsageError(f"--size {args.size} is out of range", f"16..{MAX_SIZE} pixels each way")
-        s = replace(s, size=(w, h))
+    v, w = _flag(args, "size")
+    if w:
+        s = replace(s, size=parse_size(v, w))
     if getattr(args, "view", None) is not None:
         s = replace(s, view=args.view, camera=None)
-    if getattr(args, "fov", None) is not None:
-        if not 1 <= args.fov <= 170:
-            raise UsageError(f"--fov {args.fov:g} is out of range", "1..170 degrees")
-        s = replace(s, fov=float(args.fov))
-    if getattr(args, "orbit", None) is not None:
-        if not -360 <= args.orbit <= 360:
-            raise UsageError(f"--orbit {args.orbit:g} is out of range", "-360..360 degrees per frame")
-        s = replace(s, orbit=float(args.orbit))
+    v, w = _flag(args, "fov")
+    if w:
+        fov = float(_ranged("fov", v, w))
+        s = replace(s, fov=fov, camera=replace(s.camera, fov=fov) if s.camera else None)
+    s = _camera_flags(s, args)
+    v, w = _flag(args, "orbit")
+    if w:
+        s = replace(s, orbit=float(_ranged("orbit", v, w)))
     if getattr(args, "wireframe", None) is not None:
         s = replace(s, wireframe=bool(args.wireframe))
     if getattr(args, "bones", None) is not None:
         s = replace(s, bones=bool(args.bones))
-    if getattr(args, "background", None) is not None:
-        s = replace(s, background=_background_flag(args.background))
-    if getattr(args, "supersample", None) is not None:
-        if not 1 <= args.supersample <= MAX_SUPERSAMPLE:
-            raise UsageError(f"--supersample {args.supersample} is out of range", f"1..{MAX_SUPERSAMPLE}")
-        s = replace(s, supersample=int(args.supersample))
-    if getattr(args, "device", None) is not None:
-        if args.device == "default":
-            s = replace(s, device=None)
-        elif args.device.isdigit():
-            s = replace(s, device=int(args.device))
-        else:
-            raise UsageError(f"--device {args.device!r}", "--device is 'default' or an EGL device index")
+    v, w = _flag(args, "background")
+    if w:
+        s = replace(s, background=parse_background(v, w))
+    v, w = _flag(args, "supersample")
+    if w:
+        s = replace(s, supersample=int(_ranged("supersample", v, w, integer=True)))
+    v, w = _flag(args, "device")
+    if w:
+        s = replace(s, device=parse_device(v, w))
     if getattr(args, "egl_library", None) is not None:
         s = replace(s, egl_library=args.egl_library)
     return s
 
 
-def _background_flag(text: str) -> tuple[float, float, float, float]:
-    if text == "transparent":
-        return (0.0, 0.0, 0.0, 0.0)
-    try:
-        vals = [float(x) for x in text.split(",")]
-    except ValueError:
-        vals = []
-    if len(vals) not in (3, 4) or not all(0.0 <= v <= 1.0 for v in vals):
-        raise UsageError(f"--background {text!r}", "R,G,B or R,G,B,A with values 0..1, or 'transparent'")
-    if len(vals) == 3:
-        vals.append(1.0)
-    return tuple(vals)
+def _camera_flags(s: RenderSettings, args) -> RenderSettings:
+    pos, wp = _flag(args, "camera_position")
+    tgt, wt = _flag(args, "camera_target")
+    up, wu = _flag(args, "camera_up")
+    if not (wp or wt or wu):
+        return s
+    if getattr(args, "view", None) is not None:
+        raise InputError(Mark("--view"), "both --view and --camera-* are given",
+                         "give an explicit camera or a named view, not both")
+    cam = s.camera
+    if cam is None and not wp:
+        raise InputError(wt or wu, "an explicit camera needs --camera-position", "give --camera-position X,Y,Z")
+    cam = cam or CameraSpec(position=(0.0, 0.0, 0.0), fov=s.fov)
+    cam = replace(cam, position=parse_point(pos, wp, "camera position") if wp else cam.position,
+                  target=parse_point(tgt, wt, "camera target") if wt else cam.target,
+                  up=parse_point(up, wu, "camera up") if wu else cam.up)
+    check_camera(cam, wu or wp or wt, wp or wt)
+    return replace(s, camera=cam, view="auto")
 
 
 def settings_to_dict(s: RenderSettings) -> dict:
@@ -232,8 +308,9 @@ def settings_to_dict(s: RenderSettings) -> dict:
          "wireframe": s.wireframe, "background": list(s.background), "bones": s.bones,
          "supersample": s.supersample}
     if s.camera is not None:
-        d["camera"] = {"position": list(s.camera.position), "target": list(s.camera.target),
-                       "up": list(s.camera.up), "fov": s.camera.fov}
+        d["camera"] = {"position": list(s.camera.position), "up": list(s.camera.up), "fov": s.camera.fov}
+        if s.camera.target is not None:
+            d["camera"]["target"] = list(s.camera.target)
     else:
         d["view"] = s.view
     return d

@@ -12,7 +12,7 @@ from axdf_cli import __version__, runfolder
 from axdf_cli.errors import InputError
 from axdf_cli.formats import WRITERS
 from axdf_cli.run.evaluate import CHUNK_FRAMES, evaluate_chunks, finite_or_rest, twist_references
-from axdf_cli.run.plan import RunPlan, display_path
+from axdf_cli.run.plan import RunPlan, display_path, framing
 from axdf_cli.run.pool import check_parent, fork_map
 from axdf_cli.runfolder import (BONES_CSV, MANIFEST_INTERVAL_S, STATS, OutputWriter, bone_mesh_relpath, describe_differences,
                                 frame_relpath, gl_record, mesh_relpath, write_manifest)
@@ -71,8 +71,9 @@ def manifest_dict(plan: RunPlan, files: dict, warnings: list, complete: bool, ex
              "rest_length": round(m.l0, 12), "rest_volume": float(f"{m.v0:.12g}")}
             for s, m in zip(plan.muscles, plan.models)
         ],
-        "bones": [{"name": b.name, "mesh": bone_mesh_relpath(b.name) if b.mesh else None}
-                  for b in plan.pose.skeleton.bones],
+        "bones": [{"name": b.name, "mesh": bone_mesh_relpath(b.name) if b.mesh else None,
+                   "stick_from": plan.pose.skeleton.bones[p].name if p >= 0 else None}
+                  for b, p in zip(plan.pose.skeleton.bones, plan.pose.skeleton.stick_parents())],
         "warnings": warnings,
         "files": files,
     }
@@ -170,7 +171,7 @@ def bones_csv(plan: RunPlan, bone_rows: np.ndarray) -> bytes:
 
 def strict_check(plan: RunPlan, twist_ref: np.ndarray) -> None:
     """Evaluate everything once: with --strict, any warning stops the run before it writes."""
-    found = []
+    found = [f"{plan.names[j]} frame {int(plan.frames[i])}: {msg}" for i, j, msg in plan.frame_warnings]
     for sl, _, results in evaluate_chunks(plan, twist_ref=twist_ref):
         for j, res in results:
             found += [f"{plan.names[j]} frame {int(plan.frames[sl.start + i])}: {msg}" for i, msg in res.warnings]
@@ -256,7 +257,7 @@ def _write_run(plan: RunPlan, session, twist_ref, progress, render_progress, job
         warn_text = [[""] * nm for _ in range(nf)]
         lo = np.min([p.lo for p in parts], axis=0)
         hi = np.max([p.hi for p in parts], axis=0)
-        all_warns = []
+        all_warns = list(plan.frame_warnings)
         writer.skipped = sum(p.skipped for p in parts)  # (one pass in this process: its writer is ours)
         for part in parts:
             writer.files.update(part.files)
@@ -271,13 +272,15 @@ def _write_run(plan: RunPlan, session, twist_ref, progress, render_progress, job
             writer.write(bone_mesh_relpath(bones[i].name), data)
         writer.write(STATS, stats_csv(plan, stats, warn_text))
         writer.write(BONES_CSV, bones_csv(plan, parts[0].bone_rows))
-        extra = {"bounds": [[float(f"{x:.9g}") for x in lo], [float(f"{x:.9g}") for x in hi]]}
+        frame_pts = framing(plan)
+        extra = {"bounds": [[float(f"{x:.9g}") for x in lo], [float(f"{x:.9g}") for x in hi]],
+                 "framing": {"first_frame": int(plan.pose.first), "points": frame_pts.tolist()}}
         if plan.rendering:
             from axdf_cli.render.sequence import render_plan
 
             writer.flush()
             write_manifest(root, manifest_dict(plan, writer.files, warnings, complete=False, extra=extra))
-            info = render_plan(plan, root, np.array([lo, hi]), twist_ref, render_progress)
+            info = render_plan(plan, root, np.array([lo, hi]), twist_ref, render_progress, frame_pts)
             writer.files.update(info["files"])
             extra["gl"] = gl_record(info["gl_renderer"], info["gl_version"])
         writer.flush()

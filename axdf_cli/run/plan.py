@@ -9,9 +9,9 @@ import numpy as np
 
 from axdf_cli import atomic
 from axdf_cli.errors import InputError, Mark
-from axdf_cli.loaders import Job, Pose, expand_muscle_paths, load_muscle_file, load_pose
+from axdf_cli.loaders import Job, Pose, RefPolicy, expand_muscle_paths, load_muscle_file, load_pose
 from axdf_cli.muscle import MuscleModel, MuscleSpec
-from axdf_cli.pose import parse_frames
+from axdf_cli.pose import activation_problems, muscle_range_warnings, parse_frames, subject_points
 from axdf_cli.skeleton import forward_kinematics
 
 DEFAULT_OUT = "out/run"
@@ -30,6 +30,7 @@ class RunPlan:
     warnings: list = field(default_factory=list)
     notes: list = field(default_factory=list)  # remarks printed with --verbose; not warnings
     bone_meshes: dict = field(default_factory=dict)  # bone index -> (vertices (V,3) f4, faces (T,3) i4, file bytes)
+    frame_warnings: list = field(default_factory=list)  # [(frame index, muscle index, message)] known before evaluation
 
     @property
     def names(self) -> list[str]:
@@ -49,19 +50,20 @@ def display_path(p: Path) -> str:
 
 
 def job_render_settings(job: Job | None):
-    """The job's ``render:`` mapping as RenderSettings (rendering off without one)."""
-    from axdf_cli.render.settings import parse_render_settings
+    """The job's ``render:`` settings, parsed by the loader (rendering off without a job)."""
+    from axdf_cli.render.settings import RenderSettings
 
-    if job is None:
-        return parse_render_settings(None, Mark("job"))
-    return parse_render_settings(job.render, job.render_mark or Mark(job.source))
+    return job.render if job is not None else RenderSettings()
 
 
 def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, fmt_arg=None,
-             frames_arg=None, render=None) -> RunPlan:
+             frames_arg=None, render=None, policy: RefPolicy | None = None, clamp_ranges: bool = False) -> RunPlan:
     """Load and check every input; build the muscle models. Writes nothing.
 
-    ``render``: the RenderSettings to use (None: the job's ``render:``)."""
+    ``render``: the RenderSettings to use (None: the job's ``render:``); ``policy``: where
+    referenced files may lie (default: the job's); ``clamp_ranges``: hold coordinates inside
+    their ranges (as the pose's ``clamp_ranges``)."""
+    policy = policy or (job.policy if job is not None else RefPolicy())
     if pose_arg is not None:
         pose_path, pose_mark = Path(pose_arg), Mark(str(pose_arg))
     elif job is not None:
@@ -70,7 +72,11 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
         raise InputError(None, "no pose given", "give a JOB.yaml or --pose FILE")
     if not pose_path.is_file():
         raise InputError(pose_mark, f"pose file {str(pose_path)!r} not found", "an existing pose YAML file")
-    pose = load_pose(pose_path)
+    pose = load_pose(pose_path, policy)
+    if clamp_ranges:
+        from dataclasses import replace
+
+        pose = replace(pose, clamp_ranges=True)
 
     if muscle_args:
         entries = [(Path(m), Mark(str(m))) for m in muscle_args]
@@ -78,7 +84,7 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
         entries = list(job.muscles)
     else:
         raise InputError(None, "no muscles given", "give a JOB.yaml or --muscles PATH ...")
-    files = expand_muscle_paths(entries)
+    files = expand_muscle_paths(entries, policy, Path(job.source).parent if not muscle_args else None)
     specs: list[MuscleSpec] = []
     seen: dict[str, str] = {}
     for fpath in files:
@@ -91,9 +97,7 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
     if not specs:
         raise InputError(None, "no muscles found", "give muscle YAML files")
 
-    warnings = []
-    notes = [f"{mark}: activation for {name!r}, which is not in this run; ignored"
-             for name, mark in pose.activation_marks.items() if name not in seen]
+    warnings, notes = activation_problems(pose, seen)
 
     skel = pose.skeleton
     rest = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
@@ -126,7 +130,7 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
         if Path(s).is_file():
             inputs[display_path(Path(s))] = atomic.sha256_file(s)
     return RunPlan(pose, specs, models, frames, fmt, out, inputs, render=render, warnings=warnings,
-                   bone_meshes=bone_meshes, notes=notes)
+                   bone_meshes=bone_meshes, notes=notes, frame_warnings=muscle_range_warnings(pose, frames, specs))
 
 
 def load_bone_mesh(path: str, skeleton_file: str):
@@ -136,6 +140,15 @@ def load_bone_mesh(path: str, skeleton_file: str):
     if not Path(path).is_file():
         raise InputError(Mark(skeleton_file), f"bone mesh {path} not found", "a PLY file relative to the skeleton file")
     v, _, f = load_triangles(path)
+    if len(f) == 0:
+        raise InputError(Mark(str(path)), "bone mesh has no triangles", "a PLY or OBJ mesh with at least one triangle")
     if not np.isfinite(v).all():
         raise InputError(Mark(str(path)), "non-finite vertex coordinates", "finite numbers only")
     return np.ascontiguousarray(v, dtype=np.float32), f, Path(path).read_bytes()
+
+
+def framing(plan: RunPlan) -> np.ndarray:
+    """What the automatic camera frames: the skeleton over the whole pose (not the muscles,
+    not the selected frames), rounded to 1 µm so that the manifest holds it exactly."""
+    pts = subject_points(plan.pose, {i: v for i, (v, _, _) in plan.bone_meshes.items()})
+    return np.round(pts, 6) + 0.0
