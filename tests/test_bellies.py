@@ -90,8 +90,7 @@ def _measure_library(name: str) -> dict:
     from axdf_cli import run as runner
 
     pose, frames = MOTIONS[name]
-    loaders.set_ref_policy([REPO], False)
-    job = loaders.load_job(REPO / "poses" / "jobs" / pose)
+    job = loaders.load_job(REPO / "poses" / "jobs" / pose, loaders.RefPolicy((REPO,)))
     plan = runner.plan_run(job, frames_arg=",".join(map(str, frames)))
     out = {"rest": {m.spec.name: belly_slenderness(m.rest_vertices, m.faces) for m in plan.models}}
     for sl, _, results in runner.evaluate_chunks(plan):
