@@ -75,11 +75,11 @@ bench: $(STAMP)
 import: $(STAMP)
 	$(BIN)/axdf import osim $(OSIM)/arm26/arm26.osim --name arm26 \
 	  --motion $(OSIM)/arm26/arm26_Kinematics_q.sto --controls $(OSIM)/arm26/arm26_controls.sto \
-	  --fps 60 --pose-name arm26_flex --out muscles/arm26 --muscles-out muscles/arm26 \
+	  --fps 60 --pose-name arm26_flex --palette anatomical --out muscles/arm26 --muscles-out muscles/arm26 \
 	  --skeleton-out poses/skeletons/arm26.yaml --pose-out poses/arm26_flex.yaml
 	$(BIN)/axdf import osim $(OSIM)/gait2392/gait2392_thelen2003muscle.osim --name gait2392 \
 	  --motion $(OSIM)/gait2392/subject01_walk1_ik.mot --controls $(OSIM)/gait2392/subject01_walk1_controls.sto \
-	  --pose-name gait2392_walk --out muscles/gait2392 --muscles-out muscles/gait2392 \
+	  --pose-name gait2392_walk --palette anatomical --out muscles/gait2392 --muscles-out muscles/gait2392 \
 	  --skeleton-out poses/skeletons/gait2392.yaml --pose-out poses/gait2392_walk.yaml
 	$(BIN)/axdf import bvh $(BVH) --name cmu_131_01 --pose-name cmu_131_01_walk --step 4 --out poses \
 	  --skeleton-out poses/skeletons/cmu_131_01.yaml --pose-out poses/cmu_131_01_walk.yaml
