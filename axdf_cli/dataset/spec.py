@@ -12,6 +12,7 @@ from pathlib import Path
 from axdf_cli.dataset.runner import (FRAME_WRITERS, RenderSettings, load_muscle_specs, motion_pose, parse_camera,
                                      parse_render_settings)
 from axdf_cli.errors import InputError, Mark
+from axdf_cli.formats import WRITERS
 from axdf_cli.loaders import Pose, RefPolicy, expand_muscle_paths, load_pose, load_skeleton
 from axdf_cli.yamlio import Fields, check_name, check_number, check_vector, item_marks, load_yaml, mark_of
 
@@ -23,6 +24,8 @@ MAX_FRAMES = 100_000
 MAX_VIEWS = 64
 DEFAULT_VISIBILITY_TOLERANCE = 0.1  # metres; see labels.visibility
 RENDER_KEYS_ELSEWHERE = ("enabled", "view", "camera", "orbit", "fov")
+DATASET_KEYS = ("dataset", "seed", "skeleton", "muscles", "fps", "coordinates", "motions", "sequences", "activation",
+                "cameras", "render", "format", "shards", "labels")
 
 
 @dataclass(frozen=True)
@@ -135,7 +138,7 @@ def load_dataset(path: Path | str, seed: int | None = None, policy: RefPolicy | 
     policy = policy or RefPolicy()
     doc = load_yaml(path)
     top = Mark(str(path), 1, 1)
-    f = Fields(doc, top, "dataset file")
+    f = Fields(doc, top, "dataset file", keys=DATASET_KEYS)
     name = f.name("dataset", required=True)
     file_seed = int(f.number("seed", default=0, lo=0, hi=2**63 - 1, integer=True))
     skel_ref = f.string("skeleton", required=True)
@@ -168,8 +171,6 @@ def load_dataset(path: Path | str, seed: int | None = None, policy: RefPolicy | 
     activation = _parse_activation(f.raw("activation"), f.vmark("activation"), muscle_names)
     rig, sphere = _parse_cameras(f.mapping("cameras", required=True), f.vmark("cameras"), skel)
     render, passes = _parse_render(f.mapping("render", default=None), f.vmark("render"))
-    from axdf_cli.formats import WRITERS
-
     fmt = f.choice("format", tuple(WRITERS), default="ply")
     shards = int(f.number("shards", default=1, lo=1, hi=1_000_000, integer=True))
     lab = f.mapping("labels", default=None)
