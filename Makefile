@@ -1,6 +1,7 @@
 # axdf: two commands on a fresh machine.
 #   make demo   set up (.venv, packages, Mesa EGL if missing) and run the demo job into out/demo
 #   make test   set up and run the whole test suite (CI calls this through .ci/run)
+#   make dataset  set up and build a small example data set into out/demo_small
 #   make bench  set up and print the benchmark table (BENCH_ARGS="--quick", "--long")
 PY     ?= python3
 VENV   := .venv
@@ -13,7 +14,7 @@ DATA   ?= ../shared/data
 OSIM   := $(DATA)/opensim
 BVH    := $(DATA)/bvh/cmu_131_01_walk_scaled.bvh
 
-.PHONY: all setup sysdeps demo test bench golden clean import
+.PHONY: all setup sysdeps demo dataset test bench golden clean import
 
 all: demo
 
@@ -46,6 +47,11 @@ demo: $(STAMP)
 	$(BIN)/axdf run poses/jobs/cmu_walk.yaml --out out/cmu_walk --overwrite
 	@echo "demo results in out/: demo, gait2392_walk, paper_deltoid_arm26, paper_gastrocnemius_gait2392, cmu_walk"
 	@echo "  each with meshes/, frames/ (PNG + EXR), camera.json, stats.csv, bones.csv, manifest.json"
+
+# A small data set (7 sequences, 32 samples: sampled and perturbed poses, 2 random views each).
+dataset: $(STAMP)
+	$(BIN)/axdf dataset build poses/datasets/demo_small.yaml --out out/demo_small --overwrite --jobs 2
+	@echo "data set in out/demo_small: index.parquet, dataset.json, seq_*/ (views/, labels.npz, meshes/)"
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q tests

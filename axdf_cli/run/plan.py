@@ -56,6 +56,22 @@ def job_render_settings(job: Job | None):
     return job.render if job is not None else RenderSettings()
 
 
+def load_muscle_specs(files) -> list[MuscleSpec]:
+    """Every muscle of ``files``, in order; a name defined twice, or no muscle at all, is an error."""
+    specs: list[MuscleSpec] = []
+    seen: dict[str, str] = {}
+    for fpath in files:
+        for spec in load_muscle_file(fpath):
+            if spec.name in seen:
+                raise InputError(Mark(str(fpath), 1, 1), f"muscle {spec.name!r} is also defined in {seen[spec.name]}",
+                                 "muscle names are unique within a run")
+            seen[spec.name] = str(fpath)
+            specs.append(spec)
+    if not specs:
+        raise InputError(None, "no muscles found", "give muscle YAML files")
+    return specs
+
+
 def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, fmt_arg=None,
              frames_arg=None, render=None, policy: RefPolicy | None = None, clamp_ranges: bool = False) -> RunPlan:
     """Load and check every input; build the muscle models. Writes nothing.
@@ -85,17 +101,8 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
     else:
         raise InputError(None, "no muscles given", "give a JOB.yaml or --muscles PATH ...")
     files = expand_muscle_paths(entries, policy, Path(job.source).parent if not muscle_args else None)
-    specs: list[MuscleSpec] = []
-    seen: dict[str, str] = {}
-    for fpath in files:
-        for spec in load_muscle_file(fpath):
-            if spec.name in seen:
-                raise InputError(Mark(str(fpath), 1, 1), f"muscle {spec.name!r} is also defined in {seen[spec.name]}",
-                                 "muscle names are unique within a run")
-            seen[spec.name] = str(fpath)
-            specs.append(spec)
-    if not specs:
-        raise InputError(None, "no muscles found", "give muscle YAML files")
+    specs = load_muscle_specs(files)
+    seen = [s.name for s in specs]  # in run order (activation_problems lists them)
 
     warnings, notes = activation_problems(pose, seen)
 
