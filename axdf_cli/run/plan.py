@@ -1,6 +1,7 @@
 """Planning a run: load and check every input, build the muscle models. Writes nothing."""
 from __future__ import annotations
 
+import functools
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -43,8 +44,14 @@ class RunPlan:
 
 def display_path(p: Path) -> str:
     """A path for the manifest: relative to the current folder when below it."""
+    return _display_path(str(p), os.getcwd())
+
+
+@functools.lru_cache(maxsize=4096)
+def _display_path(p: str, cwd: str) -> str:
+    # cached: a manifest names every muscle's source, and is written several times a run
     try:
-        return Path(os.path.relpath(Path(p).resolve(), Path.cwd().resolve())).as_posix()
+        return Path(os.path.relpath(Path(p).resolve(), Path(cwd).resolve())).as_posix()
     except ValueError:
         return Path(p).resolve().as_posix()
 
