@@ -2,6 +2,7 @@
 #   make demo   set up (.venv, packages, Mesa EGL if missing) and run the demo job into out/demo
 #   make test   set up and run the whole test suite (CI calls this through .ci/run); also
 #               creates .venv-blender (bpy) for the Blender check
+#   make dataset  set up and build a small example data set into out/demo_small
 #   make bench  set up and print the benchmark table (BENCH_ARGS="--quick", "--long")
 PY     ?= python3
 VENV   := .venv
@@ -20,7 +21,7 @@ DATA   ?= ../shared/data
 OSIM   := $(DATA)/opensim
 BVH    := $(DATA)/bvh/cmu_131_01_walk_scaled.bvh
 
-.PHONY: all setup sysdeps demo test bench golden clean import blender
+.PHONY: all setup sysdeps demo dataset test bench golden clean import blender
 
 all: demo
 
@@ -62,6 +63,11 @@ demo: $(STAMP)
 	@echo "demo results in out/: demo, gait2392_walk, paper_deltoid_arm26, paper_gastrocnemius_gait2392, cmu_walk"
 	@echo "  each with meshes/, frames/ (PNG + EXR), camera.json, stats.csv, bones.csv, manifest.json"
 
+# A small data set (7 sequences, 32 samples: sampled and perturbed poses, 2 random views each).
+dataset: $(STAMP)
+	$(BIN)/axdf dataset build poses/datasets/demo_small.yaml --out out/demo_small --overwrite --jobs 2
+	@echo "data set in out/demo_small: index.parquet, dataset.json, seq_*/ (views/, labels.npz, meshes/)"
+
 test: $(STAMP) $(BLENDER_STAMP)
 	$(BIN)/python -m pytest -q tests
 	@echo "golden check: a fresh run of tests/golden_job.yaml against tests/golden"
@@ -84,11 +90,11 @@ bench: $(STAMP)
 import: $(STAMP)
 	$(BIN)/axdf import osim $(OSIM)/arm26/arm26.osim --name arm26 \
 	  --motion $(OSIM)/arm26/arm26_Kinematics_q.sto --controls $(OSIM)/arm26/arm26_controls.sto \
-	  --fps 60 --pose-name arm26_flex --out muscles/arm26 --muscles-out muscles/arm26 \
+	  --fps 60 --pose-name arm26_flex --palette anatomical --out muscles/arm26 --muscles-out muscles/arm26 \
 	  --skeleton-out poses/skeletons/arm26.yaml --pose-out poses/arm26_flex.yaml
 	$(BIN)/axdf import osim $(OSIM)/gait2392/gait2392_thelen2003muscle.osim --name gait2392 \
 	  --motion $(OSIM)/gait2392/subject01_walk1_ik.mot --controls $(OSIM)/gait2392/subject01_walk1_controls.sto \
-	  --pose-name gait2392_walk --out muscles/gait2392 --muscles-out muscles/gait2392 \
+	  --pose-name gait2392_walk --palette anatomical --out muscles/gait2392 --muscles-out muscles/gait2392 \
 	  --skeleton-out poses/skeletons/gait2392.yaml --pose-out poses/gait2392_walk.yaml
 	$(BIN)/axdf import bvh $(BVH) --name cmu_131_01 --pose-name cmu_131_01_walk --step 4 --out poses \
 	  --skeleton-out poses/skeletons/cmu_131_01.yaml --pose-out poses/cmu_131_01_walk.yaml

@@ -503,7 +503,17 @@ def parse_muscle_path(f: Fields):
 def load_muscle_file(path: Path | str) -> list[MuscleSpec]:
     """One muscle (``muscle:``) or several heads (``muscles:`` list, optional ``group:``)."""
     path = Path(path)
-    doc = load_yaml(path)
+    return muscles_from_document(load_yaml(path), path)
+
+
+def parse_muscle_text(text: str, path: Path | str) -> list[MuscleSpec]:
+    """The muscles of YAML text that will live at ``path`` (as :func:`load_muscle_file` reads it)."""
+    from axdf_cli.yamlio import parse_yaml
+
+    return muscles_from_document(parse_yaml(text, str(path)), Path(path))
+
+
+def muscles_from_document(doc, path: Path) -> list[MuscleSpec]:
     top = Mark(str(path), 1, 1)
     if isinstance(doc, dict) and "muscles" in doc and "muscle" not in doc:
         f = Fields(doc, top, "multi-head muscle file", keys=("group", "muscles"))

@@ -238,7 +238,8 @@ class MuscleModel:
         gt, self.gw = bspline.gauss_legendre_params(knots, 2, tol.LENGTH_GAUSS_POINTS)
         self.dBg = bspline.basis_matrix(knots, 2, gt, 1)
         # the same bases as sparse rows (3 non-zeros each): products cost O(3), not O(n)
-        self._sparse = {id(b): kernels.sparse_rows(b) for b in (self.Bs, self.dBs, self.Bc, self.dBc, self.dBg)}
+        # (keyed by the basis' attribute name, so a pickled or copied model keeps them)
+        self._sparse = {k: kernels.sparse_rows(getattr(self, k)) for k in ("Bs", "dBs", "Bc", "dBc", "dBg")}
 
     def _stage_rest_axis(self, rest_world: np.ndarray):
         """The rest axis: control points, rest length l0 (checked), sampled frames, the start
@@ -249,7 +250,7 @@ class MuscleModel:
         if not self.l0 > tol.MIN_AXIS_LENGTH:
             raise InputError(_spec_mark(spec), f"muscle {spec.name!r}: the rest axis has length {self.l0:.3g} m",
                              "axis control points must not all coincide at the rest pose")
-        x, t = self._samples(rest_p, self.Bs, self.dBs)
+        x, t = self._samples(rest_p, "Bs", "dBs")
         # the start vector is chosen in the origin bone's own axes, so the rest shape does not
         # depend on where the skeleton stands in the world
         r_org = rest_world[self.origin_bone, :3, :3]
@@ -297,7 +298,7 @@ class MuscleModel:
                              np.einsum("nc,nc->n", off, sb[0])], axis=1)  # (8N, 3)
         self.Bb = bspline.basis_matrix(self.knots, 2, self.bind_t)
         self.dBb = bspline.basis_matrix(self.knots, 2, self.bind_t, 1)
-        self._sparse.update({id(b): kernels.sparse_rows(b) for b in (self.Bb, self.dBb)})
+        self._sparse.update({k: kernels.sparse_rows(getattr(self, k)) for k in ("Bb", "dBb")})
         self.lam = np.interp(self.bind_t, self.ts, self.arc)  # rest arc fraction of each bound point
 
     def _stage_belly_weights(self) -> None:
@@ -338,12 +339,12 @@ class MuscleModel:
         # P[f,i,c] = sum_k M[f,i,c,k] at[i,k] + M[f,i,c,3]
         return np.einsum("fick,ik->fic", m[..., :3, :3], self.at) + m[..., :3, 3]
 
-    def _apply(self, b: np.ndarray, p: np.ndarray) -> np.ndarray:
-        """X[f,s,c] = sum_i B[s,i] P[f,i,c] for a basis matrix of this model (sparse rows)."""
-        idx, w = self._sparse[id(b)]
+    def _apply(self, b: str, p: np.ndarray) -> np.ndarray:
+        """X[f,s,c] = sum_i B[s,i] P[f,i,c] for the basis matrix named ``b`` (its sparse rows)."""
+        idx, w = self._sparse[b]
         return np.einsum("sk,fskc->fsc", w, p[:, idx])
 
-    def _samples(self, p: np.ndarray, b: np.ndarray, db: np.ndarray):
+    def _samples(self, p: np.ndarray, b: str, db: str):
         # X[f,s,c] = sum_i B[s,i] P[f,i,c]; likewise the derivative
         return self._apply(b, p), _unit(self._apply(db, p))
 
@@ -352,7 +353,7 @@ class MuscleModel:
         return self._length(self._axis_points(world, coords))
 
     def _length(self, p: np.ndarray) -> np.ndarray:
-        d = self._apply(self.dBg, p)
+        d = self._apply("dBg", p)
         return np.linalg.norm(d, axis=-1) @ self.gw
 
     def _sample_index(self, t: np.ndarray) -> np.ndarray:
@@ -406,7 +407,7 @@ class MuscleModel:
         """Axis control points (F, n, 3), samples x (F, S, 3), unit tangents t and start vectors
         r0 (F, 3): what :func:`rmf.propagate` needs (batched over muscles by the caller)."""
         p = self._axis_points(world, coords)
-        b, db = (self.Bc, self.dBc) if coarse else (self.Bs, self.dBs)
+        b, db = ("Bc", "dBc") if coarse else ("Bs", "dBs")
         x, t = self._samples(p, b, db)
         r0 = rmf.perpendicular_unit(world[:, self.origin_bone, :3, :3] @ self.r0_local, t[:, 0])
         return p, x, t, r0
@@ -446,8 +447,8 @@ class MuscleModel:
             theta = theta + 2.0 * np.pi * np.round((twist_reference - theta) / (2.0 * np.pi))
 
         # bound points: position and frame at t, then the spread twist about T
-        c = self._apply(self.Bb, p)
-        tt = _unit(self._apply(self.dBb, p))
+        c = self._apply("Bb", p)
+        tt = _unit(self._apply("dBb", p))
         rr = rmf.reflect_step(x[:, self.bind_j], t[:, self.bind_j], r[:, self.bind_j], c, tt)
         ss = np.cross(tt, rr)
         ang = theta[:, None] * self.lam[None, :]  # (F, Q)

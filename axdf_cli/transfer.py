@@ -19,12 +19,22 @@ to child joint) and its perpendicular offset is scaled by the same ratio of bone
   rotation from A's bone to B's) replaces the shortest rotation; without a segment and
   without ``rotate``, R is the identity (both skeletons share axdf's world: Z-up, facing -Y).
 
+Muscles given by a ``path`` go the same way: every path point's ``at`` through its bone's
+map; a moving point's location functions are recombined per axis of B (B's axis i is
+``sum_j L_ij f_j(q) + c_i`` with L the bone-local linear part k·R', written exactly as one
+function when the axes it gathers follow one coordinate and are polynomials, or splines on
+the same knots; a plain scaling or an axis permutation always is); conditional points keep
+their coordinate range; wrap surfaces move with their bone: position mapped, orientation
+turned by R', sizes (radii, length, torus radii) times k, quadrant (the surface's own axes),
+range, method and flag kept. The path's coordinates must be coordinates of B (same names).
+
 Section sizes: radii and outline points are multiplied by the geometric mean of ``k`` over
-the muscle's axis control points (each point weighs as much as the others); with the rest
-length scaled by about the same factor, the rest volume scales by about its cube. Section
-positions ``t``, tendon fractions, twist, colour, tension, strength, volume mode and
-resolution are kept. A muscle with an axis point on a bone the map does not name is skipped
-and listed in the report. Files are written by the importers' emitter (numbers rounded as
+the muscle's axis control points, or its path points and wrap surfaces (each weighs as much
+as the others); with the rest length scaled by about the same factor, the rest volume scales
+by about its cube. Section positions ``t``, tendon fractions, twist, colour, tension,
+strength, volume mode, resolution and ``axis_points`` are kept. A muscle with a point or
+surface on a bone the map does not name, a path coordinate B lacks, or a moving point whose
+functions cannot be recombined, is skipped and listed with the reason in the report. Files are written by the importers' emitter (numbers rounded as
 it rounds them: positions to 0.1 µm, the rest to 9 significant digits). The map format: docs/FORMATS.md, "Transfer map".
 """
 from __future__ import annotations
@@ -40,7 +50,7 @@ from axdf_cli.errors import InputError, Mark
 from axdf_cli.importers import emit
 from axdf_cli.loaders import RefPolicy, load_muscle_file, load_skeleton
 from axdf_cli.muscle import AxisPoint, MuscleModel, MuscleSpec
-from axdf_cli.skeleton import Skeleton, axis_angle, euler_xyz
+from axdf_cli.skeleton import Constant, Linear, Multiplier, Polynomial, Skeleton, Spline, axis_angle, euler_xyz
 from axdf_cli.yamlio import Fields, check_name, check_vector, item_marks, load_yaml
 
 #: A segment shorter than this (metres) has no direction: the entry is treated as segment-less.
@@ -219,22 +229,121 @@ def pair_transforms(bmap: BoneMap, skel_a: Skeleton, skel_b: Skeleton) -> dict[s
     return out
 
 
-def transfer_spec(spec: MuscleSpec, tf: dict[str, PairTransform]) -> tuple[MuscleSpec | None, list[str], float]:
-    """The muscle on B, the bones of A it uses that the map lacks (then None), and its radial scale."""
-    missing = sorted({p.bone for p in spec.axis if p.bone not in tf})
+def muscle_bones(spec: MuscleSpec) -> list[str]:
+    """The bones a muscle uses: its axis points', or its path points' and wrap surfaces'."""
+    if spec.path is None:
+        return [p.bone for p in spec.axis]
+    return [p.bone for p in spec.path.points] + [w.bone for w in spec.path.wraps]
+
+
+class NotCarried(Exception):
+    """A muscle the map cannot carry onto B (the message says why); it is skipped and listed."""
+
+
+def _flatten(weight: float, fn) -> tuple[float, object]:
+    """``weight · fn`` with multipliers folded into the weight; a spline of one value is a constant."""
+    while isinstance(fn, Multiplier):
+        weight, fn = weight * fn.scale, fn.function
+    if isinstance(fn, Spline) and np.all(fn.y == fn.y[0]):
+        fn = Constant(float(fn.y[0]))
+    return weight, fn
+
+
+def combine_functions(terms: list[tuple[float, object]], offset: float):
+    """The function ``sum(w · f(x)) + offset`` of one coordinate, exactly, as one function of
+    the muscle format, or None when it has none: polynomials (constants, lines) add up into a
+    polynomial; splines on the same knots and of the same kind add up into a spline (spline
+    interpolation is linear in the values, and a constant shifts every value)."""
+    terms = [_flatten(w, f) for w, f in terms]
+    for w, f in terms:
+        if isinstance(f, Constant):
+            offset += w * f.value
+    terms = [(w, f) for w, f in terms if not isinstance(f, Constant) and w != 0.0]
+    if all(isinstance(f, (Linear, Polynomial)) for _, f in terms):
+        c = np.zeros(1)
+        for w, f in terms:
+            fc = np.array([f.intercept, f.slope]) if isinstance(f, Linear) else np.asarray(f.coefficients, float)
+            c = np.pad(c, (0, max(0, len(fc) - len(c)))) + w * np.pad(fc, (0, max(0, len(c) - len(fc))))
+        c[0] += offset
+        return Polynomial(tuple(float(v) for v in c)) if len(c) > 2 else Linear(float(c[1]), float(c[0])) \
+            if len(c) == 2 else Constant(float(c[0]))
+    if all(isinstance(f, Spline) for _, f in terms) and \
+            all(f.kind == terms[0][1].kind and np.array_equal(f.x, terms[0][1].x) for _, f in terms):
+        return Spline(terms[0][1].x.copy(), sum(w * f.y for w, f in terms) + offset, terms[0][1].kind)
+    return None
+
+
+def _carry_point(p, t: PairTransform, index: int):
+    """A path point on B: ``at`` through the bone's map; a moving point's location functions
+    recombined per B axis (an axis of B gathers the A axes the rest rotation turns onto it)."""
+    from axdf_cli.paths import Moving
+
+    lin, off = t.matrix[:3, :3], t.matrix[:3, 3]
+    at = lin @ np.asarray(p.at) + off
+    moving = None
+    if p.moving is not None:
+        axes = []
+        for i in range(3):
+            src = [j for j in range(3) if abs(lin[i, j]) > 1e-12 * t.scale]
+            driven = [j for j in src if p.moving[j] is not None]
+            if not driven:
+                axes.append(None)
+                continue
+            coords = {p.moving[j].coord for j in driven}
+            fn = None
+            if len(coords) == 1:
+                static = sum(lin[i, j] * p.at[j] for j in src if p.moving[j] is None)
+                fn = combine_functions([(lin[i, j], p.moving[j].function) for j in driven], static + off[i])
+            if fn is None:
+                raise NotCarried(f"path point {index + 1} moves along axes that bone {t.dst}'s rest rotation mixes "
+                                 "into functions the muscle format cannot write (different coordinates, or splines "
+                                 "on different knots)")
+            axes.append(Moving(coords.pop(), fn))
+        moving = tuple(axes) if any(axes) else None
+    return replace(p, bone=t.dst, at=tuple(float(x) for x in at), moving=moving)
+
+
+def _carry_wrap(w, t: PairTransform):
+    """A wrap surface on B: its frame through the bone's map (position mapped, orientation turned
+    by the rest rotation), its sizes times k; quadrant, range, method and flag kept (the quadrant
+    names the surface's own axes, which turn with it)."""
+    from scipy.spatial.transform import Rotation
+
+    lin, off = t.matrix[:3, :3], t.matrix[:3, 3]
+    turn = (lin / t.scale) @ euler_xyz(w.orient)
+    orient = Rotation.from_matrix(turn).as_euler("XYZ", degrees=True)  # intrinsic X-Y-Z: Rx·Ry·Rz
+    return replace(w, bone=t.dst, at=tuple(float(x) for x in lin @ np.asarray(w.at) + off),
+                   orient=tuple(float(x) for x in orient), size=tuple(v * t.scale for v in w.size))
+
+
+def transfer_spec(spec: MuscleSpec, tf: dict[str, PairTransform],
+                  coordinates_b: dict | None = None) -> tuple[MuscleSpec | None, list[str], float]:
+    """The muscle on B, the bones of A it uses that the map lacks (then None), and its radial scale.
+    A path muscle's coordinates must exist in B (``coordinates_b``, name → index); a muscle that
+    cannot be carried raises :class:`NotCarried`."""
+    bones = muscle_bones(spec)
+    missing = sorted({b for b in bones if b not in tf})
     if missing:
         return None, missing, 1.0
-    axis = []
-    for p in spec.axis:
-        t = tf[p.bone]
-        at = t.matrix[:3, :3] @ np.asarray(p.at) + t.matrix[:3, 3]
-        axis.append(AxisPoint(t.dst, tuple(float(x) for x in at), p.mark))
-    k = math.exp(sum(math.log(tf[p.bone].scale) for p in spec.axis) / len(spec.axis))
+    k = math.exp(sum(math.log(tf[b].scale) for b in bones) / len(bones))
     secs = []
     for s in spec.sections:
         radii = None if s.radii is None else tuple(r * k for r in s.radii)
         outline = None if s.outline is None else tuple(tuple(c * k for c in pt) for pt in s.outline)
         secs.append(replace(s, radii=radii, outline=outline))
+    if spec.path is not None:
+        lacking = sorted(c for c in spec.path.coordinates if c not in (coordinates_b or {}))
+        if lacking:
+            raise NotCarried("coordinates its path points follow are not coordinates of the target skeleton: "
+                             + ", ".join(lacking))
+        points = tuple(_carry_point(p, tf[p.bone], i) for i, p in enumerate(spec.path.points))
+        wraps = tuple(_carry_wrap(w, tf[w.bone]) for w in spec.path.wraps)
+        return replace(spec, path=replace(spec.path, points=points, wraps=wraps), sections=tuple(secs)), [], k
+    axis = []
+    for p in spec.axis:
+        t = tf[p.bone]
+        at = t.matrix[:3, :3] @ np.asarray(p.at) + t.matrix[:3, 3]
+        axis.append(AxisPoint(t.dst, tuple(float(x) for x in at), p.mark))
     return replace(spec, axis=tuple(axis), sections=tuple(secs)), [], k
 
 
@@ -252,7 +361,15 @@ def _color(c: tuple) -> str | list:
 def muscle_doc(spec: MuscleSpec) -> dict:
     """One muscle's YAML document (docs/FORMATS.md, "Muscle"): every field written out."""
     d = {"muscle": spec.name, "color": _color(spec.color), "strength": spec.strength, "tension": spec.tension,
-         "volume": spec.volume, "axis": [{"bone": p.bone, "at": list(p.at)} for p in spec.axis]}
+         "volume": spec.volume}
+    if spec.path is None:
+        d["axis"] = [{"bone": p.bone, "at": list(p.at)} for p in spec.axis]
+    else:
+        d["path"] = [emit.point_doc(p) for p in spec.path.points]
+        if spec.path.wraps:
+            d["wrap"] = [emit.wrap_doc(w) for w in spec.path.wraps]
+        if spec.path.control_points:
+            d["axis_points"] = spec.path.control_points
     if all(s.radii is not None or s.outline is not None for s in spec.sections):  # else the default sections
         d["sections"] = [{"t": s.t, "outline": [list(p) for p in s.outline]} if s.outline is not None
                          else {"t": s.t, "radii": list(s.radii), "angle": s.angle} for s in spec.sections]
@@ -301,14 +418,20 @@ def build_transfer(muscle_files: list[Path], skel_a: Skeleton | None, skel_b: Sk
         specs = load_muscle_file(path)
         kept = []
         for spec in specs:
-            new, missing, k = transfer_spec(spec, tf)
-            if new is None:
-                skipped.append({"muscle": spec.name, "file": path.name, "bones_without_counterpart": missing})
+            try:
+                new, missing, k = transfer_spec(spec, tf, skel_b.coord_index)
+            except NotCarried as e:
+                skipped.append({"muscle": spec.name, "file": path.name, "bones_without_counterpart": [],
+                                "why": str(e)})
                 continue
-            ma = MuscleModel(spec, skel_a.bone_index, wa)
-            mb = MuscleModel(new, skel_b.bone_index, wb)
-            rows.append({"muscle": spec.name, "file": path.name, "bones": sorted({f"{p.bone}->{tf[p.bone].dst}"
-                                                                               for p in spec.axis}),
+            if new is None:
+                skipped.append({"muscle": spec.name, "file": path.name, "bones_without_counterpart": missing,
+                                "why": "bones without a counterpart in the map: " + ", ".join(missing)})
+                continue
+            ma = MuscleModel(spec, skel_a.bone_index, wa, skel_a)
+            mb = MuscleModel(new, skel_b.bone_index, wb, skel_b)
+            rows.append({"muscle": spec.name, "file": path.name, "bones": sorted({f"{b}->{tf[b].dst}"
+                                                                               for b in muscle_bones(spec)}),
                          "radius_scale": k, "rest_length_from": ma.l0, "rest_length_to": mb.l0,
                          "length_ratio": mb.l0 / ma.l0, "rest_volume_from": ma.v0, "rest_volume_to": mb.v0})
             kept.append(new)
@@ -342,7 +465,8 @@ def transfer_markdown(r: dict) -> str:
     for m in r["muscles"]:
         lines.append(f"| {m['muscle']} | {m['file']} | {m['radius_scale']:.4f} | "
                      f"{m['rest_length_from']:.4f} → {m['rest_length_to']:.4f} | {m['length_ratio']:.4f} |")
-    lines += ["", "## Skipped (bones without a counterpart)", ""]
-    lines += [f"- {s['muscle']} ({s['file']}): {', '.join(s['bones_without_counterpart'])}"
+    lines += ["", "## Skipped", ""]
+    lines += [f"- {s['muscle']} ({s['file']}): " + (f"{', '.join(s['bones_without_counterpart'])} (no counterpart "
+                                                    "in the map)" if s["bones_without_counterpart"] else s["why"])
               for s in r["skipped"]] or ["- none"]
     return "\n".join(lines) + "\n"

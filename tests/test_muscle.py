@@ -623,3 +623,18 @@ def test_rmf_frames_of_the_model_are_used(chain_spec, chain_model, chain_world):
     a0 = np.arctan2(r0[:, :, 1], r0[:, :, 0])
     a1 = np.arctan2(r1[:, :, 1], r1[:, :, 0])
     np.testing.assert_allclose(np.angle(np.exp(1j * (a1 - a0))), 0.0, atol=1e-9)
+
+
+def test_a_pickled_model_evaluates_the_same(chain_spec, chain_model, chain_world):
+    """A model sent to another process (pickle) or copied keeps everything it evaluates with:
+    its sparse bases are keyed by name, not by the id() of arrays that a copy replaces."""
+    import copy
+    import pickle
+
+    m = chain_model(chain_spec)
+    w = chain_world(bend=np.linspace(0.0, 80.0, 5), roll=np.linspace(0.0, 40.0, 5))
+    ref = m.evaluate(w, np.zeros(5))
+    for other in (pickle.loads(pickle.dumps(m)), copy.deepcopy(m)):
+        got = other.evaluate(w, np.zeros(5))
+        assert np.array_equal(got.vertices, ref.vertices)
+        assert np.array_equal(got.length, ref.length)

@@ -42,6 +42,8 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--pose-name", help="pose name (default: the motion file's name)")
     p.add_argument("--fps", type=float, help="resample the motion at this frame rate (default: its own)")
     p.add_argument("--no-meshes", action="store_true", help="do not convert bone geometry")
+    p.add_argument("--palette", choices=("anatomical", "hashed"), default="anatomical",
+                   help="muscle colours: muscle reds varied per muscle (default), or any hue from the name's hash")
 
     b = sub.add_parser("bvh", help="Biovision motion capture (.bvh) → skeleton and pose",
                        description="Import a BVH file: a skeleton (Z-up, metres) and a pose of its motion.")
@@ -70,7 +72,7 @@ def run(args) -> int:
     res = build_import(args.model, args.out, name=args.name, motion=args.motion, controls=args.controls,
                        skeleton_out=args.skeleton_out, muscles_out=args.muscles_out, pose_out=args.pose_out,
                        meshes_out=args.meshes_out, pose_name=args.pose_name, fps=args.fps,
-                       meshes=not args.no_meshes)
+                       meshes=not args.no_meshes, palette=args.palette)
     for w in res.warnings:
         print(f"axdf: warning: {w}", file=sys.stderr)
     for path, data in sorted(res.files.items()):

@@ -2,9 +2,10 @@
 
 Every muscle of MUSCLES (files, folders or globs) defined on skeleton A is moved onto
 skeleton B (``--from``/``--to``, or the map's ``from:``/``to:``) through the bone correspondence in MAP (docs/FORMATS.md, "Transfer map"): axis
-points keep their place along each bone's segment, scaled by the bones' length ratio;
-section radii scale with the muscle's bones. Muscles on bones the map does not name are
-skipped and listed (exit 0 with a warning). DIR receives one file per muscle file (same
+points (or path points and wrap surfaces) keep their place along each bone's segment, scaled
+by the bones' length ratio; section radii scale with the muscle's bones. Muscles on bones the
+map does not name, or whose paths cannot be carried, are skipped and listed with the reason
+(exit 0 with a warning). DIR receives one file per muscle file (same
 name), ``transfer_report.json`` and ``TRANSFER.md``. A bad map or muscle writes nothing (exit 2).
 """
 from __future__ import annotations
@@ -41,8 +42,7 @@ def run(args) -> int:
     for path, data in sorted(res.files.items()):
         write_bytes(path, data)
     for s in res.skipped:
-        print(f"axdf: warning: {s['file']}: muscle {s['muscle']} skipped: bones without a counterpart in the map: "
-              f"{', '.join(s['bones_without_counterpart'])}", file=sys.stderr)
+        print(f"axdf: warning: {s['file']}: muscle {s['muscle']} skipped: {s['why']}", file=sys.stderr)
     if not args.quiet:
         r = res.report
         print(f"transferred {len(r['muscles'])} muscles from {r['from']} to {r['to']} "

@@ -1,4 +1,4 @@
-"""Check muscle, skeleton, pose and job files with the same checks as run; write nothing.
+"""Check muscle, skeleton, pose, job, transfer and dataset files with the same checks as run; write nothing.
 
 A job is planned exactly as ``axdf run JOB`` plans it (muscles on the pose's bones, frames,
 bone meshes, the ``render:`` block). Muscle files given together with a pose are checked on
@@ -48,6 +48,12 @@ def validate_file(path: Path, policy, args) -> tuple[str, str | None, list[str]]
 
     doc = load_yaml(path)
     kind = loaders.detect_kind(doc)
+    if isinstance(doc, dict) and "dataset" in doc:  # (it also names muscles: look first)
+        from axdf_cli.dataset.worker import build_context
+
+        ctx = build_context(path, policy=policy)
+        return (f"data set {ctx.spec.name}: {len(ctx.sequences)} sequences, {len(ctx.muscles)} muscles, "
+                f"{len(ctx.spec.views)} view(s)"), "dataset", []
     if kind == "skeleton":
         s = loaders.load_skeleton(path, policy)
         return f"skeleton {s.name}: {len(s.bones)} bones, {len(s.coordinates)} coordinates{_bone_meshes(s)}", kind, []

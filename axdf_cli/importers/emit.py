@@ -41,19 +41,30 @@ from axdf_cli.skeleton import Skeleton, Spline, forward_kinematics
 DEG = 180.0 / math.pi
 
 #: Specific tension σ (N/m²) turning max isometric force into PCSA. 0.6 MPa: inside the
-#: 0.3-1 MPa range reported for human muscle, near the 61 N/cm² used for the lower-limb
-#: model of Arnold et al. (2010). A lower σ would make every muscle thicker (PCSA ∝ 1/σ).
+#: 0.3-1 MPa range reported for human muscle, the 61 N/cm² of the lower-limb model of Arnold
+#: et al. (2010). A lower σ would make every muscle thicker (PCSA ∝ 1/σ).
 SPECIFIC_TENSION = 0.6e6
 #: Stress in a tendon at the muscle's max isometric force (N/m²), sizing tendon sections:
 #: human tendons carry roughly 30-100 MPa at maximal force; 50 MPa is the middle.
 TENDON_STRESS = 50e6
-#: Belly sections' radii relative to the largest: a fusiform profile.
-BELLY_PROFILE = (0.75, 1.0, 1.0, 0.75)
-#: Upper bound on the tendons' share of the rest axis, so a belly always remains.
+#: Share of OpenSim's tendon slack length that is free tendon, outside the belly. A Hill-type
+#: model's tendon is the whole series elastic element, free tendon plus aponeurosis (Zajac
+#: 1989); the aponeuroses lie inside the belly, along the fibres. The model does not say how
+#: the slack length divides; half puts the long leg muscles' bellies at 19-27 cm (the order of
+#: their cadaver lengths), where the whole slack length would leave the gastrocnemius 6 cm.
+FREE_TENDON_SHARE = 0.5
+#: Upper bound on the free tendons' share of the rest path, so a belly always remains.
 MAX_TENDON_FRACTION = 0.7
-#: How the tendon (tendon_slack_length) splits between origin and insertion: insertion
-#: tendons are usually the longer ones (Achilles, quadriceps, biceps distal).
+#: How the free tendon splits between origin and insertion: insertion tendons are usually
+#: the longer ones (Achilles, quadriceps, biceps distal).
 ORIGIN_TENDON_SHARE = 0.4
+#: The belly's radius profile: (position along the belly 0..1, radius / widest radius), a
+#: spindle close to sin(πx)^0.3 (a long middle) that tapers into the tendons at both ends.
+BELLY_PROFILE = ((0.04, 0.45), (0.15, 0.8), (0.32, 0.97), (0.5, 1.0), (0.68, 0.97), (0.85, 0.8), (0.96, 0.45))
+#: Sections inside a free tendon, as fractions of it from its bone; a tendon shorter than
+#: MIN_TENDON_FRACTION of the path gets none (the belly tapers into the attachment).
+TENDON_SECTIONS = (0.3, 0.75)
+MIN_TENDON_FRACTION = 0.02
 
 
 # ----------------------------------------------------------------------------- functions
@@ -153,14 +164,38 @@ def skeleton_doc(model: Model, name: str, meshes: dict[str, str]) -> dict:
 # ----------------------------------------------------------------------------- muscles
 
 
-def muscle_color(name: str) -> str:
-    """A deterministic colour from the muscle's name: hue from sha256, muscle-like saturation."""
+def _hex(rgb) -> str:
+    return "#{:02x}{:02x}{:02x}".format(*(round(c * 255) for c in rgb))
+
+
+def hashed_color(name: str) -> str:
+    """A deterministic colour from the muscle's name: any hue (sha256), muscle-like saturation."""
     h = hashlib.sha256(name.encode()).digest()
-    hue = h[0] / 255.0
-    sat = 0.45 + 0.3 * h[1] / 255.0
-    val = 0.7 + 0.25 * h[2] / 255.0
-    r, g, b = colorsys.hsv_to_rgb(hue, sat, val)
-    return "#{:02x}{:02x}{:02x}".format(round(r * 255), round(g * 255), round(b * 255))
+    return _hex(colorsys.hsv_to_rgb(h[0] / 255.0, 0.45 + 0.3 * h[1] / 255.0, 0.7 + 0.25 * h[2] / 255.0))
+
+
+#: Side suffixes: a muscle and its mirror image share their anatomical colour.
+SIDE_SUFFIX = re.compile(r"_[lr]$")
+
+
+def srgb_to_linear(c: float) -> float:
+    """IEC 61966-2-1: an sRGB (display) value in [0, 1] → linear (the muscle files' colours)."""
+    return c / 12.92 if c <= 0.04045 else ((c + 0.055) / 1.055) ** 2.4
+
+
+def anatomical_color(name: str) -> str:
+    """A muscle red, varied per muscle so that neighbours stay apart. Chosen on screen (sRGB):
+    hue 352°-10° (crimson to brick), saturation 0.6-0.85, value 0.5-0.8, each from its own
+    byte of sha256 of the name without its side suffix (``_r``/``_l``: left and right of a
+    muscle look alike); written linear, as muscle colours are."""
+    h = hashlib.sha256(SIDE_SUFFIX.sub("", name).encode()).digest()
+    hue = (352.0 + 18.0 * h[0] / 255.0) / 360.0 % 1.0
+    rgb = colorsys.hsv_to_rgb(hue, 0.6 + 0.25 * h[1] / 255.0, 0.5 + 0.3 * h[2] / 255.0)
+    return _hex([srgb_to_linear(c) for c in rgb])
+
+
+#: ``axdf import osim --palette``: how muscles are coloured.
+PALETTES = {"anatomical": anatomical_color, "hashed": hashed_color}
 
 
 def _world_points(skel: Skeleton, world: np.ndarray, pts) -> np.ndarray:
@@ -169,99 +204,136 @@ def _world_points(skel: Skeleton, world: np.ndarray, pts) -> np.ndarray:
     return np.array([(world[bi[b]] @ np.append(p, 1.0))[:3] for b, p in pts])
 
 
+def point_doc(p) -> dict:
+    """One path point's document (a :class:`axdf_cli.paths.PathPoint`, axdf units)."""
+    d: dict = {"bone": p.bone, "at": [float(v) for v in p.at]}
+    mv = {ax: {"coord": a.coord, "function": function_doc(a.function)}
+          for ax, a in zip("xyz", p.moving or ()) if a is not None}
+    if mv:
+        d["moving"] = mv
+    if p.active is not None:
+        coord, lo, hi = p.active
+        d["active"] = {"coord": coord, "range": [float(lo), float(hi)]}
+    return d
+
+
+def wrap_doc(w) -> dict:
+    """One wrap surface's document (a :class:`axdf_cli.paths.WrapSurface`)."""
+    from axdf_cli.loaders import WRAP_SIZE_KEYS
+
+    d = {"name": w.name, "shape": w.shape, "bone": w.bone}
+    if w.shape == "ellipsoid":
+        d["radii"] = [float(v) for v in w.size]
+    else:
+        d.update({k: float(v) for k, v in zip(WRAP_SIZE_KEYS[w.shape], w.size)})
+    d["at"] = [float(v) for v in w.at]
+    d["orient"] = [float(v) for v in w.orient]
+    d["quadrant"] = w.quadrant
+    if w.shape == "ellipsoid":
+        d["method"] = w.method
+    if tuple(w.range) != (-1, -1):
+        d["range"] = [int(v) for v in w.range]
+    if not w.active:
+        d["active"] = False
+    return d
+
+
 def path_docs(model: Model, m: Muscle) -> tuple[list, list]:
     """The muscle's ``path`` (every path point; moving ones with their functions in axdf
     units, conditional ones with their ``active`` range) and ``wrap`` (its wrap surfaces,
     copied per muscle with the path wrap's range and method) documents."""
+    from axdf_cli.paths import Moving, PathPoint, WrapSurface
+
     path = []
     for p in m.points:
-        d: dict = {"bone": p.body, "at": [float(v) for v in p.location]}
+        moving = None
         if p.moving is not None:
             if p.frame is not None:
                 raise InputError(p.mark, f"moving point {p.name!r} of {m.name} is attached to an offset frame",
                                  "moving points attached to a body")
-            mv = {}
-            for ax, a in zip("xyz", p.moving):
-                if a is None:
-                    continue
-                coord, fn = a
-                k_in = math.pi / 180.0 if model.coordinates[coord].type == "rotation" else 1.0
-                mv[ax] = {"coord": coord, "function": function_doc(convert_function(fn, k_in, 1.0))}
-            if mv:
-                d["moving"] = mv
+            moving = tuple(None if a is None else
+                           Moving(a[0], convert_function(a[1], math.pi / 180.0 if model.coordinates[a[0]].type
+                                                         == "rotation" else 1.0, 1.0)) for a in p.moving)
+        active = None
         if p.condition is not None:
             coord, lo, hi = p.condition
             k = DEG if model.coordinates[coord].type == "rotation" else 1.0
-            d["active"] = {"coord": coord, "range": [lo * k, hi * k]}
-        path.append(d)
+            active = (coord, lo * k, hi * k)
+        path.append(point_doc(PathPoint(p.body, tuple(p.location), moving, active)))
     wraps = []
     for pw in m.wraps:
         w = model.wrap_objects[pw.wrap]
-        d = {"name": w.name, "shape": w.shape, "bone": w.body}
-        if w.shape == "cylinder":
-            d.update(radius=w.size[0], length=w.size[1])
-        elif w.shape == "sphere":
-            d["radius"] = w.size[0]
-        elif w.shape == "ellipsoid":
-            d["radii"] = list(w.size)
-        else:
-            d.update(inner=w.size[0], outer=w.size[1])
-        d["at"] = list(w.translation)
-        d["orient"] = _deg(w.rotation)
-        d["quadrant"] = w.quadrant
-        if w.shape == "ellipsoid":
-            d["method"] = pw.method
-        if pw.range != (-1, -1):
-            d["range"] = list(pw.range)
-        if not w.active:
-            d["active"] = False
-        wraps.append(d)
+        wraps.append(wrap_doc(WrapSurface(w.name, w.body, w.shape, tuple(w.size) + (0.0,) * (3 - len(w.size)),
+                                          tuple(w.translation), tuple(_deg(w.rotation)), w.quadrant, pw.method,
+                                          tuple(pw.range), w.active)))
     return path, wraps
 
 
-def muscle_doc(m: Muscle, skel: Skeleton, world: np.ndarray, model: Model | None = None) -> tuple[dict, dict]:
+def muscle_doc(m: Muscle, skel: Skeleton, world: np.ndarray, model: Model | None = None,
+               palette: str = "anatomical") -> tuple[dict, dict]:
     """One muscle YAML document and a summary row for the import report.
 
-    Sizing: PCSA = F_max / SPECIFIC_TENSION; belly volume V = PCSA × optimal fibre length.
-    Tendons: T = min(tendon_slack_length / rest axis length, MAX_TENDON_FRACTION), split
-    ORIGIN_TENDON_SHARE : (1 - ORIGIN_TENDON_SHARE) between origin and insertion. Sections:
-    one thin section inside each tendon (radius from TENDON_STRESS) and four belly sections
-    evenly spread over the belly with radii BELLY_PROFILE × r, r chosen so that the radius
-    profile (piecewise linear along the axis, closing at the poles) holds volume V over the
-    belly. Section positions are chosen as fractions of the rest arc length and written as
-    curve parameters t (mapped through the rest axis). Circular sections; ``volume: exact``
-    keeps the rest volume under motion.
+    The belly law (README, "OpenSim models"), from the model's own numbers:
+
+    - volume V = PCSA × optimal fibre length, PCSA = F_max / SPECIFIC_TENSION (a pennate
+      muscle's fibres are short, but there are many of them side by side: V holds);
+    - free tendon = FREE_TENDON_SHARE × tendon slack length, but no longer than what leaves the
+      belly its fibres' projection (optimal fibre length × cos pennation) and at most
+      MAX_TENDON_FRACTION of the path; split ORIGIN_TENDON_SHARE : rest between origin and
+      insertion;
+    - belly length = rest path length − free tendon: the belly fills the path between the free
+      tendons (a pennate belly is much longer than its fibres);
+    - belly sections: BELLY_PROFILE × R, R such that the written mesh's rest volume (the
+      model's own surface, as ``axdf run`` builds it) is V plus the tendons' volume;
+    - tendon sections (TENDON_SECTIONS inside each free tendon) of radius r_t with
+      π r_t² = F_max / TENDON_STRESS; ``tendons`` are the free tendons' arc fractions.
+
+    Positions are fractions of the rest arc length written as curve parameters t (mapped
+    through the rest axis); sections are circular; ``volume: exact`` keeps the rest volume.
+    The row also carries the belly's slenderness (:mod:`axdf_cli.measure`) at rest.
     """
-    pts = [(p.body, p.location) for p in m.points if p.active_at_rest]
-    wpts = _world_points(skel, world, pts)
-    path_length = float(np.sum(np.linalg.norm(np.diff(wpts, axis=0), axis=1)))
+    from axdf_cli.measure import belly_slenderness
+
     path, wraps = path_docs(model, m)
     rest_ctrl, path_length = _rest_path(m.name, path, wraps, skel, world)
     t_of, axis_length = _arc_parameter_of(rest_ctrl)
     pcsa = m.max_isometric_force / SPECIFIC_TENSION
     volume = pcsa * m.optimal_fiber_length
-    tendon = min(m.tendon_slack_length / axis_length, MAX_TENDON_FRACTION) if axis_length > 0 else 0.0
-    t_o, t_i = ORIGIN_TENDON_SHARE * tendon, (1.0 - ORIGIN_TENDON_SHARE) * tendon
+    fibres = m.optimal_fiber_length * math.cos(m.pennation_angle)
+    free = min(max(min(FREE_TENDON_SHARE * m.tendon_slack_length, path_length - fibres), 0.0),
+               MAX_TENDON_FRACTION * path_length)
+    belly_length = path_length - free
+    t_o = ORIGIN_TENDON_SHARE * free / path_length
+    t_i = free / path_length - t_o
     r_t = math.sqrt(m.max_isometric_force / TENDON_STRESS / math.pi)
-    belly = 1.0 - t_o - t_i
-    ss = [t_o + belly * (k + 0.5) / len(BELLY_PROFILE) for k in range(len(BELLY_PROFILE))]  # arc fractions
-    r = _belly_radius(volume, axis_length, t_o, 1.0 - t_i, ss, r_t)
-    sections = []
-    if t_o > 0.02:
-        sections.append({"t": t_of(t_o / 2.0), "radii": [r_t, r_t], "angle": 0.0})
-    for s_, f in zip(ss, BELLY_PROFILE):
-        sections.append({"t": t_of(s_), "radii": [max(f * r, r_t), max(f * r, r_t)], "angle": 0.0})
-    if t_i > 0.02:
-        sections.append({"t": t_of(1.0 - t_i / 2.0), "radii": [r_t, r_t], "angle": 0.0})
-    doc = {
-        "muscle": m.name,
-        "color": muscle_color(m.name),
-        "volume": "exact",
-        "path": path,
-        **({"wrap": wraps} if wraps else {}),
-        "sections": sections,
-        "tendons": [t_o, t_i],
-    }
+    target = volume + math.pi * r_t * r_t * free  # the belly and the free tendons (tubes)
+    fractions, factors = [], []  # (arc fraction, radius factor: None for a tendon section)
+    if t_o > MIN_TENDON_FRACTION:
+        fractions += [x * t_o for x in TENDON_SECTIONS]
+        factors += [None] * len(TENDON_SECTIONS)
+    fractions += [t_o + x * (1.0 - t_o - t_i) for x, _ in BELLY_PROFILE]
+    factors += [f for _, f in BELLY_PROFILE]
+    if t_i > MIN_TENDON_FRACTION:
+        fractions += [1.0 - x * t_i for x in TENDON_SECTIONS[::-1]]
+        factors += [None] * len(TENDON_SECTIONS)
+    ts = [t_of(x) for x in fractions]
+
+    def document(r: float) -> dict:
+        sections = [{"t": t, "radii": [r_t, r_t] if f is None else [f * r, f * r], "angle": 0.0}
+                    for t, f in zip(ts, factors)]
+        return {"muscle": m.name, "color": PALETTES[palette](m.name), "volume": "exact", "path": path,
+                **({"wrap": wraps} if wraps else {}), "sections": sections, "tendons": [t_o, t_i]}
+
+    # a first guess from the profile's mean squared radius, then the model's own exact-volume
+    # solve (belly points scale, tendon points do not) gives the widest radius R
+    mean_sq = float(np.mean([f * f for _, f in BELLY_PROFILE]))
+    guess = math.sqrt(volume / (math.pi * belly_length * mean_sq))
+    mm = _model(document(guess), m.name, skel, world)
+    res = mm.evaluate(world[None], np.zeros(1), rest_volume=target, coords=skel.rest_coordinates()[None])
+    r = guess * float(res.scale[0])
+    doc = document(r)
+    mm = _model(doc, m.name, skel, world)
+    slender = belly_slenderness(mm.rest_vertices, mm.faces)
     conditional = [p.name for p in m.points if p.kind == "conditional"]
     dropped = [p.name for p in m.points if not p.active_at_rest]
     moving = [p.name for p in m.points if p.kind == "moving"]
@@ -269,8 +341,21 @@ def muscle_doc(m: Muscle, skel: Skeleton, world: np.ndarray, model: Model | None
            "rest_axis_length": axis_length,
            "conditional": conditional, "conditional_inactive_at_rest": dropped, "moving": moving,
            "wraps": [w.wrap for w in m.wraps], "rest_path_length": path_length, "pcsa_m2": pcsa, "volume_m3": volume,
-           "belly_radius": r, "tendon_radius": r_t, "tendons": [t_o, t_i]}
+           "optimal_fiber_length": m.optimal_fiber_length, "pennation_deg": math.degrees(m.pennation_angle),
+           "tendon_slack_length": m.tendon_slack_length, "free_tendon": free, "belly_length": belly_length,
+           "fibre_projection": fibres,
+           "belly_radius": r, "tendon_radius": r_t, "tendons": [t_o, t_i], "rest_volume_m3": mm.v0,
+           "slenderness": slender.ratio, "widest_diameter": slender.width}
     return doc, rounded(row)
+
+
+def _model(doc: dict, name: str, skel: Skeleton, world: np.ndarray):
+    """The muscle document as ``axdf run`` reads and builds it (rounded YAML text → model)."""
+    from axdf_cli.loaders import parse_muscle_text
+    from axdf_cli.muscle import MuscleModel
+
+    (spec,) = parse_muscle_text(dump_yaml(doc), f"<{name}>")
+    return MuscleModel(spec, skel.bone_index, world, skel)
 
 
 def _rest_path(name: str, path: list, wraps: list, skel: Skeleton, world: np.ndarray):
@@ -304,27 +389,6 @@ def _arc_parameter_of(ctrl: np.ndarray) -> tuple:
         return float(np.interp(x, frac, ts))
 
     return t_of, length
-
-
-def _belly_radius(volume: float, length: float, a: float, b: float, ts: list[float], r_t: float) -> float:
-    """Largest belly radius r so that the piecewise-linear radius profile through
-    (a, r_t), (ts_k, BELLY_PROFILE_k·r), (b, r_t) encloses ``volume`` over [a, b]·length."""
-    xs = [a] + list(ts) + [b]
-
-    def vol(r):
-        rs = [r_t] + [f * r for f in BELLY_PROFILE] + [r_t]
-        v = 0.0
-        for (x0, r0), (x1, r1) in zip(zip(xs, rs), zip(xs[1:], rs[1:])):
-            v += math.pi * (x1 - x0) * length * (r0 * r0 + r0 * r1 + r1 * r1) / 3.0
-        return v
-
-    lo, hi = 0.0, 1.0
-    if vol(hi) < volume:
-        return hi
-    for _ in range(80):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if vol(mid) < volume else (lo, mid)
-    return 0.5 * (lo + hi)
 
 
 def rest_world(skel: Skeleton) -> np.ndarray:

@@ -385,7 +385,8 @@ def _closest_xyz(a0, a1, a2, y0, y1, y2):
     outside, as a tuple: x_i = a_i^2 y_i / (t + a_i^2) with t the largest root of
     F(t) = sum (a_i y_i / (t + a_i^2))^2 - 1 (t > -min a_i^2). F is convex and decreasing
     there: Newton from a point left of the root (F >= 0; Eberly's start -a_k^2 + a_k |y_k| on
-    the shortest axis k) climbs to it monotonically; bisection when y_k = 0. Scalars only
+    the shortest axis k) climbs to it monotonically; bisection when y_k = 0 (or so small
+    that the start rounds onto the pole -a_k^2). Scalars only
     (no allocation: the fan calls it 300 times per segment)."""
     e0, e1, e2 = a0 * a0, a1 * a1, a2 * a2
     if e0 <= e1 and e0 <= e2:
@@ -396,7 +397,7 @@ def _closest_xyz(a0, a1, a2, y0, y1, y2):
         ek, ak, yk = e2, a2, y2
     t = -ek + ak * abs(yk)
     newton = False
-    if yk != 0.0:
+    if t + ek > 0.0:  # yk != 0 and not so small that t + ek rounds to 0 (bisection then)
         f = (a0 * y0 / (t + e0)) ** 2 + (a1 * y1 / (t + e1)) ** 2 + (a2 * y2 / (t + e2)) ** 2 - 1.0
         newton = f >= 0.0
     if newton:

@@ -1,6 +1,7 @@
 """Planning a run: load and check every input, build the muscle models. Writes nothing."""
 from __future__ import annotations
 
+import functools
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -49,8 +50,14 @@ class RunPlan:
 
 def display_path(p: Path) -> str:
     """A path for the manifest: relative to the current folder when below it."""
+    return _display_path(str(p), os.getcwd())
+
+
+@functools.lru_cache(maxsize=4096)
+def _display_path(p: str, cwd: str) -> str:
+    # cached: a manifest names every muscle's source, and is written several times a run
     try:
-        return Path(os.path.relpath(Path(p).resolve(), Path.cwd().resolve())).as_posix()
+        return Path(os.path.relpath(Path(p).resolve(), Path(cwd).resolve())).as_posix()
     except ValueError:
         return Path(p).resolve().as_posix()
 
@@ -60,6 +67,22 @@ def job_render_settings(job: Job | None):
     from axdf_cli.render.settings import RenderSettings
 
     return job.render if job is not None else RenderSettings()
+
+
+def load_muscle_specs(files) -> list[MuscleSpec]:
+    """Every muscle of ``files``, in order; a name defined twice, or no muscle at all, is an error."""
+    specs: list[MuscleSpec] = []
+    seen: dict[str, str] = {}
+    for fpath in files:
+        for spec in load_muscle_file(fpath):
+            if spec.name in seen:
+                raise InputError(Mark(str(fpath), 1, 1), f"muscle {spec.name!r} is also defined in {seen[spec.name]}",
+                                 "muscle names are unique within a run")
+            seen[spec.name] = str(fpath)
+            specs.append(spec)
+    if not specs:
+        raise InputError(None, "no muscles found", "give muscle YAML files")
+    return specs
 
 
 def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, fmt_arg=None,
@@ -91,17 +114,8 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
     else:
         raise InputError(None, "no muscles given", "give a JOB.yaml or --muscles PATH ...")
     files = expand_muscle_paths(entries, policy, Path(job.source).parent if not muscle_args else None)
-    specs: list[MuscleSpec] = []
-    seen: dict[str, str] = {}
-    for fpath in files:
-        for spec in load_muscle_file(fpath):
-            if spec.name in seen:
-                raise InputError(Mark(str(fpath), 1, 1), f"muscle {spec.name!r} is also defined in {seen[spec.name]}",
-                                 "muscle names are unique within a run")
-            seen[spec.name] = str(fpath)
-            specs.append(spec)
-    if not specs:
-        raise InputError(None, "no muscles found", "give muscle YAML files")
+    specs = load_muscle_specs(files)
+    seen = [s.name for s in specs]  # in run order (activation_problems lists them)
 
     warnings, notes = activation_problems(pose, seen)
 

@@ -1,0 +1,118 @@
+"""Build data sets: many sequences, seeded sampling, several views, labels and one index."""
+from __future__ import annotations
+
+import argparse
+import re
+import sys
+from pathlib import Path
+
+from axdf_cli.cli.run import _positive
+from axdf_cli.errors import UsageError
+
+_SHARD_RE = re.compile(r"^(\d+)/(\d+)$")
+
+
+def add_args(p) -> None:
+    sub = p.add_subparsers(dest="action", metavar="ACTION", parser_class=type(p))
+    sub.required = True
+    b = sub.add_parser("build", help="make the data set's sequences (this shard's), then the index",
+                       description="Make a data set from a dataset file (docs/FORMATS.md, Data sets).")
+    b.add_argument("dataset", metavar="DATASET.yaml", help="dataset file")
+    b.add_argument("--out", metavar="DIR", help="output folder (default out/<dataset name>)")
+    b.add_argument("--seed", type=int, metavar="N", help="override the file's seed")
+    b.add_argument("--jobs", type=_positive, default=1, metavar="N",
+                   help="worker processes (meshes and rendering); Ray CPUs for a local Ray (default 1)")
+    b.add_argument("--shard", metavar="K/N", default="0/1",
+                   help="make only sequences with index %% N == K (a SLURM array: $SLURM_ARRAY_TASK_ID/N)")
+    b.add_argument("--engine", choices=("local", "ray"), default="local",
+                   help="local process pool (default) or a Ray cluster")
+    b.add_argument("--address", metavar="ADDR",
+                   help="Ray cluster address for ray.init (default: start a local Ray with --jobs CPUs)")
+    g = b.add_mutually_exclusive_group()
+    g.add_argument("--resume", action="store_true", help="keep complete sequences, finish the others")
+    g.add_argument("--overwrite", action="store_true", help="make this run's sequences again")
+    b.add_argument("--dry-run", action="store_true", help="check the inputs, print what would be made; write nothing")
+    b.add_argument("--allow-outside", action="store_true",
+                   help="allow paths inside YAML files to leave the project folder tree")
+    m = sub.add_parser("merge", help="join the shards' sequences into OUT/index.parquet",
+                       description="Write OUT/index.parquet once every shard is done.")
+    m.add_argument("out", metavar="OUT", help="the data set's folder")
+    for sp in (b, m):  # -q/-v after the action too (SUPPRESS: never override the parent's value)
+        gq = sp.add_mutually_exclusive_group()
+        gq.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS, help="print only errors")
+        gq.add_argument("-v", "--verbose", action="store_true", default=argparse.SUPPRESS, help="print more detail")
+
+
+def parse_shard(text: str) -> tuple[int, int]:
+    m = _SHARD_RE.match(text or "")
+    if not m or not (int(m.group(2)) >= 1 and 0 <= int(m.group(1)) < int(m.group(2))):
+        raise UsageError(f"--shard {text!r}", "K/N with 0 <= K < N, e.g. --shard 3/16")
+    return int(m.group(1)), int(m.group(2))
+
+
+def run(args) -> int:
+    if args.action == "merge":
+        from axdf_cli.dataset.engine import merge
+
+        idx, rows = merge(Path(args.out))
+        if not args.quiet:
+            print(f"wrote {idx} ({rows} samples)")
+        return 0
+    return _build(args)
+
+
+def _build(args) -> int:
+    from axdf_cli.dataset import engine
+    from axdf_cli.dataset.worker import build_context
+    from axdf_cli.loaders import RefPolicy
+
+    shard = parse_shard(args.shard)
+    if args.seed is not None and not 0 <= args.seed < 2**63:
+        raise UsageError(f"--seed {args.seed}", "a whole number in 0..2^63-1")
+    policy = RefPolicy.for_command([args.dataset], args.allow_outside)
+    ctx = build_context(args.dataset, args.seed, policy)
+    out = Path(args.out or f"out/{ctx.spec.name}")
+    mine = [s for s in ctx.sequences if s.index % shard[1] == shard[0]]
+    views = len(ctx.spec.views)
+    total = sum(s.n_frames for s in mine) * views
+    if args.dry_run:
+        print(f"would make {len(mine)} of {len(ctx.sequences)} sequences ({total} samples: frames x {views} "
+              f"view(s)) in {out}, {len(ctx.muscles)} muscles, {ctx.spec.format} meshes, "
+              f"{'+'.join(ctx.spec.passes)} images {ctx.spec.render.size[0]}x{ctx.spec.render.size[1]}")
+        return 0
+    bar = None
+    if not args.quiet and sys.stderr.isatty():
+        from tqdm import tqdm
+
+        bar = tqdm(total=total, unit="sample", file=sys.stderr, desc=ctx.spec.name, smoothing=0.05)
+    try:
+        res = engine.build(args.dataset, out, seed=args.seed, jobs=args.jobs, shard=shard, engine=args.engine,
+                           address=args.address, resume=args.resume, overwrite=args.overwrite,
+                           progress=bar.update if bar else None, ctx=ctx)
+    finally:
+        if bar:
+            bar.close()
+    if not args.quiet:
+        print(summary_text(res, shard))
+    return 0
+
+
+def summary_text(res, shard) -> str:
+    """The closing summary: what was made, how fast, where the time went, the index."""
+    made = res.built
+    lines = [f"{res.sequences} sequence(s), {res.samples} samples in {res.out}: {made} made, "
+             f"{res.skipped} already complete, {res.seconds:.1f} s"
+             + (f" ({res.built_samples / res.seconds:.2f} samples/s)" if res.seconds > 0 and made else "")]
+    if made:
+        t = res.timing
+        per = 1000.0 / max(1, res.built_samples)
+        lines.append(f"per sample (summed over workers): run (evaluate + write meshes) {t['run'] * per:.0f} ms, "
+                     f"read meshes back {t['read'] * per:.0f} ms, render {t['render'] * per:.0f} ms, "
+                     f"labels + write images {t['write'] * per:.0f} ms"
+                     + (f"; {res.gl_renderer}" if res.gl_renderer else ""))
+    if res.index is not None:
+        lines.append(f"index: {res.index} ({res.rows} samples)")
+    else:
+        lines.append(f"shard {shard[0]}/{shard[1]} done; {len(res.missing)} sequence(s) of the data set still to make; "
+                     f"when every shard is done: axdf dataset merge {res.out}")
+    return "\n".join(lines)

@@ -1,0 +1,87 @@
+"""The data set's one door into the rest of axdf: the run machinery, render settings and the
+OpenSim motion reader. Everything the data-set room needs from other rooms is imported here,
+so that when those rooms move, only this module follows them.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+
+from axdf_cli.loaders import Pose
+from axdf_cli.render.camera import intrinsics, look_at  # noqa: F401  (the conventions of camera.json)
+from axdf_cli.render.renderer import id_map  # noqa: F401  (the EXR id pass's table)
+from axdf_cli.render.sequence import FRAME_WRITERS  # noqa: F401  (image passes: png, exr)
+from axdf_cli.render.settings import RenderSettings, parse_render_settings, settings_to_dict  # noqa: F401
+from axdf_cli.render.settings import parse_camera  # noqa: F401  (a job's camera: mapping)
+from axdf_cli.run import RunPlan, evaluate_chunks, execute, load_bone_mesh  # noqa: F401
+from axdf_cli.run.plan import display_path, load_muscle_specs  # noqa: F401  (as a run's manifest shows paths)
+from axdf_cli.runfolder import own_entry  # noqa: F401  (the lock and temporaries axdf leaves while writing)
+from axdf_cli.skeleton import forward_kinematics
+
+
+def sequence_plan(pose: Pose, frames: np.ndarray, muscles, models, fmt: str, out: Path, inputs: dict) -> RunPlan:
+    """A run plan for one sequence: the data set's muscles and models (built once per worker)
+    over an in-memory pose. Bone meshes are stored once for the whole data set, not per run."""
+    return RunPlan(pose=pose, muscles=list(muscles), models=list(models), frames=np.asarray(frames),
+                   formats=(fmt,), out=Path(out), inputs=dict(inputs), render=None, bone_meshes={})
+
+
+def run_sequence(plan: RunPlan, resume: bool) -> dict:
+    """Write the sequence's meshes, stats.csv, bones.csv and manifest.json (``axdf run``'s own
+    code); returns its summary, whose ``stats`` is (F, M, 6) length, volume, ratio, tension,
+    twist, scale."""
+    return execute(plan, resume=resume, overwrite=not resume)
+
+
+def written_meshes(plan: RunPlan, frame: int) -> tuple[list, list]:
+    """The muscles of one frame as the run wrote them: per muscle (V, 3) float32 positions and
+    normals, read back from the run folder (cheaper than evaluating again, and exactly what
+    was written)."""
+    from axdf_cli.formats import FORMATS
+    from axdf_cli.runfolder import mesh_relpath
+
+    read = FORMATS[plan.fmt].reader
+    pos, nrm = [], []
+    for name in plan.names:
+        m = read((plan.out / mesh_relpath(name, int(frame), plan.fmt)).read_bytes())
+        pos.append(m.vertices.astype(np.float32))
+        nrm.append(m.normals.astype(np.float32))
+    return pos, nrm
+
+
+def build_models(specs, skeleton) -> list:
+    """The muscle models at the skeleton's rest pose, as a run plan builds them."""
+    from axdf_cli.muscle import MuscleModel
+
+    rest = forward_kinematics(skeleton, skeleton.rest_coordinates()[None])[0]
+    return [MuscleModel(s, skeleton.bone_index, rest, skeleton) for s in specs]
+
+
+def motion_pose(path: Path, skeleton, name: str, fps: float | None = None) -> Pose:
+    """An OpenSim motion (.mot/.sto) as a Pose of ``skeleton``, read and converted by the
+    importer (columns to coordinates, the degrees/radians rule, resampling to ``fps``)."""
+    from axdf_cli.importers.osim_import import pose_doc
+    from axdf_cli.importers.storage import read_storage
+
+    table = read_storage(path)
+    model = SimpleNamespace(coordinates={c.name: c for c in skeleton.coordinates}, source=skeleton.source)
+    doc = pose_doc(model, table, None, name, "", fps, [], {}, [])
+    series: dict = {}
+    for frame, row in doc["keys"].items():
+        for c, v in row.items():
+            series.setdefault(c, ([], []))
+            series[c][0].append(int(frame))
+            series[c][1].append(float(v))
+    keys = {c: (tuple(f), tuple(v)) for c, (f, v) in series.items()}
+    first, last = doc["frames"]
+    return Pose(name, skeleton, float(doc["fps"]), int(first), int(last), "linear", keys, {}, {},
+                str(path), skeleton.source)
+
+
+def without_meshes(skeleton):
+    """The skeleton with its bones' mesh paths dropped (the data set stores bone meshes once)."""
+    return replace(skeleton, bones=tuple(replace(b, mesh=None) for b in skeleton.bones))
+

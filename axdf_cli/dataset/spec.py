@@ -1,0 +1,452 @@
+"""The dataset file (``dataset: NAME``) → a frozen :class:`DatasetSpec`; every check reports
+``FILE:LINE:COL: what is wrong; what is allowed`` (docs/FORMATS.md, "Data sets").
+
+Nothing here samples: :func:`expand_sequences` lists the data set's sequences (name, entry,
+number of frames) from the file alone, so every worker and every shard sees the same list.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from axdf_cli.dataset.runner import (FRAME_WRITERS, RenderSettings, load_muscle_specs, motion_pose, parse_camera,
+                                     parse_render_settings)
+from axdf_cli.errors import InputError, Mark
+from axdf_cli.formats import WRITERS
+from axdf_cli.loaders import Pose, RefPolicy, expand_muscle_paths, load_pose, load_skeleton
+from axdf_cli.yamlio import Fields, check_name, check_number, check_vector, item_marks, load_yaml, mark_of
+
+SAMPLE_MODES = ("uniform", "perturb")
+ACTIVATION_MODES = ("motion", "uniform", "none")
+CAMERA_PER = ("sequence", "frame")
+MAX_SEQUENCES = 10_000_000
+MAX_FRAMES = 100_000
+MAX_VIEWS = 64
+DEFAULT_VISIBILITY_TOLERANCE = 0.1  # metres; see labels.visibility
+RENDER_KEYS_ELSEWHERE = ("enabled", "view", "camera", "orbit", "fov")
+DATASET_KEYS = ("dataset", "seed", "skeleton", "muscles", "fps", "coordinates", "motions", "sequences", "activation",
+                "cameras", "render", "format", "shards", "labels")
+
+
+@dataclass(frozen=True)
+class CoordinateRule:
+    """How the sampler treats one coordinate: drawn within ``range`` or held at ``fixed``."""
+
+    range: tuple[float, float] | None = None
+    fixed: float | None = None
+    mark: Mark = field(default=Mark(""), compare=False)
+
+
+@dataclass(frozen=True)
+class Motion:
+    """A named motion: a pose file or an OpenSim motion (.mot/.sto), optionally a frame subset."""
+
+    name: str
+    kind: str  # "pose" | "motion"
+    path: str
+    frames: object  # raw frames spec (parse_frames) or None
+    fps: float | None  # OpenSim motions: resample to this rate (None: the file's rows)
+    mark: Mark = field(default=Mark(""), compare=False)
+
+
+@dataclass(frozen=True)
+class Entry:
+    """One item of ``sequences:``: a motion as it is, or ``count`` sampled sequences."""
+
+    kind: str  # "motion" | "uniform" | "perturb"
+    count: int
+    motion: str | None  # motion name (kind motion, or perturb's base)
+    frames: int | None  # sampled sequences: frames per sequence (uniform)
+    keys: int | None  # key poses per sequence (None: every frame)
+    spread: dict  # perturb: coordinate -> standard deviation (axdf units); "default" for the rest
+    mark: Mark = field(default=Mark(""), compare=False)
+
+    @property
+    def label(self) -> str:
+        return self.kind if self.motion is None else f"{self.kind}:{self.motion}"
+
+
+@dataclass(frozen=True)
+class Activation:
+    mode: str  # motion | uniform | none
+    range: tuple[float, float] = (0.0, 1.0)
+    muscles: dict = field(default_factory=dict)  # muscle -> (lo, hi)
+
+
+@dataclass(frozen=True)
+class RigCamera:
+    name: str
+    position: tuple[float, float, float]
+    target: tuple[float, float, float] | None  # None: the subject's centre (as target: auto)
+    up: tuple[float, float, float]
+    fov: float
+
+
+@dataclass(frozen=True)
+class Sphere:
+    views: int
+    distance: tuple[float, float]
+    elevation: tuple[float, float]  # degrees
+    azimuth: tuple[float, float]  # degrees
+    fov: float
+    target: object  # "auto" | ("bone", NAME) | (x, y, z)
+    per: str  # sequence | frame
+
+
+@dataclass(frozen=True)
+class DatasetSpec:
+    name: str
+    source: str  # the dataset file
+    seed: int
+    skeleton_path: str
+    muscle_files: tuple[str, ...]
+    motions: dict  # name -> Motion
+    entries: tuple[Entry, ...]
+    coordinates: dict  # coordinate -> CoordinateRule
+    activation: Activation
+    rig: tuple[RigCamera, ...] | None
+    sphere: Sphere | None
+    render: object  # RenderSettings (enabled)
+    passes: tuple[str, ...]  # image files per view and frame: png, exr
+    format: str  # mesh format
+    shards: int
+    visibility_tolerance: float
+    fps: float
+    policy: RefPolicy = field(default=RefPolicy(), compare=False)  # where referenced files may lie
+
+    @property
+    def views(self) -> tuple[str, ...]:
+        if self.rig is not None:
+            return tuple(c.name for c in self.rig)
+        return tuple(f"view{v:02d}" for v in range(self.sphere.views))
+
+
+@dataclass(frozen=True)
+class Sequence:
+    """One sequence of the data set: its number, folder name, entry and frame count."""
+
+    index: int
+    name: str
+    entry: int  # index into DatasetSpec.entries
+    n_frames: int
+
+
+def load_dataset(path: Path | str, seed: int | None = None, policy: RefPolicy | None = None) -> DatasetSpec:
+    """Read and check a dataset file (and the skeleton, muscles and motions it names).
+    ``seed`` overrides the file's seed (``--seed``); ``policy``: where referenced files may lie."""
+    path = Path(path)
+    policy = policy or RefPolicy()
+    doc = load_yaml(path)
+    top = Mark(str(path), 1, 1)
+    f = Fields(doc, top, "dataset file", keys=DATASET_KEYS)
+    name = f.name("dataset", required=True)
+    file_seed = int(f.number("seed", default=0, lo=0, hi=2**63 - 1, integer=True))
+    skel_ref = f.string("skeleton", required=True)
+    skel_path = policy.resolve(path, skel_ref, f.vmark("skeleton"), "skeleton")
+    if not skel_path.is_file():
+        raise InputError(f.vmark("skeleton"), f"skeleton file {skel_ref!r} not found",
+                         "a skeleton YAML relative to the dataset file")
+    skel = load_skeleton(skel_path, policy)
+
+    raw = f.raw("muscles", required=True)
+    items = [raw] if isinstance(raw, str) else raw
+    if not isinstance(items, list) or not items:
+        raise InputError(f.vmark("muscles"), "muscles is empty or not a list",
+                         "a path, folder or glob, or a list of them")
+    marks = item_marks(items, f.vmark("muscles")) if isinstance(raw, list) else [f.vmark("muscles")]
+    entries_paths = []
+    for e, m in zip(items, marks):
+        if not isinstance(e, str) or not e:
+            raise InputError(m, f"muscle path is {e!r}", "a path, folder or glob relative to the dataset file")
+        entries_paths.append((policy.resolve(path, e, m, "muscle path"), m))
+    files = expand_muscle_paths(entries_paths, policy, path.parent)
+    muscle_names = [m.name for m in load_muscle_specs(files)]
+
+    fps = float(f.number("fps", default=30.0, lo=0.0, hi=100000.0, lo_open=True))
+    coords = _parse_coordinates(f.mapping("coordinates", default=None), f.vmark("coordinates"), skel)
+    motions = _parse_motions(f.mapping("motions", default=None), f.vmark("motions"), path, policy)
+    seq_raw = f.seq("sequences", required=True, min_len=1)
+    entries = tuple(_parse_entry(v, m, motions, skel, coords)
+                    for v, m in zip(seq_raw, item_marks(seq_raw, f.vmark("sequences"))))
+    activation = _parse_activation(f.raw("activation"), f.vmark("activation"), muscle_names)
+    rig, sphere = _parse_cameras(f.mapping("cameras", required=True), f.vmark("cameras"), skel)
+    render, passes = _parse_render(f.mapping("render", default=None), f.vmark("render"))
+    fmt = f.choice("format", tuple(WRITERS), default="ply")
+    shards = int(f.number("shards", default=1, lo=1, hi=1_000_000, integer=True))
+    lab = f.mapping("labels", default=None)
+    tol = DEFAULT_VISIBILITY_TOLERANCE
+    if lab is not None:
+        lf = Fields(lab, f.vmark("labels"), "labels")
+        tol = float(lf.number("visibility_tolerance", default=tol, lo=0.0, hi=100.0))
+        lf.done()
+    f.done()
+    total = sum(e.count for e in entries)
+    if total > MAX_SEQUENCES:
+        raise InputError(f.vmark("sequences"), f"{total} sequences", f"at most {MAX_SEQUENCES}")
+    spec = DatasetSpec(name, str(path), file_seed if seed is None else int(seed), str(skel_path),
+                       tuple(str(p) for p in files), motions, entries, coords, activation, rig, sphere, render,
+                       passes, fmt, shards, tol, fps, policy)
+    # every motion must load (and match the skeleton) before anything is written
+    for m in motions.values():
+        load_motion(spec, m.name)
+    return spec
+
+
+def _parse_coordinates(value, where: Mark, skel) -> dict:
+    out = {}
+    if value is None:
+        return out
+    for cname, cval in value.items():
+        km = value.key_mark(cname)
+        if cname not in skel.coord_index:
+            raise InputError(km, f"unknown coordinate {cname!r}",
+                             f"coordinates of skeleton {skel.name}: {', '.join(skel.coord_index)}")
+        cf = Fields(cval, value.value_mark(cname), f"coordinate {cname}")
+        rng = cf.vector("range", 2, default=None)
+        fixed = cf.number("fixed", default=None)
+        cf.done()
+        if (rng is None) == (fixed is None):
+            raise InputError(value.value_mark(cname), f"coordinate {cname} needs one of range or fixed",
+                             "{range: [lo, hi]} or {fixed: value}")
+        if rng is not None and rng[1] < rng[0]:
+            raise InputError(cf.vmark("range"), f"range is {list(rng)}", "[lo, hi] with lo <= hi")
+        declared = skel.coordinates[skel.coord_index[cname]].range
+        if declared is not None:
+            lo, hi = declared
+            vals = rng if rng is not None else (fixed, fixed)
+            if vals[0] < lo - 1e-9 or vals[1] > hi + 1e-9:
+                raise InputError(cf.vmark("range" if rng is not None else "fixed"),
+                                 f"{cname} {list(vals) if rng is not None else fixed} leaves the skeleton's range "
+                                 f"[{lo:g}, {hi:g}]", "values inside the skeleton's range")
+        out[cname] = CoordinateRule(rng, fixed, value.value_mark(cname))
+    return out
+
+
+def _parse_motions(value, where: Mark, path: Path, policy: RefPolicy) -> dict:
+    out = {}
+    if value is None:
+        return out
+    for mname, mval in value.items():
+        km = value.key_mark(mname)
+        check_name(mname, km, "motion name")
+        mf = Fields(mval, value.value_mark(mname), f"motion {mname}")
+        has_pose, has_mot = mf.has("pose"), mf.has("motion")
+        if has_pose == has_mot:
+            raise InputError(value.value_mark(mname), f"motion {mname} needs one of pose or motion",
+                             "{pose: FILE.yaml} or {motion: FILE.mot|.sto}")
+        key = "pose" if has_pose else "motion"
+        ref = mf.string(key, required=True)
+        p = policy.resolve(path, ref, mf.vmark(key), f"{key} file")
+        if not p.is_file():
+            raise InputError(mf.vmark(key), f"{key} file {ref!r} not found", "a path relative to the dataset file")
+        frames = mf.raw("frames")
+        fps = mf.number("fps", default=None, lo=0.0, hi=100000.0, lo_open=True)
+        if fps is not None and has_pose:
+            raise InputError(mf.kmark("fps"), "fps is for OpenSim motions", "a pose file has its own fps")
+        mf.done()
+        out[mname] = Motion(mname, key, str(p), frames, fps, mf.vmark("frames") if frames is not None
+                            else value.value_mark(mname))
+    return out
+
+
+def _parse_entry(value, where: Mark, motions: dict, skel, coords: dict) -> Entry:
+    allowed = "{motion: NAME} or {sample: uniform|perturb, count: N, ...}"
+    f = Fields(value, where, "sequences entry")
+    if f.has("motion") == f.has("sample"):
+        raise InputError(mark_of(value, where), "a sequences entry needs one of motion or sample", allowed)
+    if f.has("motion"):
+        name = f.name("motion")
+        if name not in motions:
+            raise InputError(f.vmark("motion"), f"unknown motion {name!r}",
+                             f"motions defined under motions: {', '.join(motions) or 'none'}")
+        count = int(f.number("count", default=1, lo=1, hi=1, integer=True))
+        f.done()
+        return Entry("motion", count, name, None, None, {}, where)
+    mode = f.choice("sample", SAMPLE_MODES, required=True)
+    count = int(f.number("count", required=True, lo=1, hi=MAX_SEQUENCES, integer=True))
+    keys = f.number("keys", default=None, lo=1, hi=MAX_FRAMES, integer=True)
+    spread: dict = {}
+    if mode == "uniform":
+        frames = int(f.number("frames", default=1, lo=1, hi=MAX_FRAMES, integer=True))
+        base = None
+        if keys is not None and keys > frames:
+            raise InputError(f.vmark("keys"), f"keys is {keys} for {frames} frames", "keys <= frames")
+        # every sampled coordinate needs a range (the skeleton's, or one given here)
+        for c in skel.coordinates:
+            rule = coords.get(c.name)
+            if rule is None and c.range is None:
+                raise InputError(f.vmark("sample"), f"coordinate {c.name!r} has no range to sample",
+                                 f"give coordinates: {{{c.name}: {{range: [lo, hi]}}}} or {{fixed: value}} "
+                                 "in the dataset file, or a range in the skeleton")
+    else:
+        base = f.name("around", required=True)
+        if base not in motions:
+            raise InputError(f.vmark("around"), f"unknown motion {base!r}",
+                             f"motions defined under motions: {', '.join(motions) or 'none'}")
+        if f.has("frames"):
+            raise InputError(f.kmark("frames"), "a perturbed sequence has its motion's frames",
+                             "select frames under motions: NAME: {frames: ...}")
+        frames = None
+        sm = f.mapping("spread", required=True)
+        for cname, v in sm.items():
+            if cname != "default" and cname not in skel.coord_index:
+                raise InputError(sm.key_mark(cname), f"unknown coordinate {cname!r}",
+                                 f"'default' or coordinates of skeleton {skel.name}")
+            spread[cname] = float(check_number(v, sm.value_mark(cname), f"spread of {cname}", lo=0.0))
+    f.done()
+    return Entry(mode, count, base, frames, None if keys is None else int(keys), spread, where)
+
+
+def _parse_activation(value, where: Mark, muscle_names: list[str]) -> Activation:
+    if value is None:
+        return Activation("motion")
+    if isinstance(value, str):
+        if value not in ("motion", "none"):
+            raise InputError(where, f"activation is {value!r}",
+                             "activation is motion, none, or {sample: uniform, range: [lo, hi], muscles: {...}}")
+        return Activation(value)
+    f = Fields(value, where, "activation")
+    f.choice("sample", ("uniform",), required=True)
+    rng = f.vector("range", 2, default=(0.0, 1.0), lo=0.0, hi=1.0)
+    if rng[1] < rng[0]:
+        raise InputError(f.vmark("range"), f"range is {list(rng)}", "[lo, hi] with 0 <= lo <= hi <= 1")
+    per = {}
+    mm = f.mapping("muscles", default=None)
+    if mm is not None:
+        for name, v in mm.items():
+            if name not in muscle_names:
+                raise InputError(mm.key_mark(name), f"unknown muscle {name!r}", "muscles of this data set")
+            r = check_vector(v, mm.value_mark(name), f"activation range of {name}", 2, 0.0, 1.0)
+            if r[1] < r[0]:
+                raise InputError(mm.value_mark(name), f"range is {list(r)}", "[lo, hi] with lo <= hi")
+            per[name] = r
+    f.done()
+    return Activation("uniform", rng, per)
+
+
+def _parse_cameras(value, where: Mark, skel):
+    f = Fields(value, where, "cameras")
+    if f.has("rig") == f.has("sphere"):
+        raise InputError(where, "cameras needs one of rig or sphere",
+                         "rig: [{name, position, target, up, fov}, ...] or sphere: {views, distance, ...}")
+    if f.has("rig"):
+        seq = f.seq("rig", min_len=1)
+        if len(seq) > MAX_VIEWS:
+            raise InputError(f.vmark("rig"), f"{len(seq)} cameras", f"at most {MAX_VIEWS}")
+        rig, seen = [], set()
+        for cv, cm in zip(seq, item_marks(seq, f.vmark("rig"))):
+            if not isinstance(cv, dict) or "name" not in cv:
+                raise InputError(mark_of(cv, cm), "a rig camera needs a name", "{name, position, target, up, fov}")
+            cname = check_name(cv["name"], cv.value_mark("name"), "camera name")
+            if cname in seen:
+                raise InputError(cv.value_mark("name"), f"camera {cname!r} twice", "camera names are unique")
+            seen.add(cname)
+            rest = type(cv)({k: v for k, v in cv.items() if k != "name"})
+            rest.mark, rest.key_marks, rest.value_marks = cv.mark, cv.key_marks, cv.value_marks
+            cam = parse_camera(rest, cm)
+            rig.append(RigCamera(cname, cam.position, cam.target, cam.up, cam.fov))
+        f.done()
+        return tuple(rig), None
+    s = Fields(f.mapping("sphere"), f.vmark("sphere"), "sphere")
+    views = int(s.number("views", default=1, lo=1, hi=MAX_VIEWS, integer=True))
+    dist = s.vector("distance", 2, required=True, lo=0.0, lo_open=True)
+    elev = s.vector("elevation", 2, default=(0.0, 30.0), lo=-80.0, hi=80.0)
+    azim = s.vector("azimuth", 2, default=(0.0, 360.0), lo=-720.0, hi=720.0)
+    for key, v in (("distance", dist), ("elevation", elev), ("azimuth", azim)):
+        if v[1] < v[0]:
+            raise InputError(s.vmark(key), f"{key} is {list(v)}", "[lo, hi] with lo <= hi")
+    fov = float(s.number("fov", default=30.0, lo=1.0, hi=170.0))
+    target: object = "auto"
+    if s.has("target"):
+        t = s.raw("target")
+        if t == "auto":
+            target = "auto"
+        elif isinstance(t, dict):
+            tf = Fields(t, s.vmark("target"), "target")
+            bone = tf.name("bone", required=True)
+            tf.done()
+            if bone not in skel.bone_index:
+                raise InputError(tf.vmark("bone"), f"unknown bone {bone!r}", f"bones of skeleton {skel.name}")
+            target = ("bone", bone)
+        else:
+            target = check_vector(t, s.vmark("target"), "target", 3)
+    per = s.choice("per", CAMERA_PER, default="sequence")
+    s.done()
+    f.done()
+    return None, Sphere(views, dist, elev, azim, fov, target, per)
+
+
+def _parse_render(value, where: Mark):
+    if value is None:
+        return RenderSettings(enabled=True, size=(256, 256)), tuple(FRAME_WRITERS)
+    for k in RENDER_KEYS_ELSEWHERE:
+        if k in value:
+            raise InputError(value.key_mark(k), f"render key {k!r} does not apply to a data set",
+                             "cameras are set under cameras:; render: takes size, passes, supersample, bones, "
+                             "background, wireframe")
+    passes = tuple(FRAME_WRITERS)
+    if "passes" in value:
+        pv = value["passes"]
+        pm = value.value_mark("passes")
+        if not isinstance(pv, list) or not pv or any(p not in FRAME_WRITERS for p in pv) or len(set(pv)) != len(pv):
+            raise InputError(pm, f"passes is {pv!r}", f"a non-empty list of {', '.join(FRAME_WRITERS)}")
+        passes = tuple(p for p in FRAME_WRITERS if p in pv)
+    rest = type(value)({k: v for k, v in value.items() if k != "passes"})
+    rest.mark, rest.key_marks, rest.value_marks = value.mark, value.key_marks, value.value_marks
+    if "size" not in rest:
+        rest["size"] = [256, 256]
+    settings = parse_render_settings(rest, where)
+    return settings, passes
+
+
+# ----------------------------------------------------------------------------- sequences
+
+
+def expand_sequences(spec: DatasetSpec) -> list[Sequence]:
+    """Every sequence of the data set in order: ``seq_00000``, ``seq_00001``, ..."""
+    width = max(5, len(str(sum(e.count for e in spec.entries) - 1)))
+    out = []
+    for k, e in enumerate(spec.entries):
+        if e.kind == "uniform":
+            n = e.frames
+        else:
+            n = len(motion_frames(spec, e.motion))
+        for _ in range(e.count):
+            s = len(out)
+            out.append(Sequence(s, f"seq_{s:0{width}d}", k, n))
+    return out
+
+
+_MOTION_CACHE: dict = {}  # motions by file, content and skeleton (a worker loads each once)
+
+
+def load_motion(spec: DatasetSpec, name: str) -> Pose:
+    """The named motion as a Pose of the data set's skeleton (pose files are loaded with
+    :func:`loaders.load_pose`; OpenSim motions go through the importer's reader and unit rules)."""
+    from axdf_cli.atomic import sha256_file
+
+    m = spec.motions[name]
+    key = (m.path, sha256_file(m.path), m.kind, m.fps, spec.skeleton_path, sha256_file(spec.skeleton_path))
+    if key in _MOTION_CACHE:
+        return _MOTION_CACHE[key]
+    skel = load_skeleton(spec.skeleton_path, spec.policy)
+    if m.kind == "pose":
+        pose = load_pose(m.path, spec.policy)
+        if Path(pose.skeleton_path).resolve() != Path(spec.skeleton_path).resolve():
+            raise InputError(m.mark, f"pose {Path(m.path).name} uses skeleton {pose.skeleton_path}",
+                             f"the data set's skeleton {spec.skeleton_path}")
+    else:
+        pose = motion_pose(Path(m.path), skel, name, m.fps)
+    _MOTION_CACHE[key] = pose
+    return pose
+
+
+def motion_frames(spec: DatasetSpec, name: str):
+    """The output frames of a named motion: its ``frames:`` selection, else all of them."""
+    from axdf_cli.pose import parse_frames
+
+    m = spec.motions[name]
+    pose = load_motion(spec, name)
+    if m.frames is None:
+        return pose.frames
+    return parse_frames(m.frames, m.mark, pose.first, pose.last)

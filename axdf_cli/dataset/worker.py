@@ -1,0 +1,249 @@
+"""One worker's share of a data set: the per-process context, and one sequence made whole.
+
+The context (dataset spec, skeleton, muscle models, bone meshes, scene topology) is built once
+per process: the models depend only on the skeleton's rest pose, so every sequence reuses
+them. A sequence is a run of ``axdf run``'s own code (:mod:`axdf_cli.dataset.runner`) into
+``OUT/<sequence>/`` (meshes, stats.csv, bones.csv, manifest.json), then its views are
+rendered into ``OUT/<sequence>/views/<view>/<frame>.png|.exr``, its labels written to
+``labels.npz``, and last ``sequence.json``, whose presence marks the sequence complete.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from axdf_cli import __version__, atomic
+from axdf_cli.dataset import labels as lab
+from axdf_cli.dataset import runner
+from axdf_cli.dataset.sampling import sample_pose, with_activation
+from axdf_cli.dataset.spec import (DatasetSpec, Sequence, expand_sequences, load_dataset, load_motion,
+                                   motion_frames)
+from axdf_cli.loaders import load_skeleton
+from axdf_cli.pose import sample_activation, sample_coordinates
+from axdf_cli.skeleton import forward_kinematics
+
+RECORD = "sequence.json"  # written last: the sequence is complete
+DATASET_JSON = "dataset.json"
+INDEX = "index.parquet"
+LABELS = "labels.npz"
+
+
+@dataclass
+class Context:
+    spec: DatasetSpec
+    sequences: list[Sequence]
+    skeleton: object  # with bone meshes (rendering)
+    plan_skeleton: object  # without: runs do not copy bone meshes
+    muscles: list
+    models: list
+    bone_meshes: dict  # bone index -> (vertices, faces, bytes)
+    inputs: dict  # display path -> sha256 (dataset file, skeleton, muscles, bone meshes)
+    motion_inputs: dict  # motion name -> {display path: sha256}
+    scene: object
+    scene_bones: list  # bone indices of the scene's bones
+    dataset_json: bytes
+    digest: str
+    timing: dict = field(default_factory=dict)
+
+    @property
+    def names(self) -> list[str]:
+        return [m.name for m in self.muscles]
+
+
+def build_context(path: Path | str, seed: int | None = None, policy=None) -> Context:
+    """Load and check everything (InputError on bad input); build the muscle models once.
+    ``policy``: the command's :class:`~axdf_cli.loaders.RefPolicy` (where referenced files may lie)."""
+    from axdf_cli.scene import Scene, SceneBone, SceneMuscle
+
+    spec = load_dataset(path, seed, policy)
+    skel = load_skeleton(spec.skeleton_path, spec.policy)
+    muscles = runner.load_muscle_specs(spec.muscle_files)
+    models = runner.build_models(muscles, skel)
+    bone_meshes = {i: runner.load_bone_mesh(b.mesh, spec.skeleton_path) for i, b in enumerate(skel.bones) if b.mesh}
+    srcs = [spec.source, spec.skeleton_path, *spec.muscle_files, *sorted({b.mesh for b in skel.bones if b.mesh})]
+    inputs = {runner.display_path(Path(s)): atomic.sha256_file(s) for s in srcs}
+    motion_inputs = {m.name: {runner.display_path(Path(m.path)): atomic.sha256_file(m.path)}
+                     for m in spec.motions.values()}
+    scene_bones = sorted(bone_meshes) if spec.render.bones else []
+    scene = Scene(muscles=tuple(SceneMuscle(s.name, s.color, m.faces) for s, m in zip(muscles, models)),
+                  bones=tuple(SceneBone(skel.bones[i].name, bone_meshes[i][0], bone_meshes[i][1]) for i in scene_bones),
+                  bounds=np.zeros((2, 3)), frames=())
+    sequences = expand_sequences(spec)
+    ctx = Context(spec, sequences, skel, runner.without_meshes(skel), muscles, models, bone_meshes, inputs,
+                  motion_inputs, scene, scene_bones, b"", "")
+    ctx.dataset_json = (json.dumps(dataset_dict(ctx), indent=1) + "\n").encode()
+    ctx.digest = hashlib.sha256(ctx.dataset_json).hexdigest()
+    return ctx
+
+
+def dataset_dict(ctx: Context) -> dict:
+    """``dataset.json``: names, conventions, settings and the list of sequences."""
+    spec, skel = ctx.spec, ctx.skeleton
+    W, H = spec.render.size
+    return {
+        "tool": "axdf", "version": __version__, "dataset": spec.name, "seed": spec.seed,
+        "inputs": dict(sorted(ctx.inputs.items())),
+        "motions": {k: v for m in sorted(ctx.motion_inputs) for k, v in ctx.motion_inputs[m].items()},
+        "skeleton": skel.name,
+        "coordinates": [{"name": c.name, "type": c.type, "unit": "deg" if c.type == "rotation" else "m"}
+                        for c in skel.coordinates],
+        "joints": [b.name for b in skel.bones],
+        "parents": [b.parent for b in skel.bones],
+        "muscles": ctx.names,
+        "views": list(spec.views),
+        "image": {"width": W, "height": H, "passes": list(spec.passes)},
+        "render": runner.settings_to_dict(spec.render),
+        "ids": runner.id_map(ctx.scene, spec.render.bones),
+        "format": spec.format,
+        "shards": spec.shards,
+        "bones": {skel.bones[i].name: f"bones/{skel.bones[i].name}.ply" for i in sorted(ctx.bone_meshes)},
+        "convention": ("world Z up, metres, degrees; cameras OpenCV (x right, y down, z forward), "
+                       "world_to_camera maps world to camera, K in pixels with pixel (0,0)'s centre at (0.5,0.5); "
+                       "joint j of bone j is the origin of its joint frame"),
+        "labels": {
+            "frames": "(F,) frame numbers", "coords": "(F, C) coordinate values (deg, m)",
+            "bone_world": "(F, B, 4, 4) bone frames in the world", "joints3d": "(F, J, 3) world joint centres",
+            "joints2d": "(F, V, J, 2) pixels", "joints_depth": "(F, V, J) camera z (m)",
+            "visible": "(F, V, J) bool", "muscle_length": "(F, M) m", "muscle_volume": "(F, M) m^3",
+            "muscle_activation": "(F, M) 0..1", "K": "(V, 3, 3)", "world_to_camera": "(F, V, 4, 4)",
+        },
+        "visibility_tolerance": spec.visibility_tolerance,
+        "sequences": [{"name": s.name, "source": spec.entries[s.entry].label, "frames": s.n_frames}
+                      for s in ctx.sequences],
+    }
+
+
+# ----------------------------------------------------------------------------- one sequence
+
+
+def read_record(folder: Path, digest: str) -> dict | None:
+    """The sequence's record when it is complete (same data set, every listed file present)."""
+    try:
+        rec = json.loads((folder / RECORD).read_text())
+    except (OSError, ValueError):
+        return None
+    if not isinstance(rec, dict) or rec.get("dataset") != digest:
+        return None
+    if not all((folder / rel).is_file() for rel in rec.get("files", {})):
+        return None
+    return rec
+
+
+def sequence_pose(ctx: Context, seq: Sequence):
+    """(pose, output frames) of a sequence: a motion as it is, or sampled."""
+    spec = ctx.spec
+    entry = spec.entries[seq.entry]
+    if entry.kind == "uniform":
+        frames = np.arange(entry.frames)
+        pose = sample_pose(spec, seq, ctx.plan_skeleton, None, frames)
+    else:
+        base = load_motion(spec, entry.motion)
+        frames = motion_frames(spec, entry.motion)
+        if entry.kind == "motion":
+            pose = replace(base, name=seq.name, skeleton=ctx.plan_skeleton)
+        else:
+            pose = sample_pose(spec, seq, ctx.plan_skeleton, base, frames)
+    return with_activation(spec, seq, pose, ctx.names, frames), frames
+
+
+_RENDERERS: dict = {}  # pid -> ViewRenderer (a GL context never crosses a fork)
+
+
+def view_renderer(ctx: Context):
+    from axdf_cli.render.views import ViewRenderer
+
+    vr = _RENDERERS.get(os.getpid())
+    if vr is None:
+        vr = _RENDERERS[os.getpid()] = ViewRenderer(ctx.scene, ctx.spec.render)
+    return vr
+
+
+def release_renderer() -> None:
+    vr = _RENDERERS.pop(os.getpid(), None)
+    if vr is not None:
+        vr.release()
+
+
+def build_sequence(ctx: Context, index: int, out: Path, resume: bool) -> tuple[dict, dict]:
+    """Make sequence ``index`` whole in ``out``; return (its record, seconds per stage).
+    With ``resume`` a complete sequence is kept as it is and a partial one finished."""
+    from axdf_cli.render.views import view_camera, write_view_images
+
+    seq = ctx.sequences[index]
+    spec = ctx.spec
+    folder = Path(out) / seq.name
+    timing = {"run": 0.0, "read": 0.0, "render": 0.0, "write": 0.0, "cpu": 0.0, "skipped": 0}
+    if resume:
+        rec = read_record(folder, ctx.digest)
+        if rec is not None:
+            timing["skipped"] = 1
+            return rec, timing
+    t0, c0 = time.perf_counter(), time.process_time()
+    pose, frames = sequence_pose(ctx, seq)
+    entry = spec.entries[seq.entry]
+    inputs = dict(ctx.inputs)
+    if entry.motion is not None:
+        inputs.update(ctx.motion_inputs[entry.motion])
+    plan = runner.sequence_plan(pose, frames, ctx.muscles, ctx.models, spec.format, folder, inputs)
+    summary = runner.run_sequence(plan, resume and folder.exists())
+    t1 = time.perf_counter()
+    timing["run"] = t1 - t0
+
+    coords = sample_coordinates(pose, frames)
+    world = forward_kinematics(ctx.skeleton, coords)
+    joints = lab.joint_centres(ctx.skeleton, world)
+    subject = lab.subject_points(ctx.skeleton, world, ctx.bone_meshes)
+    K, w2c, clip = lab.view_cameras(spec, seq, frames, subject, world, ctx.skeleton.bone_index)
+    uv, z = lab.project(K, w2c, joints)
+    views = spec.views
+    nf, nv = len(frames), len(views)
+    visible = np.zeros((nf, nv, joints.shape[1]), bool)
+    files: dict = {}
+    t_read = t_render = 0.0
+    t_write = time.perf_counter() - t1  # labels so far
+    vr = view_renderer(ctx)  # once per process
+    for fi, frame in enumerate(frames):
+        ta = time.perf_counter()
+        pos, nrm = runner.written_meshes(plan, int(frame))
+        cams = [view_camera(views[v], K[v], w2c[fi, v], clip[fi, v, 0], clip[fi, v, 1], spec.render.size)
+                for v in range(nv)]
+        bw = world[fi, ctx.scene_bones] if ctx.scene_bones else None
+        tb = time.perf_counter()
+        imgs = vr.render(int(frame), pos, nrm, bw, cams)
+        tc = time.perf_counter()
+        depth = np.stack([im.depth for im in imgs])[None]  # (1, V, H, W)
+        visible[fi] = lab.visibility(uv[fi:fi + 1], z[fi:fi + 1], depth, spec.visibility_tolerance)[0]
+        for v, im in enumerate(imgs):
+            rel = f"views/{views[v]}"
+            files.update(write_view_images(folder / rel, rel, im, spec.passes))
+        t_read += tb - ta
+        t_render += tc - tb
+        t_write += time.perf_counter() - tc
+    t2 = time.perf_counter()
+    stats = summary["stats"]
+    act = np.nan_to_num(sample_activation(pose, ctx.names, frames), nan=0.0)
+    arrays = {
+        "frames": np.asarray(frames, np.int64), "coords": coords, "bone_world": world, "joints3d": joints,
+        "joints2d": uv, "joints_depth": z, "visible": visible,
+        "muscle_length": stats[..., 0], "muscle_volume": stats[..., 1], "muscle_activation": act,
+        "K": K, "world_to_camera": w2c,
+        "coord_names": np.array([c.name for c in ctx.skeleton.coordinates]),
+        "joint_names": np.array([b.name for b in ctx.skeleton.bones]),
+        "muscle_names": np.array(ctx.names), "view_names": np.array(list(views)),
+    }
+    files[LABELS] = atomic.write_bytes(folder / LABELS, lab.npz_bytes(arrays))
+    manifest = json.loads((folder / "manifest.json").read_text())
+    files.update(manifest.get("files", {}))
+    files["manifest.json"] = atomic.sha256_file(folder / "manifest.json")
+    rec = {"dataset": ctx.digest, "sequence": seq.name, "index": seq.index, "source": entry.label,
+           "frames": [int(f) for f in frames], "views": list(views), "files": dict(sorted(files.items()))}
+    atomic.write_text(folder / RECORD, json.dumps(rec, indent=1) + "\n")
+    t_write += time.perf_counter() - t2
+    timing.update(read=t_read, render=t_render, write=t_write, cpu=time.process_time() - c0)
+    return rec, timing
