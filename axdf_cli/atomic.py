@@ -164,3 +164,54 @@ def remove_stale_temporaries(folders) -> int:
                     _unlink(Path(e.path))
                     n += 1
     return n
+
+
+class StreamingFile:
+    """A file written in pieces (a per-sequence format: every frame of a muscle) that still
+    appears whole or not at all: the pieces go to a temporary name in the target's folder
+    (:data:`TMP_PREFIX`, so ``--resume`` removes what a killed run left) and :meth:`commit`
+    renames it into place; :meth:`discard` removes it.
+
+    ``pwrite(data, offset)`` places bytes anywhere (a header filled in last); the file is
+    opened for each call, so many streams may be open at once without holding descriptors.
+    Machine errors become :class:`EnvironmentProblem` (exit 3) and remove the temporary."""
+
+    def __init__(self, path: Path | str):
+        self.path = Path(path)
+        self.tmp = self.path.with_name(f"{TMP_PREFIX}{os.getpid()}-{self.path.name}")
+        try:
+            try:
+                fd = os.open(self.tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+            except FileNotFoundError:
+                ensure_dir(self.path.parent)
+                fd = os.open(self.tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+            os.close(fd)
+        except OSError as e:
+            raise _env_problem(self.path, e) from None
+
+    def pwrite(self, data, offset: int) -> None:
+        """Write ``data`` (bytes-like or a C-contiguous array) at byte ``offset``."""
+        view = memoryview(data).cast("B")
+        try:
+            fd = os.open(self.tmp, os.O_WRONLY)
+            try:
+                while view:
+                    n = os.pwrite(fd, view, offset)
+                    view, offset = view[n:], offset + n
+            finally:
+                os.close(fd)
+        except OSError as e:
+            self.discard()
+            raise _env_problem(self.path, e) from None
+
+    def commit(self) -> None:
+        """Rename the temporary into place (the file appears whole)."""
+        with deferred_signals():
+            try:
+                os.replace(self.tmp, self.path)
+            except OSError as e:
+                self.discard()
+                raise _env_problem(self.path, e) from None
+
+    def discard(self) -> None:
+        _unlink(self.tmp)

@@ -646,7 +646,7 @@ class Job:
     muscles: tuple  # ((Path, Mark), ...) files, folders or globs, resolved against the job's folder
     pose: tuple | None  # (Path, Mark)
     out: Path | None  # resolved against the job's folder
-    format: str | None
+    format: tuple | None  # the formats, parsed (axdf_cli.formats.parse_formats), or None
     frames: object  # raw frames spec or None
     frames_mark: Mark | None
     render: object  # RenderSettings (disabled when the job has no `render:`)
@@ -654,7 +654,7 @@ class Job:
 
 
 def load_job(path: Path | str, policy: RefPolicy | None = None) -> Job:
-    from axdf_cli.formats import WRITERS
+    from axdf_cli.formats import parse_formats
     from axdf_cli.render.settings import parse_render_settings
 
     policy = policy or RefPolicy()
@@ -677,7 +677,7 @@ def load_job(path: Path | str, policy: RefPolicy | None = None) -> Job:
     out = f.string("out", default=None)
     if out is not None:
         out = Path(os.path.normpath(policy.resolve(path, out, f.vmark("out"), "out")))
-    fmt = f.choice("format", tuple(WRITERS), default=None)
+    fmt = parse_formats(f.raw("format"), f.vmark("format")) if f.has("format") else None
     frames = f.raw("frames")
     frames_mark = f.vmark("frames") if frames is not None else None
     render = parse_render_settings(f.raw("render"), f.vmark("render") if f.has("render") else top)

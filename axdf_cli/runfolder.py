@@ -10,6 +10,9 @@ One module for everything that knows the layout (README "What a run writes"), sh
     bones/<bone>.ply
     stats.csv, bones.csv
     frames/<frame:04d>.png|exr, camera.json
+    <fmt>/<m>.<ext>               per-sequence formats: usd/<m>.usdc, pc2/<m>.pc2, mdd/<m>.mdd,
+                                  npz/<m>.npz; pc2/<m>.ply, mdd/<m>.ply rest meshes
+    scene.usda, usd/bones.usdc    the USD stage of the run and its bone meshes
     .axdf-lock                    while a run or render writes (flock); never in the manifest
     .axdf-new-<pid>/              --overwrite builds the new run here, then swaps it in
     .axdf-tmp-<pid>-<name>        a file being written (renamed when whole)
@@ -61,6 +64,21 @@ MANIFEST_KEYS = ("tool", "version", "complete", "inputs", "settings", "frames", 
 
 def mesh_relpath(muscle: str, frame: int, fmt: str) -> str:
     return f"meshes/{muscle}/{muscle}_{frame:04d}.{fmt}"
+
+
+def sequence_relpath(muscle: str, fmt: str, extension: str) -> str:
+    """A per-sequence file: one muscle, every frame."""
+    return f"{fmt}/{muscle}.{extension}"
+
+
+def rest_mesh_relpath(muscle: str, fmt: str) -> str:
+    """The rest mesh a point cache (pc2, mdd) applies to, beside it."""
+    return f"{fmt}/{muscle}.ply"
+
+
+USD_STAGE = "scene.usda"
+USD_BONES = "usd/bones.usdc"
+SEQUENCE_FOLDERS = ("usd", "pc2", "mdd", "npz")  # one per per-sequence format
 
 
 def bone_mesh_relpath(bone: str) -> str:
@@ -468,7 +486,7 @@ def remove_stale(out: Path) -> None:
     """Temporaries and staging folders in OUT's layout whose process is gone (never a live
     one's, never below a link)."""
     out = Path(out)
-    folders = [out] + [out / d for d in LAYOUT_DIRS]
+    folders = [out] + [out / d for d in LAYOUT_DIRS + SEQUENCE_FOLDERS]
     try:
         folders += [Path(e.path) for e in os.scandir(out / "meshes") if e.is_dir(follow_symlinks=False)]
     except OSError:

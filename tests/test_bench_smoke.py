@@ -65,3 +65,16 @@ def test_wrapping_rows():
     assert any(s.path.wraps for s in wc.specs) and not any(s.path.wraps for s in nc.specs)
     for c in (wc, nc):
         assert bench.time_evaluation(c.models(2, (8, 6)), c.world, c.tension, repeats=1, chunk=4, coords=c.coords) > 0
+
+
+def test_packed_writers(case, tmp_path):
+    """The packed formats' writer rows on 3 muscles x 5 frames; every file of every format is
+    written (and removed) and every figure positive."""
+    pytest.importorskip("pxr")
+    models = case.models(1, (8, 6))
+    out = bench.time_sequence_writers(models, case.world, case.tension, tmp_path / "w", n_muscles=3, repeats=1)
+    assert set(out) == set(bench.PACKED_FORMATS)
+    for fmt, d in out.items():
+        assert d["bytes"] > 0 and d["tofile_bytes"] > 0
+        assert all(d[k] > 0 for k in ("write", "sha256", "tofile")), fmt
+    assert not any((tmp_path / "w").rglob("*.*"))  # all removed again

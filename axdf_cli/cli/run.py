@@ -3,8 +3,9 @@ from __future__ import annotations
 
 import sys
 
-from axdf_cli.formats import WRITERS
+from axdf_cli.formats import FORMATS
 from axdf_cli.loaders import RefPolicy, load_job
+
 
 
 def add_args(p) -> None:
@@ -12,7 +13,9 @@ def add_args(p) -> None:
     p.add_argument("--muscles", nargs="+", metavar="PATH", help="muscle files, folders or globs (override the job)")
     p.add_argument("--pose", metavar="FILE", help="pose YAML (overrides the job)")
     p.add_argument("--out", metavar="DIR", help="output folder (default: the job's out, else out/run)")
-    p.add_argument("--format", choices=sorted(WRITERS), help="mesh format (default ply)")
+    p.add_argument("--format", action="append", metavar="FMT",
+                   help="mesh format(s): " + ", ".join(FORMATS) + " (ply, obj: a file per frame; the others a file "
+                        "per muscle); several as ply,usd or repeated (default ply)")
     p.add_argument("--frames", metavar="SPEC", help="frames to write: 0:48, 0:48:2, 3,7,10:12 (ends inclusive)")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--render", dest="render", action="store_true", default=None, help="render preview frames")
@@ -64,7 +67,7 @@ def run(args) -> int:
     if args.dry_run:
         runner.check_output(plan, resume=args.resume, overwrite=args.overwrite)
         print(f"would write {total} meshes ({len(plan.models)} muscles x {len(plan.frames)} frames, "
-              f"{plan.fmt}) to {plan.out}/meshes, plus stats.csv, bones.csv, manifest.json")
+              f"{plan.fmt}) to {plan.out}, plus stats.csv, bones.csv, manifest.json")
         for s, m in zip(plan.muscles, plan.models):
             print(f"  {s.name}: {m.n_vertices} vertices, {len(m.faces)} faces, rest length {m.l0:.4f} m, "
                   f"rest volume {m.v0 * 1e6:.2f} cm^3")

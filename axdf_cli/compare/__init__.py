@@ -20,16 +20,19 @@ from axdf_cli.compare.files import list_files, nested, read_compared
 from axdf_cli.compare.result import ERROR, EXTRA, FAIL, MISSING, PASS, FileResult, Outcome, Report, read_side
 from axdf_cli.compare.tolerances import FileTol, Tolerances, as_dict
 from axdf_cli.errors import AxdfError, UsageError
-from axdf_cli.formats import MeshReadError
+from axdf_cli.formats import FORMATS, MeshReadError
 from axdf_cli.yamlio import real_path
 
-# file suffix -> kind; `manifest.json` is recognised by its whole name
-KINDS = {".ply": "mesh", ".obj": "mesh", ".png": "png", ".exr": "exr", ".csv": "table", ".json": "json"}
+# file suffix -> kind; `manifest.json` is recognised by its whole name. Meshes come from the
+# formats table: a per-frame format's file is a "mesh", a per-sequence one's a "sequence"
+# (compared frame by frame); a USD stage (scene.usda) is compared value by value.
+KINDS = {**{f.suffix: "mesh" if f.layout == "frame" else "sequence" for f in FORMATS.values()},
+         ".png": "png", ".exr": "exr", ".csv": "table", ".json": "json", ".usda": "stage"}
 MANIFEST = "manifest.json"
 
 # kind -> the FileTol section that applies (None: no numeric tolerance)
 TOL_SECTION = {"mesh": "mesh", "png": "png", "exr": "exr", "table": "table", "json": "json",
-               "manifest": None, "bytes": None}
+               "sequence": "mesh", "stage": "json", "manifest": None, "bytes": None}
 
 
 def kind_of(name: str) -> str:
@@ -43,6 +46,12 @@ def _compare_kind(kind: str, a: Path, g: Path, ab: bytes, gb: bytes, t: FileTol)
     if kind == "mesh":
         from axdf_cli.compare.meshes import compare_mesh_files
         return compare_mesh_files(ab, gb, a.suffix.lower(), g.suffix.lower(), t.mesh)
+    if kind == "sequence":
+        from axdf_cli.compare.sequences import compare_sequence_files
+        return compare_sequence_files(a, g, t.mesh)
+    if kind == "stage":
+        from axdf_cli.compare.sequences import compare_usd_layers
+        return compare_usd_layers(a, g, t.json.atol, t.json.rtol)
     if kind == "png":
         from axdf_cli.compare.images import compare_png
         return compare_png(ab, gb, t.png)

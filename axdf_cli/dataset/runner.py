@@ -26,7 +26,7 @@ def sequence_plan(pose: Pose, frames: np.ndarray, muscles, models, fmt: str, out
     """A run plan for one sequence: the data set's muscles and models (built once per worker)
     over an in-memory pose. Bone meshes are stored once for the whole data set, not per run."""
     return RunPlan(pose=pose, muscles=list(muscles), models=list(models), frames=np.asarray(frames),
-                   fmt=fmt, out=Path(out), inputs=dict(inputs), render=None, bone_meshes={})
+                   formats=(fmt,), out=Path(out), inputs=dict(inputs), render=None, bone_meshes={})
 
 
 def run_sequence(plan: RunPlan, resume: bool) -> dict:

@@ -11,9 +11,13 @@ A format is laid out per frame or per sequence (:attr:`Format.layout`):
   (``writer(faces, name)``) and writes one frame: ``.encode(positions (V, 3), normals (V, 3))
   -> bytes`` and ``.write(path, positions, normals, sha256=False)``. The reader turns one
   file's bytes into one :class:`Mesh`.
-- ``"sequence"``: one file holding every frame (per muscle or per run: packed formats such as
-  USD, PC2 or NPZ, not registered yet). Its writer takes the frames as a batch (``positions
-  (F, V, 3)``) and its reader returns one :class:`Mesh` per frame, in frame order.
+- ``"sequence"``: one file per muscle holding every frame (USD, PC2, MDD, NPZ: packed
+  formats, :mod:`axdf_cli.formats.sequence`). The writer streams:
+  ``writer(path, SequenceInfo(frames, fps, name, color), faces, n_vertices)``, then
+  ``.append(positions (C, V, 3), normals (C, V, 3))`` chunk by chunk in frame order, then
+  ``.finish() -> sha256`` (whole or absent). The reader takes the file's path (a long
+  sequence is memory-mapped or read a frame at a time, never whole) and returns a
+  :class:`~axdf_cli.formats.sequence.PointSequence`.
 """
 from __future__ import annotations
 
@@ -24,8 +28,11 @@ from typing import Callable
 import numpy as np
 
 from axdf_cli.formats.mesh import Mesh, MeshReadError
+from axdf_cli.formats.npz import NpzWriter, read_npz
 from axdf_cli.formats.obj import ObjWriter, read_obj
+from axdf_cli.formats.pc2 import MddWriter, Pc2Writer, read_mdd, read_pc2
 from axdf_cli.formats.ply import PlyWriter, read_ply
+from axdf_cli.formats.usd import UsdWriter, read_usd
 
 LAYOUTS = ("frame", "sequence")
 
@@ -35,34 +42,76 @@ class Format:
     name: str  # the --format value
     suffix: str  # the file suffix, with its dot
     writer: type  # see the module doc for the per-frame and per-sequence interfaces
-    reader: Callable[[bytes], Mesh]  # file bytes -> Mesh ("frame"), or a list of Mesh ("sequence")
+    reader: Callable  # file bytes -> Mesh ("frame"); file path -> PointSequence ("sequence")
     layout: str = "frame"  # one of LAYOUTS
 
 
 FORMATS: dict[str, Format] = {
     "ply": Format("ply", ".ply", PlyWriter, read_ply),
     "obj": Format("obj", ".obj", ObjWriter, read_obj),
+    "usd": Format("usd", ".usdc", UsdWriter, read_usd, "sequence"),  # (+ the run's stage scene.usda)
+    "pc2": Format("pc2", ".pc2", Pc2Writer, read_pc2, "sequence"),
+    "mdd": Format("mdd", ".mdd", MddWriter, read_mdd, "sequence"),
+    "npz": Format("npz", ".npz", NpzWriter, read_npz, "sequence"),
 }
-assert all(f.layout in LAYOUTS and f.writer.extension == f.name for f in FORMATS.values())
+assert all(f.layout in LAYOUTS and f.suffix == "." + f.writer.extension for f in FORMATS.values())
 
-# The --format choices and their writer classes: a view of FORMATS, for the call sites that
-# only build writers.
-WRITERS = {name: f.writer for name, f in FORMATS.items()}
+# The per-frame formats and their writer classes: a view of FORMATS, for the call sites that
+# only build per-frame writers (the per-sequence ones: axdf_cli.run.sequences).
+WRITERS = {name: f.writer for name, f in FORMATS.items() if f.layout == "frame"}
 
 
-def format_of(suffix: str) -> Format:
-    """The format whose files end in ``suffix`` (``.ply``, case-insensitive); MeshReadError
-    for any other suffix."""
+FORMAT_ALIASES = {"usdc": "usd"}  # --format usdc: the USD layers are usdc, the stage is the format
+
+
+def format_names() -> tuple[str, ...]:
+    """Every ``--format`` value: the table's names, then the aliases."""
+    return tuple(FORMATS) + tuple(FORMAT_ALIASES)
+
+
+def parse_formats(value, mark) -> tuple[str, ...]:
+    """``ply``, ``ply,usd``, ``[ply, usd]`` or a list of such strings (a flag repeated, a job's
+    ``format:``) -> ('ply', 'usd'): in the order given, each once, aliases resolved. Anything
+    else is an InputError at ``mark`` listing the names."""
+    from axdf_cli.errors import InputError
+
+    allowed = "one or more of " + ", ".join(format_names()) + " (a name, a comma-separated list or a list)"
+    items = value if isinstance(value, (list, tuple)) else [value]
+    out: list[str] = []
+    for item in items:
+        if not isinstance(item, str):
+            raise InputError(mark, f"format is {item!r}", allowed)
+        for name in item.split(","):
+            name = name.strip().lower()
+            if name not in FORMATS and name not in FORMAT_ALIASES:
+                raise InputError(mark, f"unknown format {name!r}", allowed)
+            name = FORMAT_ALIASES.get(name, name)
+            if name not in out:
+                out.append(name)
+    if not out:
+        raise InputError(mark, "no format given", allowed)
+    return tuple(out)
+
+
+def format_of(suffix: str, layout: str = "frame") -> Format:
+    """The format of this ``layout`` whose files end in ``suffix`` (``.ply``,
+    case-insensitive); MeshReadError for any other suffix."""
     s = suffix.lower()
     for f in FORMATS.values():
-        if f.suffix == s:
+        if f.suffix == s and f.layout == layout:
             return f
-    raise MeshReadError(f"unknown mesh format {suffix!r}; " + " or ".join(f.suffix for f in FORMATS.values()))
+    raise MeshReadError(f"unknown mesh format {suffix!r}; "
+                        + " or ".join(f.suffix for f in FORMATS.values() if f.layout == layout))
 
 
 def read_mesh(data: bytes, suffix: str) -> Mesh:
     """Mesh bytes -> :class:`Mesh` by the file's suffix (a per-frame format)."""
     return format_of(suffix).reader(data)
+
+
+def read_sequence(path: Path | str):
+    """A per-sequence file -> :class:`~axdf_cli.formats.sequence.PointSequence` by its suffix."""
+    return format_of(Path(path).suffix, "sequence").reader(path)
 
 
 def read_triangles(data: bytes, suffix: str) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
@@ -89,4 +138,5 @@ def load_triangles(path: Path | str) -> tuple[np.ndarray, np.ndarray | None, np.
 
 
 __all__ = ["FORMATS", "Format", "LAYOUTS", "WRITERS", "Mesh", "MeshReadError", "PlyWriter", "ObjWriter",
-           "format_of", "read_mesh", "read_triangles", "load_triangles"]
+           "format_of", "format_names", "parse_formats", "read_mesh", "read_sequence", "read_triangles",
+           "load_triangles"]

@@ -4,14 +4,17 @@ The layout and the manifest are :mod:`axdf_cli.runfolder`'s. What is read:
 
 - ``manifest.json`` (an axdf run's: ``tool: axdf``): ``muscles: [{name, color, ...}]``
   (colour as linear ``[r, g, b]`` in 0..1, or sRGB ``"#rrggbb"``), ``frames: [...]``,
-  ``settings.format`` (the meshes' format: a folder with stale files of another format
-  reads the right ones), optional ``bones: [{name, mesh, stick_from}]`` (``mesh`` relative to
+  ``settings.format`` (the meshes' formats, ``ply`` or ``ply,usd``: a folder with stale
+  files of another format reads the right ones), ``settings.fps`` (MDD times), optional
+  ``bones: [{name, mesh, stick_from}]`` (``mesh`` relative to
   the run folder, a PLY in bone-local coordinates; ``stick_from``: the bone a mesh-less bone
   is drawn joined to), optional ``framing: {first_frame, points}`` (what the automatic
   camera frames) and optional ``settings.render``. A damaged manifest is an input error at
   its line and column.
 - ``meshes/<muscle>/<muscle>_<frame:04d>.ply`` (binary little-endian, float32 x y z nx ny
-  nz, int32 triangle lists) or ``.obj`` (``v``, ``vn``, ``f a//a``).
+  nz, int32 triangle lists) or ``.obj`` (``v``, ``vn``, ``f a//a``); in a run without a
+  per-frame format, each muscle's per-sequence file (``npz/<m>.npz``, ``pc2/<m>.pc2`` with
+  its rest mesh ``pc2/<m>.ply``, ``mdd/<m>.mdd``, ``usd/<m>.usdc``), read a frame at a time.
 - ``bones.csv``: ``frame,bone,x,y,z,qw,qx,qy,qz`` world pose of each bone per frame.
 """
 from __future__ import annotations
@@ -24,7 +27,7 @@ from typing import Iterator
 import numpy as np
 
 from axdf_cli.errors import InputError, Mark
-from axdf_cli.formats import FORMATS, load_triangles
+from axdf_cli.formats import FORMATS, MeshReadError, load_triangles, read_sequence
 from axdf_cli.render.settings import RenderSettings, parse_render_settings
 from axdf_cli.runfolder import BONES_CSV, Manifest, mesh_relpath, read_run_manifest
 from axdf_cli.runfolder import plain_relpath as _plain
@@ -50,6 +53,75 @@ def _quat_matrix(q: np.ndarray) -> np.ndarray:
         np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1)], -2)
 
 
+class _FrameFiles:
+    """A muscle written one file per frame (``meshes/<m>/<m>_<frame>.<fmt>``)."""
+
+    def __init__(self, run_dir: Path, name: str, fmt: str):
+        self.run_dir, self.name, self.fmt = run_dir, name, fmt
+
+    def where(self, frame: int) -> Path:
+        p = self.run_dir / mesh_relpath(self.name, frame, self.fmt)
+        if not p.is_file():
+            raise InputError(Mark(str(p)), "mesh file missing",
+                             "the run folder must hold every muscle's mesh for every frame")
+        return p
+
+    def read(self, frame: int):
+        return load_triangles(self.where(frame))
+
+
+class _SequenceFile:
+    """A muscle written in a per-sequence format (npz, pc2, mdd, usd), read a frame at a time."""
+
+    def __init__(self, path: Path, seq, faces):
+        self.file, self.seq, self.faces = path, seq, faces
+        self.index = {int(round(f)): k for k, f in enumerate(seq.frames)}
+
+    def where(self, frame: int) -> str:
+        return f"{self.file} (frame {frame})"
+
+    def read(self, frame: int):
+        k = self.index[frame]
+        nrm = None if self.seq.normals is None else np.asarray(self.seq.normals[k], np.float32)
+        return np.asarray(self.seq.points[k], np.float32), nrm, self.faces
+
+
+SEQUENCE_READ_ORDER = ("npz", "pc2", "mdd", "usd")  # read back in this order of preference (fastest first)
+
+
+def muscle_frames(run_dir: Path, name: str, formats, frames: tuple[int, ...], fps=None):
+    """Where a muscle's frames are read from: its per-frame meshes when the run wrote a
+    per-frame format, else its per-sequence file (npz, pc2, mdd, usd: the first the run
+    wrote), whose frames must be the run's. ``.read(frame)`` gives (V, 3) float32 positions,
+    normals or None, (T, 3) faces."""
+    from axdf_cli.runfolder import rest_mesh_relpath, sequence_relpath
+
+    for fmt in formats:
+        if FORMATS[fmt].layout == "frame":
+            return _FrameFiles(run_dir, name, fmt)
+    fmt = next(f for f in SEQUENCE_READ_ORDER if f in formats)
+    path = run_dir / sequence_relpath(name, fmt, FORMATS[fmt].writer.extension)
+    if not path.is_file() or path.is_symlink():
+        raise InputError(Mark(str(path)), "file missing (or not a regular file)",
+                         f"the run folder must hold every muscle's {fmt} file")
+    try:
+        seq = read_sequence(path) if fmt != "mdd" else FORMATS[fmt].reader(path, fps)
+    except MeshReadError as e:
+        raise InputError(Mark(str(path)), f"not readable ({e})", f"a {fmt} file written by axdf run") from None
+    if len(seq.frames) != len(frames) or not np.allclose(seq.frames, frames):
+        raise InputError(Mark(str(path)), f"holds frames {_span(seq.frames)}, the manifest {_span(frames)}",
+                         "the file of the same run")
+    faces = seq.faces
+    if faces is None:  # a point cache: the topology is its rest mesh's
+        faces = load_triangles(run_dir / rest_mesh_relpath(name, fmt))[2]
+    return _SequenceFile(path, seq, faces)
+
+
+def _span(frames) -> str:
+    f = np.asarray(frames, np.float64)
+    return f"{f[0]:g}..{f[-1]:g} ({len(f)})" if len(f) else "none"
+
+
 def load_run_scene(run_dir: Path, manifest: Manifest | None = None, frames=None
                    ) -> tuple[Scene, Iterator[FrameChunk], RenderSettings]:
     """Scene, an iterator of one-frame chunks (of ``frames``, default every frame of the run)
@@ -59,9 +131,11 @@ def load_run_scene(run_dir: Path, manifest: Manifest | None = None, frames=None
     m = manifest or read_run_manifest(run_dir)
     all_frames = tuple(m.frames())
     muscles_raw = m.get(("muscles",), list, "a list of {name, color, ...}")
-    fmt = m.get(("settings", "format"), str, "a mesh format: " + ", ".join(FORMATS))
-    if fmt not in FORMATS:
-        raise m.error(("settings", "format"), f"unknown mesh format {fmt!r}", "a mesh format: " + ", ".join(FORMATS))
+    allowed = "mesh formats, comma-separated: " + ", ".join(FORMATS)
+    formats = m.get(("settings", "format"), str, allowed).split(",")
+    if any(f not in FORMATS for f in formats):
+        raise m.error(("settings", "format"), f"unknown mesh format in {','.join(formats)!r}", allowed)
+    fps = m.get(("settings", "fps"), (int, float), "the pose's frames per second", required=False, default=None)
     names, colors = [], []
     for i, mu in enumerate(muscles_raw):
         m.get(("muscles", i), dict, "an object {name, color, ...}")
@@ -88,24 +162,17 @@ def load_run_scene(run_dir: Path, manifest: Manifest | None = None, frames=None
     settings = recorded_render_settings(m)
     selected = all_frames if frames is None else tuple(int(f) for f in frames)
 
-    def mesh_path(name: str, frame: int) -> Path:
-        p = run_dir / mesh_relpath(name, frame, fmt)
-        if not p.is_file():
-            raise InputError(Mark(str(p)), "mesh file missing",
-                             "the run folder must hold every muscle's mesh for every frame")
-        return p
-
     # pass 1: topology from the first frame, bounds over every frame
+    sources = [muscle_frames(run_dir, name, formats, all_frames, fps) for name in names]
     muscles, lo, hi = [], np.full(3, np.inf), np.full(3, -np.inf)
-    for name, color in zip(names, colors):
+    for name, color, src in zip(names, colors, sources):
         for k, f in enumerate(all_frames):
-            p = mesh_path(name, f)
-            pos, _, faces = load_triangles(p)
+            pos, _, faces = src.read(f)
             if k == 0:
                 muscles.append(SceneMuscle(name, color, faces))
                 nv = len(pos)
             elif len(pos) != nv:
-                raise InputError(Mark(str(p)), f"{len(pos)} vertices, frame {all_frames[0]} has {nv}",
+                raise InputError(Mark(str(src.where(f))), f"{len(pos)} vertices, frame {all_frames[0]} has {nv}",
                                  "every frame has the same vertex count")
             lo, hi = np.minimum(lo, pos.min(0)), np.maximum(hi, pos.max(0))
     bounds = np.stack([lo, hi]) if muscles else np.zeros((2, 3))
@@ -127,8 +194,8 @@ def load_run_scene(run_dir: Path, manifest: Manifest | None = None, frames=None
     def chunks() -> Iterator[FrameChunk]:
         for k, f in enumerate(selected):
             ps, ns = [], []
-            for mu in muscles:
-                pos, nrm, faces = load_triangles(mesh_path(mu.name, f))
+            for src in sources:
+                pos, nrm, faces = src.read(f)
                 if nrm is None:
                     from axdf_cli.render.renderer import vertex_normals
                     nrm = vertex_normals(pos, faces)

@@ -14,6 +14,7 @@ from axdf_cli.formats import WRITERS
 from axdf_cli.run.evaluate import CHUNK_FRAMES, evaluate_chunks, finite_or_rest, twist_references
 from axdf_cli.run.plan import RunPlan, display_path, framing
 from axdf_cli.run.pool import check_parent, fork_map
+from axdf_cli.run.sequences import SequenceFiles, file_relpath, sequence_formats, write_run_files
 from axdf_cli.runfolder import (BONES_CSV, MANIFEST_INTERVAL_S, STATS, OutputWriter, bone_mesh_relpath, describe_differences,
                                 frame_relpath, gl_record, mesh_relpath, write_manifest)
 from axdf_cli.skeleton import matrix_to_quaternion
@@ -30,7 +31,10 @@ def render_dict(settings) -> dict | None:
 
 def run_dirs(plan: RunPlan) -> list[str]:
     """The folders below OUT that the plan writes into."""
-    dirs = [PurePosixPath(mesh_relpath(n, 0, plan.fmt)).parent.as_posix() for n in plan.names]
+    dirs = [PurePosixPath(mesh_relpath(n, 0, f)).parent.as_posix() for f in plan.formats if f in WRITERS
+            for n in plan.names]
+    dirs += sorted({PurePosixPath(file_relpath(n, f)).parent.as_posix() for f in sequence_formats(plan.formats)
+                    for n in plan.names})
     dirs += [PurePosixPath(bone_mesh_relpath("b")).parent.as_posix()]
     if plan.rendering:
         dirs.append(PurePosixPath(frame_relpath(0, "png")).parent.as_posix())
@@ -98,38 +102,54 @@ class MeshPassResult:
 
 def mesh_pass(plan: RunPlan, muscles: list[int], twist_ref: np.ndarray, writer: OutputWriter,
               progress=None, on_chunk=None, bones: bool = False) -> MeshPassResult:
-    """Evaluate and write the meshes of ``muscles`` for every selected frame, chunk by chunk;
-    with ``bones``, also return every bone's world pose (from the same kinematics)."""
-    writers = {j: WRITERS[plan.fmt](plan.models[j].faces, plan.muscles[j].name) for j in muscles}
+    """Evaluate and write the meshes of ``muscles`` for every selected frame, chunk by chunk,
+    in every selected format (per-frame files through ``writer``; per-sequence files streamed
+    by :class:`SequenceFiles` and completed at the end); with ``bones``, also return every
+    bone's world pose (from the same kinematics)."""
+    frame_formats = [f for f in plan.formats if f in WRITERS]
+    writers = {(j, f): WRITERS[f](plan.models[j].faces, plan.muscles[j].name) for j in muscles for f in frame_formats}
     col = {j: k for k, j in enumerate(muscles)}
     stats = np.zeros((len(plan.frames), len(muscles), 6))
     bone_rows = np.zeros((len(plan.frames), len(plan.pose.skeleton.bones), 7)) if bones else None
     warns: list = []
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
-    for sl, world, results in evaluate_chunks(plan, twist_ref=twist_ref, muscles=muscles):
-        frames = plan.frames[sl]
-        if bones:
-            bone_rows[sl, :, :3] = world[:, :, :3, 3]
-            bone_rows[sl, :, 3:] = matrix_to_quaternion(world[:, :, :3, :3])
-        for j, res in results:
-            name = plan.muscles[j].name
-            pos, nrm, bad = finite_or_rest(res, plan.models[j])
-            res.warnings += [(int(i), "non-finite vertices; the rest shape was written instead") for i in bad]
-            w = writers[j]
-            for i, frame in enumerate(frames):
-                writer.write(mesh_relpath(name, int(frame), plan.fmt), w.encode(pos[i], nrm[i]))
-            lo = np.minimum(lo, pos.reshape(-1, 3).min(axis=0))
-            hi = np.maximum(hi, pos.reshape(-1, 3).max(axis=0))
-            st = np.stack([res.length, res.volume, res.volume / plan.models[j].v0, res.tension,
-                           res.twist, res.scale], axis=1)
-            stats[sl, col[j]] = np.where(np.isfinite(st), st, 0.0)
-            warns += [(sl.start + i, j, msg) for i, msg in res.warnings]
-            if progress:
-                progress(len(frames))
-        if on_chunk:
-            on_chunk()
-    writer.flush()
+    seq = SequenceFiles(plan, muscles, writer) if sequence_formats(plan.formats) else None
+    try:
+        for sl, world, results in evaluate_chunks(plan, twist_ref=twist_ref, muscles=muscles):
+            frames = plan.frames[sl]
+            if bones:
+                bone_rows[sl, :, :3] = world[:, :, :3, 3]
+                bone_rows[sl, :, 3:] = matrix_to_quaternion(world[:, :, :3, :3])
+            for j, res in results:
+                name = plan.muscles[j].name
+                pos, nrm, bad = finite_or_rest(res, plan.models[j])
+                res.warnings += [(int(i), "non-finite vertices; the rest shape was written instead") for i in bad]
+                for f in frame_formats:
+                    w = writers[(j, f)]
+                    for i, frame in enumerate(frames):
+                        writer.write(mesh_relpath(name, int(frame), f), w.encode(pos[i], nrm[i]))
+                if seq is not None:
+                    seq.append(j, pos, nrm)
+                lo = np.minimum(lo, pos.reshape(-1, 3).min(axis=0))
+                hi = np.maximum(hi, pos.reshape(-1, 3).max(axis=0))
+                st = np.stack([res.length, res.volume, res.volume / plan.models[j].v0, res.tension,
+                               res.twist, res.scale], axis=1)
+                stats[sl, col[j]] = np.where(np.isfinite(st), st, 0.0)
+                warns += [(sl.start + i, j, msg) for i, msg in res.warnings]
+                if progress:
+                    progress(len(frames))
+            if on_chunk:
+                on_chunk()
+        writer.flush()
+        if seq is not None:
+            files, skipped = seq.finish()
+            writer.files.update(files)
+            writer.skipped += skipped
+    except BaseException:
+        if seq is not None:
+            seq.abort()
+        raise
     return MeshPassResult(list(muscles), writer.files, stats, warns, lo, hi, writer.skipped, bone_rows)
 
 
@@ -275,6 +295,8 @@ def _write_run(plan: RunPlan, session, twist_ref, progress, render_progress, job
         frame_pts = framing(plan)
         extra = {"bounds": [[float(f"{x:.9g}") for x in lo], [float(f"{x:.9g}") for x in hi]],
                  "framing": {"first_frame": int(plan.pose.first), "points": frame_pts.tolist()}}
+        if sequence_formats(plan.formats):
+            write_run_files(plan, writer, parts[0].bone_rows, np.array([lo, hi]), frame_pts)
         if plan.rendering:
             from axdf_cli.render.sequence import render_plan
 

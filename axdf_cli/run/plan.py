@@ -10,6 +10,7 @@ import numpy as np
 
 from axdf_cli import atomic
 from axdf_cli.errors import InputError, Mark
+from axdf_cli.formats import parse_formats
 from axdf_cli.loaders import Job, Pose, RefPolicy, expand_muscle_paths, load_muscle_file, load_pose
 from axdf_cli.muscle import MuscleModel, MuscleSpec
 from axdf_cli.pose import activation_problems, muscle_range_warnings, parse_frames, subject_points
@@ -24,7 +25,7 @@ class RunPlan:
     muscles: list[MuscleSpec]
     models: list[MuscleModel]
     frames: np.ndarray  # (F,) selected output frames
-    fmt: str
+    formats: tuple  # --format names in the order given: per-frame (ply, obj) and per-sequence (usd, pc2, ...)
     out: Path
     inputs: dict  # display path -> sha256
     render: object = None  # RenderSettings (enabled or not)
@@ -36,6 +37,11 @@ class RunPlan:
     @property
     def names(self) -> list[str]:
         return [m.name for m in self.muscles]
+
+    @property
+    def fmt(self) -> str:
+        """The formats as ``--format`` takes them: ``ply`` or ``ply,usd``."""
+        return ",".join(self.formats)
 
     @property
     def rendering(self) -> bool:
@@ -123,7 +129,14 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
         frames = parse_frames(job.frames, job.frames_mark, pose.first, pose.last)
     else:
         frames = pose.frames
-    fmt = fmt_arg or (job.format if job is not None else None) or "ply"
+    if fmt_arg:
+        formats = parse_formats(fmt_arg, Mark("--format"))
+    elif job is not None and job.format is not None:
+        formats = job.format  # (parsed by the job reader)
+    else:
+        formats = ("ply",)
+    check_formats(formats, frames, Mark("--frames") if frames_arg is not None else
+                  (job.frames_mark if job is not None and job.frames is not None else Mark(pose.source)))
     if out_arg is not None:
         if not str(out_arg).strip():
             raise InputError(Mark("--out"), "the output folder is empty text", "give a folder, e.g. --out out/run")
@@ -143,8 +156,29 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
     for s in srcs:
         if Path(s).is_file():
             inputs[display_path(Path(s))] = atomic.sha256_file(s)
-    return RunPlan(pose, specs, models, frames, fmt, out, inputs, render=render, warnings=warnings,
+    return RunPlan(pose, specs, models, frames, formats, out, inputs, render=render, warnings=warnings,
                    bone_meshes=bone_meshes, notes=notes, frame_warnings=muscle_range_warnings(pose, frames, specs))
+
+
+def check_formats(formats, frames, frames_mark: Mark) -> None:
+    """What the selected formats need, checked before anything is written: evenly spaced
+    frames for point caches; Pixar's USD modules for usd (exit 3 with the install hint)."""
+    from axdf_cli.formats.pc2 import check_frames
+
+    caches = [f for f in formats if f in ("pc2", "mdd")]
+    why = check_frames(frames) if caches else None
+    if why:
+        raise InputError(frames_mark, f"frames {_frames_text(frames)} for {', '.join(caches)}",
+                         why + "; or write usd or npz, which keep any frames")
+    if "usd" in formats:
+        from axdf_cli.formats.usd import pxr
+
+        pxr()
+
+
+def _frames_text(frames) -> str:
+    f = [int(x) for x in frames]
+    return ",".join(map(str, f)) if len(f) <= 8 else ",".join(map(str, f[:8])) + ",..."
 
 
 def load_bone_mesh(path: str, skeleton_file: str):

@@ -1,0 +1,175 @@
+"""Per-sequence (packed) formats in a run: one file per muscle holding every frame.
+
+The mesh pass evaluates all its muscles chunk by chunk; :class:`SequenceFiles` streams each
+chunk into every selected per-sequence format on its own background thread (so writing
+overlaps evaluation, as the per-frame writer's thread does) and completes the files when
+the pass ends. Every file is written under a temporary name and renamed when whole; its
+sha256 goes into the manifest. On ``--resume`` a file is written again (a killed run leaves
+only temporaries) and, when the result equals the file already there and its manifest
+entry, the old one is kept and counted as skipped.
+
+After the mesh pass, :func:`write_run_files` writes what belongs to the run rather than to
+one muscle: the USD root stage (``scene.usda``) with the bones and camera, ``usd/bones.usdc``,
+and the rest meshes the point caches apply to.
+"""
+from __future__ import annotations
+
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+from axdf_cli import atomic
+from axdf_cli.formats import FORMATS
+from axdf_cli.formats.sequence import SequenceInfo
+from axdf_cli.runfolder import USD_BONES, USD_STAGE, is_file_with, rest_mesh_relpath, sequence_relpath
+
+# --format name -> streaming writer of a per-sequence format (a view of FORMATS)
+SEQUENCE_WRITERS = {name: f.writer for name, f in FORMATS.items() if f.layout == "sequence"}
+CACHE_FORMATS = ("pc2", "mdd")  # formats without faces: a rest mesh is written beside each file
+MAX_PENDING_CHUNKS = 8  # chunks queued for the sequence thread (bounds memory)
+
+
+def sequence_formats(formats) -> list[str]:
+    return [f for f in formats if f in SEQUENCE_WRITERS]
+
+
+def file_relpath(muscle: str, fmt: str) -> str:
+    return sequence_relpath(muscle, fmt, SEQUENCE_WRITERS[fmt].extension)
+
+
+def unchanged(previous: dict, path: Path, rel: str, sha: str) -> bool:
+    """The file ``rel`` (at ``path``) already holds these bytes (the sha256 the manifest says
+    and the file on disk has): ``--resume`` keeps it."""
+    return previous.get(rel) == sha and is_file_with(path, sha)
+
+
+class SequenceFiles:
+    """The per-sequence files of some muscles, fed chunk by chunk on a background thread.
+
+    ``append(j, positions, normals)`` queues muscle ``j``'s next chunk ((C, V, 3) float32,
+    frame order); :meth:`finish` completes every file and returns ``({relpath: sha256},
+    skipped)``; :meth:`abort` removes every temporary (the files stay absent)."""
+
+    def __init__(self, plan, muscles: list[int], writer):
+        self.plan, self.previous = plan, writer.previous
+        fps = float(plan.pose.fps)
+        self.writers = {}
+        try:
+            for j in muscles:
+                spec, model = plan.muscles[j], plan.models[j]
+                info = SequenceInfo(np.asarray(plan.frames), fps, spec.name, tuple(spec.color))
+                for fmt in sequence_formats(plan.formats):
+                    rel = file_relpath(spec.name, fmt)
+                    path = writer.root.path(rel)  # (the way there checked for links)
+                    self.writers[(j, fmt)] = (rel, path, SEQUENCE_WRITERS[fmt](path, info, model.faces,
+                                                                               model.n_vertices))
+        except BaseException:
+            self.abort()
+            raise
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="axdf-sequences")
+        self._pending: list = []
+
+    def append(self, j: int, positions: np.ndarray, normals: np.ndarray) -> None:
+        ws = [w for (k, _), (_, _, w) in self.writers.items() if k == j]
+        self._pending.append(self._pool.submit(_append_all, ws, positions, normals))
+        while len(self._pending) > MAX_PENDING_CHUNKS:
+            self._pending.pop(0).result()
+
+    def finish(self) -> tuple[dict, int]:
+        for fut in self._pending:
+            fut.result()
+        self._pending = []
+        files, skipped = {}, 0
+        for rel, path, w in self.writers.values():  # one at a time: one muscle's USD layer in memory
+            sha = self._pool.submit(w.close).result()
+            if unchanged(self.previous, path, rel, sha):
+                w.abort()
+                skipped += 1
+            else:
+                w.commit()
+            files[rel] = sha
+        self._pool.shutdown()
+        return files, skipped
+
+    def abort(self) -> None:
+        pool = getattr(self, "_pool", None)
+        if pool is not None:
+            for fut in self._pending:
+                fut.cancel()
+            pool.shutdown(wait=True)
+        for _, _, w in self.writers.values():
+            w.abort()
+
+
+def _append_all(writers, positions, normals) -> None:
+    for w in writers:
+        w.append(positions, normals)
+
+
+def write_run_files(plan, writer, bone_rows: np.ndarray, bounds: np.ndarray, framing: np.ndarray) -> None:
+    """Per-run files of the per-sequence formats, through ``writer`` (an OutputWriter: atomic,
+    hashed, skipped on resume when unchanged): the point caches' rest meshes, and for USD
+    ``usd/bones.usdc`` and the root stage ``scene.usda``. ``bone_rows``: (F, B, 7) x y z qw
+    qx qy qz; ``bounds``: (2, 3) of every vertex written; ``framing``: (N, 3) what the
+    automatic camera frames (:func:`axdf_cli.run.plan.framing`), as ``--render`` frames it."""
+    from axdf_cli.formats.ply import PlyWriter
+
+    for fmt in sequence_formats(plan.formats):
+        if fmt in CACHE_FORMATS:
+            for spec, m in zip(plan.muscles, plan.models):
+                writer.write(rest_mesh_relpath(spec.name, fmt),
+                             PlyWriter(m.faces, spec.name).encode(m.rest_vertices, m.rest_normals))
+    if "usd" in plan.formats:
+        writer.flush()
+        _write_usd_stage(plan, writer, bone_rows, bounds, framing)
+
+
+def _write_usd_stage(plan, writer, bone_rows, bounds, framing) -> None:
+    from axdf_cli.formats.usd import write_bones_layer, write_stage
+
+    bones = plan.pose.skeleton.bones
+    meshes = [(bones[i].name, v, f) for i, (v, f, _) in sorted(plan.bone_meshes.items())]
+    if meshes:
+        _write_with(writer, USD_BONES, lambda tmp: write_bones_layer(tmp, meshes))
+    with_mesh = {i for i in plan.bone_meshes}
+    muscles = [(s.name, file_relpath(s.name, "usd")) for s in plan.muscles]
+    bone_refs = [(b.name, USD_BONES if i in with_mesh else None) for i, b in enumerate(bones)]
+    camera = usd_camera(plan, bounds, framing)
+    _write_with(writer, USD_STAGE, lambda tmp: write_stage(tmp, plan.frames, float(plan.pose.fps), muscles,
+                                                           bone_refs, bone_rows, camera))
+
+
+def usd_camera(plan, bounds, framing) -> dict:
+    """The run's camera for the USD stage: the first panel of the render settings' view, the
+    camera ``axdf run --render`` uses (framed on ``framing``)."""
+    from axdf_cli.render.camera import sequence_cameras
+    from axdf_cli.render.settings import RenderSettings
+    from axdf_cli.scene import Scene
+
+    settings = plan.render if plan.render is not None else RenderSettings()
+    scene = Scene((), (), np.asarray(bounds, np.float64), tuple(int(f) for f in plan.frames),
+                  framing=framing, first_frame=int(plan.pose.first))
+    cams = sequence_cameras(scene, settings)
+    first = cams[0][0]
+    return {"world_to_camera": np.stack([c[0].world_to_camera for c in cams]), "K": first.K,
+            "size": tuple(settings.size), "near": first.near, "far": first.far}
+
+
+def _write_with(writer, rel: str, author) -> None:
+    """A file made by a library that writes to a path (pxr): authored at a temporary name,
+    renamed into place unless ``--resume`` finds it unchanged; recorded in ``writer.files``."""
+    path = writer.root.path(rel)
+    f = atomic.StreamingFile(path)
+    try:
+        author(f.tmp)
+        sha = atomic.sha256_file(f.tmp)
+    except BaseException:
+        f.discard()
+        raise
+    if unchanged(writer.previous, path, rel, sha):
+        f.discard()
+        writer.skipped += 1
+    else:
+        f.commit()
+    writer.files[rel] = sha
