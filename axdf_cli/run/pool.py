@@ -14,10 +14,12 @@ either
   default of one thread per core oversubscribes the cores they share; a value you set is
   kept).
 
-Workers never outlive the parent: each asks the kernel for SIGTERM when its parent dies
-(``prctl(PR_SET_PDEATHSIG)`` on Linux; a fork server's workers when the fork server dies,
-which it does when this process goes) and checks its parent between chunks
-(:func:`check_parent`). A worker stopped by SIGTERM (the parent stopping the pool, or the
+Workers never outlive the parent: a forked worker asks the kernel for SIGTERM when its
+parent dies (``prctl(PR_SET_PDEATHSIG)`` on Linux) and checks its parent between chunks
+(:func:`check_parent`); a fork server's worker (whose parent is the fork server, which
+lives as long as any of its workers does) watches this process with a thread that waits on
+a pidfd (``os.pidfd_open``; polling where there is none) and sends itself SIGTERM when this
+process is gone. A worker stopped by SIGTERM (the parent stopping the pool, or the
 parent's death) finishes the file it is writing, then exits quietly, also when its task
 catches the interrupt; Ctrl-C goes to the parent only, which stops the pool. No worker
 prints a traceback for being stopped. A worker that dies (killed, out of memory) stops the
@@ -27,6 +29,7 @@ from __future__ import annotations
 
 import os
 import signal
+import threading
 
 from axdf_cli import atomic
 from axdf_cli.errors import EnvironmentProblem
@@ -59,18 +62,49 @@ def _on_sigterm(signum, frame) -> None:
     atomic.on_signal(signum, frame)  # KeyboardInterrupt once the current file is whole
 
 
-def _init_worker(parent: int | None, shared, cwd: str | None) -> None:
-    """Each worker's start (nothing here may raise: the executor would print a traceback)."""
-    _STATE["parent"] = parent if parent is not None else os.getppid()
+def _watch(pid: int) -> None:
+    """In a fork server's worker: SIGTERM to itself once process ``pid`` (the pool's owner,
+    not this worker's parent) has ended."""
+    import select
+    import time
+
+    try:
+        fd = os.pidfd_open(pid)
+    except (AttributeError, OSError):  # no pidfd (old kernel, not Linux), or gone already
+        fd = None
+
+    def wait() -> None:
+        if fd is not None:
+            select.select([fd], [], [])  # readable once the process has ended
+        else:
+            while True:
+                try:
+                    os.kill(pid, 0)
+                except ProcessLookupError:
+                    break
+                except PermissionError:
+                    pass
+                time.sleep(0.5)
+        os.kill(os.getpid(), signal.SIGTERM)
+
+    threading.Thread(target=wait, name="axdf-parent-watch", daemon=True).start()
+
+
+def _init_worker(owner: int, shared, cwd: str | None) -> None:
+    """Each worker's start (nothing here may raise: the executor would print a traceback).
+    ``cwd``: None for a forked worker, the owner's current folder for a fork server's."""
+    fresh = cwd is not None
+    _STATE["parent"] = os.getppid() if fresh else owner
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, _on_sigterm)
     _die_with_parent()
     check_parent()
     _SHARED["value"] = shared
-    if cwd is not None:  # a fork server's worker: where the parent is now (relative paths)
+    if fresh:
+        _watch(owner)
         os.environ.setdefault("LP_NUM_THREADS", "1")
         try:
-            os.chdir(cwd)
+            os.chdir(cwd)  # where the owner is now (relative paths)
         except OSError:
             pass  # the task's own file access reports it
 
@@ -120,7 +154,7 @@ def process_map(fn, items: list, shared, *, jobs: int | None = None, on_result=N
     if fresh:
         ctx = mp.get_context("forkserver")
         ctx.set_forkserver_preload(list(preload))  # (takes effect when the fork server starts)
-        initargs = (None, shared, os.getcwd())
+        initargs = (os.getpid(), shared, os.getcwd())
     else:
         ctx = mp.get_context("fork")
         initargs = (os.getpid(), shared, None)
