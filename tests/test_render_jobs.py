@@ -157,3 +157,11 @@ def test_frame_blocks_cover_every_frame_once():
         assert [f for b in blocks for f in b] == frames
         assert all(0 < len(b) <= RENDER_CHUNK for b in blocks)
         assert len(blocks) >= min(jobs, n)
+
+
+def test_bench_render_jobs_helper(tmp_path):
+    from axdf_cli import bench
+
+    r = bench.run_jobs(bench.DEMO_JOB, tmp_path / "o", 2, frames="0:3")
+    assert r["rc"] == 0 and r["wall"] > 0 and r["load"] >= 0
+    assert len(list((tmp_path / "o" / "frames").glob("*.png"))) == 4
