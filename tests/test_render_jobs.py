@@ -10,14 +10,14 @@ from __future__ import annotations
 
 import json
 import os
-import signal
 import time
 
 import pytest
 
 from axdf_cli.run.pool import WorkerDied, process_map
 from conftest import run_main
-from test_safety import alive, own_leftovers, project, snapshot, spawn, wait_for  # noqa: F401 (project: fixture)
+from test_safety import (alive, interrupt, kill_parent_of_frozen, own_leftovers, project, snapshot,  # noqa: F401
+                         spawn, wait_for)  # (project: a fixture)
 
 FEW = ["--size", "64x64", "--frames", "0:191:24", "-q"]  # 8 frames: 2 blocks of 4 with --jobs 2
 LONG = ["run", "poses/jobs/demo.yaml", "--size", "64x64", "--frames", "0:191", "--out", "out"]
@@ -90,13 +90,7 @@ def test_an_interrupted_jobs_render_is_incomplete_and_resume_completes_it(projec
     p = spawn(LONG + ["--jobs", "2"], project, start_new_session=True)
     assert wait_for(lambda: count_frames(out) >= 40, timeout=120)  # a few blocks rendered
     workers = descendants(p.pid)
-    if how == "SIGTERM":
-        p.send_signal(signal.SIGTERM)
-    else:
-        os.killpg(p.pid, signal.SIGINT)
-    _, err = p.communicate(timeout=60)
-    assert p.returncode == 130, err.decode()
-    assert err.decode().strip() == "axdf: interrupted"  # no traceback, no warning
+    assert interrupt(p, how).decode().strip() == "axdf: interrupted"  # no traceback, no warning
     assert wait_for(lambda: not any(alive(w) for w in workers), timeout=20)
     assert own_leftovers(out) == []
     m = json.loads((out / "manifest.json").read_text())
@@ -116,16 +110,8 @@ def test_render_workers_die_with_the_parent(project):
     assert wait_for(lambda: count_frames(out) >= 8, timeout=120)
     workers = descendants(p.pid)  # the fork server and its render workers
     assert len(workers) >= 3
-    for w in workers:  # frozen while the parent dies, so they cannot simply have finished
-        os.kill(w, signal.SIGSTOP)
-    p.kill()
-    p.wait(timeout=30)
-    for w in workers:
-        os.kill(w, signal.SIGCONT)
-    assert wait_for(lambda: not any(alive(w) for w in workers), timeout=20)
-    _, err = p.communicate(timeout=30)
-    assert b"Traceback" not in err, err.decode()
-    assert count_frames(out) < 192
+    kill_parent_of_frozen(p, workers)
+    assert count_frames(out) < 192  # they stopped, not finished
 
 
 def _square(shared, x):
