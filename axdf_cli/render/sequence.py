@@ -1,9 +1,11 @@
 """Render a whole sequence to ``OUT/frames/<frame:04d>.png|.exr`` and ``OUT/camera.json``.
 
-:func:`render_sequence` is what ``axdf run --render`` and ``axdf render`` call. It creates
-the GL context itself (in the calling process; call it after any fork), renders the frames
-it is given, writes each file atomically and returns the GL renderer/version and the sha256
-of every written file for the run's manifest. :func:`check_render` is the check made before
+:func:`render_frames_of` is what ``axdf run --render`` (through :func:`render_plan`) and
+``axdf render`` call: the frames of a :class:`FrameSource`, in this process
+(:func:`render_sequence`, which creates the GL context itself: call it after any fork) or
+split in blocks over ``--jobs`` render workers, each with its own GL context. Each file is
+written atomically; the result is the GL renderer/version and the sha256 of every written
+file for the run's manifest. :func:`check_render` is the check made before
 anything is written: EGL works with these settings and the render targets fit the GL's size
 limit (the supersampling is lowered when only it does not fit).
 """

@@ -2,8 +2,9 @@
 
 :class:`ViewRenderer` keeps one GL context and one :class:`~axdf_cli.render.renderer.Renderer`
 for a scene topology (muscles' faces, bone meshes) and renders any number of frames and
-cameras with it, so a worker process that makes many sequences of the same muscles uploads
-the topology once. The context is created in the process that renders (after any fork).
+cameras with it, so a worker process that makes many sequences of the same muscles (or a
+render worker of ``--jobs``, many blocks of frames) uploads the topology once. The context
+is created in the process that renders (after any fork).
 """
 from __future__ import annotations
 
