@@ -24,6 +24,9 @@ so figures are noisy and only ratios taken in the same run are compared with tar
    them against ``ndarray.tofile`` of the same bytes in one file, and ``axdf run`` of the job
    (pose stretched to the bench's frames) per format against the same run writing no meshes,
    with peak memory.
+9. rendering split over processes: ``make demo``'s first job (poses/jobs/demo.yaml, meshes and
+   512x512 frames; every 2nd frame with ``--quick``) as a subprocess at ``--jobs 1`` and
+   ``--jobs 2``, and their ratio.
 
 ``--long`` adds the memory check of 10,000 frames x 92 muscles streamed through
 ``run.evaluate_chunks`` in a subprocess (several minutes). Helpers are importable for the
@@ -660,6 +663,42 @@ def dataset_rows(table: "Table", n_samples: int, tmp: Path) -> None:
               f"2 idle cores: <= {2 * c1 / c2:.2f}x", f"{c2 / c1:.2f}x CPU")
 
 
+# ----------------------------------------------------------------------------- rendering over processes
+
+
+def run_jobs(job: Path, out: Path, jobs: int, frames: str | None = None) -> dict:
+    """``axdf run JOB --jobs N`` (meshes and frames, as the job says) in a subprocess: wall
+    seconds, with the load average of the minute before it started (the machine may be shared)."""
+    load = os.getloadavg()[0]
+    args = ["run", str(job), "--out", str(out), "--overwrite", "--jobs", str(jobs), "--quiet"]
+    r = run_subprocess(args + (["--frames", frames] if frames else []))
+    if r["rc"] != 0:
+        raise RuntimeError(f"axdf run {job} --jobs {jobs} failed ({r['rc']}): {r['stderr'][-400:]}")
+    r["load"] = load
+    return r
+
+
+def render_jobs_rows(table: "Table", tmp: Path, quick: bool) -> None:
+    """``make demo``'s first job at --jobs 1 and --jobs 2 (the frames split over render workers)."""
+    from axdf_cli.loaders import load_job
+    from axdf_cli.run import plan_run
+
+    frames = "0:191:2" if quick else None
+    plan = plan_run(load_job(DEMO_JOB), out_arg=str(tmp / "unused"), frames_arg=frames)
+    w, h = plan.render.size
+    table.section(f"rendering over processes: axdf run {DEMO_JOB.relative_to(ROOT)} ({len(plan.models)} muscles x "
+                  f"{len(plan.frames)} frames, meshes + {w}x{h} PNG + EXR; subprocess) at --jobs 1 and --jobs 2")
+    one = run_jobs(DEMO_JOB, tmp / "jobs-1", 1, frames)
+    two = run_jobs(DEMO_JOB, tmp / "jobs-2", 2, frames)
+    shutil.rmtree(tmp / "jobs-1", ignore_errors=True)
+    shutil.rmtree(tmp / "jobs-2", ignore_errors=True)
+    n = len(plan.frames)
+    table.add("axdf run --jobs 1", f"{one['wall']:.1f} s", f"{n / one['wall']:.1f} frames/s; load before {one['load']:.2f}")
+    table.add("axdf run --jobs 2 (frames over 2 render workers)", f"{two['wall']:.1f} s",
+              f"--jobs 1 {one['wall']:.1f} s; load before {two['load']:.2f}", f"{one['wall'] / two['wall']:.2f}x",
+              f"faster than --jobs 1 {_mark(two['wall'] < one['wall'])}")
+
+
 # ----------------------------------------------------------------------------- --long
 
 LONG_SCRIPT = r"""
@@ -860,6 +899,10 @@ def main(argv=None) -> int:
 
         # 8. packed formats
         packed_rows(table, case, job, tmp, n_frames, args.quick, ply_us=ply["write"])
+
+        # 9. rendering over processes
+        if "error" not in rf:
+            render_jobs_rows(table, tmp, args.quick)
 
         # --long
         if args.long:

@@ -366,13 +366,10 @@ def alive(pid: int) -> bool:
         return False
 
 
-def test_workers_die_with_their_parent(project):
-    out = project / "out"
-    p = spawn(LONG + ["--out", "out", "--jobs", "2"], project)
-    assert wait_for(lambda: count_meshes(out) > 50)
-    workers = children(p.pid)
-    assert len(workers) >= 2
-    for w in workers:  # frozen while the parent dies, so they cannot simply have finished
+def kill_parent_of_frozen(p, workers: list[int]) -> None:
+    """SIGKILL the parent ``p`` while its ``workers`` are frozen (so they cannot simply have
+    finished); every worker must then end, and nothing print a traceback."""
+    for w in workers:
         os.kill(w, signal.SIGSTOP)
     p.kill()
     p.wait(timeout=30)
@@ -381,14 +378,21 @@ def test_workers_die_with_their_parent(project):
     assert wait_for(lambda: not any(alive(w) for w in workers), timeout=20)
     _, err = p.communicate(timeout=30)  # every writer of the pipe is gone
     assert b"Traceback" not in err and b"BrokenPipeError" not in err, err.decode()
+
+
+def test_workers_die_with_their_parent(project):
+    out = project / "out"
+    p = spawn(LONG + ["--out", "out", "--jobs", "2"], project)
+    assert wait_for(lambda: count_meshes(out) > 50)
+    workers = children(p.pid)
+    assert len(workers) >= 2
+    kill_parent_of_frozen(p, workers)
     assert count_meshes(out) < 7 * 192  # they stopped, not finished
 
 
-@pytest.mark.parametrize("how", ["SIGTERM", "Ctrl-C to the group"])
-def test_stopping_a_jobs_run_exits_130_without_tracebacks(project, how):
-    out = project / "out"
-    p = spawn(LONG + ["--out", "out", "--jobs", "2"], project, start_new_session=True)
-    assert wait_for(lambda: count_meshes(out) > 50)
+def interrupt(p, how: str) -> bytes:
+    """Stop ``p`` (spawned with start_new_session) with SIGTERM or Ctrl-C to its group: exit
+    130 without a traceback; returns its stderr."""
     if how == "SIGTERM":
         p.send_signal(signal.SIGTERM)
     else:
@@ -396,6 +400,15 @@ def test_stopping_a_jobs_run_exits_130_without_tracebacks(project, how):
     _, err = p.communicate(timeout=60)
     assert p.returncode == 130, err.decode()
     assert b"Traceback" not in err and b"KeyboardInterrupt" not in err, err.decode()
+    return err
+
+
+@pytest.mark.parametrize("how", ["SIGTERM", "Ctrl-C to the group"])
+def test_stopping_a_jobs_run_exits_130_without_tracebacks(project, how):
+    out = project / "out"
+    p = spawn(LONG + ["--out", "out", "--jobs", "2"], project, start_new_session=True)
+    assert wait_for(lambda: count_meshes(out) > 50)
+    interrupt(p, how)
     assert own_leftovers(out) == []
     json.loads((out / "manifest.json").read_text())
 

@@ -5,6 +5,7 @@ RUN_DIR) and records them, with the render settings and the GL renderer, in OUT'
 marked incomplete while frames are written, complete at the end. Settings come from the
 run's manifest, overridden by the flags below. Frames that exist are rendered again only
 with ``--overwrite``; ``--resume`` finishes an interrupted render with the same settings.
+``--jobs N`` renders over N worker processes (the same bytes).
 """
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ import sys
 import time
 from pathlib import Path
 
+from axdf_cli.cli.run import _positive
 from axdf_cli.errors import InputError, Mark, UsageError
 from axdf_cli.render.settings import add_render_args, settings_from_args, settings_to_dict
 from axdf_cli.runfolder import (CAMERA, FRAME_EXTENSIONS, MANIFEST_INTERVAL_S, Root, Session, Target,
@@ -28,6 +30,8 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     g = parser.add_mutually_exclusive_group()
     g.add_argument("--overwrite", action="store_true", help="render frames that exist again")
     g.add_argument("--resume", action="store_true", help="finish an interrupted render (same settings)")
+    parser.add_argument("--jobs", type=_positive, default=1, metavar="N",
+                        help="worker processes for the rendering (default 1; same output bytes)")
     add_render_args(parser)
 
 
@@ -56,8 +60,8 @@ def _frame_files(frames) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from axdf_cli.render.runio import load_run_scene, recorded_render_settings
-    from axdf_cli.render.sequence import check_render, render_sequence
+    from axdf_cli.render.runio import load_run_source, recorded_render_settings
+    from axdf_cli.render.sequence import check_render, render_frames_of
 
     run_dir = Path(args.run_dir)
     if not run_dir.is_dir():
@@ -103,7 +107,7 @@ def run(args: argparse.Namespace) -> int:
         todo = [f for f in chosen if f not in done]
     settings = check_render(settings, on_note=lambda text: print(f"note: {text}", file=sys.stderr))
     new_render = settings_to_dict(settings)
-    scene, chunks, _ = load_run_scene(run_dir, run_manifest, frames=todo)
+    scene, source, _ = load_run_source(run_dir, run_manifest, frames=todo)
 
     stale = set(_frame_files(todo)) | {CAMERA}
     if old is not None:
@@ -125,8 +129,8 @@ def run(args: argparse.Namespace) -> int:
                 clock["t"] = time.monotonic()
 
         try:
-            result = render_sequence(scene, chunks, settings, Root(out),
-                                     progress=(lambda f: bar.update(1)) if bar else None, on_frame=checkpoint)
+            result = render_frames_of(scene, source, todo, settings, Root(out), args.jobs,
+                                      progress=(lambda f: bar.update(1)) if bar else None, on_frame=checkpoint)
         except BaseException:  # stopped: list the whole frames, for --resume
             try_write_manifest(out, dict(base, files={**kept, **clock["files"]}))
             raise

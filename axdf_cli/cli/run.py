@@ -21,7 +21,7 @@ def add_args(p) -> None:
     g.add_argument("--render", dest="render", action="store_true", default=None, help="render preview frames")
     g.add_argument("--no-render", dest="render", action="store_false", help="do not render")
     p.add_argument("--jobs", type=_positive, default=1, metavar="N",
-                   help="worker processes for the mesh pass (default 1; same output bytes)")
+                   help="worker processes for the mesh pass and the rendering (default 1; same output bytes)")
     g2 = p.add_mutually_exclusive_group()
     g2.add_argument("--resume", action="store_true", help="finish an interrupted run in OUT, skipping finished files")
     g2.add_argument("--overwrite", action="store_true", help="replace the outputs of an earlier run in OUT")

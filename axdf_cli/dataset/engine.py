@@ -20,6 +20,7 @@ from axdf_cli import atomic
 from axdf_cli.dataset import worker as wk
 from axdf_cli.dataset.index import write_index
 from axdf_cli.errors import AxdfError, EnvironmentProblem, InputError, Interrupted, Mark
+from axdf_cli.dataset import runner
 from axdf_cli.dataset.runner import own_entry
 from axdf_cli.yamlio import NAME_RE
 
@@ -198,39 +199,30 @@ def _run_local(ctx, mine, out, jobs, resume, done, where) -> None:
         finally:
             wk.release_renderer()
         return
-    import multiprocessing as mp
-    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-    from concurrent.futures.process import BrokenProcessPool
-
     # Workers come from a fork server (a fresh interpreter), never from this process: a GL
-    # driver used here before (llvmpipe's thread pool) would hang in a forked child. Each
-    # worker builds the context once from the (already checked) dataset file.
-    mpc = mp.get_context("forkserver")
-    mpc.set_forkserver_preload(["axdf_cli.dataset.worker"])
-    pool = ProcessPoolExecutor(max_workers=min(jobs, len(mine)), mp_context=mpc, initializer=worker_context,
-                               initargs=(where,))
-    pending = {pool.submit(_worker_task, where, str(Path(out).resolve()), i, resume): i for i in mine}
+    # driver used here before would hang in a forked child (run.pool.process_map, as
+    # `axdf run --jobs` renders). Each worker builds the context once from the (already
+    # checked) dataset file.
     left = set(mine)
+
+    def finished(r: tuple) -> None:
+        left.discard(r[1])
+        if r[0] != "ok":
+            _raise_failure(ctx, r, sorted(left))
+        done(r)
+
     try:
-        while pending:
-            finished, _ = wait(pending, return_when=FIRST_COMPLETED)
-            for fut in finished:
-                i = pending.pop(fut)
-                try:
-                    r = fut.result()
-                except BrokenProcessPool:
-                    raise WorkerFailed(f"a worker process died (killed, or out of memory) while making "
-                                       f"{_names(ctx, sorted(left))}; the other sequences of this run are complete; "
-                                       "rerun the same command with --resume to finish") from None
-                left.discard(i)
-                if r[0] != "ok":
-                    _raise_failure(ctx, r, sorted(left))
-                done(r)
-    except BaseException:
-        pool.shutdown(wait=False, cancel_futures=True)
-        raise
-    finally:
-        pool.shutdown(wait=True)
+        runner.process_map(_pool_task, list(mine), (where, str(Path(out).resolve()), resume), jobs=jobs,
+                           on_result=finished, fresh=True, preload=("axdf_cli.dataset.worker",))
+    except runner.WorkerDied:
+        raise WorkerFailed(f"a worker process died (killed, or out of memory) while making "
+                           f"{_names(ctx, sorted(left))}; the other sequences of this run are complete; "
+                           "rerun the same command with --resume to finish") from None
+
+
+def _pool_task(shared: tuple, index: int) -> tuple:
+    where, out, resume = shared
+    return _worker_task(where, out, index, resume)
 
 
 def _run_ray(ctx, mine, out, jobs, resume, done, address, where) -> None:

@@ -18,6 +18,7 @@ from axdf_cli.render.settings import RenderSettings, parse_render_settings, sett
 from axdf_cli.render.settings import parse_camera  # noqa: F401  (a job's camera: mapping)
 from axdf_cli.run import RunPlan, evaluate_chunks, execute, load_bone_mesh  # noqa: F401
 from axdf_cli.run.plan import display_path, load_muscle_specs  # noqa: F401  (as a run's manifest shows paths)
+from axdf_cli.run.pool import WorkerDied, process_map  # noqa: F401  (worker processes, as axdf run's)
 from axdf_cli.runfolder import own_entry  # noqa: F401  (the lock and temporaries axdf leaves while writing)
 from axdf_cli.skeleton import forward_kinematics
 

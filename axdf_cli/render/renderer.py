@@ -357,6 +357,16 @@ class Renderer:
                            normals=np.ascontiguousarray(data[..., :3]),
                            ids=np.rint(idf).astype(np.uint32), cameras=tuple(cameras))
 
+    def frames(self, chunks: Iterable[FrameChunk], cameras: dict) -> Iterator[FrameImages]:
+        """Render every frame of ``chunks`` (in order); ``cameras``: frame number -> its
+        cameras (one per panel)."""
+        for chunk in chunks:
+            for c, f in enumerate(np.asarray(chunk.frames).tolist()):
+                if f not in cameras:
+                    raise ValueError(f"frame {f} is not in Scene.frames")
+                bw = chunk.bone_world[c] if len(self.scene.bones) else None
+                yield self.render(f, [p[c] for p in chunk.positions], [n[c] for n in chunk.normals], bw, cameras[f])
+
     def release(self) -> None:
         for obj in (self.color_fbo, self.data_fbo, self.color_tex, self.data_tex, self.id_tex,
                     self.prog, self.dprog):
@@ -368,15 +378,13 @@ def render_frames(ctx, scene: Scene, chunks: Iterable[FrameChunk], settings: Ren
     """Render every frame of ``chunks`` (in order) with ``ctx``; yield :class:`FrameImages`."""
     if cameras is None:
         cameras = sequence_cameras(scene, settings)
-    by_frame = {int(f): cams for f, cams in zip(scene.frames, cameras)}
     r = Renderer(ctx, scene, settings, len(cameras[0]) if cameras else 1)
     try:
-        for chunk in chunks:
-            for c, f in enumerate(np.asarray(chunk.frames).tolist()):
-                if f not in by_frame:
-                    raise ValueError(f"frame {f} is not in Scene.frames")
-                bw = chunk.bone_world[c] if len(scene.bones) else None
-                yield r.render(f, [p[c] for p in chunk.positions], [n[c] for n in chunk.normals],
-                               bw, by_frame[f])
+        yield from r.frames(chunks, frame_cameras(scene, cameras))
     finally:
         r.release()
+
+
+def frame_cameras(scene: Scene, cameras: list[list[Camera]]) -> dict:
+    """Frame number -> its cameras (``cameras`` as :func:`sequence_cameras` gives them)."""
+    return {int(f): cams for f, cams in zip(scene.frames, cameras)}

@@ -127,6 +127,14 @@ def load_run_scene(run_dir: Path, manifest: Manifest | None = None, frames=None
     """Scene, an iterator of one-frame chunks (of ``frames``, default every frame of the run)
     and the run's render settings (enabled). A manifest that is not an axdf run's, or damaged,
     is an input error at its position."""
+    scene, source, settings = load_run_source(run_dir, manifest, frames)
+    return scene, source.chunks(source.selected), settings
+
+
+def load_run_source(run_dir: Path, manifest: Manifest | None = None, frames=None
+                    ) -> tuple[Scene, "RunFrames", RenderSettings]:
+    """:func:`load_run_scene` with the frames as a :class:`RunFrames` (a render worker reads
+    its own)."""
     run_dir = Path(run_dir)
     m = manifest or read_run_manifest(run_dir)
     all_frames = tuple(m.frames())
@@ -191,19 +199,41 @@ def load_run_scene(run_dir: Path, manifest: Manifest | None = None, frames=None
     scene = Scene(tuple(muscles), layout.bones, bounds.astype(np.float64), all_frames,
                   framing=framing, first_frame=first_frame)
 
-    def chunks() -> Iterator[FrameChunk]:
-        for k, f in enumerate(selected):
+    source = RunFrames(run_dir, names, formats, all_frames, fps, selected, bone_world, sources)
+    return scene, source, settings
+
+
+class RunFrames:
+    """A finished run's frames for the renderer (a :class:`~axdf_cli.render.sequence.FrameSource`):
+    each muscle's mesh read a frame at a time (its per-frame files, or its per-sequence file,
+    opened in the process that reads: a render worker opens its own), normals computed where
+    the format has none; the bones' transforms of the ``selected`` frames."""
+
+    def __init__(self, run_dir: Path, names, formats, all_frames, fps, selected, bone_world, sources=None):
+        self.run_dir, self.names, self.formats, self.all_frames, self.fps = run_dir, names, formats, all_frames, fps
+        self.selected = tuple(selected)
+        self.bone_world = bone_world  # (len(selected), n_scene_bones, 4, 4)
+        self._sources = sources
+
+    def __getstate__(self) -> dict:
+        return dict(self.__dict__, _sources=None)  # files are opened again where they are read
+
+    def chunks(self, frames) -> Iterator[FrameChunk]:
+        """One-frame chunks of ``frames`` (some of ``selected``), in order."""
+        if self._sources is None:
+            self._sources = [muscle_frames(self.run_dir, n, self.formats, self.all_frames, self.fps)
+                             for n in self.names]
+        row = {f: k for k, f in enumerate(self.selected)}
+        for f in frames:
             ps, ns = [], []
-            for src in sources:
+            for src in self._sources:
                 pos, nrm, faces = src.read(f)
                 if nrm is None:
                     from axdf_cli.render.renderer import vertex_normals
                     nrm = vertex_normals(pos, faces)
                 ps.append(pos[None])
                 ns.append(nrm[None])
-            yield FrameChunk(np.array([f]), tuple(ps), tuple(ns), bone_world[k:k + 1])
-
-    return scene, chunks(), settings
+            yield FrameChunk(np.array([f]), tuple(ps), tuple(ns), self.bone_world[row[f]:row[f] + 1])
 
 
 def recorded_framing(m: Manifest) -> tuple[np.ndarray | None, int | None]:

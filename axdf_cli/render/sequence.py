@@ -1,9 +1,11 @@
 """Render a whole sequence to ``OUT/frames/<frame:04d>.png|.exr`` and ``OUT/camera.json``.
 
-:func:`render_sequence` is what ``axdf run --render`` and ``axdf render`` call. It creates
-the GL context itself (in the calling process; call it after any fork), renders the frames
-it is given, writes each file atomically and returns the GL renderer/version and the sha256
-of every written file for the run's manifest. :func:`check_render` is the check made before
+:func:`render_frames_of` is what ``axdf run --render`` (through :func:`render_plan`) and
+``axdf render`` call: the frames of a :class:`FrameSource`, in this process
+(:func:`render_sequence`, which creates the GL context itself: call it after any fork) or
+split in blocks over ``--jobs`` render workers, each with its own GL context. Each file is
+written atomically; the result is the GL renderer/version and the sha256 of every written
+file for the run's manifest. :func:`check_render` is the check made before
 anything is written: EGL works with these settings and the render targets fit the GL's size
 limit (the supersampling is lowered when only it does not fit).
 """
@@ -12,7 +14,7 @@ from __future__ import annotations
 import json
 import time
 from pathlib import Path
-from typing import Callable, Iterable
+from typing import Callable, Iterable, Iterator, Protocol
 
 from axdf_cli import atomic
 from axdf_cli.errors import InputError
@@ -20,7 +22,7 @@ from axdf_cli.render.camera import camera_json, panel_count, sequence_cameras
 from axdf_cli.render.context import create_gl_context, gl_info
 from axdf_cli.render.exr import exr_channels, write_exr
 from axdf_cli.render.png import write_png
-from axdf_cli.render.renderer import FrameImages, id_map, render_frames
+from axdf_cli.render.renderer import FrameImages, frame_cameras, id_map, render_frames
 from axdf_cli.render.settings import RenderSettings
 from axdf_cli.runfolder import CAMERA, Root, frame_relpath
 from axdf_cli.scene import FrameChunk, Scene
@@ -42,32 +44,121 @@ def render_sequence(scene: Scene, chunks: Iterable[FrameChunk], settings: Render
                     out_dir: Path | Root, progress: Callable[[int], None] | None = None,
                     on_frame: Callable[[dict], None] | None = None) -> dict:
     """Render the frames of ``chunks`` (all of ``scene.frames`` or some of them: the cameras
-    are those of the whole sequence); write ``frames/<frame:04d>.{png,exr}``, then
-    ``camera.json`` (every frame's camera).
+    are those of the whole sequence) in this process; write ``frames/<frame:04d>.{png,exr}``,
+    then ``camera.json`` (every frame's camera).
 
     ``progress`` is called with each finished frame number, ``on_frame`` with the files
     written so far. Returns ``{"gl_renderer": str, "gl_version": str, "files": {relative
     path: sha256}}``. Raises :class:`EnvironmentProblem` (exit 3) when no EGL context can be made.
     """
+    from axdf_cli.render.views import ViewRenderer
+
     root = out_dir if isinstance(out_dir, Root) else Root(Path(out_dir))
     cameras = sequence_cameras(scene, settings)
-    ctx = create_gl_context(device=settings.device, libegl=settings.egl_library)
+    vr = ViewRenderer(scene, settings, _panels(cameras))
     try:
-        info = gl_info(ctx)
-        files: dict[str, str] = {}
-        for img in render_frames(ctx, scene, chunks, settings, cameras):
-            for ext, writer in FRAME_WRITERS.items():
-                rel = frame_relpath(img.frame, ext)
-                files[rel] = writer(root.path(rel), img)
-            if progress is not None:
-                progress(img.frame)
-            if on_frame is not None:
-                on_frame(files)
-        cam = camera_json(cameras, scene.frames, settings, id_map(scene, settings.bones))
-        files[CAMERA] = atomic.write_text(root.path(CAMERA), json.dumps(cam, indent=1, sort_keys=True) + "\n")
+        files = _write_frames(vr, chunks, frame_cameras(scene, cameras), root, progress, on_frame)
     finally:
-        ctx.release()
-    return {"gl_renderer": info.renderer, "gl_version": info.version, "files": files}
+        vr.release()
+    files[CAMERA] = _write_camera(root, scene, settings, cameras)
+    return {"gl_renderer": vr.info.renderer, "gl_version": vr.info.version, "files": files}
+
+
+def _panels(cameras) -> int:
+    return len(cameras[0]) if cameras else 1
+
+
+def _write_frames(vr, chunks, cameras: dict, root: Root, progress=None, on_frame=None) -> dict:
+    """Render ``chunks`` with the :class:`~axdf_cli.render.views.ViewRenderer` ``vr`` and
+    write every frame's files; return {relative path: sha256}."""
+    files: dict[str, str] = {}
+    for img in vr.renderer.frames(chunks, cameras):
+        for ext, writer in FRAME_WRITERS.items():
+            rel = frame_relpath(img.frame, ext)
+            files[rel] = writer(root.path(rel), img)
+        if progress is not None:
+            progress(img.frame)
+        if on_frame is not None:
+            on_frame(files)
+    return files
+
+
+def _write_camera(root: Root, scene: Scene, settings: RenderSettings, cameras) -> str:
+    cam = camera_json(cameras, scene.frames, settings, id_map(scene, settings.bones))
+    return atomic.write_text(root.path(CAMERA), json.dumps(cam, indent=1, sort_keys=True) + "\n")
+
+
+class FrameSource(Protocol):
+    """Where a render worker gets its frames: :meth:`chunks` yields the :class:`FrameChunk`
+    blocks of the given frame numbers (in order). Pickled once per worker process."""
+
+    def chunks(self, frames: list[int]) -> Iterator[FrameChunk]: ...
+
+
+def frame_blocks(frames: list[int], jobs: int) -> list[list[int]]:
+    """``frames`` cut into consecutive blocks of at most RENDER_CHUNK, small enough that
+    every one of ``jobs`` workers gets one: the tasks the workers take in turn."""
+    size = max(1, min(RENDER_CHUNK, -(-len(frames) // max(jobs, 1))))
+    return [list(frames[k:k + size]) for k in range(0, len(frames), size)]
+
+
+def render_frames_of(scene: Scene, source: FrameSource, frames: list[int], settings: RenderSettings,
+                     out_dir: Path | Root, jobs: int = 1, progress: Callable[[int], None] | None = None,
+                     on_frame: Callable[[dict], None] | None = None) -> dict:
+    """:func:`render_sequence` of ``frames`` read from ``source``, split over ``jobs`` worker
+    processes (blocks of consecutive frames, :func:`frame_blocks`), each with its own GL
+    context; the same bytes as one process. Workers come from a fork server (never forked
+    from this process, whatever GL it used before; :func:`axdf_cli.run.pool.process_map`) and
+    stop, each after the file it is writing, when this process is interrupted or dies.
+    ``progress`` and ``on_frame`` are called in this process as blocks finish; camera.json is
+    written here at the end. With one job (or one frame) everything runs in this process."""
+    from axdf_cli.run.pool import process_map
+
+    frames = [int(f) for f in frames]
+    blocks = frame_blocks(frames, jobs)
+    if jobs <= 1 or len(blocks) <= 1:
+        return render_sequence(scene, source.chunks(frames), settings, out_dir, progress, on_frame)
+    root = out_dir if isinstance(out_dir, Root) else Root(Path(out_dir))
+    cameras = sequence_cameras(scene, settings)
+    files: dict[str, str] = {}
+    gl: list = []
+
+    def done(result) -> None:
+        block, block_files, info = result
+        files.update(block_files)
+        gl.append(info)
+        for f in block:
+            if progress is not None:
+                progress(f)
+        if on_frame is not None:
+            on_frame(files)
+
+    shared = (scene, source, settings, cameras, root.root)
+    process_map(_render_block, blocks, shared, jobs=jobs, on_result=done, fresh=True,
+                preload=("axdf_cli.render.sequence", "axdf_cli.run.evaluate"))
+    files[CAMERA] = _write_camera(root, scene, settings, cameras)
+    renderer, version = gl[0]
+    return {"gl_renderer": renderer, "gl_version": version, "files": files}
+
+
+_WORKER: dict = {}  # in a render worker: pid -> its ViewRenderer (a GL context never crosses a fork)
+
+
+def _render_block(shared, block: list[int]) -> tuple:
+    """In a render worker: render and write one block of frames (the GL context and the
+    scene's topology are made on the worker's first block and kept)."""
+    import os
+
+    from axdf_cli.render.views import ViewRenderer
+    from axdf_cli.run.pool import check_parent
+
+    scene, source, settings, cameras, root = shared
+    vr = _WORKER.get(os.getpid())
+    if vr is None:
+        vr = _WORKER[os.getpid()] = ViewRenderer(scene, settings, _panels(cameras))
+    files = _write_frames(vr, source.chunks(block), frame_cameras(scene, cameras), Root(root),
+                          progress=lambda _f: check_parent())
+    return block, files, (vr.info.renderer, vr.info.version)
 
 
 def fit_size(settings: RenderSettings, limit: int, renderer: str, on_note=None) -> RenderSettings:
@@ -107,15 +198,15 @@ RENDER_CHUNK = 16  # frames per block handed to the renderer by render_plan (all
 
 
 def render_plan(plan, out_dir: Path, bounds, twist_ref, progress: Callable[[int], None] | None = None,
-                framing_points=None) -> dict:
-    """Render a run plan's frames into ``out_dir`` (``axdf run --render``): the muscles are
-    evaluated again, block by block (evaluation is cheap next to rendering and this keeps
-    memory bounded), exactly as the mesh pass wrote them. ``framing_points``: what the
-    automatic camera frames (default :func:`axdf_cli.run.plan.framing`)."""
+                framing_points=None, jobs: int = 1, frames=None, on_frame: Callable[[dict], None] | None = None
+                ) -> dict:
+    """Render a run plan's frames into ``out_dir`` (``axdf run --render``) over ``jobs``
+    processes (:func:`render_frames_of`); ``frames``: those to draw now (default all of the
+    plan's; the cameras and camera.json are always the whole sequence's). ``framing_points``:
+    what the automatic camera frames (default :func:`axdf_cli.run.plan.framing`)."""
     import numpy as np
 
     from axdf_cli.render.renderer import bone_layout
-    from axdf_cli.run.evaluate import evaluate_chunks, finite_or_rest
     from axdf_cli.run.plan import framing
     from axdf_cli.scene import SceneMuscle
 
@@ -129,14 +220,35 @@ def render_plan(plan, out_dir: Path, bounds, twist_ref, progress: Callable[[int]
         muscles=tuple(SceneMuscle(s.name, s.color, m.faces) for s, m in zip(plan.muscles, plan.models)),
         bones=layout.bones, bounds=bounds, frames=tuple(int(f) for f in plan.frames),
         framing=framing_points, first_frame=int(plan.pose.first))
+    todo = scene.frames if frames is None else frames
+    return render_frames_of(scene, PlanFrames(plan, twist_ref, layout), todo, plan.render, out_dir, jobs,
+                            progress, on_frame)
 
-    def chunks():
-        for sl, world, results in evaluate_chunks(plan, RENDER_CHUNK, twist_ref):
+
+class PlanFrames:
+    """A run plan's frames for the renderer (a :class:`FrameSource`): the muscles evaluated
+    again, block by block (evaluation is cheap next to rendering and this keeps memory
+    bounded), exactly as the mesh pass wrote them; the bones placed by ``layout``
+    (:class:`~axdf_cli.render.renderer.BoneLayout`)."""
+
+    def __init__(self, plan, twist_ref, layout):
+        self.plan, self.twist_ref, self.layout = plan, twist_ref, layout
+
+    def chunks(self, frames: list[int]) -> Iterator[FrameChunk]:
+        from dataclasses import replace
+
+        import numpy as np
+
+        from axdf_cli.run.evaluate import evaluate_chunks, finite_or_rest
+
+        plan = self.plan
+        index = {int(f): i for i, f in enumerate(plan.frames)}
+        idx = np.array([index[int(f)] for f in frames], dtype=np.int64)
+        sub = replace(plan, frames=plan.frames[idx])  # each frame is evaluated alone: any subset, the same meshes
+        for sl, world, results in evaluate_chunks(sub, RENDER_CHUNK, self.twist_ref[idx]):
             done = [finite_or_rest(r, plan.models[j]) for j, r in results]
-            yield FrameChunk(frames=plan.frames[sl], positions=tuple(d[0] for d in done),
-                             normals=tuple(d[1] for d in done), bone_world=layout.transforms(world))
-
-    return render_sequence(scene, chunks(), plan.render, out_dir, progress=progress)
+            yield FrameChunk(frames=sub.frames[sl], positions=tuple(d[0] for d in done),
+                             normals=tuple(d[1] for d in done), bone_world=self.layout.transforms(world))
 
 
 def benchmark_fps(size: tuple[int, int] = (512, 512), n_muscles: int = 10, verts: int = 2000,

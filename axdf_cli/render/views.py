@@ -2,8 +2,9 @@
 
 :class:`ViewRenderer` keeps one GL context and one :class:`~axdf_cli.render.renderer.Renderer`
 for a scene topology (muscles' faces, bone meshes) and renders any number of frames and
-cameras with it, so a worker process that makes many sequences of the same muscles uploads
-the topology once. The context is created in the process that renders (after any fork).
+cameras with it, so a worker process that makes many sequences of the same muscles (or a
+render worker of ``--jobs``, many blocks of frames) uploads the topology once. The context
+is created in the process that renders (after any fork).
 """
 from __future__ import annotations
 
@@ -30,14 +31,15 @@ def view_camera(name: str, K: np.ndarray, world_to_camera: np.ndarray, near: flo
 
 class ViewRenderer:
     """One GL context and renderer for a fixed scene topology; :meth:`render` draws one
-    image per camera. Use from the process that created it only."""
+    image per camera (``panels`` 1), ``renderer.frames`` whole frames of ``panels`` panels
+    side by side (a sequence's render worker). Use from the process that created it only."""
 
-    def __init__(self, scene: Scene, settings: RenderSettings):
+    def __init__(self, scene: Scene, settings: RenderSettings, panels: int = 1):
         self.pid = os.getpid()
         self.settings = settings
         self.ctx = create_gl_context(device=settings.device, libegl=settings.egl_library)
         self.info = gl_info(self.ctx)
-        self.renderer = Renderer(self.ctx, scene, settings, 1)
+        self.renderer = Renderer(self.ctx, scene, settings, panels)
 
     def render(self, frame: int, positions, normals, bone_world: np.ndarray | None,
                cameras: list[Camera]) -> list[FrameImages]:

@@ -1,5 +1,6 @@
 """Executing a plan: the mesh pass (in this process or forked workers), the tables, the
-render pass and the manifest, written into the run folder (:mod:`axdf_cli.runfolder`)."""
+render pass (in this process or render workers) and the manifest, written into the run
+folder (:mod:`axdf_cli.runfolder`)."""
 from __future__ import annotations
 
 import time
@@ -13,10 +14,11 @@ from axdf_cli.errors import InputError
 from axdf_cli.formats import WRITERS
 from axdf_cli.run.evaluate import CHUNK_FRAMES, evaluate_chunks, finite_or_rest, twist_references
 from axdf_cli.run.plan import RunPlan, display_path, framing
-from axdf_cli.run.pool import check_parent, fork_map
+from axdf_cli.run.pool import check_parent, process_map
 from axdf_cli.run.sequences import SequenceFiles, file_relpath, sequence_formats, write_run_files
-from axdf_cli.runfolder import (BONES_CSV, MANIFEST_INTERVAL_S, STATS, OutputWriter, bone_mesh_relpath, describe_differences,
-                                frame_relpath, gl_record, mesh_relpath, write_manifest)
+from axdf_cli.runfolder import (BONES_CSV, FRAME_EXTENSIONS, MANIFEST_INTERVAL_S, STATS, OutputWriter, bone_mesh_relpath,
+                                describe_differences, frame_relpath, gl_record, is_file_with, mesh_relpath,
+                                write_manifest)
 from axdf_cli.skeleton import matrix_to_quaternion
 
 
@@ -170,7 +172,37 @@ def _parallel_mesh_pass(plan: RunPlan, root: Path, jobs: int, twist_ref, previou
     tasks = [(g, k == 0) for k, g in enumerate(groups) if g]
     on_result = (lambda r: progress(len(r.muscles) * len(plan.frames))) if progress else None
     shared = {"plan": plan, "root": root, "twist_ref": twist_ref, "previous": previous}
-    return fork_map(_mesh_worker, tasks, shared, on_result)
+    return process_map(_mesh_worker, tasks, shared, on_result=on_result)
+
+
+class Checkpoint:
+    """Calling it writes the in-progress manifest (``write()``: finished files only) at most
+    every MANIFEST_INTERVAL_S and never more than ~5% of the run's time: on a long run the
+    file list grows to many MB."""
+
+    def __init__(self, write):
+        self.write = write
+        self.t = time.monotonic()
+        self.cost = 0.0
+
+    def __call__(self) -> None:
+        now = time.monotonic()
+        if now - self.t >= max(MANIFEST_INTERVAL_S, 20.0 * self.cost):
+            self.write()
+            self.cost = time.monotonic() - now
+            self.t = time.monotonic()
+
+
+def frame_files(frame: int) -> list[str]:
+    """A rendered frame's files (one per pass)."""
+    return [frame_relpath(frame, ext) for ext in FRAME_EXTENSIONS]
+
+
+def rendered_frames(plan: RunPlan, previous: dict, root: Path) -> set[int]:
+    """The frames an interrupted run rendered whole (every pass listed in its manifest and
+    on disk with those bytes): --resume keeps them."""
+    return {int(f) for f in plan.frames
+            if all(r in previous and is_file_with(root / r, previous[r]) for r in frame_files(int(f)))}
 
 
 def stats_csv(plan: RunPlan, stats: np.ndarray, warn_text: list) -> bytes:
@@ -230,9 +262,10 @@ def execute(plan: RunPlan, *, resume: bool = False, overwrite: bool = False, pro
 
     Every check comes first (the output folder, --resume against the earlier manifest,
     --strict, EGL and the render size): a refused run writes nothing. With ``jobs`` > 1 the
-    muscles are split over forked worker processes for the mesh pass; the output is the same
-    bytes. Rendering runs in this process afterwards (the GL context is created after every
-    fork)."""
+    muscles are split over forked worker processes for the mesh pass, then the frames over
+    render workers (:func:`axdf_cli.render.sequence.render_frames_of`: from a fork server,
+    each with its own GL context; this process never makes one); the output is the same
+    bytes. With one job the frames are rendered in this process, after every fork."""
     target = check_output(plan, resume=resume, overwrite=overwrite)
     twist_ref = twist_references(plan)
     if strict:
@@ -252,6 +285,7 @@ def _write_run(plan: RunPlan, session, twist_ref, progress, render_progress, job
     nf, nm = len(plan.frames), len(plan.models)
     bones = plan.pose.skeleton.bones
     writer = OutputWriter(root, previous)
+    rendered = {"files": {}}  # frames rendered so far
     try:
         if jobs > 1 and nm > 1:
             try:
@@ -260,18 +294,7 @@ def _write_run(plan: RunPlan, session, twist_ref, progress, render_progress, job
                 runfolder.remove_stale(root)  # a worker killed mid-write (the others finish their file)
                 raise
         else:
-            clock = {"t": time.monotonic(), "cost": 0.0}
-
-            def checkpoint():
-                # the in-progress manifest (finished files only), at most every
-                # MANIFEST_INTERVAL_S and never more than ~5% of the run's time: on a long run
-                # the file list grows to many MB
-                now = time.monotonic()
-                if now - clock["t"] >= max(MANIFEST_INTERVAL_S, 20.0 * clock["cost"]):
-                    write_manifest(root, manifest_dict(plan, writer.files, [], complete=False))
-                    clock["cost"] = time.monotonic() - now
-                    clock["t"] = time.monotonic()
-
+            checkpoint = Checkpoint(lambda: write_manifest(root, manifest_dict(plan, writer.files, [], complete=False)))
             parts = [mesh_pass(plan, list(range(nm)), twist_ref, writer, progress, checkpoint, bones=True)]
         stats = np.zeros((nf, nm, 6))
         warn_text = [[""] * nm for _ in range(nf)]
@@ -298,17 +321,19 @@ def _write_run(plan: RunPlan, session, twist_ref, progress, render_progress, job
         if sequence_formats(plan.formats):
             write_run_files(plan, writer, parts[0].bone_rows, np.array([lo, hi]), frame_pts)
         if plan.rendering:
-            from axdf_cli.render.sequence import render_plan
-
             writer.flush()
             write_manifest(root, manifest_dict(plan, writer.files, warnings, complete=False, extra=extra))
-            info = render_plan(plan, root, np.array([lo, hi]), twist_ref, render_progress, frame_pts)
-            writer.files.update(info["files"])
+            info = _render_pass(plan, root, previous, writer, rendered, lambda files: manifest_dict(
+                plan, files, warnings, complete=False, extra=extra), np.array([lo, hi]), twist_ref, frame_pts,
+                render_progress, jobs)
             extra["gl"] = gl_record(info["gl_renderer"], info["gl_version"])
         writer.flush()
         session.commit(manifest_dict(plan, writer.files, warnings, complete=True, extra=extra))
     except BaseException:
         writer.close(cancel=True)
+        writer.files.update(rendered["files"])
+        if jobs > 1:
+            runfolder.remove_stale(root)  # a render worker killed mid-write (the others finish their file)
         if root == plan.out:  # stopped: list what is whole, for --resume (a staging folder goes)
             runfolder.try_write_manifest(root, manifest_dict(plan, writer.files, [], complete=False))
         raise
@@ -319,6 +344,32 @@ def _write_run(plan: RunPlan, session, twist_ref, progress, render_progress, job
         "warnings": warnings, "worst_volume_error": float(np.max(np.abs(ratio - 1.0))) if ratio.size else 0.0,
         "stats": stats,
     }
+
+
+def _render_pass(plan: RunPlan, root: Path, previous: dict, writer: OutputWriter, rendered: dict, manifest,
+                 bounds: np.ndarray, twist_ref, frame_pts, progress, jobs: int) -> dict:
+    """Render the plan's frames into ``root`` over ``jobs`` processes; the frames an
+    interrupted run rendered whole are kept (--resume). ``rendered["files"]`` follows the
+    frames' files as they are written; ``manifest(files)`` is the in-progress manifest,
+    written at checkpoints. Every frame's files end up in ``writer.files``."""
+    from axdf_cli.render.sequence import render_plan
+
+    done = rendered_frames(plan, previous, root)
+    for f in sorted(done):
+        writer.files.update({r: previous[r] for r in frame_files(f)})
+        writer.skipped += len(FRAME_EXTENSIONS)
+        if progress:
+            progress(f)
+    checkpoint = Checkpoint(lambda: write_manifest(root, manifest({**writer.files, **rendered["files"]})))
+
+    def on_frame(files: dict) -> None:  # the frames' files written so far (one growing dict)
+        rendered["files"] = files
+        checkpoint()
+
+    todo = [int(f) for f in plan.frames if int(f) not in done]
+    info = render_plan(plan, root, bounds, twist_ref, progress, frame_pts, jobs, todo, on_frame)
+    writer.files.update(info["files"])
+    return info
 
 
 def _csv_text(s: str) -> str:
