@@ -411,6 +411,21 @@ def _range_text(lo, hi, lo_open) -> str:
     return "a number"
 
 
+def unique_names(bases, taken=()) -> list[str]:
+    """``bases`` made unique, in order: a name already used (or in ``taken``) gets ``_2``,
+    ``_3``, ... appended, the first free one."""
+    seen = set(taken)
+    out = []
+    for base in bases:
+        name, k = base, 1
+        while name in seen:
+            k += 1
+            name = f"{base}_{k}"
+        seen.add(name)
+        out.append(name)
+    return out
+
+
 def check_name(v, where: Mark, what: str) -> str:
     if not isinstance(v, str) or not NAME_RE.match(v) or v in (".", "..") or len(v) > NAME_MAX:
         # YAML reads 1e-5, 12 or true as a number or boolean: a name like that needs quotes

@@ -51,17 +51,10 @@ def pxr():
 
 def prim_names(names) -> list[str]:
     """Valid, unique USD prim names for ``names``, in order."""
+    from axdf_cli.yamlio import unique_names
+
     *_, Tf = pxr()
-    out, seen = [], set()
-    for n in names:
-        base = Tf.MakeValidIdentifier(n)
-        p, k = base, 1
-        while p in seen:
-            k += 1
-            p = f"{base}_{k}"
-        seen.add(p)
-        out.append(p)
-    return out
+    return unique_names(Tf.MakeValidIdentifier(n) for n in names)
 
 
 def _metadata(stage, frames, fps: float) -> None:

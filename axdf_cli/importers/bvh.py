@@ -46,7 +46,7 @@ from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.importers import emit
 from axdf_cli.importers.osim_import import _rel, _sha, safe_name
-from axdf_cli.yamlio import NAME_ALLOWED, NAME_RE, read_text
+from axdf_cli.yamlio import NAME_ALLOWED, NAME_RE, read_text, unique_names
 
 #: channel name (lower case) → (DOF type, axis index). BVH writes them capitalised.
 CHANNELS = {"xposition": ("translation", 0), "yposition": ("translation", 1), "zposition": ("translation", 2),
@@ -395,17 +395,8 @@ def frame_rate(frame_time: float, text: str) -> float:
 
 def bone_names(bvh: BVH) -> list[str]:
     """Unique axdf bone names: joint names made safe, end sites ``<joint>_end``; ``ground`` is taken."""
-    taken = {"ground"}
-    out = []
-    for j in bvh.joints:
-        base = safe_name(bvh.joints[j.parent].name) + "_end" if j.end_site else safe_name(j.name)
-        name, k = base, 1
-        while name in taken:
-            k += 1
-            name = f"{base}_{k}"
-        taken.add(name)
-        out.append(name)
-    return out
+    return unique_names((safe_name(bvh.joints[j.parent].name) + "_end" if j.end_site else safe_name(j.name)
+                         for j in bvh.joints), taken=("ground",))
 
 
 def coordinate_name(bone: str, channel: str) -> str:

@@ -760,6 +760,24 @@ def _path_length(n_ent, pos, ent_w, ent_side, arc_len):
 
 
 @njit(cache=True)
+def _drop_surface(w, n_ent, pos, ent_p, ent_w, ent_side):
+    """Remove surface ``w``'s entries (its wrap points) from the path's entry arrays, in place,
+    keeping the others in order; return the new entry count."""
+    e = 0
+    while e < n_ent:
+        if ent_w[e] == w:
+            for g in range(e, n_ent - 1):
+                pos[g] = pos[g + 1]
+                ent_p[g] = ent_p[g + 1]
+                ent_w[g] = ent_w[g + 1]
+                ent_side[g] = ent_side[g + 1]
+            n_ent -= 1
+        else:
+            e += 1
+    return n_ent
+
+
+@njit(cache=True)
 def wrapped_paths(points, active, wrap_xf, kind, prm, wrap_axis, wrap_sign, method, on, rng, fractions,
                   out_samples, out_length, out_inside, out_points, out_count):
     """Per frame f: the path through the active points (F, P, 3 world; active (F, P)), wrapped
@@ -802,18 +820,7 @@ def wrapped_paths(points, active, wrap_xf, kind, prm, wrap_axis, wrap_sign, meth
             for i in range(nw):
                 w = order[i]
                 result[i] = NO_WRAP
-                # remove this surface's wrap points
-                e = 0
-                while e < n_ent:
-                    if ent_w[e] == w:
-                        for g in range(e, n_ent - 1):
-                            pos[g] = pos[g + 1]
-                            ent_p[g] = ent_p[g + 1]
-                            ent_w[g] = ent_w[g + 1]
-                            ent_side[g] = ent_side[g + 1]
-                        n_ent -= 1
-                    else:
-                        e += 1
+                n_ent = _drop_surface(w, n_ent, pos, ent_p, ent_w, ent_side)  # its old wrap points
                 if not on[w]:
                     continue
                 lo, hi = rng[w, 0], rng[w, 1]
@@ -888,17 +895,7 @@ def wrapped_paths(points, active, wrap_xf, kind, prm, wrap_axis, wrap_sign, meth
             if kk == 0 and nw > 1 and result[0] == NO_WRAP and result[1] == INSIDE:
                 order[0] = 1
                 order[1] = 0
-                e = 0
-                while e < n_ent:
-                    if ent_w[e] == 0:
-                        for g in range(e, n_ent - 1):
-                            pos[g] = pos[g + 1]
-                            ent_p[g] = ent_p[g + 1]
-                            ent_w[g] = ent_w[g + 1]
-                            ent_side[g] = ent_side[g + 1]
-                        n_ent -= 1
-                    else:
-                        e += 1
+                n_ent = _drop_surface(0, n_ent, pos, ent_p, ent_w, ent_side)
         out_length[f] = _path_length(n_ent, pos, ent_w, ent_side, arc_len)
         out_inside[f] = inside
         out_count[f] = n_ent
