@@ -50,12 +50,13 @@ import numpy as np
 
 from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError, Mark
+from axdf_cli.formats.ply import PlyWriter
 from axdf_cli.importers import emit
 from axdf_cli.loaders import RefPolicy, parse_skeleton_text
 from axdf_cli.yamlio import check_name
 from axdf_cli.importers.osim import Model, load_osim
 from axdf_cli.importers.storage import Table, read_storage
-from axdf_cli.importers.vtp import ply_bytes, read_vtp
+from axdf_cli.importers.vtp import read_vtp
 
 NAME_RE = re.compile(r"^[A-Za-z0-9_.-]+$")
 #: The angle-unit rule's thresholds (see module doc).
@@ -275,7 +276,7 @@ def body_meshes(model: Model, model_path: Path, warnings: list[str], report: dic
             ts.append(t + base)
             base += len(v)
         if vs:
-            out[body.name] = ply_bytes(np.concatenate(vs), np.concatenate(ts))
+            out[body.name] = PlyWriter(np.concatenate(ts)).encode(np.concatenate(vs))
     for m in missing:
         warnings.append(f"{m['where']}: mesh {m['mesh_file']!r} of body {m['body']} "
                         f"{m.get('why', 'not found beside the model or in Geometry/')}; skipped")
