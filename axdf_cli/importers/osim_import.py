@@ -53,12 +53,11 @@ from axdf_cli.errors import InputError, Mark
 from axdf_cli.formats.ply import PlyWriter
 from axdf_cli.importers import emit
 from axdf_cli.loaders import RefPolicy, parse_skeleton_text
-from axdf_cli.yamlio import check_name
+from axdf_cli.yamlio import NAME_ALLOWED, check_name, is_name
 from axdf_cli.importers.osim import Model, load_osim
 from axdf_cli.importers.storage import Table, read_storage
 from axdf_cli.importers.vtp import read_vtp
 
-NAME_RE = re.compile(r"^[A-Za-z0-9_.-]+$")
 #: The angle-unit rule's thresholds (see module doc).
 RADIAN_BOUND = 2.0 * math.pi
 MAX_RADIAN_STEP = 0.35
@@ -306,8 +305,10 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
         raise InputError(None, "--controls needs --motion", "give the motion the controls belong to")
     model = load_osim(model_path)
     name = name or safe_name(model.name)
-    if not NAME_RE.match(name):
-        raise InputError(None, f"name {name!r}", "names use letters, digits, '_', '.', '-'")
+    pname = pose_name or (safe_name(Path(motion).stem) if motion is not None else None)
+    for what, v in (("--name", name), ("--pose-name", pname)):
+        if v is not None and not is_name(v):
+            raise InputError(None, f"{what} {v!r}", NAME_ALLOWED)
     # names become axdf names in files that do not exist yet: check them here, at the .osim line
     for what, items in (("body", model.bodies.values()), ("coordinate", model.coordinates.values()),
                         ("wrap object", model.wrap_objects.values())):
@@ -318,7 +319,7 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
                 raise InputError(item.mark, f"{what} name {item.name!r} cannot be an axdf name",
                                  "names use letters, digits, '_', '.', '-' (rename it in the model)") from e
     for m in model.muscles:
-        if not NAME_RE.match(m.name):
+        if not is_name(m.name):
             raise InputError(m.mark, f"muscle name {m.name!r}", "names use letters, digits, '_', '.', '-'")
     motion_t = read_storage(motion) if motion is not None else None
     controls_t = read_storage(controls) if controls is not None else None
@@ -326,7 +327,6 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
     skel_path = Path(skeleton_out) if skeleton_out else out_dir / "skeletons" / f"{name}.yaml"
     mesh_dir = Path(meshes_out) if meshes_out else skel_path.parent / "meshes" / name
     mus_dir = Path(muscles_out) if muscles_out else out_dir / "muscles"
-    pname = pose_name or (safe_name(Path(motion).stem) if motion is not None else None)
     pose_path = (Path(pose_out) if pose_out else out_dir / f"{pname}.yaml") if motion is not None else None
 
     warnings: list[str] = []
