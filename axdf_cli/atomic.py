@@ -178,7 +178,7 @@ class StreamingFile:
 
     def __init__(self, path: Path | str):
         self.path = Path(path)
-        self.tmp = self.path.with_name(f"{TMP_PREFIX}{os.getpid()}-{self.path.name}")
+        self.tmp = temp_path(self.path)
         try:
             try:
                 fd = os.open(self.tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
@@ -187,7 +187,7 @@ class StreamingFile:
                 fd = os.open(self.tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
             os.close(fd)
         except OSError as e:
-            raise _env_problem(self.path, e) from None
+            raise environment_problem(self.path, e) from None
 
     def pwrite(self, data, offset: int) -> None:
         """Write ``data`` (bytes-like or a C-contiguous array) at byte ``offset``."""
@@ -202,7 +202,7 @@ class StreamingFile:
                 os.close(fd)
         except OSError as e:
             self.discard()
-            raise _env_problem(self.path, e) from None
+            raise environment_problem(self.path, e) from None
 
     def commit(self) -> None:
         """Rename the temporary into place (the file appears whole)."""
@@ -211,7 +211,7 @@ class StreamingFile:
                 os.replace(self.tmp, self.path)
             except OSError as e:
                 self.discard()
-                raise _env_problem(self.path, e) from None
+                raise environment_problem(self.path, e) from None
 
     def discard(self) -> None:
         _unlink(self.tmp)

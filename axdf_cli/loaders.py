@@ -475,7 +475,7 @@ def parse_muscle_path(f: Fields):
         else:
             size = tuple(wf.number(key, required=True, lo=0.0, lo_open=True) for key in WRAP_SIZE_KEYS[shape])
         size = tuple(float(v) for v in size) + (0.0,) * (3 - len(size))
-        for key in set(k for ks in WRAP_SIZE_KEYS.values() for k in ks) - set(WRAP_SIZE_KEYS[shape]):
+        for key in sorted({k for ks in WRAP_SIZE_KEYS.values() for k in ks} - set(WRAP_SIZE_KEYS[shape])):
             if wf.has(key):
                 raise InputError(wf.kmark(key), f"{key!r} is not a size of a {shape}",
                                  f"a {shape} takes " + ", ".join(WRAP_SIZE_KEYS[shape]))

@@ -430,8 +430,6 @@ class MuscleModel:
         None: no target, the start scale as it is); coords : (F, C) skeleton coordinates, for
         paths with moving or conditional points.
         """
-        spec = self.spec
-        nf = world.shape[0]
         warnings: list = []
         p, x, t, r = frames if frames is not None else self.axis_frames(world, coords)
         if self.path is not None:

@@ -426,8 +426,14 @@ def unique_names(bases, taken=()) -> list[str]:
     return out
 
 
+def is_name(v) -> bool:
+    """Whether ``v`` is an axdf name (a muscle, bone, sequence...: it becomes a file or folder
+    name, so never ``.`` or ``..``)."""
+    return isinstance(v, str) and bool(NAME_RE.match(v)) and v not in (".", "..") and len(v) <= NAME_MAX
+
+
 def check_name(v, where: Mark, what: str) -> str:
-    if not isinstance(v, str) or not NAME_RE.match(v) or v in (".", "..") or len(v) > NAME_MAX:
+    if not is_name(v):
         # YAML reads 1e-5, 12 or true as a number or boolean: a name like that needs quotes
         quote = " (in quotes when it looks like a number or boolean)" if isinstance(v, (int, float)) else ""
         raise InputError(where, f"{what} is {_type_name(v)}", f"{what}: {NAME_ALLOWED}{quote}")

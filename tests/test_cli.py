@@ -381,3 +381,18 @@ def test_run_on_extreme_poses_is_finite(project, capsys):
     rows = read_csv(project / "out" / "stats.csv")[1:]
     assert len(rows) == 3 * len(DEMO_MUSCLES)
     assert all("non-finite" not in r[8] for r in rows)
+
+
+def test_obj_bone_mesh_is_copied_into_the_run_as_a_ply(project, capsys):
+    """A skeleton may name OBJ bone meshes; the run's bones/<bone>.ply is then a PLY of the same
+    triangles (it was the OBJ text under a .ply name), and PLY bone meshes are copied as they are."""
+    src = project / "poses" / "skeletons" / "human_r_meshes"
+    v, _, f = read_triangles((src / "femur_r.ply").read_bytes(), ".ply")
+    (src / "femur_r.obj").write_text("".join(f"v {x:.9g} {y:.9g} {z:.9g}\n" for x, y, z in v.tolist())
+                                     + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in f.tolist()))
+    _mutate(project / "poses" / "skeletons" / "human_r.yaml", "femur_r.ply", "femur_r.obj")
+    rc, _, err = run_main(["run", JOB, "--no-render", "--frames", "0:1", "--out", "out", "-q"], capsys)
+    assert rc == 0, err
+    pos, nrm, faces = read_triangles((project / "out" / "bones" / "femur_r.ply").read_bytes(), ".ply")
+    assert nrm is None and np.array_equal(faces, f) and np.allclose(pos, v, atol=1e-6)
+    assert (project / "out" / "bones" / "tibia_r.ply").read_bytes() == (src / "tibia_r.ply").read_bytes()

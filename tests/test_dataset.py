@@ -217,3 +217,22 @@ def test_readme_loading_snippet_runs(tiny):
     scope: dict = {}
     exec(block.replace('"out/demo_small"', repr(str(tiny / "ref"))), scope)
     assert scope["image"].shape == (48, 40, 4) and scope["uv"].shape == (5, 2) and scope["visible"].dtype == bool
+
+
+
+@pytest.mark.parametrize("bad", ["..", "."])
+def test_overwrite_removes_only_the_old_data_sets_sequence_folders(tiny, monkeypatch, capsys, bad):
+    """--overwrite of another data set removes the sequence folders its dataset.json names;
+    a name such as '..' or '.' (a hand-edited file) names no sequence and removes nothing."""
+    monkeypatch.chdir(tiny)
+    holder = tiny / f"holder{len(bad)}"
+    (holder / "ds" / "seq_x").mkdir(parents=True)
+    (holder / "keep.txt").write_text("beside OUT")
+    (holder / "ds" / "mine.txt").write_text("in OUT, not the data set's")
+    (holder / "ds" / "dataset.json").write_text(json.dumps(
+        {"tool": "axdf", "dataset": "old", "sequences": [{"name": bad}, {"name": "seq_x"}]}))
+    rc, out, err = run_main(["dataset", "build", "tiny.yaml", "--out", str(holder / "ds"), "--overwrite",
+                             "--shard", "0/3"], capsys)
+    assert rc == 0, err
+    assert (holder / "keep.txt").read_text() == "beside OUT"
+    assert (holder / "ds" / "mine.txt").is_file() and not (holder / "ds" / "seq_x").exists()

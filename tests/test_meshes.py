@@ -151,6 +151,20 @@ def test_ply_bytes_are_deterministic(sample_mesh):
     assert PlyWriter(faces, name).encode(pos, nrm) == a
 
 
+def test_ply_without_normals_reads_back_and_interleaves_with_normals(sample_mesh):
+    """Positions only (bone meshes): x y z per vertex; the same writer then writes normals again."""
+    pos, nrm, faces, name = sample_mesh
+    w = PlyWriter(faces)
+    data = w.encode(pos)
+    assert b"property float nx" not in data and b"comment" not in data
+    v, n, f = read_triangles(data, ".ply")
+    assert n is None and np.array_equal(f, faces) and np.allclose(v, pos, atol=1e-6)
+    m = trimesh.load(io.BytesIO(data), file_type="ply", process=False)
+    assert np.allclose(m.vertices, pos, atol=1e-6) and np.array_equal(m.faces, faces)
+    assert w.encode(pos, nrm) == PlyWriter(faces).encode(pos, nrm)
+    assert w.encode(pos) == data
+
+
 def test_obj_round_trip_trimesh(sample_mesh, tmp_path):
     pos, nrm, faces, name = sample_mesh
     data = ObjWriter(faces, name).encode(pos, nrm)

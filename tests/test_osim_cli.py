@@ -194,6 +194,14 @@ def test_controls_need_a_motion(tmp_path, capsys):
     assert rc == 2 and "--controls needs --motion" in capsys.readouterr().err
 
 
+
+@pytest.mark.parametrize("flag,value", [("--pose-name", "../escape"), ("--pose-name", ".."), ("--name", "a b")])
+def test_bad_name_or_pose_name_exit_2_nothing_written(tmp_path, capsys, flag, value):
+    rc, out = run_import(tmp_path, ARM, "--motion", str(ARM_Q), flag, value)
+    err = capsys.readouterr().err
+    assert rc == 2 and f"{flag} {value!r}" in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
+
 #: The committed library against a fresh import: numbers within these (the importer rounds
 #: positions to 1e-7 m and other numbers to 9 significant digits, so another CPU's or BLAS
 #: build's last bits can move a value by one rounding step: <= 1e-7 absolute or 1e-8

@@ -139,6 +139,32 @@ def test_full_disk_or_unwritable_out_exits_3_and_leaves_nothing_half_written(tmp
         assert len(trimesh.load(ply, process=False).faces) > 0
 
 
+@pytest.mark.parametrize("fmt", ["pc2", "npz"])
+def test_full_disk_while_streaming_a_packed_format_exits_3(tmp_path, monkeypatch, capsys, fmt):
+    """The packed formats write through atomic.StreamingFile (os.pwrite), not write_parts."""
+    monkeypatch.chdir(ROOT)
+    out = tmp_path / "o"
+    real_pwrite = os.pwrite
+    calls = {"n": 0}
+
+    def failing_pwrite(fd, data, offset):
+        calls["n"] += 1
+        if calls["n"] > 3:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        return real_pwrite(fd, data, offset)
+
+    monkeypatch.setattr(os, "pwrite", failing_pwrite)
+    rc = main(["run", "poses/jobs/demo.yaml", "--no-render", "--frames", "0:20", "--format", fmt, "--out", str(out)])
+    monkeypatch.undo()
+    captured = capsys.readouterr()
+    assert calls["n"] > 3
+    assert rc == 3, captured.err
+    assert "no space left on device" in captured.err
+    assert "Traceback" not in captured.err
+    assert not [q for q in out.rglob("*") if q.name.startswith(".axdf-tmp-")]
+    assert not list(out.rglob("*." + fmt))
+
+
 def test_output_under_a_file_exits_3(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(ROOT)
     blocker = tmp_path / "file"

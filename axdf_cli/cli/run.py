@@ -7,7 +7,6 @@ from axdf_cli.formats import FORMATS
 from axdf_cli.loaders import RefPolicy, load_job
 
 
-
 def add_args(p) -> None:
     p.add_argument("job", nargs="?", help="job YAML (muscles, pose, out, format, frames, render)")
     p.add_argument("--muscles", nargs="+", metavar="PATH", help="muscle files, folders or globs (override the job)")

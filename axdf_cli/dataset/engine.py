@@ -22,7 +22,7 @@ from axdf_cli.dataset.index import write_index
 from axdf_cli.errors import AxdfError, EnvironmentProblem, InputError, Interrupted, Mark
 from axdf_cli.dataset import runner
 from axdf_cli.dataset.runner import own_entry
-from axdf_cli.yamlio import NAME_RE
+from axdf_cli.yamlio import is_name
 
 ENGINES = ("local", "ray")
 RAY_HINT = "pip install 'ray>=2.9' (or the project's extra: pip install -e '.[ray]')"
@@ -78,7 +78,7 @@ def prepare_out(out: Path, ctx: wk.Context, mine: list[int], resume: bool, overw
                              "pass --overwrite to replace it, or another --out (shards of one data set share one --out)")
         if not same:  # --overwrite: remove what the old data set wrote there, nothing else
             olds = [s.get("name") for s in old.get("sequences", []) if isinstance(s, dict)]
-            for n in sorted({n for n in olds if isinstance(n, str) and NAME_RE.match(n)} | set(names)):
+            for n in sorted({n for n in olds if is_name(n)} | set(names)):
                 if not os.path.islink(out / n):
                     shutil.rmtree(out / n, ignore_errors=True)
             shutil.rmtree(out / "bones", ignore_errors=True)

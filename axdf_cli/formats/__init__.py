@@ -125,6 +125,11 @@ def read_triangles(data: bytes, suffix: str) -> tuple[np.ndarray, np.ndarray | N
 def load_triangles(path: Path | str) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
     """:func:`read_triangles` of the file at ``path``, read as every input file is
     (``yamlio.read_input``: regular files only, bounded); problems are InputErrors naming it."""
+    return load_triangles_and_bytes(path)[0]
+
+
+def load_triangles_and_bytes(path: Path | str) -> tuple[tuple, bytes]:
+    """:func:`load_triangles` and the file's bytes, from one read."""
     from axdf_cli.errors import InputError, Mark
     from axdf_cli.yamlio import read_input
 
@@ -132,11 +137,11 @@ def load_triangles(path: Path | str) -> tuple[np.ndarray, np.ndarray | None, np.
     allowed = "a PLY or OBJ triangle mesh"
     data = read_input(path, str(path), allowed)
     try:
-        return read_triangles(data, path.suffix)
+        return read_triangles(data, path.suffix), data
     except MeshReadError as e:
         raise InputError(Mark(str(path)), f"not a readable mesh ({e})", allowed) from None
 
 
 __all__ = ["FORMATS", "Format", "LAYOUTS", "WRITERS", "Mesh", "MeshReadError", "PlyWriter", "ObjWriter",
            "format_of", "format_names", "parse_formats", "read_mesh", "read_sequence", "read_triangles",
-           "load_triangles"]
+           "load_triangles", "load_triangles_and_bytes"]

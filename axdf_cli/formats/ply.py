@@ -10,6 +10,8 @@ header (negative or impossible counts, repeated properties, non-integer list typ
 lengths beyond the file) is a :class:`MeshReadError`, never a numpy error: everything the
 header says is checked against the file's length before any array is made.
 
+Without normals (``encode(positions)``: bone meshes) a vertex is x y z only.
+
 Speed: the whole file lives in one preallocated buffer per writer (header, interleaved
 vertex block, face block formatted once); a frame only overwrites the vertex block in
 place. :meth:`PlyWriter.write` hands that buffer to the file in one ``write`` call, with
@@ -37,39 +39,41 @@ class PlyWriter:
         rec["i"] = faces
         self._faces = rec.tobytes()
         self.name = name
-        self._n_vertices = -1  # vertex count the buffer is laid out for
+        self._layout = (-1, 0)  # (vertex count, floats per vertex) the buffer is laid out for
         self._buf = bytearray()
         self._verts = np.empty((0, 6), dtype="<f4")
 
-    def header(self, n_vertices: int) -> bytes:
+    def header(self, n_vertices: int, normals: bool = True) -> bytes:
         lines = ["ply", "format binary_little_endian 1.0"]
         if self.name:
             lines.append(f"comment axdf muscle {self.name}")
-        lines += [f"element vertex {n_vertices}",
-                  "property float x", "property float y", "property float z",
-                  "property float nx", "property float ny", "property float nz",
-                  f"element face {self.n_faces}", "property list uchar int vertex_indices", "end_header", ""]
+        lines += [f"element vertex {n_vertices}", "property float x", "property float y", "property float z"]
+        if normals:
+            lines += ["property float nx", "property float ny", "property float nz"]
+        lines += [f"element face {self.n_faces}", "property list uchar int vertex_indices", "end_header", ""]
         return "\n".join(lines).encode("ascii")
 
-    def _fill(self, positions: np.ndarray, normals: np.ndarray) -> bytearray:
+    def _fill(self, positions: np.ndarray, normals: np.ndarray | None) -> bytearray:
         """Write one frame into the file buffer (laid out on first use for this vertex count)."""
         n = len(positions)
-        if len(normals) != n:
+        if normals is not None and len(normals) != n:
             raise ValueError(f"positions ({n}, 3) and normals ({len(normals)}, 3) differ in length")
-        if n != self._n_vertices:
-            head = self.header(n)
-            self._buf = bytearray(len(head) + 24 * n + len(self._faces))
+        k = 3 if normals is None else 6
+        if (n, k) != self._layout:
+            head = self.header(n, normals is not None)
+            self._buf = bytearray(len(head) + 4 * k * n + len(self._faces))
             self._buf[:len(head)] = head
-            self._buf[len(head) + 24 * n:] = self._faces
-            # (V, 6) float32 view of the vertex block: x y z nx ny nz interleaved
-            self._verts = np.frombuffer(self._buf, dtype="<f4", count=6 * n, offset=len(head)).reshape(n, 6)
-            self._n_vertices = n
+            self._buf[len(head) + 4 * k * n:] = self._faces
+            # (V, k) float32 view of the vertex block: x y z [nx ny nz] interleaved
+            self._verts = np.frombuffer(self._buf, dtype="<f4", count=k * n, offset=len(head)).reshape(n, k)
+            self._layout = (n, k)
         self._verts[:, :3] = positions
-        self._verts[:, 3:] = normals
+        if normals is not None:
+            self._verts[:, 3:] = normals
         return self._buf
 
-    def encode(self, positions: np.ndarray, normals: np.ndarray) -> bytes:
-        """positions, normals : (V, 3) → file bytes."""
+    def encode(self, positions: np.ndarray, normals: np.ndarray | None = None) -> bytes:
+        """positions, normals : (V, 3) → file bytes (no normals: x y z only)."""
         return bytes(self._fill(positions, normals))
 
     def write(self, path: Path | str, positions: np.ndarray, normals: np.ndarray, sha256: bool = False) -> str | None:

@@ -46,7 +46,7 @@ from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.importers import emit
 from axdf_cli.importers.osim_import import _rel, _sha, safe_name
-from axdf_cli.yamlio import NAME_ALLOWED, NAME_RE, read_text, unique_names
+from axdf_cli.yamlio import NAME_ALLOWED, is_name, read_text, unique_names
 
 #: channel name (lower case) → (DOF type, axis index). BVH writes them capitalised.
 CHANNELS = {"xposition": ("translation", 0), "yposition": ("translation", 1), "zposition": ("translation", 2),
@@ -466,7 +466,7 @@ def build_import(bvh_path: Path | str, out_dir: Path | str, *, name: str | None 
     name = name or safe_name(bvh_path.stem)
     pname = pose_name or name
     for what, v in (("--name", name), ("--pose-name", pname)):
-        if not NAME_RE.match(v) or v in (".", ".."):
+        if not is_name(v):
             raise InputError(None, f"{what} {v!r}", NAME_ALLOWED)
     unit, height = guess_unit(bvh)
     notes = [f"rest skeleton height {height:.4g} units: looks like {UNIT_WORDS[unit]} "

@@ -50,14 +50,14 @@ import numpy as np
 
 from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError, Mark
+from axdf_cli.formats.ply import PlyWriter
 from axdf_cli.importers import emit
 from axdf_cli.loaders import RefPolicy, parse_skeleton_text
-from axdf_cli.yamlio import check_name
+from axdf_cli.yamlio import NAME_ALLOWED, check_name, is_name
 from axdf_cli.importers.osim import Model, load_osim
 from axdf_cli.importers.storage import Table, read_storage
-from axdf_cli.importers.vtp import ply_bytes, read_vtp
+from axdf_cli.importers.vtp import read_vtp
 
-NAME_RE = re.compile(r"^[A-Za-z0-9_.-]+$")
 #: The angle-unit rule's thresholds (see module doc).
 RADIAN_BOUND = 2.0 * math.pi
 MAX_RADIAN_STEP = 0.35
@@ -275,7 +275,7 @@ def body_meshes(model: Model, model_path: Path, warnings: list[str], report: dic
             ts.append(t + base)
             base += len(v)
         if vs:
-            out[body.name] = ply_bytes(np.concatenate(vs), np.concatenate(ts))
+            out[body.name] = PlyWriter(np.concatenate(ts)).encode(np.concatenate(vs))
     for m in missing:
         warnings.append(f"{m['where']}: mesh {m['mesh_file']!r} of body {m['body']} "
                         f"{m.get('why', 'not found beside the model or in Geometry/')}; skipped")
@@ -305,8 +305,10 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
         raise InputError(None, "--controls needs --motion", "give the motion the controls belong to")
     model = load_osim(model_path)
     name = name or safe_name(model.name)
-    if not NAME_RE.match(name):
-        raise InputError(None, f"name {name!r}", "names use letters, digits, '_', '.', '-'")
+    pname = pose_name or (safe_name(Path(motion).stem) if motion is not None else None)
+    for what, v in (("--name", name), ("--pose-name", pname)):
+        if v is not None and not is_name(v):
+            raise InputError(None, f"{what} {v!r}", NAME_ALLOWED)
     # names become axdf names in files that do not exist yet: check them here, at the .osim line
     for what, items in (("body", model.bodies.values()), ("coordinate", model.coordinates.values()),
                         ("wrap object", model.wrap_objects.values())):
@@ -317,7 +319,7 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
                 raise InputError(item.mark, f"{what} name {item.name!r} cannot be an axdf name",
                                  "names use letters, digits, '_', '.', '-' (rename it in the model)") from e
     for m in model.muscles:
-        if not NAME_RE.match(m.name):
+        if not is_name(m.name):
             raise InputError(m.mark, f"muscle name {m.name!r}", "names use letters, digits, '_', '.', '-'")
     motion_t = read_storage(motion) if motion is not None else None
     controls_t = read_storage(controls) if controls is not None else None
@@ -325,7 +327,6 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
     skel_path = Path(skeleton_out) if skeleton_out else out_dir / "skeletons" / f"{name}.yaml"
     mesh_dir = Path(meshes_out) if meshes_out else skel_path.parent / "meshes" / name
     mus_dir = Path(muscles_out) if muscles_out else out_dir / "muscles"
-    pname = pose_name or (safe_name(Path(motion).stem) if motion is not None else None)
     pose_path = (Path(pose_out) if pose_out else out_dir / f"{pname}.yaml") if motion is not None else None
 
     warnings: list[str] = []

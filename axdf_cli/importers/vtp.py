@@ -1,4 +1,4 @@
-"""VTK PolyData XML (``.vtp``, ASCII) bone meshes → triangles → binary PLY.
+"""VTK PolyData XML (``.vtp``, ASCII) bone meshes → triangles (the importer writes them as PLY).
 
 Reads the ``<Points>`` of every ``<Piece>`` and triangulates ``<Polys>`` (fans) and
 ``<Strips>`` (alternating winding, as VTK does); ``<Verts>``/``<Lines>`` carry no surface and
@@ -77,15 +77,3 @@ def read_vtp(path: Path | str) -> tuple[np.ndarray, np.ndarray]:
     t = np.concatenate(tris) if tris else np.zeros((0, 3), dtype=np.int64)
     return v, t
 
-
-def ply_bytes(vertices: np.ndarray, triangles: np.ndarray) -> bytes:
-    """Binary little-endian PLY: float32 x y z per vertex, uchar-counted int32 index lists."""
-    v = np.ascontiguousarray(vertices, dtype="<f4")
-    t = np.asarray(triangles, dtype="<i4")
-    header = ("ply\nformat binary_little_endian 1.0\n"
-              f"element vertex {len(v)}\nproperty float x\nproperty float y\nproperty float z\n"
-              f"element face {len(t)}\nproperty list uchar int vertex_indices\nend_header\n").encode("ascii")
-    faces = np.zeros(len(t), dtype=[("n", "u1"), ("i", "<i4", (3,))])
-    faces["n"] = 3
-    faces["i"] = t
-    return header + v.tobytes() + faces.tobytes()

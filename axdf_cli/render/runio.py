@@ -31,7 +31,7 @@ from axdf_cli.formats import FORMATS, MeshReadError, load_triangles, read_sequen
 from axdf_cli.render.settings import RenderSettings, parse_render_settings
 from axdf_cli.runfolder import BONES_CSV, Manifest, mesh_relpath, read_run_manifest
 from axdf_cli.runfolder import plain_relpath as _plain
-from axdf_cli.yamlio import NAME_ALLOWED, NAME_RE
+from axdf_cli.yamlio import NAME_ALLOWED, is_name
 from axdf_cli.scene import FrameChunk, Scene, SceneMuscle
 
 def _color(c, where: Mark) -> tuple[float, float, float]:
@@ -148,7 +148,7 @@ def load_run_source(run_dir: Path, manifest: Manifest | None = None, frames=None
     for i, mu in enumerate(muscles_raw):
         m.get(("muscles", i), dict, "an object {name, color, ...}")
         name = m.get(("muscles", i, "name"), str, "a muscle name")
-        if not NAME_RE.match(name) or name in (".", ".."):
+        if not is_name(name):
             raise m.error(("muscles", i, "name"), f"{name!r} is not a muscle name", NAME_ALLOWED)
         names.append(name)
         colors.append(_color(mu.get("color", [0.7, 0.3, 0.3]), m.mark(("muscles", i, "color"))))

@@ -12,7 +12,7 @@ import numpy as np
 from axdf_cli import __version__, runfolder
 from axdf_cli.errors import InputError
 from axdf_cli.formats import WRITERS
-from axdf_cli.run.evaluate import CHUNK_FRAMES, evaluate_chunks, finite_or_rest, twist_references
+from axdf_cli.run.evaluate import evaluate_chunks, finite_or_rest, twist_references
 from axdf_cli.run.plan import RunPlan, display_path, framing
 from axdf_cli.run.pool import check_parent, process_map
 from axdf_cli.run.sequences import SequenceFiles, file_relpath, sequence_formats, write_run_files
@@ -20,7 +20,6 @@ from axdf_cli.runfolder import (BONES_CSV, FRAME_EXTENSIONS, MANIFEST_INTERVAL_S
                                 describe_differences, frame_relpath, gl_record, is_file_with, mesh_relpath,
                                 write_manifest)
 from axdf_cli.skeleton import matrix_to_quaternion
-
 
 
 def render_dict(settings) -> dict | None:

@@ -182,17 +182,21 @@ def _frames_text(frames) -> str:
 
 
 def load_bone_mesh(path: str, skeleton_file: str):
-    """Read a bone's mesh (PLY or OBJ triangles) → (vertices, faces, bytes); bad files are input errors."""
-    from axdf_cli.formats import load_triangles
+    """Read a bone's mesh (PLY or OBJ triangles, one read) → (vertices, faces, PLY bytes for the
+    run's ``bones/<bone>.ply``: the file itself when it is a PLY, else the triangles written as
+    one); bad files are input errors."""
+    from axdf_cli.formats import PlyWriter, load_triangles_and_bytes
 
     if not Path(path).is_file():
         raise InputError(Mark(skeleton_file), f"bone mesh {path} not found", "a PLY file relative to the skeleton file")
-    v, _, f = load_triangles(path)
+    (v, _, f), data = load_triangles_and_bytes(path)
     if len(f) == 0:
         raise InputError(Mark(str(path)), "bone mesh has no triangles", "a PLY or OBJ mesh with at least one triangle")
     if not np.isfinite(v).all():
         raise InputError(Mark(str(path)), "non-finite vertex coordinates", "finite numbers only")
-    return np.ascontiguousarray(v, dtype=np.float32), f, Path(path).read_bytes()
+    if Path(path).suffix.lower() != "." + PlyWriter.extension:
+        data = PlyWriter(f).encode(v)
+    return np.ascontiguousarray(v, dtype=np.float32), f, data
 
 
 def framing(plan: RunPlan) -> np.ndarray:
