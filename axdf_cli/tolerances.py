@@ -43,7 +43,7 @@ SCALE_MIN = 0.05
 SCALE_MAX = 20.0
 
 # Isometric tension law: the belly's area profile is multiplied by 1 + TENSION_GAIN*e*(2b-1),
-# b = sin^2(pi*s) over the belly; see axdf_cli/muscle.py.
+# b = sin^2(pi*s) over the belly; see axdf_cli/model/muscle.py.
 TENSION_GAIN = 0.6
 
 # YAML safety limits: hostile documents (alias bombs, deep nesting, huge files).

@@ -179,14 +179,14 @@ def chain_files(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="session")
 def chain_skeleton(chain_files):
-    from axdf_cli.loaders import load_skeleton
+    from axdf_cli.specs import load_skeleton
 
     return load_skeleton(chain_files / "chain.yaml")
 
 
 @pytest.fixture(scope="session")
 def chain_spec(chain_files):
-    from axdf_cli.loaders import load_muscle_file
+    from axdf_cli.specs import load_muscle_file
 
     (spec,) = load_muscle_file(chain_files / "chainm.yaml")
     return spec
@@ -195,7 +195,7 @@ def chain_spec(chain_files):
 @pytest.fixture(scope="session")
 def chain_world(chain_skeleton):
     """world(**coords) for one or many frames: scalars or (F,) arrays → (F, 5, 4, 4)."""
-    from axdf_cli.skeleton import forward_kinematics
+    from axdf_cli.model.skeleton import forward_kinematics
 
     cidx = chain_skeleton.coord_index
 
@@ -212,7 +212,7 @@ def chain_world(chain_skeleton):
 @pytest.fixture(scope="session")
 def chain_model(chain_skeleton, chain_world):
     """make(**spec_overrides) → MuscleModel of the chain muscle on the chain skeleton."""
-    from axdf_cli.muscle import MuscleModel
+    from axdf_cli.model.muscle import MuscleModel
 
     def make(spec, **overrides):
         spec = dataclasses.replace(spec, **overrides) if overrides else spec
@@ -224,9 +224,9 @@ def chain_model(chain_skeleton, chain_world):
 @pytest.fixture(scope="session")
 def demo():
     """The demo skeleton, muscle specs and models at rest (built once)."""
-    from axdf_cli.loaders import load_muscle_file, load_pose
-    from axdf_cli.muscle import MuscleModel
-    from axdf_cli.skeleton import forward_kinematics
+    from axdf_cli.specs import load_muscle_file, load_pose
+    from axdf_cli.model.muscle import MuscleModel
+    from axdf_cli.model.skeleton import forward_kinematics
 
     pose = load_pose(DEMO_POSE)
     skel = pose.skeleton

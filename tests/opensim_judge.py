@@ -4,7 +4,7 @@ Both sides are driven with the same coordinates: the axdf pose's, sampled at its
 converted to OpenSim units (degrees → radians for rotational coordinates). OpenSim gives
 ``Muscle.getLength`` (the path length, wrap arcs included) and ``getCurrentPath`` (path
 points, wrap tangent points included); axdf gives each muscle's axis arc length
-(:class:`~axdf_cli.muscle.FrameResult.length`, the ``length`` column of stats.csv).
+(:class:`~axdf_cli.model.muscle.FrameResult.length`, the ``length`` column of stats.csv).
 """
 from __future__ import annotations
 
@@ -13,10 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
-from axdf_cli.loaders import expand_muscle_paths, load_muscle_file, load_pose
-from axdf_cli.muscle import MuscleModel
-from axdf_cli.pose import sample_coordinates
-from axdf_cli.skeleton import forward_kinematics
+from axdf_cli.specs import expand_muscle_paths, load_muscle_file, load_pose
+from axdf_cli.model.muscle import MuscleModel
+from axdf_cli.model.pose import sample_coordinates
+from axdf_cli.model.skeleton import forward_kinematics
 
 
 def pose_coordinates(pose_path: Path, frames=None):

@@ -1,12 +1,12 @@
 """The numpy formulation of the surface stage: the reference the compiled kernel
-(:mod:`axdf_cli.kernels`) is tested against. Dense Kronecker tessellation, component-major
+(:mod:`axdf_cli.model.kernels`) is tested against. Dense Kronecker tessellation, component-major
 grids, whole-array cross products: slow, but written independently of the kernel's loops."""
 from __future__ import annotations
 
 import numpy as np
 
 from axdf_cli import tolerances as tol
-from axdf_cli.muscle import OCT
+from axdf_cli.model.muscle import OCT
 
 
 def _planar(g: np.ndarray) -> np.ndarray:

@@ -1,7 +1,7 @@
 """Anatomical bellies (issue 14): the slenderness measure, and the shipped gait2392 and arm26
 libraries measured with it at rest and over their motions.
 
-The measure (axdf_cli/measure.py): along the mesh's principal axis, the length over which the
+The measure (axdf_cli/model/measure.py): along the mesh's principal axis, the length over which the
 cross-section's diameter is at least half the widest, divided by the widest diameter.
 The aim: none below 1.2, at most 5% of a library below 1.5, at rest and at every measured
 frame; every muscle below 1.5 is listed below with its reason, and IMPORT.md explains it.
@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from axdf_cli.measure import belly_slenderness, cut_widths
+from axdf_cli.model.measure import belly_slenderness, cut_widths
 from osim_common import ARM, needs_data, run_import
 
 REPO = Path(__file__).resolve().parents[1]
@@ -86,8 +86,8 @@ def test_measure_is_scale_and_motion_invariant_and_ignores_grazing_slivers():
 
 def _measure_library(name: str) -> dict:
     """{frame or 'rest': {muscle: Slenderness}} for a shipped library over its motion."""
-    from axdf_cli import loaders
-    from axdf_cli import run as runner
+    from axdf_cli import specs as loaders
+    from axdf_cli import pipeline as runner
 
     pose, frames = MOTIONS[name]
     job = loaders.load_job(REPO / "poses" / "jobs" / pose, loaders.RefPolicy((REPO,)))
@@ -141,8 +141,8 @@ def test_pennate_bellies_are_longer_than_their_fibres():
     builds is PCSA x fibre length plus the free tendons."""
     from axdf_cli.importers import emit
     from axdf_cli.importers.emit import rest_world
-    from axdf_cli.loaders import load_muscle_file, load_skeleton
-    from axdf_cli.muscle import MuscleModel
+    from axdf_cli.specs import load_muscle_file, load_skeleton
+    from axdf_cli.model.muscle import MuscleModel
 
     report = {r["muscle"]: r for r in json.loads((REPO / "muscles" / "gait2392" / "import_report.json").read_text())["muscles"]}
     for m in ("med_gas_r", "lat_gas_r", "soleus_r", "tib_post_r"):

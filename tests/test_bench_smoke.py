@@ -1,11 +1,11 @@
-"""The benchmark's helpers run on a tiny case (1 muscle, 5 frames): keeps axdf_cli.bench from
+"""The benchmark's helpers run on a tiny case (1 muscle, 5 frames): keeps benchmarks.bench from
 rotting. No speed assertions: timings are only checked to be positive numbers."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from axdf_cli import bench
+from benchmarks import bench
 
 
 @pytest.fixture(scope="module")
@@ -44,7 +44,7 @@ def test_writers(case, tmp_path):
 
 
 def test_long_pose_stretch_and_table():
-    from axdf_cli.loaders import load_pose
+    from axdf_cli.specs import load_pose
 
     pose = load_pose(bench.DEMO_POSE)
     long = bench.stretched_pose(pose, 1000)

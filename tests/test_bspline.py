@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.interpolate import BSpline
 
-from axdf_cli import bspline
+from axdf_cli.model import bspline
 
 CLAMPED_CASES = [(3, 2), (4, 2), (5, 2), (9, 2), (6, 3), (12, 3), (4, 1)]
 

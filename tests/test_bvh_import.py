@@ -140,9 +140,9 @@ def reference_positions(text: str, scale: float) -> tuple[list[str], np.ndarray]
 
 def imported_positions(tmp_path: Path, out: str, frames) -> tuple[object, np.ndarray]:
     """The imported skeleton and its bones' world origins (F, B, 3) at ``frames``."""
-    from axdf_cli.loaders import RefPolicy, load_pose
-    from axdf_cli.pose import sample_coordinates
-    from axdf_cli.skeleton import forward_kinematics
+    from axdf_cli.specs import RefPolicy, load_pose
+    from axdf_cli.model.pose import sample_coordinates
+    from axdf_cli.model.skeleton import forward_kinematics
 
     (pose_file,) = (tmp_path / out).glob("*.yaml")
     pose = load_pose(pose_file, RefPolicy((tmp_path,)))
@@ -193,7 +193,7 @@ def test_cmu_walk_matches_reference_fk(tmp_path):
     assert pose.fps == 120.0 and pose.last == 994
     assert len(bones) == 38 and sum(b.endswith("_end") for b in bones) == 7
     # Z-up and facing -Y: the head is above the hips, the toes are in front of the ankles (-Y)
-    from axdf_cli.skeleton import forward_kinematics
+    from axdf_cli.model.skeleton import forward_kinematics
 
     w0 = forward_kinematics(pose.skeleton, pose.skeleton.rest_coordinates()[None])[0, :, :3, 3]
     assert w0[bi["Head"], 2] > w0[bi["Hips"], 2] + 0.3

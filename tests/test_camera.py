@@ -52,8 +52,8 @@ def test_camera_ignores_the_frame_subset_and_the_muscles(repo_root, tmp_path, ca
 
 def test_fit_is_tight_and_centred():
     from axdf_cli.render.camera import FRAME_MARGIN, VIEW_AXES, sequence_cameras
-    from axdf_cli.render.settings import RenderSettings
-    from axdf_cli.scene import Scene
+    from axdf_cli.specs.render import RenderSettings
+    from axdf_cli.render.scene import Scene
 
     rng = np.random.default_rng(7)
     pts = rng.normal(size=(400, 3)) * [0.2, 0.3, 0.8] + [1.0, -2.0, 0.9]
@@ -153,8 +153,8 @@ def test_stick_matrices_map_the_unit_stick_between_joints():
 
 
 def test_floating_base_gets_no_stick_and_the_world_origin_is_not_framed(tmp_path):
-    from axdf_cli.loaders import load_pose
-    from axdf_cli.pose import subject_points
+    from axdf_cli.specs import load_pose
+    from axdf_cli.model.pose import subject_points
 
     (tmp_path / "s.yaml").write_text("""skeleton: s
 bones:

@@ -16,8 +16,8 @@ import pytest
 import trimesh
 
 from axdf_cli.formats import read_triangles
-from axdf_cli.skeleton import forward_kinematics, matrix_to_quaternion
-from axdf_cli.pose import sample_coordinates
+from axdf_cli.model.skeleton import forward_kinematics, matrix_to_quaternion
+from axdf_cli.model.pose import sample_coordinates
 
 from conftest import REPO_ROOT, all_files, run_main
 

@@ -1,7 +1,7 @@
 """The data-set rows of `make bench` run on a tiny share of their data set (no speed assertions)."""
 from __future__ import annotations
 
-from axdf_cli import bench
+from benchmarks import bench
 
 
 def test_dataset_rows(tmp_path, repo_root):

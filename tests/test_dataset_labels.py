@@ -109,8 +109,8 @@ def test_hidden_joints_are_not_visible(rig):
 
 
 def test_coordinates_reproduce_bone_frames_and_tables(rig):
-    from axdf_cli.loaders import load_skeleton
-    from axdf_cli.skeleton import forward_kinematics
+    from axdf_cli.specs import load_skeleton
+    from axdf_cli.model.skeleton import forward_kinematics
 
     skel = load_skeleton(rig.parent / "chain.yaml")
     for seq in ("seq_00000", "seq_00002", "seq_00003"):

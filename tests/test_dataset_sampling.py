@@ -26,7 +26,7 @@ def tiny_spec(tmp_path_factory):
 def test_uniform_poses_stay_within_ranges(tiny_spec, seed, frames, keys):
     from axdf_cli.dataset.sampling import sample_pose
     from axdf_cli.dataset.spec import Entry, Sequence
-    from axdf_cli.pose import sample_coordinates
+    from axdf_cli.model.pose import sample_coordinates
 
     ctx = tiny_spec
     entry = Entry("uniform", 1, None, frames, min(keys, frames), {})
@@ -45,7 +45,7 @@ def test_uniform_poses_stay_within_ranges(tiny_spec, seed, frames, keys):
 def test_perturbed_poses_stay_within_ranges(tiny_spec, seed, spread, keys):
     from axdf_cli.dataset.sampling import sample_pose
     from axdf_cli.dataset.spec import Entry, Sequence, load_motion, motion_frames
-    from axdf_cli.pose import sample_coordinates
+    from axdf_cli.model.pose import sample_coordinates
 
     ctx = tiny_spec
     entry = Entry("perturb", 1, "walk", None, keys, {"default": spread, "stretch": spread / 100})
@@ -79,7 +79,7 @@ def test_draws_depend_only_on_seed_sequence_frame_view(tiny_spec):
 def test_sphere_cameras_keep_distance_elevation_and_look_at_the_target(tiny_spec):
     from axdf_cli.dataset import labels as lab
     from axdf_cli.dataset.spec import Sequence
-    from axdf_cli.skeleton import forward_kinematics
+    from axdf_cli.model.skeleton import forward_kinematics
 
     ctx = tiny_spec
     sph = ctx.spec.sphere
@@ -136,7 +136,7 @@ def test_opensim_motion_through_the_importers_reader(tmp_path, monkeypatch, caps
 def test_perturb_default_spread_moves_rotations_only(tiny_spec):
     from axdf_cli.dataset.sampling import sample_pose
     from axdf_cli.dataset.spec import Entry, Sequence, load_motion, motion_frames
-    from axdf_cli.pose import sample_coordinates
+    from axdf_cli.model.pose import sample_coordinates
 
     ctx = tiny_spec
     spec = dataclasses.replace(ctx.spec, entries=(Entry("perturb", 1, "walk", None, None, {"default": 10.0}),))

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from axdf_cli import loaders
-from axdf_cli import run as runner
+from axdf_cli import specs as loaders
+from axdf_cli import pipeline as runner
 from axdf_cli import tolerances as tol
 from axdf_cli.cli.main import main
 

@@ -116,7 +116,7 @@ def test_clamp_ranges_flag_and_pose_key_hold_the_range_end(proj, capsys):
 
 def test_ranges_of_a_coordinate_intersect_and_must_be_ordered(tmp_path):
     from axdf_cli.errors import InputError
-    from axdf_cli.loaders import load_skeleton
+    from axdf_cli.specs import load_skeleton
 
     p = tmp_path / "s.yaml"
     p.write_text(RANGED_SKELETON.replace("  bend: {type: rotation, default: 0}",
@@ -171,7 +171,7 @@ def test_misspelt_kind_key_names_the_key(proj, capsys, command):
 
 def test_fields_suggest_in_done_and_schema_first():
     from axdf_cli.errors import InputError
-    from axdf_cli.yamlio import Fields, parse_yaml
+    from axdf_cli.fileio.yamlio import Fields, parse_yaml
 
     doc = parse_yaml("a: 1\ncolour: 2\n", "x.yaml")
     f = Fields(doc, None, "thing")
@@ -236,9 +236,9 @@ def test_overlong_names_are_refused_before_anything_is_written(proj, capsys):
 
 def test_longest_name_gives_file_names_that_fit():
     """Every file a run writes, under its temporary name too, fits 255 bytes."""
-    from axdf_cli import atomic
-    from axdf_cli.runfolder import bone_mesh_relpath, mesh_relpath
-    from axdf_cli.yamlio import NAME_MAX
+    from axdf_cli.fileio import atomic
+    from axdf_cli.fileio.runfolder import bone_mesh_relpath, mesh_relpath
+    from axdf_cli.fileio.yamlio import NAME_MAX
 
     name = "n" * NAME_MAX
     for rel in (mesh_relpath(name, 10_000_000, "ply"), mesh_relpath(name, 10_000_000, "obj"),
@@ -294,7 +294,7 @@ def test_symlink_out_of_the_tree_is_refused_in_folders_and_globs(tmp_path_factor
 
 def test_policy_is_an_argument_not_global_state(proj):
     from axdf_cli.errors import InputError
-    from axdf_cli.loaders import RefPolicy, load_pose
+    from axdf_cli.specs import RefPolicy, load_pose
 
     (proj / "sub").mkdir()
     (proj / "sub" / "p.yaml").write_text(_pose({0: {"bend": 0}}).replace("skeleton: chain.yaml",
@@ -303,7 +303,7 @@ def test_policy_is_an_argument_not_global_state(proj):
         load_pose(proj / "sub" / "p.yaml", RefPolicy((proj / "sub",)))
     assert load_pose(proj / "sub" / "p.yaml", RefPolicy((proj,))).skeleton.name == "chain"
     assert load_pose(proj / "sub" / "p.yaml", RefPolicy((proj / "sub",), allow_outside=True))
-    import axdf_cli.loaders as loaders
+    import axdf_cli.specs as loaders
 
     assert not hasattr(loaders, "POLICY") and not hasattr(loaders, "set_ref_policy")
 
@@ -328,8 +328,8 @@ def test_job_out_is_relative_to_the_job(proj, tmp_path_factory, monkeypatch, cap
 @pytest.mark.parametrize("frames, expect", [("[1, 3]", [1, 2, 3]), ('"1:3"', [1, 2, 3]), ('"1,3"', [1, 3]),
                                             ("2", [2])])
 def test_job_frames_list_is_a_range_as_in_a_pose(proj, frames, expect):
-    from axdf_cli.loaders import load_job
-    from axdf_cli.run import plan_run
+    from axdf_cli.specs import load_job
+    from axdf_cli.pipeline import plan_run
 
     (proj / "job.yaml").write_text(f"muscles: m\npose: p.yaml\nframes: {frames}\n")
     assert plan_run(load_job(proj / "job.yaml")).frames.tolist() == expect
@@ -345,8 +345,8 @@ def test_job_frames_list_of_three_is_refused(proj, capsys):
 
 
 def test_job_render_block_is_parsed_by_the_loader(proj):
-    from axdf_cli.loaders import load_job
-    from axdf_cli.render.settings import RenderSettings
+    from axdf_cli.specs import load_job
+    from axdf_cli.specs.render import RenderSettings
 
     job = load_job(_job(proj, "render:\n  size: 96x64\n  fov: 20\n"))
     assert isinstance(job.render, RenderSettings) and job.render.enabled
@@ -359,8 +359,8 @@ def test_size_in_either_spelling_in_both_places(flag, yaml_value):
     import argparse
 
     from axdf_cli.errors import Mark
-    from axdf_cli.render.settings import RenderSettings, add_render_args, parse_render_settings, settings_from_args
-    from axdf_cli.yamlio import parse_yaml
+    from axdf_cli.specs.render import RenderSettings, add_render_args, parse_render_settings, settings_from_args
+    from axdf_cli.fileio.yamlio import parse_yaml
 
     p = argparse.ArgumentParser()
     add_render_args(p)
@@ -376,8 +376,8 @@ def test_one_table_of_ranges_for_yaml_and_flags(key, bad):
     import argparse
 
     from axdf_cli.errors import InputError, Mark
-    from axdf_cli.render.settings import RenderSettings, add_render_args, parse_render_settings, settings_from_args
-    from axdf_cli.yamlio import parse_yaml
+    from axdf_cli.specs.render import RenderSettings, add_render_args, parse_render_settings, settings_from_args
+    from axdf_cli.fileio.yamlio import parse_yaml
 
     p = argparse.ArgumentParser()
     add_render_args(p)
@@ -393,7 +393,7 @@ def test_camera_flags(proj):
     import argparse
 
     from axdf_cli.errors import InputError
-    from axdf_cli.render.settings import RenderSettings, add_render_args, settings_from_args
+    from axdf_cli.specs.render import RenderSettings, add_render_args, settings_from_args
 
     p = argparse.ArgumentParser()
     add_render_args(p)

@@ -16,7 +16,7 @@ import yaml
 
 from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError
-from axdf_cli.yamlio import FileRefused, parse_yaml, read_input, read_regular
+from axdf_cli.fileio.yamlio import FileRefused, parse_yaml, read_input, read_regular
 from conftest import main_or_hang
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -1,4 +1,4 @@
-"""The compiled surface stage (axdf_cli/kernels.py) against its numpy formulation
+"""The compiled surface stage (axdf_cli/model/kernels.py) against its numpy formulation
 (tests/reference_surface.py): the same vertices, normals, volumes and scales."""
 from __future__ import annotations
 
@@ -7,9 +7,9 @@ import dataclasses
 import numpy as np
 import pytest
 
-from axdf_cli.pose import sample_coordinates
-from axdf_cli.skeleton import forward_kinematics
-from axdf_cli.muscle import MuscleModel
+from axdf_cli.model.pose import sample_coordinates
+from axdf_cli.model.skeleton import forward_kinematics
+from axdf_cli.model.muscle import MuscleModel
 from reference_surface import reference_surface
 
 

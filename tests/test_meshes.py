@@ -14,9 +14,9 @@ import trimesh
 
 from axdf_cli.formats import WRITERS, ObjWriter, PlyWriter
 from axdf_cli.formats import read_triangles
-from axdf_cli.muscle import grid_faces, grid_to_vertices
-from axdf_cli.pose import sample_coordinates
-from axdf_cli.skeleton import forward_kinematics
+from axdf_cli.model.muscle import grid_faces, grid_to_vertices
+from axdf_cli.model.pose import sample_coordinates
+from axdf_cli.model.skeleton import forward_kinematics
 
 from conftest import mesh_volume
 

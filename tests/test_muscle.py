@@ -13,12 +13,12 @@ import json
 import numpy as np
 import pytest
 
-from axdf_cli import bspline
+from axdf_cli.model import bspline
 from axdf_cli import tolerances as tol
 from axdf_cli.formats import read_triangles
-from axdf_cli.loaders import load_muscle_file
-from axdf_cli.muscle import OCT, MuscleModel, Section, ellipse_outline, grid_faces
-from axdf_cli.skeleton import forward_kinematics
+from axdf_cli.specs import load_muscle_file
+from axdf_cli.model.muscle import OCT, MuscleModel, Section, ellipse_outline, grid_faces
+from axdf_cli.model.skeleton import forward_kinematics
 
 from conftest import (CHAIN_MUSCLE_YAML, CHAIN_SKELETON_YAML, DEMO_MUSCLE_FILES, demo_extreme_coordinates,
                       mesh_volume,
@@ -167,8 +167,8 @@ def test_ellipse_outline_touches_the_ellipse():
 def test_rest_pose_through_the_pipeline_equals_rest(demo, repo_root):
     """Frame 0 of the demo pose is the rest pose with zero activation: every muscle equals
     its rest shape (plan_run + evaluate_chunks, the code path of `axdf run`)."""
-    from axdf_cli import run as runner
-    from axdf_cli.loaders import RefPolicy, load_job
+    from axdf_cli import pipeline as runner
+    from axdf_cli.specs import RefPolicy, load_job
 
     policy = RefPolicy.for_command(["poses/jobs/demo.yaml"])  # as `axdf run` does
     plan = runner.plan_run(load_job("poses/jobs/demo.yaml", policy), frames_arg="0")
@@ -245,7 +245,7 @@ def test_demo_biceps_has_no_frame_to_frame_jitter(demo):
     """During the demo's shoulder abduction (frames 48..94) the biceps moves smoothly: the
     largest second difference of any vertex between consecutive frames stays below 5 mm
     (the smooth motion itself needs ~3 mm; a spinning section gives ~2 cm)."""
-    from axdf_cli.pose import sample_coordinates
+    from axdf_cli.model.pose import sample_coordinates
 
     frames = np.arange(48, 95)
     world = forward_kinematics(demo.skel, sample_coordinates(demo.pose, frames))
@@ -399,7 +399,7 @@ def test_exact_volume_on_written_meshes(chain_project, capsys):
 
 def test_exact_volume_over_the_demo_sequence(demo):
     """Every frame of the demo pose, in float32 as written: within 0.5% of rest."""
-    from axdf_cli.pose import effective_tension, sample_activation, sample_coordinates
+    from axdf_cli.model.pose import effective_tension, sample_activation, sample_coordinates
 
     pose = demo.pose
     frames = pose.frames
@@ -493,7 +493,7 @@ def test_twist_is_spread_along_the_axis(chain_spec, chain_model, chain_world, mo
     """With a straight axis, a control point bound at rest arc fraction lam turns by
     lam * roll about the axis (the Z axis, pointing down: roll about -Z). (volume: none, as
     twisting elliptic sections changes the mesh volume and ``exact`` would rescale them.)"""
-    from axdf_cli.skeleton import axis_angle
+    from axdf_cli.model.skeleton import axis_angle
 
     model = chain_model(chain_spec, volume="none")
     rolls = np.array([0.0, 90.0, 250.0])
@@ -536,7 +536,7 @@ def test_twist_in_the_pipeline_and_frame_subsets(chain_project, capsys):
 
 def test_demo_biceps_twist_is_continuous(demo):
     """Forearm pronation (-60 .. 85 degrees) twists the biceps smoothly."""
-    from axdf_cli.pose import sample_coordinates
+    from axdf_cli.model.pose import sample_coordinates
 
     frames = np.arange(96, 144)
     world = forward_kinematics(demo.skel, sample_coordinates(demo.pose, frames))
@@ -580,7 +580,7 @@ def test_normals_unit_and_outward(demo, chain_spec, chain_model, chain_world):
 def test_pole_normals_point_away_over_the_demo_sequence(demo):
     """The pole normals point away from the neighbouring ring (checked on the demo's poses;
     at range ends the deltoid folds over the shoulder and its origin pole may tilt)."""
-    from axdf_cli.pose import sample_coordinates
+    from axdf_cli.model.pose import sample_coordinates
 
     frames = demo.pose.frames[::3]
     world = forward_kinematics(demo.skel, sample_coordinates(demo.pose, frames))

@@ -35,9 +35,9 @@ def test_every_muscle_length_within_1pct_of_opensim(case):
 
 @pytest.mark.parametrize("case", sorted(CASES))
 def test_wrapped_path_points_match_getCurrentPath(case):
-    from axdf_cli.loaders import expand_muscle_paths, load_muscle_file
-    from axdf_cli.paths.path import PathModel
-    from axdf_cli.skeleton import forward_kinematics
+    from axdf_cli.specs import expand_muscle_paths, load_muscle_file
+    from axdf_cli.model.paths.path import PathModel
+    from axdf_cli.model.skeleton import forward_kinematics
 
     osim, mdir, posef = CASES[case]
     pose, frames, q = pose_coordinates(posef)

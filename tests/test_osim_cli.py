@@ -20,7 +20,7 @@ pytestmark = needs_data
     (FK_MODEL, ["--motion", str(FK_Q)]),
 ], ids=["arm26", "gait2392", "gait2354"])
 def test_every_model_imports_and_loads(tmp_path, model, extra):
-    from axdf_cli.loaders import load_muscle_file, load_pose, load_skeleton
+    from axdf_cli.specs import load_muscle_file, load_pose, load_skeleton
 
     rc, out = run_import(tmp_path, model, *extra)
     assert rc == 0
@@ -54,7 +54,7 @@ def test_import_is_deterministic(tmp_path):
 
 def test_activation_columns_map_to_their_muscles(tmp_path):
     from axdf_cli.importers.storage import read_storage
-    from axdf_cli.loaders import load_pose
+    from axdf_cli.specs import load_pose
 
     for model, q, ctrl, fps in ((ARM, ARM_Q, ARM_CTRL, 60), (GAIT, GAIT_Q, GAIT_CTRL, None)):
         extra = ["--motion", str(q), "--controls", str(ctrl)] + (["--fps", str(fps)] if fps else [])
@@ -81,7 +81,7 @@ def test_activation_columns_map_to_their_muscles(tmp_path):
 
 def test_motion_values_and_angle_units(tmp_path):
     from axdf_cli.importers.storage import read_storage
-    from axdf_cli.loaders import load_pose
+    from axdf_cli.specs import load_pose
 
     rc, out = run_import(tmp_path, GAIT, "--motion", str(GAIT_Q))
     pose = load_pose(out / "subject01_walk1_ik.yaml")
@@ -105,7 +105,7 @@ def _table(path: Path, in_degrees: str, rows):
 
 
 def test_radians_labelled_degrees_are_detected(tmp_path, capsys):
-    from axdf_cli.loaders import load_pose
+    from axdf_cli.specs import load_pose
 
     t = np.linspace(0, 1, 51)
     rows = np.stack([t, 0.1 * np.sin(t), 1.5 * t], axis=1)  # elbow 0 -> 1.5 rad

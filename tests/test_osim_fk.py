@@ -2,7 +2,7 @@
 
 ``gait2354_fk_check`` holds a scaled 54-muscle model, the coordinates it was driven with
 (degrees) and OpenSim's body centre-of-mass positions and body-fixed X-Y-Z orientations in
-ground. The imported skeleton (read back through :func:`axdf_cli.loaders.load_skeleton`)
+ground. The imported skeleton (read back through :func:`axdf_cli.specs.load_skeleton`)
 must reproduce them: positions within 0.5 mm, orientations within 0.05°, after undoing the
 importer's ground rotation (OpenSim Y-up, X-forward → axdf Z-up, facing -Y).
 
@@ -30,8 +30,8 @@ ANG_TOL = 0.05  # degrees
 def fk_result(tmp_path_factory):
     from axdf_cli.importers.osim import load_osim
     from axdf_cli.importers.storage import read_storage
-    from axdf_cli.loaders import load_skeleton
-    from axdf_cli.skeleton import euler_xyz, forward_kinematics
+    from axdf_cli.specs import load_skeleton
+    from axdf_cli.model.skeleton import euler_xyz, forward_kinematics
 
     tmp = tmp_path_factory.mktemp("fk")
     rc, out = run_import(tmp, FK_MODEL, "--name", "gait2354", "--no-meshes")
@@ -58,7 +58,7 @@ def _body_rows(skel, model):
 
 
 def test_fk_orientations_match_opensim(fk_result):
-    from axdf_cli.skeleton import euler_xyz
+    from axdf_cli.model.skeleton import euler_xyz
 
     skel, model, w, ref = fk_result
     worst = 0.0

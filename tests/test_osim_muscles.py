@@ -23,7 +23,7 @@ def imported(request, tmp_path_factory):
 
 
 def _world(skel):
-    from axdf_cli.skeleton import forward_kinematics
+    from axdf_cli.model.skeleton import forward_kinematics
 
     return forward_kinematics(skel, skel.rest_coordinates()[None])[0]
 
@@ -36,9 +36,9 @@ def test_path_is_the_models_and_the_axis_follows_it(imported):
     """Every OpenSim path point is in the YAML path (conditional ones with their range, in
     degrees); at rest the axis starts at the origin, ends at the insertion and is as long as
     the wrapped path (within 1%)."""
-    from axdf_cli import bspline
-    from axdf_cli.loaders import load_muscle_file, load_skeleton
-    from axdf_cli.paths.path import PathModel
+    from axdf_cli.model import bspline
+    from axdf_cli.specs import load_muscle_file, load_skeleton
+    from axdf_cli.model.paths.path import PathModel
 
     name, model, out = imported
     skel = load_skeleton(out / "skeletons" / f"{name}.yaml")
@@ -69,7 +69,7 @@ def test_path_is_the_models_and_the_axis_follows_it(imported):
 
 def test_muscle_sizes_follow_force_and_fibre_length(imported):
     from axdf_cli.importers import emit
-    from axdf_cli.loaders import load_muscle_file
+    from axdf_cli.specs import load_muscle_file
 
     name, model, out = imported
     for m in model.muscles:

@@ -307,8 +307,8 @@ def test_a_failing_sequence_leaves_no_file_and_no_temporary(repo_root, tmp_path,
         return real(self, *a)
 
     monkeypatch.setattr(NpzWriter, "_chunk", failing)
-    monkeypatch.setattr("axdf_cli.run.evaluate.CHUNK_FRAMES", 2)  # several chunks per muscle
-    monkeypatch.setattr("axdf_cli.run.evaluate.chunk_frames", lambda plan: 2)
+    monkeypatch.setattr("axdf_cli.pipeline.evaluate.CHUNK_FRAMES", 2)  # several chunks per muscle
+    monkeypatch.setattr("axdf_cli.pipeline.evaluate.chunk_frames", lambda plan: 2)
     rc = main(["run", "poses/jobs/demo.yaml", "--out", str(tmp_path / "o"), "--frames", "0:5", "--format", "usd,npz",
                "-q"])
     assert rc != 0

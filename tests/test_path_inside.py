@@ -45,9 +45,9 @@ def inside_project(project):
 
 def _origin_inside(frames) -> np.ndarray:
     """Ground truth from the skeleton alone: is the origin inside the sphere at each frame?"""
-    from axdf_cli.loaders import load_pose
-    from axdf_cli.pose import sample_coordinates
-    from axdf_cli.skeleton import forward_kinematics
+    from axdf_cli.specs import load_pose
+    from axdf_cli.model.pose import sample_coordinates
+    from axdf_cli.model.skeleton import forward_kinematics
 
     pose = load_pose(REPO_ROOT / "poses" / "demo.yaml")
     world = forward_kinematics(pose.skeleton, sample_coordinates(pose, np.asarray(frames)))

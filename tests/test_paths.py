@@ -9,7 +9,7 @@ import shutil
 import numpy as np
 import pytest
 
-from axdf_cli.paths import wrap as W
+from axdf_cli.model.paths import wrap as W
 from conftest import REPO_ROOT, run_main
 
 POSITION = re.compile(r"^(?P<file>[^\s:]+\.yaml):(?P<line>\d+):(?P<col>\d+): ", re.M)
@@ -64,8 +64,8 @@ def test_inside_and_missing_segments():
 
 
 def _path_model(wraps):
-    from axdf_cli.paths import PathPoint, PathSpec, WrapSurface
-    from axdf_cli.paths.path import PathModel
+    from axdf_cli.model.paths import PathPoint, PathSpec, WrapSurface
+    from axdf_cli.model.paths.path import PathModel
 
     spec = PathSpec((PathPoint("a", (0.0, 0.0, 0.0)), PathPoint("b", (0.0, 0.0, 0.0))), tuple(wraps), 12)
     return PathModel(spec, {"a": 0, "b": 1, "g": 2}, None)
@@ -74,7 +74,7 @@ def _path_model(wraps):
 def test_wrapping_engages_without_a_pop():
     """A path swept across a sphere: samples, length and axis move continuously as the
     straight segment starts to touch the sphere and wraps."""
-    from axdf_cli.paths import WrapSurface
+    from axdf_cli.model.paths import WrapSurface
 
     pm = _path_model([WrapSurface("ball", "g", "sphere", (0.03, 0.0, 0.0), at=(0.0, 0.0, 0.0))])
     hs = np.linspace(0.06, 0.002, 233)  # height of the straight segment over the centre

@@ -14,7 +14,7 @@ import time
 
 import pytest
 
-from axdf_cli.run.pool import WorkerDied, process_map
+from axdf_cli.workers import WorkerDied, process_map
 from conftest import run_main
 from test_safety import (alive, interrupt, kill_parent_of_frozen, own_leftovers, project, snapshot,  # noqa: F401
                          spawn, wait_for)  # (project: a fixture)
@@ -146,7 +146,7 @@ def test_frame_blocks_cover_every_frame_once():
 
 
 def test_bench_render_jobs_helper(tmp_path):
-    from axdf_cli import bench
+    from benchmarks import bench
 
     r = bench.run_jobs(bench.DEMO_JOB, tmp_path / "o", 2, frames="0:3")
     assert r["rc"] == 0 and r["wall"] > 0 and r["load"] >= 0

@@ -11,7 +11,7 @@ from axdf_cli.errors import EnvironmentProblem
 from axdf_cli.render.context import create_gl_context
 from axdf_cli.render.renderer import render_frames
 from axdf_cli.render.sequence import benchmark_fps, render_sequence
-from axdf_cli.render.settings import CameraSpec, RenderSettings
+from axdf_cli.specs.render import CameraSpec, RenderSettings
 from axdf_cli.render.synthetic import synthetic_scene
 
 SMALL = RenderSettings(enabled=True, size=(160, 120))

@@ -3,9 +3,9 @@ import argparse
 import pytest
 
 from axdf_cli.errors import InputError, Mark
-from axdf_cli.render.settings import (RenderSettings, add_render_args, parse_render_settings,
+from axdf_cli.specs.render import (RenderSettings, add_render_args, parse_render_settings,
                                       settings_from_args)
-from axdf_cli.yamlio import parse_yaml
+from axdf_cli.fileio.yamlio import parse_yaml
 
 
 def parse(text: str) -> RenderSettings:

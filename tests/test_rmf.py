@@ -10,9 +10,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from axdf_cli import bspline, rmf
+from axdf_cli.model import bspline, rmf
 from axdf_cli import tolerances as tol
-from axdf_cli.skeleton import forward_kinematics
+from axdf_cli.model.skeleton import forward_kinematics
 
 from conftest import demo_extreme_coordinates, random_rigid
 

@@ -108,7 +108,7 @@ def test_overwrite_deletes_only_the_files_the_old_run_lists(project, capsys):
 
 @pytest.mark.parametrize("fault", ["full disk", "interrupt"])
 def test_a_failed_overwrite_keeps_the_old_run(project, capsys, monkeypatch, fault):
-    from axdf_cli import atomic
+    from axdf_cli.fileio import atomic
     from axdf_cli.errors import EnvironmentProblem
 
     assert run_main(DEMO + ["--frames", "0:3", "--out", "out"], capsys)[0] == 0
@@ -504,7 +504,7 @@ def test_render_reads_the_recorded_mesh_format(small_run, capsys, project):
 
 def test_render_size_beyond_the_gl_limit(project, capsys):
     from axdf_cli.render.context import probe
-    from axdf_cli.render.settings import RenderSettings
+    from axdf_cli.specs.render import RenderSettings
 
     _, limit = probe(RenderSettings())
     args = ["run", "--muscles", "muscles/demo/biceps_brachii.yaml", "--pose", "poses/demo.yaml", "--frames", "100",
@@ -608,13 +608,13 @@ def chain(tmp_path, monkeypatch):
 
 
 def _plan(pose: str, frames: str):
-    from axdf_cli.run import plan_run
+    from axdf_cli.pipeline import plan_run
 
     return plan_run(None, muscle_args=["chainm.yaml"], pose_arg=pose, frames_arg=frames)
 
 
 def test_twist_reference_cost_follows_what_is_computed_not_the_pose_length(chain, monkeypatch):
-    from axdf_cli.run import evaluate
+    from axdf_cli.pipeline import evaluate
 
     pose = chain("long", {0: {"roll": 0, "bend": 0}, 9_999_999: {"roll": 720, "bend": 90}}, [0, 9_999_999])
     seen = {"frames": 0}
@@ -638,7 +638,7 @@ def test_twist_reference_cost_follows_what_is_computed_not_the_pose_length(chain
 
 @pytest.mark.parametrize("interpolation", ["linear", "cubic", "step"])
 def test_any_frame_subset_gets_the_same_twist_branch(chain, interpolation):
-    from axdf_cli.run import evaluate
+    from axdf_cli.pipeline import evaluate
 
     keys = {0: {"roll": 0}, 300: {"roll": 400}, 310: {"roll": -200}, 2000: {"roll": 1000}, 2400: {"roll": 1000}}
     pose = chain("spin", keys, [0, 2600], interpolation)

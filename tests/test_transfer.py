@@ -54,7 +54,7 @@ def transfer(tmp_path: Path, to: Path, map_path: Path, out: str = "out", *extra:
 
 
 def load_specs(folder: Path) -> dict:
-    from axdf_cli.loaders import load_muscle_file
+    from axdf_cli.specs import load_muscle_file
 
     return {s.name: s for f in sorted(folder.glob("*.yaml")) for s in load_muscle_file(f)}
 
@@ -105,7 +105,7 @@ def test_t_pose_rest_rotation_keeps_bone_local_points(tmp_path):
     """B's arm is abducted 90° at rest (a T-pose): the humerus' and ulna's segments turn with it;
     the radius is a leaf bone, so the map's ``rotate`` gives its rest rotation."""
     from axdf_cli.importers.emit import rest_world
-    from axdf_cli.loaders import load_skeleton
+    from axdf_cli.specs import load_skeleton
 
     b = scaled_skeleton(tmp_path / "tpose.yaml", 1.0, humerus_orient=[0, 90, 0])
     entries = {x: x for x in HUMAN_BONES}
@@ -247,8 +247,8 @@ def test_cmu_job_runs(tmp_path):
     assert len(rows) == 7 * 5 and all(r["warning"] == "" for r in rows)
     src = load_specs(DEMO)
     from axdf_cli.importers.emit import rest_world
-    from axdf_cli.loaders import load_skeleton
-    from axdf_cli.muscle import MuscleModel
+    from axdf_cli.specs import load_skeleton
+    from axdf_cli.model.muscle import MuscleModel
 
     skel = load_skeleton(HUMAN)
     w = rest_world(skel)

@@ -51,8 +51,8 @@ def identity_map(path: Path, skel: Path) -> Path:
 
 def _models(folder: Path, skel_path: Path):
     from axdf_cli.importers.emit import rest_world
-    from axdf_cli.loaders import load_muscle_file, load_skeleton
-    from axdf_cli.muscle import MuscleModel
+    from axdf_cli.specs import load_muscle_file, load_skeleton
+    from axdf_cli.model.muscle import MuscleModel
 
     skel = load_skeleton(skel_path)
     world = rest_world(skel)
@@ -63,9 +63,9 @@ def _models(folder: Path, skel_path: Path):
 def _lengths(skel, models, pose_path: Path, frames) -> dict:
     """Axis lengths (F,) of every model over a pose's frames, on ``skel`` (the pose's keys are
     coordinates: the same numbers drive either skeleton)."""
-    from axdf_cli.loaders import load_pose
-    from axdf_cli.pose import sample_coordinates
-    from axdf_cli.skeleton import forward_kinematics
+    from axdf_cli.specs import load_pose
+    from axdf_cli.model.pose import sample_coordinates
+    from axdf_cli.model.skeleton import forward_kinematics
 
     q = sample_coordinates(load_pose(pose_path), np.asarray(frames))
     world = forward_kinematics(skel, q)
@@ -108,7 +108,7 @@ def test_scaled_skeleton_scales_path_muscles(tmp_path, model, pose, frames, k):
                    (w.name, w.shape, w.bone, w.quadrant, w.method, w.range, w.active)
             assert np.allclose(np.multiply(w.size, k), v.size, rtol=1e-8)
             assert np.allclose(np.multiply(w.at, k), v.at, atol=2e-7)
-            from axdf_cli.skeleton import euler_xyz
+            from axdf_cli.model.skeleton import euler_xyz
             assert np.allclose(euler_xyz(w.orient), euler_xyz(v.orient), atol=1e-9)  # same frame, maybe other angles
         ra = [s.radii for s in a.spec.sections]
         rb = [s.radii for s in mb[name].spec.sections]
@@ -126,8 +126,8 @@ def test_scaled_skeleton_scales_path_muscles(tmp_path, model, pose, frames, k):
 def test_moving_point_functions_recombine_exactly():
     """A rest rotation that mixes a moving point's axes: the location along each axis of B is
     a weighted sum of A's functions of the same coordinate, written exactly as one function."""
-    from axdf_cli.skeleton import Constant, Linear, Multiplier, Polynomial, Spline
-    from axdf_cli.transfer import combine_functions
+    from axdf_cli.model.skeleton import Constant, Linear, Multiplier, Polynomial, Spline
+    from axdf_cli.importers.transfer import combine_functions
 
     x = np.linspace(-150, 150, 301)
     knots = np.array([-120.0, -60.0, 0.0, 10.0, 120.0])
@@ -172,7 +172,7 @@ def test_ellipsoid_closest_point_off_a_pole(y1):
     """Found carrying arm26's BIClong onto a scaled arm: the humeral head (two equal shortest
     semi-axes) and a point whose coordinate along them is 1e-18 m made the Newton start land
     on the pole t = -a_k^2 and divide by zero (a ZeroDivisionError out of the compiled path)."""
-    from axdf_cli.paths.wrap import _closest_xyz
+    from axdf_cli.model.paths.wrap import _closest_xyz
 
     a = (0.0325, 0.026, 0.026)
     y = (0.015061078825635527, y1, 0.034729132694275154)
@@ -188,9 +188,9 @@ def test_ellipsoid_closest_point_off_a_pole(y1):
 def test_moving_point_through_a_rotation_that_mixes_its_axes():
     """A bone whose rest frame on B is turned (30° about Z, 20° about X) and scaled: the moving
     point's location on B equals the map applied to its location on A, at every coordinate value."""
-    from axdf_cli.paths import Moving, PathPoint
-    from axdf_cli.skeleton import Linear, Spline, euler_xyz
-    from axdf_cli.transfer import NotCarried, PairTransform, _carry_point
+    from axdf_cli.model.paths import Moving, PathPoint
+    from axdf_cli.model.skeleton import Linear, Spline, euler_xyz
+    from axdf_cli.importers.transfer import NotCarried, PairTransform, _carry_point
 
     knots = np.array([-120.0, -60.0, 0.0, 10.0, 120.0])
     fx = Spline(knots, np.array([0.01, 0.03, 0.06, 0.065, 0.05]), "fmm")

@@ -6,7 +6,7 @@ import pytest
 
 from axdf_cli.formats import ObjWriter, PlyWriter
 from axdf_cli.formats import read_triangles
-from axdf_cli.muscle import grid_faces
+from axdf_cli.model.muscle import grid_faces
 
 
 # ---- the original implementations (reference for byte identity) ----------------------------

@@ -12,7 +12,7 @@ import os
 import sys
 from pathlib import Path
 
-from axdf_cli.atomic import write_bytes, write_text
+from axdf_cli.fileio.atomic import write_bytes, write_text
 from axdf_cli.errors import UsageError
 
 

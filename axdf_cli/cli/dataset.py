@@ -64,7 +64,7 @@ def run(args) -> int:
 def _build(args) -> int:
     from axdf_cli.dataset import engine
     from axdf_cli.dataset.worker import build_context
-    from axdf_cli.loaders import RefPolicy
+    from axdf_cli.specs import RefPolicy
 
     shard = parse_shard(args.shard)
     if args.seed is not None and not 0 <= args.seed < 2**63:

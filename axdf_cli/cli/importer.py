@@ -17,7 +17,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from axdf_cli.atomic import write_bytes
+from axdf_cli.fileio.atomic import write_bytes
 
 
 def add_args(parser: argparse.ArgumentParser) -> None:

@@ -57,7 +57,7 @@ def main(argv: list[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as e:
         return int(e.code or 0) if not isinstance(e.code, str) else 2
-    from axdf_cli import atomic
+    from axdf_cli.fileio import atomic
 
     old = {}
     for sig in (signal.SIGINT, signal.SIGTERM):  # both end the run with 130, never mid-file

@@ -17,8 +17,8 @@ from pathlib import Path
 
 from axdf_cli.cli.run import _positive
 from axdf_cli.errors import InputError, Mark, UsageError
-from axdf_cli.render.settings import add_render_args, settings_from_args, settings_to_dict
-from axdf_cli.runfolder import (CAMERA, FRAME_EXTENSIONS, MANIFEST_INTERVAL_S, Root, Session, Target,
+from axdf_cli.specs.render import add_render_args, settings_from_args, settings_to_dict
+from axdf_cli.fileio.runfolder import (CAMERA, FRAME_EXTENSIONS, MANIFEST_INTERVAL_S, Root, Session, Target,
                                 check_dirs, describe_differences, frame_relpath, gl_record, is_file_with, prepare,
                                 read_run_manifest, try_write_manifest, write_manifest)
 
@@ -45,7 +45,7 @@ def progress_bar(total: int, quiet: bool):
 
 
 def _select(spec: str, frames: list[int]) -> list[int]:
-    from axdf_cli.pose import parse_frames
+    from axdf_cli.model.pose import parse_frames
 
     chosen = [int(f) for f in parse_frames(spec, Mark("--frames"), min(frames), max(frames))]
     missing = sorted(set(chosen) - set(frames))

@@ -4,7 +4,7 @@ from __future__ import annotations
 import sys
 
 from axdf_cli.formats import FORMATS
-from axdf_cli.loaders import RefPolicy, load_job
+from axdf_cli.specs import RefPolicy, load_job
 
 
 def add_args(p) -> None:
@@ -30,7 +30,7 @@ def add_args(p) -> None:
                    help="hold coordinates inside their skeleton ranges (default: warn per frame)")
     p.add_argument("--allow-outside", action="store_true",
                    help="allow paths inside YAML files to leave the project folder tree")
-    from axdf_cli.render.settings import add_render_args
+    from axdf_cli.specs.render import add_render_args
 
     add_render_args(p)
 
@@ -48,7 +48,7 @@ def _positive(text: str) -> int:
 
 
 def run(args) -> int:
-    from axdf_cli import run as runner
+    from axdf_cli import pipeline as runner
 
     plan = plan_from_args(args)
     if args.verbose:
@@ -101,8 +101,8 @@ def plan_from_args(args):
     calls it too). Files named on the command line, and their folders, are trusted roots."""
     from dataclasses import replace
 
-    from axdf_cli import run as runner
-    from axdf_cli.render.settings import settings_from_args
+    from axdf_cli import pipeline as runner
+    from axdf_cli.specs.render import settings_from_args
 
     policy = RefPolicy.for_command([args.job, args.pose] + list(args.muscles or []), args.allow_outside)
     job = load_job(args.job, policy) if args.job else None

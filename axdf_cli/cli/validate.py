@@ -24,7 +24,7 @@ def add_args(p) -> None:
 
 def _bone_meshes(skel) -> str:
     """Read every bone mesh of ``skel`` as a run does; a short description."""
-    from axdf_cli.run import load_bone_mesh
+    from axdf_cli.pipeline import load_bone_mesh
 
     meshes = [b.mesh for b in skel.bones if b.mesh]
     for m in meshes:
@@ -43,8 +43,8 @@ def _plan(job=None, pose=None, muscles=None, allow_outside=False):
 
 def validate_file(path: Path, policy, args) -> tuple[str, str | None, list[str]]:
     """Validate one file: (description, kind, warnings). Raises InputError."""
-    from axdf_cli import loaders
-    from axdf_cli.yamlio import load_yaml
+    from axdf_cli import specs as loaders
+    from axdf_cli.fileio.yamlio import load_yaml
 
     doc = load_yaml(path)
     kind = loaders.detect_kind(doc)
@@ -68,7 +68,7 @@ def validate_file(path: Path, policy, args) -> tuple[str, str | None, list[str]]
         plan = _plan(job=str(path), allow_outside=args.allow_outside)
         return f"job: {len(plan.models)} muscles x {len(plan.frames)} frames", kind, _plan_warnings(plan)
     if kind == "transfer":
-        from axdf_cli.transfer import load_map
+        from axdf_cli.importers.transfer import load_map
 
         m = load_map(path, policy=policy)
         return f"transfer map {m.name}: {len(m.pairs)} bones, {m.skel_a.name} -> {m.skel_b.name}", kind, []
@@ -81,7 +81,7 @@ def _plan_warnings(plan) -> list[str]:
 
 
 def run(args) -> int:
-    from axdf_cli.loaders import RefPolicy
+    from axdf_cli.specs import RefPolicy
 
     policy = RefPolicy.for_command(args.files, args.allow_outside)
     errors = 0

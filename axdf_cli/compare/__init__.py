@@ -15,13 +15,13 @@ import time
 from pathlib import Path
 from typing import Callable, Iterable
 
-from axdf_cli.atomic import write_bytes
+from axdf_cli.fileio.atomic import write_bytes
 from axdf_cli.compare.files import list_files, nested, read_compared
 from axdf_cli.compare.result import ERROR, EXTRA, FAIL, MISSING, PASS, FileResult, Outcome, Report, read_side
 from axdf_cli.compare.tolerances import FileTol, Tolerances, as_dict
 from axdf_cli.errors import AxdfError, UsageError
 from axdf_cli.formats import FORMATS, MeshReadError
-from axdf_cli.yamlio import real_path
+from axdf_cli.fileio.yamlio import real_path
 
 # file suffix -> kind; `manifest.json` is recognised by its whole name. Meshes come from the
 # formats table: a per-frame format's file is a "mesh", a per-sequence one's a "sequence"

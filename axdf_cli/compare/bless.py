@@ -21,12 +21,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable
 
-from axdf_cli.atomic import write_parts
+from axdf_cli.fileio.atomic import write_parts
 from axdf_cli.compare.files import check_compared, list_files, nested, read_compared
 from axdf_cli.compare.result import Report, Unreadable
 from axdf_cli.compare.tolerances import Tolerances
 from axdf_cli.errors import EnvironmentProblem, UsageError
-from axdf_cli.yamlio import real_path
+from axdf_cli.fileio.yamlio import real_path
 
 
 @dataclass(frozen=True)

@@ -20,8 +20,8 @@ from pathlib import Path
 from typing import Iterable
 
 from axdf_cli.compare.result import Unreadable
-from axdf_cli.runfolder import own_entry
-from axdf_cli.yamlio import FileRefused, not_regular, read_regular, real_path
+from axdf_cli.fileio.runfolder import own_entry
+from axdf_cli.fileio.yamlio import FileRefused, not_regular, read_regular, real_path
 
 # The largest file a comparison reads (each side is held in memory, plus its decoded form).
 # A 4K EXR frame with every pass is ~250 MB uncompressed and far less compressed.
@@ -49,7 +49,7 @@ def list_files(root: Path, exclude: Iterable[Path] = (), errors: dict[str, str] 
     ``exclude`` (this comparison's own report, JUnit file and picture folder, or the other
     run folder when one holds the other) is left out. Folders that cannot be listed go into
     ``errors`` as ``"rel/": why``. What axdf itself leaves while it writes (the lock,
-    temporaries, a staging folder: :func:`axdf_cli.runfolder.own_entry`) is not part of a run
+    temporaries, a staging folder: :func:`axdf_cli.fileio.runfolder.own_entry`) is not part of a run
     and is left out too."""
     skip = {Path(os.path.abspath(p)) for p in exclude}
     out: dict[str, Path] = {}

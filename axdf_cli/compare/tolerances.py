@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from axdf_cli.errors import InputError, Mark
-from axdf_cli.yamlio import Fields, item_marks, load_yaml
+from axdf_cli.fileio.yamlio import Fields, item_marks, load_yaml
 
 # ----------------------------------------------------------------------------- the defaults
 # Meshes are written as float32 in metres. A float32 step at 1 m is 6e-8 m; a float64 result

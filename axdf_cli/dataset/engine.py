@@ -16,13 +16,13 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from axdf_cli import atomic
+from axdf_cli.fileio import atomic
 from axdf_cli.dataset import worker as wk
 from axdf_cli.dataset.index import write_index
 from axdf_cli.errors import AxdfError, EnvironmentProblem, InputError, Interrupted, Mark
 from axdf_cli.dataset import runner
 from axdf_cli.dataset.runner import own_entry
-from axdf_cli.yamlio import is_name
+from axdf_cli.fileio.yamlio import is_name
 
 ENGINES = ("local", "ray")
 RAY_HINT = "pip install 'ray>=2.9' (or the project's extra: pip install -e '.[ray]')"
@@ -141,7 +141,7 @@ def worker_context(where: tuple) -> wk.Context:
     """The context in a worker process (pool or Ray), built once from the dataset file: the
     worker works in the driver's folder (manifests name inputs relative to it) under the
     driver's path policy. ``where`` = (dataset file, seed, folder, policy roots, allow_outside)."""
-    from axdf_cli.loaders import RefPolicy
+    from axdf_cli.specs import RefPolicy
 
     path, seed, cwd, roots, allow_outside = where
     # the workers are the parallelism: each renders with one llvmpipe thread (Mesa's default is

@@ -13,7 +13,7 @@ from __future__ import annotations
 import io
 from pathlib import Path
 
-from axdf_cli import atomic
+from axdf_cli.fileio import atomic
 from axdf_cli.errors import EnvironmentProblem
 
 COLUMNS = ("sample", "sequence", "sequence_index", "source", "frame", "frame_index", "view", "view_index",

@@ -10,17 +10,17 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from axdf_cli.loaders import Pose
+from axdf_cli.specs import Pose
 from axdf_cli.render.camera import intrinsics, look_at  # noqa: F401  (the conventions of camera.json)
 from axdf_cli.render.renderer import id_map  # noqa: F401  (the EXR id pass's table)
-from axdf_cli.render.sequence import FRAME_WRITERS  # noqa: F401  (image passes: png, exr)
-from axdf_cli.render.settings import RenderSettings, parse_render_settings, settings_to_dict  # noqa: F401
-from axdf_cli.render.settings import parse_camera  # noqa: F401  (a job's camera: mapping)
-from axdf_cli.run import RunPlan, evaluate_chunks, execute, load_bone_mesh  # noqa: F401
-from axdf_cli.run.plan import display_path, load_muscle_specs  # noqa: F401  (as a run's manifest shows paths)
-from axdf_cli.run.pool import WorkerDied, process_map  # noqa: F401  (worker processes, as axdf run's)
-from axdf_cli.runfolder import own_entry  # noqa: F401  (the lock and temporaries axdf leaves while writing)
-from axdf_cli.skeleton import forward_kinematics
+from axdf_cli.render.passes import FRAME_WRITERS  # noqa: F401  (image passes: png, exr)
+from axdf_cli.specs.render import RenderSettings, parse_render_settings, settings_to_dict  # noqa: F401
+from axdf_cli.specs.render import parse_camera  # noqa: F401  (a job's camera: mapping)
+from axdf_cli.pipeline import RunPlan, evaluate_chunks, execute, load_bone_mesh  # noqa: F401
+from axdf_cli.pipeline.plan import display_path, load_muscle_specs  # noqa: F401  (as a run's manifest shows paths)
+from axdf_cli.workers import WorkerDied, process_map  # noqa: F401  (worker processes, as axdf run's)
+from axdf_cli.fileio.runfolder import own_entry  # noqa: F401  (the lock and temporaries axdf leaves while writing)
+from axdf_cli.model.skeleton import forward_kinematics
 
 
 def sequence_plan(pose: Pose, frames: np.ndarray, muscles, models, fmt: str, out: Path, inputs: dict) -> RunPlan:
@@ -42,7 +42,7 @@ def written_meshes(plan: RunPlan, frame: int) -> tuple[list, list]:
     normals, read back from the run folder (cheaper than evaluating again, and exactly what
     was written)."""
     from axdf_cli.formats import FORMATS
-    from axdf_cli.runfolder import mesh_relpath
+    from axdf_cli.fileio.runfolder import mesh_relpath
 
     read = FORMATS[plan.fmt].reader
     pos, nrm = [], []
@@ -55,7 +55,7 @@ def written_meshes(plan: RunPlan, frame: int) -> tuple[list, list]:
 
 def build_models(specs, skeleton) -> list:
     """The muscle models at the skeleton's rest pose, as a run plan builds them."""
-    from axdf_cli.muscle import MuscleModel
+    from axdf_cli.model.muscle import MuscleModel
 
     rest = forward_kinematics(skeleton, skeleton.rest_coordinates()[None])[0]
     return [MuscleModel(s, skeleton.bone_index, rest, skeleton) for s in specs]

@@ -7,7 +7,7 @@ where ``stream`` names the kind of draw (:data:`STREAM_POSE`, :data:`STREAM_ACTI
 name (activations) or 0 (poses). Nothing depends on the order in which sequences are made or
 on how the work is split: any worker, shard or cluster node draws the same numbers.
 
-Poses. A sampled sequence is a :class:`~axdf_cli.loaders.Pose` (the type ``load_pose``
+Poses. A sampled sequence is a :class:`~axdf_cli.specs.Pose` (the type ``load_pose``
 returns), never a file. ``uniform``: at each key frame every coordinate is drawn uniformly in
 its range (the dataset file's ``coordinates:`` range, else the skeleton's; ``fixed`` ones are
 held), and frames between keys are interpolated with PCHIP, which never leaves the span of
@@ -25,8 +25,8 @@ from dataclasses import replace
 import numpy as np
 
 from axdf_cli.dataset.spec import DatasetSpec, Entry, Sequence
-from axdf_cli.loaders import Pose
-from axdf_cli.pose import sample_coordinates
+from axdf_cli.specs import Pose
+from axdf_cli.model.pose import sample_coordinates
 
 STREAM_POSE = 1
 STREAM_ACTIVATION = 2

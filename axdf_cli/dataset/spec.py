@@ -13,8 +13,8 @@ from axdf_cli.dataset.runner import (FRAME_WRITERS, RenderSettings, load_muscle_
                                      parse_render_settings)
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.formats import WRITERS
-from axdf_cli.loaders import Pose, RefPolicy, expand_muscle_paths, load_pose, load_skeleton
-from axdf_cli.yamlio import Fields, check_name, check_number, check_vector, item_marks, load_yaml, mark_of
+from axdf_cli.specs import Pose, RefPolicy, expand_muscle_paths, load_pose, load_skeleton
+from axdf_cli.fileio.yamlio import Fields, check_name, check_number, check_vector, item_marks, load_yaml, mark_of
 
 SAMPLE_MODES = ("uniform", "perturb")
 ACTIVATION_MODES = ("motion", "uniform", "none")
@@ -423,7 +423,7 @@ _MOTION_CACHE: dict = {}  # motions by file, content and skeleton (a worker load
 def load_motion(spec: DatasetSpec, name: str) -> Pose:
     """The named motion as a Pose of the data set's skeleton (pose files are loaded with
     :func:`loaders.load_pose`; OpenSim motions go through the importer's reader and unit rules)."""
-    from axdf_cli.atomic import sha256_file
+    from axdf_cli.fileio.atomic import sha256_file
 
     m = spec.motions[name]
     key = (m.path, sha256_file(m.path), m.kind, m.fps, spec.skeleton_path, sha256_file(spec.skeleton_path))
@@ -443,7 +443,7 @@ def load_motion(spec: DatasetSpec, name: str) -> Pose:
 
 def motion_frames(spec: DatasetSpec, name: str):
     """The output frames of a named motion: its ``frames:`` selection, else all of them."""
-    from axdf_cli.pose import parse_frames
+    from axdf_cli.model.pose import parse_frames
 
     m = spec.motions[name]
     pose = load_motion(spec, name)

@@ -18,15 +18,16 @@ from pathlib import Path
 
 import numpy as np
 
-from axdf_cli import __version__, atomic
+from axdf_cli import __version__
+from axdf_cli.fileio import atomic
 from axdf_cli.dataset import labels as lab
 from axdf_cli.dataset import runner
 from axdf_cli.dataset.sampling import sample_pose, with_activation
 from axdf_cli.dataset.spec import (DatasetSpec, Sequence, expand_sequences, load_dataset, load_motion,
                                    motion_frames)
-from axdf_cli.loaders import load_skeleton
-from axdf_cli.pose import sample_activation, sample_coordinates
-from axdf_cli.skeleton import forward_kinematics
+from axdf_cli.specs import load_skeleton
+from axdf_cli.model.pose import sample_activation, sample_coordinates
+from axdf_cli.model.skeleton import forward_kinematics
 
 RECORD = "sequence.json"  # written last: the sequence is complete
 DATASET_JSON = "dataset.json"
@@ -58,8 +59,8 @@ class Context:
 
 def build_context(path: Path | str, seed: int | None = None, policy=None) -> Context:
     """Load and check everything (InputError on bad input); build the muscle models once.
-    ``policy``: the command's :class:`~axdf_cli.loaders.RefPolicy` (where referenced files may lie)."""
-    from axdf_cli.scene import Scene, SceneBone, SceneMuscle
+    ``policy``: the command's :class:`~axdf_cli.specs.RefPolicy` (where referenced files may lie)."""
+    from axdf_cli.render.scene import Scene, SceneBone, SceneMuscle
 
     spec = load_dataset(path, seed, policy)
     skel = load_skeleton(spec.skeleton_path, spec.policy)

@@ -57,7 +57,7 @@ FORMATS: dict[str, Format] = {
 assert all(f.layout in LAYOUTS and f.suffix == "." + f.writer.extension for f in FORMATS.values())
 
 # The per-frame formats and their writer classes: a view of FORMATS, for the call sites that
-# only build per-frame writers (the per-sequence ones: axdf_cli.run.sequences).
+# only build per-frame writers (the per-sequence ones: axdf_cli.pipeline.sequences).
 WRITERS = {name: f.writer for name, f in FORMATS.items() if f.layout == "frame"}
 
 
@@ -131,7 +131,7 @@ def load_triangles(path: Path | str) -> tuple[np.ndarray, np.ndarray | None, np.
 def load_triangles_and_bytes(path: Path | str) -> tuple[tuple, bytes]:
     """:func:`load_triangles` and the file's bytes, from one read."""
     from axdf_cli.errors import InputError, Mark
-    from axdf_cli.yamlio import read_input
+    from axdf_cli.fileio.yamlio import read_input
 
     path = Path(path)
     allowed = "a PLY or OBJ triangle mesh"

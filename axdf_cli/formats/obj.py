@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from axdf_cli import atomic
+from axdf_cli.fileio import atomic
 from axdf_cli.formats.mesh import Mesh, MeshReadError
 
 _BIG = 1000  # integer parts below this use the tables; larger ones take the % path

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from axdf_cli import atomic
+from axdf_cli.fileio import atomic
 from axdf_cli.formats.mesh import Mesh, MeshReadError
 
 

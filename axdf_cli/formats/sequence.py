@@ -10,7 +10,7 @@ stays bounded on any sequence length::
     sha256 = w.finish()        # the file appears whole (or, after w.abort(), not at all)
                                # (w.close() + w.commit() do it in two steps)
 
-The bytes go to a temporary name (:class:`axdf_cli.atomic.StreamingFile`) until
+The bytes go to a temporary name (:class:`axdf_cli.fileio.atomic.StreamingFile`) until
 :meth:`SequenceWriter.finish`; a killed run leaves only temporaries, which ``--resume``
 removes. Readers take a path and return a :class:`PointSequence`.
 """
@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from axdf_cli import atomic
+from axdf_cli.fileio import atomic
 from axdf_cli.formats.mesh import Mesh, MeshReadError
 
 
@@ -64,7 +64,7 @@ class PointSequence:
 
 
 class SequenceWriter:
-    """The streaming life cycle over one :class:`~axdf_cli.atomic.StreamingFile`.
+    """The streaming life cycle over one :class:`~axdf_cli.fileio.atomic.StreamingFile`.
 
     Subclasses give :attr:`extension`, lay the file out in ``__init__`` (sizes are known:
     frames x vertices) and implement :meth:`_chunk` (write one chunk at frame index ``k0``)

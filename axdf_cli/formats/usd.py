@@ -1,6 +1,6 @@
 """USD: one stage per run, written with Pixar's ``usd-core`` (``pxr``).
 
-Layout (paths relative to the run folder, :mod:`axdf_cli.runfolder`; every reference is
+Layout (paths relative to the run folder, :mod:`axdf_cli.fileio.runfolder`; every reference is
 relative, so the folder moves whole)::
 
     scene.usda          the stage a user opens: metadata (Z up, metersPerUnit 1,
@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from axdf_cli import atomic
+from axdf_cli.fileio import atomic
 from axdf_cli.errors import EnvironmentProblem
 from axdf_cli.formats.mesh import MeshReadError
 from axdf_cli.formats.sequence import PointSequence, SequenceWriter
@@ -51,7 +51,7 @@ def pxr():
 
 def prim_names(names) -> list[str]:
     """Valid, unique USD prim names for ``names``, in order."""
-    from axdf_cli.yamlio import unique_names
+    from axdf_cli.fileio.yamlio import unique_names
 
     *_, Tf = pxr()
     return unique_names(Tf.MakeValidIdentifier(n) for n in names)

@@ -46,7 +46,7 @@ from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.importers import emit
 from axdf_cli.importers.osim_import import _rel, _sha, safe_name
-from axdf_cli.yamlio import NAME_ALLOWED, is_name, read_text, unique_names
+from axdf_cli.fileio.yamlio import NAME_ALLOWED, is_name, read_text, unique_names
 
 #: channel name (lower case) → (DOF type, axis index). BVH writes them capitalised.
 CHANNELS = {"xposition": ("translation", 0), "yposition": ("translation", 1), "zposition": ("translation", 2),

@@ -36,7 +36,7 @@ import yaml
 
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.importers.osim import Axis, FConst, FLinear, FMult, FPoly, FSpline, Model, Muscle
-from axdf_cli.skeleton import Skeleton, Spline, forward_kinematics
+from axdf_cli.model.skeleton import Skeleton, Spline, forward_kinematics
 
 DEG = 180.0 / math.pi
 
@@ -205,7 +205,7 @@ def _world_points(skel: Skeleton, world: np.ndarray, pts) -> np.ndarray:
 
 
 def point_doc(p) -> dict:
-    """One path point's document (a :class:`axdf_cli.paths.PathPoint`, axdf units)."""
+    """One path point's document (a :class:`axdf_cli.model.paths.PathPoint`, axdf units)."""
     d: dict = {"bone": p.bone, "at": [float(v) for v in p.at]}
     mv = {ax: {"coord": a.coord, "function": function_doc(a.function)}
           for ax, a in zip("xyz", p.moving or ()) if a is not None}
@@ -218,8 +218,8 @@ def point_doc(p) -> dict:
 
 
 def wrap_doc(w) -> dict:
-    """One wrap surface's document (a :class:`axdf_cli.paths.WrapSurface`)."""
-    from axdf_cli.loaders import WRAP_SIZE_KEYS
+    """One wrap surface's document (a :class:`axdf_cli.model.paths.WrapSurface`)."""
+    from axdf_cli.specs import WRAP_SIZE_KEYS
 
     d = {"name": w.name, "shape": w.shape, "bone": w.bone}
     if w.shape == "ellipsoid":
@@ -242,7 +242,7 @@ def path_docs(model: Model, m: Muscle) -> tuple[list, list]:
     """The muscle's ``path`` (every path point; moving ones with their functions in axdf
     units, conditional ones with their ``active`` range) and ``wrap`` (its wrap surfaces,
     copied per muscle with the path wrap's range and method) documents."""
-    from axdf_cli.paths import Moving, PathPoint, WrapSurface
+    from axdf_cli.model.paths import Moving, PathPoint, WrapSurface
 
     path = []
     for p in m.points:
@@ -290,9 +290,9 @@ def muscle_doc(m: Muscle, skel: Skeleton, world: np.ndarray, model: Model | None
 
     Positions are fractions of the rest arc length written as curve parameters t (mapped
     through the rest axis); sections are circular; ``volume: exact`` keeps the rest volume.
-    The row also carries the belly's slenderness (:mod:`axdf_cli.measure`) at rest.
+    The row also carries the belly's slenderness (:mod:`axdf_cli.model.measure`) at rest.
     """
-    from axdf_cli.measure import belly_slenderness
+    from axdf_cli.model.measure import belly_slenderness
 
     path, wraps = path_docs(model, m)
     rest_ctrl, path_length = _rest_path(m.name, path, wraps, skel, world)
@@ -351,8 +351,8 @@ def muscle_doc(m: Muscle, skel: Skeleton, world: np.ndarray, model: Model | None
 
 def _model(doc: dict, name: str, skel: Skeleton, world: np.ndarray):
     """The muscle document as ``axdf run`` reads and builds it (rounded YAML text → model)."""
-    from axdf_cli.loaders import parse_muscle_text
-    from axdf_cli.muscle import MuscleModel
+    from axdf_cli.specs import parse_muscle_text
+    from axdf_cli.model.muscle import MuscleModel
 
     (spec,) = parse_muscle_text(dump_yaml(doc), f"<{name}>")
     return MuscleModel(spec, skel.bone_index, world, skel)
@@ -361,9 +361,9 @@ def _model(doc: dict, name: str, skel: Skeleton, world: np.ndarray):
 def _rest_path(name: str, path: list, wraps: list, skel: Skeleton, world: np.ndarray):
     """The path documents read back through the loader, evaluated at the rest pose: the axis
     control points (n, 3) and the wrapped path's length."""
-    from axdf_cli.loaders import parse_muscle_path
-    from axdf_cli.paths.path import PathModel
-    from axdf_cli.yamlio import Fields
+    from axdf_cli.specs import parse_muscle_path
+    from axdf_cli.model.paths.path import PathModel
+    from axdf_cli.fileio.yamlio import Fields
 
     doc = {"path": path, "wrap": wraps}
     spec = parse_muscle_path(Fields(doc, Mark(f"<{name}>"), "muscle"))
@@ -377,7 +377,7 @@ def _rest_path(name: str, path: list, wraps: list, skel: Skeleton, world: np.nda
 def _arc_parameter_of(ctrl: np.ndarray) -> tuple:
     """The arc-length fraction → curve parameter map of the axis with control points ctrl,
     and its length."""
-    from axdf_cli import bspline
+    from axdf_cli.model import bspline
 
     ts = np.linspace(0.0, 1.0, 2001)
     c = np.einsum("si,ic->sc", bspline.basis_matrix(bspline.clamped_knots(len(ctrl), 2), 2, ts), ctrl)

@@ -33,14 +33,14 @@ from pathlib import Path
 import numpy as np
 
 from axdf_cli.errors import InputError, Mark
-from axdf_cli.skeleton import Constant, Linear, Multiplier, Polynomial, Spline
+from axdf_cli.model.skeleton import Constant, Linear, Multiplier, Polynomial, Spline
 from axdf_cli.importers.xmltree import Node, parse_xml
-from axdf_cli.skeleton import euler_xyz
+from axdf_cli.model.skeleton import euler_xyz
 
 # ----------------------------------------------------------------------------- functions
 
 
-# The importer builds axdf's own function objects (axdf_cli.skeleton), in OpenSim units;
+# The importer builds axdf's own function objects (axdf_cli.model.skeleton), in OpenSim units;
 # emit.convert_function turns them into axdf units.
 FConst, FLinear, FPoly, FMult = Constant, Linear, Polynomial, Multiplier
 

@@ -52,8 +52,8 @@ from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.formats.ply import PlyWriter
 from axdf_cli.importers import emit
-from axdf_cli.loaders import RefPolicy, parse_skeleton_text
-from axdf_cli.yamlio import NAME_ALLOWED, check_name, is_name
+from axdf_cli.specs import RefPolicy, parse_skeleton_text
+from axdf_cli.fileio.yamlio import NAME_ALLOWED, check_name, is_name
 from axdf_cli.importers.osim import Model, load_osim
 from axdf_cli.importers.storage import Table, read_storage
 from axdf_cli.importers.vtp import read_vtp
@@ -430,7 +430,7 @@ def import_markdown(r: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-#: Bellies whose slenderness (axdf_cli/measure.py) is below this are listed in IMPORT.md, each
+#: Bellies whose slenderness (axdf_cli/model/measure.py) is below this are listed in IMPORT.md, each
 #: with its numbers and why it is short or squat.
 SHORT_BELLY = 2.0
 #: Squat: the issue's aim is none below 1.2 and at most 5% of a library below 1.5.
@@ -482,7 +482,7 @@ def belly_markdown(r: dict) -> list[str]:
              "belly length = rest path − free tendon; tendon Ø from max force at "
              f"{st['tendon_stress_Pa'] / 1e6:g} MPa. Colours: {st['palette']} palette.", "",
              f"Slenderness at rest (length where the cross-section is at least half its widest, over the widest "
-             f"diameter; `axdf_cli/measure.py`): min {min(sl):.2f}, median {float(np.median(sl)):.2f}, "
+             f"diameter; `axdf_cli/model/measure.py`): min {min(sl):.2f}, median {float(np.median(sl)):.2f}, "
              f"below 1.2: {sum(x < 1.2 for x in sl)}, below {SQUAT_BELLY:g}: {sum(x < SQUAT_BELLY for x in sl)} "
              f"of {len(sl)}.", ""]
     short = [m for m in ms if m["slenderness"] < SHORT_BELLY or m["belly_length"] < m["fibre_projection"] * (1 - 1e-6)]

@@ -17,7 +17,7 @@ import numpy as np
 
 from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError, Mark
-from axdf_cli.yamlio import read_input
+from axdf_cli.fileio.yamlio import read_input
 
 
 @dataclass(frozen=True)

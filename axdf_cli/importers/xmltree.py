@@ -12,7 +12,7 @@ from pathlib import Path
 from xml.parsers import expat
 
 from axdf_cli.errors import InputError, Mark
-from axdf_cli.yamlio import read_input
+from axdf_cli.fileio.yamlio import read_input
 
 
 @dataclass(eq=False)

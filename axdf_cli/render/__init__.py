@@ -5,7 +5,7 @@ Public API: :func:`render_sequence`, :func:`parse_render_settings`, :class:`Rend
 :func:`benchmark_fps`, :func:`create_gl_context`. Heavy modules (moderngl, OpenEXR) are
 imported only when rendering starts.
 """
-from axdf_cli.render.settings import (RenderSettings, CameraSpec, add_render_args,  # noqa: F401
+from axdf_cli.specs.render import (RenderSettings, CameraSpec, add_render_args,  # noqa: F401
                                       parse_render_settings, settings_from_args)
 
 

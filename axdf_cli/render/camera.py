@@ -18,7 +18,7 @@ For a sheet each panel has its own camera whose ``K`` already includes the panel
 horizontal offset, so projected pixels are pixels of the whole sheet.
 
 Automatic framing frames ``Scene.framing`` (points whose hull holds the subject: the
-skeleton's bones over *every* frame of the pose, see :func:`axdf_cli.pose.subject_points`;
+skeleton's bones over *every* frame of the pose, see :func:`axdf_cli.model.pose.subject_points`;
 ``Scene.bounds`` when a scene has none): the camera depends on the skeleton, the whole pose
 and the render settings only, never on which frames are written or on the muscles, so a
 muscle edit or a ``--frames`` subset leaves every frame's camera as it was. For a fixed view
@@ -35,7 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from axdf_cli.render.settings import RenderSettings
+from axdf_cli.specs.render import RenderSettings
 
 # Fraction of the image kept free at each border by automatic framing.
 FRAME_MARGIN = 0.04

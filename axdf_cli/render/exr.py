@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from axdf_cli import atomic
+from axdf_cli.fileio import atomic
 from axdf_cli.errors import EnvironmentProblem
 
 CHANNEL_TYPES = {"R": np.float16, "G": np.float16, "B": np.float16, "A": np.float16,

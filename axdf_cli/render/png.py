@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from axdf_cli import atomic
+from axdf_cli.fileio import atomic
 
 
 def linear_to_srgb(x: np.ndarray) -> np.ndarray:

@@ -31,8 +31,8 @@ import numpy as np
 
 from axdf_cli.render.camera import Camera, sequence_cameras
 from axdf_cli.render.context import check_same_process
-from axdf_cli.render.settings import RenderSettings
-from axdf_cli.scene import FrameChunk, Scene, SceneBone
+from axdf_cli.specs.render import RenderSettings
+from axdf_cli.render.scene import FrameChunk, Scene, SceneBone
 
 BONE_COLOR = (0.78, 0.75, 0.68)  # neutral ivory, linear RGB
 STICK_SIDES = 12  # a stick is a 12-sided cylinder with flat caps
@@ -165,7 +165,7 @@ class BoneLayout:
 
 def bone_layout(names, parents, meshes: dict, extent: float) -> BoneLayout:
     """``names`` of every bone and ``parents``: the bone a stick joins it to (-1: none, see
-    :meth:`axdf_cli.skeleton.Skeleton.stick_parents`); ``meshes``: bone index -> (vertices,
+    :meth:`axdf_cli.model.skeleton.Skeleton.stick_parents`); ``meshes``: bone index -> (vertices,
     faces) bone-local; ``extent``: the subject's largest extent (stick radius)."""
     radius = max(STICK_MIN_RADIUS, STICK_RADIUS_FRACTION * extent)
     stick_v, stick_f = unit_stick()

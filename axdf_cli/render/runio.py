@@ -1,6 +1,6 @@
 """Read a finished run folder back into a :class:`Scene` and its frames (for ``axdf render``).
 
-The layout and the manifest are :mod:`axdf_cli.runfolder`'s. What is read:
+The layout and the manifest are :mod:`axdf_cli.fileio.runfolder`'s. What is read:
 
 - ``manifest.json`` (an axdf run's: ``tool: axdf``): ``muscles: [{name, color, ...}]``
   (colour as linear ``[r, g, b]`` in 0..1, or sRGB ``"#rrggbb"``), ``frames: [...]``,
@@ -28,11 +28,11 @@ import numpy as np
 
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.formats import FORMATS, MeshReadError, load_triangles, read_sequence
-from axdf_cli.render.settings import RenderSettings, parse_render_settings
-from axdf_cli.runfolder import BONES_CSV, Manifest, mesh_relpath, read_run_manifest
-from axdf_cli.runfolder import plain_relpath as _plain
-from axdf_cli.yamlio import NAME_ALLOWED, is_name
-from axdf_cli.scene import FrameChunk, Scene, SceneMuscle
+from axdf_cli.specs.render import RenderSettings, parse_render_settings
+from axdf_cli.fileio.runfolder import BONES_CSV, Manifest, mesh_relpath, read_run_manifest
+from axdf_cli.fileio.runfolder import plain_relpath as _plain
+from axdf_cli.fileio.yamlio import NAME_ALLOWED, is_name
+from axdf_cli.render.scene import FrameChunk, Scene, SceneMuscle
 
 def _color(c, where: Mark) -> tuple[float, float, float]:
     if isinstance(c, str) and len(c) == 7 and c.startswith("#"):
@@ -94,7 +94,7 @@ def muscle_frames(run_dir: Path, name: str, formats, frames: tuple[int, ...], fp
     per-frame format, else its per-sequence file (npz, pc2, mdd, usd: the first the run
     wrote), whose frames must be the run's. ``.read(frame)`` gives (V, 3) float32 positions,
     normals or None, (T, 3) faces."""
-    from axdf_cli.runfolder import rest_mesh_relpath, sequence_relpath
+    from axdf_cli.fileio.runfolder import rest_mesh_relpath, sequence_relpath
 
     for fmt in formats:
         if FORMATS[fmt].layout == "frame":

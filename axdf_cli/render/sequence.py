@@ -16,28 +16,17 @@ import time
 from pathlib import Path
 from typing import Callable, Iterable, Iterator, Protocol
 
-from axdf_cli import atomic
+from axdf_cli.fileio import atomic
 from axdf_cli.errors import InputError
 from axdf_cli.render.camera import camera_json, panel_count, sequence_cameras
 from axdf_cli.render.context import create_gl_context, gl_info
-from axdf_cli.render.exr import exr_channels, write_exr
-from axdf_cli.render.png import write_png
-from axdf_cli.render.renderer import FrameImages, frame_cameras, id_map, render_frames
-from axdf_cli.render.settings import RenderSettings
-from axdf_cli.runfolder import CAMERA, Root, frame_relpath
-from axdf_cli.scene import FrameChunk, Scene
+from axdf_cli.render.passes import FRAME_WRITERS
+from axdf_cli.render.renderer import frame_cameras, id_map, render_frames
+from axdf_cli.specs.render import RenderSettings
+from axdf_cli.fileio.runfolder import CAMERA, Root, frame_relpath
+from axdf_cli.render.scene import FrameChunk, Scene
 
 
-def _write_png(path: Path, img: FrameImages) -> str:
-    return write_png(path, img.rgba)
-
-
-def _write_exr(path: Path, img: FrameImages) -> str:
-    return write_exr(path, exr_channels(img.rgba, img.depth, img.normals, img.ids))
-
-
-# file extension -> writer(path, FrameImages) -> sha256; every frame gets one file of each
-FRAME_WRITERS: dict[str, Callable[[Path, FrameImages], str]] = {"png": _write_png, "exr": _write_exr}
 
 
 def render_sequence(scene: Scene, chunks: Iterable[FrameChunk], settings: RenderSettings,
@@ -94,6 +83,12 @@ class FrameSource(Protocol):
 
     def chunks(self, frames: list[int]) -> Iterator[FrameChunk]: ...
 
+    #: modules a render worker imports before its first block (optional): what ``chunks`` needs
+    preload: tuple[str, ...]
+
+
+RENDER_CHUNK = 16  # frames per block handed to the renderer (all muscles of a frame at once)
+
 
 def frame_blocks(frames: list[int], jobs: int) -> list[list[int]]:
     """``frames`` cut into consecutive blocks of at most RENDER_CHUNK, small enough that
@@ -108,11 +103,11 @@ def render_frames_of(scene: Scene, source: FrameSource, frames: list[int], setti
     """:func:`render_sequence` of ``frames`` read from ``source``, split over ``jobs`` worker
     processes (blocks of consecutive frames, :func:`frame_blocks`), each with its own GL
     context; the same bytes as one process. Workers come from a fork server (never forked
-    from this process, whatever GL it used before; :func:`axdf_cli.run.pool.process_map`) and
+    from this process, whatever GL it used before; :func:`axdf_cli.workers.process_map`) and
     stop, each after the file it is writing, when this process is interrupted or dies.
     ``progress`` and ``on_frame`` are called in this process as blocks finish; camera.json is
     written here at the end. With one job (or one frame) everything runs in this process."""
-    from axdf_cli.run.pool import process_map
+    from axdf_cli.workers import process_map
 
     frames = [int(f) for f in frames]
     blocks = frame_blocks(frames, jobs)
@@ -135,7 +130,7 @@ def render_frames_of(scene: Scene, source: FrameSource, frames: list[int], setti
 
     shared = (scene, source, settings, cameras, root.root)
     process_map(_render_block, blocks, shared, jobs=jobs, on_result=done, fresh=True,
-                preload=("axdf_cli.render.sequence", "axdf_cli.run.evaluate"))
+                preload=("axdf_cli.render.sequence",) + tuple(getattr(source, "preload", ())))
     files[CAMERA] = _write_camera(root, scene, settings, cameras)
     renderer, version = gl[0]
     return {"gl_renderer": renderer, "gl_version": version, "files": files}
@@ -150,7 +145,7 @@ def _render_block(shared, block: list[int]) -> tuple:
     import os
 
     from axdf_cli.render.views import ViewRenderer
-    from axdf_cli.run.pool import check_parent
+    from axdf_cli.workers import check_parent
 
     scene, source, settings, cameras, root = shared
     vr = _WORKER.get(os.getpid())
@@ -188,67 +183,11 @@ def check_render(settings: RenderSettings, on_note=None) -> RenderSettings:
     that no GL state exists in this process when the mesh pass forks its workers) and fit the
     render size to its limit (:func:`fit_size`). No EGL: EnvironmentProblem (exit 3)."""
     from axdf_cli.render.context import probe
-    from axdf_cli.run.pool import in_child
+    from axdf_cli.workers import in_child
 
     info, limit = in_child(probe, settings)
     return fit_size(settings, limit, info.renderer, on_note)
 
-
-RENDER_CHUNK = 16  # frames per block handed to the renderer by render_plan (all muscles of a frame at once)
-
-
-def render_plan(plan, out_dir: Path, bounds, twist_ref, progress: Callable[[int], None] | None = None,
-                framing_points=None, jobs: int = 1, frames=None, on_frame: Callable[[dict], None] | None = None
-                ) -> dict:
-    """Render a run plan's frames into ``out_dir`` (``axdf run --render``) over ``jobs``
-    processes (:func:`render_frames_of`); ``frames``: those to draw now (default all of the
-    plan's; the cameras and camera.json are always the whole sequence's). ``framing_points``:
-    what the automatic camera frames (default :func:`axdf_cli.run.plan.framing`)."""
-    import numpy as np
-
-    from axdf_cli.render.renderer import bone_layout
-    from axdf_cli.run.plan import framing
-    from axdf_cli.scene import SceneMuscle
-
-    skel = plan.pose.skeleton
-    framing_points = framing(plan) if framing_points is None else framing_points
-    shown = skel.bones if plan.render.bones else ()
-    layout = bone_layout([b.name for b in shown], skel.stick_parents() if shown else [],
-                         {i: (v, f) for i, (v, f, _) in plan.bone_meshes.items() if shown},
-                         float(np.ptp(framing_points, axis=0).max()))
-    scene = Scene(
-        muscles=tuple(SceneMuscle(s.name, s.color, m.faces) for s, m in zip(plan.muscles, plan.models)),
-        bones=layout.bones, bounds=bounds, frames=tuple(int(f) for f in plan.frames),
-        framing=framing_points, first_frame=int(plan.pose.first))
-    todo = scene.frames if frames is None else frames
-    return render_frames_of(scene, PlanFrames(plan, twist_ref, layout), todo, plan.render, out_dir, jobs,
-                            progress, on_frame)
-
-
-class PlanFrames:
-    """A run plan's frames for the renderer (a :class:`FrameSource`): the muscles evaluated
-    again, block by block (evaluation is cheap next to rendering and this keeps memory
-    bounded), exactly as the mesh pass wrote them; the bones placed by ``layout``
-    (:class:`~axdf_cli.render.renderer.BoneLayout`)."""
-
-    def __init__(self, plan, twist_ref, layout):
-        self.plan, self.twist_ref, self.layout = plan, twist_ref, layout
-
-    def chunks(self, frames: list[int]) -> Iterator[FrameChunk]:
-        from dataclasses import replace
-
-        import numpy as np
-
-        from axdf_cli.run.evaluate import evaluate_chunks, finite_or_rest
-
-        plan = self.plan
-        index = {int(f): i for i, f in enumerate(plan.frames)}
-        idx = np.array([index[int(f)] for f in frames], dtype=np.int64)
-        sub = replace(plan, frames=plan.frames[idx])  # each frame is evaluated alone: any subset, the same meshes
-        for sl, world, results in evaluate_chunks(sub, RENDER_CHUNK, self.twist_ref[idx]):
-            done = [finite_or_rest(r, plan.models[j]) for j, r in results]
-            yield FrameChunk(frames=sub.frames[sl], positions=tuple(d[0] for d in done),
-                             normals=tuple(d[1] for d in done), bone_world=self.layout.transforms(world))
 
 
 def benchmark_fps(size: tuple[int, int] = (512, 512), n_muscles: int = 10, verts: int = 2000,

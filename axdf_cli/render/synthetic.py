@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from axdf_cli.scene import FrameChunk, Scene, SceneBone, SceneMuscle
+from axdf_cli.render.scene import FrameChunk, Scene, SceneBone, SceneMuscle
 
 PALETTE = ((0.75, 0.16, 0.14), (0.85, 0.45, 0.12), (0.70, 0.62, 0.15), (0.25, 0.55, 0.22),
            (0.12, 0.50, 0.60), (0.18, 0.30, 0.70), (0.45, 0.22, 0.62), (0.72, 0.22, 0.45))

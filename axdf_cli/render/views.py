@@ -16,9 +16,9 @@ import numpy as np
 from axdf_cli.render.camera import Camera
 from axdf_cli.render.context import create_gl_context, gl_info
 from axdf_cli.render.renderer import FrameImages, Renderer
-from axdf_cli.render.sequence import FRAME_WRITERS
-from axdf_cli.render.settings import RenderSettings
-from axdf_cli.scene import Scene
+from axdf_cli.render.passes import FRAME_WRITERS
+from axdf_cli.specs.render import RenderSettings
+from axdf_cli.render.scene import Scene
 
 
 def view_camera(name: str, K: np.ndarray, world_to_camera: np.ndarray, near: float, far: float,

@@ -48,10 +48,10 @@ import numpy as np
 
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.importers import emit
-from axdf_cli.loaders import RefPolicy, load_muscle_file, load_skeleton
-from axdf_cli.muscle import AxisPoint, MuscleModel, MuscleSpec
-from axdf_cli.skeleton import Constant, Linear, Multiplier, Polynomial, Skeleton, Spline, axis_angle, euler_xyz
-from axdf_cli.yamlio import Fields, check_name, check_vector, item_marks, load_yaml
+from axdf_cli.specs import RefPolicy, load_muscle_file, load_skeleton
+from axdf_cli.model.muscle import AxisPoint, MuscleModel, MuscleSpec
+from axdf_cli.model.skeleton import Constant, Linear, Multiplier, Polynomial, Skeleton, Spline, axis_angle, euler_xyz
+from axdf_cli.fileio.yamlio import Fields, check_name, check_vector, item_marks, load_yaml
 
 #: A segment shorter than this (metres) has no direction: the entry is treated as segment-less.
 MIN_SEGMENT = 1e-6
@@ -149,7 +149,7 @@ def load_map(path: Path | str, skel_a: Skeleton | None = None, skel_b: Skeleton 
 
 def _single(val: str, vm: Mark):
     """``bone: OTHER`` shorthand as a mapping ``{to: OTHER}`` whose value sits at ``vm``."""
-    from axdf_cli.yamlio import YMap
+    from axdf_cli.fileio.yamlio import YMap
 
     m = YMap(to=val)
     m.mark, m.key_marks, m.value_marks = vm, {"to": vm}, {"to": vm}
@@ -276,7 +276,7 @@ def combine_functions(terms: list[tuple[float, object]], offset: float):
 def _carry_point(p, t: PairTransform, index: int):
     """A path point on B: ``at`` through the bone's map; a moving point's location functions
     recombined per B axis (an axis of B gathers the A axes the rest rotation turns onto it)."""
-    from axdf_cli.paths import Moving
+    from axdf_cli.model.paths import Moving
 
     lin, off = t.matrix[:3, :3], t.matrix[:3, 3]
     at = lin @ np.asarray(p.at) + off
@@ -455,7 +455,7 @@ def build_transfer(muscle_files: list[Path], skel_a: Skeleton | None, skel_b: Sk
 
 def transfer_markdown(r: dict) -> str:
     lines = [f"# Transfer `{r['map']}`: {r['from']} → {r['to']}", "",
-             f"Map `{r['map_file']}`; rules: `axdf_cli/transfer.py` and docs/FORMATS.md (Transfer map).", "",
+             f"Map `{r['map_file']}`; rules: `axdf_cli/importers/transfer.py` and docs/FORMATS.md (Transfer map).", "",
              "| bone (from) | bone (to) | scale k | segment lengths (m) | rest rotation (°) |", "|---|---|---|---|---|"]
     for b in r["bones"]:
         seg = "–" if b["segment_lengths"] is None else f"{b['segment_lengths'][0]:.4f} → {b['segment_lengths'][1]:.4f}"

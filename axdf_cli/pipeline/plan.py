@@ -8,13 +8,13 @@ from pathlib import Path
 
 import numpy as np
 
-from axdf_cli import atomic
+from axdf_cli.fileio import atomic
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.formats import parse_formats
-from axdf_cli.loaders import Job, Pose, RefPolicy, expand_muscle_paths, load_muscle_file, load_pose
-from axdf_cli.muscle import MuscleModel, MuscleSpec
-from axdf_cli.pose import activation_problems, muscle_range_warnings, parse_frames, subject_points
-from axdf_cli.skeleton import forward_kinematics
+from axdf_cli.specs import Job, Pose, RefPolicy, expand_muscle_paths, load_muscle_file, load_pose
+from axdf_cli.model.muscle import MuscleModel, MuscleSpec
+from axdf_cli.model.pose import activation_problems, muscle_range_warnings, parse_frames, subject_points
+from axdf_cli.model.skeleton import forward_kinematics
 
 DEFAULT_OUT = "out/run"
 
@@ -64,7 +64,7 @@ def _display_path(p: str, cwd: str) -> str:
 
 def job_render_settings(job: Job | None):
     """The job's ``render:`` settings, parsed by the loader (rendering off without a job)."""
-    from axdf_cli.render.settings import RenderSettings
+    from axdf_cli.specs.render import RenderSettings
 
     return job.render if job is not None else RenderSettings()
 

@@ -19,10 +19,10 @@ from pathlib import Path
 
 import numpy as np
 
-from axdf_cli import atomic
+from axdf_cli.fileio import atomic
 from axdf_cli.formats import FORMATS
 from axdf_cli.formats.sequence import SequenceInfo
-from axdf_cli.runfolder import USD_BONES, USD_STAGE, is_file_with, rest_mesh_relpath, sequence_relpath
+from axdf_cli.fileio.runfolder import USD_BONES, USD_STAGE, is_file_with, rest_mesh_relpath, sequence_relpath
 
 # --format name -> streaming writer of a per-sequence format (a view of FORMATS)
 SEQUENCE_WRITERS = {name: f.writer for name, f in FORMATS.items() if f.layout == "sequence"}
@@ -112,7 +112,7 @@ def write_run_files(plan, writer, bone_rows: np.ndarray, bounds: np.ndarray, fra
     hashed, skipped on resume when unchanged): the point caches' rest meshes, and for USD
     ``usd/bones.usdc`` and the root stage ``scene.usda``. ``bone_rows``: (F, B, 7) x y z qw
     qx qy qz; ``bounds``: (2, 3) of every vertex written; ``framing``: (N, 3) what the
-    automatic camera frames (:func:`axdf_cli.run.plan.framing`), as ``--render`` frames it."""
+    automatic camera frames (:func:`axdf_cli.pipeline.plan.framing`), as ``--render`` frames it."""
     from axdf_cli.formats.ply import PlyWriter
 
     for fmt in sequence_formats(plan.formats):
@@ -144,8 +144,8 @@ def usd_camera(plan, bounds, framing) -> dict:
     """The run's camera for the USD stage: the first panel of the render settings' view, the
     camera ``axdf run --render`` uses (framed on ``framing``)."""
     from axdf_cli.render.camera import sequence_cameras
-    from axdf_cli.render.settings import RenderSettings
-    from axdf_cli.scene import Scene
+    from axdf_cli.specs.render import RenderSettings
+    from axdf_cli.render.scene import Scene
 
     settings = plan.render if plan.render is not None else RenderSettings()
     scene = Scene((), (), np.asarray(bounds, np.float64), tuple(int(f) for f in plan.frames),

@@ -2,7 +2,7 @@
 user's files safe.
 
 One module for everything that knows the layout (README "What a run writes"), shared by
-``axdf run`` (:mod:`axdf_cli.run`), ``axdf render`` and reading a run back
+``axdf run`` (:mod:`axdf_cli.pipeline`), ``axdf render`` and reading a run back
 (:mod:`axdf_cli.render.runio`)::
 
     manifest.json                 MANIFEST_KEYS, in that order
@@ -43,7 +43,7 @@ import stat
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 
-from axdf_cli import atomic
+from axdf_cli.fileio import atomic
 from axdf_cli.errors import EnvironmentProblem, InputError, Mark
 
 MANIFEST = "manifest.json"

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from axdf_cli.errors import InputError, Mark
-from axdf_cli.yamlio import nearest
+from axdf_cli.fileio.yamlio import nearest
 
 #: Frames sampled at once when scanning a whole sequence (bounds memory for long poses).
 SCAN_FRAMES = 65536
@@ -215,7 +215,7 @@ def subject_points(pose, bone_vertices: dict) -> np.ndarray:
     kinematics (batched over frames), grown by FRAMING_PAD (at most a share of the extent) each
     way. What a camera frames: it depends on the skeleton and the whole pose, never on which
     frames are written or on the muscles."""
-    from axdf_cli.skeleton import forward_kinematics
+    from axdf_cli.model.skeleton import forward_kinematics
 
     skel = pose.skeleton
     joints = set(bone_vertices)

@@ -1,6 +1,6 @@
 """``make bench``: one table of speed figures, every figure and every limit measured in the same run.
 
-    python -m axdf_cli.bench [--quick] [--long] [--profile]
+    python -m benchmarks.bench [--quick] [--long] [--profile]
 
 Rows (medians of repeated runs timed with ``time.perf_counter``; the machine may be shared,
 so figures are noisy and only ratios taken in the same run are compared with targets):
@@ -49,12 +49,12 @@ from pathlib import Path
 
 import numpy as np
 
-from axdf_cli import atomic
+from axdf_cli.fileio import atomic
 from axdf_cli.formats import ObjWriter, PlyWriter
-from axdf_cli.loaders import Pose, expand_muscle_paths, load_muscle_file, load_pose
-from axdf_cli.muscle import OCT, MuscleModel, MuscleSpec
-from axdf_cli.pose import effective_tension, sample_activation, sample_coordinates
-from axdf_cli.skeleton import forward_kinematics
+from axdf_cli.specs import Pose, expand_muscle_paths, load_muscle_file, load_pose
+from axdf_cli.model.muscle import OCT, MuscleModel, MuscleSpec
+from axdf_cli.model.pose import effective_tension, sample_activation, sample_coordinates
+from axdf_cli.model.skeleton import forward_kinematics
 
 ROOT = Path(__file__).resolve().parent.parent
 GAIT_MUSCLES = ROOT / "muscles" / "gait2392"
@@ -206,7 +206,7 @@ def evaluate_all(models: list[MuscleModel], world: np.ndarray, tension: np.ndarr
 
 def time_evaluation(models, world, tension, repeats: int, chunk: int | None = None, coords=None) -> float:
     """µs per muscle-frame (median of ``repeats`` passes)."""
-    from axdf_cli.run import CHUNK_FRAMES
+    from axdf_cli.pipeline import CHUNK_FRAMES
 
     chunk = chunk or CHUNK_FRAMES
     evaluate_all(models, world[:chunk], tension[:chunk], chunk,
@@ -393,8 +393,8 @@ def run_subprocess(args: list[str], cwd: Path = ROOT) -> dict:
 
 def end_to_end(job: Path, out: Path, fmt: str = "ply") -> dict:
     """``axdf run JOB --no-render`` in a subprocess: wall time, frames, peak memory."""
-    from axdf_cli.loaders import load_job
-    from axdf_cli.run import plan_run
+    from axdf_cli.specs import load_job
+    from axdf_cli.pipeline import plan_run
 
     r = run_subprocess(["run", str(job), "--out", str(out), "--format", fmt, "--no-render", "--quiet"])
     if r["rc"] != 0:
@@ -412,8 +412,8 @@ def profile_run(job: Path, out: Path, fmt: str = "ply", top: int = 0) -> dict:
     """Run ``execute`` in-process under cProfile (no rendering): seconds in evaluation (twist
     references, kinematics, ``MuscleModel.evaluate``), in writing (encode, sha256, atomic
     writes) and in total; ``top`` functions by own time as text."""
-    from axdf_cli.loaders import load_job
-    from axdf_cli.run import execute, plan_run
+    from axdf_cli.specs import load_job
+    from axdf_cli.pipeline import execute, plan_run
 
     t0 = time.perf_counter()
     plan = plan_run(load_job(job), out_arg=str(out), fmt_arg=fmt)
@@ -456,8 +456,8 @@ def time_sequence_writers(models: list[MuscleModel], world: np.ndarray, tension:
     pages being written back is slowed by the disk, not by its own work). The frames are evaluated once beforehand (``models`` cycled over the
     muscles, each file its own)."""
     from axdf_cli.formats.sequence import SequenceInfo
-    from axdf_cli.run import CHUNK_FRAMES
-    from axdf_cli.run.sequences import SEQUENCE_WRITERS
+    from axdf_cli.pipeline import CHUNK_FRAMES
+    from axdf_cli.pipeline.sequences import SEQUENCE_WRITERS
 
     F = world.shape[0]
     data = []
@@ -513,9 +513,9 @@ def time_sequence_writers(models: list[MuscleModel], world: np.ndarray, tension:
 PACKED_SCRIPT = r"""
 import json, resource, sys, time, dataclasses
 from pathlib import Path
-from axdf_cli.bench import stretched_pose
-from axdf_cli.loaders import load_job
-from axdf_cli.run import plan_run, execute
+from benchmarks.bench import stretched_pose
+from axdf_cli.specs import load_job
+from axdf_cli.pipeline import plan_run, execute
 job, n, fmt, out = sys.argv[1], int(sys.argv[2]), sys.argv[3], Path(sys.argv[4])
 plan = plan_run(load_job(job), out_arg=str(out), fmt_arg=None if fmt == "none" else fmt)
 plan.pose = stretched_pose(plan.pose, n)
@@ -603,7 +603,7 @@ def time_dataset(n_samples: int, jobs: int, out: Path) -> dict:
     one view each; a shard 0/K of its 1000), in process: wall seconds and per-stage seconds."""
     from axdf_cli.dataset import engine
     from axdf_cli.dataset.worker import build_context
-    from axdf_cli.loaders import RefPolicy
+    from axdf_cli.specs import RefPolicy
 
     ctx = build_context(DATASET_FILE, policy=RefPolicy.for_command([DATASET_FILE]))
     shard = (0, max(1, len(ctx.sequences) // n_samples))
@@ -618,7 +618,7 @@ def dataset_evaluation(n_sequences: int) -> float:
     kinematics, ``evaluate``), timed alone on the data set's first sequences."""
     from axdf_cli.dataset import runner
     from axdf_cli.dataset.worker import build_context, sequence_pose
-    from axdf_cli.loaders import RefPolicy
+    from axdf_cli.specs import RefPolicy
 
     ctx = build_context(DATASET_FILE, policy=RefPolicy.for_command([DATASET_FILE]))
     t = 0.0
@@ -680,8 +680,8 @@ def run_jobs(job: Path, out: Path, jobs: int, frames: str | None = None) -> dict
 
 def render_jobs_rows(table: "Table", tmp: Path, quick: bool) -> None:
     """``make demo``'s first job at --jobs 1 and --jobs 2 (the frames split over render workers)."""
-    from axdf_cli.loaders import load_job
-    from axdf_cli.run import plan_run
+    from axdf_cli.specs import load_job
+    from axdf_cli.pipeline import plan_run
 
     frames = "0:191:2" if quick else None
     plan = plan_run(load_job(DEMO_JOB), out_arg=str(tmp / "unused"), frames_arg=frames)
@@ -704,9 +704,9 @@ def render_jobs_rows(table: "Table", tmp: Path, quick: bool) -> None:
 LONG_SCRIPT = r"""
 import json, sys, time
 import numpy as np
-from axdf_cli.bench import stretched_pose
-from axdf_cli.loaders import load_job
-from axdf_cli.run import plan_run, evaluate_chunks, chunk_frames
+from benchmarks.bench import stretched_pose
+from axdf_cli.specs import load_job
+from axdf_cli.pipeline import plan_run, evaluate_chunks, chunk_frames
 job, n = sys.argv[1], int(sys.argv[2])
 plan = plan_run(load_job(job))
 plan.pose = stretched_pose(plan.pose, n)
@@ -779,7 +779,7 @@ def _mbs(nbytes: float, us: float) -> str:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m axdf_cli.bench", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="python -m benchmarks.bench", description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="fewer frames and repeats (about a minute)")
     ap.add_argument("--long", action="store_true", help=f"also {LONG_FRAMES} frames x all muscles: peak memory")
     ap.add_argument("--profile", action="store_true", help="print the top functions of the slow rows")

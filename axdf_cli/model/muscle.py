@@ -41,10 +41,11 @@ from enum import Enum
 
 import numpy as np
 
-from axdf_cli import bspline, kernels, rmf
+from axdf_cli.model import bspline, kernels, rmf
 from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError, Mark
-from axdf_cli.paths.points import PathSpec
+from axdf_cli.model.paths.points import PathSpec
+from axdf_cli.model.skeleton import bone_of
 
 OCT = 8  # control points per section (the paper's choice)
 
@@ -210,7 +211,7 @@ class MuscleModel:
         self.rest_q = skeleton.rest_coordinates()[None] if skeleton is not None else None
         self._last = (None, None)  # (control points, could-not-wrap flags) of the last path evaluation
         if spec.path is not None:
-            from axdf_cli.paths.path import PathModel
+            from axdf_cli.model.paths.path import PathModel
 
             self.path = PathModel(spec.path, bone_index, skeleton.coord_index if skeleton is not None else None)
             self.n_axis = self.path.n
@@ -219,7 +220,7 @@ class MuscleModel:
             return
         self.path = None
         self.n_axis = len(spec.axis)
-        self.bones = np.array([_bone(bone_index, p) for p in spec.axis])
+        self.bones = np.array([bone_of(bone_index, p.bone, p.mark) for p in spec.axis])
         self.at = np.array([p.at for p in spec.axis], dtype=np.float64)  # (n, 3)
         self.origin_bone = int(self.bones[0])
         self.insertion_bone = int(self.bones[-1])
@@ -492,7 +493,7 @@ class MuscleModel:
 
     def _surface(self, fixed: np.ndarray, scaled: np.ndarray, p: np.ndarray, t: np.ndarray,
                  s0: np.ndarray, v0: float | None):
-        """The surface stage (compiled, :func:`axdf_cli.kernels.surface_stage`): bound control
+        """The surface stage (compiled, :func:`axdf_cli.model.kernels.surface_stage`): bound control
         points fixed + s * scaled (F, 8N, 3), axis control points p (F, n, 3), sample tangents
         t (F, S, 3), starting scales s0 (F,), the volume to keep v0 (None: keep s0) → vertices (F, V, 3), normals (F, V, 3), volume
         (F,), scale (F,), no-solution flags (F,)."""
@@ -514,17 +515,6 @@ class MuscleModel:
 
 def _spec_mark(spec: MuscleSpec) -> Mark:
     return spec.axis[0].mark if spec.axis else spec.path.points[0].mark
-
-
-def _bone(index: dict[str, int], p: AxisPoint) -> int:
-    return _bone_of(index, p.bone, p.mark)
-
-
-def _bone_of(index: dict[str, int], bone: str, mark) -> int:
-    if bone not in index:
-        known = ", ".join(sorted(index))
-        raise InputError(mark, f"unknown bone {bone!r}", f"bones of the skeleton: {known}")
-    return index[bone]
 
 
 def _unit(d: np.ndarray) -> np.ndarray:

@@ -31,7 +31,7 @@ import os
 import signal
 import threading
 
-from axdf_cli import atomic
+from axdf_cli.fileio import atomic
 from axdf_cli.errors import EnvironmentProblem
 
 _STATE = {"parent": None, "in_task": False, "stopping": False}

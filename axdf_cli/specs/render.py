@@ -36,7 +36,7 @@ import re
 from dataclasses import dataclass, replace
 
 from axdf_cli.errors import InputError, Mark
-from axdf_cli.yamlio import Fields, check_number, check_vector, parse_yaml
+from axdf_cli.fileio.yamlio import Fields, check_number, check_vector, parse_yaml
 
 VIEWS = ("auto", "front", "side", "top", "sheet")
 

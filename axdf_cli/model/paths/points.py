@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from axdf_cli.errors import InputError, Mark
+from axdf_cli.model.skeleton import bone_of
 
 
 @dataclass(frozen=True)
@@ -22,7 +23,7 @@ class Moving:
     """One axis of a moving point: the coordinate and the function giving the location."""
 
     coord: str
-    function: object  # an axdf_cli.skeleton function (axdf units)
+    function: object  # an axdf_cli.model.skeleton function (axdf units)
 
 
 @dataclass(frozen=True)
@@ -79,10 +80,9 @@ class PointsModel:
     """Vectorized evaluation of a path's points: positions (F, P, 3) and active flags (F, P)."""
 
     def __init__(self, spec: PathSpec, bone_index: dict[str, int], coord_index: dict[str, int] | None):
-        from axdf_cli.muscle import _bone_of
 
         self.spec = spec
-        self.bones = np.array([_bone_of(bone_index, p.bone, p.mark) for p in spec.points])
+        self.bones = np.array([bone_of(bone_index, p.bone, p.mark) for p in spec.points])
         self.at = np.array([p.at for p in spec.points], dtype=np.float64)
         need = spec.coordinates
         if need and coord_index is None:

@@ -1,6 +1,6 @@
 """Executing a plan: the mesh pass (in this process or forked workers), the tables, the
 render pass (in this process or render workers) and the manifest, written into the run
-folder (:mod:`axdf_cli.runfolder`)."""
+folder (:mod:`axdf_cli.fileio.runfolder`)."""
 from __future__ import annotations
 
 import time
@@ -9,23 +9,24 @@ from pathlib import Path, PurePosixPath
 
 import numpy as np
 
-from axdf_cli import __version__, runfolder
+from axdf_cli import __version__
+from axdf_cli.fileio import runfolder
 from axdf_cli.errors import InputError
 from axdf_cli.formats import WRITERS
-from axdf_cli.run.evaluate import evaluate_chunks, finite_or_rest, twist_references
-from axdf_cli.run.plan import RunPlan, display_path, framing
-from axdf_cli.run.pool import check_parent, process_map
-from axdf_cli.run.sequences import SequenceFiles, file_relpath, sequence_formats, write_run_files
-from axdf_cli.runfolder import (BONES_CSV, FRAME_EXTENSIONS, MANIFEST_INTERVAL_S, STATS, OutputWriter, bone_mesh_relpath,
+from axdf_cli.pipeline.evaluate import evaluate_chunks, finite_or_rest, twist_references
+from axdf_cli.pipeline.plan import RunPlan, display_path, framing
+from axdf_cli.workers import check_parent, process_map
+from axdf_cli.pipeline.sequences import SequenceFiles, file_relpath, sequence_formats, write_run_files
+from axdf_cli.fileio.runfolder import (BONES_CSV, FRAME_EXTENSIONS, MANIFEST_INTERVAL_S, STATS, OutputWriter, bone_mesh_relpath,
                                 describe_differences, frame_relpath, gl_record, is_file_with, mesh_relpath,
                                 write_manifest)
-from axdf_cli.skeleton import matrix_to_quaternion
+from axdf_cli.model.skeleton import matrix_to_quaternion
 
 
 def render_dict(settings) -> dict | None:
     if settings is None or not settings.enabled:
         return None
-    from axdf_cli.render.settings import settings_to_dict
+    from axdf_cli.specs.render import settings_to_dict
 
     return settings_to_dict(settings)
 
@@ -351,7 +352,7 @@ def _render_pass(plan: RunPlan, root: Path, previous: dict, writer: OutputWriter
     interrupted run rendered whole are kept (--resume). ``rendered["files"]`` follows the
     frames' files as they are written; ``manifest(files)`` is the in-progress manifest,
     written at checkpoints. Every frame's files end up in ``writer.files``."""
-    from axdf_cli.render.sequence import render_plan
+    from axdf_cli.pipeline.frames import render_plan
 
     done = rendered_frames(plan, previous, root)
     for f in sorted(done):

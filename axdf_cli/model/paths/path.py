@@ -16,11 +16,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from axdf_cli import bspline
+from axdf_cli.model import bspline
 from axdf_cli.errors import InputError
-from axdf_cli.paths import wrap as W
-from axdf_cli.paths.points import PathSpec, PointsModel, default_control_points
-from axdf_cli.skeleton import euler_xyz
+from axdf_cli.model.paths import wrap as W
+from axdf_cli.model.paths.points import PathSpec, PointsModel, default_control_points
+from axdf_cli.model.skeleton import bone_of, euler_xyz
 
 #: Samples of the path per axis control point.
 SAMPLES_PER_CONTROL_POINT = 4
@@ -45,7 +45,6 @@ def fit_matrix(n: int, k: int) -> tuple[np.ndarray, np.ndarray]:
 
 class PathModel:
     def __init__(self, spec: PathSpec, bone_index: dict[str, int], coord_index: dict[str, int] | None):
-        from axdf_cli.muscle import _bone_of
 
         self.spec = spec
         self.points = PointsModel(spec, bone_index, coord_index)
@@ -53,7 +52,7 @@ class PathModel:
         self.fractions, self.fit = fit_matrix(self.n, SAMPLES_PER_CONTROL_POINT * self.n)
         nw = len(spec.wraps)
         npt = len(spec.points)
-        self.wrap_bones = np.array([_bone_of(bone_index, w.bone, w.mark) for w in spec.wraps], dtype=np.int64)
+        self.wrap_bones = np.array([bone_of(bone_index, w.bone, w.mark) for w in spec.wraps], dtype=np.int64)
         self.wrap_local = np.zeros((nw, 4, 4))
         self.kind = np.zeros(nw, np.int64)
         self.prm = np.zeros((nw, 3))

@@ -3,10 +3,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from axdf_cli import rmf
-from axdf_cli.pose import effective_tension, sample_activation, sample_coordinates
-from axdf_cli.run.plan import RunPlan
-from axdf_cli.skeleton import forward_kinematics
+from axdf_cli.model import rmf
+from axdf_cli.model.pose import effective_tension, sample_activation, sample_coordinates
+from axdf_cli.pipeline.plan import RunPlan
+from axdf_cli.model.skeleton import forward_kinematics
 
 CHUNK_FRAMES = 128  # frames evaluated together: bounds memory for any sequence length
 EVAL_BUDGET_BYTES = 128 * 1024 * 1024  # per-muscle chunk memory budget (see chunk_frames)

@@ -22,6 +22,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from axdf_cli.errors import InputError
+
 # ----------------------------------------------------------------------------- functions
 
 
@@ -229,6 +231,15 @@ class Skeleton:
 
 
 # ----------------------------------------------------------------------------- rotations
+
+
+def bone_of(index: dict[str, int], bone: str, mark) -> int:
+    """The index of bone ``bone`` in a skeleton's ``bone_index``; an unknown name is an
+    :class:`InputError` at ``mark`` naming the skeleton's bones."""
+    if bone not in index:
+        known = ", ".join(sorted(index))
+        raise InputError(mark, f"unknown bone {bone!r}", f"bones of the skeleton: {known}")
+    return index[bone]
 
 
 def euler_xyz(deg) -> np.ndarray:
