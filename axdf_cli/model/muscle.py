@@ -406,10 +406,25 @@ class MuscleModel:
         return rmf.signed_angle(r_end, target, t_end)
 
     # -- evaluation -----------------------------------------------------------------------
-    def rmf_inputs(self, world: np.ndarray, coarse: bool = False, coords: np.ndarray | None = None):
+    def axis_points(self, world: np.ndarray, coords: np.ndarray | None = None) -> np.ndarray:
+        """The axis control points (F, n, 3) in the world where the bones (and the path) put
+        them: world (F, B, 4, 4), coordinates (F, C). A TIME stage (jiggle) may move them
+        before the surfaces are built (``rmf_inputs(..., p=)``)."""
+        return self._axis_points(world, coords)
+
+    def axis_moved(self, p: np.ndarray, moved: np.ndarray) -> None:
+        """The control points ``p`` that :meth:`axis_points` returned were moved to ``moved``
+        (same frames): a path's could-not-wrap flags of those frames stay with them."""
+        if self._last[0] is p:
+            self._last = (moved, self._last[1])
+
+    def rmf_inputs(self, world: np.ndarray, coarse: bool = False, coords: np.ndarray | None = None,
+                   p: np.ndarray | None = None):
         """Axis control points (F, n, 3), samples x (F, S, 3), unit tangents t and start vectors
-        r0 (F, 3): what :func:`rmf.propagate` needs (batched over muscles by the caller)."""
-        p = self._axis_points(world, coords)
+        r0 (F, 3): what :func:`rmf.propagate` needs (batched over muscles by the caller).
+        ``p``: the control points when the caller has them (moved by a TIME stage)."""
+        if p is None:
+            p = self._axis_points(world, coords)
         b, db = ("Bc", "dBc") if coarse else ("Bs", "dBs")
         x, t = self._samples(p, b, db)
         r0 = rmf.perpendicular_unit(world[:, self.origin_bone, :3, :3] @ self.r0_local, t[:, 0])

@@ -5,7 +5,9 @@ import numpy as np
 
 from axdf_cli.model import rmf
 from axdf_cli.model.pose import effective_tension, sample_activation, sample_coordinates
+from axdf_cli.pipeline.jiggle_stage import time_stages
 from axdf_cli.pipeline.plan import RunPlan
+from axdf_cli.pipeline.stages import Chunk
 from axdf_cli.model.skeleton import forward_kinematics
 
 CHUNK_FRAMES = 128  # frames evaluated together: bounds memory for any sequence length
@@ -84,10 +86,12 @@ def _coarse_roll(plan: RunPlan, frames: np.ndarray) -> np.ndarray:
                     axis=1)
 
 
-def batched_axis_frames(models, indices, world: np.ndarray, coarse: bool = False, coords=None) -> dict:
+def batched_axis_frames(models, indices, world: np.ndarray, coarse: bool = False, coords=None,
+                        axis: dict | None = None) -> dict:
     """Axis frames (p, x, t, r) of several muscles at once, by muscle index. Muscles with the
     same number of axis samples share one double-reflection recurrence, so its loop over the
-    samples runs once per group, not once per muscle (row by row the same arithmetic)."""
+    samples runs once per group, not once per muscle (row by row the same arithmetic).
+    ``axis``: muscle -> control points (F, n, 3) already placed (and moved by TIME stages)."""
     groups: dict[int, list[int]] = {}
     for j in indices:
         m = models[j]
@@ -95,7 +99,7 @@ def batched_axis_frames(models, indices, world: np.ndarray, coarse: bool = False
     nf = world.shape[0]
     out = {}
     for js in groups.values():
-        ins = [models[j].rmf_inputs(world, coarse, coords) for j in js]
+        ins = [models[j].rmf_inputs(world, coarse, coords, None if axis is None else axis[j]) for j in js]
         r = rmf.propagate(np.concatenate([i[1] for i in ins]), np.concatenate([i[2] for i in ins]),
                           np.concatenate([i[3] for i in ins]))
         for k, j in enumerate(js):
@@ -115,20 +119,35 @@ def evaluate_chunks(plan: RunPlan, chunk: int | None = None, twist_ref: np.ndarr
                     muscles: list[int] | None = None):
     """Yield (frame_slice, world (C, B, 4, 4), results) over the selected frames, where
     ``results`` is a lazy iterator of (muscle index, FrameResult): a consumer that handles one
-    muscle at a time holds one muscle's chunk in memory, never all of them."""
+    muscle at a time holds one muscle's chunk in memory, never all of them.
+
+    TIME stages (:func:`~axdf_cli.pipeline.jiggle_stage.time_stages`) move the axis control
+    points between the axis and the surfaces, their state carried from chunk to chunk from
+    the pose's first frame (a stage advances over the frames not selected itself)."""
     if twist_ref is None:
         twist_ref = twist_references(plan)
     chunk = chunk or chunk_frames(plan)
     names = plan.names
+    which = list(range(len(plan.models))) if muscles is None else list(muscles)
+    stages = time_stages(plan)
+    states = [st.start(plan) for st in stages]
     for s in range(0, len(plan.frames), chunk):
         fr = plan.frames[s:s + chunk]
         q = sample_coordinates(plan.pose, fr)
         world = forward_kinematics(plan.pose.skeleton, q)
         act = sample_activation(plan.pose, names, fr)
+        axis = None
+        if stages:  # the axis first, then the TIME stages on it (in order, eagerly: they carry state)
+            placed = {j: plan.models[j].axis_points(world, q) for j in which}
+            ck = Chunk(slice(s, s + len(fr)), fr, q, world, act, which, placed)
+            for k, st in enumerate(stages):
+                states[k], ck = st(states[k], ck)
+            axis = ck.axis
+            for j in which:
+                plan.models[j].axis_moved(placed[j], axis[j])
 
-        def results(world=world, act=act, s=s, n=len(fr), q=q):
-            which = list(range(len(plan.models))) if muscles is None else list(muscles)
-            frames = batched_axis_frames(plan.models, which, world, coords=q)
+        def results(world=world, act=act, s=s, n=len(fr), q=q, axis=axis):
+            frames = batched_axis_frames(plan.models, which, world, coords=q, axis=axis)
             for j in which:
                 m = plan.models[j]
                 yield j, m.evaluate(world, effective_tension(m.spec.tension, act[:, j]), twist_ref[s:s + n, j],

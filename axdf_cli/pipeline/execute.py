@@ -68,6 +68,7 @@ def manifest_dict(plan: RunPlan, files: dict, warnings: list, complete: bool, ex
             "skeleton": plan.pose.skeleton.name,
             "fps": plan.pose.fps,
             "render": render_dict(plan.render),
+            "jiggle": plan.jiggle,
         },
         "frames": [int(f) for f in plan.frames],
         "muscles": [

@@ -33,6 +33,7 @@ class RunPlan:
     notes: list = field(default_factory=list)  # remarks printed with --verbose; not warnings
     bone_meshes: dict = field(default_factory=dict)  # bone index -> (vertices (V,3) f4, faces (T,3) i4, file bytes)
     frame_warnings: list = field(default_factory=list)  # [(frame index, muscle index, message)] known before evaluation
+    jiggle: bool = True  # the jiggle stage (muscles' `jiggle:`); off: --no-jiggle or a job's `jiggle: false`
 
     @property
     def names(self) -> list[str]:
@@ -86,12 +87,14 @@ def load_muscle_specs(files) -> list[MuscleSpec]:
 
 
 def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, fmt_arg=None,
-             frames_arg=None, render=None, policy: RefPolicy | None = None, clamp_ranges: bool = False) -> RunPlan:
+             frames_arg=None, render=None, policy: RefPolicy | None = None, clamp_ranges: bool = False,
+             jiggle: bool | None = None) -> RunPlan:
     """Load and check every input; build the muscle models. Writes nothing.
 
     ``render``: the RenderSettings to use (None: the job's ``render:``); ``policy``: where
     referenced files may lie (default: the job's); ``clamp_ranges``: hold coordinates inside
-    their ranges (as the pose's ``clamp_ranges``)."""
+    their ranges (as the pose's ``clamp_ranges``); ``jiggle``: False switches the jiggle stage
+    off (None: the job's ``jiggle``, on by default)."""
     policy = policy or (job.policy if job is not None else RefPolicy())
     if pose_arg is not None:
         pose_path, pose_mark = Path(pose_arg), Mark(str(pose_arg))
@@ -156,8 +159,28 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
     for s in srcs:
         if Path(s).is_file():
             inputs[display_path(Path(s))] = atomic.sha256_file(s)
+    if jiggle is None:
+        jiggle = job.jiggle if job is not None else True
+    if jiggle:
+        notes += jiggle_notes(pose, specs)
     return RunPlan(pose, specs, models, frames, formats, out, inputs, render=render, warnings=warnings,
-                   bone_meshes=bone_meshes, notes=notes, frame_warnings=muscle_range_warnings(pose, frames, specs))
+                   bone_meshes=bone_meshes, notes=notes, frame_warnings=muscle_range_warnings(pose, frames, specs),
+                   jiggle=bool(jiggle))
+
+
+def jiggle_notes(pose: Pose, specs) -> list[str]:
+    """Remarks on ``jiggle:`` frequencies that the pose's frames cannot show: above the
+    Nyquist frequency fps / 2 the ring aliases between frames (the motion is still exact)."""
+    out = []
+    for s in specs:
+        j = s.jiggle
+        if j is None:
+            continue
+        top = max(j.frequency, j.tensed_frequency or 0.0)
+        if top > 0.5 * pose.fps:
+            out.append(f"{s.name}: jiggle at up to {top:g} Hz is above half the pose's {pose.fps:g} fps; "
+                       "the ring aliases between frames (a pose with more frames per second shows it)")
+    return out
 
 
 def check_formats(formats, frames, frames_mark: Mark) -> None:
