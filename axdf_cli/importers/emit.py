@@ -36,6 +36,7 @@ import yaml
 
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.importers.osim import Axis, FConst, FLinear, FMult, FPoly, FSpline, Model, Muscle
+from axdf_cli.model.jiggle import JiggleSpec
 from axdf_cli.model.skeleton import Skeleton, Spline, forward_kinematics
 
 DEG = 180.0 / math.pi
@@ -65,6 +66,34 @@ BELLY_PROFILE = ((0.04, 0.45), (0.15, 0.8), (0.32, 0.97), (0.5, 1.0), (0.68, 0.9
 #: MIN_TENDON_FRACTION of the path gets none (the belly tapers into the attachment).
 TENDON_SECTIONS = (0.3, 0.75)
 MIN_TENDON_FRACTION = 0.02
+
+#: Secondary motion (``jiggle:``, README "Jiggle") of the calf's and the thigh's muscles, by
+#: name without the side suffix (OpenSim's gait2392/gait2354 names). Soft tissue of the leg
+#: rings at 10-50 Hz after a heel strike (Wakeling & Nigg 2001), but those are skin-mounted
+#: accelerometers on the surface's fast, small vibrations, which frames at 24-60 fps cannot
+#: show (above half the frame rate they alias). Our jiggle moves the whole axis: the slow,
+#: visible sway animators key (a few Hz), lightly damped when relaxed; a tensed muscle rings
+#: faster and dies out sooner, as the measured frequency and damping rise with muscle force.
+#: The thigh's bellies are heavier than the calf's: a lower frequency.
+JIGGLE_CALF = JiggleSpec(6.0, 0.25, tensed_frequency=10.0, tensed_damping_ratio=0.5)
+JIGGLE_THIGH = JiggleSpec(5.0, 0.3, tensed_frequency=9.0, tensed_damping_ratio=0.5)
+JIGGLE = {**{m: JIGGLE_CALF for m in ("med_gas", "lat_gas", "soleus", "tib_ant", "tib_post", "per_long",
+                                      "per_brev", "per_tert", "ext_dig", "ext_hal", "flex_dig", "flex_hal")},
+          **{m: JIGGLE_THIGH for m in ("rect_fem", "vas_med", "vas_int", "vas_lat", "bifemlh", "bifemsh",
+                                       "semimem", "semiten", "sar", "grac", "add_long", "add_brev", "add_mag1",
+                                       "add_mag2", "add_mag3")}}
+
+
+def jiggle_doc(spec: JiggleSpec) -> dict:
+    """A muscle's ``jiggle:`` mapping (docs/FORMATS.md), optional keys only when set."""
+    d = {"frequency": spec.frequency, "damping_ratio": spec.damping_ratio}
+    if spec.weight is not None:
+        d["weight"] = list(spec.weight)
+    tensed = {k: v for k, v in (("frequency", spec.tensed_frequency), ("damping_ratio", spec.tensed_damping_ratio))
+              if v is not None}
+    if tensed:
+        d["tensed"] = tensed
+    return d
 
 
 # ----------------------------------------------------------------------------- functions
@@ -321,8 +350,10 @@ def muscle_doc(m: Muscle, skel: Skeleton, world: np.ndarray, model: Model | None
     def document(r: float) -> dict:
         sections = [{"t": t, "radii": [r_t, r_t] if f is None else [f * r, f * r], "angle": 0.0}
                     for t, f in zip(ts, factors)]
+        jig = JIGGLE.get(SIDE_SUFFIX.sub("", m.name))
         return {"muscle": m.name, "color": PALETTES[palette](m.name), "volume": "exact", "path": path,
-                **({"wrap": wraps} if wraps else {}), "sections": sections, "tendons": [t_o, t_i]}
+                **({"wrap": wraps} if wraps else {}), "sections": sections, "tendons": [t_o, t_i],
+                **({"jiggle": jiggle_doc(jig)} if jig is not None else {})}
 
     # a first guess from the profile's mean squared radius, then the model's own exact-volume
     # solve (belly points scale, tendon points do not) gives the widest radius R
