@@ -27,6 +27,10 @@ so figures are noisy and only ratios taken in the same run are compared with tar
 9. rendering split over processes: ``make demo``'s first job (poses/jobs/demo.yaml, meshes and
    512x512 frames; every 2nd frame with ``--quick``) as a subprocess at ``--jobs 1`` and
    ``--jobs 2``, and their ratio.
+10. jiggle: ``evaluate_chunks`` of the gait2392 walk (92 muscles, the whole trial; 54 jiggle)
+   with and without the jiggle stage, µs per muscle-frame, and the stage alone; and a
+   ``--frames`` subset's extra cost (frames not selected are advanced too).
+   ``--only jiggle`` runs these rows alone.
 
 ``--long`` adds the memory check of 10,000 frames x 92 muscles streamed through
 ``run.evaluate_chunks`` in a subprocess (several minutes). Helpers are importable for the
@@ -730,6 +734,74 @@ print(json.dumps({"seconds": dt, "muscle_frames": n * nm, "chunk": chunk_frames(
 """
 
 
+def time_chunks(plan, repeats: int) -> float:
+    """Median seconds of evaluating every selected frame of ``plan`` (all muscles, no writing)
+    through ``evaluate_chunks``, twist references computed once outside."""
+    from axdf_cli.pipeline.evaluate import evaluate_chunks, twist_references
+
+    twist = twist_references(plan)
+
+    def once():
+        for _, _, results in evaluate_chunks(plan, twist_ref=twist):
+            for _ in results:
+                pass
+
+    return median_time(once, repeats)
+
+
+def time_jiggle_stage(plan, repeats: int) -> tuple[float, int]:
+    """Median seconds of the jiggle stage alone over the plan's frames (the axis placed once,
+    outside the timing), and the number of jiggling muscles."""
+    from axdf_cli.pipeline.evaluate import chunk_frames
+    from axdf_cli.pipeline.jiggle_stage import JiggleStage
+    from axdf_cli.pipeline.stages import Chunk
+
+    stage = JiggleStage(plan)
+    which = list(range(len(plan.models)))
+    chunks = []
+    size = chunk_frames(plan)
+    for s in range(0, len(plan.frames), size):
+        fr = plan.frames[s:s + size]
+        q = sample_coordinates(plan.pose, fr)
+        world = forward_kinematics(plan.pose.skeleton, q)
+        act = sample_activation(plan.pose, plan.names, fr)
+        axis = {j: plan.models[j].axis_points(world, q) for j in which}
+        chunks.append(Chunk(slice(s, s + len(fr)), fr, q, world, act, which, axis))
+
+    def once():
+        state = stage.start(plan)
+        for ck in chunks:
+            state, _ = stage(state, ck)
+
+    return median_time(once, repeats), len(stage.specs)
+
+
+def jiggle_rows(table: "Table", reps: int) -> None:
+    """Rows 10: the jiggle stage's cost on the gait2392 walk (or the demo when not shipped)."""
+    from axdf_cli.pipeline.plan import plan_run
+    from axdf_cli.specs import load_job
+
+    job = load_job(GAIT_JOB if GAIT_JOB.is_file() else DEMO_JOB)
+    base = plan_run(job)
+    plan = dataclasses.replace(base, frames=base.pose.frames)  # the whole trial
+    off = dataclasses.replace(plan, jiggle=False)
+    nm, nf = len(plan.models), len(plan.frames)
+    mf = nm * nf
+    t_on, t_off = time_chunks(plan, reps), time_chunks(off, reps)
+    t_stage, n_jig = time_jiggle_stage(plan, reps)
+    table.section(f"jiggle ({plan.pose.name}: {nm} muscles, {n_jig} with jiggle, {nf} frames): evaluate_chunks "
+                  "(all muscles, no writing) with the stage vs without")
+    table.add("evaluate with jiggle", f"{t_on / mf * 1e6:.1f} µs/mf", f"without {t_off / mf * 1e6:.1f} µs/mf",
+              f"{t_on / t_off:.3f}x")
+    table.add("the jiggle stage alone (axis placed outside)", f"{t_stage / mf * 1e6:.2f} µs/mf",
+              f"{t_stage / (n_jig * nf) * 1e6:.2f} µs per jiggling muscle-frame")
+    every4 = dataclasses.replace(plan, frames=plan.frames[::4])
+    t_sub, t_sub_off = time_chunks(every4, reps), time_chunks(dataclasses.replace(every4, jiggle=False), reps)
+    per = nm * len(every4.frames)
+    table.add("--frames every 4th (frames between advanced too)", f"{t_sub / per * 1e6:.1f} µs/mf",
+              f"without {t_sub_off / per * 1e6:.1f} µs/mf", f"{t_sub / t_sub_off:.3f}x")
+
+
 def long_memory(job: Path, n_frames: int = LONG_FRAMES) -> dict:
     """Stream ``n_frames`` (the job's pose stretched) x all muscles through evaluate_chunks in
     a subprocess, keeping what ``execute`` keeps (stats, the manifest's file list); peak RSS."""
@@ -784,6 +856,7 @@ def main(argv=None) -> int:
     ap.add_argument("--long", action="store_true", help=f"also {LONG_FRAMES} frames x all muscles: peak memory")
     ap.add_argument("--profile", action="store_true", help="print the top functions of the slow rows")
     ap.add_argument("--tmp", default=None, help="folder for the written files (default: a new temporary folder)")
+    ap.add_argument("--only", choices=["jiggle"], default=None, help="run only these rows")
     ap.add_argument("--dataset-samples", type=int, default=None, metavar="N",
                     help=f"samples of the data-set rows (default {DATASET_SAMPLES}, 100 with --quick; 0: skip them)")
     args = ap.parse_args(argv)
@@ -795,6 +868,11 @@ def main(argv=None) -> int:
     tmp = Path(tempfile.mkdtemp(prefix="axdf-bench-", dir=args.tmp))
     table = Table()
     profiles: list[str] = []
+    if args.only == "jiggle":
+        jiggle_rows(table, reps)
+        print(table.text())
+        print(f"(µs/mf: microseconds per muscle-frame; total bench time {time.perf_counter() - t_start:.0f} s)")
+        return 0
     try:
         case = load_case(n_frames, max(counts))
         job = GAIT_JOB if case.name == "gait2392" and GAIT_JOB.is_file() else DEMO_JOB
@@ -903,6 +981,9 @@ def main(argv=None) -> int:
         # 9. rendering over processes
         if "error" not in rf:
             render_jobs_rows(table, tmp, args.quick)
+
+        # 10. jiggle
+        jiggle_rows(table, reps)
 
         # --long
         if args.long:
