@@ -26,6 +26,7 @@ from axdf_cli.dataset.sampling import sample_pose, with_activation
 from axdf_cli.dataset.spec import (DatasetSpec, Sequence, expand_sequences, load_dataset, load_motion,
                                    motion_frames)
 from axdf_cli.specs import load_skeleton
+from axdf_cli.model.keypoints import skeleton_keypoints
 from axdf_cli.model.pose import sample_activation, sample_coordinates
 from axdf_cli.model.skeleton import forward_kinematics
 
@@ -44,6 +45,7 @@ class Context:
     muscles: list
     models: list
     bone_meshes: dict  # bone index -> (vertices, faces, bytes)
+    keypoints: object  # axdf_cli.model.keypoints.Keypoints: the labelled joints and end points
     inputs: dict  # display path -> sha256 (dataset file, skeleton, muscles, bone meshes)
     motion_inputs: dict  # motion name -> {display path: sha256}
     scene: object
@@ -76,8 +78,9 @@ def build_context(path: Path | str, seed: int | None = None, policy=None) -> Con
                   bones=tuple(SceneBone(skel.bones[i].name, bone_meshes[i][0], bone_meshes[i][1]) for i in scene_bones),
                   bounds=np.zeros((2, 3)), frames=())
     sequences = expand_sequences(spec)
-    ctx = Context(spec, sequences, skel, runner.without_meshes(skel), muscles, models, bone_meshes, inputs,
-                  motion_inputs, scene, scene_bones, b"", "")
+    keypoints = skeleton_keypoints(skel, {i: m[0] for i, m in bone_meshes.items()})
+    ctx = Context(spec, sequences, skel, runner.without_meshes(skel), muscles, models, bone_meshes, keypoints,
+                  inputs, motion_inputs, scene, scene_bones, b"", "")
     ctx.dataset_json = (json.dumps(dataset_dict(ctx), indent=1) + "\n").encode()
     ctx.digest = hashlib.sha256(ctx.dataset_json).hexdigest()
     return ctx
@@ -94,8 +97,12 @@ def dataset_dict(ctx: Context) -> dict:
         "skeleton": skel.name,
         "coordinates": [{"name": c.name, "type": c.type, "unit": "deg" if c.type == "rotation" else "m"}
                         for c in skel.coordinates],
-        "joints": [b.name for b in skel.bones],
-        "parents": [b.parent for b in skel.bones],
+        "joints": list(ctx.keypoints.names),
+        "joint_parents": ctx.keypoints.parents.tolist(),
+        "joint_bones": [skel.bones[b].name for b in ctx.keypoints.bones],
+        "joint_kinds": list(ctx.keypoints.kinds),
+        "bone_names": [b.name for b in skel.bones],
+        "bone_parents": [b.parent for b in skel.bones],
         "muscles": ctx.names,
         "views": list(spec.views),
         "image": {"width": W, "height": H, "passes": list(spec.passes)},
@@ -106,10 +113,12 @@ def dataset_dict(ctx: Context) -> dict:
         "bones": {skel.bones[i].name: f"bones/{skel.bones[i].name}.ply" for i in sorted(ctx.bone_meshes)},
         "convention": ("world Z up, metres, degrees; cameras OpenCV (x right, y down, z forward), "
                        "world_to_camera maps world to camera, K in pixels with pixel (0,0)'s centre at (0.5,0.5); "
-                       "joint j of bone j is the origin of its joint frame"),
+                       "joints are named anatomical keypoints fixed in bones: a joint where a bone with DOFs "
+                       "attaches to its parent (the origin of its joint frame), or an end point (head top, "
+                       "fingertips, toe tips)"),
         "labels": {
             "frames": "(F,) frame numbers", "coords": "(F, C) coordinate values (deg, m)",
-            "bone_world": "(F, B, 4, 4) bone frames in the world", "joints3d": "(F, J, 3) world joint centres",
+            "bone_world": "(F, B, 4, 4) bone frames in the world", "joints3d": "(F, J, 3) world keypoints",
             "joints2d": "(F, V, J, 2) pixels", "joints_depth": "(F, V, J) camera z (m)",
             "visible": "(F, V, J) bool", "muscle_length": "(F, M) m", "muscle_volume": "(F, M) m^3",
             "muscle_activation": "(F, M) 0..1", "K": "(V, 3, 3)", "world_to_camera": "(F, V, 4, 4)",
@@ -198,7 +207,7 @@ def build_sequence(ctx: Context, index: int, out: Path, resume: bool) -> tuple[d
 
     coords = sample_coordinates(pose, frames)
     world = forward_kinematics(ctx.skeleton, coords)
-    joints = lab.joint_centres(ctx.skeleton, world)
+    joints = ctx.keypoints.positions(world)
     subject = lab.subject_points(ctx.skeleton, world, ctx.bone_meshes)
     K, w2c, clip = lab.view_cameras(spec, seq, frames, subject, world, ctx.skeleton.bone_index)
     uv, z = lab.project(K, w2c, joints)
@@ -235,7 +244,8 @@ def build_sequence(ctx: Context, index: int, out: Path, resume: bool) -> tuple[d
         "muscle_length": stats[..., 0], "muscle_volume": stats[..., 1], "muscle_activation": act,
         "K": K, "world_to_camera": w2c,
         "coord_names": np.array([c.name for c in ctx.skeleton.coordinates]),
-        "joint_names": np.array([b.name for b in ctx.skeleton.bones]),
+        "joint_names": np.array(list(ctx.keypoints.names)), "joint_parents": ctx.keypoints.parents,
+        "joint_bones": ctx.keypoints.bones, "bone_names": np.array([b.name for b in ctx.skeleton.bones]),
         "muscle_names": np.array(ctx.names), "view_names": np.array(list(views)),
     }
     files[LABELS] = atomic.write_bytes(folder / LABELS, lab.npz_bytes(arrays))
