@@ -20,6 +20,7 @@ import numpy as np
 
 from axdf_cli import __version__
 from axdf_cli.fileio import atomic
+from axdf_cli.dataset import amodal as coco
 from axdf_cli.dataset import labels as lab
 from axdf_cli.dataset import runner
 from axdf_cli.dataset.sampling import sample_pose, with_activation
@@ -31,6 +32,7 @@ from axdf_cli.model.pose import sample_activation, sample_coordinates
 from axdf_cli.model.skeleton import forward_kinematics
 
 RECORD = "sequence.json"  # written last: the sequence is complete
+AMODAL = "amodal.json"  # with the amodal pass: COCO annotations of each muscle's full extent
 DATASET_JSON = "dataset.json"
 INDEX = "index.parquet"
 LABELS = "labels.npz"
@@ -124,6 +126,9 @@ def dataset_dict(ctx: Context) -> dict:
             "muscle_activation": "(F, M) 0..1", "K": "(V, 3, 3)", "world_to_camera": "(F, V, 4, 4)",
         },
         "visibility_tolerance": spec.visibility_tolerance,
+        **({"amodal": f"<sequence>/{AMODAL}: COCO annotations per view and frame, each muscle's full extent "
+                      "(occluders ignored) as uncompressed RLE, category id = the muscle's EXR id"}
+           if "amodal" in spec.passes else {}),
         "sequences": [{"name": s.name, "source": spec.entries[s.entry].label, "frames": s.n_frames}
                       for s in ctx.sequences],
     }
@@ -213,8 +218,12 @@ def build_sequence(ctx: Context, index: int, out: Path, resume: bool) -> tuple[d
     uv, z = lab.project(K, w2c, joints)
     views = spec.views
     nf, nv = len(frames), len(views)
+    W, H = spec.render.size
     visible = np.zeros((nf, nv, joints.shape[1]), bool)
     files: dict = {}
+    amodal = "amodal" in spec.passes
+    coco_images: list[dict] = []
+    coco_anns: list[dict] = []
     t_read = t_render = 0.0
     t_write = time.perf_counter() - t1  # labels so far
     vr = view_renderer(ctx)  # once per process
@@ -226,12 +235,18 @@ def build_sequence(ctx: Context, index: int, out: Path, resume: bool) -> tuple[d
         bw = world[fi, ctx.scene_bones] if ctx.scene_bones else None
         tb = time.perf_counter()
         imgs = vr.render(int(frame), pos, nrm, bw, cams)
+        masks = [vr.renderer.amodal(c) for c in cams] if amodal else []
         tc = time.perf_counter()
         depth = np.stack([im.depth for im in imgs])[None]  # (1, V, H, W)
         visible[fi] = lab.visibility(uv[fi:fi + 1], z[fi:fi + 1], depth, spec.visibility_tolerance)[0]
         for v, im in enumerate(imgs):
             rel = f"views/{views[v]}"
             files.update(write_view_images(folder / rel, rel, im, spec.passes))
+            if amodal:
+                image_id = len(coco_images)
+                coco_images.append({"id": image_id, "file_name": f"{rel}/{int(frame):04d}.png", "width": W,
+                                    "height": H, "frame": int(frame), "view": views[v]})
+                coco_anns += coco.annotations(masks[v], im.ids, image_id, len(coco_anns))
         t_read += tb - ta
         t_render += tc - tb
         t_write += time.perf_counter() - tc
@@ -249,6 +264,9 @@ def build_sequence(ctx: Context, index: int, out: Path, resume: bool) -> tuple[d
         "muscle_names": np.array(ctx.names), "view_names": np.array(list(views)),
     }
     files[LABELS] = atomic.write_bytes(folder / LABELS, lab.npz_bytes(arrays))
+    if amodal:
+        files[AMODAL] = atomic.write_text(folder / AMODAL, json.dumps(
+            coco.coco_dict(ctx.names, coco_images, coco_anns), separators=(",", ":")) + "\n")
     manifest = json.loads((folder / "manifest.json").read_text())
     files.update(manifest.get("files", {}))
     files["manifest.json"] = atomic.sha256_file(folder / "manifest.json")
