@@ -2,7 +2,7 @@
 #   make demo   set up (.venv, packages, Mesa EGL if missing) and run the demo job into out/demo
 #   make test   set up and run the whole test suite (CI calls this through .ci/run); also
 #               creates .venv-blender (bpy) for the Blender check
-#   make dataset  set up and build a small example data set into out/demo_small
+#   make dataset  set up and build a small gait2392 data set into out/gait2392_small
 #   make bench  set up and print the benchmark table (BENCH_ARGS="--quick", "--long")
 PY     ?= python3
 VENV   := .venv

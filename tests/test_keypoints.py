@@ -2,6 +2,7 @@
 origin, no coincident duplicates, and the head, hands and toes where a skeleton has them."""
 from __future__ import annotations
 
+import functools
 import itertools
 
 import numpy as np
@@ -12,6 +13,7 @@ from conftest import REPO_ROOT
 SKELETONS = REPO_ROOT / "poses" / "skeletons"
 
 
+@functools.lru_cache(maxsize=None)
 def _keypoints(name: str):
     from axdf_cli.formats import load_triangles
     from axdf_cli.model.keypoints import skeleton_keypoints
