@@ -27,7 +27,7 @@ so figures are noisy and only ratios taken in the same run are compared with tar
 9. rendering split over processes: ``make demo``'s first job (poses/jobs/demo.yaml, meshes and
    512x512 frames; every 2nd frame with ``--quick``) as a subprocess at ``--jobs 1`` and
    ``--jobs 2``, and their ratio.
-10. jiggle: ``evaluate_chunks`` of the gait2392 walk (92 muscles, the whole trial; 54 jiggle)
+10. jiggle: ``evaluate_plan`` of the gait2392 walk (92 muscles, the whole trial; 54 jiggle)
    with and without the jiggle stage, µs per muscle-frame, and the stage alone; and a
    ``--frames`` subset's extra cost (frames not selected are advanced too).
    ``--only jiggle`` runs these rows alone.
@@ -736,13 +736,12 @@ print(json.dumps({"seconds": dt, "muscle_frames": n * nm, "chunk": chunk_frames(
 
 def time_chunks(plan, repeats: int) -> float:
     """Median seconds of evaluating every selected frame of ``plan`` (all muscles, no writing)
-    through ``evaluate_chunks``, twist references computed once outside."""
-    from axdf_cli.pipeline.evaluate import evaluate_chunks, twist_references
-
-    twist = twist_references(plan)
+    through ``evaluate_plan``, its pre-pass (twist references, TIME stages' block states)
+    included."""
+    from axdf_cli.pipeline.evaluate import evaluate_plan
 
     def once():
-        for _, _, results in evaluate_chunks(plan, twist_ref=twist):
+        for _, results in evaluate_plan(plan):
             for _ in results:
                 pass
 
@@ -750,30 +749,24 @@ def time_chunks(plan, repeats: int) -> float:
 
 
 def time_jiggle_stage(plan, repeats: int) -> tuple[float, int]:
-    """Median seconds of the jiggle stage alone over the plan's frames (the axis placed once,
-    outside the timing), and the number of jiggling muscles."""
-    from axdf_cli.pipeline.evaluate import chunk_frames
+    """Median seconds of the jiggle stage alone over the pose's frames from its first to the
+    last selected (the axis placed once, outside the timing), and the number of jiggling
+    muscles."""
+    from axdf_cli.pipeline.evaluate import TIME_BLOCK, _chunk
     from axdf_cli.pipeline.jiggle_stage import JiggleStage
-    from axdf_cli.pipeline.stages import Chunk
 
-    stage = JiggleStage(plan)
+    stage = JiggleStage()
     which = list(range(len(plan.models)))
-    chunks = []
-    size = chunk_frames(plan)
-    for s in range(0, len(plan.frames), size):
-        fr = plan.frames[s:s + size]
-        q = sample_coordinates(plan.pose, fr)
-        world = forward_kinematics(plan.pose.skeleton, q)
-        act = sample_activation(plan.pose, plan.names, fr)
-        axis = {j: plan.models[j].axis_points(world, q) for j in which}
-        chunks.append(Chunk(slice(s, s + len(fr)), fr, q, world, act, which, axis))
+    frames = plan.pose.frames[plan.pose.frames <= plan.frames.max()]
+    chunks = [_chunk(plan, slice(s, s + TIME_BLOCK), frames[s:s + TIME_BLOCK], which)
+              for s in range(0, len(frames), TIME_BLOCK)]
 
     def once():
         state = stage.start(plan)
         for ck in chunks:
             state, _ = stage(state, ck)
 
-    return median_time(once, repeats), len(stage.specs)
+    return median_time(once, repeats), len(stage.start(plan).muscles)
 
 
 def jiggle_rows(table: "Table", reps: int) -> None:
@@ -784,19 +777,19 @@ def jiggle_rows(table: "Table", reps: int) -> None:
     job = load_job(GAIT_JOB if GAIT_JOB.is_file() else DEMO_JOB)
     base = plan_run(job)
     plan = dataclasses.replace(base, frames=base.pose.frames)  # the whole trial
-    off = dataclasses.replace(plan, jiggle=False)
+    off = dataclasses.replace(plan, stages=())
     nm, nf = len(plan.models), len(plan.frames)
     mf = nm * nf
     t_on, t_off = time_chunks(plan, reps), time_chunks(off, reps)
     t_stage, n_jig = time_jiggle_stage(plan, reps)
-    table.section(f"jiggle ({plan.pose.name}: {nm} muscles, {n_jig} with jiggle, {nf} frames): evaluate_chunks "
+    table.section(f"jiggle ({plan.pose.name}: {nm} muscles, {n_jig} with jiggle, {nf} frames): evaluate_plan "
                   "(all muscles, no writing) with the stage vs without")
     table.add("evaluate with jiggle", f"{t_on / mf * 1e6:.1f} µs/mf", f"without {t_off / mf * 1e6:.1f} µs/mf",
               f"{t_on / t_off:.3f}x")
     table.add("the jiggle stage alone (axis placed outside)", f"{t_stage / mf * 1e6:.2f} µs/mf",
               f"{t_stage / (n_jig * nf) * 1e6:.2f} µs per jiggling muscle-frame")
     every4 = dataclasses.replace(plan, frames=plan.frames[::4])
-    t_sub, t_sub_off = time_chunks(every4, reps), time_chunks(dataclasses.replace(every4, jiggle=False), reps)
+    t_sub, t_sub_off = time_chunks(every4, reps), time_chunks(dataclasses.replace(every4, stages=()), reps)
     per = nm * len(every4.frames)
     table.add("--frames every 4th (frames between advanced too)", f"{t_sub / per * 1e6:.1f} µs/mf",
               f"without {t_sub_off / per * 1e6:.1f} µs/mf", f"{t_sub / t_sub_off:.3f}x")

@@ -87,7 +87,7 @@ def test_jiggle_rows_helpers(repo_root):
     from axdf_cli.specs import load_job
 
     plan = plan_run(load_job(bench.DEMO_JOB), frames_arg="0:5")
-    plan = dataclasses.replace(plan, models=plan.models[-2:], muscles=plan.muscles[-2:])  # the gastrocnemius heads
+    plan = dataclasses.replace(plan, models=plan.models[-2:], muscles=plan.muscles[-2:])  # the gastrocnemius heads (jiggle)
     assert bench.time_chunks(plan, repeats=1) > 0
     seconds, n = bench.time_jiggle_stage(plan, repeats=1)
     assert seconds > 0 and n == 2

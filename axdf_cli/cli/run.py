@@ -115,7 +115,15 @@ def plan_from_args(args):
         settings = replace(settings, enabled=args.render)
     return runner.plan_run(job, muscle_args=args.muscles, pose_arg=args.pose, out_arg=args.out,
                            fmt_arg=args.format, frames_arg=args.frames, render=settings_from_args(settings, args),
-                           policy=policy, clamp_ranges=args.clamp_ranges, jiggle=args.jiggle)
+                           policy=policy, clamp_ranges=args.clamp_ranges, stages=stage_switches(job, args))
+
+
+def stage_switches(job, args) -> dict:
+    """Which stages are on: a job's ``jiggle: false``, then ``--jiggle`` / ``--no-jiggle``."""
+    switches = {} if job is None or job.jiggle else {"jiggle": False}
+    if getattr(args, "jiggle", None) is not None:
+        switches["jiggle"] = args.jiggle
+    return switches
 
 
 def refuse_warnings(plan) -> None:

@@ -1,19 +1,19 @@
 """The jiggle stage (scope TIME): the secondary motion of :mod:`axdf_cli.model.jiggle`
-carried through time, on the axis control points before the surfaces are built (the
-exact-volume solve comes after it, as always).
+carried through time, on the axis control points before the surfaces are built (the twist
+and the exact-volume solve come after it, as always).
 
-State: for every carried muscle with ``jiggle``, its oscillators' positions and velocities
-(n_j, 3) in the world, with the kinematic targets and effective tension of the frame the
-state is at. It starts at rest on the pose's first frame (the muscle has held that pose for
-ever: a settled pre-roll). A chunk holds the *selected* frames only; the oscillators advance
-over every pose frame up to the chunk's last one (the targets of frames that are not
-selected are computed here, a block at a time, so memory stays bounded), so a ``--frames``
-subset gives the bytes of the same frames of a full run. A chunk that starts at or before
-the state's frame restarts from the first frame.
+The runner hands a TIME stage every frame of the pose's timeline in order, a block at a
+time, from :meth:`JiggleStage.start`'s state (:mod:`axdf_cli.pipeline.stages`): the
+oscillators therefore advance over every pose frame, selected or not, and a ``--frames``
+subset, ``--resume``, mesh and render workers all see the axis a whole run computes.
 
-Every muscle's oscillators are independent, and every operation is elementwise per control
-point, so a muscle moves to the same bytes whichever muscles share its chunk (``--jobs``
-splits muscles).
+State: for every muscle with ``jiggle``, its oscillators' positions and velocities (n, 3) in
+the world and its targets and effective tension at the frame the state is at, plus what the
+law needs of the muscle (spec, weights, tone). Before the first chunk it is empty: the first
+frame of the pose starts at rest on its target (the muscle has held that pose for ever: a
+settled pre-roll). Every muscle's oscillators are independent and every operation is
+elementwise per control point, so a muscle moves to the same bytes whichever muscles share
+its chunk.
 """
 from __future__ import annotations
 
@@ -22,136 +22,102 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from axdf_cli.model import jiggle
-from axdf_cli.model.pose import effective_tension, sample_activation, sample_coordinates
-from axdf_cli.model.skeleton import forward_kinematics
-from axdf_cli.pipeline.stages import Chunk, Scope
+from axdf_cli.model.pose import effective_tension
 
-#: Pose frames advanced per block when the targets of frames that are not selected must be
-#: computed here (--frames subsets, render blocks): bounds memory for any pose length.
-BLOCK_FRAMES = 128
+
+@dataclass
+class Oscillators:
+    """One muscle's law (spec, weights (n,), tone) and state: positions x and velocities v
+    (n, 3), the targets (n, 3) and effective tension at the state's frame (x None: not started)."""
+
+    spec: jiggle.JiggleSpec
+    weights: np.ndarray
+    tone: float
+    x: np.ndarray | None = None
+    v: np.ndarray | None = None
+    target: np.ndarray | None = None
+    tension: float = 0.0
 
 
 @dataclass
 class JiggleState:
-    """Where the oscillators are: at pose frame ``frame`` (None: before the first chunk);
-    per muscle, positions x and velocities v (n, 3), the targets (n, 3) and effective tension
-    at that frame."""
+    """Every jiggling muscle's :class:`Oscillators`, at pose frame ``frame`` (None: before the
+    pose's first frame); dt the pose's frame time (s)."""
 
+    first: int
+    dt: float
+    muscles: dict = field(default_factory=dict)  # muscle index -> Oscillators
     frame: int | None = None
-    x: dict = field(default_factory=dict)
-    v: dict = field(default_factory=dict)
-    target: dict = field(default_factory=dict)
-    tension: dict = field(default_factory=dict)
 
 
 class JiggleStage:
-    """Damped oscillators on the free axis control points of the muscles with ``jiggle``."""
+    """Damped oscillators on the free axis control points of the muscles with ``jiggle``
+    (docs/FORMATS.md, "Jiggle"); switched off by ``--no-jiggle`` or a job's ``jiggle: false``."""
 
     name = "jiggle"
-    scope = Scope.TIME
+    scope = "time"  # Scope.TIME (its value: :mod:`.stages` registers this stage, so it is not imported here)
 
-    def __init__(self, plan):
-        self.plan = plan
-        self.specs = {j: s.jiggle for j, s in enumerate(plan.muscles) if s.jiggle is not None}
-        self.weights = {j: jiggle.control_weights(spec.weight, plan.models[j].n_axis) for j, spec in self.specs.items()}
-        self.dt = 1.0 / float(plan.pose.fps)
+    @staticmethod
+    def needed(specs) -> bool:
+        """Whether the stage acts on any of these muscles (a run without one leaves it out)."""
+        return any(s.jiggle is not None for s in specs)
 
     def start(self, plan) -> JiggleState:
-        return JiggleState()
+        muscles = {j: Oscillators(s.jiggle, jiggle.control_weights(s.jiggle.weight, plan.models[j].n_axis),
+                                  float(s.tension))
+                   for j, s in enumerate(plan.muscles) if s.jiggle is not None}
+        return JiggleState(int(plan.pose.first), 1.0 / float(plan.pose.fps), muscles)
 
-    def __call__(self, state: JiggleState, chunk: Chunk) -> tuple[JiggleState, Chunk]:
-        js = [j for j in chunk.muscles if j in self.specs]
+    def __call__(self, state: JiggleState, chunk):
+        """Advance every jiggling muscle of ``chunk`` over its frames (consecutive pose frames
+        right after the state's: (C,) frames, axis (C, n, 3) each) and move its axis to
+        ``target + weight (x - target)``."""
+        js = [j for j in chunk.muscles if j in state.muscles]
         if not js:
             return state, chunk
         frames = np.asarray(chunk.frames, dtype=np.int64)
-        if state.frame is None or frames[0] <= state.frame or any(j not in state.x for j in js):
-            state = self._at_rest(js, chunk)
-        pos = {int(f): i for i, f in enumerate(frames)}
-        sizes = [len(self.weights[j]) for j in js]
+        start = state.first if state.frame is None else state.frame + 1
+        if int(frames[0]) != start or np.any(np.diff(frames) != 1):
+            raise ValueError(f"the jiggle stage needs the pose's frames in order from {start}; "
+                             f"got {int(frames[0])}..{int(frames[-1])} ({len(frames)} frames)")
+        osc = [state.muscles[j] for j in js]
+        if any(o.x is None for o in osc) and state.frame is not None:
+            raise ValueError("a jiggling muscle joined after the pose's first frame")
+        sizes = [len(o.weights) for o in osc]
         cuts = np.cumsum([0] + sizes)
-        w = np.concatenate([self.weights[j] for j in js])[None, :, None]  # (1, P, 1)
-        x = np.concatenate([state.x[j] for j in js])
-        v = np.concatenate([state.v[j] for j in js])
-        prev_t = np.concatenate([state.target[j] for j in js])
-        prev_e = np.array([state.tension[j] for j in js])
-        moved = {j: np.array(chunk.axis[j], dtype=np.float64, copy=True) for j in js}
-        frame = state.frame
-        while frame < frames[-1]:
-            block = np.arange(frame + 1, min(frame + BLOCK_FRAMES, int(frames[-1])) + 1, dtype=np.int64)
-            targets, tension = self._block_targets(js, block, pos, chunk)  # (b, P, 3), (b, M')
-            # a step's stiffness and damping: at the mean tension of its two frames
-            mid = 0.5 * (np.concatenate([prev_e[None], tension[:-1]]) + tension)  # (b, M')
-            phi = np.empty((len(block), cuts[-1], 2, 2))
-            for k, j in enumerate(js):
-                omega, zeta = jiggle.parameters(self.specs[j], mid[:, k])
-                phi[:, cuts[k]:cuts[k + 1]] = jiggle.step_matrices(omega, zeta, self.dt)[:, None]
-            xs, x, v = jiggle.oscillate(x, v, np.concatenate([prev_t[None], targets]), phi, self.dt)
-            # a target that is not finite (a degenerate pose) leaves the oscillator at rest
-            # on the next finite one, instead of poisoning every later frame
-            bad = ~(np.isfinite(x).all(axis=1) & np.isfinite(v).all(axis=1))
-            if bad.any():
-                x[bad], v[bad] = targets[-1, bad], 0.0
-            out = targets + w * (xs - targets)  # what is written: T + w (x - T)
-            for i, f in enumerate(block):
-                row = pos.get(int(f))
-                if row is not None:
-                    for k, j in enumerate(js):
-                        moved[j][row] = out[i, cuts[k]:cuts[k + 1]]
-            prev_t, prev_e, frame = targets[-1], tension[-1], int(block[-1])
-        state = JiggleState(frame, {j: x[cuts[k]:cuts[k + 1]] for k, j in enumerate(js)},
-                            {j: v[cuts[k]:cuts[k + 1]] for k, j in enumerate(js)},
-                            {j: prev_t[cuts[k]:cuts[k + 1]] for k, j in enumerate(js)},
-                            {j: float(prev_e[k]) for k, j in enumerate(js)})
-        return state, replace(chunk, axis={**chunk.axis, **moved})
-
-    # -- the kinematic targets ------------------------------------------------------------
-    def _at_rest(self, js: list[int], chunk: Chunk) -> JiggleState:
-        """Every oscillator at rest on its target at the pose's first frame."""
-        first = int(self.plan.pose.first)
-        if int(chunk.frames[0]) == first:
-            targets = {j: chunk.axis[j][0] for j in js}
-            act = chunk.activation[:1]
+        targets = np.concatenate([chunk.axis[j] for j in js], axis=1)  # (C, P, 3)
+        tone = np.array([o.tone for o in osc])
+        tension = effective_tension(tone, chunk.activation[:, js])  # (C, M')
+        if state.frame is None:  # the pose's first frame: at rest on its target
+            skip, prev_t, prev_e = 1, targets[0].copy(), tension[0].copy()
+            x, v = prev_t.copy(), np.zeros_like(prev_t)
         else:
-            targets = {j: p[0] for j, p in self._targets(js, np.array([first])).items()}
-            act = sample_activation(self.plan.pose, self.plan.names, np.array([first]))
-        tension = self._tension(js, act)[0]
-        return JiggleState(first, {j: np.array(targets[j], dtype=np.float64) for j in js},
-                           {j: np.zeros(np.shape(targets[j])) for j in js},
-                           {j: np.array(targets[j], dtype=np.float64) for j in js},
-                           {j: float(tension[k]) for k, j in enumerate(js)})
-
-    def _block_targets(self, js, block, pos, chunk: Chunk):
-        """Targets (b, P, 3) and effective tensions (b, M') of the pose frames ``block``: the
-        chunk's axis and activation where selected, computed for the others."""
-        rows = np.array([pos.get(int(f), -1) for f in block], dtype=np.int64)
-        have = rows >= 0
-        targets = np.empty((len(block), sum(len(self.weights[j]) for j in js), 3))
-        tension = np.empty((len(block), len(js)))
-        if have.any():
-            r = rows[have]
-            targets[have] = np.concatenate([chunk.axis[j][r] for j in js], axis=1)
-            tension[have] = self._tension(js, chunk.activation[r])
-        if not have.all():
-            need = block[~have]
-            computed = self._targets(js, need)
-            targets[~have] = np.concatenate([computed[j] for j in js], axis=1)
-            tension[~have] = self._tension(js, sample_activation(self.plan.pose, self.plan.names, need))
-        return targets, tension
-
-    def _targets(self, js, frames: np.ndarray) -> dict:
-        """Axis control points where the bones put them, at ``frames``: muscle -> (F, n, 3)."""
-        q = sample_coordinates(self.plan.pose, frames)
-        world = forward_kinematics(self.plan.pose.skeleton, q)
-        return {j: self.plan.models[j].axis_points(world, q) for j in js}
-
-    def _tension(self, js, activation: np.ndarray) -> np.ndarray:
-        """Effective tension (F, M') of muscles ``js`` from every muscle's activation (F, M)."""
-        tone = np.array([self.plan.muscles[j].tension for j in js])
-        return effective_tension(tone, activation[:, js])
-
-
-def time_stages(plan) -> list:
-    """The plan's TIME stages: jiggle when it is on and a muscle has ``jiggle``."""
-    if plan.jiggle and any(s.jiggle is not None for s in plan.muscles):
-        return [JiggleStage(plan)]
-    return []
+            skip = 0
+            prev_t = np.concatenate([o.target for o in osc])
+            prev_e = np.array([o.tension for o in osc])
+            x = np.concatenate([o.x for o in osc])
+            v = np.concatenate([o.v for o in osc])
+        moved = {j: chunk.axis[j].copy() for j in js}  # (the first frame at rest stays on its target)
+        if len(frames) > skip:
+            tgt, ten = targets[skip:], tension[skip:]
+            # a step's stiffness and damping: at the mean effective tension of its two frames
+            mid = 0.5 * (np.concatenate([prev_e[None], ten[:-1]]) + ten)  # (S, M')
+            phi = np.empty((len(tgt), cuts[-1], 2, 2))
+            for k, o in enumerate(osc):
+                omega, zeta = jiggle.parameters(o.spec, mid[:, k])
+                phi[:, cuts[k]:cuts[k + 1]] = jiggle.step_matrices(omega, zeta, state.dt)[:, None]
+            xs, x, v = jiggle.oscillate(x, v, np.concatenate([prev_t[None], tgt]), phi, state.dt)
+            # a target that is not finite (a degenerate pose) leaves the oscillator at rest on
+            # the chunk's last target instead of poisoning every later frame
+            bad = ~(np.isfinite(x).all(axis=1) & np.isfinite(v).all(axis=1))
+            x[bad], v[bad] = tgt[-1, bad], 0.0
+            w = np.concatenate([o.weights for o in osc])[None, :, None]
+            out = tgt + w * (xs - tgt)  # what is written: T + w (x - T)
+            for k, j in enumerate(js):
+                moved[j][skip:] = out[:, cuts[k]:cuts[k + 1]]
+            prev_t, prev_e = tgt[-1], ten[-1]
+        after = {j: replace(o, x=x[cuts[k]:cuts[k + 1]].copy(), v=v[cuts[k]:cuts[k + 1]].copy(),
+                            target=prev_t[cuts[k]:cuts[k + 1]].copy(), tension=float(prev_e[k]))
+                 for k, (j, o) in enumerate(zip(js, osc))}
+        return (replace(state, muscles={**state.muscles, **after}, frame=int(frames[-1])),
+                replace(chunk, axis={**chunk.axis, **moved}))

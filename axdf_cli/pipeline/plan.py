@@ -15,6 +15,7 @@ from axdf_cli.specs import Job, Pose, RefPolicy, expand_muscle_paths, load_muscl
 from axdf_cli.model.muscle import MuscleModel, MuscleSpec
 from axdf_cli.model.pose import activation_problems, muscle_range_warnings, parse_frames, subject_points
 from axdf_cli.model.skeleton import forward_kinematics
+from axdf_cli.pipeline.stages import build_stages
 
 DEFAULT_OUT = "out/run"
 
@@ -33,7 +34,7 @@ class RunPlan:
     notes: list = field(default_factory=list)  # remarks printed with --verbose; not warnings
     bone_meshes: dict = field(default_factory=dict)  # bone index -> (vertices (V,3) f4, faces (T,3) i4, file bytes)
     frame_warnings: list = field(default_factory=list)  # [(frame index, muscle index, message)] known before evaluation
-    jiggle: bool = True  # the jiggle stage (muscles' `jiggle:`); off: --no-jiggle or a job's `jiggle: false`
+    stages: tuple = ()  # the run's stages (axdf_cli.pipeline.stages: build_stages), in order within each scope
 
     @property
     def names(self) -> list[str]:
@@ -88,13 +89,14 @@ def load_muscle_specs(files) -> list[MuscleSpec]:
 
 def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, fmt_arg=None,
              frames_arg=None, render=None, policy: RefPolicy | None = None, clamp_ranges: bool = False,
-             jiggle: bool | None = None) -> RunPlan:
+             stages=None) -> RunPlan:
     """Load and check every input; build the muscle models. Writes nothing.
 
     ``render``: the RenderSettings to use (None: the job's ``render:``); ``policy``: where
     referenced files may lie (default: the job's); ``clamp_ranges``: hold coordinates inside
-    their ranges (as the pose's ``clamp_ranges``); ``jiggle``: False switches the jiggle stage
-    off (None: the job's ``jiggle``, on by default)."""
+    their ranges (as the pose's ``clamp_ranges``); ``stages``: stage name -> on, from the
+    command line and the job (:func:`axdf_cli.pipeline.stages.build_stages`; default every
+    registered stage)."""
     policy = policy or (job.policy if job is not None else RefPolicy())
     if pose_arg is not None:
         pose_path, pose_mark = Path(pose_arg), Mark(str(pose_arg))
@@ -160,13 +162,12 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
     for s in srcs:
         if Path(s).is_file():
             inputs[display_path(Path(s))] = atomic.sha256_file(s)
-    if jiggle is None:
-        jiggle = job.jiggle if job is not None else True
-    if jiggle:
+    built = build_stages(stages, specs)
+    if any(st.name == "jiggle" for st in built):
         notes += jiggle_notes(pose, specs)
     return RunPlan(pose, specs, models, frames, formats, out, inputs, render=render, warnings=warnings,
                    bone_meshes=bone_meshes, notes=notes, frame_warnings=muscle_range_warnings(pose, frames, specs),
-                   jiggle=bool(jiggle))
+                   stages=built)
 
 
 def jiggle_notes(pose: Pose, specs) -> list[str]:
