@@ -224,3 +224,54 @@ def test_render_workers_draw_the_jiggled_muscles(hinge, capsys):
     a, b = outputs(one), outputs(two)
     assert any(k.startswith("frames/") for k in a)
     assert a == b
+
+
+JIGGLE_DATASET = """\
+dataset: jig
+seed: 3
+skeleton: chain.yaml
+muscles: [chainm.yaml]
+coordinates:
+  stretch: {range: [0.0, 0.4]}
+  bend: {range: [-50, 50]}
+  roll: {range: [-80, 80]}
+motions:
+  walk: {pose: walk.yaml, frames: "2:8:3"}
+sequences:
+  - {motion: walk}
+  - {sample: uniform, count: 1, frames: 1}
+activation: none
+cameras:
+  sphere: {views: 1, distance: [1.2, 1.5], elevation: [0, 20], fov: 40}
+render: {size: [24, 24], supersample: 1}
+"""
+
+
+def test_data_set_sequences_honour_jiggle(tmp_path, monkeypatch, capsys):
+    """A data set's motion sequence is the run of its frames (jiggle carried from the motion's
+    first frame, though the sequence starts at frame 2); a single-frame sample has no
+    history: it is the muscle at rest on its pose, as without jiggle."""
+    from dataset_helpers import write_tiny
+
+    from conftest import CHAIN_MUSCLE_YAML
+
+    sets = {}
+    for name, muscle in (("jig", CHAIN_MUSCLE_YAML + "jiggle: {frequency: 3, damping_ratio: 0.1}\n"),
+                         ("still", CHAIN_MUSCLE_YAML)):
+        d = tmp_path / name
+        write_tiny(d, JIGGLE_DATASET)
+        (d / "chainm.yaml").write_text(muscle)
+        monkeypatch.chdir(d)
+        rc, _, err = run_main(["dataset", "build", "tiny.yaml", "--out", "ds", "-q"], capsys)
+        assert rc == 0, err
+        rc, _, err = run_main(["run", "--muscles", "chainm.yaml", "--pose", "walk.yaml", "--frames", "2:8:3",
+                               "--out", "run", "--no-render", "-q"], capsys)
+        assert rc == 0, err
+        sets[name] = d
+    for name, d in sets.items():
+        seq = {k: v for k, v in all_files(d / "ds" / "seq_00000" / "meshes").items()}
+        assert seq == all_files(d / "run" / "meshes") and len(seq) == 3
+    jig, still = (all_files(sets[n] / "ds" / "seq_00000" / "meshes") for n in ("jig", "still"))
+    assert jig != still  # the motion rings
+    one = [all_files(sets[n] / "ds" / "seq_00001" / "meshes") for n in ("jig", "still")]
+    assert one[0] == one[1]  # one frame: at rest
