@@ -195,8 +195,11 @@ def test_a_job_switches_jiggle_off_and_resume_refuses_the_change(hinge, hinge_ru
     assert rc == 0, err
     still = outputs(hinge_runs[1])
     assert all(still[k] == v for k, v in outputs(hinge / "jobout").items() if k.startswith("meshes/"))
-    rc, _, err = run_main(["run", job, "--no-render", "-q", "--jiggle", "--resume"], capsys)
-    assert rc == 2 and "jiggle" in err and "--resume would mix two runs" in err
+    # --resume refuses to switch it (here on again, over a --no-jiggle run)
+    run(hinge, "off", capsys, "--frames", "30:40", "--no-jiggle")
+    rc, _, err = run_main(["run", "--muscles", hinge / "muscles", "--pose", hinge / "bend.yaml", "--frames", "30:40",
+                           "--out", hinge / "off", "--no-render", "-q", "--resume"], capsys)
+    assert rc == 2 and "jiggle" in err and "--resume would mix two runs" in err, err
 
 
 def test_sigkill_then_resume_gives_the_same_bytes(hinge, hinge_runs):

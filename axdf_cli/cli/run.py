@@ -26,17 +26,30 @@ def add_args(p) -> None:
     g2.add_argument("--overwrite", action="store_true", help="replace the outputs of an earlier run in OUT")
     p.add_argument("--dry-run", action="store_true", help="check inputs and print what would be written; write nothing")
     p.add_argument("--strict", action="store_true", help="fail (exit 2) on any per-muscle, per-frame warning")
-    g3 = p.add_mutually_exclusive_group()
-    g3.add_argument("--no-jiggle", dest="jiggle", action="store_false", default=None,
-                    help="switch the muscles' jiggle (secondary motion) off (default: on, as the job says)")
-    g3.add_argument("--jiggle", dest="jiggle", action="store_true", help="switch jiggle on (over a job's jiggle: false)")
     p.add_argument("--clamp-ranges", action="store_true",
                    help="hold coordinates inside their skeleton ranges (default: warn per frame)")
     p.add_argument("--allow-outside", action="store_true",
                    help="allow paths inside YAML files to leave the project folder tree")
+    add_stage_args(p)
     from axdf_cli.specs.render import add_render_args
 
     add_render_args(p)
+
+
+def add_stage_args(p) -> None:
+    """``--no-<stage>`` for every stage of the table (:data:`axdf_cli.pipeline.stages.STAGES`)."""
+    from axdf_cli.pipeline.stages import STAGES
+
+    for name in STAGES:
+        p.add_argument(f"--no-{name}", dest=f"stage_{name}", action="store_false", default=None,
+                       help=f"leave out the {name} stage (default: on)")
+
+
+def stage_switches(args) -> dict:
+    """The stages switched off on the command line: name -> False."""
+    from axdf_cli.pipeline.stages import STAGES
+
+    return {name: False for name in STAGES if getattr(args, f"stage_{name}", None) is False}
 
 
 def _positive(text: str) -> int:
@@ -115,15 +128,13 @@ def plan_from_args(args):
         settings = replace(settings, enabled=args.render)
     return runner.plan_run(job, muscle_args=args.muscles, pose_arg=args.pose, out_arg=args.out,
                            fmt_arg=args.format, frames_arg=args.frames, render=settings_from_args(settings, args),
-                           policy=policy, clamp_ranges=args.clamp_ranges, stages=stage_switches(job, args))
+                           policy=policy, clamp_ranges=args.clamp_ranges,
+                           stages={**job_switches(job), **stage_switches(args)})
 
 
-def stage_switches(job, args) -> dict:
-    """Which stages are on: a job's ``jiggle: false``, then ``--jiggle`` / ``--no-jiggle``."""
-    switches = {} if job is None or job.jiggle else {"jiggle": False}
-    if getattr(args, "jiggle", None) is not None:
-        switches["jiggle"] = args.jiggle
-    return switches
+def job_switches(job) -> dict:
+    """The stages a job switches off (``jiggle: false``): name -> False."""
+    return {} if job is None or job.jiggle else {"jiggle": False}
 
 
 def refuse_warnings(plan) -> None:

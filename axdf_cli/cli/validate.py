@@ -38,7 +38,7 @@ def _plan(job=None, pose=None, muscles=None, allow_outside=False):
 
     return plan_from_args(argparse.Namespace(
         job=job, pose=pose, muscles=muscles, out=None, format=None, frames=None, render=None,
-        allow_outside=allow_outside, clamp_ranges=False, jiggle=None))
+        allow_outside=allow_outside, clamp_ranges=False))
 
 
 def validate_file(path: Path, policy, args) -> tuple[str, str | None, list[str]]:
