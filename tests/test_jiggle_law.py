@@ -194,3 +194,17 @@ def test_jiggle_errors_have_positions(text, where, words):
         parse_muscle_text(MUSCLE + text + "\n", "m.yaml")
     assert str(e.value).startswith(f"m.yaml:{where}:"), str(e.value)
     assert words in str(e.value), str(e.value)
+
+
+def test_a_target_that_is_not_finite_stays_one_frame():
+    """A degenerate pose (a non-finite target) is that frame's problem only: the oscillator
+    restarts at rest on the next finite target."""
+    t, target = _ramp_then_hold(60.0, seconds=1.0)
+    target = target.copy()
+    target[20, 0, 1] = np.nan
+    omega, z = jiggle.parameters(jiggle.JiggleSpec(4.0, 0.2), np.zeros(len(target) - 1))
+    phi = jiggle.step_matrices(omega, z, 1 / 60)[:, None]
+    out, x, v = jiggle.oscillate(target[0].copy(), np.zeros((1, 3)), target, phi, 1 / 60)
+    finite = np.isfinite(out).all(axis=(1, 2))
+    assert not finite[19] and finite[:19].all() and finite[21:].all()  # out[k] is frame k + 1
+    assert np.isfinite(x).all() and np.isfinite(v).all()

@@ -141,7 +141,9 @@ def oscillate(x: np.ndarray, v: np.ndarray, targets: np.ndarray, phi: np.ndarray
     x, v : (P, 3) positions and velocities at the time of ``targets[0]``;
     targets : (K + 1, P, 3) kinematic targets at the start and at the end of every step
     (linear in time between them); phi : (K, P, 2, 2) each point's step matrix per step.
-    Returns the positions (K, P, 3) at the end of every step and the final (x, v)."""
+    Returns the positions (K, P, 3) at the end of every step and the final (x, v). A point
+    whose step is not finite (a degenerate pose's target) is put at rest on its target, so
+    the frames after it are not poisoned."""
     k_steps = phi.shape[0]
     out = np.empty((k_steps,) + x.shape)
     for k in range(k_steps):
@@ -152,5 +154,8 @@ def oscillate(x: np.ndarray, v: np.ndarray, targets: np.ndarray, phi: np.ndarray
         e1 = p[:, 0, 0, None] * e + p[:, 0, 1, None] * de
         de1 = p[:, 1, 0, None] * e + p[:, 1, 1, None] * de
         x, v = t1 + e1, vt + de1
+        bad = ~(np.isfinite(x).all(axis=-1) & np.isfinite(v).all(axis=-1))
+        if bad.any():
+            x[bad], v[bad] = t1[bad], 0.0
         out[k] = x
     return out, x, v

@@ -107,10 +107,6 @@ class JiggleStage:
                 omega, zeta = jiggle.parameters(o.spec, mid[:, k])
                 phi[:, cuts[k]:cuts[k + 1]] = jiggle.step_matrices(omega, zeta, state.dt)[:, None]
             xs, x, v = jiggle.oscillate(x, v, np.concatenate([prev_t[None], tgt]), phi, state.dt)
-            # a target that is not finite (a degenerate pose) leaves the oscillator at rest on
-            # the chunk's last target instead of poisoning every later frame
-            bad = ~(np.isfinite(x).all(axis=1) & np.isfinite(v).all(axis=1))
-            x[bad], v[bad] = tgt[-1, bad], 0.0
             w = np.concatenate([o.weights for o in osc])[None, :, None]
             out = tgt + w * (xs - tgt)  # what is written: T + w (x - T)
             for k, j in enumerate(js):
