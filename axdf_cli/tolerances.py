@@ -68,3 +68,33 @@ RENDER_DEPTH_RTOL = 1e-4
 # Rasterizers snap vertices to a sub-pixel grid (Mesa llvmpipe: 1/256 px); a pixel centre
 # counts as inside a triangle only when at least this far (pixels) from each of its edges.
 RENDER_EDGE_MARGIN_PX = 0.02
+
+# Retargeting (axdf retarget, axdf_cli/model/ik.py). Each frame's least squares stops when
+# the cost changes by less than IK_FTOL relative or the step by less than IK_XTOL relative
+# (joint centres are fitted to ~1e-9 m; mocap is good to ~1 mm), or after IK_MAX_EVALUATIONS
+# (a warm-started frame takes 3-10).
+IK_FTOL = 1e-10
+IK_XTOL = 1e-10
+IK_GTOL = 1e-10
+IK_MAX_EVALUATIONS = 200
+# The pull towards the previous frame, as residual metres per unit of a coordinate: 0.1 mm per
+# degree of a rotation (a 0.4 m lever moves its end 7 mm per degree: the pull is 1/70 of what
+# the points say, ~1e-4 of the cost), 0.01 m per metre of a translation. It decides only what
+# the points leave undecided (a hip's rotation about a straight leg).
+IK_SMOOTH_ROTATION = 1e-4
+IK_SMOOTH_TRANSLATION = 1e-2
+# A free coordinate within this share of its range's width of an end is reported as held there.
+IK_AT_BOUND = 1e-6
+# Scaling the model to the subject (`scale: fit`): a pair of mapped points is a segment when its
+# distance changes by less than SEGMENT_MODEL_RIGIDITY (relative) over sampled poses of the model
+# (a knee's coupled translations move the hip-knee distance by < 1%) and by less than
+# SEGMENT_MOCAP_RIGIDITY between the 10th and 90th percentile of the motion (marker noise and
+# soft tissue: a few per cent), and is at least SEGMENT_MIN_LENGTH metres long in both.
+SEGMENT_MODEL_RIGIDITY = 0.08
+SEGMENT_MOCAP_RIGIDITY = 0.05
+SEGMENT_MIN_LENGTH = 0.02
+# Poses sampled to find the model's rigid pairs and points rigid with the root (seeded, fixed).
+SEGMENT_SAMPLES = 16
+# A point is rigid with the root bone when it moves by less than this (metres) in the root's frame
+# over the sampled poses.
+ROOT_RIGID = 1e-6
