@@ -77,11 +77,14 @@ IK_FTOL = 1e-10
 IK_XTOL = 1e-10
 IK_GTOL = 1e-10
 IK_MAX_EVALUATIONS = 200
-# The pull towards the previous frame, as residual metres per unit of a coordinate: 0.1 mm per
-# degree of a rotation (a 0.4 m lever moves its end 7 mm per degree: the pull is 1/70 of what
-# the points say, ~1e-4 of the cost), 0.01 m per metre of a translation. It decides only what
-# the points leave undecided (a hip's rotation about a straight leg).
-IK_SMOOTH_ROTATION = 1e-4
+# The pull towards the previous frame (a retarget map's `smooth:` default), as residual metres
+# per degree of a rotation: a 10 degree change between frames costs as much as 1 cm of joint
+# centre error. Where the points decide a coordinate it is negligible (a 0.4 m lever moves its
+# end 7 mm per degree, ~50 times the pull's weight in the cost: a lag of ~2% of a frame's
+# change); it decides what the points barely tell: a hip's rotation about a nearly straight
+# leg, a toe's flexion on a 5 cm lever (CMU's noisy toe joints turned the toes through 60 deg
+# in a 30th of a second with 1e-4). Translations: 0.01 m per metre (the root is seen directly).
+IK_SMOOTH_ROTATION = 1e-3
 IK_SMOOTH_TRANSLATION = 1e-2
 # A free coordinate within this share of its range's width of an end is reported as held there.
 IK_AT_BOUND = 1e-6

@@ -51,9 +51,14 @@ def run(args) -> int:
         raise UsageError(f"--step {args.step}", "a whole number in 1..10000")
     policy = RefPolicy.for_command([args.map, args.onto, args.motion], args.allow_outside)
     skel = load_skeleton(Path(args.onto), policy) if args.onto else None
-    res = build_retarget(Path(args.motion), Path(args.map), Path(args.out), skeleton=skel,
-                         skeleton_path=Path(args.onto) if args.onto else None, name=args.name, scale=scale,
-                         step=args.step, up=args.up, policy=policy)
+    bar = _Bar() if not args.quiet and sys.stderr.isatty() else None
+    try:
+        res = build_retarget(Path(args.motion), Path(args.map), Path(args.out), skeleton=skel,
+                             skeleton_path=Path(args.onto) if args.onto else None, name=args.name, scale=scale,
+                             step=args.step, up=args.up, policy=policy, progress=bar)
+    finally:
+        if bar is not None:
+            bar.close()
     for path, data in sorted(res.files.items()):
         write_bytes(path, data)
     if not args.quiet:
@@ -62,6 +67,24 @@ def run(args) -> int:
         print("\n".join(summary(res.report, args.verbose)))
         print(f"report: {Path(args.out) / 'retarget_report.json'}")
     return 0
+
+
+class _Bar:
+    """A tqdm bar on stderr, opened at the first fitted frame."""
+
+    def __init__(self):
+        self.bar = None
+
+    def __call__(self, n: int) -> None:
+        if self.bar is None:
+            from tqdm import tqdm
+
+            self.bar = tqdm(unit="frame", desc="fit", file=sys.stderr, leave=False)
+        self.bar.update(n)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
 
 
 def summary(rep: dict, verbose: bool = False) -> list[str]:

@@ -50,7 +50,7 @@ from axdf_cli.model.ik import FitResult, fit_frames, pose_points
 from axdf_cli.model.skeleton import Skeleton, forward_kinematics
 from axdf_cli.specs import RefPolicy, load_skeleton
 
-MAP_KEYS = ("retarget", "onto", "scale", "align", "hold", "joints")
+MAP_KEYS = ("retarget", "onto", "scale", "align", "smooth", "hold", "ranges", "joints")
 POINT_KEYS = ("bone", "at", "from", "weight")
 ALIGN = ("centre", "none")
 #: Rotational coordinates without a range are sampled this far (degrees) either side of their
@@ -77,12 +77,15 @@ class MapPoint:
 class RetargetMap:
     name: str
     source: str
-    skeleton: Skeleton
+    skeleton: Skeleton  # the model's, with the map's ranges in place of its own (what the fit keeps to)
     points: tuple[MapPoint, ...]
     hold: dict  # coordinate -> value
+    ranges: dict  # coordinate -> (lo, hi): narrower than the skeleton's, for the fit
     scale: object  # "fit" | "none" | float (model -> subject)
     align: str
+    smooth: float  # pull towards the previous frame: residual metres per degree
     marks: dict = field(default_factory=dict)  # key -> Mark (scale, align, joints)
+    model: Skeleton | None = None  # the model's skeleton as loaded (poses are written for it)
 
 
 def load_map(path: Path | str, skeleton: Skeleton | None = None, policy: RefPolicy | None = None) -> RetargetMap:
@@ -103,15 +106,18 @@ def load_map(path: Path | str, skeleton: Skeleton | None = None, policy: RefPoli
         skeleton = load_skeleton(p, policy)
     scale = _scale(f.raw("scale", default="fit"), f.vmark("scale"))
     align = f.choice("align", ALIGN, default="centre")
+    smooth = float(f.number("smooth", default=tol.IK_SMOOTH_ROTATION, lo=0.0, hi=1.0))
     hold = _hold(f.mapping("hold", default=None), skeleton)
+    ranges = _ranges(f.mapping("ranges", default=None), skeleton, hold)
     joints = f.mapping("joints", required=True)
     f.done()
     points = tuple(_point(key, joints[key], joints, skeleton) for key in joints)
     if not points or sum(p.weight > 0 for p in points) < 2:
         raise InputError(f.vmark("joints"), f"{sum(p.weight > 0 for p in points)} points with a positive weight",
                          "at least 2 (3 or more not on one line to place a body)")
-    marks = {k: f.vmark(k) for k in ("scale", "align", "joints", "hold")}
-    return RetargetMap(name, str(path), skeleton, points, hold, scale, align, marks)
+    marks = {k: f.vmark(k) for k in ("scale", "align", "joints", "hold", "ranges")}
+    return RetargetMap(name, str(path), _narrowed(skeleton, ranges), points, hold, ranges, scale, align, smooth,
+                       marks, skeleton)
 
 
 def _scale(v, where: Mark):
@@ -129,14 +135,48 @@ def _hold(value: YMap | None, skel: Skeleton) -> dict:
         return out
     for c, v in value.items():
         km, vm = value.key_mark(c), value.value_mark(c)
-        if c not in skel.coord_index:
-            raise InputError(km, f"unknown coordinate {c!r}",
-                             f"{did_you_mean(c, skel.coord_index)}coordinates of skeleton {skel.name}: "
-                             + ", ".join(skel.coord_index))
-        coord = skel.coordinates[skel.coord_index[c]]
+        coord = _coordinate(c, km, skel)
         lo, hi = coord.range if coord.range else (None, None)
         out[c] = float(check_number(v, vm, f"hold value of {c}", lo, hi))
     return out
+
+
+def _coordinate(c, where: Mark, skel: Skeleton):
+    if c not in skel.coord_index:
+        raise InputError(where, f"unknown coordinate {c!r}",
+                         f"{did_you_mean(c, skel.coord_index)}coordinates of skeleton {skel.name}: "
+                         + ", ".join(skel.coord_index))
+    return skel.coordinates[skel.coord_index[c]]
+
+
+def _ranges(value: YMap | None, skel: Skeleton, hold: dict) -> dict:
+    """``ranges: {COORD: [lo, hi]}``: where the fit may take a coordinate, inside its own range."""
+    from axdf_cli.fileio.yamlio import check_vector
+
+    out = {}
+    if value is None:
+        return out
+    for c, v in value.items():
+        km, vm = value.key_mark(c), value.value_mark(c)
+        coord = _coordinate(c, km, skel)
+        if c in hold:
+            raise InputError(km, f"coordinate {c!r} is both held and given a range", "hold it, or give it a range")
+        lo, hi = check_vector(v, vm, f"range of {c}", 2)
+        own = coord.range or (-math.inf, math.inf)
+        if not (own[0] <= lo < hi <= own[1]):
+            raise InputError(vm, f"range of {c} is {[lo, hi]}",
+                             f"[lo, hi] with lo < hi inside the skeleton's range [{own[0]:g}, {own[1]:g}]")
+        out[c] = (float(lo), float(hi))
+    return out
+
+
+def _narrowed(skel: Skeleton, ranges: dict) -> Skeleton:
+    """The skeleton with the map's ranges in place of its own (what the fit keeps to)."""
+    from dataclasses import replace
+
+    if not ranges:
+        return skel
+    return replace(skel, coordinates=tuple(replace(c, range=ranges.get(c.name, c.range)) for c in skel.coordinates))
 
 
 def _point(key, value, joints: YMap, skel: Skeleton) -> MapPoint:
@@ -387,8 +427,23 @@ def retarget(rmap: RetargetMap, mocap: Mocap, progress=None) -> Retargeted:
         s, source = (1.0, "none") if rmap.scale == "none" else (float(rmap.scale), "map")
     world = align_world(mp, rmap, targets, s)
     fitted = fit_frames(rmap.skeleton, mp.bones, mp.local, mp.weights, world.apply(targets), mp.free, mp.q_start,
-                        root=mp.root, root_points=mp.root_points, progress=progress)
+                        root=mp.root, root_points=mp.root_points, smooth=rmap.smooth, progress=progress)
     return Retargeted(rmap, mocap, mp, world, segs, fitted, source)
+
+
+def as_pose(res: Retargeted, name: str):
+    """The fitted coordinates as an in-memory :class:`~axdf_cli.specs.Pose` of the model's
+    skeleton (what a data set's ``retarget`` motion is): every fitted coordinate keyed at
+    every frame, the held ones at frame 0."""
+    from axdf_cli.specs import Pose
+
+    skel = res.rmap.model
+    frames = tuple(range(len(res.fit.q)))
+    keys = {skel.coordinates[c].name: (frames, tuple(float(v) for v in res.fit.q[:, c])) for c in res.points.free}
+    for c, v in res.rmap.hold.items():
+        keys[c] = ((0,), (float(v),))
+    return Pose(name, skel, float(res.mocap.fps), 0, len(frames) - 1, "linear", keys, {}, {},
+                res.mocap.source, skel.source)
 
 
 def jumps(q: np.ndarray, fps: float) -> tuple[np.ndarray, np.ndarray, int]:

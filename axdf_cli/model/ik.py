@@ -101,10 +101,12 @@ class _Problem:
 
 
 def fit_frames(skel: Skeleton, bones, local, weights, targets: np.ndarray, free, q_start: np.ndarray,
-               root=(), root_points=(), progress=None) -> FitResult:
+               root=(), root_points=(), smooth: float = tol.IK_SMOOTH_ROTATION, progress=None) -> FitResult:
     """Fit the coordinates ``free`` (K,) indices of ``skel``'s to ``targets`` (F, P, 3), frame
     by frame (see the module doc). Coordinates not free keep their ``q_start`` (C,) values.
-    ``root``: coordinates fitted alone first on frame 0, to the points ``root_points``."""
+    ``root``: coordinates fitted alone first on frame 0, to the points ``root_points``;
+    ``smooth``: the pull towards the previous frame, residual metres per degree of a rotation
+    (translations: ``tolerances.IK_SMOOTH_TRANSLATION`` per metre)."""
     from scipy.optimize import least_squares
 
     bones_full = np.asarray(bones, int)
@@ -118,9 +120,8 @@ def fit_frames(skel: Skeleton, bones, local, weights, targets: np.ndarray, free,
     coords = skel.coordinates
     lo = np.array([coords[c].range[0] if coords[c].range else -np.inf for c in free])
     hi = np.array([coords[c].range[1] if coords[c].range else np.inf for c in free])
-    smooth = np.array([tol.IK_SMOOTH_ROTATION if coords[c].type == "rotation" else tol.IK_SMOOTH_TRANSLATION
-                       for c in free])
-    prob = _Problem(sub, bones, local, np.sqrt(np.asarray(weights, float)), free, smooth)
+    pull = np.array([smooth if coords[c].type == "rotation" else tol.IK_SMOOTH_TRANSLATION for c in free])
+    prob = _Problem(sub, bones, local, np.sqrt(np.asarray(weights, float)), free, pull)
     prob.q = np.asarray(q_start, float).copy()
     opts = dict(method="trf", ftol=tol.IK_FTOL, xtol=tol.IK_XTOL, gtol=tol.IK_GTOL, max_nfev=tol.IK_MAX_EVALUATIONS)
 
