@@ -18,6 +18,7 @@ units.
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -276,12 +277,35 @@ def euler_xyz(deg) -> np.ndarray:
 
 def axis_angle(axis: np.ndarray, angle_rad: np.ndarray) -> np.ndarray:
     """Rotations about one unit ``axis`` (3,) by ``angle_rad`` (F,): (F, 3, 3) (Rodrigues)."""
-    x, y, z = axis
+    eye, k, kk = _rodrigues_parts(tuple(float(a) for a in axis))
     c = np.cos(angle_rad)[:, None, None]
     s = np.sin(angle_rad)[:, None, None]
-    k = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-    kk = np.outer(axis, axis)
-    return c * np.eye(3) + s * k + (1.0 - c) * kk
+    return c * eye + s * k + (1.0 - c) * kk
+
+
+@functools.lru_cache(maxsize=4096)
+def _rodrigues_parts(axis: tuple) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """I, the cross-product matrix K and the outer product a aᵀ of a unit axis: the parts of
+    Rodrigues' formula that do not depend on the angle (cached: a skeleton poses the same axes
+    over and over; the arrays are never written to)."""
+    x, y, z = axis
+    a = np.array(axis)
+    parts = (np.eye(3), np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]]), np.outer(a, a))
+    for m in parts:
+        m.flags.writeable = False
+    return parts
+
+
+@functools.lru_cache(maxsize=4096)
+def _joint_frames(offset: tuple, orient: tuple, post_offset: tuple, post_orient: tuple):
+    """A bone's constant parts: ``T(offset) R(orient)`` and ``(T(post_offset) R(post_orient))^-1``
+    (None when both are zero); cached, read-only."""
+    pre = rigid(euler_xyz(orient), offset)
+    post = np.linalg.inv(rigid(euler_xyz(post_orient), post_offset)) if any(post_offset) or any(post_orient) else None
+    for m in (pre, post):
+        if m is not None:
+            m.flags.writeable = False
+    return pre, post
 
 
 def rigid(rot: np.ndarray, trans) -> np.ndarray:
@@ -411,7 +435,8 @@ def _kinematics(skel: Skeleton, q: np.ndarray, record: list | None) -> np.ndarra
     values = dof_values(skel, q)
     world = np.empty((n_frames, len(skel.bones), 4, 4))
     for b, bone in enumerate(skel.bones):
-        pre = rigid(euler_xyz(bone.orient), bone.offset)
+        pre, post = _joint_frames(tuple(bone.offset), tuple(bone.orient), tuple(bone.post_offset),
+                                  tuple(bone.post_orient))
         local = np.broadcast_to(pre, (n_frames, 4, 4)).copy()
         for dof, v in zip(bone.dofs, values[b]):
             axis = np.asarray(dof.axis)
@@ -426,8 +451,7 @@ def _kinematics(skel: Skeleton, q: np.ndarray, record: list | None) -> np.ndarra
             else:
                 # local[f] = local[f] @ T(v axis): translation expressed in the current frame
                 local[:, :3, 3] += np.einsum("fij,j->fi", local[:, :3, :3], axis) * v[:, None]
-        if any(bone.post_offset) or any(bone.post_orient):
-            post = np.linalg.inv(rigid(euler_xyz(bone.post_orient), bone.post_offset))
+        if post is not None:
             local = local @ post
         world[:, b] = local if bone.parent < 0 else world[:, bone.parent] @ local
     return world
