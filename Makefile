@@ -60,7 +60,8 @@ demo: $(STAMP)
 	$(BIN)/axdf run poses/jobs/paper_deltoid_arm26.yaml --out out/paper_deltoid_arm26 --overwrite
 	$(BIN)/axdf run poses/jobs/paper_gastrocnemius_gait2392.yaml --out out/paper_gastrocnemius_gait2392 --overwrite
 	$(BIN)/axdf run poses/jobs/cmu_walk.yaml --out out/cmu_walk --overwrite
-	@echo "demo results in out/: demo, gait2392_walk, paper_deltoid_arm26, paper_gastrocnemius_gait2392, cmu_walk"
+	$(BIN)/axdf run poses/jobs/gait2392_cmu_walk.yaml --out out/gait2392_cmu_walk --overwrite
+	@echo "demo results in out/: demo, gait2392_walk, paper_deltoid_arm26, paper_gastrocnemius_gait2392, cmu_walk, gait2392_cmu_walk"
 	@echo "  each with meshes/, frames/ (PNG + EXR), camera.json, stats.csv, bones.csv, manifest.json"
 
 # A small data set (7 sequences, 32 samples: sampled and perturbed poses, 2 random views each).
@@ -87,6 +88,7 @@ bench: $(STAMP)
 # (+ meshes/), poses/arm26_flex.yaml, poses/gait2392_walk.yaml. Reports: muscles/*/IMPORT.md.
 # And the CMU walk: poses/skeletons/cmu_131_01.yaml and poses/cmu_131_01_walk.yaml (BVH at 30 fps),
 # muscles/cmu/ (the demo muscles moved onto it through poses/maps/human_r_to_cmu.yaml; TRANSFER.md).
+# And the same take fitted onto gait2392 (poses/maps/cmu_to_gait2392.yaml): poses/retargeted/.
 import: $(STAMP)
 	$(BIN)/axdf import osim $(OSIM)/arm26/arm26.osim --name arm26 \
 	  --motion $(OSIM)/arm26/arm26_Kinematics_q.sto --controls $(OSIM)/arm26/arm26_controls.sto \
@@ -100,6 +102,8 @@ import: $(STAMP)
 	  --skeleton-out poses/skeletons/cmu_131_01.yaml --pose-out poses/cmu_131_01_walk.yaml
 	$(BIN)/axdf transfer muscles/demo --from poses/skeletons/human_r.yaml --to poses/skeletons/cmu_131_01.yaml \
 	  --map poses/maps/human_r_to_cmu.yaml --out muscles/cmu
+	$(BIN)/axdf retarget $(BVH) --onto poses/skeletons/gait2392.yaml --map poses/maps/cmu_to_gait2392.yaml --step 4 \
+	  --name cmu_131_01_walk_gait2392 --out poses/retargeted/cmu_131_01_walk_gait2392
 
 clean:
 	rm -rf out .pytest_cache

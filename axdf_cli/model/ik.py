@@ -9,10 +9,11 @@ within their ranges: scipy's ``least_squares`` (trust region reflective, which k
 bounds), with the analytic Jacobian of :func:`axdf_cli.model.skeleton.point_jacobian`,
 warm-started from the previous frame's solution, as OpenSim's InverseKinematicsTool solves
 its weighted marker least squares frame after frame (Delp et al. 2007; Seth et al. 2018).
-The small pull ``lambda`` towards the previous frame settles coordinates the points leave
-undecided (a hip's rotation about a straight leg: its column of the Jacobian vanishes) and
-costs nothing measurable where the points decide (``tolerances.IK_SMOOTH_*``: 0.1 mm of
-residual per degree, against ~7 mm per degree for a 0.4 m lever).
+The pull ``lambda`` towards the previous frame (``smooth``; by default
+``tolerances.IK_SMOOTH_ROTATION``, 1 mm of residual per degree) settles coordinates the points
+barely decide (a hip's rotation about a nearly straight leg: its column of the Jacobian
+nearly vanishes; a toe on a 5 cm lever) and costs the well-seen ones little (a 0.4 m lever
+moves its end 7 mm per degree: a lag of ~2% of a frame's change).
 
 The first frame starts from ``q_start`` and fits the ``root`` coordinates alone to the
 ``root_points`` first (the pelvis placed and turned before the legs move), then everything.
