@@ -337,7 +337,7 @@ def test_bad_map_entries_exit_2_at_their_position(tmp_path, capsys, case):
     (tmp_path / "map.yaml").write_text(text)
     assert _retarget(tmp_path, CMU_BVH, tmp_path / "map.yaml", "--step", "40") == 2
     err = capsys.readouterr().err
-    assert f"map.yaml:6:" in err and word in err and "Traceback" not in err, err
+    assert "map.yaml:6:" in err and word in err and "Traceback" not in err, err
     assert not (tmp_path / "out").exists()
 
 
@@ -425,3 +425,23 @@ def test_a_data_set_takes_a_retargeted_take(tmp_path):
     pose = load_motion(spec, "walk")
     assert pose.fps == 15 and pose.last == 124 and list(motion_frames(spec, "walk")) == [0, 60, 120]
     assert "knee_angle_r" in pose.keys and "subtalar_angle_r" in pose.keys
+
+
+def test_npz_headers_are_checked_before_reading(tmp_path, capsys, monkeypatch):
+    """An array past the size limit (or of pickled objects) is refused from its header."""
+    from axdf_cli.importers import mocap
+
+    _, _, pts = known_positions(range(0, 30, 3))
+    np.savez_compressed(tmp_path / "big.npz", joints=pts, names=np.array(list(KNOWN_POINTS)))
+    known_map(tmp_path / "map.yaml")
+    monkeypatch.setattr(mocap, "NPZ_MAX_VALUES", pts.size - 1)
+    assert _retarget(tmp_path, "big.npz", tmp_path / "map.yaml") == 2
+    err = capsys.readouterr().err
+    assert "big.npz: joints: has shape (10, 22, 3)" in err, err
+
+
+def test_validate_knows_a_retarget_map(capsys):
+    from axdf_cli.cli.main import main
+
+    assert main(["validate", str(CMU_MAP)]) == 0
+    assert "retarget map cmu_to_gait2392: 15 points of gait2392" in capsys.readouterr().out

@@ -19,6 +19,7 @@ centres over frames, in axdf's world (Z-up, metres):
 """
 from __future__ import annotations
 
+import io
 import math
 import zipfile
 from dataclasses import dataclass
@@ -42,6 +43,8 @@ UP_AXES = {"z": np.eye(3), "y": np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.
 FK_CHUNK = 4096
 MAX_FRAMES = 1_000_000
 MAX_JOINTS = 10_000
+#: Values one npz array may hold (3e7: 100,000 frames of 100 joints; 240 MB as float64).
+NPZ_MAX_VALUES = 30_000_000
 
 
 @dataclass(frozen=True)
@@ -130,37 +133,52 @@ def _where(path: Path, array: str, index=None) -> str:
     return f"{path}: {array}[{', '.join(str(int(i)) for i in index)}]"
 
 
+def _npz_array(archive: zipfile.ZipFile, info: zipfile.ZipInfo, path: Path, key: str) -> np.ndarray:
+    """One array of an npz: its header is read first (shape and dtype), so an object array or
+    one past NPZ_MAX_VALUES is refused before anything is decompressed into memory."""
+    fmt = np.lib.format
+    try:
+        with archive.open(info) as f:
+            version = fmt.read_magic(f)
+            header = fmt.read_array_header_1_0 if version == (1, 0) else fmt.read_array_header_2_0
+            shape, _, dtype = header(f)
+            if dtype.hasobject:
+                raise InputError(_where(path, key), "holds Python objects (pickled)",
+                                 "numbers (joints, fps) or fixed-width strings (names)")
+            if int(np.prod(shape, dtype=np.int64)) > NPZ_MAX_VALUES:
+                raise InputError(_where(path, key), f"has shape {tuple(shape)}", f"at most {NPZ_MAX_VALUES} values")
+        with archive.open(info) as f:
+            return fmt.read_array(f, allow_pickle=False)
+    except InputError:
+        raise
+    except (ValueError, OSError, zipfile.BadZipFile, EOFError) as e:
+        raise InputError(_where(path, key), f"cannot be read ({e})", "an array written by np.savez") from None
+
+
 def read_npz_joints(path: Path | str, *, scale: float = 1.0, step: int = 1, up: str = "z") -> Mocap:
     """``joints`` (F, J, 3), ``names`` (J,) and optional ``fps`` from an ``.npz``; every
     problem names the array (and the index of the first bad value)."""
     path = Path(path)
     data = read_input(path, str(path), "an existing .npz file (numpy's np.savez)")
-    import io
-
+    allowed = "an archive written by np.savez with joints, names and fps"
     try:
-        archive = np.load(io.BytesIO(data), allow_pickle=False)
-    except (ValueError, OSError, zipfile.BadZipFile, EOFError) as e:
-        raise InputError(Mark(str(path)), f"not a readable .npz ({e})",
-                         "an archive written by np.savez with joints, names and fps") from None
-    if not isinstance(archive, np.lib.npyio.NpzFile):
-        raise InputError(Mark(str(path)), "a single .npy array, not an .npz archive",
-                         "an archive written by np.savez with joints, names and fps")
+        archive = zipfile.ZipFile(io.BytesIO(data))
+    except (zipfile.BadZipFile, ValueError, OSError) as e:
+        raise InputError(Mark(str(path)), f"not a readable .npz ({e})", allowed) from None
+    arrays = {}
     with archive:
-        keys = list(archive.files)
-        for k in keys:
-            if k not in NPZ_KEYS:
-                raise InputError(_where(path, k), f"unknown array {k!r}", f"arrays: {', '.join(NPZ_KEYS)}")
+        members = {}
+        for info in archive.infolist():
+            key = info.filename[:-4] if info.filename.endswith(".npy") else info.filename
+            if key not in NPZ_KEYS:
+                raise InputError(Mark(str(path)), f"unknown array {key!r}", f"arrays: {', '.join(NPZ_KEYS)}")
+            members[key] = info
         for k in ("joints", "names"):
-            if k not in keys:
+            if k not in members:
                 raise InputError(Mark(str(path)), f"no array {k!r}",
                                  "joints (F, J, 3) positions and names (J,) strings; fps optional")
-        arrays = {}
-        for k in keys:
-            try:
-                arrays[k] = archive[k]
-            except (ValueError, OSError, zipfile.BadZipFile, EOFError) as e:
-                raise InputError(_where(path, k), f"cannot be read ({e})",
-                                 "plain numeric or string arrays (no pickled objects)") from None
+        for key, info in members.items():
+            arrays[key] = _npz_array(archive, info, path, key)
     joints, names = arrays["joints"], arrays["names"]
     if joints.dtype.kind not in "fiu" or joints.ndim != 3 or joints.shape[2] != 3:
         raise InputError(_where(path, "joints"), f"is {joints.dtype} of shape {joints.shape}",

@@ -403,7 +403,7 @@ def point_jacobian(skel: Skeleton, frames: DofFrames, world: np.ndarray, bones: 
     # x[f, p, i] = R[f, b_p, i, j] local[p, j] + t[f, b_p, i]
     posed = world[:, bones]  # (F, P, 4, 4)
     x = np.einsum("fpij,pj->fpi", posed[..., :3, :3], local) + posed[..., :3, 3]
-    n_frames, n_coords = world.shape[0], len(skel.coordinates)
+    n_coords = len(skel.coordinates)
     moves = _dof_moves(skel, frames.bone)[bones]  # (P, D): DOF d moves the bone of point p
     arm = x[:, :, None, :] - frames.origin[:, None, :, :]  # (F, P, D, 3)
     axis = np.broadcast_to(frames.axis[:, None, :, :], arm.shape)
