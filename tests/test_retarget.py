@@ -445,3 +445,15 @@ def test_validate_knows_a_retarget_map(capsys):
 
     assert main(["validate", str(CMU_MAP)]) == 0
     assert "retarget map cmu_to_gait2392: 15 points of gait2392" in capsys.readouterr().out
+
+
+def test_an_input_is_never_overwritten(tmp_path, capsys):
+    _, _, pts = known_positions(range(0, 30, 3))
+    write_npz(tmp_path / "walk.npz", pts, list(KNOWN_POINTS))
+    known_map(tmp_path / "walk_gait2392.yaml")  # the map where the pose would go
+    before = (tmp_path / "walk_gait2392.yaml").read_bytes()
+    assert run_cli(tmp_path, "retarget", "walk.npz", "--map", "walk_gait2392.yaml", "--out", ".",
+                   "--allow-outside") == 2
+    assert "is an input of this command" in capsys.readouterr().err
+    assert (tmp_path / "walk_gait2392.yaml").read_bytes() == before
+    assert not (tmp_path / "retarget.csv").exists()

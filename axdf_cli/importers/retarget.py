@@ -551,7 +551,7 @@ def build_retarget(motion: Path | str, map_path: Path | str, out_dir: Path | str
     Layout: ``DIR/NAME.yaml`` (the pose; its skeleton by a path relative to DIR),
     ``DIR/retarget.csv`` (per frame: RMS, max and every point's error, metres),
     ``DIR/retarget_report.json``."""
-    from axdf_cli.fileio.yamlio import NAME_ALLOWED, is_name
+    from axdf_cli.fileio.yamlio import NAME_ALLOWED, is_name, real_path
     from axdf_cli.importers import emit
     from axdf_cli.importers.mocap import read_motion
     from axdf_cli.importers.osim_import import _rel
@@ -572,6 +572,11 @@ def build_retarget(motion: Path | str, map_path: Path | str, out_dir: Path | str
         raise InputError(Mark(str(motion)), f"the pose would be {len(text)} bytes ({len(res.fit.q)} frames)",
                          f"axdf reads YAML files up to {tol.YAML_MAX_BYTES} bytes; a larger --step or a shorter take")
     files = {str(pose_path): text, str(out_dir / "retarget.csv"): frames_csv(res)}
+    inputs = {real_path(p): p for p in (motion, map_path, skel_file)}
+    for out in [*files, str(out_dir / "retarget_report.json")]:
+        if real_path(out) in inputs:
+            raise InputError(None, f"{out} is an input of this command ({inputs[real_path(out)]})",
+                             "an --out folder (or --name) whose files are not the motion, the map or the skeleton")
     rel = [Path(p).name for p in files] + ["retarget_report.json"]
     rep = report(res, name, rel)
     files[str(out_dir / "retarget_report.json")] = (json.dumps(rep, indent=1, sort_keys=True) + "\n").encode()
