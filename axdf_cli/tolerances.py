@@ -71,7 +71,7 @@ RENDER_EDGE_MARGIN_PX = 0.02
 
 # Retargeting (axdf retarget, axdf_cli/model/ik.py). Each frame's least squares stops when
 # the cost changes by less than IK_FTOL relative or the step by less than IK_XTOL relative
-# (joint centres are fitted to ~1e-9 m; mocap is good to ~1 mm), or after IK_MAX_EVALUATIONS
+# (exact data is fitted to ~1 µm; mocap is good to ~1 mm), or after IK_MAX_EVALUATIONS
 # (a warm-started frame takes 3-10).
 IK_FTOL = 1e-10
 IK_XTOL = 1e-10
@@ -90,7 +90,8 @@ IK_SMOOTH_TRANSLATION = 1e-2
 IK_AT_BOUND = 1e-6
 # Scaling the model to the subject (`scale: fit`): a pair of mapped points is a segment when its
 # distance changes by less than SEGMENT_MODEL_RIGIDITY (relative) over sampled poses of the model
-# (a knee's coupled translations move the hip-knee distance by < 1%) and by less than
+# (gait2392's coupled knee translations move the hip-knee distance by up to 7% over the knee's
+# whole range, 2.5% over a walk: the thighs count, and they carry the legs' proportions) and by less than
 # SEGMENT_MOCAP_RIGIDITY between the 10th and 90th percentile of the motion (marker noise and
 # soft tissue: a few per cent), and is at least SEGMENT_MIN_LENGTH metres long in both.
 SEGMENT_MODEL_RIGIDITY = 0.08
@@ -101,3 +102,10 @@ SEGMENT_SAMPLES = 16
 # A point is rigid with the root bone when it moves by less than this (metres) in the root's frame
 # over the sampled poses.
 ROOT_RIGID = 1e-6
+
+# Data-set keypoints (axdf_cli/model/keypoints.py): two keypoints closer than this (metres) at
+# the rest pose are one point. Coincident by construction are BVH helper joints at offset 0
+# from their parent (CMU's LHipJoint, lowerback, lowerneck, the collars, lhand, LThumb) and the
+# radius's head 2 cm beside the humero-ulnar joint (human_r); distinct anatomical keypoints of
+# the shipped skeletons are 2.8 cm apart or more (CMU's fingers' base to their end site).
+KEYPOINT_MERGE = 0.025
