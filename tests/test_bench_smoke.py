@@ -91,3 +91,11 @@ def test_jiggle_rows_helpers(repo_root):
     assert bench.time_chunks(plan, repeats=1) > 0
     seconds, n = bench.time_jiggle_stage(plan, repeats=1)
     assert seconds > 0 and n == 2
+
+
+def test_retarget_jacobian_timing():
+    from axdf_cli.importers.retarget import load_map
+
+    a, b, diff = bench.jacobian_times(load_map(bench.CMU_MAP), repeats=1)
+    assert a > 0 and b > 0
+    assert diff < 1e-6  # the analytic Jacobian is the finite differences' limit
