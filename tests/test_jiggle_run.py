@@ -278,3 +278,15 @@ def test_data_set_sequences_honour_jiggle(tmp_path, monkeypatch, capsys):
     assert jig != still  # the motion rings
     one = [all_files(sets[n] / "ds" / "seq_00001" / "meshes") for n in ("jig", "still")]
     assert one[0] == one[1]  # one frame: at rest
+
+
+def test_a_frequency_the_frames_cannot_show_is_noted(tmp_path, capsys):
+    h = hinge_folder(tmp_path / "h")
+    write_pose(h, "slow", {0: {"knee": 0}, 4: {"knee": 30}}, [0, 4], skeleton="hinge.yaml", fps=6)
+    rc, _, err = run_main(["run", "--muscles", h / "muscles", "--pose", h / "slow.yaml", "--out", h / "o",
+                           "--no-render", "--verbose"], capsys)
+    assert rc == 0, err
+    assert "note: jiggle at up to 4 Hz (back, front) is above half the pose's 6 fps" in err
+    rc, _, err = run_main(["run", "--muscles", h / "muscles", "--pose", h / "bend.yaml", "--out", h / "o2",
+                           "--frames", "0:3", "--no-render", "--verbose"], capsys)
+    assert rc == 0 and "aliases" not in err

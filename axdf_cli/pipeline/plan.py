@@ -173,15 +173,17 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
 def jiggle_notes(pose: Pose, specs) -> list[str]:
     """Remarks on ``jiggle:`` frequencies that the pose's frames cannot show: above the
     Nyquist frequency fps / 2 the ring aliases between frames (the motion is still exact)."""
-    out = []
+    over: dict[float, list[str]] = {}  # highest frequency -> muscles
     for s in specs:
         j = s.jiggle
-        if j is None:
-            continue
-        top = max(j.frequency, j.tensed_frequency or 0.0)
+        top = 0.0 if j is None else max(j.frequency, j.tensed_frequency or 0.0)
         if top > 0.5 * pose.fps:
-            out.append(f"{s.name}: jiggle at up to {top:g} Hz is above half the pose's {pose.fps:g} fps; "
-                       "the ring aliases between frames (a pose with more frames per second shows it)")
+            over.setdefault(top, []).append(s.name)
+    out = []
+    for top, names in sorted(over.items()):
+        who = ", ".join(names[:3]) + (f" and {len(names) - 3} more" if len(names) > 3 else "")
+        out.append(f"jiggle at up to {top:g} Hz ({who}) is above half the pose's {pose.fps:g} fps: the ring "
+                   "aliases between frames (a pose with more frames per second shows it)")
     return out
 
 
