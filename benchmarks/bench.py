@@ -625,7 +625,7 @@ def dataset_evaluation(n_sequences: int) -> float:
     n = 0
     for seq in ctx.sequences[:n_sequences]:
         pose, frames = sequence_pose(ctx, seq)
-        plan = runner.sequence_plan(pose, frames, ctx.muscles, ctx.models, "ply", Path("unused"), {})
+        plan = runner.sequence_plan(pose, frames, ctx.muscles, ctx.models, "ply", Path("unused"), {}, ctx.stages)
         t0 = time.perf_counter()
         for _, _, results in runner.evaluate_chunks(plan):
             for _ in results:

@@ -30,9 +30,26 @@ def add_args(p) -> None:
                    help="hold coordinates inside their skeleton ranges (default: warn per frame)")
     p.add_argument("--allow-outside", action="store_true",
                    help="allow paths inside YAML files to leave the project folder tree")
+    add_stage_args(p)
     from axdf_cli.specs.render import add_render_args
 
     add_render_args(p)
+
+
+def add_stage_args(p) -> None:
+    """``--no-<stage>`` for every stage of the table (:data:`axdf_cli.pipeline.stages.STAGES`)."""
+    from axdf_cli.pipeline.stages import STAGES
+
+    for name in STAGES:
+        p.add_argument(f"--no-{name}", dest=f"stage_{name}", action="store_false", default=None,
+                       help=f"leave out the {name} stage (default: on)")
+
+
+def stage_switches(args) -> dict:
+    """The stages switched off on the command line: name -> False."""
+    from axdf_cli.pipeline.stages import STAGES
+
+    return {name: False for name in STAGES if getattr(args, f"stage_{name}", None) is False}
 
 
 def _positive(text: str) -> int:
@@ -111,7 +128,7 @@ def plan_from_args(args):
         settings = replace(settings, enabled=args.render)
     return runner.plan_run(job, muscle_args=args.muscles, pose_arg=args.pose, out_arg=args.out,
                            fmt_arg=args.format, frames_arg=args.frames, render=settings_from_args(settings, args),
-                           policy=policy, clamp_ranges=args.clamp_ranges)
+                           policy=policy, clamp_ranges=args.clamp_ranges, stages=stage_switches(args))
 
 
 def refuse_warnings(plan) -> None:

@@ -51,6 +51,7 @@ class Context:
     dataset_json: bytes
     digest: str
     timing: dict = field(default_factory=dict)
+    stages: tuple = ()  # the run's stages (axdf_cli.pipeline.stages), applied to every sequence
 
     @property
     def names(self) -> list[str]:
@@ -77,7 +78,7 @@ def build_context(path: Path | str, seed: int | None = None, policy=None) -> Con
                   bounds=np.zeros((2, 3)), frames=())
     sequences = expand_sequences(spec)
     ctx = Context(spec, sequences, skel, runner.without_meshes(skel), muscles, models, bone_meshes, inputs,
-                  motion_inputs, scene, scene_bones, b"", "")
+                  motion_inputs, scene, scene_bones, b"", "", stages=runner.build_stages())
     ctx.dataset_json = (json.dumps(dataset_dict(ctx), indent=1) + "\n").encode()
     ctx.digest = hashlib.sha256(ctx.dataset_json).hexdigest()
     return ctx
@@ -115,6 +116,7 @@ def dataset_dict(ctx: Context) -> dict:
             "muscle_activation": "(F, M) 0..1", "K": "(V, 3, 3)", "world_to_camera": "(F, V, 4, 4)",
         },
         "visibility_tolerance": spec.visibility_tolerance,
+        **({"stages": runner.stages_record(ctx.stages)} if ctx.stages else {}),
         "sequences": [{"name": s.name, "source": spec.entries[s.entry].label, "frames": s.n_frames}
                       for s in ctx.sequences],
     }
@@ -191,7 +193,7 @@ def build_sequence(ctx: Context, index: int, out: Path, resume: bool) -> tuple[d
     inputs = dict(ctx.inputs)
     if entry.motion is not None:
         inputs.update(ctx.motion_inputs[entry.motion])
-    plan = runner.sequence_plan(pose, frames, ctx.muscles, ctx.models, spec.format, folder, inputs)
+    plan = runner.sequence_plan(pose, frames, ctx.muscles, ctx.models, spec.format, folder, inputs, ctx.stages)
     summary = runner.run_sequence(plan, resume and folder.exists())
     t1 = time.perf_counter()
     timing["run"] = t1 - t0

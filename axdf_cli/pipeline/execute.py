@@ -133,7 +133,8 @@ class Spill:
         self.offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
         self.path = path
         try:
-            self.data = np.lib.format.open_memmap(path, mode="w+", dtype="<f4", shape=(2, n_rows, int(self.offsets[-1]), 3))
+            self.data = np.lib.format.open_memmap(path, mode="w+", dtype="<f4",
+                                                  shape=(2, n_rows, int(self.offsets[-1]), 3))
         except OSError as e:
             raise atomic.environment_problem(path, e) from None
 
