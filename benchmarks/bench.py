@@ -50,7 +50,7 @@ from pathlib import Path
 import numpy as np
 
 from axdf_cli.fileio import atomic
-from axdf_cli.formats import ObjWriter, PlyWriter
+from axdf_cli.formats import FORMATS, ObjWriter, PlyWriter, read_preference
 from axdf_cli.specs import Pose, expand_muscle_paths, load_muscle_file, load_pose
 from axdf_cli.model.muscle import OCT, MuscleModel, MuscleSpec
 from axdf_cli.model.pose import effective_tension, sample_activation, sample_coordinates
@@ -441,7 +441,7 @@ def profile_run(job: Path, out: Path, fmt: str = "ply", top: int = 0) -> dict:
 
 # ----------------------------------------------------------------------------- packed formats
 
-PACKED_FORMATS = ("npz", "pc2", "mdd", "usd")
+PACKED_FORMATS = tuple(read_preference(FORMATS))  # every per-sequence format, fastest to read first
 TARGET_PACKED = 1.5  # pc2 and npz writing within 1.5x of ndarray.tofile of the same bytes in one file
 
 
@@ -457,7 +457,6 @@ def time_sequence_writers(models: list[MuscleModel], world: np.ndarray, tension:
     muscles, each file its own)."""
     from axdf_cli.formats.sequence import SequenceInfo
     from axdf_cli.pipeline import CHUNK_FRAMES
-    from axdf_cli.pipeline.sequences import SEQUENCE_WRITERS
 
     F = world.shape[0]
     data = []
@@ -467,7 +466,7 @@ def time_sequence_writers(models: list[MuscleModel], world: np.ndarray, tension:
     frames = np.arange(F)
 
     def write(fmt: str, sha256: bool) -> int:
-        cls = SEQUENCE_WRITERS[fmt]
+        cls = FORMATS[fmt].writer
         d = folder / fmt
         d.mkdir(parents=True)
         writers = [cls(d / f"m{j}.{cls.extension}", SequenceInfo(frames, fps, f"m{j}"), data[j % len(data)][0].faces,
@@ -487,7 +486,7 @@ def time_sequence_writers(models: list[MuscleModel], world: np.ndarray, tension:
                 for j in range(n_muscles):
                     _, pos, nrm = data[j % len(data)]
                     pos[s:s + CHUNK_FRAMES].tofile(fh)
-                    if fmt in ("npz", "usd"):  # the formats that carry normals
+                    if FORMATS[fmt].normals:
                         nrm[s:s + CHUNK_FRAMES].tofile(fh)
         return ref.stat().st_size
 

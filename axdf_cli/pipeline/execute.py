@@ -407,7 +407,7 @@ def _write_run(plan: RunPlan, session, prep: Prepass, progress, render_progress,
                 parts = _parallel_mesh_pass(plan, root, min(jobs, nm if split_of(plan) == "muscles" else nf), prep,
                                             previous, progress)
             except BaseException:
-                runfolder.remove_stale(root)  # a worker killed mid-write (the others finish their file)
+                runfolder.remove_stale(root, run_dirs(plan))  # a worker killed mid-write (the others finish theirs)
                 raise
         else:
             checkpoint = Checkpoint(lambda: write_manifest(root, manifest_dict(plan, writer.files, [], complete=False)))
@@ -452,7 +452,7 @@ def _write_run(plan: RunPlan, session, prep: Prepass, progress, render_progress,
         writer.close(cancel=True)
         writer.files.update(rendered["files"])
         if jobs > 1:
-            runfolder.remove_stale(root)  # a render worker killed mid-write (the others finish their file)
+            runfolder.remove_stale(root, run_dirs(plan))  # a render worker killed mid-write (the others finish theirs)
         if root == plan.out:  # stopped: list what is whole, for --resume (a staging folder goes)
             runfolder.try_write_manifest(root, manifest_dict(plan, writer.files, [], complete=False))
         raise
