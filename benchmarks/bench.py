@@ -6,7 +6,7 @@ Rows (medians of repeated runs timed with ``time.perf_counter``; the machine may
 so figures are noisy and only ratios taken in the same run are compared with targets):
 
 1. evaluation: µs per muscle-frame of ``MuscleModel.evaluate`` at 48x24 and 96x48, over
-   1000 frames in chunks of ``run.CHUNK_FRAMES``, for 1, 10 and 92 muscles (the gait2392
+   1000 frames in chunks of ``pipeline.CHUNK_FRAMES``, for 1, 10 and 92 muscles (the gait2392
    library and walk when shipped, else demo muscles replicated and perturbed on the demo
    skeleton with a synthetic pose);
 2. the limit: numpy filling the same outputs (``np.copyto`` into preallocated (F, V, 3)
@@ -29,7 +29,7 @@ so figures are noisy and only ratios taken in the same run are compared with tar
    ``--jobs 2``, and their ratio.
 
 ``--long`` adds the memory check of 10,000 frames x 92 muscles streamed through
-``run.evaluate_chunks`` in a subprocess (several minutes). Helpers are importable for the
+``pipeline.evaluate_chunks`` in a subprocess (several minutes). Helpers are importable for the
 smoke test (``tests/test_bench_smoke.py``), which runs them on a tiny case.
 """
 from __future__ import annotations
@@ -448,14 +448,14 @@ TARGET_PACKED = 1.5  # pc2 and npz writing within 1.5x of ndarray.tofile of the 
 def time_sequence_writers(models: list[MuscleModel], world: np.ndarray, tension: np.ndarray, folder: Path,
                           n_muscles: int, repeats: int, fps: float = 60.0) -> dict:
     """Seconds to write ``n_muscles`` muscles x F frames in each per-sequence format as the run
-    streams them (chunks of ``run.CHUNK_FRAMES`` frames, muscle by muscle in each chunk, then
+    streams them (chunks of ``pipeline.CHUNK_FRAMES`` frames, muscle by muscle in each chunk, then
     every file completed: headers, CRC, rename), without and with the sha256 the manifest
     records, against ``ndarray.tofile`` of the same bytes into one file (written in the same
     chunks). Medians of ``repeats`` rounds; in each round the three variants of a format run
     back to back, each after ``os.sync()`` (a variant that meets the previous one's dirty
     pages being written back is slowed by the disk, not by its own work). The frames are evaluated once beforehand (``models`` cycled over the
     muscles, each file its own)."""
-    from axdf_cli.formats.sequence import SequenceInfo
+    from axdf_cli.formats.packed import SequenceInfo
     from axdf_cli.pipeline import CHUNK_FRAMES
 
     F = world.shape[0]
@@ -615,7 +615,7 @@ def time_dataset(n_samples: int, jobs: int, out: Path) -> dict:
 def dataset_evaluation(n_sequences: int) -> float:
     """Seconds per sample of the evaluation inside a sequence's run (twist references,
     kinematics, ``evaluate``), timed alone on the data set's first sequences."""
-    from axdf_cli.dataset import runner
+    from axdf_cli.dataset import door
     from axdf_cli.dataset.worker import build_context, sequence_pose
     from axdf_cli.specs import RefPolicy
 
@@ -624,9 +624,9 @@ def dataset_evaluation(n_sequences: int) -> float:
     n = 0
     for seq in ctx.sequences[:n_sequences]:
         pose, frames = sequence_pose(ctx, seq)
-        plan = runner.sequence_plan(pose, frames, ctx.muscles, ctx.models, "ply", Path("unused"), {}, ctx.stages)
+        plan = door.sequence_plan(pose, frames, ctx.muscles, ctx.models, "ply", Path("unused"), {}, ctx.stages)
         t0 = time.perf_counter()
-        for _, _, results in runner.evaluate_chunks(plan):
+        for _, _, results in door.evaluate_chunks(plan):
             for _ in results:
                 pass
         t += time.perf_counter() - t0
@@ -802,7 +802,7 @@ def main(argv=None) -> int:
               file=sys.stderr)
 
         # 1-2. evaluation against the limit
-        table.section(f"evaluation ({case.name}, {n_frames} frames in chunks of run.CHUNK_FRAMES) vs numpy "
+        table.section(f"evaluation ({case.name}, {n_frames} frames in chunks of pipeline.CHUNK_FRAMES) vs numpy "
                       "filling the same outputs (vertices + normals, 2 x (F, V, 3) float64)")
         eval_us: dict = {}
         worst_limit = 0.0
@@ -907,7 +907,7 @@ def main(argv=None) -> int:
         if args.long:
             lj = GAIT_JOB if GAIT_JOB.is_file() else DEMO_JOB
             lr = long_memory(lj)
-            table.section(f"--long: {LONG_FRAMES} frames x all muscles through run.evaluate_chunks "
+            table.section(f"--long: {LONG_FRAMES} frames x all muscles through pipeline.evaluate_chunks "
                           "(+ stats and the manifest's file list)")
             table.add(f"peak memory ({lr['muscle_frames']} muscle-frames, chunk {lr['chunk']})",
                       f"{lr['maxrss'] / 2**20:.0f} MiB", f"{lr['seconds']:.0f} s evaluating",

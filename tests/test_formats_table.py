@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from axdf_cli.formats import FORMATS, of_layout, read_preference, read_sequence
-from axdf_cli.formats.sequence import SequenceInfo
+from axdf_cli.formats.packed import SequenceInfo
 
 from conftest import REPO_ROOT, run_main
 

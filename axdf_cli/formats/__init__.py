@@ -17,12 +17,12 @@ A format is laid out per frame or per sequence (:attr:`Format.layout`):
   -> bytes`` and ``.write(path, positions, normals, sha256=False)``. The reader turns one
   file's bytes into one :class:`Mesh`.
 - ``"sequence"``: one file per muscle holding every frame (USD, PC2, MDD, NPZ: packed
-  formats, :mod:`axdf_cli.formats.sequence`). The writer streams:
+  formats, :mod:`axdf_cli.formats.packed`). The writer streams:
   ``writer(path, SequenceInfo(frames, fps, name, color), faces, n_vertices)``, then
   ``.append(positions (C, V, 3), normals (C, V, 3))`` chunk by chunk in frame order, then
   ``.finish() -> sha256`` (whole or absent). The reader takes the file's path (a long
   sequence is memory-mapped or read a frame at a time, never whole) and returns a
-  :class:`~axdf_cli.formats.sequence.PointSequence`.
+  :class:`~axdf_cli.formats.packed.PointSequence`.
 """
 from __future__ import annotations
 
@@ -148,7 +148,7 @@ def read_mesh(data: bytes, suffix: str) -> Mesh:
 
 
 def read_sequence(path: Path | str, fps: float | None = None):
-    """A per-sequence file -> :class:`~axdf_cli.formats.sequence.PointSequence` by its suffix.
+    """A per-sequence file -> :class:`~axdf_cli.formats.packed.PointSequence` by its suffix.
     ``fps``: a format that stores times (MDD) gives frame numbers time x fps; without it, the
     frame indices 0, 1, ..."""
     f = format_of(Path(path).suffix, "sequence")

@@ -25,7 +25,7 @@ from axdf_cli.pipeline.evaluate import Prepass, chunk_frames, evaluate_plan, fin
 from axdf_cli.pipeline.plan import RunPlan, display_path, framing
 from axdf_cli.pipeline.stages import Scope, of_scope, stages_record
 from axdf_cli.workers import check_parent, process_map
-from axdf_cli.pipeline.sequences import SequenceFiles, file_relpath, sequence_formats, write_run_files
+from axdf_cli.pipeline.packed import SequenceFiles, file_relpath, sequence_formats, write_run_files
 from axdf_cli.fileio.runfolder import (BONES_CSV, FRAME_EXTENSIONS, MANIFEST_INTERVAL_S, STATS, OutputWriter, bone_mesh_relpath,
                                 describe_differences, frame_relpath, gl_record, is_file_with, mesh_relpath,
                                 write_manifest)
@@ -378,7 +378,7 @@ def execute(plan: RunPlan, *, resume: bool = False, overwrite: bool = False, pro
     Every check comes first (the output folder, --resume against the earlier manifest,
     --strict, EGL and the render size): a refused run writes nothing. With ``jobs`` > 1 the
     muscles are split over forked worker processes for the mesh pass, then the frames over
-    render workers (:func:`axdf_cli.render.sequence.render_frames_of`: from a fork server,
+    render workers (:func:`axdf_cli.render.framefiles.render_frames_of`: from a fork server,
     each with its own GL context; this process never makes one); the output is the same
     bytes. With one job the frames are rendered in this process, after every fork."""
     target = check_output(plan, resume=resume, overwrite=overwrite)
@@ -386,7 +386,7 @@ def execute(plan: RunPlan, *, resume: bool = False, overwrite: bool = False, pro
     if strict:
         strict_check(plan, prep)
     if plan.rendering:
-        from axdf_cli.render.sequence import check_render
+        from axdf_cli.render.framefiles import check_render
 
         plan = replace(plan, render=check_render(plan.render, on_note))
     with runfolder.Session(target) as session:

@@ -201,7 +201,7 @@ def load_run_source(run_dir: Path, manifest: Manifest | None = None, frames=None
 
 
 class RunFrames:
-    """A finished run's frames for the renderer (a :class:`~axdf_cli.render.sequence.FrameSource`):
+    """A finished run's frames for the renderer (a :class:`~axdf_cli.render.framefiles.FrameSource`):
     each muscle's mesh read a frame at a time (its per-frame files, or its per-sequence file,
     opened in the process that reads: a render worker opens its own), normals computed where
     the format has none; the bones' transforms of the ``selected`` frames."""

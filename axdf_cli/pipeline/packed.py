@@ -21,7 +21,7 @@ import numpy as np
 
 from axdf_cli.fileio import atomic
 from axdf_cli.formats import FORMATS, of_layout
-from axdf_cli.formats.sequence import SequenceInfo
+from axdf_cli.formats.packed import SequenceInfo
 from axdf_cli.fileio.runfolder import USD_BONES, USD_STAGE, is_file_with, rest_mesh_relpath, sequence_relpath
 
 MAX_PENDING_CHUNKS = 8  # chunks queued for the sequence thread (bounds memory)
