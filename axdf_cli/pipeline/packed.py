@@ -1,4 +1,5 @@
-"""Per-sequence (packed) formats in a run: one file per muscle holding every frame.
+"""The packed sink: a run's per-sequence (packed) files, one per muscle and format holding
+every frame (each format's folder, faces and rest mesh: its ``FORMATS`` entry).
 
 The mesh pass evaluates all its muscles chunk by chunk; :class:`SequenceFiles` streams each
 chunk into every selected per-sequence format on its own background thread (so writing

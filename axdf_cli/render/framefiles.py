@@ -1,4 +1,5 @@
-"""Render a whole sequence to ``OUT/frames/<frame:04d>.png|.exr`` and ``OUT/camera.json``.
+"""The frames of a sequence rendered into files: ``OUT/frames/<frame:04d>.png|.exr`` and
+``OUT/camera.json``.
 
 :func:`render_frames_of` is what ``axdf run --render`` (through :func:`render_plan`) and
 ``axdf render`` call: the frames of a :class:`FrameSource`, in this process
