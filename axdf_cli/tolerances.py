@@ -68,3 +68,10 @@ RENDER_DEPTH_RTOL = 1e-4
 # Rasterizers snap vertices to a sub-pixel grid (Mesa llvmpipe: 1/256 px); a pixel centre
 # counts as inside a triangle only when at least this far (pixels) from each of its edges.
 RENDER_EDGE_MARGIN_PX = 0.02
+
+# Data-set keypoints (axdf_cli/model/keypoints.py): two keypoints closer than this (metres) at
+# the rest pose are one point. Coincident by construction are BVH helper joints at offset 0
+# from their parent (CMU's LHipJoint, lowerback, lowerneck, the collars, lhand, LThumb) and the
+# radius's head 2 cm beside the humero-ulnar joint (human_r); distinct anatomical keypoints of
+# the shipped skeletons are 2.8 cm apart or more (CMU's fingers' base to their end site).
+KEYPOINT_MERGE = 0.025

@@ -409,8 +409,8 @@ def _cum(stats: pstats.Stats, file_end: str, func: str) -> float:
 
 
 def profile_run(job: Path, out: Path, fmt: str = "ply", top: int = 0) -> dict:
-    """Run ``execute`` in-process under cProfile (no rendering): seconds in evaluation (twist
-    references, kinematics, ``MuscleModel.evaluate``), in writing (encode, sha256, atomic
+    """Run ``execute`` in-process under cProfile (no rendering): seconds in evaluation (the
+    pipeline's pre-pass, chunks and surfaces: ``pipeline.evaluate``), in writing (encode, sha256, atomic
     writes) and in total; ``top`` functions by own time as text."""
     from axdf_cli.specs import load_job
     from axdf_cli.pipeline import execute, plan_run
@@ -423,11 +423,10 @@ def profile_run(job: Path, out: Path, fmt: str = "ply", top: int = 0) -> dict:
     prof.runcall(execute, plan)
     total = time.perf_counter() - t0
     st = pstats.Stats(prof)
-    # evaluation: evaluate + twist references + kinematics (those inside twist_references once)
-    fk_in_twist = sum(cv[3] for (f, _, fn), v in st.stats.items() if fn == "forward_kinematics"
-                      and f.endswith("skeleton.py") for (_, _, cfn), cv in v[4].items() if cfn == "twist_references")
-    ev = (_cum(st, "muscle.py", "evaluate") + _cum(st, "evaluate.py", "twist_references")
-          + _cum(st, "skeleton.py", "forward_kinematics") - fk_in_twist)
+    # evaluation: the pre-pass (twist references, time stages' states), the chunks (kinematics,
+    # axis points, time stages) and their surfaces (RMF, surface, frame stages), as the mesh pass reads them
+    ev = (_cum(st, "evaluate.py", "prepare") + _cum(st, "evaluate.py", "evaluate_plan")
+          + _cum(st, "evaluate.py", "_surfaces"))
     enc = _cum(st, f"{fmt}.py", "encode")
     wr = _cum(st, "runfolder.py", "write")  # OutputWriter.write: sha256 + atomic write
     text = ""
