@@ -7,7 +7,6 @@ gives the PLY's points from each."""
 from __future__ import annotations
 
 import json
-import shutil
 
 import numpy as np
 import pytest
@@ -15,7 +14,8 @@ import pytest
 from axdf_cli.formats import FORMATS, of_layout, read_preference, read_sequence
 from axdf_cli.formats.packed import SequenceInfo
 
-from conftest import REPO_ROOT, run_main
+from conftest import run_main
+from test_safety import project  # noqa: F401  (the demo library in a tmp folder, as the current folder)
 
 FPS = 24.0
 FRAMES = np.arange(10, 31, 4)  # evenly spaced: every format holds them
@@ -69,7 +69,7 @@ def test_each_format_round_trips_what_its_entry_says_it_holds(name, tmp_path):
         np.testing.assert_array_equal(seq.faces, faces)
 
 
-def test_a_run_writes_every_format_where_its_entry_says(tmp_path, capsys, monkeypatch):
+def test_a_run_writes_every_format_where_its_entry_says(project, capsys):
     """Every --format of the table in one run; each per-sequence file in its entry's folder (a
     rest mesh beside a format without faces), read back as ``axdf render`` reads a run."""
     from axdf_cli.render.runio import muscle_frames
@@ -80,13 +80,10 @@ def test_a_run_writes_every_format_where_its_entry_says(tmp_path, capsys, monkey
                 f.check()
             except Exception as e:
                 pytest.skip(f"{f.name}: {e}")
-    shutil.copytree(REPO_ROOT / "muscles" / "demo", tmp_path / "muscles" / "demo")
-    shutil.copytree(REPO_ROOT / "poses", tmp_path / "poses")
-    monkeypatch.chdir(tmp_path)
     rc, _, err = run_main(["run", "poses/jobs/demo.yaml", "--no-render", "-q", "--out", "out",
                            "--frames", "20:30:5", "--format", ",".join(FORMATS)], capsys)
     assert rc == 0, err
-    out = tmp_path / "out"
+    out = project / "out"
     names = [m["name"] for m in json.loads((out / "manifest.json").read_text())["muscles"]]
     frames = (20, 25, 30)
     for fmt in of_layout("sequence"):

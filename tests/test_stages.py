@@ -11,7 +11,6 @@ import io
 import json
 import os
 import pickle
-import shutil
 import signal
 import subprocess
 import sys
@@ -22,23 +21,14 @@ import numpy as np
 import pytest
 
 import stage_doubles
-from conftest import REPO_ROOT, all_files, run_main
+from conftest import all_files, run_main
+from test_safety import project  # noqa: F401  (the demo library in a tmp folder, as the current folder)
 
 RUN = ["run", "poses/jobs/demo.yaml", "--no-render", "-q"]
 FULL = "0:150"  # with TIME_BLOCK 32 (set below): five timeline blocks
 FORMATS = "ply,npz,pc2"
 SETS = [("smooth",), ("push",), ("smooth", "push")]
 SMALL_BLOCK = 32  # the timeline block in these tests, so that 150 frames span several
-
-
-@pytest.fixture
-def project(tmp_path, monkeypatch):
-    """The demo library in tmp_path/project, as the current folder."""
-    root = tmp_path / "project"
-    shutil.copytree(REPO_ROOT / "muscles" / "demo", root / "muscles" / "demo")
-    shutil.copytree(REPO_ROOT / "poses", root / "poses")
-    monkeypatch.chdir(root)
-    return root
 
 
 def use_stages(monkeypatch, names, block: int | None = SMALL_BLOCK) -> None:
