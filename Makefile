@@ -60,13 +60,14 @@ $(BLENDER_STAMP):
 
 DEMO_JOBS := $(DEMO):out/demo poses/jobs/gait2392_walk.yaml:out/gait2392_walk \
   poses/jobs/paper_deltoid_arm26.yaml:out/paper_deltoid_arm26 \
-  poses/jobs/paper_gastrocnemius_gait2392.yaml:out/paper_gastrocnemius_gait2392 poses/jobs/cmu_walk.yaml:out/cmu_walk
+  poses/jobs/paper_gastrocnemius_gait2392.yaml:out/paper_gastrocnemius_gait2392 poses/jobs/cmu_walk.yaml:out/cmu_walk \
+  poses/jobs/gait2392_cmu_walk.yaml:out/gait2392_cmu_walk
 
 demo: $(STAMP)
 	@n=0; for jo in $(DEMO_JOBS); do n=$$((n + 1)); job=$${jo%%:*}; out=$${jo#*:}; \
-	  echo "demo $$n/5: axdf run $$job --out $$out (meshes, then rendered frames)"; \
+	  echo "demo $$n/6: axdf run $$job --out $$out (meshes, then rendered frames)"; \
 	  $(BIN)/axdf run $$job --out $$out --overwrite || exit $$?; done
-	@echo "demo results in out/: demo, gait2392_walk, paper_deltoid_arm26, paper_gastrocnemius_gait2392, cmu_walk"
+	@echo "demo results in out/: demo, gait2392_walk, paper_deltoid_arm26, paper_gastrocnemius_gait2392, cmu_walk, gait2392_cmu_walk"
 	@echo "  each with meshes/, frames/ (PNG + EXR), camera.json, stats.csv, bones.csv, manifest.json"
 
 # A small data set: gait2392's 92 muscles (see poses/datasets/gait2392_small.yaml).
@@ -94,6 +95,7 @@ bench: $(STAMP)
 # (+ meshes/), poses/arm26_flex.yaml, poses/gait2392_walk.yaml. Reports: muscles/*/IMPORT.md.
 # And the CMU walk: poses/skeletons/cmu_131_01.yaml and poses/cmu_131_01_walk.yaml (BVH at 30 fps),
 # muscles/cmu/ (the demo muscles moved onto it through poses/maps/human_r_to_cmu.yaml; TRANSFER.md).
+# And the same take fitted onto gait2392 (poses/maps/cmu_to_gait2392.yaml): poses/retargeted/.
 import: $(STAMP)
 	@if [ ! -f "$(OSIM)/arm26/arm26.osim" ] || [ ! -f "$(OSIM)/gait2392/gait2392_thelen2003muscle.osim" ] \
 	   || [ ! -f "$(BVH)" ]; then \
@@ -115,6 +117,8 @@ import: $(STAMP)
 	  --skeleton-out poses/skeletons/cmu_131_01.yaml --pose-out poses/cmu_131_01_walk.yaml
 	$(BIN)/axdf transfer muscles/demo --from poses/skeletons/human_r.yaml --to poses/skeletons/cmu_131_01.yaml \
 	  --map poses/maps/human_r_to_cmu.yaml --out muscles/cmu
+	$(BIN)/axdf retarget $(BVH) --onto poses/skeletons/gait2392.yaml --map poses/maps/cmu_to_gait2392.yaml --step 4 \
+	  --name cmu_131_01_walk_gait2392 --out poses/retargeted/cmu_131_01_walk_gait2392
 
 clean:
 	rm -rf out .pytest_cache

@@ -74,7 +74,7 @@ def build_context(path: Path | str, seed: int | None = None, policy=None) -> Con
     bone_meshes = {i: door.load_bone_mesh(b.mesh, spec.skeleton_path) for i, b in enumerate(skel.bones) if b.mesh}
     srcs = [spec.source, spec.skeleton_path, *spec.muscle_files, *sorted({b.mesh for b in skel.bones if b.mesh})]
     inputs = {door.display_path(Path(s)): atomic.sha256_file(s) for s in srcs}
-    motion_inputs = {m.name: {door.display_path(Path(m.path)): atomic.sha256_file(m.path)}
+    motion_inputs = {m.name: {door.display_path(Path(p)): atomic.sha256_file(p) for p in (m.path, m.map) if p}
                      for m in spec.motions.values()}
     scene_bones = sorted(bone_meshes) if spec.render.bones else []
     scene = Scene(muscles=tuple(SceneMuscle(s.name, s.color, m.faces) for s, m in zip(muscles, models)),
