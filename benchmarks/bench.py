@@ -6,7 +6,7 @@ Rows (medians of repeated runs timed with ``time.perf_counter``; the machine may
 so figures are noisy and only ratios taken in the same run are compared with targets):
 
 1. evaluation: µs per muscle-frame of ``MuscleModel.evaluate`` at 48x24 and 96x48, over
-   1000 frames in chunks of ``run.CHUNK_FRAMES``, for 1, 10 and 92 muscles (the gait2392
+   1000 frames in chunks of ``pipeline.CHUNK_FRAMES``, for 1, 10 and 92 muscles (the gait2392
    library and walk when shipped, else demo muscles replicated and perturbed on the demo
    skeleton with a synthetic pose);
 2. the limit: numpy filling the same outputs (``np.copyto`` into preallocated (F, V, 3)
@@ -38,7 +38,7 @@ so figures are noisy and only ratios taken in the same run are compared with tar
 ``--only retarget`` prints just the retargeting rows, ``--only jiggle`` the jiggle rows.
 
 ``--long`` adds the memory check of 10,000 frames x 92 muscles streamed through
-``run.evaluate_chunks`` in a subprocess (several minutes). Helpers are importable for the
+``pipeline.evaluate_chunks`` in a subprocess (several minutes). Helpers are importable for the
 smoke test (``tests/test_bench_smoke.py``), which runs them on a tiny case.
 """
 from __future__ import annotations
@@ -59,7 +59,7 @@ from pathlib import Path
 import numpy as np
 
 from axdf_cli.fileio import atomic
-from axdf_cli.formats import ObjWriter, PlyWriter
+from axdf_cli.formats import FORMATS, ObjWriter, PlyWriter, read_preference
 from axdf_cli.specs import Pose, expand_muscle_paths, load_muscle_file, load_pose
 from axdf_cli.model.muscle import OCT, MuscleModel, MuscleSpec
 from axdf_cli.model.pose import effective_tension, sample_activation, sample_coordinates
@@ -418,8 +418,8 @@ def _cum(stats: pstats.Stats, file_end: str, func: str) -> float:
 
 
 def profile_run(job: Path, out: Path, fmt: str = "ply", top: int = 0) -> dict:
-    """Run ``execute`` in-process under cProfile (no rendering): seconds in evaluation (twist
-    references, kinematics, ``MuscleModel.evaluate``), in writing (encode, sha256, atomic
+    """Run ``execute`` in-process under cProfile (no rendering): seconds in evaluation (the
+    pipeline's pre-pass, chunks and surfaces: ``pipeline.evaluate``), in writing (encode, sha256, atomic
     writes) and in total; ``top`` functions by own time as text."""
     from axdf_cli.specs import load_job
     from axdf_cli.pipeline import execute, plan_run
@@ -432,11 +432,10 @@ def profile_run(job: Path, out: Path, fmt: str = "ply", top: int = 0) -> dict:
     prof.runcall(execute, plan)
     total = time.perf_counter() - t0
     st = pstats.Stats(prof)
-    # evaluation: evaluate + twist references + kinematics (those inside twist_references once)
-    fk_in_twist = sum(cv[3] for (f, _, fn), v in st.stats.items() if fn == "forward_kinematics"
-                      and f.endswith("skeleton.py") for (_, _, cfn), cv in v[4].items() if cfn == "twist_references")
-    ev = (_cum(st, "muscle.py", "evaluate") + _cum(st, "evaluate.py", "twist_references")
-          + _cum(st, "skeleton.py", "forward_kinematics") - fk_in_twist)
+    # evaluation: the pre-pass (twist references, time stages' states), the chunks (kinematics,
+    # axis points, time stages) and their surfaces (RMF, surface, frame stages), as the mesh pass reads them
+    ev = (_cum(st, "evaluate.py", "prepare") + _cum(st, "evaluate.py", "evaluate_plan")
+          + _cum(st, "evaluate.py", "_surfaces"))
     enc = _cum(st, f"{fmt}.py", "encode")
     wr = _cum(st, "runfolder.py", "write")  # OutputWriter.write: sha256 + atomic write
     text = ""
@@ -450,23 +449,22 @@ def profile_run(job: Path, out: Path, fmt: str = "ply", top: int = 0) -> dict:
 
 # ----------------------------------------------------------------------------- packed formats
 
-PACKED_FORMATS = ("npz", "pc2", "mdd", "usd")
+PACKED_FORMATS = tuple(read_preference(FORMATS))  # every per-sequence format, fastest to read first
 TARGET_PACKED = 1.5  # pc2 and npz writing within 1.5x of ndarray.tofile of the same bytes in one file
 
 
 def time_sequence_writers(models: list[MuscleModel], world: np.ndarray, tension: np.ndarray, folder: Path,
                           n_muscles: int, repeats: int, fps: float = 60.0) -> dict:
     """Seconds to write ``n_muscles`` muscles x F frames in each per-sequence format as the run
-    streams them (chunks of ``run.CHUNK_FRAMES`` frames, muscle by muscle in each chunk, then
+    streams them (chunks of ``pipeline.CHUNK_FRAMES`` frames, muscle by muscle in each chunk, then
     every file completed: headers, CRC, rename), without and with the sha256 the manifest
     records, against ``ndarray.tofile`` of the same bytes into one file (written in the same
     chunks). Medians of ``repeats`` rounds; in each round the three variants of a format run
     back to back, each after ``os.sync()`` (a variant that meets the previous one's dirty
     pages being written back is slowed by the disk, not by its own work). The frames are evaluated once beforehand (``models`` cycled over the
     muscles, each file its own)."""
-    from axdf_cli.formats.sequence import SequenceInfo
+    from axdf_cli.formats.packed import SequenceInfo
     from axdf_cli.pipeline import CHUNK_FRAMES
-    from axdf_cli.pipeline.sequences import SEQUENCE_WRITERS
 
     F = world.shape[0]
     data = []
@@ -476,7 +474,7 @@ def time_sequence_writers(models: list[MuscleModel], world: np.ndarray, tension:
     frames = np.arange(F)
 
     def write(fmt: str, sha256: bool) -> int:
-        cls = SEQUENCE_WRITERS[fmt]
+        cls = FORMATS[fmt].writer
         d = folder / fmt
         d.mkdir(parents=True)
         writers = [cls(d / f"m{j}.{cls.extension}", SequenceInfo(frames, fps, f"m{j}"), data[j % len(data)][0].faces,
@@ -496,7 +494,7 @@ def time_sequence_writers(models: list[MuscleModel], world: np.ndarray, tension:
                 for j in range(n_muscles):
                     _, pos, nrm = data[j % len(data)]
                     pos[s:s + CHUNK_FRAMES].tofile(fh)
-                    if fmt in ("npz", "usd"):  # the formats that carry normals
+                    if FORMATS[fmt].normals:
                         nrm[s:s + CHUNK_FRAMES].tofile(fh)
         return ref.stat().st_size
 
@@ -625,7 +623,7 @@ def time_dataset(n_samples: int, jobs: int, out: Path) -> dict:
 def dataset_evaluation(n_sequences: int) -> float:
     """Seconds per sample of the evaluation inside a sequence's run (twist references,
     kinematics, ``evaluate``), timed alone on the data set's first sequences."""
-    from axdf_cli.dataset import runner
+    from axdf_cli.dataset import door
     from axdf_cli.dataset.worker import build_context, sequence_pose
     from axdf_cli.specs import RefPolicy
 
@@ -634,9 +632,9 @@ def dataset_evaluation(n_sequences: int) -> float:
     n = 0
     for seq in ctx.sequences[:n_sequences]:
         pose, frames = sequence_pose(ctx, seq)
-        plan = runner.sequence_plan(pose, frames, ctx.muscles, ctx.models, "ply", Path("unused"), {})
+        plan = door.sequence_plan(pose, frames, ctx.muscles, ctx.models, "ply", Path("unused"), {}, ctx.stages)
         t0 = time.perf_counter()
-        for _, _, results in runner.evaluate_chunks(plan):
+        for _, _, results in door.evaluate_chunks(plan):
             for _ in results:
                 pass
         t += time.perf_counter() - t0
@@ -954,7 +952,7 @@ def main(argv=None) -> int:
               file=sys.stderr)
 
         # 1-2. evaluation against the limit
-        table.section(f"evaluation ({case.name}, {n_frames} frames in chunks of run.CHUNK_FRAMES) vs numpy "
+        table.section(f"evaluation ({case.name}, {n_frames} frames in chunks of pipeline.CHUNK_FRAMES) vs numpy "
                       "filling the same outputs (vertices + normals, 2 x (F, V, 3) float64)")
         eval_us: dict = {}
         worst_limit = 0.0
@@ -1065,7 +1063,7 @@ def main(argv=None) -> int:
         if args.long:
             lj = GAIT_JOB if GAIT_JOB.is_file() else DEMO_JOB
             lr = long_memory(lj)
-            table.section(f"--long: {LONG_FRAMES} frames x all muscles through run.evaluate_chunks "
+            table.section(f"--long: {LONG_FRAMES} frames x all muscles through pipeline.evaluate_chunks "
                           "(+ stats and the manifest's file list)")
             table.add(f"peak memory ({lr['muscle_frames']} muscle-frames, chunk {lr['chunk']})",
                       f"{lr['maxrss'] / 2**20:.0f} MiB", f"{lr['seconds']:.0f} s evaluating",

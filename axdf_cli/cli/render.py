@@ -61,7 +61,7 @@ def _frame_files(frames) -> list[str]:
 
 def run(args: argparse.Namespace) -> int:
     from axdf_cli.render.runio import load_run_source, recorded_render_settings
-    from axdf_cli.render.sequence import check_render, render_frames_of
+    from axdf_cli.render.framefiles import check_render, render_frames_of
 
     run_dir = Path(args.run_dir)
     if not run_dir.is_dir():

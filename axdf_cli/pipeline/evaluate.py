@@ -162,6 +162,10 @@ def timeline_block(plan: RunPlan, frames: np.ndarray) -> np.ndarray:
 
 
 def time_states(plan: RunPlan) -> dict:
+    """{timeline block: the TIME stages' states at its start} for the blocks holding selected
+    frames (empty without TIME stages): the stages run from :meth:`Stage.start` over every
+    block before the last such block, all muscles, in order. Kept states are copies, so a
+    stage that changes its state in place cannot change them."""
     stages = of_scope(plan.stages, Scope.TIME)
     if not stages:
         return {}
@@ -205,8 +209,8 @@ def _chunk(plan: RunPlan, rows: slice, frames: np.ndarray, muscles: list[int], t
 
 
 def evaluate_plan(plan: RunPlan, prep: Prepass | None = None, rows: slice | None = None,
-             muscles: list[int] | None = None, size: int | None = None
-             ) -> Iterator[tuple[Chunk, Iterator[tuple[int, FrameResult]]]]:
+                  muscles: list[int] | None = None, size: int | None = None
+                  ) -> Iterator[tuple[Chunk, Iterator[tuple[int, FrameResult]]]]:
     """The selected frames ``rows`` (positions in ``plan.frames``, default all) of ``muscles``
     (default all; every muscle when a FRAME stage runs), in chunks of at most ``size`` frames:
     yields ``(chunk, results)`` in frame order, where ``results`` yields ``(muscle, FrameResult)``

@@ -25,7 +25,7 @@ from axdf_cli.pipeline.evaluate import Prepass, chunk_frames, evaluate_plan, fin
 from axdf_cli.pipeline.plan import RunPlan, display_path, framing
 from axdf_cli.pipeline.stages import Scope, of_scope, stages_record
 from axdf_cli.workers import check_parent, process_map
-from axdf_cli.pipeline.sequences import SequenceFiles, file_relpath, sequence_formats, write_run_files
+from axdf_cli.pipeline.packed import SequenceFiles, file_relpath, sequence_formats, write_run_files
 from axdf_cli.fileio.runfolder import (BONES_CSV, FRAME_EXTENSIONS, MANIFEST_INTERVAL_S, STATS, OutputWriter, bone_mesh_relpath,
                                 describe_differences, frame_relpath, gl_record, is_file_with, mesh_relpath,
                                 write_manifest)
@@ -133,7 +133,8 @@ class Spill:
         self.offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
         self.path = path
         try:
-            self.data = np.lib.format.open_memmap(path, mode="w+", dtype="<f4", shape=(2, n_rows, int(self.offsets[-1]), 3))
+            self.data = np.lib.format.open_memmap(path, mode="w+", dtype="<f4",
+                                                  shape=(2, n_rows, int(self.offsets[-1]), 3))
         except OSError as e:
             raise atomic.environment_problem(path, e) from None
 
@@ -377,7 +378,7 @@ def execute(plan: RunPlan, *, resume: bool = False, overwrite: bool = False, pro
     Every check comes first (the output folder, --resume against the earlier manifest,
     --strict, EGL and the render size): a refused run writes nothing. With ``jobs`` > 1 the
     muscles are split over forked worker processes for the mesh pass, then the frames over
-    render workers (:func:`axdf_cli.render.sequence.render_frames_of`: from a fork server,
+    render workers (:func:`axdf_cli.render.framefiles.render_frames_of`: from a fork server,
     each with its own GL context; this process never makes one); the output is the same
     bytes. With one job the frames are rendered in this process, after every fork."""
     target = check_output(plan, resume=resume, overwrite=overwrite)
@@ -385,7 +386,7 @@ def execute(plan: RunPlan, *, resume: bool = False, overwrite: bool = False, pro
     if strict:
         strict_check(plan, prep)
     if plan.rendering:
-        from axdf_cli.render.sequence import check_render
+        from axdf_cli.render.framefiles import check_render
 
         plan = replace(plan, render=check_render(plan.render, on_note))
     with runfolder.Session(target) as session:
@@ -406,7 +407,7 @@ def _write_run(plan: RunPlan, session, prep: Prepass, progress, render_progress,
                 parts = _parallel_mesh_pass(plan, root, min(jobs, nm if split_of(plan) == "muscles" else nf), prep,
                                             previous, progress)
             except BaseException:
-                runfolder.remove_stale(root)  # a worker killed mid-write (the others finish their file)
+                runfolder.remove_stale(root, run_dirs(plan))  # a worker killed mid-write (the others finish theirs)
                 raise
         else:
             checkpoint = Checkpoint(lambda: write_manifest(root, manifest_dict(plan, writer.files, [], complete=False)))
@@ -451,7 +452,7 @@ def _write_run(plan: RunPlan, session, prep: Prepass, progress, render_progress,
         writer.close(cancel=True)
         writer.files.update(rendered["files"])
         if jobs > 1:
-            runfolder.remove_stale(root)  # a render worker killed mid-write (the others finish their file)
+            runfolder.remove_stale(root, run_dirs(plan))  # a render worker killed mid-write (the others finish theirs)
         if root == plan.out:  # stopped: list what is whole, for --resume (a staging folder goes)
             runfolder.try_write_manifest(root, manifest_dict(plan, writer.files, [], complete=False))
         raise

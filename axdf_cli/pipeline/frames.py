@@ -1,7 +1,7 @@
 """The frames sink: a run plan's frames rendered into ``OUT/frames/`` (``axdf run --render``).
 
 The renderer (:mod:`axdf_cli.render`) takes a scene and chunks of arrays and never evaluates;
-:class:`PlanFrames` is the :class:`~axdf_cli.render.sequence.FrameSource` that evaluates the
+:class:`PlanFrames` is the :class:`~axdf_cli.render.framefiles.FrameSource` that evaluates the
 plan's muscles again, block by block, through the same pipeline (stages included, from the
 run's pre-pass), exactly as the mesh pass wrote them.
 """
@@ -16,7 +16,7 @@ from axdf_cli.pipeline.evaluate import Prepass, evaluate_plan, finite_or_rest
 from axdf_cli.pipeline.plan import camera_targets, framing
 from axdf_cli.render.renderer import bone_layout
 from axdf_cli.render.scene import FrameChunk, Scene, SceneMuscle
-from axdf_cli.render.sequence import RENDER_CHUNK, render_frames_of
+from axdf_cli.render.framefiles import RENDER_CHUNK, render_frames_of
 
 
 def render_plan(plan, out_dir: Path, bounds, prep: Prepass, progress: Callable[[int], None] | None = None,

@@ -188,19 +188,19 @@ def jiggle_notes(pose: Pose, specs) -> list[str]:
 
 
 def check_formats(formats, frames, frames_mark: Mark) -> None:
-    """What the selected formats need, checked before anything is written: evenly spaced
-    frames for point caches; Pixar's USD modules for usd (exit 3 with the install hint)."""
-    from axdf_cli.formats.pc2 import check_frames
+    """What the selected formats need (their ``FORMATS`` entries), checked before anything is
+    written: the frames they can hold (evenly spaced for point caches); what the machine needs
+    to write them (Pixar's USD modules for usd: exit 3 with the install hint)."""
+    from axdf_cli.formats import FORMATS, frames_problem, of_layout
 
-    caches = [f for f in formats if f in ("pc2", "mdd")]
-    why = check_frames(frames) if caches else None
+    cannot, why = frames_problem(formats, frames)
     if why:
-        raise InputError(frames_mark, f"frames {_frames_text(frames)} for {', '.join(caches)}",
-                         why + "; or write usd or npz, which keep any frames")
-    if "usd" in formats:
-        from axdf_cli.formats.usd import pxr
-
-        pxr()
+        keep = [n for n in of_layout("sequence") if FORMATS[n].frames == "any"]
+        raise InputError(frames_mark, f"frames {_frames_text(frames)} for {', '.join(cannot)}",
+                         why + f"; or write {' or '.join(keep)}, which keep any frames")
+    for name in formats:
+        if FORMATS[name].check is not None:
+            FORMATS[name].check()
 
 
 def _frames_text(frames) -> str:
