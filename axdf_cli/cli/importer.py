@@ -71,6 +71,8 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     j.add_argument("--no-meshes", action="store_true", help="do not convert bone geometry")
     j.add_argument("--max-faces", type=int, default=0, metavar="N",
                    help="decimate each bone mesh to at most N triangles (default 0: keep all)")
+    j.add_argument("--mesh-edge", type=float, default=0.0, metavar="M",
+                   help="decimate each bone mesh to triangles of about this edge length in metres (default 0: off)")
     j.add_argument("--palette", choices=("anatomical", "hashed"), default="anatomical",
                    help="muscle colours: muscle reds varied per muscle (default), or any hue from the name's hash")
 
@@ -135,10 +137,12 @@ def run_mjcf(args) -> int:
         raise UsageError(f"--fps {args.fps}", "a frame rate in (0, 10000]")
     if not 0 <= args.max_faces <= 10_000_000:
         raise UsageError(f"--max-faces {args.max_faces}", "a whole number in 0..10000000 (0: keep every triangle)")
+    if not 0 <= args.mesh_edge <= 1:
+        raise UsageError(f"--mesh-edge {args.mesh_edge}", "metres in [0, 1] (0: off)")
     res = build_import(args.model, args.out, name=args.name, motion=args.motion, skeleton_out=args.skeleton_out,
                        muscles_out=args.muscles_out, pose_out=args.pose_out, meshes_out=args.meshes_out,
                        pose_name=args.pose_name, fps=args.fps, meshes=not args.no_meshes, max_faces=args.max_faces,
-                       palette=args.palette)
+                       mesh_edge=args.mesh_edge, palette=args.palette)
     for w in res.warnings:
         print(f"axdf: warning: {w}", file=sys.stderr)
     for path, data in sorted(res.files.items()):

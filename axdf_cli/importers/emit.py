@@ -293,7 +293,7 @@ def muscle_doc(m: Muscle, skel: Skeleton, world: np.ndarray, model: Model | None
 
 def belly_doc(name: str, path: list, wraps: list, max_force: float, fibre_length: float, tendon_slack: float,
               pennation: float, skel: Skeleton, world: np.ndarray, palette: str = "anatomical",
-              axis_points: int = 0) -> tuple[dict, dict]:
+              axis_points: int = 0, min_slenderness: float = 0.0) -> tuple[dict, dict]:
     """A path muscle's YAML document sized by its model's own numbers, and its summary row
     (unrounded): the path and wrap documents ``path``, ``wraps``, the max isometric force (N),
     optimal fibre length, tendon slack length (m) and pennation (rad).
@@ -312,6 +312,11 @@ def belly_doc(name: str, path: list, wraps: list, max_force: float, fibre_length
       model's own surface, as ``axdf run`` builds it) is V plus the tendons' volume;
     - tendon sections (TENDON_SECTIONS inside each free tendon) of radius r_t with
       π r_t² = F_max / TENDON_STRESS; ``tendons`` are the free tendons' arc fractions.
+
+    With ``min_slenderness`` (MuJoCo imports), a belly squatter than that at rest is thinned
+    (R scaled down, the volume falls below the law's) until it is not; the row's
+    ``thinned_from_radius`` keeps the law's R. ``axis_points`` (0: the path's default) is
+    written into the document.
 
     Positions are fractions of the rest arc length written as curve parameters t (mapped
     through the rest axis); sections are circular; ``volume: exact`` keeps the rest volume.
@@ -359,6 +364,14 @@ def belly_doc(name: str, path: list, wraps: list, max_force: float, fibre_length
     doc = document(r)
     mm = _model(doc, name, skel, world)
     slender = belly_slenderness(mm.rest_vertices, mm.faces)
+    law_radius = r
+    for _ in range(6):  # a squat belly thinned to ``min_slenderness`` (its width scales with R)
+        if slender.ratio >= min_slenderness:
+            break
+        r *= slender.ratio / min_slenderness * (1.0 - 1e-3)
+        doc = document(r)
+        mm = _model(doc, name, skel, world)
+        slender = belly_slenderness(mm.rest_vertices, mm.faces)
     row = {"muscle": name, "control_points": len(rest_ctrl), "rest_axis_length": axis_length,
            "rest_path_length": path_length, "pcsa_m2": pcsa, "volume_m3": volume,
            "optimal_fiber_length": fibre_length, "pennation_deg": math.degrees(pennation),
@@ -366,6 +379,8 @@ def belly_doc(name: str, path: list, wraps: list, max_force: float, fibre_length
            "fibre_projection": fibres,
            "belly_radius": r, "tendon_radius": r_t, "tendons": [t_o, t_i], "rest_volume_m3": mm.v0,
            "slenderness": slender.ratio, "widest_diameter": slender.width}
+    if r != law_radius:
+        row["thinned_from_radius"] = law_radius
     return doc, row
 
 

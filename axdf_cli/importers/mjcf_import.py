@@ -64,6 +64,10 @@ FALLBACK_FIBRE_SHARE = 0.5
 #: Without a positive ``force`` (MuJoCo's default -1: scale / acc0, known only to MuJoCo's
 #: compiler), the max isometric force is ``scale`` newtons.
 MJ_SHAPES = {"sphere": "mujoco_sphere", "cylinder": "mujoco_cylinder"}
+#: Bellies squatter than this at rest are thinned (emit.belly_doc): MuJoCo's models carry big
+#: forces on short paths (pronator quadratus, anconeus, the multifidi's short slips), and a
+#: belly squats further as its muscle shortens in motion; the library's floor is 1.2.
+MIN_REST_SLENDERNESS = 1.5
 
 
 # ----------------------------------------------------------------------------- rotations
@@ -281,6 +285,24 @@ def _read_mesh(path: Path, mark: Mark) -> tuple[np.ndarray, np.ndarray]:
     return v, f
 
 
+#: Decimated meshes keep at least this many triangles (a carpal bone stays a closed shape).
+MIN_FACES = 200
+
+
+def face_budget(v: np.ndarray, f: np.ndarray, max_faces: int, edge: float) -> int:
+    """Triangles to keep (0: all): at most ``max_faces`` (0: no cap), and with ``edge`` > 0 about
+    what equilateral triangles of that edge (m) need to tile the mesh's area, at least MIN_FACES."""
+    n = len(f)
+    if edge > 0:
+        tri = v[f]
+        # area[t] = |(b - a) x (c - a)| / 2
+        area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum()
+        n = min(n, max(MIN_FACES, int(area / (math.sqrt(3) / 4 * edge * edge))))
+    if max_faces > 0:
+        n = min(n, max_faces)
+    return 0 if n >= len(f) else n
+
+
 def decimate(v: np.ndarray, f: np.ndarray, max_faces: int) -> tuple[np.ndarray, np.ndarray]:
     """At most ``max_faces`` triangles: quadric edge collapse (fast-simplification, the
     Fast-Quadric-Mesh-Simplification algorithm); meshes already small are kept."""
@@ -295,7 +317,7 @@ def decimate(v: np.ndarray, f: np.ndarray, max_faces: int) -> tuple[np.ndarray, 
     return np.asarray(pv, dtype=np.float64), np.asarray(pf, dtype=np.int64)
 
 
-def body_meshes(model: MjcfModel, max_faces: int, report: dict) -> dict[str, bytes]:
+def body_meshes(model: MjcfModel, max_faces: int, report: dict, edge: float = 0.0) -> dict[str, bytes]:
     """Body → binary PLY bytes: its mesh geoms in the body frame (``v_body = R_g (s ⊙ R_ref^T
     (v − refpos)) + p_g``, as MuJoCo places them), faces turned when the scale mirrors."""
     out = {}
@@ -316,7 +338,7 @@ def body_meshes(model: MjcfModel, max_faces: int, report: dict) -> dict[str, byt
                 if np.prod(np.sign(asset.scale)) < 0:
                     f = f[:, ::-1]
                 n0 = len(f)
-                v, f = decimate(v, f, max_faces)
+                v, f = decimate(v, f, face_budget(v, f, max_faces, edge))
                 cache[asset.name] = (v, f)
                 rows.append({"mesh": asset.name, "file": asset.file.name, "faces": int(n0), "kept": int(len(f))})
             v, f = cache[asset.name]
@@ -507,12 +529,14 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
                  motion: Path | str | None = None, skeleton_out: Path | str | None = None,
                  muscles_out: Path | str | None = None, pose_out: Path | str | None = None,
                  meshes_out: Path | str | None = None, pose_name: str | None = None, fps: float | None = None,
-                 meshes: bool = True, max_faces: int = 0, palette: str = "anatomical") -> ImportResult:
+                 meshes: bool = True, max_faces: int = 0, mesh_edge: float = 0.0,
+                 palette: str = "anatomical") -> ImportResult:
     """Read ``model_path`` (+ a qpos motion) and build every output file's bytes.
 
     Layout as ``axdf import osim``'s: ``skeletons/NAME.yaml``, ``skeletons/meshes/NAME/*.ply``,
     ``muscles/MUSCLE.yaml``, ``POSE.yaml`` (with a motion), ``import_report.json``, ``IMPORT.md``.
-    ``fps`` overrides the motion's; ``max_faces`` (0: all) bounds each bone mesh.
+    ``fps`` overrides the motion's; ``max_faces`` (0: all) bounds each bone mesh, ``mesh_edge``
+    (m, 0: off) decimates it to about that edge length (:func:`face_budget`).
     """
     model_path = Path(model_path)
     out_dir = Path(out_dir)
@@ -538,7 +562,7 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
     report: dict = {"source": {"model": model_path.name, "sha256": _sha(model_path), "model_name": model.name},
                     "tool": "axdf import mjcf", "skeleton": name}
     files: dict[str, bytes] = {}
-    mesh_bytes = body_meshes(model, max_faces, report) if meshes else {}
+    mesh_bytes = body_meshes(model, max_faces, report, mesh_edge) if meshes else {}
     mesh_refs = {}
     for body, data in sorted(mesh_bytes.items()):
         p = mesh_dir / f"{names('body', body)}.ply"
@@ -567,7 +591,8 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
         for n in notes:
             warnings.append(f"{m.mark}: muscle {m.name!r}: {n}")
         n_axis, axis_err = axis_points_for(mname, path, wraps, skel, probe)
-        doc, row = emit.belly_doc(mname, path, wraps, force, l0, lt, 0.0, skel, world, palette, n_axis)
+        doc, row = emit.belly_doc(mname, path, wraps, force, l0, lt, 0.0, skel, world, palette, n_axis,
+                                  MIN_REST_SLENDERNESS)
         row.update({"axis_points": n_axis, "axis_length_error": axis_err, "type": m.kind, "tendon": m.tendon, "path_points": len(path), "wraps": [w["name"] for w in wraps],
                     "sidesites": sum("side" in w for w in wraps), "force": force, "lengthrange": m.lengthrange,
                     "notes": notes})
@@ -597,7 +622,8 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
     report["warnings"] = [_strip_dirs(w, inputs) for w in warnings]
     report["renamed"] = names.renamed
     report["settings"] = {"specific_tension_Pa": emit.SPECIFIC_TENSION, "tendon_stress_Pa": emit.TENDON_STRESS,
-                          "free_tendon_share": emit.FREE_TENDON_SHARE, "palette": palette, "max_faces": max_faces}
+                          "free_tendon_share": emit.FREE_TENDON_SHARE, "palette": palette, "max_faces": max_faces,
+                          "mesh_edge_m": mesh_edge}
     report["files"] = sorted(_rel(Path(p), out_dir) for p in files)
     files[str(out_dir / "import_report.json")] = (json.dumps(report, indent=1, sort_keys=True) + "\n").encode()
     files[str(out_dir / "IMPORT.md")] = import_markdown(report).encode()
@@ -667,7 +693,9 @@ def import_markdown(r: dict) -> str:
         n0 = sum(m["faces"] for m in r["meshes"])
         n1 = sum(m["kept"] for m in r["meshes"])
         lines += [f"Bone meshes: {len(r['meshes'])} mesh files, {n0} triangles → {n1} kept"
-                  + (f" (at most {r['settings']['max_faces']} per mesh)" if r["settings"]["max_faces"] else "") + ".", ""]
+                  + (f" (at most {r['settings']['max_faces']} per mesh)" if r["settings"]["max_faces"] else "")
+                  + (f", decimated to edges of about {r['settings']['mesh_edge_m'] * 1000:g} mm"
+                     if r["settings"]["mesh_edge_m"] else "") + " (quadric edge collapse).", ""]
     if "motion" in r:
         mo = r["motion"]
         dev = mo["coupled_joints_ignored"]
