@@ -445,7 +445,8 @@ def read_motion(path: Path, nq: int) -> tuple[np.ndarray, float]:
     bad = np.argwhere(~np.isfinite(q) | (np.abs(q) > tol.MAX_ABS_NUMBER))
     if len(bad):
         f, k = (int(x) for x in bad[0])
-        raise InputError(Mark(shown), f"qpos[{f}, {k}] = {q[f, k]!r}", f"finite numbers within ±{tol.MAX_ABS_NUMBER:g}")
+        raise InputError(Mark(shown), f"qpos[{f}, {k}] = {float(q[f, k]):g}",
+                         f"finite numbers within ±{tol.MAX_ABS_NUMBER:g}")
     fps = DEFAULT_FPS
     if "fps" in z.files:
         try:
@@ -709,7 +710,7 @@ def import_markdown(r: dict) -> str:
     lines += ["## Not imported", "", "| kind | name | where | why |", "|---|---|---|---|"]
     lines += [f"| {i['kind']} | {i['name']} | {i['where']} | {i['why']} |" for i in r["ignored"]] or \
         ["| – | – | – | nothing |"]
-    lines += belly_markdown_mjcf(r)
+    lines += belly_markdown_mjcf(r) if r["muscles"] else ["", "## Bellies", "", "No muscles."]
     lines += ["", "## Muscles", "", "| muscle | sites | wrap geoms | rest path (cm) | force (N) | PCSA (cm²) | "
               "fibres (cm) | free tendon (cm) | belly (cm) | belly Ø (mm) | tendon Ø (mm) | slenderness |",
               "|---|---|---|---|---|---|---|---|---|---|---|---|"]
