@@ -78,9 +78,13 @@ def quat_to_euler(q: np.ndarray) -> np.ndarray:
     (R = Rx(a) Ry(b) Rz(c), b in [-90, 90])."""
     from scipy.spatial.transform import Rotation
 
+    import warnings
+
     q = np.asarray(q, dtype=np.float64)
     flat = q.reshape(-1, 4)
-    e = Rotation.from_quat(flat[:, [1, 2, 3, 0]]).as_euler("XYZ", degrees=True)
+    with warnings.catch_warnings():  # at b = ±90° (gimbal lock) c is set to 0: the rotation is still exact
+        warnings.simplefilter("ignore", UserWarning)
+        e = Rotation.from_quat(flat[:, [1, 2, 3, 0]]).as_euler("XYZ", degrees=True)
     return e.reshape(q.shape[:-1] + (3,))
 
 
