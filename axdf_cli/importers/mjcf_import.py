@@ -61,8 +61,9 @@ MAX_MOTION_FRAMES = 100_000
 #: Without a ``lengthrange`` (MuJoCo computes one when it compiles the model), the optimal
 #: fibre length is this share of the rest path and the tendon slack length the rest of it.
 FALLBACK_FIBRE_SHARE = 0.5
-#: Without a positive ``force`` (MuJoCo's default -1: scale / acc0, known only to MuJoCo's
-#: compiler), the max isometric force is ``scale`` newtons.
+#: (Without a positive ``force``, MuJoCo's default -1 meaning scale / acc0, which only MuJoCo's
+#: compiler knows, the max isometric force is ``scale`` newtons: :func:`hill_numbers`.)
+#: MuJoCo's wrap geoms → axdf wrap shapes.
 MJ_SHAPES = {"sphere": "mujoco_sphere", "cylinder": "mujoco_cylinder"}
 #: Bellies squatter than this at rest are thinned (emit.belly_doc): MuJoCo's models carry big
 #: forces on short paths (pronator quadratus, anconeus, the multifidi's short slips), and a
@@ -416,14 +417,13 @@ def tendon_paths(model: MjcfModel, names: Names, m: Muscle) -> tuple[list, list]
 
 def read_motion(path: Path, nq: int) -> tuple[np.ndarray, float]:
     """``qpos`` (F, nq) float64 and fps of a motion npz; InputErrors name the array and index."""
+    import io
     import zipfile
 
     from axdf_cli.fileio.yamlio import read_input
 
     shown = str(path)
     data = read_input(path, shown, "an existing .npz file")
-    import io
-
     try:
         z = np.load(io.BytesIO(data), allow_pickle=False)
     except (ValueError, OSError, zipfile.BadZipFile, EOFError) as e:
@@ -474,9 +474,9 @@ def qpos_layout(model: MjcfModel) -> dict[str, int]:
     return out
 
 
-def motion_coordinates(model: MjcfModel, rows: list[dict], q: np.ndarray, source: str) -> tuple[dict, dict]:
-    """Coordinate name → values (F,) in axdf units from qpos (F, nq); and the deviation report of
-    coupled joints (their qpos values are not used: they follow their polynomials)."""
+def motion_coordinates(model: MjcfModel, rows: list[dict], q: np.ndarray, source: str) -> dict[str, np.ndarray]:
+    """Coordinate name → values (F,) in axdf units from qpos (F, nq) (coupled joints' qpos
+    values are not used: they follow their polynomials)."""
     adr = qpos_layout(model)
     out: dict[str, np.ndarray] = {}
     for r in rows:
@@ -501,7 +501,7 @@ def motion_coordinates(model: MjcfModel, rows: list[dict], q: np.ndarray, source
         else:
             for k in range(3):
                 out[r["coords"][k]] = euler[:, k]
-    return out, {}
+    return out
 
 
 def coupled_deviation(model: MjcfModel, q: np.ndarray) -> dict[str, float]:
@@ -519,7 +519,7 @@ def coupled_deviation(model: MjcfModel, q: np.ndarray) -> dict[str, float]:
 
 def pose_doc(model: MjcfModel, rows: list[dict], q: np.ndarray, fps: float, pose_name: str, skeleton_ref: str,
              source: str) -> dict:
-    values, _ = motion_coordinates(model, rows, q, source)
+    values = motion_coordinates(model, rows, q, source)
     names = list(values)
     arr = np.stack([values[c] for c in names], axis=1) if names else np.zeros((len(q), 0))
     keys = {f: {c: float(arr[f, i]) for i, c in enumerate(names)} for f in range(len(q))}
