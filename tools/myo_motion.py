@@ -1,7 +1,7 @@
 """Real motions as ``qpos`` npz files for the myo-sim models (``axdf import mjcf --motion``).
 
     python tools/myo_motion.py gait MODEL.xml OUT.npz    # MyoSuite's sample gait cycle
-    python tools/myo_motion.py arm26 MODEL.xml OUT.npz   # OpenSim arm26's elbow flexion
+    python tools/myo_motion.py arm26 MODEL.xml OUT.npz [STO]   # OpenSim arm26's elbow flexion
 
 - ``gait``: ``poses/motions/myosuite_sample_gait_cycle.csv``, copied unchanged from MyoSuite
   3.0.0 (``myosuite/envs/myo/assets/leg/sample_gait_cycle.csv``, Apache-2.0): 247 rows of one
@@ -84,8 +84,9 @@ def base_qpos(model, posture: str | None) -> np.ndarray:
     return q
 
 
-def joint_values(kind: str) -> tuple[dict[str, np.ndarray], float]:
-    """Joint name → values (F,) in radians, and fps, of a source motion."""
+def joint_values(kind: str, sto: Path | None = None) -> tuple[dict[str, np.ndarray], float]:
+    """Joint name → values (F,) in radians, and fps, of a source motion (``sto``: arm26's
+    kinematics file, default the shared data's)."""
     if kind == "gait":
         rows = list(csv.reader(GAIT_CSV.open()))
         head, data = rows[0], np.array(rows[1:], dtype=np.float64)[::GAIT_STEP]
@@ -94,18 +95,18 @@ def joint_values(kind: str) -> tuple[dict[str, np.ndarray], float]:
         sys.path.insert(0, str(ROOT))
         from axdf_cli.importers.storage import read_storage
 
-        t = read_storage(ARM26_STO)
+        t = read_storage(sto or ARM26_STO)
         times = np.arange(t.time[0], t.time[-1] + 1e-9, 1.0 / ARM26_FPS)
         elbow = np.interp(times, t.time, t.data[:, t.labels.index("r_elbow_flex")])  # degrees
         return {"elbow_flexion_r": np.radians(elbow)}, ARM26_FPS
     raise SystemExit(f"unknown motion {kind!r}: gait or arm26")
 
 
-def motion_qpos(kind: str, model) -> tuple[np.ndarray, float]:
+def motion_qpos(kind: str, model, sto: Path | None = None) -> tuple[np.ndarray, float]:
     """(qpos (F, nq), fps) of a source motion on a compiled MuJoCo model."""
     import mujoco
 
-    values, fps = joint_values(kind)
+    values, fps = joint_values(kind, sto)
     n = len(next(iter(values.values())))
     q = np.tile(base_qpos(model, "standing" if kind == "gait" else None), (n, 1))
     for name, v in values.items():
@@ -118,13 +119,13 @@ def motion_qpos(kind: str, model) -> tuple[np.ndarray, float]:
 
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
-    if len(argv) != 3:
-        print("usage: python tools/myo_motion.py gait|arm26 MODEL.xml OUT.npz", file=sys.stderr)
+    if len(argv) not in (3, 4):
+        print("usage: python tools/myo_motion.py gait|arm26 MODEL.xml OUT.npz [arm26_Kinematics_q.sto]", file=sys.stderr)
         return 2
     import mujoco
 
     model = mujoco.MjModel.from_xml_path(argv[1])
-    q, fps = motion_qpos(argv[0], model)
+    q, fps = motion_qpos(argv[0], model, Path(argv[3]) if len(argv) == 4 else None)
     out = Path(argv[2])
     out.parent.mkdir(parents=True, exist_ok=True)
     with open(out, "wb") as fh:
