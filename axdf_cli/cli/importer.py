@@ -17,7 +17,21 @@ import argparse
 import sys
 from pathlib import Path
 
-from axdf_cli.fileio.atomic import write_bytes
+from axdf_cli.errors import Mark
+from axdf_cli.fileio.outputs import OutputSet, check_outputs, write_checked
+from axdf_cli.importers.check import check_documents
+
+
+def output_role(path, args) -> str:
+    """What names an output of ``axdf import osim`` in messages: its flag, or its role."""
+    p = Path(path)
+    for flag in ("skeleton_out", "pose_out"):
+        if getattr(args, flag, None) is not None and Path(getattr(args, flag)) == p:
+            return "--" + flag.replace("_", "-")
+    for flag in ("meshes_out", "muscles_out"):
+        if getattr(args, flag, None) is not None and Path(getattr(args, flag)) == p.parent:
+            return f"--{flag.replace('_', '-')} file"
+    return "output"
 
 
 def add_args(parser: argparse.ArgumentParser) -> None:
@@ -44,6 +58,7 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--no-meshes", action="store_true", help="do not convert bone geometry")
     p.add_argument("--palette", choices=("anatomical", "hashed"), default="anatomical",
                    help="muscle colours: muscle reds varied per muscle (default), or any hue from the name's hash")
+    add_overwrite_arg(p)
 
     b = sub.add_parser("bvh", help="Biovision motion capture (.bvh) → skeleton and pose",
                        description="Import a BVH file: a skeleton (Z-up, metres) and a pose of its motion.")
@@ -59,6 +74,30 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     b.add_argument("--skeleton-out", type=Path, metavar="FILE", help="skeleton YAML (default DIR/skeletons/NAME.yaml)")
     b.add_argument("--pose-out", type=Path, metavar="FILE", help="pose YAML (default DIR/POSE.yaml)")
     b.add_argument("--pose-name", help="pose name (default: the skeleton's name)")
+    add_overwrite_arg(b)
+
+
+def add_overwrite_arg(p) -> None:
+    """``--overwrite``, as every command that writes a set of files has it (fileio/outputs.py)."""
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace this command's earlier output in DIR (and files outside DIR that it wrote, "
+                        "unchanged since); nothing else is ever replaced")
+
+
+def progress_bar(steps, quiet: bool, desc: str):
+    """(tick(step), close()) for a tqdm bar over ``steps`` on stderr; silent when stderr is
+    not a terminal or with -q."""
+    if quiet or not sys.stderr.isatty():
+        return (lambda step: None), (lambda: None)
+    from tqdm import tqdm
+
+    bar = tqdm(total=len(steps), unit="step", file=sys.stderr, desc=desc, leave=False)
+
+    def tick(step: str) -> None:
+        bar.set_postfix_str(step)
+        bar.update(1)
+
+    return tick, bar.close
 
 
 def run(args) -> int:
@@ -73,10 +112,16 @@ def run(args) -> int:
                        skeleton_out=args.skeleton_out, muscles_out=args.muscles_out, pose_out=args.pose_out,
                        meshes_out=args.meshes_out, pose_name=args.pose_name, fps=args.fps,
                        meshes=not args.no_meshes, palette=args.palette)
+    files = OutputSet(args.out, "import osim")
+    for path, data in res.files.items():
+        files.add(path, data, output_role(path, args))
+    files.settings = {"name": args.name, "fps": args.fps, "pose_name": args.pose_name, "meshes": not args.no_meshes,
+                      "palette": args.palette}
+    checked = check_outputs(files, inputs=[args.model, args.motion, args.controls], overwrite=args.overwrite)
+    check_documents(files, Mark(str(args.model)))
+    write_checked(checked)
     for w in res.warnings:
         print(f"axdf: warning: {w}", file=sys.stderr)
-    for path, data in sorted(res.files.items()):
-        write_bytes(path, data)
     if not args.quiet:
         c = res.report["counts"]
         print(f"imported {args.model.name}: {c['bodies']} bodies, {c['coordinates']} coordinates, "
@@ -110,16 +155,26 @@ def run_bvh(args) -> int:
             raise UsageError(f"--scale {args.scale}", f"a positive number of metres per unit, or one of {', '.join(UNITS)}")
     if not 1 <= args.step <= 10000:
         raise UsageError(f"--step {args.step}", "a whole number in 1..10000")
-    res = build_import(args.model, args.out, name=args.name, scale=scale, step=args.step,
-                       skeleton_out=args.skeleton_out, pose_out=args.pose_out, pose_name=args.pose_name)
-    for path, data in sorted(res.files.items()):
-        write_bytes(path, data)
+    from axdf_cli.importers.bvh import STEPS
+
+    tick, close = progress_bar(STEPS + ("check", "write"), args.quiet, f"import {args.model.name}")
+    try:
+        res = build_import(args.model, args.out, name=args.name, scale=scale, step=args.step,
+                           skeleton_out=args.skeleton_out, pose_out=args.pose_out, pose_name=args.pose_name,
+                           progress=tick)
+        checked = check_outputs(res.files, inputs=[args.model], overwrite=args.overwrite)
+        check_documents(res.files, Mark(str(args.model)))
+        tick("check")
+        write_checked(checked)
+        tick("write")
+    finally:
+        close()
     if not args.quiet:
         r = res.report
         for line in res.notes:
             print(line)
         print(f"imported {args.model.name}: {r['joints']} joints, {r['end_sites']} end sites, {r['channels']} channels, "
               f"{r['frames']} frames at {r['fps']:g} fps")
-        for path in sorted(res.files):
-            print(path)
+        for o in res.files:
+            print(o.path if not o.path.is_relative_to(Path.cwd()) else o.path.relative_to(Path.cwd()))
     return 0

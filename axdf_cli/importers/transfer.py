@@ -41,7 +41,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -51,6 +51,7 @@ from axdf_cli.importers import emit
 from axdf_cli.specs import RefPolicy, load_muscle_file, load_skeleton
 from axdf_cli.model.muscle import AxisPoint, MuscleModel, MuscleSpec
 from axdf_cli.model.skeleton import Constant, Linear, Multiplier, Polynomial, Skeleton, Spline, axis_angle, euler_xyz
+from axdf_cli.fileio.outputs import UniqueFiles
 from axdf_cli.fileio.yamlio import Fields, check_name, check_vector, item_marks, load_yaml
 
 #: A segment shorter than this (metres) has no direction: the entry is treated as segment-less.
@@ -396,6 +397,7 @@ class TransferResult:
     files: dict[str, bytes]  # output path -> bytes
     report: dict
     skipped: list[dict]
+    inputs: list = field(default_factory=list)  # every file read (the map, both skeletons, the muscles)
 
 
 def build_transfer(muscle_files: list[Path], skel_a: Skeleton | None, skel_b: Skeleton | None,
@@ -407,7 +409,7 @@ def build_transfer(muscle_files: list[Path], skel_a: Skeleton | None, skel_b: Sk
     skel_a, skel_b = bmap.skel_a, bmap.skel_b
     tf = pair_transforms(bmap, skel_a, skel_b)
     wa, wb = emit.rest_world(skel_a), emit.rest_world(skel_b)
-    files: dict[str, bytes] = {}
+    files: dict[str, bytes] = UniqueFiles()
     rows, skipped = [], []
     names: dict[str, Path] = {}
     for path in muscle_files:
@@ -450,7 +452,8 @@ def build_transfer(muscle_files: list[Path], skel_a: Skeleton | None, skel_b: Sk
     report = emit.rounded(report)  # as the YAML files: no CPU-dependent last digits
     files[str(out_dir / "transfer_report.json")] = (json.dumps(report, indent=1, sort_keys=True) + "\n").encode()
     files[str(out_dir / "TRANSFER.md")] = transfer_markdown(report).encode()
-    return TransferResult(files, report, skipped)
+    return TransferResult(files, report, skipped, [Path(map_path), Path(skel_a.source), Path(skel_b.source),
+                                                   *muscle_files])
 
 
 def transfer_markdown(r: dict) -> str:
