@@ -201,6 +201,21 @@ def check(out: Path, dataset_json: bytes, names: list[str], dirs: list[str], *, 
     return Target(out, "replace", old, old_files=old_files)
 
 
+def check_dry(out: Path, *, resume: bool, overwrite: bool) -> None:
+    """``--dry-run``'s checks of OUT, which do not need the list of sequences: OUT is absent,
+    empty or an axdf data set (its dataset.json readable)."""
+    out = Path(out)
+    if os.path.lexists(out) and not out.is_dir():
+        raise InputError(None, f"--out {out} exists and is not a folder", "give a folder")
+    if not out.is_dir() or not [n for n in os.listdir(out) if not own_entry(n)]:
+        return
+    dj = out / DATASET_JSON
+    if os.path.islink(dj) or not dj.is_file():
+        raise InputError(None, f"output folder {out} is not empty and holds no axdf data set (no dataset.json "
+                         "written by axdf)", "choose an empty or new output folder")
+    read_dataset_json(dj)
+
+
 # ----------------------------------------------------------------------------- locks
 
 

@@ -57,9 +57,11 @@ class Context:
         return [m.name for m in self.muscles]
 
 
-def build_context(path: Path | str, seed: int | None = None, policy=None) -> Context:
+def build_context(path: Path | str, seed: int | None = None, policy=None, listed: bool = True) -> Context:
     """Load and check everything (InputError on bad input); build the muscle models once.
-    ``policy``: the command's :class:`~axdf_cli.specs.RefPolicy` (where referenced files may lie)."""
+    ``policy``: the command's :class:`~axdf_cli.specs.RefPolicy` (where referenced files may
+    lie). ``listed`` False: the sequences are not listed and dataset.json not made (``--dry-run``:
+    memory and time independent of the number of sequences; :func:`spec.count` counts them)."""
     from axdf_cli.render.scene import Scene, SceneBone, SceneMuscle
 
     spec = load_dataset(path, seed, policy)
@@ -75,9 +77,11 @@ def build_context(path: Path | str, seed: int | None = None, policy=None) -> Con
     scene = Scene(muscles=tuple(SceneMuscle(s.name, s.color, m.faces) for s, m in zip(muscles, models)),
                   bones=tuple(SceneBone(skel.bones[i].name, bone_meshes[i][0], bone_meshes[i][1]) for i in scene_bones),
                   bounds=np.zeros((2, 3)), frames=())
-    sequences = expand_sequences(spec)
+    sequences = expand_sequences(spec) if listed else []
     ctx = Context(spec, sequences, skel, runner.without_meshes(skel), muscles, models, bone_meshes, inputs,
                   motion_inputs, scene, scene_bones, b"", "")
+    if not listed:
+        return ctx
     ctx.dataset_json = (json.dumps(dataset_dict(ctx), indent=1) + "\n").encode()
     ctx.digest = hashlib.sha256(ctx.dataset_json).hexdigest()
     return ctx

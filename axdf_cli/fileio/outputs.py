@@ -111,12 +111,19 @@ class Checked:
     target: object  # runfolder.Target
     inside: dict  # rel -> Output
     outside: dict  # rel to OUT -> (Output, sha256 of the file there now or None)
-    inputs: dict  # rel to OUT -> sha256
+    inputs: list  # [{file, sha256}]: every input read (no absolute path: see _shown)
 
 
 def _real(path: Path) -> str:
     """The real path of ``path`` (its folder resolved; a final link resolved too)."""
     return os.path.realpath(path)
+
+
+def _shown(path: Path) -> str:
+    """An input as the manifest names it: relative to the current folder when below it, else
+    its file name (no absolute path, and none spelled out by '..' either)."""
+    rel = os.path.relpath(os.path.abspath(path))
+    return Path(rel).as_posix() if not rel.startswith(os.pardir) else path.name
 
 
 def _sha_of(path: Path) -> str:
@@ -157,7 +164,7 @@ def check_outputs(outputs: OutputSet, *, inputs=(), overwrite: bool = False) -> 
             raise InputError(None, f"{o} and {reals[r]} are the same file",
                              "two outputs of one command need different paths")
         reals[r] = str(o)
-    recorded_inputs: dict = {}
+    recorded_inputs: list = []
     for i in inputs:
         if i is None:
             continue
@@ -166,7 +173,7 @@ def check_outputs(outputs: OutputSet, *, inputs=(), overwrite: bool = False) -> 
             raise InputError(Mark(str(i)), f"this input is also an output: {clash}",
                              "an input is never overwritten; choose another output path")
         if os.path.isfile(i):
-            recorded_inputs[Path(os.path.relpath(os.path.abspath(i), os.path.abspath(out))).as_posix()] = _sha_of(Path(i))
+            recorded_inputs.append({"file": _shown(Path(i)), "sha256": _sha_of(Path(i))})
     dirs = sorted({str(Path(rel).parent.as_posix()) for rel in inside} - {"."})
     target = prepare(out, overwrite=overwrite, dirs=dirs, command=outputs.command, resumable=False)
     previous = target.previous
@@ -220,7 +227,7 @@ def check_outputs(outputs: OutputSet, *, inputs=(), overwrite: bool = False) -> 
                              "move it away or choose another path")
         outside[rel] = (o, sha)
 
-    return Checked(outputs, target, inside, outside, dict(sorted(recorded_inputs.items())))
+    return Checked(outputs, target, inside, outside, sorted(recorded_inputs, key=lambda d: (d["file"], d["sha256"])))
 
 
 def write_checked(checked: Checked) -> dict:

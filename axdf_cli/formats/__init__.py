@@ -28,11 +28,11 @@ from typing import Callable
 import numpy as np
 
 from axdf_cli.formats.mesh import Mesh, MeshReadError
-from axdf_cli.formats.npz import NpzWriter, read_npz
+from axdf_cli.formats.npz import NpzWriter, read_npz, verify_npz
 from axdf_cli.formats.obj import ObjWriter, read_obj
-from axdf_cli.formats.pc2 import MddWriter, Pc2Writer, read_mdd, read_pc2
+from axdf_cli.formats.pc2 import MddWriter, Pc2Writer, read_mdd, read_pc2, verify_mdd, verify_pc2
 from axdf_cli.formats.ply import PlyWriter, read_ply
-from axdf_cli.formats.usd import UsdWriter, read_usd
+from axdf_cli.formats.usd import UsdWriter, read_usd, verify_usd
 
 LAYOUTS = ("frame", "sequence")
 
@@ -44,15 +44,17 @@ class Format:
     writer: type  # see the module doc for the per-frame and per-sequence interfaces
     reader: Callable  # file bytes -> Mesh ("frame"); file path -> PointSequence ("sequence")
     layout: str = "frame"  # one of LAYOUTS
+    verify: Callable | None = None  # ("sequence") file path -> None: its own checks (checksums, frame
+    #                                  times), MeshReadError naming the first problem
 
 
 FORMATS: dict[str, Format] = {
     "ply": Format("ply", ".ply", PlyWriter, read_ply),
     "obj": Format("obj", ".obj", ObjWriter, read_obj),
-    "usd": Format("usd", ".usdc", UsdWriter, read_usd, "sequence"),  # (+ the run's stage scene.usda)
-    "pc2": Format("pc2", ".pc2", Pc2Writer, read_pc2, "sequence"),
-    "mdd": Format("mdd", ".mdd", MddWriter, read_mdd, "sequence"),
-    "npz": Format("npz", ".npz", NpzWriter, read_npz, "sequence"),
+    "usd": Format("usd", ".usdc", UsdWriter, read_usd, "sequence", verify_usd),  # (+ the run's stage scene.usda)
+    "pc2": Format("pc2", ".pc2", Pc2Writer, read_pc2, "sequence", verify_pc2),
+    "mdd": Format("mdd", ".mdd", MddWriter, read_mdd, "sequence", verify_mdd),
+    "npz": Format("npz", ".npz", NpzWriter, read_npz, "sequence", verify_npz),
 }
 assert all(f.layout in LAYOUTS and f.suffix == "." + f.writer.extension for f in FORMATS.values())
 
@@ -112,6 +114,13 @@ def read_mesh(data: bytes, suffix: str) -> Mesh:
 def read_sequence(path: Path | str):
     """A per-sequence file -> :class:`~axdf_cli.formats.sequence.PointSequence` by its suffix."""
     return format_of(Path(path).suffix, "sequence").reader(path)
+
+
+def verify_sequence(path: Path | str) -> None:
+    """A per-sequence file's own checks by its suffix (:attr:`Format.verify`)."""
+    f = format_of(Path(path).suffix, "sequence")
+    if f.verify is not None:
+        f.verify(path)
 
 
 def read_triangles(data: bytes, suffix: str) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
