@@ -27,7 +27,6 @@ from axdf_cli.errors import AxdfError, EnvironmentProblem, InputError, Interrupt
 from axdf_cli.dataset import runner
 
 ENGINES = ("local", "ray")
-RAY_STOP_WAIT_S = 10.0  # cancelled Ray tasks get this long to finish their file
 
 
 @dataclass
@@ -220,36 +219,43 @@ def _pool_task(shared: tuple, index: int) -> tuple:
 
 def _run_ray(ray, ctx, mine, out, resume, done, where) -> None:
     """One Ray task per sequence on a started Ray (:class:`raycluster.RayEngine`). Stopped
-    (Ctrl-C, SIGTERM, a failure): the other tasks are cancelled and given a moment to end
-    their file, as the local workers are."""
+    (Ctrl-C, SIGTERM, a failure): Ray is shut down with its workers, and what they leave is
+    cleaned (:func:`clean_stopped`)."""
     task = ray.remote(num_cpus=1)(_worker_task)
     refs = {task.remote(where, str(Path(out).resolve()), i, resume): i for i in mine}
     left = set(mine)
-    try:
-        while refs:
-            ready, _ = ray.wait(list(refs), num_returns=1)
-            i = refs.pop(ready[0])
-            try:
-                r = ray.get(ready[0])
-            except Exception as e:  # ray.exceptions.RayError: the worker died, or the task could not run
-                raise WorkerFailed(f"Ray task for {ctx.sequences[i].name} failed ({type(e).__name__}); "
-                                   f"not finished: {_names(ctx, sorted(left))}; rerun with --resume to finish") from None
-            left.discard(i)
-            if r[0] != "ok":
-                _raise_failure(ctx, r, sorted(left))
-            done(r)
-    except BaseException:
-        with atomic.deferred_signals():  # a second Ctrl-C waits for the tasks' files
-            for ref in refs:
-                try:
-                    ray.cancel(ref)  # KeyboardInterrupt in the task: it ends its file and its run cleanly
-                except Exception:  # noqa: BLE001  (a task that ended meanwhile)
-                    pass
-            try:
-                ray.wait(list(refs), num_returns=len(refs), timeout=RAY_STOP_WAIT_S)
-            except Exception:  # noqa: BLE001
-                pass
-        raise
+    # stopped, no ray.cancel: cancelling tasks as they complete trips a check inside Ray (2.60:
+    # "Tried to complete task that was not pending", abort); Ray is shut down instead
+    while refs:
+        ready, _ = ray.wait(list(refs), num_returns=1)
+        i = refs.pop(ready[0])
+        try:
+            r = ray.get(ready[0])
+        except Exception as e:  # ray.exceptions.RayError: the worker died, or the task could not run
+            raise WorkerFailed(f"Ray task for {ctx.sequences[i].name} failed ({type(e).__name__}); "
+                               f"not finished: {_names(ctx, sorted(left))}; rerun with --resume to finish") from None
+        left.discard(i)
+        if r[0] != "ok":
+            _raise_failure(ctx, r, sorted(left))
+        done(r)
+
+
+def clean_stopped(root: Path, names: list[str], views) -> None:
+    """After workers were killed (a stopped Ray build): in this build's sequence folders, the
+    temporaries and staging folders of processes that are gone and lock files nobody holds
+    (never a live process's, never through a link)."""
+    from axdf_cli.fileio import runfolder
+
+    for n in names:
+        folder = Path(root) / n
+        if not folder.is_dir() or folder.is_symlink():
+            continue
+        dsfolder.remove_stale_lock(folder)
+        try:
+            runfolder.remove_stale(folder)
+        except OSError:
+            pass
+        atomic.remove_stale_temporaries([folder / "views" / v for v in views])
 
 
 # ----------------------------------------------------------------------------- build and merge
@@ -275,6 +281,8 @@ def build(path: Path | str, out: Path | str, *, seed: int | None = None, jobs: i
 
         ray_engine = RayEngine(address, jobs)
     with contextlib.ExitStack() as stack:
+        if ray_engine is not None:  # (runs last: once Ray and its workers are gone)
+            stack.callback(clean_stopped, target.root, [ctx.sequences[i].name for i in mine], ctx.spec.views)
         ray = stack.enter_context(ray_engine) if ray_engine is not None else None
         fd = claim(target, ctx, mine, resume, shared=n > 1 and target.mode != "replace")
         stack.callback(dsfolder.unlock_folder, fd)
