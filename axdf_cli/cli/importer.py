@@ -77,6 +77,19 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     add_overwrite_arg(b)
 
 
+def write_imported(files: OutputSet, inputs, overwrite: bool, source, tick=lambda step: None) -> dict:
+    """What every importer does with its files (``import osim|bvh|mjcf``, ``retarget``): the
+    output rule's checks (axdf_cli/fileio/outputs.py), then every YAML file read back by the
+    file specs (what ``axdf validate`` accepts; errors name ``source``), then the write.
+    Nothing is written unless all of it passes. ``tick(step)``: the progress bar."""
+    checked = check_outputs(files, inputs=inputs, overwrite=overwrite)
+    check_documents(files, Mark(str(source)))
+    tick("check")
+    manifest = write_checked(checked)
+    tick("write")
+    return manifest
+
+
 def add_overwrite_arg(p) -> None:
     """``--overwrite``, as every command that writes a set of files has it (fileio/outputs.py)."""
     p.add_argument("--overwrite", action="store_true",
@@ -108,18 +121,21 @@ def run(args) -> int:
 
     if args.fps is not None and not (0 < args.fps <= 10000):
         raise UsageError(f"--fps {args.fps}", "a frame rate in (0, 10000]")
-    res = build_import(args.model, args.out, name=args.name, motion=args.motion, controls=args.controls,
-                       skeleton_out=args.skeleton_out, muscles_out=args.muscles_out, pose_out=args.pose_out,
-                       meshes_out=args.meshes_out, pose_name=args.pose_name, fps=args.fps,
-                       meshes=not args.no_meshes, palette=args.palette)
-    files = OutputSet(args.out, "import osim")
-    for path, data in res.files.items():
-        files.add(path, data, output_role(path, args))
-    files.settings = {"name": args.name, "fps": args.fps, "pose_name": args.pose_name, "meshes": not args.no_meshes,
-                      "palette": args.palette}
-    checked = check_outputs(files, inputs=[args.model, args.motion, args.controls], overwrite=args.overwrite)
-    check_documents(files, Mark(str(args.model)))
-    write_checked(checked)
+    tick, close = progress_bar(("read", "check", "write"), args.quiet, f"import {args.model.name}")
+    try:
+        res = build_import(args.model, args.out, name=args.name, motion=args.motion, controls=args.controls,
+                           skeleton_out=args.skeleton_out, muscles_out=args.muscles_out, pose_out=args.pose_out,
+                           meshes_out=args.meshes_out, pose_name=args.pose_name, fps=args.fps,
+                           meshes=not args.no_meshes, palette=args.palette)
+        tick("read")
+        files = OutputSet(args.out, "import osim")
+        for path, data in res.files.items():
+            files.add(path, data, output_role(path, args))
+        files.settings = {"name": args.name, "fps": args.fps, "pose_name": args.pose_name,
+                          "meshes": not args.no_meshes, "palette": args.palette}
+        write_imported(files, [args.model, args.motion, args.controls], args.overwrite, args.model, tick)
+    finally:
+        close()
     for w in res.warnings:
         print(f"axdf: warning: {w}", file=sys.stderr)
     if not args.quiet:
@@ -162,11 +178,7 @@ def run_bvh(args) -> int:
         res = build_import(args.model, args.out, name=args.name, scale=scale, step=args.step,
                            skeleton_out=args.skeleton_out, pose_out=args.pose_out, pose_name=args.pose_name,
                            progress=tick)
-        checked = check_outputs(res.files, inputs=[args.model], overwrite=args.overwrite)
-        check_documents(res.files, Mark(str(args.model)))
-        tick("check")
-        write_checked(checked)
-        tick("write")
+        write_imported(res.files, [args.model], args.overwrite, args.model, tick)
     finally:
         close()
     if not args.quiet:

@@ -8,6 +8,12 @@ Commands that make a set of files at once (``axdf import osim|bvh|mjcf``, ``axdf
     files.add(path, data, "--pose-out")            # a path inside OUT, or a single file outside it
     write_outputs(files, inputs=[bvh_path], overwrite=args.overwrite)
 
+An importer's CLI calls :func:`axdf_cli.cli.importer.write_imported` instead, which adds, between
+the checks and the write, the importers' own promise: every YAML file read back by the file
+specs (what ``axdf validate`` accepts). Give the command ``--overwrite``
+(:func:`axdf_cli.cli.importer.add_overwrite_arg`). A builder that collects ``path -> bytes`` in
+a dict uses :class:`UniqueFiles`, so that two outputs on one path are refused, not merged.
+
 The rule (README, "The output folder is safe to point anywhere"):
 
 - **OUT is a folder the command owns.** It is written only when it is absent, empty, or
@@ -34,6 +40,7 @@ recognises.
 """
 from __future__ import annotations
 
+import hashlib
 import os
 import stat
 from dataclasses import dataclass, field
@@ -42,8 +49,8 @@ from pathlib import Path
 from axdf_cli import __version__
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.fileio import atomic
-from axdf_cli.fileio.runfolder import (LOCK, MANIFEST, STAGING_PREFIX, Manifest, Root, Session, check_dirs,
-                                       plain_relpath, prepare)
+from axdf_cli.fileio.runfolder import (LOCK, MANIFEST, STAGING_PREFIX, Manifest, Root, Session, plain_relpath,
+                                       prepare)
 
 
 @dataclass(frozen=True)
@@ -239,8 +246,6 @@ def write_checked(checked: Checked) -> dict:
         files: dict = {}
         for rel, out in sorted(checked.inside.items()):
             files[rel] = atomic.write_bytes(root.path(rel), out.data)
-        import hashlib
-
         new_outside = {rel: hashlib.sha256(x.data).hexdigest() for rel, (x, _) in sorted(checked.outside.items())}
         old_outside = {rel: sha for rel, (_, sha) in sorted(checked.outside.items()) if sha is not None}
         manifest = {"tool": "axdf", "version": __version__, "command": o.command, "complete": True,
@@ -272,8 +277,3 @@ def write_outputs(outputs: OutputSet, *, inputs=(), overwrite: bool = False) -> 
     """The one call: :func:`check_outputs` (every check, nothing written), then
     :func:`write_checked`. Returns the manifest written into OUT."""
     return write_checked(check_outputs(outputs, inputs=inputs, overwrite=overwrite))
-
-
-def check_no_links_below(root: Path, rels) -> None:
-    """Every existing folder on the way from ``root`` to each file ``rels`` is a real folder."""
-    check_dirs(root, sorted({Path(r).parent.as_posix() for r in rels} - {"."}))
