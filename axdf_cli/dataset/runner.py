@@ -82,6 +82,18 @@ def motion_pose(path: Path, skeleton, name: str, fps: float | None = None) -> Po
                 str(path), skeleton.source)
 
 
+def retarget_pose(path: Path, map_path: Path, skeleton, name: str, step: int = 1, scale: float | None = None,
+                  policy=None) -> Pose:
+    """Motion capture (a BVH take, an npz of joints) as a Pose of ``skeleton``, fitted through
+    the retarget map as ``axdf retarget`` fits it (the map's ``onto:`` gives way to the data
+    set's skeleton)."""
+    from axdf_cli.importers.mocap import read_motion
+    from axdf_cli.importers.retarget import as_pose, load_map, retarget
+
+    rmap = load_map(map_path, skeleton, policy)
+    return as_pose(retarget(rmap, read_motion(path, scale=scale, step=step)), name)
+
+
 def without_meshes(skeleton):
     """The skeleton with its bones' mesh paths dropped (the data set stores bone meshes once)."""
     return replace(skeleton, bones=tuple(replace(b, mesh=None) for b in skeleton.bones))

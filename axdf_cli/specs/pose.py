@@ -81,6 +81,9 @@ def pose_from_document(doc, path: Path, policy: RefPolicy, skeletons: dict | Non
     skel_path = policy.resolve(path, skel_ref, f.vmark("skeleton"))
     known = {os.path.realpath(k): v for k, v in (skeletons or {}).items()}
     skel = known.get(os.path.realpath(skel_path))
+    if skel is None and skeletons is not None and not skel_path.is_file():
+        # a pose about to be written: its folder may not exist yet, so '..' is taken lexically
+        skel_path = Path(os.path.normpath(skel_path))
     if skel is None:
         if not skel_path.is_file():
             raise InputError(f.vmark("skeleton"), f"skeleton file {skel_ref!r} not found",
