@@ -668,3 +668,26 @@ def test_transfer_refuses_a_muscle_defined_twice(tproj, capsys):
     rc, _, err = run_main(transfer("out", muscles="twice"), capsys)
     assert rc == 2 and err.startswith("twice/b.yaml:") and "also defined in" in err, err
     assert not (tproj / "out").exists()
+
+
+def test_overwrite_never_replaces_a_file_its_manifest_does_not_list(tproj, capsys, tmp_path):
+    """Inside a folder the command owns, a file (or link) at a path the new output writes
+    that the old manifest does not list is yours: refused, kept."""
+    assert run_main(transfer("moved", "-q"), capsys)[0] == 0
+    listed = json.loads((tproj / "moved" / "manifest.json").read_text())["files"]
+    (tproj / "moved" / "TRANSFER.md").unlink()
+    (tproj / "moved" / "TRANSFER.md").write_text("my notes\n")  # same path, but the manifest's sha differs: still listed
+    assert "TRANSFER.md" in listed
+    m = json.loads((tproj / "moved" / "manifest.json").read_text())
+    del m["files"]["TRANSFER.md"]  # now it is not axdf's
+    (tproj / "moved" / "manifest.json").write_text(json.dumps(m, indent=1))
+    before = snapshot(tproj)
+    rc, _, err = run_main(transfer("moved", "--overwrite"), capsys)
+    assert rc == 2 and "does not list it" in err, err
+    assert snapshot(tproj) == before
+    (tproj / "moved" / "TRANSFER.md").unlink()
+    (tproj / "moved" / "TRANSFER.md").symlink_to(tmp_path / "elsewhere.md")
+    before = snapshot(tmp_path)
+    rc, _, err = run_main(transfer("moved", "--overwrite"), capsys)
+    assert rc == 2 and "symbolic link" in err, err
+    assert snapshot(tmp_path) == before

@@ -21,7 +21,8 @@ The rule (README, "The output folder is safe to point anywhere"):
   ``command: <this command>``); then only with ``--overwrite``. Anything else is refused
   (exit 2). The new output is built in ``OUT/.axdf-new-<pid>/`` and swapped in once it is
   complete: the files the old manifest lists and the new output lacks are deleted then,
-  never earlier; anything else in OUT stays (:class:`~axdf_cli.fileio.runfolder.Session`).
+  never earlier; anything else in OUT stays (:class:`~axdf_cli.fileio.runfolder.Session`), and
+  a new file that would land on a file the old manifest does not list (or on a link) is refused.
 - **A single file outside OUT** (``--skeleton-out``, ``--pose-out``, a muscles or meshes
   folder elsewhere): written when it does not exist; an existing file only with
   ``--overwrite`` and only when axdf wrote it: OUT's manifest lists it (``outside``: its
@@ -199,6 +200,12 @@ def check_outputs(outputs: OutputSet, *, inputs=(), overwrite: bool = False) -> 
             raise atomic.environment_problem(out / rel, e) from None
         if stat.S_ISDIR(st.st_mode):
             raise InputError(None, f"{o} is a folder", "a file; remove or rename the folder")
+        if stat.S_ISLNK(st.st_mode):
+            raise InputError(None, f"{o} is a symbolic link",
+                             "axdf never replaces a link or writes through one; remove the link")
+        if rel not in old_files:  # a file there that the old output does not list: not axdf's
+            raise InputError(None, f"{o} exists and {out / MANIFEST} does not list it (axdf did not write it)",
+                             "--overwrite replaces only the files the old output lists; move it away")
 
     deleted = {_real(out / rel): f"{rel} (listed in {out / MANIFEST}, deleted by --overwrite)"
                for rel in old_files if rel not in inside} if overwrite else {}
