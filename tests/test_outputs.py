@@ -691,3 +691,15 @@ def test_overwrite_never_replaces_a_file_its_manifest_does_not_list(tproj, capsy
     rc, _, err = run_main(transfer("moved", "--overwrite"), capsys)
     assert rc == 2 and "symbolic link" in err, err
     assert snapshot(tmp_path) == before
+
+
+def test_an_output_on_the_output_folder_itself_and_render_of_a_non_run(proj, capsys):
+    before = snapshot(proj)
+    for out in ("imp", "imp/sub"):
+        rc, _, err = run_main(bvh("--out", out, "--pose-out", "imp"), capsys)
+        assert rc == 2 and "is the output folder" in err, err
+    assert snapshot(proj) == before
+    assert run_main(bvh("--out", "imp", "-q"), capsys)[0] == 0
+    rc, _, err = run_main(["render", "imp", "--out", "r"], capsys)
+    assert rc == 2 and "holds the output of axdf import bvh, not a run" in err, err
+    assert not (proj / "r").exists()

@@ -18,7 +18,7 @@ from pathlib import Path
 from axdf_cli.cli.run import _positive
 from axdf_cli.errors import InputError, Mark, UsageError
 from axdf_cli.specs.render import add_render_args, settings_from_args, settings_to_dict
-from axdf_cli.fileio.runfolder import (CAMERA, FRAME_EXTENSIONS, MANIFEST_INTERVAL_S, Root, Session, Target,
+from axdf_cli.fileio.runfolder import (RUN_COMMAND, command_of, CAMERA, FRAME_EXTENSIONS, MANIFEST_INTERVAL_S, Root, Session, Target,
                                 check_dirs, describe_differences, frame_relpath, gl_record, is_file_with, prepare,
                                 read_run_manifest, try_write_manifest, write_manifest)
 
@@ -78,6 +78,9 @@ def run(args: argparse.Namespace) -> int:
     if not run_dir.is_dir():
         raise UsageError(f"{run_dir} is not a folder", "give the output folder of `axdf run`")
     run_manifest = read_run_manifest(run_dir)
+    if command_of(run_manifest) != RUN_COMMAND:
+        raise InputError(run_manifest.mark(("command",)), f"{run_dir} holds the output of axdf "
+                         f"{command_of(run_manifest)}, not a run", "give the output folder of `axdf run`")
     all_frames = run_manifest.frames()
     chosen = all_frames if args.frames is None else _select(args.frames, all_frames)
     settings = settings_from_args(recorded_render_settings(run_manifest), args)

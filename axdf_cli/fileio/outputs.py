@@ -152,7 +152,10 @@ def check_outputs(outputs: OutputSet, *, inputs=(), overwrite: bool = False) -> 
     out = outputs.out
     inside: dict = {}
     outside_files: list = []
+    top_out = Path(os.path.abspath(out))
     for o in outputs:
+        if o.path == top_out or o.path in top_out.parents:
+            raise InputError(None, f"{o} is the output folder {out} (or holds it)", "a file inside or beside --out")
         rel = outputs.relpath(o.path)
         if rel is None:
             outside_files.append(o)
