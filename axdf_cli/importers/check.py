@@ -9,7 +9,7 @@ that would have been written and why).
 """
 from __future__ import annotations
 
-from pathlib import Path
+import re
 
 from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError
@@ -23,20 +23,17 @@ ALLOWED = "the importer writes only files axdf validate accepts; this input is b
 def check_documents(outputs, source=None, progress=None) -> None:
     """Read every ``.yaml`` of ``outputs`` (an :class:`~axdf_cli.fileio.outputs.OutputSet`)
     back as axdf would: skeletons first (a pose may name one that is not on disk yet), then
-    muscles and poses. ``source``: the input file, for the message; ``progress(n)``: called
-    per file checked."""
+    muscles and poses, one file at a time (memory: the largest file's document). ``source``:
+    the input file, for the message; ``progress(n)``: called per file checked."""
     policy = RefPolicy(allow_outside=True)
-    docs = []
-    for o in outputs:
-        if o.path.suffix.lower() not in (".yaml", ".yml"):
-            continue
+    yamls = [o for o in outputs if o.path.suffix.lower() in (".yaml", ".yml")]
+    for o in yamls:
         if len(o.data) > tol.YAML_MAX_BYTES:
             raise InputError(source, f"{o.what} {o.path.name} would be {len(o.data)} bytes",
                              f"axdf reads YAML files up to {tol.YAML_MAX_BYTES} bytes; {ALLOWED}")
-        docs.append((o, _read(o, source, lambda text, shown: parse_yaml(text, shown))))
     skeletons = {}
-    order = sorted(docs, key=lambda d: detect_kind(d[1]) != "skeleton")
-    for o, doc in order:
+    for o in sorted(yamls, key=lambda o: not _SKELETON.search(o.data)):  # skeletons first (a cheap look)
+        doc = _read(o, source, lambda text, shown: parse_yaml(text, shown))
         kind = detect_kind(doc)
         if kind == "skeleton":
             skeletons[o.path] = _read(o, source, lambda *_: skeleton_from_document(doc, o.path, policy))
@@ -44,8 +41,12 @@ def check_documents(outputs, source=None, progress=None) -> None:
             _read(o, source, lambda *_: muscles_from_document(doc, o.path))
         elif kind == "pose":
             _read(o, source, lambda *_: pose_from_document(doc, o.path, policy, skeletons))
+        del doc
         if progress:
             progress(1)
+
+
+_SKELETON = re.compile(rb"^skeleton:.*^bones:", re.M | re.S)
 
 
 def _read(o, source, fn):
