@@ -10,6 +10,12 @@ input is bad (exit 2, ``FILE:LINE:COL``).
 ``bvh`` reads a Biovision motion-capture file and writes an axdf skeleton (Z-up, metres;
 end sites become ``<joint>_end`` tip bones) and a pose keyed at every frame; the length unit is
 guessed from the skeleton's height unless ``--scale`` gives it.
+
+Both follow the output rule (axdf_cli/fileio/outputs.py): ``--out`` is the import's own folder
+(its ``manifest.json``); ``--overwrite`` replaces an earlier import there and files outside it
+that the import wrote and nobody changed since; every YAML file is read back as ``axdf
+validate`` reads it before anything is written (:func:`write_imported`, which ``retarget`` and
+any new importer call too).
 """
 from __future__ import annotations
 
