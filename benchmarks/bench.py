@@ -6,7 +6,7 @@ Rows (medians of repeated runs timed with ``time.perf_counter``; the machine may
 so figures are noisy and only ratios taken in the same run are compared with targets):
 
 1. evaluation: µs per muscle-frame of ``MuscleModel.evaluate`` at 48x24 and 96x48, over
-   1000 frames in chunks of ``run.CHUNK_FRAMES``, for 1, 10 and 92 muscles (the gait2392
+   1000 frames in chunks of ``pipeline.CHUNK_FRAMES``, for 1, 10 and 92 muscles (the gait2392
    library and walk when shipped, else demo muscles replicated and perturbed on the demo
    skeleton with a synthetic pose);
 2. the limit: numpy filling the same outputs (``np.copyto`` into preallocated (F, V, 3)
@@ -31,11 +31,14 @@ so figures are noisy and only ratios taken in the same run are compared with tar
    and 120 fps; every 4th frame of the take with ``--quick``), and one Jacobian of the mapped
    points by the analytic formula against central differences batched as frames of one
    forward-kinematics call (the alternative the fit could use).
+11. jiggle: ``evaluate_plan`` of the gait2392 walk (92 muscles, the whole trial; 54 jiggle)
+   with and without the jiggle stage (timed in turn, medians of 5), µs per muscle-frame, and
+   the stage alone; and a ``--frames`` subset's extra cost (frames not selected are advanced too).
 
-``--only retarget`` prints just the retargeting rows.
+``--only retarget`` prints just the retargeting rows, ``--only jiggle`` the jiggle rows.
 
 ``--long`` adds the memory check of 10,000 frames x 92 muscles streamed through
-``run.evaluate_chunks`` in a subprocess (several minutes). Helpers are importable for the
+``pipeline.evaluate_chunks`` in a subprocess (several minutes). Helpers are importable for the
 smoke test (``tests/test_bench_smoke.py``), which runs them on a tiny case.
 """
 from __future__ import annotations
@@ -56,7 +59,7 @@ from pathlib import Path
 import numpy as np
 
 from axdf_cli.fileio import atomic
-from axdf_cli.formats import ObjWriter, PlyWriter
+from axdf_cli.formats import FORMATS, ObjWriter, PlyWriter, read_preference
 from axdf_cli.specs import Pose, expand_muscle_paths, load_muscle_file, load_pose
 from axdf_cli.model.muscle import OCT, MuscleModel, MuscleSpec
 from axdf_cli.model.pose import effective_tension, sample_activation, sample_coordinates
@@ -415,8 +418,8 @@ def _cum(stats: pstats.Stats, file_end: str, func: str) -> float:
 
 
 def profile_run(job: Path, out: Path, fmt: str = "ply", top: int = 0) -> dict:
-    """Run ``execute`` in-process under cProfile (no rendering): seconds in evaluation (twist
-    references, kinematics, ``MuscleModel.evaluate``), in writing (encode, sha256, atomic
+    """Run ``execute`` in-process under cProfile (no rendering): seconds in evaluation (the
+    pipeline's pre-pass, chunks and surfaces: ``pipeline.evaluate``), in writing (encode, sha256, atomic
     writes) and in total; ``top`` functions by own time as text."""
     from axdf_cli.specs import load_job
     from axdf_cli.pipeline import execute, plan_run
@@ -429,11 +432,10 @@ def profile_run(job: Path, out: Path, fmt: str = "ply", top: int = 0) -> dict:
     prof.runcall(execute, plan)
     total = time.perf_counter() - t0
     st = pstats.Stats(prof)
-    # evaluation: evaluate + twist references + kinematics (those inside twist_references once)
-    fk_in_twist = sum(cv[3] for (f, _, fn), v in st.stats.items() if fn == "forward_kinematics"
-                      and f.endswith("skeleton.py") for (_, _, cfn), cv in v[4].items() if cfn == "twist_references")
-    ev = (_cum(st, "muscle.py", "evaluate") + _cum(st, "evaluate.py", "twist_references")
-          + _cum(st, "skeleton.py", "forward_kinematics") - fk_in_twist)
+    # evaluation: the pre-pass (twist references, time stages' states), the chunks (kinematics,
+    # axis points, time stages) and their surfaces (RMF, surface, frame stages), as the mesh pass reads them
+    ev = (_cum(st, "evaluate.py", "prepare") + _cum(st, "evaluate.py", "evaluate_plan")
+          + _cum(st, "evaluate.py", "_surfaces"))
     enc = _cum(st, f"{fmt}.py", "encode")
     wr = _cum(st, "runfolder.py", "write")  # OutputWriter.write: sha256 + atomic write
     text = ""
@@ -447,23 +449,22 @@ def profile_run(job: Path, out: Path, fmt: str = "ply", top: int = 0) -> dict:
 
 # ----------------------------------------------------------------------------- packed formats
 
-PACKED_FORMATS = ("npz", "pc2", "mdd", "usd")
+PACKED_FORMATS = tuple(read_preference(FORMATS))  # every per-sequence format, fastest to read first
 TARGET_PACKED = 1.5  # pc2 and npz writing within 1.5x of ndarray.tofile of the same bytes in one file
 
 
 def time_sequence_writers(models: list[MuscleModel], world: np.ndarray, tension: np.ndarray, folder: Path,
                           n_muscles: int, repeats: int, fps: float = 60.0) -> dict:
     """Seconds to write ``n_muscles`` muscles x F frames in each per-sequence format as the run
-    streams them (chunks of ``run.CHUNK_FRAMES`` frames, muscle by muscle in each chunk, then
+    streams them (chunks of ``pipeline.CHUNK_FRAMES`` frames, muscle by muscle in each chunk, then
     every file completed: headers, CRC, rename), without and with the sha256 the manifest
     records, against ``ndarray.tofile`` of the same bytes into one file (written in the same
     chunks). Medians of ``repeats`` rounds; in each round the three variants of a format run
     back to back, each after ``os.sync()`` (a variant that meets the previous one's dirty
     pages being written back is slowed by the disk, not by its own work). The frames are evaluated once beforehand (``models`` cycled over the
     muscles, each file its own)."""
-    from axdf_cli.formats.sequence import SequenceInfo
+    from axdf_cli.formats.packed import SequenceInfo
     from axdf_cli.pipeline import CHUNK_FRAMES
-    from axdf_cli.pipeline.sequences import SEQUENCE_WRITERS
 
     F = world.shape[0]
     data = []
@@ -473,7 +474,7 @@ def time_sequence_writers(models: list[MuscleModel], world: np.ndarray, tension:
     frames = np.arange(F)
 
     def write(fmt: str, sha256: bool) -> int:
-        cls = SEQUENCE_WRITERS[fmt]
+        cls = FORMATS[fmt].writer
         d = folder / fmt
         d.mkdir(parents=True)
         writers = [cls(d / f"m{j}.{cls.extension}", SequenceInfo(frames, fps, f"m{j}"), data[j % len(data)][0].faces,
@@ -493,7 +494,7 @@ def time_sequence_writers(models: list[MuscleModel], world: np.ndarray, tension:
                 for j in range(n_muscles):
                     _, pos, nrm = data[j % len(data)]
                     pos[s:s + CHUNK_FRAMES].tofile(fh)
-                    if fmt in ("npz", "usd"):  # the formats that carry normals
+                    if FORMATS[fmt].normals:
                         nrm[s:s + CHUNK_FRAMES].tofile(fh)
         return ref.stat().st_size
 
@@ -622,7 +623,7 @@ def time_dataset(n_samples: int, jobs: int, out: Path) -> dict:
 def dataset_evaluation(n_sequences: int) -> float:
     """Seconds per sample of the evaluation inside a sequence's run (twist references,
     kinematics, ``evaluate``), timed alone on the data set's first sequences."""
-    from axdf_cli.dataset import runner
+    from axdf_cli.dataset import door
     from axdf_cli.dataset.worker import build_context, sequence_pose
     from axdf_cli.specs import RefPolicy
 
@@ -631,9 +632,9 @@ def dataset_evaluation(n_sequences: int) -> float:
     n = 0
     for seq in ctx.sequences[:n_sequences]:
         pose, frames = sequence_pose(ctx, seq)
-        plan = runner.sequence_plan(pose, frames, ctx.muscles, ctx.models, "ply", Path("unused"), {})
+        plan = door.sequence_plan(pose, frames, ctx.muscles, ctx.models, "ply", Path("unused"), {}, ctx.stages)
         t0 = time.perf_counter()
-        for _, _, results in runner.evaluate_chunks(plan):
+        for _, _, results in door.evaluate_chunks(plan):
             for _ in results:
                 pass
         t += time.perf_counter() - t0
@@ -794,6 +795,76 @@ print(json.dumps({"seconds": dt, "muscle_frames": n * nm, "chunk": chunk_frames(
 """
 
 
+def time_chunks(plan, repeats: int) -> float:
+    """Median seconds of evaluating every selected frame of ``plan`` (all muscles, no writing)
+    through ``evaluate_plan``, its pre-pass (twist references, TIME stages' block states)
+    included."""
+    return time_pair(plan, plan, repeats)[0]
+
+
+def time_pair(a, b, repeats: int) -> tuple[float, float]:
+    """Median seconds of evaluating plans ``a`` and ``b`` (as :func:`time_chunks`), timed in
+    turn (a, b, a, b, ...): on a shared machine both see the same load."""
+    from axdf_cli.pipeline.evaluate import evaluate_plan
+
+    def once(plan):
+        t0 = time.perf_counter()
+        for _, results in evaluate_plan(plan):
+            for _ in results:
+                pass
+        return time.perf_counter() - t0
+
+    ts = [(once(a), once(b)) for _ in range(max(1, repeats))]
+    return float(np.median([t[0] for t in ts])), float(np.median([t[1] for t in ts]))
+
+
+def time_jiggle_stage(plan, repeats: int) -> tuple[float, int]:
+    """Median seconds of the jiggle stage alone over the pose's frames from its first to the
+    last selected (the axis placed once, outside the timing), and the number of jiggling
+    muscles."""
+    from axdf_cli.pipeline.evaluate import TIME_BLOCK, _chunk
+    from axdf_cli.pipeline.jiggle_stage import JiggleStage
+
+    stage = JiggleStage()
+    which = list(range(len(plan.models)))
+    frames = plan.pose.frames[plan.pose.frames <= plan.frames.max()]
+    chunks = [_chunk(plan, slice(s, s + TIME_BLOCK), frames[s:s + TIME_BLOCK], which)
+              for s in range(0, len(frames), TIME_BLOCK)]
+
+    def once():
+        state = stage.start(plan)
+        for ck in chunks:
+            state, _ = stage(state, ck)
+
+    return median_time(once, repeats), len(stage.start(plan).muscles)
+
+
+def jiggle_rows(table: "Table", reps: int) -> None:
+    """Rows 10: the jiggle stage's cost on the gait2392 walk (or the demo when not shipped)."""
+    from axdf_cli.pipeline.plan import plan_run
+    from axdf_cli.specs import load_job
+
+    job = load_job(GAIT_JOB if GAIT_JOB.is_file() else DEMO_JOB)
+    base = plan_run(job)
+    plan = dataclasses.replace(base, frames=base.pose.frames)  # the whole trial
+    off = dataclasses.replace(plan, stages=())
+    nm, nf = len(plan.models), len(plan.frames)
+    mf = nm * nf
+    t_on, t_off = time_pair(plan, off, reps)
+    t_stage, n_jig = time_jiggle_stage(plan, reps)
+    table.section(f"jiggle ({plan.pose.name}: {nm} muscles, {n_jig} with jiggle, {nf} frames): evaluate_plan "
+                  "(all muscles, no writing) with the stage vs without")
+    table.add("evaluate with jiggle", f"{t_on / mf * 1e6:.1f} µs/mf", f"without {t_off / mf * 1e6:.1f} µs/mf",
+              f"{t_on / t_off:.3f}x")
+    table.add("the jiggle stage alone (axis placed outside)", f"{t_stage / mf * 1e6:.2f} µs/mf",
+              f"{t_stage / (n_jig * nf) * 1e6:.2f} µs per jiggling muscle-frame")
+    every4 = dataclasses.replace(plan, frames=plan.frames[::4])
+    t_sub, t_sub_off = time_pair(every4, dataclasses.replace(every4, stages=()), reps)
+    per = nm * len(every4.frames)
+    table.add("--frames every 4th (frames between advanced too)", f"{t_sub / per * 1e6:.1f} µs/mf",
+              f"without {t_sub_off / per * 1e6:.1f} µs/mf", f"{t_sub / t_sub_off:.3f}x")
+
+
 def long_memory(job: Path, n_frames: int = LONG_FRAMES) -> dict:
     """Stream ``n_frames`` (the job's pose stretched) x all muscles through evaluate_chunks in
     a subprocess, keeping what ``execute`` keeps (stats, the manifest's file list); peak RSS."""
@@ -848,8 +919,8 @@ def main(argv=None) -> int:
     ap.add_argument("--long", action="store_true", help=f"also {LONG_FRAMES} frames x all muscles: peak memory")
     ap.add_argument("--profile", action="store_true", help="print the top functions of the slow rows")
     ap.add_argument("--tmp", default=None, help="folder for the written files (default: a new temporary folder)")
-    ap.add_argument("--only", choices=("retarget",), default=None,
-                    help="print only these rows (retarget: the retargeting fit)")
+    ap.add_argument("--only", choices=("retarget", "jiggle"), default=None,
+                    help="print only these rows (retarget: the retargeting fit; jiggle: the jiggle stage)")
     ap.add_argument("--dataset-samples", type=int, default=None, metavar="N",
                     help=f"samples of the data-set rows (default {DATASET_SAMPLES}, 100 with --quick; 0: skip them)")
     args = ap.parse_args(argv)
@@ -860,6 +931,12 @@ def main(argv=None) -> int:
         retarget_rows(table, args.quick)
         print(table.text())
         print(f"(total bench time {time.perf_counter() - t_start:.0f} s)")
+        return 0
+    if args.only == "jiggle":
+        table = Table()
+        jiggle_rows(table, 3 if args.quick else 5)
+        print(table.text())
+        print(f"(µs/mf: microseconds per muscle-frame; total bench time {time.perf_counter() - t_start:.0f} s)")
         return 0
     n_frames = 200 if args.quick else 1000
     reps = 2 if args.quick else 3
@@ -875,7 +952,7 @@ def main(argv=None) -> int:
               file=sys.stderr)
 
         # 1-2. evaluation against the limit
-        table.section(f"evaluation ({case.name}, {n_frames} frames in chunks of run.CHUNK_FRAMES) vs numpy "
+        table.section(f"evaluation ({case.name}, {n_frames} frames in chunks of pipeline.CHUNK_FRAMES) vs numpy "
                       "filling the same outputs (vertices + normals, 2 x (F, V, 3) float64)")
         eval_us: dict = {}
         worst_limit = 0.0
@@ -979,11 +1056,14 @@ def main(argv=None) -> int:
         # 10. retargeting
         retarget_rows(table, args.quick)
 
+        # 11. jiggle
+        jiggle_rows(table, 2 * reps - 1)
+
         # --long
         if args.long:
             lj = GAIT_JOB if GAIT_JOB.is_file() else DEMO_JOB
             lr = long_memory(lj)
-            table.section(f"--long: {LONG_FRAMES} frames x all muscles through run.evaluate_chunks "
+            table.section(f"--long: {LONG_FRAMES} frames x all muscles through pipeline.evaluate_chunks "
                           "(+ stats and the manifest's file list)")
             table.add(f"peak memory ({lr['muscle_frames']} muscle-frames, chunk {lr['chunk']})",
                       f"{lr['maxrss'] / 2**20:.0f} MiB", f"{lr['seconds']:.0f} s evaluating",

@@ -152,9 +152,9 @@ KILLER = """\
 # loaded by every Python process of the test (PYTHONPATH): the worker that makes seq_00003
 # dies right after writing its meshes, as a worker killed by the OOM killer would
 import os
-from axdf_cli.dataset import runner
+from axdf_cli.dataset import door
 
-_real = runner.run_sequence
+_real = door.run_sequence
 
 
 def _dies(plan, resume):
@@ -164,7 +164,7 @@ def _dies(plan, resume):
     return out
 
 
-runner.run_sequence = _dies
+door.run_sequence = _dies
 """
 
 

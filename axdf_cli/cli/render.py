@@ -10,6 +10,7 @@ with ``--overwrite``; ``--resume`` finishes an interrupted render with the same 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import sys
 import time
@@ -72,7 +73,7 @@ def _identity(manifest: dict) -> dict:
 
 def run(args: argparse.Namespace) -> int:
     from axdf_cli.render.runio import load_run_source, recorded_render_settings
-    from axdf_cli.render.sequence import check_render, render_frames_of
+    from axdf_cli.render.framefiles import check_render, render_frames_of
 
     run_dir = Path(args.run_dir)
     if not run_dir.is_dir():
@@ -98,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
                                  f"{out} holds frames rendered from another run ({'; '.join(changed)[:300]})",
                                  "pass --overwrite to replace them (only once the new frames are complete), "
                                  "or another --out")
-            target = Target(out, target.previous, True)  # staged, then swapped in
+            target = dataclasses.replace(target, replace=True)  # staged, then swapped in
     check_dirs(out, [os.path.dirname(frame_relpath(0, "png"))])
     old = target.previous if not target.replace else None
     old_files = old.files() if old is not None else {}

@@ -24,7 +24,7 @@ from axdf_cli.dataset import folder as dsfolder
 from axdf_cli.dataset import worker as wk
 from axdf_cli.dataset.index import write_index
 from axdf_cli.errors import AxdfError, EnvironmentProblem, InputError, Interrupted
-from axdf_cli.dataset import runner
+from axdf_cli.dataset import door
 
 ENGINES = ("local", "ray")
 
@@ -204,9 +204,9 @@ def _run_local(ctx, mine, out, jobs, resume, done, where) -> None:
         done(r)
 
     try:
-        runner.process_map(_pool_task, list(mine), (where, str(Path(out).resolve()), resume), jobs=jobs,
+        door.process_map(_pool_task, list(mine), (where, str(Path(out).resolve()), resume), jobs=jobs,
                            on_result=finished, fresh=True, preload=("axdf_cli.dataset.worker",))
-    except runner.WorkerDied:
+    except door.WorkerDied:
         raise WorkerFailed(f"a worker process died (killed, or out of memory) while making "
                            f"{_names(ctx, sorted(left))}; the other sequences of this run are complete; "
                            "rerun the same command with --resume to finish") from None

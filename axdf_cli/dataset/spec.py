@@ -9,8 +9,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from axdf_cli.dataset.runner import (FRAME_WRITERS, RenderSettings, load_muscle_specs, motion_pose, parse_camera,
-                                     parse_render_settings, retarget_pose)
+from axdf_cli.dataset.door import (FRAME_WRITERS, RenderSettings, load_muscle_specs, motion_pose, parse_camera,
+                                   parse_render_settings, retarget_pose)
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.tolerances import MAX_ABS_NUMBER, MAX_FPS, MAX_SEED
 from axdf_cli.formats import WRITERS

@@ -2,7 +2,7 @@
 
 The context (dataset spec, skeleton, muscle models, bone meshes, scene topology) is built once
 per process: the models depend only on the skeleton's rest pose, so every sequence reuses
-them. A sequence is a run of ``axdf run``'s own code (:mod:`axdf_cli.dataset.runner`) into
+them. A sequence is a run of ``axdf run``'s own code (:mod:`axdf_cli.dataset.door`) into
 ``OUT/<sequence>/`` (meshes, stats.csv, bones.csv, manifest.json), then its views are
 rendered into ``OUT/<sequence>/views/<view>/<frame>.png|.exr``, its labels written to
 ``labels.npz``, and last ``sequence.json``, whose presence marks the sequence complete.
@@ -24,7 +24,7 @@ from axdf_cli.dataset import amodal as coco
 from axdf_cli.dataset import folder as dsfolder
 from axdf_cli.dataset.folder import DATASET_JSON, INDEX, RECORD  # noqa: F401  (RECORD: written last)
 from axdf_cli.dataset import labels as lab
-from axdf_cli.dataset import runner
+from axdf_cli.dataset import door
 from axdf_cli.errors import InputError
 from axdf_cli.dataset.sampling import sample_pose, with_activation
 from axdf_cli.dataset.spec import (DatasetSpec, Sequence, expand_sequences, load_dataset, load_motion,
@@ -55,6 +55,7 @@ class Context:
     dataset_json: bytes
     digest: str
     timing: dict = field(default_factory=dict)
+    stages: tuple = ()  # the run's stages (axdf_cli.pipeline.stages), applied to every sequence
 
     @property
     def names(self) -> list[str]:
@@ -70,12 +71,12 @@ def build_context(path: Path | str, seed: int | None = None, policy=None, listed
 
     spec = load_dataset(path, seed, policy)
     skel = load_skeleton(spec.skeleton_path, spec.policy)
-    muscles = runner.load_muscle_specs(spec.muscle_files)
-    models = runner.build_models(muscles, skel)
-    bone_meshes = {i: runner.load_bone_mesh(b.mesh, spec.skeleton_path) for i, b in enumerate(skel.bones) if b.mesh}
+    muscles = door.load_muscle_specs(spec.muscle_files)
+    models = door.build_models(muscles, skel)
+    bone_meshes = {i: door.load_bone_mesh(b.mesh, spec.skeleton_path) for i, b in enumerate(skel.bones) if b.mesh}
     srcs = [spec.source, spec.skeleton_path, *spec.muscle_files, *sorted({b.mesh for b in skel.bones if b.mesh})]
-    inputs = {runner.display_path(Path(s)): atomic.sha256_file(s) for s in srcs}
-    motion_inputs = {m.name: {runner.display_path(Path(p)): atomic.sha256_file(p) for p in (m.path, m.map) if p}
+    inputs = {door.display_path(Path(s)): atomic.sha256_file(s) for s in srcs}
+    motion_inputs = {m.name: {door.display_path(Path(p)): atomic.sha256_file(p) for p in (m.path, m.map) if p}
                      for m in spec.motions.values()}
     scene_bones = sorted(bone_meshes) if spec.render.bones else []
     scene = Scene(muscles=tuple(SceneMuscle(s.name, s.color, m.faces) for s, m in zip(muscles, models)),
@@ -83,8 +84,8 @@ def build_context(path: Path | str, seed: int | None = None, policy=None, listed
                   bounds=np.zeros((2, 3)), frames=())
     sequences = expand_sequences(spec) if listed else []
     keypoints = skeleton_keypoints(skel, {i: m[0] for i, m in bone_meshes.items()})
-    ctx = Context(spec, sequences, skel, runner.without_meshes(skel), muscles, models, bone_meshes, keypoints,
-                  inputs, motion_inputs, scene, scene_bones, b"", "")
+    ctx = Context(spec, sequences, skel, door.without_meshes(skel), muscles, models, bone_meshes, keypoints,
+                  inputs, motion_inputs, scene, scene_bones, b"", "", stages=door.build_stages(muscles=muscles))
     if not listed:
         return ctx
     ctx.dataset_json = (json.dumps(dataset_dict(ctx), indent=1) + "\n").encode()
@@ -112,8 +113,8 @@ def dataset_dict(ctx: Context) -> dict:
         "muscles": ctx.names,
         "views": list(spec.views),
         "image": {"width": W, "height": H, "passes": list(spec.passes)},
-        "render": runner.settings_to_dict(spec.render),
-        "ids": runner.id_map(ctx.scene, spec.render.bones),
+        "render": door.settings_to_dict(spec.render),
+        "ids": door.id_map(ctx.scene, spec.render.bones),
         "format": spec.format,
         "shards": spec.shards,
         "bones": {skel.bones[i].name: f"bones/{skel.bones[i].name}.ply" for i in sorted(ctx.bone_meshes)},
@@ -133,6 +134,7 @@ def dataset_dict(ctx: Context) -> dict:
         **({"amodal": f"<sequence>/{AMODAL}: COCO annotations per view and frame, each muscle's full extent "
                       "(occluders ignored) as uncompressed RLE, category id = the muscle's EXR id"}
            if "amodal" in spec.passes else {}),
+        **({"stages": door.stages_record(ctx.stages)} if ctx.stages else {}),
         "sequences": [{"name": s.name, "source": spec.entries[s.entry].label, "frames": s.n_frames}
                       for s in ctx.sequences],
     }
@@ -243,8 +245,8 @@ def _make_sequence(ctx: Context, seq: Sequence, folder: Path, resume: bool, timi
     inputs = dict(ctx.inputs)
     if entry.motion is not None:
         inputs.update(ctx.motion_inputs[entry.motion])
-    plan = runner.sequence_plan(pose, frames, ctx.muscles, ctx.models, spec.format, folder, inputs)
-    summary = runner.run_sequence(plan, resume)
+    plan = door.sequence_plan(pose, frames, ctx.muscles, ctx.models, spec.format, folder, inputs, ctx.stages)
+    summary = door.run_sequence(plan, resume)
     t1 = time.perf_counter()
     timing["run"] = t1 - t0
 
@@ -269,7 +271,7 @@ def _make_sequence(ctx: Context, seq: Sequence, folder: Path, resume: bool, timi
     root = runfolder.Root(folder)  # never through a link (views, views/<view>)
     for fi, frame in enumerate(frames):
         ta = time.perf_counter()
-        pos, nrm = runner.written_meshes(plan, int(frame))
+        pos, nrm = door.written_meshes(plan, int(frame))
         cams = [view_camera(views[v], K[v], w2c[fi, v], clip[fi, v, 0], clip[fi, v, 1], spec.render.size)
                 for v in range(nv)]
         bw = world[fi, ctx.scene_bones] if ctx.scene_bones else None

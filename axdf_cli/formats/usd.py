@@ -32,7 +32,7 @@ import numpy as np
 from axdf_cli.fileio import atomic
 from axdf_cli.errors import EnvironmentProblem
 from axdf_cli.formats.mesh import MeshReadError
-from axdf_cli.formats.sequence import PointSequence, SequenceWriter
+from axdf_cli.formats.packed import PointSequence, SequenceWriter
 
 ROOT = "/axdf"
 SPOOL_BLOCK = 128  # frames read back from a muscle's spool at a time
@@ -285,7 +285,7 @@ def verify_usd(path: Path | str) -> None:
     layer whose default prim is a triangle Mesh (:func:`read_usd`), its time codes are
     finite and strictly increasing, and every time sample holds as many finite points (and
     normals) as the first."""
-    from axdf_cli.formats.sequence import check_frame_times
+    from axdf_cli.formats.packed import check_frame_times
 
     seq = read_usd(path)
     check_frame_times(seq.frames, "USD time samples")

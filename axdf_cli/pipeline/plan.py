@@ -15,6 +15,7 @@ from axdf_cli.specs import Job, Pose, RefPolicy, expand_muscle_paths, load_muscl
 from axdf_cli.model.muscle import MuscleModel, MuscleSpec
 from axdf_cli.model.pose import activation_problems, muscle_range_warnings, parse_frames, subject_points
 from axdf_cli.model.skeleton import forward_kinematics
+from axdf_cli.pipeline.stages import build_stages
 
 DEFAULT_OUT = "out/run"
 
@@ -33,6 +34,7 @@ class RunPlan:
     notes: list = field(default_factory=list)  # remarks printed with --verbose; not warnings
     bone_meshes: dict = field(default_factory=dict)  # bone index -> (vertices (V,3) f4, faces (T,3) i4, file bytes)
     frame_warnings: list = field(default_factory=list)  # [(frame index, muscle index, message)] known before evaluation
+    stages: tuple = ()  # the run's stages (axdf_cli.pipeline.stages: build_stages), in order within each scope
 
     @property
     def names(self) -> list[str]:
@@ -86,12 +88,15 @@ def load_muscle_specs(files) -> list[MuscleSpec]:
 
 
 def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, fmt_arg=None,
-             frames_arg=None, render=None, policy: RefPolicy | None = None, clamp_ranges: bool = False) -> RunPlan:
+             frames_arg=None, render=None, policy: RefPolicy | None = None, clamp_ranges: bool = False,
+             stages=None) -> RunPlan:
     """Load and check every input; build the muscle models. Writes nothing.
 
     ``render``: the RenderSettings to use (None: the job's ``render:``); ``policy``: where
     referenced files may lie (default: the job's); ``clamp_ranges``: hold coordinates inside
-    their ranges (as the pose's ``clamp_ranges``)."""
+    their ranges (as the pose's ``clamp_ranges``); ``stages``: stage name -> on, from the
+    command line and the job (:func:`axdf_cli.pipeline.stages.build_stages`; default every
+    registered stage)."""
     policy = policy or (job.policy if job is not None else RefPolicy())
     if pose_arg is not None:
         pose_path, pose_mark = Path(pose_arg), Mark(str(pose_arg))
@@ -157,24 +162,45 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
     for s in srcs:
         if Path(s).is_file():
             inputs[display_path(Path(s))] = atomic.sha256_file(s)
+    built = build_stages(stages, specs)
+    if any(st.name == "jiggle" for st in built):
+        notes += jiggle_notes(pose, specs)
     return RunPlan(pose, specs, models, frames, formats, out, inputs, render=render, warnings=warnings,
-                   bone_meshes=bone_meshes, notes=notes, frame_warnings=muscle_range_warnings(pose, frames, specs))
+                   bone_meshes=bone_meshes, notes=notes, frame_warnings=muscle_range_warnings(pose, frames, specs),
+                   stages=built)
+
+
+def jiggle_notes(pose: Pose, specs) -> list[str]:
+    """Remarks on ``jiggle:`` frequencies that the pose's frames cannot show: above the
+    Nyquist frequency fps / 2 the ring aliases between frames (the motion is still exact)."""
+    over: dict[float, list[str]] = {}  # highest frequency -> muscles
+    for s in specs:
+        j = s.jiggle
+        top = 0.0 if j is None else max(j.frequency, j.tensed_frequency or 0.0)
+        if top > 0.5 * pose.fps:
+            over.setdefault(top, []).append(s.name)
+    out = []
+    for top, names in sorted(over.items()):
+        who = ", ".join(names[:3]) + (f" and {len(names) - 3} more" if len(names) > 3 else "")
+        out.append(f"jiggle at up to {top:g} Hz ({who}) is above half the pose's {pose.fps:g} fps: the ring "
+                   "aliases between frames (a pose with more frames per second shows it)")
+    return out
 
 
 def check_formats(formats, frames, frames_mark: Mark) -> None:
-    """What the selected formats need, checked before anything is written: evenly spaced
-    frames for point caches; Pixar's USD modules for usd (exit 3 with the install hint)."""
-    from axdf_cli.formats.pc2 import check_frames
+    """What the selected formats need (their ``FORMATS`` entries), checked before anything is
+    written: the frames they can hold (evenly spaced for point caches); what the machine needs
+    to write them (Pixar's USD modules for usd: exit 3 with the install hint)."""
+    from axdf_cli.formats import FORMATS, frames_problem, of_layout
 
-    caches = [f for f in formats if f in ("pc2", "mdd")]
-    why = check_frames(frames) if caches else None
+    cannot, why = frames_problem(formats, frames)
     if why:
-        raise InputError(frames_mark, f"frames {_frames_text(frames)} for {', '.join(caches)}",
-                         why + "; or write usd or npz, which keep any frames")
-    if "usd" in formats:
-        from axdf_cli.formats.usd import pxr
-
-        pxr()
+        keep = [n for n in of_layout("sequence") if FORMATS[n].frames == "any"]
+        raise InputError(frames_mark, f"frames {_frames_text(frames)} for {', '.join(cannot)}",
+                         why + f"; or write {' or '.join(keep)}, which keep any frames")
+    for name in formats:
+        if FORMATS[name].check is not None:
+            FORMATS[name].check()
 
 
 def _frames_text(frames) -> str:
