@@ -70,6 +70,12 @@ YAML_MAX_DEPTH = 64
 BVH_MAX_BYTES = 512 * 1024 * 1024
 # numbers whose magnitude exceeds this are refused (metres, degrees, frames alike)
 MAX_ABS_NUMBER = 1e9
+# The highest frame rate a pose may have (and an importer may write): 100 kHz is beyond any
+# motion capture or simulation output we read; a rate past it is a unit mistake.
+MAX_FPS = 100000.0
+# Seeds (a data set's seed: and --seed): the same range in the file and on the command line,
+# within the numbers every axdf file accepts.
+MAX_SEED = 1_000_000_000
 
 # Rendering (tests/test_render_output.py). A vertex projected with camera.json is checked
 # against the EXR `id` and `Z` at the pixel containing it, when that pixel's centre falls

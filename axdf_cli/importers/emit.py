@@ -27,6 +27,7 @@ Conversions (OpenSim → axdf):
 from __future__ import annotations
 
 import colorsys
+import functools
 import hashlib
 import math
 import re
@@ -515,9 +516,22 @@ def _scalar(v) -> str:
     if v is None:
         return "null"
     s = str(v)
-    if _PLAIN.match(s) and yaml.safe_load(s) == s:
+    if _plain_string(s):
         return s
     return '"' + s.replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+_RESOLVER = yaml.resolver.Resolver()
+_STR_TAG = "tag:yaml.org,2002:str"
+
+
+@functools.lru_cache(maxsize=1 << 20)
+def _plain_string(s: str) -> bool:
+    """Whether ``s`` may be written unquoted: it looks like a name and PyYAML's implicit
+    resolvers read it back as this string (not ``true``, ``null``, ``on``, a number). The
+    resolver's pattern match only: parsing every string as a document was most of an
+    import's time."""
+    return bool(_PLAIN.match(s)) and _RESOLVER.resolve(yaml.ScalarNode, s, (True, False)) == _STR_TAG
 
 
 def _flow(v) -> str:
@@ -534,14 +548,33 @@ def _simple(v) -> bool:
     return not isinstance(v, dict)
 
 
+def _inline_text(v, limit: int = 120) -> str | None:
+    """``v`` on one line (flow style) when it goes there: a scalar, a list of scalars, a small
+    mapping of simple values (at most ``limit`` characters); else None. Each text is built
+    once (it was built twice: to measure it, then to write it)."""
+    if isinstance(v, (list, tuple)):
+        return _flow(v) if _simple(v) else None
+    if isinstance(v, dict):
+        if not all(_simple(x) or isinstance(x, dict) for x in v.values()):
+            return None
+        parts = []
+        n = 2
+        for k, x in v.items():
+            t = _flow(x) if _simple(x) else _inline_text(x, limit)
+            if t is None:
+                return None
+            parts.append(f"{_scalar(k)}: {t}")
+            n += len(parts[-1]) + 2
+            if n > limit + 2:
+                return None
+        text = "{" + ", ".join(parts) + "}"
+        return text if len(text) <= limit else None
+    return _scalar(v)
+
+
 def _inline_ok(v, limit: int = 120) -> bool:
     """Small mappings of simple values, and lists of scalars, go on one line."""
-    if isinstance(v, (list, tuple)):
-        return _simple(v)
-    if isinstance(v, dict):
-        return all(_simple(x) or (isinstance(x, dict) and _inline_ok(x, limit)) for x in v.values()) and \
-            len(_flow(v)) <= limit
-    return True
+    return _inline_text(v, limit) is not None
 
 
 #: Mappings whose entries are always written on one line each (pose keys, activation curves).
@@ -556,31 +589,27 @@ def dump_yaml(doc, header: str = "") -> str:
     if header:
         lines += ["# " + h if h else "#" for h in header.splitlines()]
 
-    def block(x) -> bool:
-        return isinstance(x, (dict, list, tuple)) and bool(x) and not _inline_ok(x)
-
     def emit(v, indent: int, flow_children: bool = False):
         pad = " " * indent
         if isinstance(v, dict):
             for k, x in v.items():
                 key = _scalar(k)
-                if block(x) and not flow_children:
+                text = _flow(x) if flow_children or not isinstance(x, (dict, list, tuple)) or not x \
+                    else _inline_text(x)
+                if text is None:
                     lines.append(f"{pad}{key}:")
                     emit(x, indent + 2, k in FLOW_CHILDREN)
                 else:
-                    lines.append(f"{pad}{key}: {_flow(x)}")
+                    lines.append(f"{pad}{key}: {text}")
         elif isinstance(v, (list, tuple)):
             for x in v:
-                if isinstance(x, dict) and block(x):
-                    saved = lines[:]
-                    lines.clear()
+                text = _inline_text(x) if isinstance(x, dict) and x else None
+                if isinstance(x, dict) and x and text is None:
+                    start = len(lines)  # the mapping's first line becomes the item's "- " line
                     emit(x, indent + 2)
-                    sub = lines[:]
-                    lines[:] = saved
-                    lines.append(f"{pad}- {sub[0][indent + 2:]}")
-                    lines.extend(sub[1:])
+                    lines[start] = f"{pad}- {lines[start][indent + 2:]}"
                 else:
-                    lines.append(f"{pad}- {_flow(x)}")
+                    lines.append(f"{pad}- {text if text is not None else _flow(x)}")
         else:
             lines.append(pad + _scalar(v))
 

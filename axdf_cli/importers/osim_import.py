@@ -53,6 +53,7 @@ from axdf_cli.errors import InputError, Mark
 from axdf_cli.formats.ply import PlyWriter
 from axdf_cli.importers import emit
 from axdf_cli.specs import RefPolicy, parse_skeleton_text
+from axdf_cli.fileio.outputs import UniqueFiles
 from axdf_cli.fileio.yamlio import NAME_ALLOWED, check_name, is_name
 from axdf_cli.importers.osim import Model, load_osim
 from axdf_cli.importers.storage import Table, read_storage
@@ -332,7 +333,7 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
     warnings: list[str] = []
     report: dict = {"source": {"model": model_path.name, "sha256": _sha(model_path), "model_name": model.name},
                     "tool": "axdf import osim", "skeleton": name}
-    files: dict[str, bytes] = {}
+    files: dict[str, bytes] = UniqueFiles()  # a path twice: exit 2, never one file lost
     mesh_bytes = body_meshes(model, model_path, warnings, report) if meshes else {}
     mesh_refs = {}
     for body, data in sorted(mesh_bytes.items()):

@@ -117,7 +117,7 @@ def skeleton_from_document(doc, path: Path, policy: RefPolicy | None = None) -> 
     bones: list[Bone] = []
     index: dict[str, int] = {}
     used: dict[str, str] = {}  # coordinate -> type inferred from direct use
-    order: list[str] = list(declared)
+    order: dict[str, None] = dict.fromkeys(declared)  # coordinates in order of appearance (a set: linear time)
     for bval, bm in zip(bones_seq, item_marks(bones_seq, top)):
         bf = Fields(bval, bm, "bone", keys=("name", "parent", "offset", "orient", "post_offset", "post_orient",
                                             "mesh", "dofs"))
@@ -174,8 +174,7 @@ def skeleton_from_document(doc, path: Path, policy: RefPolicy | None = None) -> 
                     if coord in declared and declared[coord].type != dtype:
                         raise InputError(df.vmark("coord"), f"coordinate {coord!r} is declared {declared[coord].type}",
                                          f"use it on a {declared[coord].type} dof or through a function")
-                if coord not in order:
-                    order.append(coord)
+                order.setdefault(coord)
             dofs.append(Dof(dtype, axis, coord, fn))
         bf.done()
         index[bname] = len(bones)
