@@ -17,6 +17,10 @@ Conversions (OpenSim → axdf):
   sums them in the parent frame), then rotations (a body-fixed sequence). Axes whose function
   is the constant 0 are dropped; an identity ``LinearFunction`` of a coordinate of the
   axis's own type becomes a plain DOF; anything else a coupled DOF with ``function``.
+- Coupled coordinates: the dependent coordinate of a ``CoordinateCouplerConstraint`` is
+  written ``follows: {coord: INDEPENDENT, function: scale · f}`` (no default, no range: the
+  skeleton sets it from the coordinate it follows), its function converted like a DOF's
+  (input in the independent coordinate's units, output in its own).
 - Units: rotational coordinates and rotation outputs rad → degrees. A function
   ``y = f(x)`` in OpenSim units becomes ``y' = k_out · f(k_in · x')`` with
   ``k_in = π/180`` for a rotational coordinate and ``k_out = 180/π`` for a rotation axis:
@@ -135,6 +139,11 @@ def skeleton_doc(model: Model, name: str, meshes: dict[str, str]) -> dict:
     coords = {}
     for c in model.coordinates.values():
         k = DEG if c.type == "rotation" else 1.0
+        if c.follows is not None:  # a CoordinateCouplerConstraint's dependent: no default, no range of its own
+            k_in = math.pi / 180.0 if model.coordinates[c.follows].type == "rotation" else 1.0
+            coords[c.name] = {"type": c.type, "follows": {"coord": c.follows,
+                                                          "function": function_doc(convert_function(c.function, k_in, k))}}
+            continue
         cd = {"type": c.type, "default": c.default * k}
         if c.range is not None:
             cd["range"] = [c.range[0] * k, c.range[1] * k]
@@ -269,8 +278,48 @@ def path_docs(model: Model, m: Muscle) -> tuple[list, list]:
     return path, wraps
 
 
+def axis_points_for(name: str, path: list, wraps: list, skel: Skeleton, world: np.ndarray,
+                    motion_q: np.ndarray | None) -> tuple[int, int, float, float]:
+    """The axis control points a path muscle needs over the imported motion: ``(n, default
+    n, shortfall at n, shortfall at the default)``. The default count (``PathModel``) is kept
+    unless the axis falls more than ``AXIS_SHORTFALL_MAX`` short of the wrapped path in some
+    frame of ``motion_q`` (F, C) (at most ``AXIS_FIT_FRAMES`` of them, evenly spread); then
+    the smallest count in steps of 4 up to ``AXIS_POINTS_MAX`` that keeps it within, or the
+    best of them. Without a motion: the default, measured at the rest pose."""
+    import dataclasses
+
+    from axdf_cli import tolerances as tol
+    from axdf_cli.fileio.yamlio import Fields
+    from axdf_cli.model.paths.path import PathModel
+    from axdf_cli.specs import parse_muscle_path
+
+    spec = parse_muscle_path(Fields({"path": path, "wrap": wraps}, Mark(f"<{name}>"), "muscle"))
+    q = skel.rest_coordinates()[None]
+    if motion_q is not None and len(motion_q):
+        pick = np.unique(np.linspace(0, len(motion_q) - 1, min(len(motion_q), tol.AXIS_FIT_FRAMES)).astype(np.int64))
+        q = np.concatenate([q, motion_q[pick]])
+    frames_world = forward_kinematics(skel, q)
+    n0 = PathModel(spec, skel.bone_index, skel.coord_index).n
+
+    def worst(n: int) -> float:
+        pm = PathModel(dataclasses.replace(spec, control_points=n), skel.bone_index, skel.coord_index)
+        return float(np.max(pm.shortfall(frames_world, q)))
+
+    best = (n0, worst(n0))
+    s0 = best[1]
+    if motion_q is None or s0 <= tol.AXIS_SHORTFALL_MAX:
+        return n0, n0, s0, s0
+    for n in range(n0 + 4, tol.AXIS_POINTS_MAX + 1, 4):
+        sn = worst(n)
+        if sn < best[1]:
+            best = (n, sn)
+        if sn <= tol.AXIS_SHORTFALL_MAX:
+            break
+    return best[0], n0, best[1], s0
+
+
 def muscle_doc(m: Muscle, skel: Skeleton, world: np.ndarray, model: Model | None = None,
-               palette: str = "anatomical") -> tuple[dict, dict]:
+               palette: str = "anatomical", motion_q: np.ndarray | None = None) -> tuple[dict, dict]:
     """One muscle YAML document and a summary row for the import report.
 
     The belly law (README, "OpenSim models"), from the model's own numbers:
@@ -291,11 +340,15 @@ def muscle_doc(m: Muscle, skel: Skeleton, world: np.ndarray, model: Model | None
     Positions are fractions of the rest arc length written as curve parameters t (mapped
     through the rest axis); sections are circular; ``volume: exact`` keeps the rest volume.
     The row also carries the belly's slenderness (:mod:`axdf_cli.model.measure`) at rest.
+    ``axis_points`` is written when the imported motion ``motion_q`` (F, C) needs more than
+    the default (:func:`axis_points_for`).
     """
     from axdf_cli.model.measure import belly_slenderness
 
     path, wraps = path_docs(model, m)
-    rest_ctrl, path_length = _rest_path(m.name, path, wraps, skel, world)
+    n_axis, n_default, shortfall, shortfall_default = axis_points_for(m.name, path, wraps, skel, world, motion_q)
+    extra = {"axis_points": n_axis} if n_axis != n_default else {}
+    rest_ctrl, path_length = _rest_path(m.name, path, wraps, skel, world, n_axis if extra else 0)
     t_of, axis_length = _arc_parameter_of(rest_ctrl)
     pcsa = m.max_isometric_force / SPECIFIC_TENSION
     volume = pcsa * m.optimal_fiber_length
@@ -322,7 +375,7 @@ def muscle_doc(m: Muscle, skel: Skeleton, world: np.ndarray, model: Model | None
         sections = [{"t": t, "radii": [r_t, r_t] if f is None else [f * r, f * r], "angle": 0.0}
                     for t, f in zip(ts, factors)]
         return {"muscle": m.name, "color": PALETTES[palette](m.name), "volume": "exact", "path": path,
-                **({"wrap": wraps} if wraps else {}), "sections": sections, "tendons": [t_o, t_i]}
+                **({"wrap": wraps} if wraps else {}), **extra, "sections": sections, "tendons": [t_o, t_i]}
 
     # a first guess from the profile's mean squared radius, then the model's own exact-volume
     # solve (belly points scale, tendon points do not) gives the widest radius R
@@ -346,6 +399,10 @@ def muscle_doc(m: Muscle, skel: Skeleton, world: np.ndarray, model: Model | None
            "fibre_projection": fibres,
            "belly_radius": r, "tendon_radius": r_t, "tendons": [t_o, t_i], "rest_volume_m3": mm.v0,
            "slenderness": slender.ratio, "widest_diameter": slender.width}
+    if motion_q is not None:
+        row["axis_shortfall"] = shortfall  # the worst over the motion, at the count written
+        if extra:
+            row["axis_points_raised"] = {"from": n_default, "to": n_axis, "shortfall_at_default": shortfall_default}
     return doc, rounded(row)
 
 
@@ -358,14 +415,14 @@ def _model(doc: dict, name: str, skel: Skeleton, world: np.ndarray):
     return MuscleModel(spec, skel.bone_index, world, skel)
 
 
-def _rest_path(name: str, path: list, wraps: list, skel: Skeleton, world: np.ndarray):
+def _rest_path(name: str, path: list, wraps: list, skel: Skeleton, world: np.ndarray, axis_points: int = 0):
     """The path documents read back through the loader, evaluated at the rest pose: the axis
     control points (n, 3) and the wrapped path's length."""
     from axdf_cli.specs import parse_muscle_path
     from axdf_cli.model.paths.path import PathModel
     from axdf_cli.fileio.yamlio import Fields
 
-    doc = {"path": path, "wrap": wraps}
+    doc = {"path": path, "wrap": wraps, **({"axis_points": axis_points} if axis_points else {})}
     spec = parse_muscle_path(Fields(doc, Mark(f"<{name}>"), "muscle"))
     pm = PathModel(spec, skel.bone_index, skel.coord_index)
     q = skel.rest_coordinates()[None]
