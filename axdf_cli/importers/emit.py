@@ -399,10 +399,9 @@ def muscle_doc(m: Muscle, skel: Skeleton, world: np.ndarray, model: Model | None
            "fibre_projection": fibres,
            "belly_radius": r, "tendon_radius": r_t, "tendons": [t_o, t_i], "rest_volume_m3": mm.v0,
            "slenderness": slender.ratio, "widest_diameter": slender.width}
-    if motion_q is not None:
-        row["axis_shortfall"] = shortfall  # the worst over the motion, at the count written
-        if extra:
-            row["axis_points_raised"] = {"from": n_default, "to": n_axis, "shortfall_at_default": shortfall_default}
+    if extra:  # the worst shortfall over the motion at the default count and at the count written
+        row["axis_points_raised"] = {"from": n_default, "to": n_axis, "shortfall_at_default": shortfall_default,
+                                     "shortfall": shortfall}
     return doc, rounded(row)
 
 

@@ -3,7 +3,8 @@
 Everything here stays in OpenSim's units and frames (radians, metres, Y-up ground); the
 conversion to axdf (degrees, Z-up) happens in :mod:`axdf_cli.importers.emit`. What the
 parser does not model is listed in :attr:`Model.ignored` (wrap objects, markers,
-constraints, non-muscle forces, ...), never dropped silently.
+constraints, non-muscle forces, muscles on a ``FunctionBasedPath``, ...), never dropped
+silently.
 
 Semantics (confirmed against Simbody / OpenSim sources):
 
@@ -85,6 +86,8 @@ class Coordinate:
     follows: str | None = None
     #: ... and its value as a function of that one (OpenSim units, the scale factor included)
     function: object | None = None
+    #: ... and the constraint's name
+    coupler: str | None = None
 
 
 @dataclass(frozen=True)
@@ -393,7 +396,7 @@ class _Parser:
             scale = _numbers(sn, 1)[0] if sn is not None and sn.text else 1.0
             if scale != 1.0:
                 fn = FMult(scale, fn)
-            self.coords[dep.name] = replace(dep, follows=ind.name, function=fn)
+            self.coords[dep.name] = replace(dep, follows=ind.name, function=fn, coupler=c.name)
         # a chain of couplers must end at a free coordinate
         for name, c in self.coords.items():
             seen = [name]
@@ -702,6 +705,10 @@ class _Parser:
         names = set()
         for f in (fs.children if fs is not None else []):
             gp = f.find("GeometryPath")
+            if gp is None and f.find("FunctionBasedPath") is not None:
+                self.ignore("muscle", f.name, f, f"{f.tag} on a FunctionBasedPath (its length a function of "
+                            "coordinates, no path points to build a belly along): skipped; give it a GeometryPath")
+                continue
             if gp is None or f.find("max_isometric_force") is None:
                 self.ignore("force", f.name, f, f"{f.tag}: not a muscle with a path")
                 continue

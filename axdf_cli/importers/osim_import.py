@@ -394,7 +394,8 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
     mus_dir = Path(muscles_out) if muscles_out else out_dir / "muscles"
     pose_path = (Path(pose_out) if pose_out else out_dir / f"{pname}.yaml") if motion is not None else None
 
-    warnings: list[str] = []
+    warnings: list[str] = [f"{i['where']}: muscle {i['name']} skipped: {i['why']}" for i in model.ignored
+                           if i["kind"] == "muscle"]
     report: dict = {"source": {"model": model_path.name, "sha256": _sha(model_path), "model_name": model.name},
                     "tool": "axdf import osim", "skeleton": name}
     files: dict[str, bytes] = {}
@@ -432,6 +433,10 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
         files[str(mus_dir / f"{m.name}.yaml")] = emit.dump_yaml(mdoc, f"{m.name}: imported from {model_path.name} "
                                                                       f"({m.type}) by `axdf import osim`.").encode()
     report["muscles"] = rows
+    coupled = [{"coordinate": c.name, "follows": c.follows, "constraint": c.coupler}
+               for c in model.coordinates.values() if c.follows is not None]
+    if coupled:
+        report["coupled_coordinates"] = coupled
     report["counts"] = {"bodies": len(model.bodies), "joints": len(model.joints), "coordinates": len(model.coordinates),
                         "muscles": len(model.muscles), "meshes": len(mesh_bytes),
                         "path_points": sum(r["path_points"] for r in rows),
@@ -481,6 +486,17 @@ def import_markdown(r: dict) -> str:
         co = r["controls"]
         lines += [f"Controls: `{co['file']}`, {len(co['muscles'])} muscles; ignored columns: "
                   f"{', '.join(co['ignored_columns']) or 'none'}.", ""]
+    if r.get("coupled_coordinates"):
+        lines += ["Coupled coordinates (no pose keys them: the skeleton computes each from the coordinate it "
+                  "follows, as OpenSim's constraint does; a motion's column of one is checked, not read):", ""]
+        lines += [f"- `{c['coordinate']}` follows `{c['follows']}` (CoordinateCouplerConstraint `{c['constraint']}`)"
+                  for c in r["coupled_coordinates"]] + [""]
+    raised = [m for m in r["muscles"] if "axis_points_raised" in m]
+    if raised:
+        lines += ["Axis control points raised where the motion bends the path more sharply than the default count "
+                  f"follows (the axis falls short of the path by more than {tol.AXIS_SHORTFALL_MAX:.1%} in some frame):", ""]
+        lines += [f"- {m['muscle']}: {a['from']} → {a['to']} (shortfall {a['shortfall_at_default']:.2%} → "
+                  f"{a['shortfall']:.2%})" for m in raised for a in [m["axis_points_raised"]]] + [""]
     lines += ["## Warnings", ""] + ([f"- {w}" for w in r["warnings"]] or ["- none"]) + [""]
     lines += ["## Not imported", "", "| kind | name | where | why |", "|---|---|---|---|"]
     lines += [f"| {i['kind']} | {i['name']} | {i['where']} "
