@@ -160,6 +160,14 @@ def test_datasets_draw_leaders_and_never_followers(tmp_path, capsys, monkeypatch
     q = sample_coordinates(pose, np.arange(5))
     np.testing.assert_allclose(q[:, skel.coord_index["twin"]], 2 * q[:, skel.coord_index["bend"]], atol=1e-12)
     assert np.ptp(q[:, skel.coord_index["twin"]]) > 0
+    # an OpenSim motion for the data set: its column of the coupled coordinate is not read
+    from axdf_cli.dataset.runner import motion_pose
+
+    (tmp_path / "m.mot").write_text("m\nversion=1\nnRows=2\nnColumns=3\ninDegrees=yes\nendheader\n"
+                                    "time\tbend\ttwin\n0.0\t10.0\t99.0\n0.5\t20.0\t99.0\n")
+    mp = motion_pose(tmp_path / "m.mot", skel, "m")
+    assert set(mp.keys) == {"bend"}
+    np.testing.assert_allclose(sample_coordinates(mp, mp.frames)[:, skel.coord_index["twin"]], [20.0, 40.0])
     (tmp_path / "tiny.yaml").write_text(DATASET_YAML.replace("  roll: {range: [-80, 80]}\n",
                                                              "  roll: {range: [-80, 80]}\n  twin: {range: [0, 1]}\n"))
     monkeypatch.chdir(tmp_path)
