@@ -90,3 +90,10 @@ AXIS_POINTS_MAX = 48
 # The shortfall is measured on at most this many frames of the motion, evenly spread (the
 # path moves smoothly: a 2000-frame sample of a long take misses no bend of it).
 AXIS_FIT_FRAMES = 2000
+
+# Data-set keypoints (axdf_cli/model/keypoints.py): two keypoints closer than this (metres) at
+# the rest pose are one point. Coincident by construction are BVH helper joints at offset 0
+# from their parent (CMU's LHipJoint, lowerback, lowerneck, the collars, lhand, LThumb) and the
+# radius's head 2 cm beside the humero-ulnar joint (human_r); distinct anatomical keypoints of
+# the shipped skeletons are 2.8 cm apart or more (CMU's fingers' base to their end site).
+KEYPOINT_MERGE = 0.025

@@ -107,7 +107,9 @@ def run(args: argparse.Namespace) -> int:
         todo = [f for f in chosen if f not in done]
     settings = check_render(settings, on_note=lambda text: print(f"note: {text}", file=sys.stderr))
     new_render = settings_to_dict(settings)
-    scene, source, _ = load_run_source(run_dir, run_manifest, frames=todo)
+    cam = settings.camera
+    aim = (cam.target_bone, cam.target_mark) if cam is not None and cam.target_bone is not None else None
+    scene, source, _ = load_run_source(run_dir, run_manifest, frames=todo, target_bone=aim)
 
     stale = set(_frame_files(todo)) | {CAMERA}
     if old is not None:

@@ -384,6 +384,11 @@ def _parse_cameras(value, where: Mark, skel):
     return None, Sphere(views, dist, elev, azim, fov, target, per)
 
 
+#: Passes of a data set beyond the image files: ``amodal``, each muscle's full extent per view
+#: and frame (``<seq>/amodal.json``, COCO RLE; :mod:`axdf_cli.dataset.amodal`).
+DATASET_PASSES = ("amodal",)
+
+
 def _parse_render(value, where: Mark):
     if value is None:
         return RenderSettings(enabled=True, size=(256, 256)), tuple(FRAME_WRITERS)
@@ -396,9 +401,10 @@ def _parse_render(value, where: Mark):
     if "passes" in value:
         pv = value["passes"]
         pm = value.value_mark("passes")
-        if not isinstance(pv, list) or not pv or any(p not in FRAME_WRITERS for p in pv) or len(set(pv)) != len(pv):
-            raise InputError(pm, f"passes is {pv!r}", f"a non-empty list of {', '.join(FRAME_WRITERS)}")
-        passes = tuple(p for p in FRAME_WRITERS if p in pv)
+        allowed = tuple(FRAME_WRITERS) + DATASET_PASSES
+        if not isinstance(pv, list) or not pv or any(p not in allowed for p in pv) or len(set(pv)) != len(pv):
+            raise InputError(pm, f"passes is {pv!r}", f"a non-empty list of {', '.join(allowed)}")
+        passes = tuple(p for p in allowed if p in pv)
     rest = type(value)({k: v for k, v in value.items() if k != "passes"})
     rest.mark, rest.key_marks, rest.value_marks = value.mark, value.key_marks, value.value_marks
     if "size" not in rest:

@@ -13,7 +13,7 @@ from typing import Callable, Iterator
 import numpy as np
 
 from axdf_cli.pipeline.evaluate import evaluate_chunks, finite_or_rest
-from axdf_cli.pipeline.plan import framing
+from axdf_cli.pipeline.plan import camera_targets, framing
 from axdf_cli.render.renderer import bone_layout
 from axdf_cli.render.scene import FrameChunk, Scene, SceneMuscle
 from axdf_cli.render.sequence import RENDER_CHUNK, render_frames_of
@@ -35,7 +35,7 @@ def render_plan(plan, out_dir: Path, bounds, twist_ref, progress: Callable[[int]
     scene = Scene(
         muscles=tuple(SceneMuscle(s.name, s.color, m.faces) for s, m in zip(plan.muscles, plan.models)),
         bones=layout.bones, bounds=bounds, frames=tuple(int(f) for f in plan.frames),
-        framing=framing_points, first_frame=int(plan.pose.first))
+        framing=framing_points, first_frame=int(plan.pose.first), targets=camera_targets(plan))
     todo = scene.frames if frames is None else frames
     return render_frames_of(scene, PlanFrames(plan, twist_ref, layout), todo, plan.render, out_dir, jobs,
                             progress, on_frame)

@@ -147,6 +147,7 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
         out = Path(DEFAULT_OUT)
     if render is None:
         render = job_render_settings(job)
+    check_camera_bone(render, pose.skeleton)
 
     bone_meshes = {i: load_bone_mesh(b.mesh, pose.skeleton_path) for i, b in enumerate(skel.bones) if b.mesh}
 
@@ -200,7 +201,54 @@ def load_bone_mesh(path: str, skeleton_file: str):
 
 
 def framing(plan: RunPlan) -> np.ndarray:
-    """What the automatic camera frames: the skeleton over the whole pose (not the muscles,
-    not the selected frames), rounded to 1 µm so that the manifest holds it exactly."""
-    pts = subject_points(plan.pose, {i: v for i, (v, _, _) in plan.bone_meshes.items()})
+    """What the automatic camera frames: the run's muscles swept over the whole pose (not the
+    selected frames), rounded to 1 µm so that the manifest holds it exactly. Each muscle's
+    rest mesh rides rigidly on the bones of its two nearest anchors (axis control points or
+    path points) at rest, posed by forward kinematics at every frame of the pose
+    (:func:`muscle_anchored_points`, :func:`axdf_cli.model.pose.subject_points`): a muscle
+    between two bones lies between the copies its bones carry, so the hull holds it while
+    the camera frames the muscles, not the whole skeleton, and never depends on ``--frames``."""
+    pts = subject_points(plan.pose, muscle_anchored_points(plan.models, plan.pose.skeleton), joints=False)
     return np.round(pts, 6) + 0.0
+
+
+def muscle_anchored_points(models, skel) -> dict:
+    """Bone index -> (N, 3) bone-local points: each muscle's rest vertices (V, 3), carried by
+    the bones of the two anchors nearest each vertex at rest (its axis control points'
+    bones, or its path points' for a path muscle)."""
+    rest = forward_kinematics(skel, skel.rest_coordinates()[None])[0]  # (B, 4, 4)
+    out: dict[int, list] = {}
+    for m in models:
+        src = m.path.points if m.path is not None else m
+        bones, at = np.asarray(src.bones), np.asarray(src.at, dtype=np.float64)
+        # a[k,i] = sum_j R[bones_k,i,j] at[k,j] + t[bones_k,i]: the anchors at rest (world)
+        anchors = np.einsum("kij,kj->ki", rest[bones, :3, :3], at) + rest[bones, :3, 3]
+        v = m.rest_vertices.astype(np.float64)  # (V, 3) world at rest
+        d = np.linalg.norm(v[:, None] - anchors[None], axis=2)  # (V, K)
+        near = np.argsort(d, axis=1, kind="stable")[:, :2]  # (V, 2) the two nearest anchors
+        for b in np.unique(bones):
+            sel = np.isin(bones[near], b).any(axis=1)
+            R, t = rest[b, :3, :3], rest[b, :3, 3]
+            out.setdefault(int(b), []).append((v[sel] - t) @ R)  # world -> bone-local: R^T (v - t)
+    return {b: np.concatenate(p) for b, p in out.items()}
+
+
+def camera_targets(plan: RunPlan, frames=None) -> np.ndarray | None:
+    """(F, 3) the origin of the render camera's target bone at ``frames`` (default: the plan's),
+    or None when the camera does not aim at a bone."""
+    from axdf_cli.model.pose import sample_coordinates
+
+    cam = plan.render.camera if plan.render is not None else None
+    if cam is None or cam.target_bone is None:
+        return None
+    frames = plan.frames if frames is None else np.asarray(frames)
+    b = plan.pose.skeleton.bone_index[cam.target_bone]
+    return forward_kinematics(plan.pose.skeleton, sample_coordinates(plan.pose, frames))[:, b, :3, 3]
+
+
+def check_camera_bone(render, skel) -> None:
+    """A camera that aims at a bone names a bone of the skeleton (checked before any output)."""
+    cam = render.camera if render is not None else None
+    if cam is not None and cam.target_bone is not None and cam.target_bone not in skel.bone_index:
+        raise InputError(cam.target_mark, f"the camera's target bone {cam.target_bone!r} is not a bone of "
+                         f"skeleton {skel.name!r}", "bones: " + ", ".join(b.name for b in skel.bones))

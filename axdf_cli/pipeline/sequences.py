@@ -143,13 +143,14 @@ def _write_usd_stage(plan, writer, bone_rows, bounds, framing) -> None:
 def usd_camera(plan, bounds, framing) -> dict:
     """The run's camera for the USD stage: the first panel of the render settings' view, the
     camera ``axdf run --render`` uses (framed on ``framing``)."""
+    from axdf_cli.pipeline.plan import camera_targets
     from axdf_cli.render.camera import sequence_cameras
     from axdf_cli.specs.render import RenderSettings
     from axdf_cli.render.scene import Scene
 
     settings = plan.render if plan.render is not None else RenderSettings()
     scene = Scene((), (), np.asarray(bounds, np.float64), tuple(int(f) for f in plan.frames),
-                  framing=framing, first_frame=int(plan.pose.first))
+                  framing=framing, first_frame=int(plan.pose.first), targets=camera_targets(plan))
     cams = sequence_cameras(scene, settings)
     first = cams[0][0]
     return {"world_to_camera": np.stack([c[0].world_to_camera for c in cams]), "K": first.K,

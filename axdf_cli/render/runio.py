@@ -131,10 +131,11 @@ def load_run_scene(run_dir: Path, manifest: Manifest | None = None, frames=None
     return scene, source.chunks(source.selected), settings
 
 
-def load_run_source(run_dir: Path, manifest: Manifest | None = None, frames=None
+def load_run_source(run_dir: Path, manifest: Manifest | None = None, frames=None, target_bone=None
                     ) -> tuple[Scene, "RunFrames", RenderSettings]:
     """:func:`load_run_scene` with the frames as a :class:`RunFrames` (a render worker reads
-    its own)."""
+    its own). ``target_bone``: (name, Mark) of the bone a camera aims at, or None: its origin
+    at every frame of the run (``bones.csv``) becomes ``Scene.targets``."""
     run_dir = Path(run_dir)
     m = manifest or read_run_manifest(run_dir)
     all_frames = tuple(m.frames())
@@ -196,8 +197,15 @@ def load_run_source(run_dir: Path, manifest: Manifest | None = None, frames=None
     layout = bone_layout(bone_names, parents, meshes, extent)
     world = _read_bones_csv(run_dir / BONES_CSV, selected, bone_names if layout.bones else [])
     bone_world = layout.transforms(world)
+    targets = None
+    if target_bone is not None:
+        name, where = target_bone
+        if name not in bone_names:
+            raise InputError(where, f"the camera's target bone {name!r} is not a bone of this run",
+                             "bones: " + ", ".join(bone_names))
+        targets = _read_bones_csv(run_dir / BONES_CSV, all_frames, [name])[:, 0, :3, 3]
     scene = Scene(tuple(muscles), layout.bones, bounds.astype(np.float64), all_frames,
-                  framing=framing, first_frame=first_frame)
+                  framing=framing, first_frame=first_frame, targets=targets)
 
     source = RunFrames(run_dir, names, formats, all_frames, fps, selected, bone_world, sources)
     return scene, source, settings
