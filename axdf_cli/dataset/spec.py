@@ -210,6 +210,10 @@ def _parse_coordinates(value, where: Mark, skel) -> dict:
         if cname not in skel.coord_index:
             raise InputError(km, f"unknown coordinate {cname!r}",
                              f"coordinates of skeleton {skel.name}: {', '.join(skel.coord_index)}")
+        leader = skel.coordinates[skel.coord_index[cname]].follows
+        if leader is not None:
+            raise InputError(km, f"coordinate {cname!r} is coupled: it follows {leader!r}",
+                             f"set {leader!r} instead; coupled coordinates are never drawn")
         cf = Fields(cval, value.value_mark(cname), f"coordinate {cname}")
         rng = cf.vector("range", 2, default=None)
         fixed = cf.number("fixed", default=None)
@@ -296,7 +300,7 @@ def _parse_entry(value, where: Mark, motions: dict, skel, coords: dict) -> Entry
         # every sampled coordinate needs a range (the skeleton's, or one given here)
         for c in skel.coordinates:
             rule = coords.get(c.name)
-            if rule is None and c.range is None:
+            if rule is None and c.range is None and c.follows is None:
                 raise InputError(f.vmark("sample"), f"coordinate {c.name!r} has no range to sample",
                                  f"give coordinates: {{{c.name}: {{range: [lo, hi]}}}} or {{fixed: value}} "
                                  "in the dataset file, or a range in the skeleton")
@@ -314,6 +318,10 @@ def _parse_entry(value, where: Mark, motions: dict, skel, coords: dict) -> Entry
             if cname != "default" and cname not in skel.coord_index:
                 raise InputError(sm.key_mark(cname), f"unknown coordinate {cname!r}",
                                  f"'default' or coordinates of skeleton {skel.name}")
+            if cname != "default" and skel.coordinates[skel.coord_index[cname]].follows is not None:
+                raise InputError(sm.key_mark(cname), f"coordinate {cname!r} is coupled: it follows "
+                                 f"{skel.coordinates[skel.coord_index[cname]].follows!r}",
+                                 "spread free coordinates; coupled ones follow theirs")
             spread[cname] = float(check_number(v, sm.value_mark(cname), f"spread of {cname}", lo=0.0))
     f.done()
     return Entry(mode, count, base, frames, None if keys is None else int(keys), spread, where)

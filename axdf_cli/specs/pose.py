@@ -111,6 +111,10 @@ def pose_from_document(doc, path: Path, policy: RefPolicy, skeletons: dict | Non
             if coord not in cidx:
                 raise InputError(cm, f"unknown coordinate {coord!r}",
                                  f"{did_you_mean(coord, cidx)}coordinates of skeleton {skel.name}: {', '.join(cidx)}")
+            leader = skel.coordinates[cidx[coord]].follows
+            if leader is not None:
+                raise InputError(cm, f"coordinate {coord!r} is coupled: it follows {leader!r} through the "
+                                 f"skeleton's function", f"key {leader!r} instead; a pose sets free coordinates only")
             x = check_number(val, values.value_mark(coord) if isinstance(values, YMap) else vm, coord)
             series.setdefault(coord, []).append((fnum, float(x)))
             key_marks.setdefault(coord, cm)
