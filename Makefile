@@ -137,10 +137,10 @@ import-mjcf: $(STAMP)
 	$(BIN)/python tools/myo_motion.py gait $(MYO)/myofullbody.xml $(MYO)/myobody_gait.npz
 	$(BIN)/axdf import mjcf $(MYO)/myoarm.xml --name myoarm --motion $(MYO)/myoarm_elbow.npz $(MJCF_MESHES) \
 	  --out muscles/myoarm --muscles-out muscles/myoarm --skeleton-out poses/skeletons/myoarm.yaml \
-	  --pose-out poses/myoarm_elbow.yaml
+	  --pose-out poses/myoarm_elbow.yaml --overwrite
 	$(BIN)/axdf import mjcf $(MYO)/myofullbody.xml --name myobody --motion $(MYO)/myobody_gait.npz $(MJCF_MESHES) \
 	  --out muscles/myobody --muscles-out muscles/myobody --skeleton-out poses/skeletons/myobody.yaml \
-	  --pose-out poses/myobody_gait.yaml
+	  --pose-out poses/myobody_gait.yaml --overwrite
 
 clean:
 	rm -rf out .pytest_cache

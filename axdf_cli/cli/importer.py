@@ -173,7 +173,7 @@ def run(args) -> int:
             files.add(path, data, output_role(path, args))
         files.settings = {"name": args.name, "fps": args.fps, "pose_name": args.pose_name,
                           "meshes": not args.no_meshes, "palette": args.palette}
-        write_imported(files, [args.model, args.motion, args.controls], args.overwrite, args.model, tick)
+        write_imported(files, res.inputs, args.overwrite, args.model, tick)
     finally:
         close()
     for w in res.warnings:
@@ -220,7 +220,7 @@ def run_mjcf(args) -> int:
         files.settings = {"name": args.name, "fps": args.fps, "pose_name": args.pose_name,
                           "meshes": not args.no_meshes, "max_faces": args.max_faces, "mesh_edge": args.mesh_edge,
                           "palette": args.palette}
-        write_imported(files, [args.model, args.motion], args.overwrite, args.model, tick)
+        write_imported(files, res.inputs, args.overwrite, args.model, tick)
     finally:
         close()
     for w in res.warnings:

@@ -1,7 +1,7 @@
 """``axdf import mjcf``: a MuJoCo model (+ a ``qpos`` motion) → axdf files, in memory.
 
 :func:`build_import` reads and checks every input first and returns an
-:class:`~axdf_cli.importers.osim_import.ImportResult` holding the bytes of every output file;
+:class:`~axdf_cli.importers.result.ImportResult` holding the bytes of every output file;
 the CLI writes them (atomically) only when all inputs were good.
 
 How MuJoCo maps to axdf (docs/FORMATS.md, "Imported MuJoCo models")
@@ -46,11 +46,14 @@ import numpy as np
 
 from axdf_cli import tolerances as tol
 from axdf_cli.errors import EnvironmentProblem, InputError, Mark
+from axdf_cli.fileio.atomic import sha256_file
+from axdf_cli.fileio.outputs import UniqueFiles
 from axdf_cli.fileio.yamlio import NAME_ALLOWED, is_name
 from axdf_cli.formats.ply import PlyWriter
 from axdf_cli.importers import emit
 from axdf_cli.importers.mjcf import Body, Coupling, Joint, MjcfModel, Muscle, load_mjcf, quat_matrix
-from axdf_cli.importers.osim_import import ImportResult, _num, _rel, _sha, _strip_dirs, belly_markdown, safe_name
+from axdf_cli.importers.result import (ImportResult, axis_markdown, belly_markdown, relative_ref, safe_name,
+                                      strip_dirs, yaml_number)
 from axdf_cli.specs import RefPolicy, parse_skeleton_text
 
 DEG = 180.0 / math.pi
@@ -253,6 +256,13 @@ def skeleton_doc(model: MjcfModel, name: str, names: Names, meshes: dict[str, st
                     cd = {"type": dtype, "default": j.ref * k}
                     if j.range is not None:
                         cd["range"] = [j.range[0] * k, j.range[1] * k]
+                    for key in ("default", "range"):
+                        far = [v for v in np.atleast_1d(cd.get(key, [])) if abs(v) > tol.MAX_ABS_NUMBER]
+                        if far:
+                            unit = "degrees" if dtype == "rotation" else "m"
+                            raise InputError(j.mark, f"joint {j.name!r}: its {'ref' if key == 'default' else key} "
+                                             f"is {far[0]:g} {unit}", f"within ±{tol.MAX_ABS_NUMBER:g} {unit} "
+                                             "(what every axdf file holds)")
                     coords[jn] = cd
                     rows.append({"joint": j.name, "kind": j.type, "coords": [jn]})
             if np.any(anchor != 0):
@@ -523,7 +533,7 @@ def pose_doc(model: MjcfModel, rows: list[dict], q: np.ndarray, fps: float, pose
     names = list(values)
     arr = np.stack([values[c] for c in names], axis=1) if names else np.zeros((len(q), 0))
     keys = {f: {c: float(arr[f, i]) for i, c in enumerate(names)} for f in range(len(q))}
-    return {"pose": pose_name, "skeleton": skeleton_ref, "fps": _num(fps), "frames": [0, len(q) - 1],
+    return {"pose": pose_name, "skeleton": skeleton_ref, "fps": yaml_number(fps), "frames": [0, len(q) - 1],
             "interpolation": "linear", "keys": keys}
 
 
@@ -564,21 +574,25 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
     pose_path = (Path(pose_out) if pose_out else out_dir / f"{pname}.yaml") if motion is not None else None
 
     warnings: list[str] = []
-    report: dict = {"source": {"model": model_path.name, "sha256": _sha(model_path), "model_name": model.name},
+    report: dict = {"source": {"model": model_path.name, "sha256": sha256_file(model_path), "model_name": model.name},
                     "tool": "axdf import mjcf", "skeleton": name}
-    files: dict[str, bytes] = {}
+    files: dict[str, bytes] = UniqueFiles()  # a path twice: exit 2, never one file lost
     mesh_bytes = body_meshes(model, max_faces, report, mesh_edge) if meshes else {}
     mesh_refs = {}
     for body, data in sorted(mesh_bytes.items()):
         p = mesh_dir / f"{names('body', body)}.ply"
         files[str(p)] = data
-        mesh_refs[body] = _rel(p, skel_path.parent)
+        mesh_refs[body] = relative_ref(p, skel_path.parent)
     sdoc, rows = skeleton_doc(model, name, names, mesh_refs)
     header = (f"Imported from {model_path.name} (MuJoCo model {model.name!r}) by `axdf import mjcf`.\n"
               "Regenerate with the importer rather than editing by hand.")
     text = emit.dump_yaml(sdoc, header)
     files[str(skel_path)] = text.encode()
-    skel = parse_skeleton_text(text, skel_path, RefPolicy(allow_outside=True))
+    try:  # the skeleton as axdf will read it back (its meshes are files this import writes)
+        skel = parse_skeleton_text(text, skel_path, RefPolicy(allow_outside=True))
+    except InputError as e:  # a limit of the file format that the model's numbers exceed
+        raise InputError(Mark(str(model_path)), f"the skeleton {skel_path.name} would not pass axdf validate ({e})",
+                         "numbers and names within what axdf files hold") from None
     world = emit.rest_world(skel)
 
     mrows, skipped = [], []
@@ -595,27 +609,29 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
         force, l0, lt, notes = hill_numbers(m, rest)
         for n in notes:
             warnings.append(f"{m.mark}: muscle {m.name!r}: {n}")
-        n_axis, axis_err = axis_points_for(mname, path, wraps, skel, probe)
-        doc, row = emit.belly_doc(mname, path, wraps, force, l0, lt, 0.0, skel, world, palette, n_axis,
-                                  MIN_REST_SLENDERNESS)
-        row.update({"axis_points": n_axis, "axis_length_error": axis_err, "type": m.kind, "tendon": m.tendon, "path_points": len(path), "wraps": [w["name"] for w in wraps],
+        axis = emit.axis_points_for(mname, path, wraps, skel, probe)
+        doc, row = emit.belly_doc(mname, path, wraps, force, l0, lt, 0.0, skel, world, palette,
+                                  axis.n if axis.raised else 0, MIN_REST_SLENDERNESS)
+        row.update({"type": m.kind, "tendon": m.tendon, "path_points": len(path), "wraps": [w["name"] for w in wraps],
                     "sidesites": sum("side" in w for w in wraps), "force": force, "lengthrange": m.lengthrange,
-                    "notes": notes})
+                    "notes": notes, "axis_shortfall": axis.error})
+        if axis.raised:
+            row["axis_points_raised"] = axis.row()
         mrows.append(emit.rounded(row))
         files[str(mus_dir / f"{mname}.yaml")] = emit.dump_yaml(
             doc, f"{mname}: imported from {model_path.name} (MuJoCo {m.kind} on tendon {m.tendon}) "
                  "by `axdf import mjcf`.").encode()
     report["muscles"] = mrows
     if q is not None:
-        pdoc = pose_doc(model, rows, q, fps, pname, _rel(skel_path, pose_path.parent), str(motion))
+        pdoc = pose_doc(model, rows, q, fps, pname, relative_ref(skel_path, pose_path.parent), str(motion))
         text = emit.dump_yaml(pdoc, f"Imported from {Path(motion).name} by `axdf import mjcf`.").encode()
         if len(text) > tol.YAML_MAX_BYTES:
             raise InputError(Mark(str(motion)), f"the pose would be {len(text)} bytes ({len(q)} frames)",
                              f"axdf reads YAML files up to {tol.YAML_MAX_BYTES} bytes; a shorter motion")
         files[str(pose_path)] = text
         dev = coupled_deviation(model, q)
-        report["motion"] = {"file": Path(motion).name, "sha256": _sha(Path(motion)), "frames": int(len(q)),
-                            "fps": _num(fps), "coupled_joints_ignored": emit.rounded(dev)}
+        report["motion"] = {"file": Path(motion).name, "sha256": sha256_file(Path(motion)), "frames": int(len(q)),
+                            "fps": yaml_number(fps), "coupled_joints_ignored": emit.rounded(dev)}
     report["counts"] = {"bodies": len(model.bodies), "joints": len(model.joints),
                         "coordinates": sum(len(r["coords"]) for r in rows), "couplings": len(model.couplings),
                         "muscles": len(mrows), "meshes": len(mesh_bytes),
@@ -623,60 +639,30 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
                         "wrap_surfaces": sum(len(r["wraps"]) for r in mrows),
                         "sidesites": sum(r["sidesites"] for r in mrows)}
     inputs = [Path(x) for x in (model_path, motion) if x is not None]
-    report["ignored"] = [dict(i, where=_strip_dirs(i["where"], inputs)) for i in model.ignored + skipped]
-    report["warnings"] = [_strip_dirs(w, inputs) for w in warnings]
+    read = [model_path, *model.includes, *(model.meshes[m["mesh"]].file for m in report.get("meshes", [])),
+            *([Path(motion)] if motion is not None else [])]
+    report["ignored"] = [dict(i, where=strip_dirs(i["where"], inputs)) for i in model.ignored + skipped]
+    report["warnings"] = [strip_dirs(w, inputs) for w in warnings]
     report["renamed"] = names.renamed
     report["settings"] = {"specific_tension_Pa": emit.SPECIFIC_TENSION, "tendon_stress_Pa": emit.TENDON_STRESS,
                           "free_tendon_share": emit.FREE_TENDON_SHARE, "palette": palette, "max_faces": max_faces,
                           "mesh_edge_m": mesh_edge}
-    report["files"] = sorted(_rel(Path(p), out_dir) for p in files)
+    report["files"] = sorted(relative_ref(Path(p), out_dir) for p in files)
     files[str(out_dir / "import_report.json")] = (json.dumps(report, indent=1, sort_keys=True) + "\n").encode()
     files[str(out_dir / "IMPORT.md")] = import_markdown(report).encode()
-    return ImportResult(files, report, warnings, None)
+    return ImportResult(files, report, warnings, None, read)
 
 
-def probe_poses(skel) -> tuple[np.ndarray, np.ndarray]:
-    """Coordinates (P, C) and bone transforms (P, B, 4, 4) of the poses the axis is fitted on:
+def probe_poses(skel) -> np.ndarray:
+    """Coordinates (P, C) of the poses the axes are measured on (:func:`emit.axis_points_for`):
     the rest pose and AXIS_PROBE_POSES poses with every ranged coordinate uniform in its range
-    (seeded: the same poses every import)."""
-    from axdf_cli.model.skeleton import forward_kinematics
-
+    (seeded: the same poses every import), coupled coordinates following."""
     rng = np.random.default_rng(tol.AXIS_PROBE_SEED)
     q = np.tile(skel.rest_coordinates(), (tol.AXIS_PROBE_POSES + 1, 1))
     for i, c in enumerate(skel.coordinates):
         if c.range is not None:
             q[1:, i] = rng.uniform(c.range[0], c.range[1], size=tol.AXIS_PROBE_POSES)
-    return q, forward_kinematics(skel, q)
-
-
-def axis_points_for(name: str, path: list, wraps: list, skel, probe) -> tuple[int, float]:
-    """The fewest axis control points (0: the default, else one of AXIS_POINT_STEPS) whose axis
-    length is within AXIS_LENGTH_TARGET of the wrapped path's over the probe poses, and that
-    error (the largest count's when none reaches the target)."""
-    import dataclasses
-
-    from axdf_cli.fileio.yamlio import Fields
-    from axdf_cli.model import bspline
-    from axdf_cli.model.paths.path import PathModel
-    from axdf_cli.specs import parse_muscle_path
-
-    q, world = probe
-    spec = parse_muscle_path(Fields({"path": path, "wrap": wraps}, Mark(f"<{name}>"), "muscle"))
-    default = PathModel(spec, skel.bone_index, skel.coord_index).n
-    err = math.inf
-    for n in (0,) + tuple(k for k in tol.AXIS_POINT_STEPS if k > default):
-        pm = PathModel(dataclasses.replace(spec, control_points=n), skel.bone_index, skel.coord_index)
-        samples, length, _ = pm.wrapped(world, q)
-        ctrl = np.einsum("nk,fkc->fnc", pm.fit, samples)
-        ts = np.linspace(0.0, 1.0, 64 * pm.n + 1)
-        basis = bspline.basis_matrix(bspline.clamped_knots(pm.n, 2), 2, ts)
-        # c[f,s,c] = sum_n basis[s,n] ctrl[f,n,c]
-        c = np.einsum("sn,fnc->fsc", basis, ctrl)
-        axis = np.linalg.norm(np.diff(c, axis=1), axis=2).sum(axis=1)
-        err = float(np.max(np.abs(axis - length) / length))
-        if err <= tol.AXIS_LENGTH_TARGET:
-            return n, err
-    return tol.AXIS_POINT_STEPS[-1] if default < tol.AXIS_POINT_STEPS[-1] else 0, err
+    return skel.couple(q)
 
 
 def _rest_length(name: str, path: list, wraps: list, skel, world) -> float:
@@ -710,6 +696,7 @@ def import_markdown(r: dict) -> str:
     if r["renamed"]:
         lines += ["Renamed (axdf names use letters, digits, '_', '.', '-'): "
                   + ", ".join(f"{x['kind']} `{x['mjcf']}` → `{x['axdf']}`" for x in r["renamed"]) + ".", ""]
+    lines += axis_markdown(r, f"the rest pose and {tol.AXIS_PROBE_POSES} seeded poses in the joints' ranges", "pose")
     lines += ["## Warnings", ""] + ([f"- {w}" for w in r["warnings"]] or ["- none"]) + [""]
     lines += ["## Not imported", "", "| kind | name | where | why |", "|---|---|---|---|"]
     lines += [f"| {i['kind']} | {i['name']} | {i['where']} | {i['why']} |" for i in r["ignored"]] or \
