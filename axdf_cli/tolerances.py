@@ -140,9 +140,9 @@ AXIS_POINTS_MAX = 128
 # The poses measured are the importer's choice. axdf import osim: the rest pose and the
 # imported motion's frames, at most AXIS_FIT_FRAMES of them, evenly spread (the path moves
 # smoothly: a 2000-frame sample of a long take misses no bend of it). axdf import mjcf (whose
-# models come without a motion of their own): the rest pose and AXIS_PROBE_POSES poses with
-# every ranged coordinate uniform in its range (seed AXIS_PROBE_SEED: the same poses every
-# import), so that the whole range of every joint is covered.
+# models come without a motion of their own): the same, and AXIS_PROBE_POSES poses with every
+# ranged coordinate uniform in its range (seed AXIS_PROBE_SEED: the same poses every import),
+# so that the whole range of every joint is covered.
 AXIS_FIT_FRAMES = 2000
 AXIS_PROBE_POSES = 64
 AXIS_PROBE_SEED = 20

@@ -26,7 +26,8 @@ class ImportResult:
     report: dict
     warnings: list[str] = field(default_factory=list)
     model: object | None = None  # the importer's model (OpenSim's Model; None for MuJoCo)
-    inputs: list[Path] = field(default_factory=list)  # every file read: never an output, listed in the manifest
+    inputs: list[Path] = field(default_factory=list)  # the model, its includes, the motion: listed in the manifest
+    assets: list[Path] = field(default_factory=list)  # other files read (bone meshes): never an output either
 
 
 def relative_ref(target: Path | str, start_dir: Path | str) -> str:
