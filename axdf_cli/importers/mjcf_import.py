@@ -596,7 +596,7 @@ def import_markdown(r: dict) -> str:
         lines += ["Renamed (axdf names use letters, digits, '_', '.', '-'): "
                   + ", ".join(f"{x['kind']} `{x['mjcf']}` → `{x['axdf']}`" for x in r["renamed"]) + ".", ""]
     lines += axis_markdown(r, f"the rest pose, {tol.AXIS_PROBE_POSES} seeded poses in the joints' ranges"
-                              + (" and the motion's frames" if "motion" in r else ""), "pose")
+                              + (" and the motion's frames" if "motion" in r else ""))
     lines += ["## Warnings", ""] + ([f"- {w}" for w in r["warnings"]] or ["- none"]) + [""]
     lines += ["## Not imported", "", "| kind | name | where | why |", "|---|---|---|---|"]
     lines += [f"| {i['kind']} | {i['name']} | {i['where']} | {i['why']} |" for i in r["ignored"]] or \

@@ -458,7 +458,7 @@ def import_markdown(r: dict) -> str:
                   "follows, as OpenSim's constraint does; a motion's column of one is checked, not read):", ""]
         lines += [f"- `{c['coordinate']}` follows `{c['follows']}` (CoordinateCouplerConstraint `{c['constraint']}`)"
                   for c in r["coupled_coordinates"]] + [""]
-    lines += axis_markdown(r, "the motion", "frame")
+    lines += axis_markdown(r, "the rest pose and the motion's frames")
     lines += ["## Warnings", ""] + ([f"- {w}" for w in r["warnings"]] or ["- none"]) + [""]
     lines += ["## Not imported", "", "| kind | name | where | why |", "|---|---|---|---|"]
     lines += [f"| {i['kind']} | {i['name']} | {i['where']} "

@@ -58,17 +58,17 @@ def yaml_number(x: float) -> float | int:
 # ----------------------------------------------------------------------------- IMPORT.md
 
 
-def axis_markdown(r: dict, poses: str, pose: str) -> list[str]:
+def axis_markdown(r: dict, poses: str) -> list[str]:
     """IMPORT.md's list of the muscles whose axis control points were raised (the report rows'
-    ``axis_points_raised``: emit.axis_points_for): ``poses`` names the poses measured and
-    ``pose`` one of them."""
+    ``axis_points_raised``: emit.axis_points_for); ``poses`` names the poses measured."""
     from axdf_cli import tolerances as tol
 
     raised = [m for m in r["muscles"] if "axis_points_raised" in m]
     if not raised:
         return []
-    return [f"Axis control points raised where the path bends more sharply over {poses} than the default count "
-            f"follows (the axis falls short of the path by more than {tol.AXIS_SHORTFALL_MAX:.1%} in some {pose}):",
+    return [f"Axis control points raised where the default count leaves the axis more than "
+            f"{tol.AXIS_SHORTFALL_MAX:.1%} short of the wrapped path somewhere over {poses} (a bend the smooth "
+            "axis cuts):",
             ""] + [f"- {m['muscle']}: {a['from']} → {a['to']} (shortfall {a['shortfall_at_default']:.2%} → "
                    f"{a['shortfall']:.2%})" for m in raised for a in [m["axis_points_raised"]]] + [""]
 
