@@ -230,23 +230,53 @@ def _pole_normals(ga, end0, end1, out_n, f):
 
 
 @njit(cache=True)
-def surface_stage(fixed, scaled, pole0, pole1, end0, end1, u_idx, u_w, v_idx, v_w,
-                  exact, v0, s_in, s_min, s_max, iters, rtol,
-                  out_v, out_n, out_vol, out_s, out_bad):
-    """Per frame f (F frames, Q = 8 N bound points, U rows, A columns):
+def surface_frame(fixed, scaled, pole0, pole1, end0, end1, u_idx, u_w, v_idx, v_w, exact, v0, s0, s_min, s_max,
+                  iters, rtol, net_a, net_w, ta, tw, ga, gw, out_v, out_n, f):
+    """Frame f of one muscle (Q = 8 N bound points, U rows, A columns, m = N + 2):
 
     fixed, scaled : (F, Q, 3)  bound control points: the part that keeps its size, and the
                     part multiplied by the section scale s
     pole0, pole1  : (F, 3)     axis ends (the pole rows of the net)
     end0, end1    : (F, 3)     outward axis directions at the poles (-T(0), T(1))
-    u_idx, u_w    : (U, 3)     along basis (rational), sparse rows over the m = N + 2 net rows
+    u_idx, u_w    : (U, 3)     along basis (rational), sparse rows over the m net rows
     v_idx, v_w    : (A, 3)     around basis (closed), sparse rows over the 8 columns
-    s_in          : (F,)       starting scale (the paper's sqrt(l0/l1), or 1)
-    outputs       : out_v, out_n (F, V, 3) with V = 2 + (U-2) A; out_vol, out_s (F,); out_bad (F,)
+    exact, v0     : whether to solve for the scale that gives volume v0
+    s0            : frame f's starting scale (the paper's sqrt(l0/l1), or 1)
+    scratch       : net_a, net_w (m, 8, 3); ta, tw (U, 8, 3); ga, gw (U, A, 3)
+    outputs       : out_v[f], out_n[f] (V, 3) with V = 2 + (U-2) A
+    returns       : (volume, scale s, no-solution flag)
 
-    The pipeline per frame: net (1), tessellation (2), volume cubic (3), scale (4, ``exact``
-    only), vertices and ring normals of A + s W (5), pole normals (6).
+    The pipeline: net (1), tessellation (2), volume cubic (3), scale (4, ``exact`` only),
+    vertices and ring normals of A + s W (5), pole normals (6).
     """
+    nu = u_idx.shape[0]
+    na = v_idx.shape[0]
+    _fill_net(net_a, net_w, fixed, scaled, pole0, pole1, f)
+    _tessellate(net_a, net_w, u_idx, u_w, v_idx, v_w, ta, tw, ga, gw)
+    c0, c1, c2, c3 = _volume_cubic(ga, gw)
+    s = s0
+    bad = False
+    if exact:
+        s, bad = _solve_scale(c0, c1, c2, c3, v0, s0, iters, rtol)
+    sc = min(max(s, s_min), s_max)
+    volume = ((c3 * sc + c2) * sc + c1) * sc + c0
+    for u in range(nu):
+        for a in range(na):
+            for c in range(3):
+                ga[u, a, c] += sc * gw[u, a, c]
+    _ring_vertices(ga, out_v, out_n, f)
+    _pole_normals(ga, end0, end1, out_n, f)
+    return volume, s, bad
+
+
+@njit(cache=True)
+def surface_stage(fixed, scaled, pole0, pole1, end0, end1, u_idx, u_w, v_idx, v_w,
+                  exact, v0, s_in, s_min, s_max, iters, rtol,
+                  out_v, out_n, out_vol, out_s, out_bad):
+    """:func:`surface_frame` over the F frames: fixed, scaled (F, Q, 3); pole0, pole1, end0,
+    end1 (F, 3); s_in (F,) starting scales (the paper's sqrt(l0/l1), or 1); exact: solve for
+    the scale that keeps volume v0; outputs out_v, out_n (F, V, 3) with V = 2 + (U-2) A;
+    out_vol, out_s (F,); out_bad (F,) no solution (the start scale kept)."""
     nf = fixed.shape[0]
     nu = u_idx.shape[0]
     na = v_idx.shape[0]
@@ -258,21 +288,8 @@ def surface_stage(fixed, scaled, pole0, pole1, end0, end1, u_idx, u_w, v_idx, v_
     ga = np.empty((nu, na, 3))
     gw = np.empty((nu, na, 3))
     for f in range(nf):
-        _fill_net(net_a, net_w, fixed, scaled, pole0, pole1, f)
-        _tessellate(net_a, net_w, u_idx, u_w, v_idx, v_w, ta, tw, ga, gw)
-        c0, c1, c2, c3 = _volume_cubic(ga, gw)
-        s0 = s_in[f]
-        s = s0
-        bad = False
-        if exact:
-            s, bad = _solve_scale(c0, c1, c2, c3, v0, s0, iters, rtol)
-        out_bad[f] = bad
+        vol, s, bad = surface_frame(fixed, scaled, pole0, pole1, end0, end1, u_idx, u_w, v_idx, v_w, exact, v0,
+                                    s_in[f], s_min, s_max, iters, rtol, net_a, net_w, ta, tw, ga, gw, out_v, out_n, f)
+        out_vol[f] = vol
         out_s[f] = s
-        sc = min(max(s, s_min), s_max)
-        out_vol[f] = ((c3 * sc + c2) * sc + c1) * sc + c0
-        for u in range(nu):
-            for a in range(na):
-                for c in range(3):
-                    ga[u, a, c] += sc * gw[u, a, c]
-        _ring_vertices(ga, out_v, out_n, f)
-        _pole_normals(ga, end0, end1, out_n, f)
+        out_bad[f] = bad

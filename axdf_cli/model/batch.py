@@ -1,0 +1,213 @@
+"""Every muscle of a run at once: the models packed end to end for the compiled passes.
+
+A :class:`MuscleBatch` holds what :class:`~axdf_cli.model.muscle.MuscleModel` prepared for
+each muscle (basis rows, binding, belly weights, surface bases, rest values) as concatenated
+arrays with offsets: muscle j's rows of a packed array ``X`` are ``X[X_off[j]:X_off[j + 1]]``.
+Muscles differ in axis control points (n), RMF samples (S), bound points (Q = 8 sections),
+Gauss points (G) and resolution (U x A), so each kind of row has its own offsets.
+
+A chunk of F frames of K muscles is then two steps, as the run's stages need them
+(:mod:`axdf_cli.pipeline.stages`):
+
+1a. :meth:`MuscleBatch.axis_points`: the axis control points of every muscle, packed
+    (F, ΣN, 3) (fixed points compiled in one call; paths through :mod:`axdf_cli.model.paths`);
+1b. :meth:`MuscleBatch.surfaces`: from those points (as a TIME stage left them), the RMF, the
+    bound points' frames, twist, tension, exact volume, surface and normals of every muscle
+    in two compiled calls (:mod:`axdf_cli.model.batch_kernels`), with the roll's arctan2 and
+    branch and the arc length's quadrature in numpy between them.
+
+The results are :class:`~axdf_cli.model.muscle.FrameResult` per muscle, their vertices and
+normals views of one buffer (each muscle's block (F, V_j, 3) contiguous). The arithmetic is
+:meth:`MuscleModel.surface`'s, operation for operation (``tests/test_batch.py`` holds the two
+to the same bytes, or to the stated bound where a numpy kernel's order is not followed).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from axdf_cli import tolerances as tol
+from axdf_cli.model import batch_kernels as K
+from axdf_cli.model.rmf import STEP_RTOL
+
+_RTOL2 = STEP_RTOL ** 2  # (as rmf computes it)
+_TWO_PI = 2.0 * np.pi
+
+
+def _offsets(sizes) -> np.ndarray:
+    return np.concatenate([[0], np.cumsum(np.asarray(list(sizes), dtype=np.int64))]).astype(np.int64)
+
+
+def _rows(blocks) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Sparse basis rows (idx (R, 3), w (R, 3)) of every muscle end to end: offsets, idx, w."""
+    off = _offsets(len(i) for i, _ in blocks)
+    idx = np.ascontiguousarray(np.concatenate([i for i, _ in blocks]), dtype=np.int64)
+    w = np.ascontiguousarray(np.concatenate([w for _, w in blocks]), dtype=np.float64)
+    return off, idx, w
+
+
+class MuscleBatch:
+    """Muscle models packed for the compiled passes (module doc). Holds arrays only (no
+    models), so it pickles small; build it once per run (:func:`axdf_cli.pipeline.evaluate.batch_of`)."""
+
+    def __init__(self, models):
+        from axdf_cli.model.muscle import VolumeMode
+
+        models = list(models)
+        self.n = len(models)
+        self.a_off = _offsets(m.n_axis for m in models)
+        self.paths = [j for j, m in enumerate(models) if m.path is not None]
+        self.fixed = np.array([j for j, m in enumerate(models) if m.path is None], dtype=np.int64)
+        nn = int(self.a_off[-1])
+        self.bones = np.zeros(nn, dtype=np.int64)
+        self.at = np.zeros((nn, 3))
+        for j in self.fixed:
+            m = models[j]
+            self.bones[self.a_off[j]:self.a_off[j + 1]] = m.bones
+            self.at[self.a_off[j]:self.a_off[j + 1]] = m.at
+        sp = [m._sparse for m in models]
+        self.s_off, self.bs_idx, self.bs_w = _rows([s["Bs"] for s in sp])
+        _, self.dbs_idx, self.dbs_w = _rows([s["dBs"] for s in sp])
+        self.c_off, self.bc_idx, self.bc_w = _rows([s["Bc"] for s in sp])
+        _, self.dbc_idx, self.dbc_w = _rows([s["dBc"] for s in sp])
+        self.q_off, self.bb_idx, self.bb_w = _rows([s["Bb"] for s in sp])
+        _, self.dbb_idx, self.dbb_w = _rows([s["dBb"] for s in sp])
+        self.g_off, self.dbg_idx, self.dbg_w = _rows([s["dBg"] for s in sp])
+        self.gw = np.concatenate([m.gw for m in models]).astype(np.float64)
+        self.bind_j = np.concatenate([m.bind_j for m in models]).astype(np.int64)
+        self.lam = np.concatenate([m.lam for m in models]).astype(np.float64)
+        self.uvw = np.ascontiguousarray(np.concatenate([m.uvw for m in models]), dtype=np.float64)
+        self.beta = np.concatenate([m.beta for m in models]).astype(np.float64)
+        self.bump = np.concatenate([m.bump for m in models]).astype(np.float64)
+        self.origin = np.array([m.origin_bone for m in models], dtype=np.int64)
+        self.insertion = np.array([m.insertion_bone for m in models], dtype=np.int64)
+        self.r0_local = np.array([m.r0_local for m in models], dtype=np.float64).reshape(-1, 3)
+        self.rend_local = np.array([m.rend_local for m in models], dtype=np.float64).reshape(-1, 3)
+        self.l0 = np.array([m.l0 for m in models], dtype=np.float64)
+        self.v0 = np.array([getattr(m, "v0", np.nan) for m in models], dtype=np.float64)
+        self.solve = np.array([m.volume_mode is VolumeMode.EXACT for m in models], dtype=np.bool_)
+        self.keep = np.array([m.volume_mode is VolumeMode.NONE for m in models], dtype=np.bool_)
+        self.m_off = _offsets(len(m.spec.sections) + 2 for m in models)
+        self.u_off, self.u_idx, self.u_w = _rows([(m.u_idx, m.u_w) for m in models])
+        self.v_off, self.v_idx, self.v_w = _rows([(m.v_idx, m.v_w) for m in models])
+        self.n_vertices = np.array([m.n_vertices for m in models], dtype=np.int64)
+
+    # -- step 1a ------------------------------------------------------------------------
+    def axis_points(self, models, world: np.ndarray, coords: np.ndarray | None, muscles) -> tuple[np.ndarray, dict]:
+        """The axis control points of ``muscles`` (indices) for frames world (F, B, 4, 4) (and
+        coordinates (F, C), which paths with moving or conditional points need): packed
+        (F, ΣN, 3) (the other muscles' rows undefined) and {muscle: [(frame index, warning)]}
+        (``models``: the models the batch was made from, for their paths)."""
+        muscles = list(muscles)
+        p = np.empty((world.shape[0], int(self.a_off[-1]), 3))
+        chosen = set(muscles)
+        js = np.array([j for j in self.fixed if j in chosen], dtype=np.int64)
+        K.axis_fixed(js, np.ascontiguousarray(world), self.bones, self.at, self.a_off, p)
+        notes = {j: [] for j in muscles}
+        for j in self.paths:
+            if j in chosen:
+                p[:, self.a_off[j]:self.a_off[j + 1]], notes[j] = models[j].axis_points(world, coords)
+        return p, notes
+
+    def pack(self, axis: dict, nf: int) -> np.ndarray:
+        """{muscle: (F, n_j, 3)} axis control points → packed (F, ΣN, 3) (the rest undefined)."""
+        p = np.empty((nf, int(self.a_off[-1]), 3))
+        for j, a in axis.items():
+            p[:, self.a_off[j]:self.a_off[j + 1]] = a
+        return p
+
+    def unpack(self, p: np.ndarray, muscles) -> dict:
+        """Packed (F, ΣN, 3) → {muscle: (F, n_j, 3) view}."""
+        return {j: p[:, self.a_off[j]:self.a_off[j + 1]] for j in muscles}
+
+    # -- the roll alone (twist references) ------------------------------------------------
+    def coarse_roll(self, world: np.ndarray, p: np.ndarray, muscles) -> np.ndarray:
+        """The insertion roll (radians, wrapped to (-pi, pi]) of ``muscles`` on the coarse
+        samples (:meth:`MuscleModel.end_twist`), from packed axis points p: (F, K)."""
+        js = np.asarray(list(muscles), dtype=np.int64)
+        roll = np.zeros((self.n, world.shape[0], 2))
+        K.roll_pass(js, p, np.ascontiguousarray(world), self.a_off, self.c_off, self.bc_idx, self.bc_w,
+                    self.dbc_idx, self.dbc_w, self.origin, self.insertion, self.r0_local, self.rend_local, _RTOL2,
+                    roll)
+        return np.arctan2(roll[js, :, 0], roll[js, :, 1]).T
+
+    # -- step 1b ------------------------------------------------------------------------
+    def surfaces(self, world: np.ndarray, p: np.ndarray, tension: np.ndarray, twist_reference: np.ndarray | None,
+                 muscles, rest_volume: float | None | str = "model", notes: dict | None = None,
+                 control_points: np.ndarray | None = None) -> dict:
+        """Step 1b of ``muscles`` (indices, K) for F frames: world (F, B, 4, 4); p (F, ΣN, 3)
+        packed axis control points; tension (F, K) effective tension of each; twist_reference
+        (F, K) unwrapped coarse roll choosing the exact roll's branch, or None (unwrapped within
+        the block); rest_volume: the volume ``exact`` keeps ("model": each model's own, None: no
+        target, a number: that one); notes: {muscle: step 1a's [(frame index, warning)]};
+        control_points: (F, ΣQ, 3) to receive the bound section control points as tessellated
+        (fixed + s scaled), or None. Returns {muscle: FrameResult} (:meth:`MuscleModel.surface`'s
+        fields)."""
+        from axdf_cli.model.muscle import FrameResult
+
+        js = np.asarray(list(muscles), dtype=np.int64)
+        nf, nk, nq = world.shape[0], len(js), int(self.q_off[-1])
+        world = np.ascontiguousarray(world, dtype=np.float64)
+        p = np.ascontiguousarray(p, dtype=np.float64)
+        cb = np.empty((nf, nq, 3))
+        tb = np.empty((nf, nq, 3))
+        rb = np.empty((nf, nq, 3))
+        ends = np.zeros((self.n, nf, 2, 3))
+        roll = np.zeros((self.n, nf, 2))
+        length = np.zeros((self.n, nf))
+        K.frames_pass(js, p, world, self.a_off, self.s_off, self.bs_idx, self.bs_w, self.dbs_idx, self.dbs_w,
+                      self.q_off, self.bb_idx, self.bb_w, self.dbb_idx, self.dbb_w, self.bind_j, self.g_off,
+                      self.dbg_idx, self.dbg_w, self.gw, self.origin, self.insertion, self.r0_local, self.rend_local,
+                      _RTOL2, cb, tb, rb, ends, roll, length)
+        # the roll on its branch (numpy's arctan2, as MuscleModel._roll)
+        theta = np.arctan2(roll[js, :, 0], roll[js, :, 1])  # (K, F)
+        if twist_reference is None:
+            theta = np.unwrap(theta, axis=1)
+        else:
+            ref = np.asarray(twist_reference, dtype=np.float64).T
+            theta = theta + 2.0 * np.pi * np.round((ref - theta) / _TWO_PI)
+        length = length[js]
+        e = np.clip(np.asarray(tension, dtype=np.float64).T.reshape(nk, nf), 0.0, 1.0)
+        ratio = self.l0[js, None] / np.maximum(length, tol.MIN_AXIS_LENGTH)
+        s0 = np.where(self.keep[js, None], 1.0, np.sqrt(ratio))
+        full = np.zeros((3, self.n, nf))
+        full[0, js], full[1, js], full[2, js] = theta, e, s0
+        solve, v0 = self.solve, self.v0
+        if not isinstance(rest_volume, str):
+            solve = solve & (rest_volume is not None)
+            v0 = np.full(self.n, float(rest_volume or 0.0))
+        vert_off = _offsets(self.n_vertices[js])
+        out_v = np.empty(3 * nf * int(vert_off[-1]))
+        out_n = np.empty(3 * nf * int(vert_off[-1]))
+        vol = np.zeros((self.n, nf))
+        scale = np.zeros((self.n, nf))
+        bad = np.zeros((self.n, nf), dtype=np.bool_)
+        K.shape_pass(js, p, self.a_off, cb, tb, rb, ends, full[0], full[1], full[2], self.q_off, self.lam, self.uvw,
+                     self.beta, self.bump, tol.TENSION_GAIN, self.m_off, self.u_off, self.u_idx, self.u_w, self.v_off,
+                     self.v_idx, self.v_w, solve, v0, tol.SCALE_MIN, tol.SCALE_MAX, tol.VOLUME_SOLVE_ITERS,
+                     tol.VOLUME_SOLVE_RTOL, vert_off, out_v, out_n, vol, scale, bad,
+                     np.zeros((0, 0, 3)) if control_points is None else control_points)
+        twist = np.degrees(theta)
+        vol, scale, bad = vol[js], scale[js], bad[js]
+        clipped = np.clip(scale, tol.SCALE_MIN, tol.SCALE_MAX)
+        short = length < tol.MIN_AXIS_LENGTH
+        out_of = (scale < tol.SCALE_MIN) | (scale > tol.SCALE_MAX)
+        flagged = bad.any(axis=1) | short.any(axis=1) | out_of.any(axis=1)
+        notes = notes or {}
+        results = {}
+        for k, j in enumerate(js):
+            j = int(j)
+            a, b = 3 * nf * vert_off[k], 3 * nf * vert_off[k + 1]
+            nv = int(self.n_vertices[j])
+            warnings = list(notes.get(j, ()))
+            if flagged[k]:
+                for i in np.nonzero(bad[k])[0]:
+                    warnings.append((int(i), "exact volume has no solution; used the paper's scale"))
+                for i in np.nonzero(short[k])[0]:
+                    warnings.append((int(i), f"axis length {length[k, i]:.3g} m is degenerate"))
+                for i in np.nonzero(out_of[k])[0]:
+                    warnings.append((int(i), f"section scale {scale[k, i]:.3g} clamped to "
+                                             f"[{tol.SCALE_MIN}, {tol.SCALE_MAX}]"))
+            results[j] = FrameResult(vertices=out_v[a:b].reshape(nf, nv, 3), normals=out_n[a:b].reshape(nf, nv, 3),
+                                     length=length[k], volume=vol[k], scale=clipped[k], twist=twist[k],
+                                     tension=e[k], warnings=warnings)
+        return results
