@@ -55,7 +55,7 @@ def test_every_muscle_at_once_is_numpys_step_1b_bit_for_bit(job, step):
     plan, world, q, tension = _case(job, step)
     batch = MuscleBatch(plan.models)
     every = range(len(plan.models))
-    p, _ = batch.axis_points(plan.models, world, q, every)
+    p, _ = batch.axis_points(world, q, every)
     got = batch.surfaces(world, p, tension, None, every)
     for j, m in enumerate(plan.models):
         want = reference_model.reference_step_1b(m, world, p[:, batch.a_off[j]:batch.a_off[j + 1]], tension[:, j],
@@ -87,7 +87,7 @@ def test_against_the_numpy_code_as_it_was_the_difference_is_the_arc_length_sum()
     plan, world, q, tension = _case("gait2392_walk.yaml", 4)
     batch = MuscleBatch(plan.models)
     every = range(len(plan.models))
-    p, _ = batch.axis_points(plan.models, world, q, every)
+    p, _ = batch.axis_points(world, q, every)
     got = batch.surfaces(world, p, tension, None, every)
     for j, m in enumerate(plan.models):
         want = reference_model.reference_step_1b(m, world, p[:, batch.a_off[j]:batch.a_off[j + 1]], tension[:, j])
@@ -106,7 +106,7 @@ def test_packing_subsets_and_chunks_do_not_change_a_muscle():
     plan, world, q, tension = _case("arm26_flex.yaml", 5)
     batch = MuscleBatch(plan.models)
     every = list(range(len(plan.models)))
-    p, _ = batch.axis_points(plan.models, world, q, every)
+    p, _ = batch.axis_points(world, q, every)
     full = batch.surfaces(world, p, tension, None, every)
     some = [4, 1]
     sub = batch.surfaces(world, p, tension[:, some], None, some)
@@ -126,7 +126,7 @@ def test_results_are_contiguous_per_muscle_and_independent():
     plan, world, q, tension = _case("demo.yaml", 16)
     batch = MuscleBatch(plan.models)
     every = range(len(plan.models))
-    p, _ = batch.axis_points(plan.models, world, q, every)
+    p, _ = batch.axis_points(world, q, every)
     res = batch.surfaces(world, p, tension, None, every)
     for j, m in enumerate(plan.models):
         v = res[j].vertices
@@ -142,7 +142,7 @@ def test_coarse_roll_is_the_reference_roll():
     plan, world, q, _ = _case("arm26_flex.yaml", 3)
     batch = MuscleBatch(plan.models)
     every = range(len(plan.models))
-    p, _ = batch.axis_points(plan.models, world, q, every)
+    p, _ = batch.axis_points(world, q, every)
     got = batch.coarse_roll(world, p, every)
     for j, m in enumerate(plan.models):
         pj = p[:, batch.a_off[j]:batch.a_off[j + 1]]
@@ -151,11 +151,14 @@ def test_coarse_roll_is_the_reference_roll():
         assert got[:, j].tobytes() == want.tobytes(), m.spec.name
 
 
-def test_axis_points_of_fixed_muscles_are_the_models():
-    """The packed axis points of fixed muscles (one compiled call) = each model's axis_points."""
-    plan, world, q, _ = _case("demo.yaml", 9)
+@pytest.mark.parametrize("job", ["demo.yaml", "arm26_flex.yaml", "gait2392_walk.yaml"])
+def test_axis_points_are_the_models(job):
+    """The packed axis points (one compiled call for the fixed muscles, one for the paths:
+    moving and conditional points, wrap cylinders and ellipsoids) = each model's axis_points,
+    bit for bit, with the same could-not-wrap warnings."""
+    plan, world, q, _ = _case(job, 3)
     batch = MuscleBatch(plan.models)
-    p, notes = batch.axis_points(plan.models, world, q, range(len(plan.models)))
+    p, notes = batch.axis_points(world, q, range(len(plan.models)))
     for j, m in enumerate(plan.models):
         want, w = m.axis_points(world, q)
         assert p[:, batch.a_off[j]:batch.a_off[j + 1]].tobytes() == np.ascontiguousarray(want).tobytes()

@@ -90,22 +90,78 @@ class MuscleBatch:
         self.u_off, self.u_idx, self.u_w = _rows([(m.u_idx, m.u_w) for m in models])
         self.v_off, self.v_idx, self.v_w = _rows([(m.v_idx, m.v_w) for m in models])
         self.n_vertices = np.array([m.n_vertices for m in models], dtype=np.int64)
+        self._pack_paths(models)
+
+    def _pack_paths(self, models) -> None:
+        """The paths' points, wrap surfaces, sample fractions and fits, end to end (muscles
+        without a path have none); the moving and conditional points, evaluated per chunk."""
+        paths = [m.path if m.path is not None else None for m in models]
+        self.p_off = _offsets(0 if pm is None else len(pm.points.bones) for pm in paths)
+        self.w_off = _offsets(0 if pm is None else len(pm.kind) for pm in paths)
+        self.k_off = _offsets(0 if pm is None else len(pm.fractions) for pm in paths)
+        self.fit_off = _offsets(0 if pm is None else pm.fit.size for pm in paths)
+        have = [pm for pm in paths if pm is not None]
+
+        def cat(get, shape, dtype):
+            parts = [np.asarray(get(pm), dtype=dtype).reshape((-1,) + shape) for pm in have]
+            return np.ascontiguousarray(np.concatenate(parts) if parts else np.zeros((0,) + shape, dtype))
+
+        self.pbones = cat(lambda pm: pm.points.bones, (), np.int64)
+        self.pat = cat(lambda pm: pm.points.at, (3,), np.float64)
+        self.wbones = cat(lambda pm: pm.wrap_bones, (), np.int64)
+        self.wlocal = cat(lambda pm: pm.wrap_local, (4, 4), np.float64)
+        self.kind = cat(lambda pm: pm.kind, (), np.int64)
+        self.prm = cat(lambda pm: pm.prm, (3,), np.float64)
+        self.wrap_axis = cat(lambda pm: pm.axis, (), np.int64)
+        self.wrap_sign = cat(lambda pm: pm.sign, (), np.int64)
+        self.method = cat(lambda pm: pm.method, (), np.int64)
+        self.on = cat(lambda pm: pm.on, (), np.bool_)
+        self.rng = cat(lambda pm: pm.rng, (2,), np.int64)
+        self.fractions = cat(lambda pm: pm.fractions, (), np.float64)
+        self.fit = cat(lambda pm: pm.fit, (), np.float64)
+        self.wrap_names = [[] if pm is None else [w.name for w in pm.spec.wraps] for pm in paths]
+        # per chunk: (muscle, packed point row, axis, coordinate, function) and (muscle, row, coordinate, lo, hi)
+        self.moving = [(j, int(self.p_off[j]) + k, a, c, fn) for j, pm in enumerate(paths) if pm is not None
+                       for k, a, c, fn in pm.points.moving]
+        self.conditional = [(j, int(self.p_off[j]) + k, c, lo, hi) for j, pm in enumerate(paths) if pm is not None
+                            for k, c, lo, hi in pm.points.conditional]
 
     # -- step 1a ------------------------------------------------------------------------
-    def axis_points(self, models, world: np.ndarray, coords: np.ndarray | None, muscles) -> tuple[np.ndarray, dict]:
+    def axis_points(self, world: np.ndarray, coords: np.ndarray | None, muscles) -> tuple[np.ndarray, dict]:
         """The axis control points of ``muscles`` (indices) for frames world (F, B, 4, 4) (and
         coordinates (F, C), which paths with moving or conditional points need): packed
         (F, ΣN, 3) (the other muscles' rows undefined) and {muscle: [(frame index, warning)]}
-        (``models``: the models the batch was made from, for their paths)."""
+        (a path that could not wrap over a surface)."""
         muscles = list(muscles)
-        p = np.empty((world.shape[0], int(self.a_off[-1]), 3))
-        chosen = set(muscles)
-        js = np.array([j for j in self.fixed if j in chosen], dtype=np.int64)
-        K.axis_fixed(js, np.ascontiguousarray(world), self.bones, self.at, self.a_off, p)
+        nf = world.shape[0]
+        world = np.ascontiguousarray(world, dtype=np.float64)
+        p = np.empty((nf, int(self.a_off[-1]), 3))
+        chosen = np.zeros(self.n, dtype=np.bool_)
+        chosen[muscles] = True
+        K.axis_fixed(self.fixed[chosen[self.fixed]], world, self.bones, self.at, self.a_off, p)
         notes = {j: [] for j in muscles}
-        for j in self.paths:
-            if j in chosen:
-                p[:, self.a_off[j]:self.a_off[j + 1]], notes[j] = models[j].axis_points(world, coords)
+        js = np.array([j for j in self.paths if chosen[j]], dtype=np.int64)
+        if len(js):
+            loc = np.empty((nf, len(self.pbones), 3))
+            loc[:] = self.pat
+            active = np.ones((nf, len(self.pbones)), dtype=np.bool_)
+            if (self.moving or self.conditional) and coords is None:
+                raise ValueError("these paths need the skeleton's coordinates per frame")
+            for j, row, a, c, fn in self.moving:
+                if chosen[j]:
+                    loc[:, row, a] = fn(coords[:, c])
+            for j, row, c, lo, hi in self.conditional:
+                if chosen[j]:
+                    active[:, row] = (coords[:, c] >= lo) & (coords[:, c] <= hi)
+            inside = np.zeros((self.n, nf), dtype=np.int64)
+            K.axis_paths(js, world, self.pbones, loc, active, self.p_off, self.wbones, self.wlocal, self.w_off,
+                         self.kind, self.prm, self.wrap_axis, self.wrap_sign, self.method, self.on, self.rng,
+                         self.fractions, self.k_off, self.fit, self.fit_off, self.a_off, p, inside)
+            for j in js[inside[js].any(axis=1)]:
+                names = self.wrap_names[j]
+                notes[int(j)] = [(int(i), f"path cannot wrap over {names[int(inside[j, i]) - 1]!r}: an end point "
+                                          "lies inside it; kept the straight segment")
+                                 for i in np.nonzero(inside[j])[0]]
         return p, notes
 
     def pack(self, axis: dict, nf: int) -> np.ndarray:

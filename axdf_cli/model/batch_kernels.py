@@ -3,8 +3,10 @@
 Three calls per chunk, over muscles packed end to end (concatenated arrays with offsets, batch
 dimension first; the offsets ``*_off`` (M + 1,) say where muscle j's rows start and end):
 
-1. :func:`axis_fixed`: the axis control points of the muscles whose points are fixed in bones
-   (paths are placed by :mod:`axdf_cli.model.paths`);
+1. :func:`axis_fixed`, :func:`axis_paths`: the axis control points of the muscles fixed in
+   bones, and of the muscles with a path (its points placed, wrapped over its surfaces by
+   :func:`axdf_cli.model.paths.wrap.wrapped_paths`, sampled and fitted as
+   :class:`~axdf_cli.model.paths.path.PathModel` does);
 2. :func:`frames_pass`: per muscle and frame, the axis samples and unit tangents, the
    rotation-minimizing frame by double reflection (Wang, Jüttler, Zheng, Liu: "Computation
    of rotation minimizing frames", ACM TOG 27(1), 2008, Algorithm 1), the bound points'
@@ -34,6 +36,7 @@ from numba import njit, types
 from numba.extending import intrinsic
 
 from axdf_cli.model.kernels import surface_frame
+from axdf_cli.model.paths import wrap as W
 
 _EPS = 1e-30  # as axdf_cli.model.rmf._EPS
 _TINY = 1e-300  # the unit tangent's floor (as MuscleModel's _unit)
@@ -91,6 +94,71 @@ def axis_fixed(js, world, bones, at, a_off, out):
                 for c in range(3):
                     m = world[f, b]
                     out[f, i, c] = (0.0 + ((m[c, 0] * at[i, 0] + m[c, 2] * at[i, 2]) + m[c, 1] * at[i, 1])) + m[c, 3]
+
+
+@njit(cache=True)
+def axis_paths(js, world, pbones, loc, active, p_off, wbones, wlocal, w_off, kind, prm, wrap_axis, wrap_sign,
+               method, on, rng, fractions, k_off, fit, fit_off, a_off, out, out_inside):
+    """Axis control points of path muscles ``js``, as :meth:`PathModel.control_points`:
+
+    world        : (F, B, 4, 4)
+    pbones, loc  : (ΣP,) path points' bones, (F, ΣP, 3) their locations in them (moving
+                   points already evaluated); active (F, ΣP) bool (conditional points)
+    wbones, wlocal : (ΣW,), (ΣW, 4, 4) wrap surfaces' bones and transforms in them; kind,
+                   prm (ΣW, 3), wrap_axis, wrap_sign, method, on, rng (ΣW, 2): as PathModel's
+    fractions    : (ΣK,) arc fractions of the path samples; fit (flat) the (n_j, K_j) least
+                   squares map from samples to control points, row-major from fit_off[j]
+    outputs      : out (F, ΣN, 3) rows a_off[j] ..; out_inside (M, F) the index + 1 of a
+                   surface the path could not wrap over (an end point inside it), 0 if none
+
+    Points: ``einsum('fpck,fpk->fpc', R, loc) + t`` (``0 + ((r0 l0 + r2 l2) + r1 l1)``), the
+    surfaces' transforms ``einsum('fwij,wjk->fwik')`` (in order from 0), the fit in order.
+    """
+    nf = world.shape[0]
+    for kk in range(js.shape[0]):
+        j = js[kk]
+        p0, p1 = p_off[j], p_off[j + 1]
+        w0, w1 = w_off[j], w_off[j + 1]
+        k0, k1 = k_off[j], k_off[j + 1]
+        npt, nw, nk = p1 - p0, w1 - w0, k1 - k0
+        pts = np.empty((nf, npt, 3))
+        act = np.empty((nf, npt), dtype=np.bool_)
+        xf = np.zeros((nf, nw, 4, 4))
+        for f in range(nf):
+            for i in range(npt):
+                m = world[f, pbones[p0 + i]]
+                l0 = loc[f, p0 + i, 0]
+                l1 = loc[f, p0 + i, 1]
+                l2 = loc[f, p0 + i, 2]
+                for c in range(3):
+                    pts[f, i, c] = (0.0 + ((m[c, 0] * l0 + m[c, 2] * l2) + m[c, 1] * l1)) + m[c, 3]
+                act[f, i] = active[f, p0 + i]
+            for w in range(nw):
+                m = world[f, wbones[w0 + w]]
+                b = wlocal[w0 + w]
+                for r in range(4):
+                    for c in range(4):
+                        acc = 0.0
+                        for q in range(4):
+                            acc += m[r, q] * b[q, c]
+                        xf[f, w, r, c] = 0.0 + acc
+        samples = np.empty((nf, nk, 3))
+        length = np.empty(nf)
+        inside = np.zeros(nf, dtype=np.int64)
+        points = np.zeros((nf, npt + 2 * nw, 3))
+        count = np.zeros(nf, dtype=np.int64)
+        W.wrapped_paths(pts, act, xf, kind[w0:w1], prm[w0:w1], wrap_axis[w0:w1], wrap_sign[w0:w1], method[w0:w1],
+                        on[w0:w1], rng[w0:w1], fractions[k0:k1], samples, length, inside, points, count)
+        n = a_off[j + 1] - a_off[j]
+        for f in range(nf):
+            out_inside[j, f] = inside[f]
+            for i in range(n):
+                row = fit_off[j] + i * nk
+                for c in range(3):
+                    acc = 0.0
+                    for k in range(nk):
+                        acc += fit[row + k] * samples[f, k, c]
+                    out[f, a_off[j] + i, c] = acc
 
 
 @njit(cache=True)

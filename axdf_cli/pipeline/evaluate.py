@@ -99,7 +99,7 @@ def _coarse_roll(plan: RunPlan, frames: np.ndarray) -> np.ndarray:
     q = sample_coordinates(plan.pose, frames)
     world = forward_kinematics(plan.pose.skeleton, q)
     batch, every = batch_of(plan), range(len(plan.models))
-    p, _ = batch.axis_points(plan.models, world, q, every)
+    p, _ = batch.axis_points(world, q, every)
     return batch.coarse_roll(world, p, every)
 
 
@@ -190,7 +190,7 @@ def _chunk(plan: RunPlan, rows: slice, frames: np.ndarray, muscles: list[int], t
     world = forward_kinematics(plan.pose.skeleton, q)
     act = sample_activation(plan.pose, plan.names, frames)
     batch = batch_of(plan)
-    p, notes = batch.axis_points(plan.models, world, q, muscles)
+    p, notes = batch.axis_points(world, q, muscles)
     return Chunk(rows, frames, q, world, act, muscles, batch.unpack(p, muscles), twist=twist, notes=notes)
 
 
