@@ -23,6 +23,8 @@ to the same bytes, or to the stated bound where a numpy kernel's order is not fo
 """
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 
 from axdf_cli import tolerances as tol
@@ -31,6 +33,31 @@ from axdf_cli.model.rmf import STEP_RTOL
 
 _RTOL2 = STEP_RTOL ** 2  # (as rmf computes it)
 _TWO_PI = 2.0 * np.pi
+POOL = 6  # buffers a batch keeps for reuse: the scratch, a chunk's vertices and normals, the previous chunk's (a consumer may still hold its last result) and a spare
+
+
+class _Pool:
+    """Float64 buffers handed out again once nothing refers to them any more (no result of an
+    earlier call alive): a chunk's vertices and normals land in memory that is already
+    mapped and in the caches, instead of fresh pages the kernel must first fault in and zero
+    (the bench's "first touch" row measures what that costs)."""
+
+    def __init__(self, keep: int = POOL):
+        self.keep = keep
+        self.free = True  # False: always fresh memory (the bench's first-touch measurement)
+        self.buffers: list = []
+
+    def take(self, n: int) -> np.ndarray:
+        """A flat float64 array of n elements (its contents undefined)."""
+        if self.free:
+            for b in self.buffers:
+                # only this list, the loop variable and getrefcount's argument refer to it
+                if len(b) >= n and sys.getrefcount(b) == 3:
+                    return b[:n]
+        b = np.empty(max(n, 1))
+        if self.free:
+            self.buffers = (self.buffers + [b])[-self.keep:]
+        return b[:n]
 
 
 def _offsets(sizes) -> np.ndarray:
@@ -91,6 +118,7 @@ class MuscleBatch:
         self.v_off, self.v_idx, self.v_w = _rows([(m.v_idx, m.v_w) for m in models])
         self.n_vertices = np.array([m.n_vertices for m in models], dtype=np.int64)
         self._pack_paths(models)
+        self.pool = _Pool()
 
     def _pack_paths(self, models) -> None:
         """The paths' points, wrap surfaces, sample fractions and fits, end to end (muscles
@@ -197,16 +225,16 @@ class MuscleBatch:
         target, a number: that one); notes: {muscle: step 1a's [(frame index, warning)]};
         control_points: (F, ΣQ, 3) to receive the bound section control points as tessellated
         (fixed + s scaled), or None. Returns {muscle: FrameResult} (:meth:`MuscleModel.surface`'s
-        fields)."""
+        fields). Their vertices and normals are views of buffers the batch hands out again
+        once no result of an earlier call refers to them (:class:`_Pool`)."""
         from axdf_cli.model.muscle import FrameResult
 
         js = np.asarray(list(muscles), dtype=np.int64)
         nf, nk, nq = world.shape[0], len(js), int(self.q_off[-1])
         world = np.ascontiguousarray(world, dtype=np.float64)
         p = np.ascontiguousarray(p, dtype=np.float64)
-        cb = np.empty((nf, nq, 3))
-        tb = np.empty((nf, nq, 3))
-        rb = np.empty((nf, nq, 3))
+        work = self.pool.take(3 * nq * 3 * nf)  # frames last (the compiled passes run over frames innermost)
+        cb, tb, rb = (work[i * nq * 3 * nf:(i + 1) * nq * 3 * nf].reshape(nq, 3, nf) for i in range(3))
         ends = np.zeros((self.n, nf, 2, 3))
         roll = np.zeros((self.n, nf, 2))
         length = np.zeros((self.n, nf))
@@ -232,8 +260,8 @@ class MuscleBatch:
             solve = solve & (rest_volume is not None)
             v0 = np.full(self.n, float(rest_volume or 0.0))
         vert_off = _offsets(self.n_vertices[js])
-        out_v = np.empty(3 * nf * int(vert_off[-1]))
-        out_n = np.empty(3 * nf * int(vert_off[-1]))
+        out_v = self.pool.take(3 * nf * int(vert_off[-1]))
+        out_n = self.pool.take(3 * nf * int(vert_off[-1]))
         vol = np.zeros((self.n, nf))
         scale = np.zeros((self.n, nf))
         bad = np.zeros((self.n, nf), dtype=np.bool_)

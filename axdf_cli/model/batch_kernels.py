@@ -35,11 +35,13 @@ from llvmlite import ir
 from numba import njit, types
 from numba.extending import intrinsic
 
-from axdf_cli.model.kernels import surface_frame
+from axdf_cli.model.kernels import _solve_scale
 from axdf_cli.model.paths import wrap as W
 
 _EPS = 1e-30  # as axdf_cli.model.rmf._EPS
 _TINY = 1e-300  # the unit tangent's floor (as MuscleModel's _unit)
+LANES = 8  # frames made at once in the innermost loops (one AVX-512 vector of float64)
+_U = np.uint64  # loop indices the compiler can vectorize over (no negative-index wraparound)
 
 
 @intrinsic
@@ -297,7 +299,7 @@ def _roll_args(rot, local, r_end, t_end, tgt, out):
 def frames_pass(js, p, world, a_off, s_off, bs_idx, bs_w, dbs_idx, dbs_w, q_off, bb_idx, bb_w, dbb_idx, dbb_w,
                 bind_j, g_off, dbg_idx, dbg_w, gw, origin, insertion, r0_local, rend_local, rtol2,
                 out_c, out_t, out_r, out_ends, out_roll, out_length):
-    """Step 2 of the module doc for the muscles ``js`` (K,) and every frame f of the chunk:
+    """Step 2 of the module doc for the muscles ``js`` (K,) and every frame of the chunk:
 
     p          : (F, ΣN, 3)  axis control points (muscle j: rows a_off[j] .. a_off[j+1])
     world      : (F, B, 4, 4) bone transforms (the origin bone's start vector, the insertion roll)
@@ -309,119 +311,194 @@ def frames_pass(js, p, world, a_off, s_off, bs_idx, bs_w, dbs_idx, dbs_w, q_off,
                              their weights
     origin, insertion : (M,) bones; r0_local, rend_local (M, 3) the start vector in the
                              origin bone and the insertion's rest reference in its bone
-    outputs    : out_c, out_t, out_r (F, ΣQ, 3) bound points' position, unit tangent and
-                 untwisted unit reference vector; out_ends (M, F, 2, 3) the unit tangents at
-                 t = 0 and 1; out_roll (M, F, 2) arctan2's (y, x) of the insertion roll;
-                 out_length (M, F) the arc length sum_g gw_g |C'(t_g)|, added in order (numpy's
-                 ``@`` here is OpenBLAS's dot, whose order follows the data's alignment: this
-                 sum may differ from it in the last bit)
+    outputs    : out_c, out_t, out_r (ΣQ, 3, F) bound points' position, unit tangent and
+                 untwisted unit reference vector (frames last); out_ends (M, F, 2, 3) the
+                 unit tangents at t = 0 and 1; out_roll (M, F, 2) arctan2's (y, x) of the
+                 insertion roll; out_length (M, F) the arc length sum_g gw_g |C'(t_g)|, added
+                 in order (numpy's ``@`` here was OpenBLAS's dot, whose order changes with the
+                 number of frames: this sum may differ from it in the last bit)
+
+    Frames run innermost, LANES at a time, in arrays whose last axis is the frame, so that
+    the compiler makes each operation one vector instruction over the frames: every frame
+    still gets exactly the scalar sequence of operations (same bits as one frame alone).
     """
     nf = p.shape[0]
     smax = 1
+    nmax = 1
     for k in range(js.shape[0]):
         j = js[k]
         smax = max(smax, s_off[j + 1] - s_off[j])
-    xs = np.empty((smax, 3))
-    ts = np.empty((smax, 3))
-    rs = np.empty((smax, 3))
+        nmax = max(nmax, a_off[j + 1] - a_off[j])
+    pt = np.empty((nmax, 3, LANES))  # the block's control points, frames last
+    xs = np.empty((smax, 3, LANES))
+    ts = np.empty((smax, 3, LANES))
+    rs = np.empty((smax, 3, LANES))
     r0 = np.empty(3)
     rj = np.empty(3)
+    tj = np.empty(3)
+    tgt = np.empty(3)
     for k in range(js.shape[0]):
         j = js[k]
         a0 = a_off[j]
+        na = a_off[j + 1] - a0
         ns = s_off[j + 1] - s_off[j]
-        ng = g_off[j + 1] - g_off[j]
-        for f in range(nf):
-            pf = p[f]
-            _samples(pf, a0, bs_idx, bs_w, dbs_idx, dbs_w, s_off[j], ns, xs, ts)
-            _start_vector(world[f, origin[j]], r0_local[j], ts[0, 0], ts[0, 1], ts[0, 2], r0)
-            _propagate(xs, ts, ns, r0, rs, rtol2)
-            for c in range(3):
-                out_ends[j, f, 0, c] = ts[0, c]
-                out_ends[j, f, 1, c] = ts[ns - 1, c]
-            _finish(rs[ns - 1, 0], rs[ns - 1, 1], rs[ns - 1, 2], ts[ns - 1, 0], ts[ns - 1, 1], ts[ns - 1, 2], rj)
-            _roll_args(world[f, insertion[j]], rend_local[j], rj, ts[ns - 1], r0, out_roll[j, f])
+        sb = s_off[j]
+        for f0 in range(0, nf, LANES):
+            nb = min(LANES, nf - f0)
+            for i in range(na):
+                for c in range(3):
+                    for f in range(nb):
+                        pt[i, c, f] = p[f0 + f, a0 + i, c]
+            # samples and unit tangents (sparse rows, in order from 0; d / max(|d|, 1e-300))
+            for s in range(ns):
+                r = sb + s
+                i0, i1, i2 = bs_idx[r, 0], bs_idx[r, 1], bs_idx[r, 2]
+                w0, w1, w2 = bs_w[r, 0], bs_w[r, 1], bs_w[r, 2]
+                e0, e1, e2 = dbs_idx[r, 0], dbs_idx[r, 1], dbs_idx[r, 2]
+                v0, v1, v2 = dbs_w[r, 0], dbs_w[r, 1], dbs_w[r, 2]
+                for c in range(3):
+                    for f in range(nb):
+                        xs[s, c, f] = ((0.0 + w0 * pt[i0, c, f]) + w1 * pt[i1, c, f]) + w2 * pt[i2, c, f]
+                for f in range(nb):
+                    d0 = ((0.0 + v0 * pt[e0, 0, f]) + v1 * pt[e1, 0, f]) + v2 * pt[e2, 0, f]
+                    d1 = ((0.0 + v0 * pt[e0, 1, f]) + v1 * pt[e1, 1, f]) + v2 * pt[e2, 1, f]
+                    d2 = ((0.0 + v0 * pt[e0, 2, f]) + v1 * pt[e1, 2, f]) + v2 * pt[e2, 2, f]
+                    n = _floor(math.sqrt(_sumsq(d0, d1, d2)), _TINY)
+                    ts[s, 0, f] = d0 / n
+                    ts[s, 1, f] = d1 / n
+                    ts[s, 2, f] = d2 / n
+            for f in range(nb):
+                _start_vector(world[f0 + f, origin[j]], r0_local[j], ts[0, 0, f], ts[0, 1, f], ts[0, 2, f], r0)
+                for c in range(3):
+                    rs[0, c, f] = r0[c]
+            # the double-reflection recurrence (rmf.propagate), every frame of the block at once
+            for i in range(ns - 1):
+                for f in range(nb):
+                    x00 = xs[i, 0, f]
+                    x01 = xs[i, 1, f]
+                    x02 = xs[i, 2, f]
+                    x10 = xs[i + 1, 0, f]
+                    x11 = xs[i + 1, 1, f]
+                    x12 = xs[i + 1, 2, f]
+                    v0 = x10 - x00
+                    v1 = x11 - x01
+                    v2 = x12 - x02
+                    cc1 = _dot(v0, v1, v2, v0, v1, v2)
+                    sa = _dot(x10, x11, x12, x10, x11, x12)
+                    sq = _dot(x00, x01, x02, x00, x01, x02)
+                    k1 = 2.0 / cc1 if (cc1 > _EPS and cc1 > rtol2 * sa and cc1 > rtol2 * sq) else 0.0
+                    tt0 = ts[i, 0, f]
+                    tt1 = ts[i, 1, f]
+                    tt2 = ts[i, 2, f]
+                    kd = k1 * _dot(v0, v1, v2, tt0, tt1, tt2)
+                    u0 = ts[i + 1, 0, f] - (tt0 - kd * v0)
+                    u1 = ts[i + 1, 1, f] - (tt1 - kd * v1)
+                    u2 = ts[i + 1, 2, f] - (tt2 - kd * v2)
+                    cc2 = _dot(u0, u1, u2, u0, u1, u2)
+                    k2 = 2.0 / cc2 if cc2 > rtol2 else 0.0
+                    c0 = rs[i, 0, f]
+                    c1 = rs[i, 1, f]
+                    c2 = rs[i, 2, f]
+                    # cur - (v1 . cur) a1 with a1 = k1 v1, then likewise with v2 (sums in order, from 0)
+                    sm = ((0.0 + v0 * c0) + v1 * c1) + v2 * c2
+                    c0 = c0 - sm * (k1 * v0)
+                    c1 = c1 - sm * (k1 * v1)
+                    c2 = c2 - sm * (k1 * v2)
+                    sm = ((0.0 + u0 * c0) + u1 * c1) + u2 * c2
+                    rs[i + 1, 0, f] = c0 - sm * (k2 * u0)
+                    rs[i + 1, 1, f] = c1 - sm * (k2 * u1)
+                    rs[i + 1, 2, f] = c2 - sm * (k2 * u2)
+            e = ns - 1
+            for f in range(nb):
+                for c in range(3):
+                    out_ends[j, f0 + f, 0, c] = ts[0, c, f]
+                    out_ends[j, f0 + f, 1, c] = ts[e, c, f]
+                    tj[c] = ts[e, c, f]
+                _finish(rs[e, 0, f], rs[e, 1, f], rs[e, 2, f], tj[0], tj[1], tj[2], rj)
+                _roll_args(world[f0 + f, insertion[j]], rend_local[j], rj, tj, tgt, out_roll[j, f0 + f])
+            # the bound points: C(t), its unit tangent, one double-reflection step from sample s
             for q in range(q_off[j], q_off[j + 1]):
-                # the bound point: C(t) and its unit tangent (sparse rows, as _samples)
-                x10 = 0.0
-                x11 = 0.0
-                x12 = 0.0
-                d0 = 0.0
-                d1 = 0.0
-                d2 = 0.0
-                for kk in range(3):
-                    wv = bb_w[q, kk]
-                    i = a0 + bb_idx[q, kk]
-                    x10 += wv * pf[i, 0]
-                    x11 += wv * pf[i, 1]
-                    x12 += wv * pf[i, 2]
-                for kk in range(3):
-                    wv = dbb_w[q, kk]
-                    i = a0 + dbb_idx[q, kk]
-                    d0 += wv * pf[i, 0]
-                    d1 += wv * pf[i, 1]
-                    d2 += wv * pf[i, 2]
-                n = _floor(math.sqrt(_sumsq(d0, d1, d2)), _TINY)
-                t10 = d0 / n
-                t11 = d1 / n
-                t12 = d2 / n
-                # one double-reflection step from sample s (rmf.reflect_step)
                 s = bind_j[q]
-                _finish(rs[s, 0], rs[s, 1], rs[s, 2], ts[s, 0], ts[s, 1], ts[s, 2], rj)
-                x00 = xs[s, 0]
-                x01 = xs[s, 1]
-                x02 = xs[s, 2]
-                v0 = x10 - x00
-                v1 = x11 - x01
-                v2 = x12 - x02
-                cc1 = _dot(v0, v1, v2, v0, v1, v2)
-                sa = _dot(x00, x01, x02, x00, x01, x02)
-                sb = _dot(x10, x11, x12, x10, x11, x12)
-                k1 = 0.0
-                if cc1 > _EPS and cc1 > rtol2 * sa and cc1 > rtol2 * sb:
-                    k1 = 2.0 / cc1
-                kr = k1 * _dot(v0, v1, v2, rj[0], rj[1], rj[2])
-                rl0 = rj[0] - kr * v0
-                rl1 = rj[1] - kr * v1
-                rl2 = rj[2] - kr * v2
-                kt = k1 * _dot(v0, v1, v2, ts[s, 0], ts[s, 1], ts[s, 2])
-                u0 = t10 - (ts[s, 0] - kt * v0)
-                u1 = t11 - (ts[s, 1] - kt * v1)
-                u2 = t12 - (ts[s, 2] - kt * v2)
-                cc2 = _dot(u0, u1, u2, u0, u1, u2)
-                k2 = 2.0 / cc2 if cc2 > rtol2 else 0.0
-                kr = k2 * _dot(u0, u1, u2, rl0, rl1, rl2)
-                r10 = rl0 - kr * u0
-                r11 = rl1 - kr * u1
-                r12 = rl2 - kr * u2
-                dd = _dot(r10, r11, r12, t10, t11, t12)
-                r10 = r10 - dd * t10
-                r11 = r11 - dd * t11
-                r12 = r12 - dd * t12
-                n = _floor(math.sqrt(_sumsq(r10, r11, r12)), _EPS)
-                out_c[f, q, 0] = x10
-                out_c[f, q, 1] = x11
-                out_c[f, q, 2] = x12
-                out_t[f, q, 0] = t10
-                out_t[f, q, 1] = t11
-                out_t[f, q, 2] = t12
-                out_r[f, q, 0] = r10 / n
-                out_r[f, q, 1] = r11 / n
-                out_r[f, q, 2] = r12 / n
-            acc = 0.0
-            for g in range(ng):
-                r = g_off[j] + g
-                d0 = 0.0
-                d1 = 0.0
-                d2 = 0.0
-                for kk in range(3):
-                    wv = dbg_w[r, kk]
-                    i = a0 + dbg_idx[r, kk]
-                    d0 += wv * pf[i, 0]
-                    d1 += wv * pf[i, 1]
-                    d2 += wv * pf[i, 2]
-                acc += math.sqrt(_sumsq(d0, d1, d2)) * gw[r]
-            out_length[j, f] = acc
+                i0, i1, i2 = bb_idx[q, 0], bb_idx[q, 1], bb_idx[q, 2]
+                w0, w1, w2 = bb_w[q, 0], bb_w[q, 1], bb_w[q, 2]
+                e0, e1, e2 = dbb_idx[q, 0], dbb_idx[q, 1], dbb_idx[q, 2]
+                v0, v1, v2 = dbb_w[q, 0], dbb_w[q, 1], dbb_w[q, 2]
+                for f in range(nb):
+                    x10 = ((0.0 + w0 * pt[i0, 0, f]) + w1 * pt[i1, 0, f]) + w2 * pt[i2, 0, f]
+                    x11 = ((0.0 + w0 * pt[i0, 1, f]) + w1 * pt[i1, 1, f]) + w2 * pt[i2, 1, f]
+                    x12 = ((0.0 + w0 * pt[i0, 2, f]) + w1 * pt[i1, 2, f]) + w2 * pt[i2, 2, f]
+                    d0 = ((0.0 + v0 * pt[e0, 0, f]) + v1 * pt[e1, 0, f]) + v2 * pt[e2, 0, f]
+                    d1 = ((0.0 + v0 * pt[e0, 1, f]) + v1 * pt[e1, 1, f]) + v2 * pt[e2, 1, f]
+                    d2 = ((0.0 + v0 * pt[e0, 2, f]) + v1 * pt[e1, 2, f]) + v2 * pt[e2, 2, f]
+                    n = _floor(math.sqrt(_sumsq(d0, d1, d2)), _TINY)
+                    t10 = d0 / n
+                    t11 = d1 / n
+                    t12 = d2 / n
+                    # the sample's reference vector made unit and orthogonal (propagate's last step)
+                    ts0 = ts[s, 0, f]
+                    ts1 = ts[s, 1, f]
+                    ts2 = ts[s, 2, f]
+                    q0 = rs[s, 0, f]
+                    q1 = rs[s, 1, f]
+                    q2 = rs[s, 2, f]
+                    dd = _dot(q0, q1, q2, ts0, ts1, ts2)
+                    q0 = q0 - dd * ts0
+                    q1 = q1 - dd * ts1
+                    q2 = q2 - dd * ts2
+                    n = _floor(math.sqrt(_sumsq(q0, q1, q2)), _EPS)
+                    q0 = q0 / n
+                    q1 = q1 / n
+                    q2 = q2 / n
+                    x00 = xs[s, 0, f]
+                    x01 = xs[s, 1, f]
+                    x02 = xs[s, 2, f]
+                    u0 = x10 - x00
+                    u1 = x11 - x01
+                    u2 = x12 - x02
+                    cc1 = _dot(u0, u1, u2, u0, u1, u2)
+                    sa = _dot(x00, x01, x02, x00, x01, x02)
+                    sq = _dot(x10, x11, x12, x10, x11, x12)
+                    k1 = 2.0 / cc1 if (cc1 > _EPS and cc1 > rtol2 * sa and cc1 > rtol2 * sq) else 0.0
+                    kr = k1 * _dot(u0, u1, u2, q0, q1, q2)
+                    rl0 = q0 - kr * u0
+                    rl1 = q1 - kr * u1
+                    rl2 = q2 - kr * u2
+                    kt = k1 * _dot(u0, u1, u2, ts0, ts1, ts2)
+                    z0 = t10 - (ts0 - kt * u0)
+                    z1 = t11 - (ts1 - kt * u1)
+                    z2 = t12 - (ts2 - kt * u2)
+                    cc2 = _dot(z0, z1, z2, z0, z1, z2)
+                    k2 = 2.0 / cc2 if cc2 > rtol2 else 0.0
+                    kr = k2 * _dot(z0, z1, z2, rl0, rl1, rl2)
+                    r10 = rl0 - kr * z0
+                    r11 = rl1 - kr * z1
+                    r12 = rl2 - kr * z2
+                    dd = _dot(r10, r11, r12, t10, t11, t12)
+                    r10 = r10 - dd * t10
+                    r11 = r11 - dd * t11
+                    r12 = r12 - dd * t12
+                    n = _floor(math.sqrt(_sumsq(r10, r11, r12)), _EPS)
+                    out_c[q, 0, f0 + f] = x10
+                    out_c[q, 1, f0 + f] = x11
+                    out_c[q, 2, f0 + f] = x12
+                    out_t[q, 0, f0 + f] = t10
+                    out_t[q, 1, f0 + f] = t11
+                    out_t[q, 2, f0 + f] = t12
+                    out_r[q, 0, f0 + f] = r10 / n
+                    out_r[q, 1, f0 + f] = r11 / n
+                    out_r[q, 2, f0 + f] = r12 / n
+            # arc length: the speeds at the Gauss points against their weights, in order
+            for f in range(nb):
+                out_length[j, f0 + f] = 0.0
+            for r in range(g_off[j], g_off[j + 1]):
+                i0, i1, i2 = dbg_idx[r, 0], dbg_idx[r, 1], dbg_idx[r, 2]
+                v0, v1, v2 = dbg_w[r, 0], dbg_w[r, 1], dbg_w[r, 2]
+                g = gw[r]
+                for f in range(nb):
+                    d0 = ((0.0 + v0 * pt[i0, 0, f]) + v1 * pt[i1, 0, f]) + v2 * pt[i2, 0, f]
+                    d1 = ((0.0 + v0 * pt[i0, 1, f]) + v1 * pt[i1, 1, f]) + v2 * pt[i2, 1, f]
+                    d2 = ((0.0 + v0 * pt[i0, 2, f]) + v1 * pt[i1, 2, f]) + v2 * pt[i2, 2, f]
+                    out_length[j, f0 + f] += math.sqrt(_sumsq(d0, d1, d2)) * g
 
 
 @njit(cache=True)
@@ -452,13 +529,168 @@ def roll_pass(js, p, world, a_off, s_off, bs_idx, bs_w, dbs_idx, dbs_w, origin, 
 
 
 @njit(cache=True)
+def _grid(net_a, net_w, u_idx, u_w, v_idx, v_w, ta, tw, ga, gw):
+    """:func:`axdf_cli.model.kernels._tessellate` of one frame into the layout the loops
+    below run along: nets (m, 24) (rows of 8 points x 3); ta, tw (3, 8, U) along; ga, gw
+    (3, A + 2, U): column a + 1 holds around-column a, columns 0 and A + 1 repeat columns
+    A - 1 and 0 (so that neighbours around are plain offsets), rows u innermost."""
+    nu = u_idx.shape[0]
+    na = v_idx.shape[0]
+    for u in range(nu):
+        i0, i1, i2 = u_idx[u, 0], u_idx[u, 1], u_idx[u, 2]
+        w0, w1, w2 = u_w[u, 0], u_w[u, 1], u_w[u, 2]
+        for e in range(24):
+            ta[e % 3, e // 3, u] = ((0.0 + w0 * net_a[i0, e]) + w1 * net_a[i1, e]) + w2 * net_a[i2, e]
+            tw[e % 3, e // 3, u] = ((0.0 + w0 * net_w[i0, e]) + w1 * net_w[i1, e]) + w2 * net_w[i2, e]
+    for c in range(3):
+        for a in range(na):
+            i0, i1, i2 = v_idx[a, 0], v_idx[a, 1], v_idx[a, 2]
+            w0, w1, w2 = v_w[a, 0], v_w[a, 1], v_w[a, 2]
+            for u in range(nu):
+                ga[c, a + 1, u] = ((0.0 + w0 * ta[c, i0, u]) + w1 * ta[c, i1, u]) + w2 * ta[c, i2, u]
+                gw[c, a + 1, u] = ((0.0 + w0 * tw[c, i0, u]) + w1 * tw[c, i1, u]) + w2 * tw[c, i2, u]
+        for u in range(nu):
+            ga[c, 0, u] = ga[c, na, u]
+            gw[c, 0, u] = gw[c, na, u]
+            ga[c, na + 1, u] = ga[c, 1, u]
+            gw[c, na + 1, u] = gw[c, 1, u]
+
+
+@njit(cache=True)
+def _volume_terms(ga, gw, terms):
+    """Each quad's four contributions to :func:`axdf_cli.model.kernels._volume_cubic`'s sums
+    (terms (4, (A + 2) U) at the quad's corner (u, a): flat index (a + 1) U + u), computed over
+    the whole grid at once (the rows u = U - 1 and the ghost columns are not quads: unused).
+    Indices are unsigned: numba's negative-index wraparound on ``i + U`` would keep the
+    compiler from making the loop vector instructions."""
+    nu = _U(ga.shape[2])
+    n = _U(ga.shape[1] - 1) * nu - _U(1)
+    one = _U(1)
+    a_ = ga.reshape(3, -1)
+    w_ = gw.reshape(3, -1)
+    for i in range(nu, n):
+        i1 = i + nu  # (u, a + 1)
+        i2 = i + one  # (u + 1, a)
+        i3 = i1 + one  # (u + 1, a + 1)
+        ax0 = a_[0, i1]
+        ax1 = a_[1, i1]
+        ax2 = a_[2, i1]
+        wx0 = w_[0, i1]
+        wx1 = w_[1, i1]
+        wx2 = w_[2, i1]
+        ay0 = a_[0, i2]
+        ay1 = a_[1, i2]
+        ay2 = a_[2, i2]
+        wy0 = w_[0, i2]
+        wy1 = w_[1, i2]
+        wy2 = w_[2, i2]
+        ad0 = a_[0, i] - a_[0, i3]
+        ad1 = a_[1, i] - a_[1, i3]
+        ad2 = a_[2, i] - a_[2, i3]
+        wd0 = w_[0, i] - w_[0, i3]
+        wd1 = w_[1, i] - w_[1, i3]
+        wd2 = w_[2, i] - w_[2, i3]
+        p0 = ay1 * ad2 - ay2 * ad1
+        p1 = ay2 * ad0 - ay0 * ad2
+        p2 = ay0 * ad1 - ay1 * ad0
+        q0 = wy1 * wd2 - wy2 * wd1
+        q1 = wy2 * wd0 - wy0 * wd2
+        q2 = wy0 * wd1 - wy1 * wd0
+        r0 = (wy1 * ad2 - wy2 * ad1) + (ay1 * wd2 - ay2 * wd1)
+        r1 = (wy2 * ad0 - wy0 * ad2) + (ay2 * wd0 - ay0 * wd2)
+        r2 = (wy0 * ad1 - wy1 * ad0) + (ay0 * wd1 - ay1 * wd0)
+        terms[0, i] = ax0 * p0 + ax1 * p1 + ax2 * p2
+        terms[1, i] = (wx0 * p0 + wx1 * p1 + wx2 * p2) + (ax0 * r0 + ax1 * r1 + ax2 * r2)
+        terms[2, i] = (ax0 * q0 + ax1 * q1 + ax2 * q2) + (wx0 * r0 + wx1 * r1 + wx2 * r2)
+        terms[3, i] = wx0 * q0 + wx1 * q1 + wx2 * q2
+
+
+@njit(cache=True)
+def _ring_normals(ga, nrm):
+    """:func:`axdf_cli.model.kernels._ring_vertices`' normals of one frame's grid (3, A + 2, U)
+    into nrm (same layout), over the whole grid at once (rows 0 and U - 1 and the ghost
+    columns come out meaningless: unused). Unsigned indices, as :func:`_volume_terms`."""
+    nu = _U(ga.shape[2])
+    n = _U(ga.shape[1] - 1) * nu - _U(1)
+    one = _U(1)
+    g = ga.reshape(3, -1)
+    o = nrm.reshape(3, -1)
+    for i in range(nu + one, n):
+        ia = i + nu  # around: (u, a + 1) - (u, a - 1)
+        ib = i - nu
+        ic = i + one  # along: (u + 1, a) - (u - 1, a)
+        id_ = i - one
+        sv0 = g[0, ia] - g[0, ib]
+        sv1 = g[1, ia] - g[1, ib]
+        sv2 = g[2, ia] - g[2, ib]
+        su0 = g[0, ic] - g[0, id_]
+        su1 = g[1, ic] - g[1, id_]
+        su2 = g[2, ic] - g[2, id_]
+        n0 = sv1 * su2 - sv2 * su1
+        n1 = sv2 * su0 - sv0 * su2
+        n2 = sv0 * su1 - sv1 * su0
+        ln = max(np.sqrt(n0 * n0 + n1 * n1 + n2 * n2), 1e-300)
+        o[0, i] = n0 / ln
+        o[1, i] = n1 / ln
+        o[2, i] = n2 / ln
+
+
+@njit(cache=True)
+def _unpack_grid(ga, nrm, bv, bn):
+    """The rings' vertices and normals (grids (3, A + 2, U)) into one frame's (V, 3) arrays,
+    vertex (u, a) at 1 + (u - 1) A + a (the poles are set apart)."""
+    nu = _U(ga.shape[2])
+    na = _U(ga.shape[1] - 2)
+    one = _U(1)
+    for u in range(one, nu - one):
+        base = one + (u - one) * na
+        for a in range(na):
+            for c in range(3):
+                bv[base + a, c] = ga[c, a + one, u]
+                bn[base + a, c] = nrm[c, a + one, u]
+
+
+@njit(cache=True)
+def _pole_normal(ga, row, ring, sign, e0, e1, e2, out):
+    """:func:`axdf_cli.model.kernels._pole_normals` of one pole (grid (3, A + 2, U); the pole
+    at along-row ``row``, its fan to ``ring``) into out (3,): the fan's area-weighted normal,
+    or the outward axis direction e where the fan folds."""
+    na = ga.shape[1] - 2
+    f0 = 0.0
+    f1 = 0.0
+    f2 = 0.0
+    for a in range(na):
+        x0 = ga[0, a + 2, ring] - ga[0, 1, row]
+        x1 = ga[1, a + 2, ring] - ga[1, 1, row]
+        x2 = ga[2, a + 2, ring] - ga[2, 1, row]
+        y0 = ga[0, a + 1, ring] - ga[0, 1, row]
+        y1 = ga[1, a + 1, ring] - ga[1, 1, row]
+        y2 = ga[2, a + 1, ring] - ga[2, 1, row]
+        f0 += x1 * y2 - x2 * y1
+        f1 += x2 * y0 - x0 * y2
+        f2 += x0 * y1 - x1 * y0
+    ln = max(np.sqrt(f0 * f0 + f1 * f1 + f2 * f2), 1e-300)
+    f0 = sign * f0 / ln
+    f1 = sign * f1 / ln
+    f2 = sign * f2 / ln
+    if f0 * e0 + f1 * e1 + f2 * e2 <= 0.5:
+        le = max(np.sqrt(e0 * e0 + e1 * e1 + e2 * e2), 1e-300)
+        f0 = e0 / le
+        f1 = e1 / le
+        f2 = e2 / le
+    out[0] = f0
+    out[1] = f1
+    out[2] = f2
+
+
+@njit(cache=True)
 def shape_pass(js, p, a_off, cb, tb, rb, ends, theta, tension, scale0, q_off, lam, uvw, beta, bump, gain,
                m_off, u_off, u_idx, u_w, v_off, v_idx, v_w, solve, v0, s_min, s_max, iters, rtol,
                vert_off, out_v, out_n, out_vol, out_s, out_bad, out_cp):
     """Step 3 of the module doc for the muscles ``js`` (K,) and every frame f:
 
     p, a_off     : axis control points (F, ΣN, 3) (the surface's poles are the axis ends)
-    cb, tb, rb   : (F, ΣQ, 3) frames_pass's bound points (position, tangent, untwisted R)
+    cb, tb, rb   : (ΣQ, 3, F) frames_pass's bound points (position, tangent, untwisted R)
     ends         : (M, F, 2, 3) unit tangents at the axis ends
     theta        : (M, F) the insertion roll on its branch (radians), spread by ``lam``
     tension      : (M, F) effective tension e, clipped to [0, 1]
@@ -476,9 +708,13 @@ def shape_pass(js, p, a_off, cb, tb, rb, ends, theta, tension, scale0, q_off, la
 
     Per bound point (MuscleModel.surface): the twist rotates (R, S) about T by theta lam; the
     offset is u T + v R + w S; tau = sqrt(1 + g e (2 b - 1) beta), h = e b; the part kept is
-    C + (1 - beta) off + beta tau h s0 off, the part scaled by s is beta tau (1 - h) off.
+    C + (1 - beta) off + beta tau h s0 off, the part scaled by s is beta tau (1 - h) off. Then
+    the surface of :func:`axdf_cli.model.kernels.surface_frame`, its steps laid out so that
+    each runs as one long loop over the grid (which the compiler makes vector instructions):
+    the same operations on the same numbers, so the same bits.
     """
     nf = p.shape[0]
+    pole = np.empty(3)
     for k in range(js.shape[0]):
         j = js[k]
         nq = q_off[j + 1] - q_off[j]
@@ -486,16 +722,16 @@ def shape_pass(js, p, a_off, cb, tb, rb, ends, theta, tension, scale0, q_off, la
         na = v_off[j + 1] - v_off[j]
         nm = m_off[j + 1] - m_off[j]
         nv = 2 + (nu - 2) * na
-        # this muscle's inputs and scratch (a few allocations per muscle and chunk)
-        fixed = np.empty((nf, nq, 3))
-        scaled = np.empty((nf, nq, 3))
-        poles = np.empty((4, nf, 3))  # pole0, pole1, end0 = -T(0), end1 = T(1)
-        net_a = np.zeros((nm, 8, 3))
-        net_w = np.zeros((nm, 8, 3))
-        ta = np.empty((nu, 8, 3))
-        tw = np.empty((nu, 8, 3))
-        ga = np.empty((nu, na, 3))
-        gw = np.empty((nu, na, 3))
+        last = nv - 1
+        # this muscle's scratch (a few allocations per muscle and chunk)
+        net_a = np.empty((nm, 24))
+        net_w = np.empty((nm, 24))
+        ta = np.empty((3, 8, nu))
+        tw = np.empty((3, 8, nu))
+        ga = np.empty((3, na + 2, nu))
+        gw = np.empty((3, na + 2, nu))
+        nrm = np.empty((3, na + 2, nu))
+        terms = np.empty((4, (na + 2) * nu))
         block_v = out_v[3 * nf * vert_off[k]:3 * nf * vert_off[k + 1]].reshape((nf, nv, 3))
         block_n = out_n[3 * nf * vert_off[k]:3 * nf * vert_off[k + 1]].reshape((nf, nv, 3))
         uj_idx = u_idx[u_off[j]:u_off[j + 1]]
@@ -509,12 +745,12 @@ def shape_pass(js, p, a_off, cb, tb, rb, ends, theta, tension, scale0, q_off, la
             ge = gain * e
             for qq in range(nq):
                 q = q_off[j] + qq
-                t0 = tb[f, q, 0]
-                t1 = tb[f, q, 1]
-                t2 = tb[f, q, 2]
-                r0 = rb[f, q, 0]
-                r1 = rb[f, q, 1]
-                r2 = rb[f, q, 2]
+                t0 = tb[q, 0, f]
+                t1 = tb[q, 1, f]
+                t2 = tb[q, 2, f]
+                r0 = rb[q, 0, f]
+                r1 = rb[q, 1, f]
+                r2 = rb[q, 2, f]
                 # S = T x R (np.cross), then the twist about T
                 x0 = t1 * r2 - t2 * r1
                 x1 = t2 * r0 - t0 * r2
@@ -540,25 +776,64 @@ def shape_pass(js, p, a_off, cb, tb, rb, ends, theta, tension, scale0, q_off, la
                 kh = b * ((tau * h) * sf)
                 kb = 1.0 - b
                 ks = b * (tau * (1.0 - h))
-                fixed[f, qq, 0] = (cb[f, q, 0] + kb * o0) + kh * o0
-                fixed[f, qq, 1] = (cb[f, q, 1] + kb * o1) + kh * o1
-                fixed[f, qq, 2] = (cb[f, q, 2] + kb * o2) + kh * o2
-                scaled[f, qq, 0] = ks * o0
-                scaled[f, qq, 1] = ks * o1
-                scaled[f, qq, 2] = ks * o2
-            for c in range(3):
-                poles[0, f, c] = p[f, a_off[j], c]
-                poles[1, f, c] = p[f, a_off[j + 1] - 1, c]
-                poles[2, f, c] = -ends[j, f, 0, c]
-                poles[3, f, c] = ends[j, f, 1, c]
-            vol, s, bad = surface_frame(fixed, scaled, poles[0], poles[1], poles[2], poles[3], uj_idx, uj_w, vj_idx,
-                                        vj_w, solve[j], v0[j], sf, s_min, s_max, iters, rtol, net_a, net_w, ta, tw,
-                                        ga, gw, block_v, block_n, f)
-            out_vol[j, f] = vol
+                row = 1 + qq // 8
+                col = 3 * (qq % 8)
+                net_a[row, col] = (cb[q, 0, f] + kb * o0) + kh * o0
+                net_a[row, col + 1] = (cb[q, 1, f] + kb * o1) + kh * o1
+                net_a[row, col + 2] = (cb[q, 2, f] + kb * o2) + kh * o2
+                net_w[row, col] = ks * o0
+                net_w[row, col + 1] = ks * o1
+                net_w[row, col + 2] = ks * o2
+            for col in range(8):  # the pole rows: the axis ends (fixed), nothing scaled
+                for c in range(3):
+                    net_a[0, 3 * col + c] = p[f, a_off[j], c]
+                    net_a[nm - 1, 3 * col + c] = p[f, a_off[j + 1] - 1, c]
+                    net_w[0, 3 * col + c] = 0.0
+                    net_w[nm - 1, 3 * col + c] = 0.0
+            _grid(net_a, net_w, uj_idx, uj_w, vj_idx, vj_w, ta, tw, ga, gw)
+            _volume_terms(ga, gw, terms)
+            c0 = 0.0
+            c1 = 0.0
+            c2 = 0.0
+            c3 = 0.0
+            for u in range(nu - 1):  # the quads' sums in kernels._volume_cubic's order
+                for a in range(na):
+                    i = (a + 1) * nu + u
+                    c0 += terms[0, i]
+                    c1 += terms[1, i]
+                    c2 += terms[2, i]
+                    c3 += terms[3, i]
+            c0 = c0 / 6.0
+            c1 = c1 / 6.0
+            c2 = c2 / 6.0
+            c3 = c3 / 6.0
+            s = sf
+            bad = False
+            if solve[j]:
+                s, bad = _solve_scale(c0, c1, c2, c3, v0[j], sf, iters, rtol)
+            sc = min(max(s, s_min), s_max)
+            out_vol[j, f] = ((c3 * sc + c2) * sc + c1) * sc + c0
             out_s[j, f] = s
             out_bad[j, f] = bad
+            g_ = ga.reshape(-1)
+            w_ = gw.reshape(-1)
+            for i in range(g_.shape[0]):
+                g_[i] += sc * w_[i]
+            _ring_normals(ga, nrm)
+            bv = block_v[f]
+            bn = block_n[f]
+            for c in range(3):
+                bv[0, c] = ga[c, 1, 0]
+                bv[last, c] = ga[c, 1, nu - 1]
+            _unpack_grid(ga, nrm, bv, bn)
+            _pole_normal(ga, 0, 1, 1.0, -ends[j, f, 0, 0], -ends[j, f, 0, 1], -ends[j, f, 0, 2], pole)
+            for c in range(3):
+                bn[0, c] = pole[c]
+            _pole_normal(ga, nu - 1, nu - 2, -1.0, ends[j, f, 1, 0], ends[j, f, 1, 1], ends[j, f, 1, 2], pole)
+            for c in range(3):
+                bn[last, c] = pole[c]
             if out_cp.shape[0] > 0:
-                sc = min(max(s, s_min), s_max)
                 for qq in range(nq):
                     for c in range(3):
-                        out_cp[f, q_off[j] + qq, c] = fixed[f, qq, c] + sc * scaled[f, qq, c]
+                        e3 = 3 * (qq % 8) + c
+                        out_cp[f, q_off[j] + qq, c] = net_a[1 + qq // 8, e3] + sc * net_w[1 + qq // 8, e3]
