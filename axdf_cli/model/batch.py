@@ -233,15 +233,14 @@ class MuscleBatch:
         nf, nk, nq = world.shape[0], len(js), int(self.q_off[-1])
         world = np.ascontiguousarray(world, dtype=np.float64)
         p = np.ascontiguousarray(p, dtype=np.float64)
-        work = self.pool.take(3 * nq * 3 * nf)  # frames last (the compiled passes run over frames innermost)
-        cb, tb, rb = (work[i * nq * 3 * nf:(i + 1) * nq * 3 * nf].reshape(nq, 3, nf) for i in range(3))
+        fr = self.pool.take(3 * nq * 3 * nf).reshape(3, nq, 3, nf)  # frames last (innermost in the passes)
         ends = np.zeros((self.n, nf, 2, 3))
         roll = np.zeros((self.n, nf, 2))
         length = np.zeros((self.n, nf))
         K.frames_pass(js, p, world, self.a_off, self.s_off, self.bs_idx, self.bs_w, self.dbs_idx, self.dbs_w,
                       self.q_off, self.bb_idx, self.bb_w, self.dbb_idx, self.dbb_w, self.bind_j, self.g_off,
                       self.dbg_idx, self.dbg_w, self.gw, self.origin, self.insertion, self.r0_local, self.rend_local,
-                      _RTOL2, cb, tb, rb, ends, roll, length)
+                      _RTOL2, fr, ends, roll, length)
         # the roll on its branch (numpy's arctan2, as MuscleModel._roll)
         theta = np.arctan2(roll[js, :, 0], roll[js, :, 1])  # (K, F)
         if twist_reference is None:
@@ -265,7 +264,7 @@ class MuscleBatch:
         vol = np.zeros((self.n, nf))
         scale = np.zeros((self.n, nf))
         bad = np.zeros((self.n, nf), dtype=np.bool_)
-        K.shape_pass(js, p, self.a_off, cb, tb, rb, ends, full[0], full[1], full[2], self.q_off, self.lam, self.uvw,
+        K.shape_pass(js, p, self.a_off, fr, ends, full[0], full[1], full[2], self.q_off, self.lam, self.uvw,
                      self.beta, self.bump, tol.TENSION_GAIN, self.m_off, self.u_off, self.u_idx, self.u_w, self.v_off,
                      self.v_idx, self.v_w, solve, v0, tol.SCALE_MIN, tol.SCALE_MAX, tol.VOLUME_SOLVE_ITERS,
                      tol.VOLUME_SOLVE_RTOL, vert_off, out_v, out_n, vol, scale, bad,

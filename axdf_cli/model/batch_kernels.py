@@ -40,7 +40,7 @@ from axdf_cli.model.paths import wrap as W
 
 _EPS = 1e-30  # as axdf_cli.model.rmf._EPS
 _TINY = 1e-300  # the unit tangent's floor (as MuscleModel's _unit)
-LANES = 8  # frames made at once in the innermost loops (one AVX-512 vector of float64)
+LANES = 16  # frames made at once in the innermost loops (two AVX-512 vectors of float64)
 _U = np.uint64  # loop indices the compiler can vectorize over (no negative-index wraparound)
 
 
@@ -57,32 +57,32 @@ def _fma(typingctx, a, b, c):
     return sig, codegen
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _matvec_row(m0, m1, m2, v0, v1, v2):
     """Row (m0, m1, m2) of numpy's ``@`` of a 3x3 matrix and a 3-vector, as its BLAS kernel
     (OpenBLAS dgemv on x86-64) rounds it: fma(m2, v2, fma(m0, v0, m1 v1))."""
     return _fma(m2, v2, _fma(m0, v0, m1 * v1))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _dot(a0, a1, a2, b0, b1, b2):
     """numpy's ``einsum('...c,...c->...')`` of 3-vectors, operation for operation."""
     return 0.0 + ((a0 * b0 + a2 * b2) + a1 * b1)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _sumsq(a0, a1, a2):
     """The sum under ``np.linalg.norm(axis=-1)`` (an add.reduce from 0, in order)."""
     return ((0.0 + a0 * a0) + a1 * a1) + a2 * a2
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _floor(x, lo):
     """``np.maximum(x, lo)``: NaN stays NaN."""
     return x if (x >= lo or x != x) else lo
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def axis_fixed(js, world, bones, at, a_off, out):
     """Axis control points of muscles fixed in bones: out[f, i] = M[f, bone_i, :3, :3] at_i +
     M[f, bone_i, :3, 3] for the rows i of muscles ``js`` (numpy's ``einsum('fick,ik->fic')``
@@ -98,7 +98,7 @@ def axis_fixed(js, world, bones, at, a_off, out):
                     out[f, i, c] = (0.0 + ((m[c, 0] * at[i, 0] + m[c, 2] * at[i, 2]) + m[c, 1] * at[i, 1])) + m[c, 3]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def axis_paths(js, world, pbones, loc, active, p_off, wbones, wlocal, w_off, kind, prm, wrap_axis, wrap_sign,
                method, on, rng, fractions, k_off, fit, fit_off, a_off, out, out_inside):
     """Axis control points of path muscles ``js``, as :meth:`PathModel.control_points`:
@@ -163,7 +163,7 @@ def axis_paths(js, world, pbones, loc, active, p_off, wbones, wlocal, w_off, kin
                     out[f, a_off[j] + i, c] = acc
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _samples(p, a0, idx, w, didx, dw, s0, ns, xs, ts):
     """Axis samples xs (ns, 3) and unit tangents ts from control points p[a0 + i] (sparse
     basis rows idx, w and didx, dw from row s0): numpy's sparse ``einsum('sk,fskc->fsc')``, then
@@ -192,7 +192,7 @@ def _samples(p, a0, idx, w, didx, dw, s0, ns, xs, ts):
         ts[s, 2] = d2 / n
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _start_vector(rot, local, t0, t1, t2, out):
     """:func:`axdf_cli.model.rmf.perpendicular_unit` of ``rot @ local`` against the unit t:
     out (3,)."""
@@ -209,7 +209,7 @@ def _start_vector(rot, local, t0, t1, t2, out):
     out[2] = p2 / n
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _propagate(xs, ts, ns, r0, rs, rtol2):
     """The double-reflection recurrence of :func:`axdf_cli.model.rmf.propagate` over samples
     xs, ts (ns, 3) from r0 (3,): the unnormalised reference vectors rs (ns, 3) (the caller
@@ -268,7 +268,7 @@ def _propagate(xs, ts, ns, r0, rs, rtol2):
         rs[i + 1, 2] = c2
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _finish(r0, r1, r2, t0, t1, t2, out):
     """propagate's last step for one sample: r - (r . t) t, made unit: out (3,)."""
     d = _dot(r0, r1, r2, t0, t1, t2)
@@ -281,7 +281,7 @@ def _finish(r0, r1, r2, t0, t1, t2, out):
     out[2] = p2 / n
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _roll_args(rot, local, r_end, t_end, tgt, out):
     """The insertion roll's arctan2 arguments (y, x) (:meth:`MuscleModel._roll`): the angle from
     the propagated r_end to the insertion bone's reference ``rot @ local`` made ⟂ t_end
@@ -295,10 +295,10 @@ def _roll_args(rot, local, r_end, t_end, tgt, out):
     out[1] = _dot(a0, a1, a2, tgt[0], tgt[1], tgt[2])
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def frames_pass(js, p, world, a_off, s_off, bs_idx, bs_w, dbs_idx, dbs_w, q_off, bb_idx, bb_w, dbb_idx, dbb_w,
                 bind_j, g_off, dbg_idx, dbg_w, gw, origin, insertion, r0_local, rend_local, rtol2,
-                out_c, out_t, out_r, out_ends, out_roll, out_length):
+                out_q, out_ends, out_roll, out_length):
     """Step 2 of the module doc for the muscles ``js`` (K,) and every frame of the chunk:
 
     p          : (F, ΣN, 3)  axis control points (muscle j: rows a_off[j] .. a_off[j+1])
@@ -311,8 +311,8 @@ def frames_pass(js, p, world, a_off, s_off, bs_idx, bs_w, dbs_idx, dbs_w, q_off,
                              their weights
     origin, insertion : (M,) bones; r0_local, rend_local (M, 3) the start vector in the
                              origin bone and the insertion's rest reference in its bone
-    outputs    : out_c, out_t, out_r (ΣQ, 3, F) bound points' position, unit tangent and
-                 untwisted unit reference vector (frames last); out_ends (M, F, 2, 3) the
+    outputs    : out_q (3, ΣQ, 3, F) the bound points' position, unit tangent and untwisted
+                 unit reference vector (frames last); out_ends (M, F, 2, 3) the
                  unit tangents at t = 0 and 1; out_roll (M, F, 2) arctan2's (y, x) of the
                  insertion roll; out_length (M, F) the arc length sum_g gw_g |C'(t_g)|, added
                  in order (numpy's ``@`` here was OpenBLAS's dot, whose order changes with the
@@ -330,9 +330,9 @@ def frames_pass(js, p, world, a_off, s_off, bs_idx, bs_w, dbs_idx, dbs_w, q_off,
         smax = max(smax, s_off[j + 1] - s_off[j])
         nmax = max(nmax, a_off[j + 1] - a_off[j])
     pt = np.empty((nmax, 3, LANES))  # the block's control points, frames last
-    xs = np.empty((smax, 3, LANES))
-    ts = np.empty((smax, 3, LANES))
-    rs = np.empty((smax, 3, LANES))
+    res = np.empty((9, LANES))  # a bound point's results over the block (its shape known to the compiler)
+    smp = np.empty((3, smax, 3, LANES))  # the samples x, unit tangents t, reference vectors r (one array:
+    # one base pointer, so the compiler checks one overlap per loop, not one per pair of arrays)
     r0 = np.empty(3)
     rj = np.empty(3)
     tj = np.empty(3)
@@ -344,11 +344,12 @@ def frames_pass(js, p, world, a_off, s_off, bs_idx, bs_w, dbs_idx, dbs_w, q_off,
         ns = s_off[j + 1] - s_off[j]
         sb = s_off[j]
         for f0 in range(0, nf, LANES):
-            nb = min(LANES, nf - f0)
+            nb = _U(min(LANES, nf - f0))
+            fu = _U(f0)
             for i in range(na):
                 for c in range(3):
                     for f in range(nb):
-                        pt[i, c, f] = p[f0 + f, a0 + i, c]
+                        pt[i, c, f] = p[fu + f, a0 + i, c]
             # samples and unit tangents (sparse rows, in order from 0; d / max(|d|, 1e-300))
             for s in range(ns):
                 r = sb + s
@@ -358,28 +359,28 @@ def frames_pass(js, p, world, a_off, s_off, bs_idx, bs_w, dbs_idx, dbs_w, q_off,
                 v0, v1, v2 = dbs_w[r, 0], dbs_w[r, 1], dbs_w[r, 2]
                 for c in range(3):
                     for f in range(nb):
-                        xs[s, c, f] = ((0.0 + w0 * pt[i0, c, f]) + w1 * pt[i1, c, f]) + w2 * pt[i2, c, f]
+                        smp[0, s, c, f] = ((0.0 + w0 * pt[i0, c, f]) + w1 * pt[i1, c, f]) + w2 * pt[i2, c, f]
                 for f in range(nb):
                     d0 = ((0.0 + v0 * pt[e0, 0, f]) + v1 * pt[e1, 0, f]) + v2 * pt[e2, 0, f]
                     d1 = ((0.0 + v0 * pt[e0, 1, f]) + v1 * pt[e1, 1, f]) + v2 * pt[e2, 1, f]
                     d2 = ((0.0 + v0 * pt[e0, 2, f]) + v1 * pt[e1, 2, f]) + v2 * pt[e2, 2, f]
                     n = _floor(math.sqrt(_sumsq(d0, d1, d2)), _TINY)
-                    ts[s, 0, f] = d0 / n
-                    ts[s, 1, f] = d1 / n
-                    ts[s, 2, f] = d2 / n
+                    smp[1, s, 0, f] = d0 / n
+                    smp[1, s, 1, f] = d1 / n
+                    smp[1, s, 2, f] = d2 / n
             for f in range(nb):
-                _start_vector(world[f0 + f, origin[j]], r0_local[j], ts[0, 0, f], ts[0, 1, f], ts[0, 2, f], r0)
+                _start_vector(world[fu + f, origin[j]], r0_local[j], smp[1, 0, 0, f], smp[1, 0, 1, f], smp[1, 0, 2, f], r0)
                 for c in range(3):
-                    rs[0, c, f] = r0[c]
+                    smp[2, 0, c, f] = r0[c]
             # the double-reflection recurrence (rmf.propagate), every frame of the block at once
             for i in range(ns - 1):
                 for f in range(nb):
-                    x00 = xs[i, 0, f]
-                    x01 = xs[i, 1, f]
-                    x02 = xs[i, 2, f]
-                    x10 = xs[i + 1, 0, f]
-                    x11 = xs[i + 1, 1, f]
-                    x12 = xs[i + 1, 2, f]
+                    x00 = smp[0, i, 0, f]
+                    x01 = smp[0, i, 1, f]
+                    x02 = smp[0, i, 2, f]
+                    x10 = smp[0, i + 1, 0, f]
+                    x11 = smp[0, i + 1, 1, f]
+                    x12 = smp[0, i + 1, 2, f]
                     v0 = x10 - x00
                     v1 = x11 - x01
                     v2 = x12 - x02
@@ -387,35 +388,35 @@ def frames_pass(js, p, world, a_off, s_off, bs_idx, bs_w, dbs_idx, dbs_w, q_off,
                     sa = _dot(x10, x11, x12, x10, x11, x12)
                     sq = _dot(x00, x01, x02, x00, x01, x02)
                     k1 = 2.0 / cc1 if (cc1 > _EPS and cc1 > rtol2 * sa and cc1 > rtol2 * sq) else 0.0
-                    tt0 = ts[i, 0, f]
-                    tt1 = ts[i, 1, f]
-                    tt2 = ts[i, 2, f]
+                    tt0 = smp[1, i, 0, f]
+                    tt1 = smp[1, i, 1, f]
+                    tt2 = smp[1, i, 2, f]
                     kd = k1 * _dot(v0, v1, v2, tt0, tt1, tt2)
-                    u0 = ts[i + 1, 0, f] - (tt0 - kd * v0)
-                    u1 = ts[i + 1, 1, f] - (tt1 - kd * v1)
-                    u2 = ts[i + 1, 2, f] - (tt2 - kd * v2)
+                    u0 = smp[1, i + 1, 0, f] - (tt0 - kd * v0)
+                    u1 = smp[1, i + 1, 1, f] - (tt1 - kd * v1)
+                    u2 = smp[1, i + 1, 2, f] - (tt2 - kd * v2)
                     cc2 = _dot(u0, u1, u2, u0, u1, u2)
                     k2 = 2.0 / cc2 if cc2 > rtol2 else 0.0
-                    c0 = rs[i, 0, f]
-                    c1 = rs[i, 1, f]
-                    c2 = rs[i, 2, f]
+                    c0 = smp[2, i, 0, f]
+                    c1 = smp[2, i, 1, f]
+                    c2 = smp[2, i, 2, f]
                     # cur - (v1 . cur) a1 with a1 = k1 v1, then likewise with v2 (sums in order, from 0)
                     sm = ((0.0 + v0 * c0) + v1 * c1) + v2 * c2
                     c0 = c0 - sm * (k1 * v0)
                     c1 = c1 - sm * (k1 * v1)
                     c2 = c2 - sm * (k1 * v2)
                     sm = ((0.0 + u0 * c0) + u1 * c1) + u2 * c2
-                    rs[i + 1, 0, f] = c0 - sm * (k2 * u0)
-                    rs[i + 1, 1, f] = c1 - sm * (k2 * u1)
-                    rs[i + 1, 2, f] = c2 - sm * (k2 * u2)
+                    smp[2, i + 1, 0, f] = c0 - sm * (k2 * u0)
+                    smp[2, i + 1, 1, f] = c1 - sm * (k2 * u1)
+                    smp[2, i + 1, 2, f] = c2 - sm * (k2 * u2)
             e = ns - 1
             for f in range(nb):
                 for c in range(3):
-                    out_ends[j, f0 + f, 0, c] = ts[0, c, f]
-                    out_ends[j, f0 + f, 1, c] = ts[e, c, f]
-                    tj[c] = ts[e, c, f]
-                _finish(rs[e, 0, f], rs[e, 1, f], rs[e, 2, f], tj[0], tj[1], tj[2], rj)
-                _roll_args(world[f0 + f, insertion[j]], rend_local[j], rj, tj, tgt, out_roll[j, f0 + f])
+                    out_ends[j, fu + f, 0, c] = smp[1, 0, c, f]
+                    out_ends[j, fu + f, 1, c] = smp[1, e, c, f]
+                    tj[c] = smp[1, e, c, f]
+                _finish(smp[2, e, 0, f], smp[2, e, 1, f], smp[2, e, 2, f], tj[0], tj[1], tj[2], rj)
+                _roll_args(world[fu + f, insertion[j]], rend_local[j], rj, tj, tgt, out_roll[j, fu + f])
             # the bound points: C(t), its unit tangent, one double-reflection step from sample s
             for q in range(q_off[j], q_off[j + 1]):
                 s = bind_j[q]
@@ -435,12 +436,12 @@ def frames_pass(js, p, world, a_off, s_off, bs_idx, bs_w, dbs_idx, dbs_w, q_off,
                     t11 = d1 / n
                     t12 = d2 / n
                     # the sample's reference vector made unit and orthogonal (propagate's last step)
-                    ts0 = ts[s, 0, f]
-                    ts1 = ts[s, 1, f]
-                    ts2 = ts[s, 2, f]
-                    q0 = rs[s, 0, f]
-                    q1 = rs[s, 1, f]
-                    q2 = rs[s, 2, f]
+                    ts0 = smp[1, s, 0, f]
+                    ts1 = smp[1, s, 1, f]
+                    ts2 = smp[1, s, 2, f]
+                    q0 = smp[2, s, 0, f]
+                    q1 = smp[2, s, 1, f]
+                    q2 = smp[2, s, 2, f]
                     dd = _dot(q0, q1, q2, ts0, ts1, ts2)
                     q0 = q0 - dd * ts0
                     q1 = q1 - dd * ts1
@@ -449,9 +450,9 @@ def frames_pass(js, p, world, a_off, s_off, bs_idx, bs_w, dbs_idx, dbs_w, q_off,
                     q0 = q0 / n
                     q1 = q1 / n
                     q2 = q2 / n
-                    x00 = xs[s, 0, f]
-                    x01 = xs[s, 1, f]
-                    x02 = xs[s, 2, f]
+                    x00 = smp[0, s, 0, f]
+                    x01 = smp[0, s, 1, f]
+                    x02 = smp[0, s, 2, f]
                     u0 = x10 - x00
                     u1 = x11 - x01
                     u2 = x12 - x02
@@ -478,18 +479,21 @@ def frames_pass(js, p, world, a_off, s_off, bs_idx, bs_w, dbs_idx, dbs_w, q_off,
                     r11 = r11 - dd * t11
                     r12 = r12 - dd * t12
                     n = _floor(math.sqrt(_sumsq(r10, r11, r12)), _EPS)
-                    out_c[q, 0, f0 + f] = x10
-                    out_c[q, 1, f0 + f] = x11
-                    out_c[q, 2, f0 + f] = x12
-                    out_t[q, 0, f0 + f] = t10
-                    out_t[q, 1, f0 + f] = t11
-                    out_t[q, 2, f0 + f] = t12
-                    out_r[q, 0, f0 + f] = r10 / n
-                    out_r[q, 1, f0 + f] = r11 / n
-                    out_r[q, 2, f0 + f] = r12 / n
+                    res[0, f] = x10
+                    res[1, f] = x11
+                    res[2, f] = x12
+                    res[3, f] = t10
+                    res[4, f] = t11
+                    res[5, f] = t12
+                    res[6, f] = r10 / n
+                    res[7, f] = r11 / n
+                    res[8, f] = r12 / n
+                for kk in range(9):  # (written apart: stores to one scratch of fixed shape keep the loop above vector code)
+                    for f in range(nb):
+                        out_q[kk // 3, q, kk % 3, fu + f] = res[kk, f]
             # arc length: the speeds at the Gauss points against their weights, in order
             for f in range(nb):
-                out_length[j, f0 + f] = 0.0
+                out_length[j, fu + f] = 0.0
             for r in range(g_off[j], g_off[j + 1]):
                 i0, i1, i2 = dbg_idx[r, 0], dbg_idx[r, 1], dbg_idx[r, 2]
                 v0, v1, v2 = dbg_w[r, 0], dbg_w[r, 1], dbg_w[r, 2]
@@ -498,10 +502,10 @@ def frames_pass(js, p, world, a_off, s_off, bs_idx, bs_w, dbs_idx, dbs_w, q_off,
                     d0 = ((0.0 + v0 * pt[i0, 0, f]) + v1 * pt[i1, 0, f]) + v2 * pt[i2, 0, f]
                     d1 = ((0.0 + v0 * pt[i0, 1, f]) + v1 * pt[i1, 1, f]) + v2 * pt[i2, 1, f]
                     d2 = ((0.0 + v0 * pt[i0, 2, f]) + v1 * pt[i1, 2, f]) + v2 * pt[i2, 2, f]
-                    out_length[j, f0 + f] += math.sqrt(_sumsq(d0, d1, d2)) * g
+                    out_length[j, fu + f] += math.sqrt(_sumsq(d0, d1, d2)) * g
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def roll_pass(js, p, world, a_off, s_off, bs_idx, bs_w, dbs_idx, dbs_w, origin, insertion, r0_local, rend_local,
               rtol2, out_roll):
     """The insertion roll's arctan2 arguments alone (M, F, 2), from the samples of the given
@@ -528,7 +532,7 @@ def roll_pass(js, p, world, a_off, s_off, bs_idx, bs_w, dbs_idx, dbs_w, origin, 
             _roll_args(world[f, insertion[j]], rend_local[j], rj, ts[ns - 1], r0, out_roll[j, f])
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _grid(net_a, net_w, u_idx, u_w, v_idx, v_w, ta, tw, ga, gw):
     """:func:`axdf_cli.model.kernels._tessellate` of one frame into the layout the loops
     below run along: nets (m, 24) (rows of 8 points x 3); ta, tw (3, 8, U) along; ga, gw
@@ -556,7 +560,7 @@ def _grid(net_a, net_w, u_idx, u_w, v_idx, v_w, ta, tw, ga, gw):
             gw[c, na + 1, u] = gw[c, 1, u]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _volume_terms(ga, gw, terms):
     """Each quad's four contributions to :func:`axdf_cli.model.kernels._volume_cubic`'s sums
     (terms (4, (A + 2) U) at the quad's corner (u, a): flat index (a + 1) U + u), computed over
@@ -605,7 +609,7 @@ def _volume_terms(ga, gw, terms):
         terms[3, i] = wx0 * q0 + wx1 * q1 + wx2 * q2
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _ring_normals(ga, nrm):
     """:func:`axdf_cli.model.kernels._ring_vertices`' normals of one frame's grid (3, A + 2, U)
     into nrm (same layout), over the whole grid at once (rows 0 and U - 1 and the ghost
@@ -635,7 +639,7 @@ def _ring_normals(ga, nrm):
         o[2, i] = n2 / ln
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _unpack_grid(ga, nrm, bv, bn):
     """The rings' vertices and normals (grids (3, A + 2, U)) into one frame's (V, 3) arrays,
     vertex (u, a) at 1 + (u - 1) A + a (the poles are set apart)."""
@@ -650,7 +654,7 @@ def _unpack_grid(ga, nrm, bv, bn):
                 bn[base + a, c] = nrm[c, a + one, u]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _pole_normal(ga, row, ring, sign, e0, e1, e2, out):
     """:func:`axdf_cli.model.kernels._pole_normals` of one pole (grid (3, A + 2, U); the pole
     at along-row ``row``, its fan to ``ring``) into out (3,): the fan's area-weighted normal,
@@ -683,14 +687,14 @@ def _pole_normal(ga, row, ring, sign, e0, e1, e2, out):
     out[2] = f2
 
 
-@njit(cache=True)
-def shape_pass(js, p, a_off, cb, tb, rb, ends, theta, tension, scale0, q_off, lam, uvw, beta, bump, gain,
+@njit(cache=True, error_model="numpy")
+def shape_pass(js, p, a_off, fr, ends, theta, tension, scale0, q_off, lam, uvw, beta, bump, gain,
                m_off, u_off, u_idx, u_w, v_off, v_idx, v_w, solve, v0, s_min, s_max, iters, rtol,
                vert_off, out_v, out_n, out_vol, out_s, out_bad, out_cp):
     """Step 3 of the module doc for the muscles ``js`` (K,) and every frame f:
 
     p, a_off     : axis control points (F, ΣN, 3) (the surface's poles are the axis ends)
-    cb, tb, rb   : (ΣQ, 3, F) frames_pass's bound points (position, tangent, untwisted R)
+    fr           : (3, ΣQ, 3, F) frames_pass's bound points (position, tangent, untwisted R)
     ends         : (M, F, 2, 3) unit tangents at the axis ends
     theta        : (M, F) the insertion roll on its branch (radians), spread by ``lam``
     tension      : (M, F) effective tension e, clipped to [0, 1]
@@ -715,6 +719,8 @@ def shape_pass(js, p, a_off, cb, tb, rb, ends, theta, tension, scale0, q_off, la
     """
     nf = p.shape[0]
     pole = np.empty(3)
+    res = np.empty((6, LANES))  # a bound point's fixed and scaled parts over a block (fixed shape: vector code)
+    cs = np.empty((2, LANES))
     for k in range(js.shape[0]):
         j = js[k]
         nq = q_off[j + 1] - q_off[j]
@@ -724,8 +730,7 @@ def shape_pass(js, p, a_off, cb, tb, rb, ends, theta, tension, scale0, q_off, la
         nv = 2 + (nu - 2) * na
         last = nv - 1
         # this muscle's scratch (a few allocations per muscle and chunk)
-        net_a = np.empty((nm, 24))
-        net_w = np.empty((nm, 24))
+        nets = np.empty((2, LANES, nm, 24))  # the block's control nets: fixed part, scaled part
         ta = np.empty((3, 8, nu))
         tw = np.empty((3, 8, nu))
         ga = np.empty((3, na + 2, nu))
@@ -738,102 +743,116 @@ def shape_pass(js, p, a_off, cb, tb, rb, ends, theta, tension, scale0, q_off, la
         uj_w = u_w[u_off[j]:u_off[j + 1]]
         vj_idx = v_idx[v_off[j]:v_off[j + 1]]
         vj_w = v_w[v_off[j]:v_off[j + 1]]
-        for f in range(nf):
-            th = theta[j, f]
-            e = tension[j, f]
-            sf = scale0[j, f]
-            ge = gain * e
+        for f0 in range(0, nf, LANES):
+            nb = _U(min(LANES, nf - f0))
+            fu = _U(f0)
             for qq in range(nq):
                 q = q_off[j] + qq
-                t0 = tb[q, 0, f]
-                t1 = tb[q, 1, f]
-                t2 = tb[q, 2, f]
-                r0 = rb[q, 0, f]
-                r1 = rb[q, 1, f]
-                r2 = rb[q, 2, f]
-                # S = T x R (np.cross), then the twist about T
-                x0 = t1 * r2 - t2 * r1
-                x1 = t2 * r0 - t0 * r2
-                x2 = t0 * r1 - t1 * r0
-                ang = th * lam[q]
-                ca = math.cos(ang)
-                sa = math.sin(ang)
-                rr0 = ca * r0 + sa * x0
-                rr1 = ca * r1 + sa * x1
-                rr2 = ca * r2 + sa * x2
-                ss0 = ca * x0 - sa * r0
-                ss1 = ca * x1 - sa * r1
-                ss2 = ca * x2 - sa * r2
+                lq = lam[q]
+                for f in range(nb):  # the twist's cos and sin (libm's, one call each)
+                    ang = theta[j, fu + f] * lq
+                    cs[0, f] = math.cos(ang)
+                    cs[1, f] = math.sin(ang)
                 u = uvw[q, 0]
                 v = uvw[q, 1]
                 w = uvw[q, 2]
-                o0 = (u * t0 + v * rr0) + w * ss0
-                o1 = (u * t1 + v * rr1) + w * ss1
-                o2 = (u * t2 + v * rr2) + w * ss2
                 b = beta[q]
-                tau = math.sqrt(1.0 + (ge * (2.0 * bump[q] - 1.0)) * b)
-                h = e * bump[q]
-                kh = b * ((tau * h) * sf)
+                bq = bump[q]
                 kb = 1.0 - b
-                ks = b * (tau * (1.0 - h))
+                for f in range(nb):
+                    e = tension[j, fu + f]
+                    t0 = fr[1, q, 0, fu + f]
+                    t1 = fr[1, q, 1, fu + f]
+                    t2 = fr[1, q, 2, fu + f]
+                    r0 = fr[2, q, 0, fu + f]
+                    r1 = fr[2, q, 1, fu + f]
+                    r2 = fr[2, q, 2, fu + f]
+                    # S = T x R (np.cross), then the twist about T
+                    x0 = t1 * r2 - t2 * r1
+                    x1 = t2 * r0 - t0 * r2
+                    x2 = t0 * r1 - t1 * r0
+                    ca = cs[0, f]
+                    sa = cs[1, f]
+                    rr0 = ca * r0 + sa * x0
+                    rr1 = ca * r1 + sa * x1
+                    rr2 = ca * r2 + sa * x2
+                    ss0 = ca * x0 - sa * r0
+                    ss1 = ca * x1 - sa * r1
+                    ss2 = ca * x2 - sa * r2
+                    o0 = (u * t0 + v * rr0) + w * ss0
+                    o1 = (u * t1 + v * rr1) + w * ss1
+                    o2 = (u * t2 + v * rr2) + w * ss2
+                    tau = math.sqrt(1.0 + ((gain * e) * (2.0 * bq - 1.0)) * b)
+                    h = e * bq
+                    kh = b * ((tau * h) * scale0[j, fu + f])
+                    ks = b * (tau * (1.0 - h))
+                    res[0, f] = (fr[0, q, 0, fu + f] + kb * o0) + kh * o0
+                    res[1, f] = (fr[0, q, 1, fu + f] + kb * o1) + kh * o1
+                    res[2, f] = (fr[0, q, 2, fu + f] + kb * o2) + kh * o2
+                    res[3, f] = ks * o0
+                    res[4, f] = ks * o1
+                    res[5, f] = ks * o2
                 row = 1 + qq // 8
                 col = 3 * (qq % 8)
-                net_a[row, col] = (cb[q, 0, f] + kb * o0) + kh * o0
-                net_a[row, col + 1] = (cb[q, 1, f] + kb * o1) + kh * o1
-                net_a[row, col + 2] = (cb[q, 2, f] + kb * o2) + kh * o2
-                net_w[row, col] = ks * o0
-                net_w[row, col + 1] = ks * o1
-                net_w[row, col + 2] = ks * o2
-            for col in range(8):  # the pole rows: the axis ends (fixed), nothing scaled
-                for c in range(3):
-                    net_a[0, 3 * col + c] = p[f, a_off[j], c]
-                    net_a[nm - 1, 3 * col + c] = p[f, a_off[j + 1] - 1, c]
-                    net_w[0, 3 * col + c] = 0.0
-                    net_w[nm - 1, 3 * col + c] = 0.0
-            _grid(net_a, net_w, uj_idx, uj_w, vj_idx, vj_w, ta, tw, ga, gw)
-            _volume_terms(ga, gw, terms)
-            c0 = 0.0
-            c1 = 0.0
-            c2 = 0.0
-            c3 = 0.0
-            for u in range(nu - 1):  # the quads' sums in kernels._volume_cubic's order
-                for a in range(na):
-                    i = (a + 1) * nu + u
-                    c0 += terms[0, i]
-                    c1 += terms[1, i]
-                    c2 += terms[2, i]
-                    c3 += terms[3, i]
-            c0 = c0 / 6.0
-            c1 = c1 / 6.0
-            c2 = c2 / 6.0
-            c3 = c3 / 6.0
-            s = sf
-            bad = False
-            if solve[j]:
-                s, bad = _solve_scale(c0, c1, c2, c3, v0[j], sf, iters, rtol)
-            sc = min(max(s, s_min), s_max)
-            out_vol[j, f] = ((c3 * sc + c2) * sc + c1) * sc + c0
-            out_s[j, f] = s
-            out_bad[j, f] = bad
-            g_ = ga.reshape(-1)
-            w_ = gw.reshape(-1)
-            for i in range(g_.shape[0]):
-                g_[i] += sc * w_[i]
-            _ring_normals(ga, nrm)
-            bv = block_v[f]
-            bn = block_n[f]
-            for c in range(3):
-                bv[0, c] = ga[c, 1, 0]
-                bv[last, c] = ga[c, 1, nu - 1]
-            _unpack_grid(ga, nrm, bv, bn)
-            _pole_normal(ga, 0, 1, 1.0, -ends[j, f, 0, 0], -ends[j, f, 0, 1], -ends[j, f, 0, 2], pole)
-            for c in range(3):
-                bn[0, c] = pole[c]
-            _pole_normal(ga, nu - 1, nu - 2, -1.0, ends[j, f, 1, 0], ends[j, f, 1, 1], ends[j, f, 1, 2], pole)
-            for c in range(3):
-                bn[last, c] = pole[c]
-            if out_cp.shape[0] > 0:
-                for qq in range(nq):
+                for f in range(nb):
                     for c in range(3):
-                        e3 = 3 * (qq % 8) + c
-                        out_cp[f, q_off[j] + qq, c] = net_a[1 + qq // 8, e3] + sc * net_w[1 + qq // 8, e3]
+                        nets[0, f, row, col + c] = res[c, f]
+                        nets[1, f, row, col + c] = res[3 + c, f]
+            for f in range(nb):
+                ff = fu + f
+                net_a = nets[0, f]
+                net_w = nets[1, f]
+                for col in range(8):  # the pole rows: the axis ends (fixed), nothing scaled
+                    for c in range(3):
+                        net_a[0, 3 * col + c] = p[ff, a_off[j], c]
+                        net_a[nm - 1, 3 * col + c] = p[ff, a_off[j + 1] - 1, c]
+                        net_w[0, 3 * col + c] = 0.0
+                        net_w[nm - 1, 3 * col + c] = 0.0
+                sf = scale0[j, ff]
+                _grid(net_a, net_w, uj_idx, uj_w, vj_idx, vj_w, ta, tw, ga, gw)
+                _volume_terms(ga, gw, terms)
+                c0 = 0.0
+                c1 = 0.0
+                c2 = 0.0
+                c3 = 0.0
+                for u in range(nu - 1):  # the quads' sums in kernels._volume_cubic's order
+                    for a in range(na):
+                        i = (a + 1) * nu + u
+                        c0 += terms[0, i]
+                        c1 += terms[1, i]
+                        c2 += terms[2, i]
+                        c3 += terms[3, i]
+                c0 = c0 / 6.0
+                c1 = c1 / 6.0
+                c2 = c2 / 6.0
+                c3 = c3 / 6.0
+                s = sf
+                bad = False
+                if solve[j]:
+                    s, bad = _solve_scale(c0, c1, c2, c3, v0[j], sf, iters, rtol)
+                sc = min(max(s, s_min), s_max)
+                out_vol[j, ff] = ((c3 * sc + c2) * sc + c1) * sc + c0
+                out_s[j, ff] = s
+                out_bad[j, ff] = bad
+                g_ = ga.reshape(-1)
+                w_ = gw.reshape(-1)
+                for i in range(g_.shape[0]):
+                    g_[i] += sc * w_[i]
+                _ring_normals(ga, nrm)
+                bv = block_v[ff]
+                bn = block_n[ff]
+                for c in range(3):
+                    bv[0, c] = ga[c, 1, 0]
+                    bv[last, c] = ga[c, 1, nu - 1]
+                _unpack_grid(ga, nrm, bv, bn)
+                _pole_normal(ga, 0, 1, 1.0, -ends[j, ff, 0, 0], -ends[j, ff, 0, 1], -ends[j, ff, 0, 2], pole)
+                for c in range(3):
+                    bn[0, c] = pole[c]
+                _pole_normal(ga, nu - 1, nu - 2, -1.0, ends[j, ff, 1, 0], ends[j, ff, 1, 1], ends[j, ff, 1, 2], pole)
+                for c in range(3):
+                    bn[last, c] = pole[c]
+                if out_cp.shape[0] > 0:
+                    for qq in range(nq):
+                        for c in range(3):
+                            e3 = 3 * (qq % 8) + c
+                            out_cp[ff, q_off[j] + qq, c] = net_a[1 + qq // 8, e3] + sc * net_w[1 + qq // 8, e3]
