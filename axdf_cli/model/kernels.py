@@ -293,3 +293,38 @@ def surface_stage(fixed, scaled, pole0, pole1, end0, end1, u_idx, u_w, v_idx, v_
         out_vol[f] = vol
         out_s[f] = s
         out_bad[f] = bad
+
+
+@njit(cache=True, error_model="numpy")
+def written(vertices, normals, rest_v, rest_n, out_v, out_n, bounds):
+    """What is written of a muscle's frames, in one pass: vertices, normals (F, V, 3) float64
+    → out_v, out_n (F, V, 3) float32 (numpy's rounding, as ``astype``), a frame with any
+    non-finite float32 value replaced by the rest shape rest_v, rest_n (V, 3) float32;
+    bounds (F, 2, 3) each frame's smallest and largest written coordinates. Returns the
+    replaced frames' flags (F,)."""
+    nf, nv = vertices.shape[0], vertices.shape[1]
+    bad = np.zeros(nf, dtype=np.bool_)
+    for f in range(nf):
+        ok = True
+        for i in range(nv):
+            for c in range(3):
+                x = np.float32(vertices[f, i, c])
+                y = np.float32(normals[f, i, c])
+                out_v[f, i, c] = x
+                out_n[f, i, c] = y
+                if not (np.isfinite(x) and np.isfinite(y)):
+                    ok = False
+        if not ok:
+            bad[f] = True
+            out_v[f] = rest_v
+            out_n[f] = rest_n
+        for c in range(3):
+            lo = out_v[f, 0, c]
+            hi = lo
+            for i in range(1, nv):
+                x = out_v[f, i, c]
+                lo = min(lo, x)
+                hi = max(hi, x)
+            bounds[f, 0, c] = lo
+            bounds[f, 1, c] = hi
+    return bad

@@ -19,6 +19,7 @@ from typing import Iterator
 
 import numpy as np
 
+from axdf_cli.model import kernels
 from axdf_cli.model.batch import MuscleBatch
 from axdf_cli.model.muscle import FrameResult
 from axdf_cli.model.pose import effective_tension, sample_activation, sample_coordinates
@@ -266,12 +267,15 @@ def evaluate_chunks(plan: RunPlan, chunk: int | None = None, twist_ref: np.ndarr
         yield c.rows, c.world, results
 
 
-def finite_or_rest(res, model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def finite_or_rest(res, model, bounds: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A result's vertices and normals as float32, frames with any non-finite value replaced
-    by the rest shape (what is written and rendered): (positions, normals, replaced frame indices)."""
-    pos = res.vertices.astype(np.float32)
-    nrm = res.normals.astype(np.float32)
-    bad = np.nonzero(~(np.isfinite(pos).all(axis=(1, 2)) & np.isfinite(nrm).all(axis=(1, 2))))[0]
-    pos[bad] = model.rest_vertices
-    nrm[bad] = model.rest_normals
-    return pos, nrm, bad
+    by the rest shape (what is written and rendered): (positions, normals, replaced frame
+    indices); ``bounds`` (F, 2, 3), when given, receives each frame's smallest and largest
+    written coordinates. One compiled pass (:func:`axdf_cli.model.kernels.written`)."""
+    nf, nv = res.vertices.shape[:2]
+    pos = np.empty((nf, nv, 3), np.float32)
+    nrm = np.empty((nf, nv, 3), np.float32)
+    box = np.empty((nf, 2, 3), np.float32) if bounds is None else bounds
+    bad = kernels.written(np.ascontiguousarray(res.vertices, np.float64), np.ascontiguousarray(res.normals, np.float64),
+                          model.rest_vertices, model.rest_normals, pos, nrm, box)
+    return pos, nrm, np.nonzero(bad)[0]
