@@ -296,35 +296,55 @@ def surface_stage(fixed, scaled, pole0, pole1, end0, end1, u_idx, u_w, v_idx, v_
 
 
 @njit(cache=True, error_model="numpy")
-def written(vertices, normals, rest_v, rest_n, out_v, out_n, bounds):
-    """What is written of a muscle's frames, in one pass: vertices, normals (F, V, 3) float64
-    → out_v, out_n (F, V, 3) float32 (numpy's rounding, as ``astype``), a frame with any
-    non-finite float32 value replaced by the rest shape rest_v, rest_n (V, 3) float32;
-    bounds (F, 2, 3) each frame's smallest and largest written coordinates. Returns the
-    replaced frames' flags (F,)."""
+def written(vertices, normals, rest_v, rest_n, out_v, out_n, bounds, bad):
+    """What is written of a muscle's frames: vertices, normals (F, V, 3) float64 → out_v, out_n
+    (F, V, 3) float32 (rounded as numpy's ``astype``), a frame with any non-finite float32
+    value replaced by the rest shape rest_v, rest_n (V, 3) float32 (its flag set in bad (F,));
+    bounds (F, 2, 3) each frame's smallest and largest written coordinates."""
     nf, nv = vertices.shape[0], vertices.shape[1]
-    bad = np.zeros(nf, dtype=np.bool_)
+    flat_v = vertices.reshape(nf, -1)
+    flat_n = normals.reshape(nf, -1)
+    o_v = out_v.reshape(nf, -1)
+    o_n = out_n.reshape(nf, -1)
+    n3 = _U(3 * nv)
     for f in range(nf):
         ok = True
-        for i in range(nv):
-            for c in range(3):
-                x = np.float32(vertices[f, i, c])
-                y = np.float32(normals[f, i, c])
-                out_v[f, i, c] = x
-                out_n[f, i, c] = y
-                if not (np.isfinite(x) and np.isfinite(y)):
-                    ok = False
+        for i in range(n3):  # (x - x is 0 for a finite x, NaN otherwise; an and of flags: vector code)
+            x = np.float32(flat_v[f, i])
+            y = np.float32(flat_n[f, i])
+            o_v[f, i] = x
+            o_n[f, i] = y
+            ok = ok & ((x - x) == 0.0) & ((y - y) == 0.0)
+        bad[f] = not ok
         if not ok:
-            bad[f] = True
             out_v[f] = rest_v
             out_n[f] = rest_n
-        for c in range(3):
-            lo = out_v[f, 0, c]
-            hi = lo
-            for i in range(1, nv):
-                x = out_v[f, i, c]
-                lo = min(lo, x)
-                hi = max(hi, x)
-            bounds[f, 0, c] = lo
-            bounds[f, 1, c] = hi
-    return bad
+        _bounds(out_v[f], bounds[f])
+
+
+@njit(cache=True, error_model="numpy", fastmath={"nnan", "nsz"})
+def _bounds(v, out):
+    """Smallest and largest of each coordinate of finite points v (V, 3) into out (2, 3)
+    (no NaN here, so the compiler may take the minima in any order: vector code)."""
+    lo0 = v[0, 0]
+    lo1 = v[0, 1]
+    lo2 = v[0, 2]
+    hi0 = lo0
+    hi1 = lo1
+    hi2 = lo2
+    for i in range(_U(1), _U(v.shape[0])):
+        lo0 = min(lo0, v[i, 0])
+        lo1 = min(lo1, v[i, 1])
+        lo2 = min(lo2, v[i, 2])
+        hi0 = max(hi0, v[i, 0])
+        hi1 = max(hi1, v[i, 1])
+        hi2 = max(hi2, v[i, 2])
+    out[0, 0] = lo0
+    out[0, 1] = lo1
+    out[0, 2] = lo2
+    out[1, 0] = hi0
+    out[1, 1] = hi1
+    out[1, 2] = hi2
+
+
+_U = np.uint64  # loop indices the compiler can vectorize over (no negative-index wraparound)

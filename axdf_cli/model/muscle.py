@@ -171,6 +171,9 @@ class FrameResult:
     twist: np.ndarray  # (F,) insertion roll spread along the axis (degrees, unwrapped)
     tension: np.ndarray  # (F,) effective tension
     warnings: list  # [(frame index in block, message)]
+    # what the sinks write of it, made after every stage (axdf_cli.pipeline.evaluate.finite_or_rest):
+    # positions, normals (F, V, 3) float32, the frames replaced by the rest shape, bounds (F, 2, 3)
+    written: tuple | None = None
 
 
 class MuscleModel:

@@ -255,7 +255,9 @@ def _surfaces(plan, chunk: Chunk, stages, state: list) -> Iterator[tuple[int, Fr
     for k, stage in enumerate(stages):
         state[k], chunk = stage(state[k], chunk)
     for j in chunk.muscles:
-        yield j, chunk.results.pop(j)
+        res = chunk.results.pop(j)
+        res.written = written_arrays(res, plan.models[j])
+        yield j, res
 
 
 def evaluate_chunks(plan: RunPlan, chunk: int | None = None, twist_ref: np.ndarray | None = None,
@@ -271,11 +273,24 @@ def finite_or_rest(res, model, bounds: np.ndarray | None = None) -> tuple[np.nda
     """A result's vertices and normals as float32, frames with any non-finite value replaced
     by the rest shape (what is written and rendered): (positions, normals, replaced frame
     indices); ``bounds`` (F, 2, 3), when given, receives each frame's smallest and largest
-    written coordinates. One compiled pass (:func:`axdf_cli.model.kernels.written`)."""
+    written coordinates. :func:`evaluate_plan` makes them for every result after the stages
+    (``res.written``); otherwise one compiled pass here (:func:`axdf_cli.model.kernels.written`)."""
+    if res.written is None:
+        res.written = written_arrays(res, model)
+    pos, nrm, bad, box = res.written
+    if bounds is not None:
+        bounds[...] = box
+    return pos, nrm, bad
+
+
+def written_arrays(res, model) -> tuple:
+    """(positions, normals (F, V, 3) float32, replaced frame indices, bounds (F, 2, 3)) of a
+    result (:func:`finite_or_rest`)."""
     nf, nv = res.vertices.shape[:2]
     pos = np.empty((nf, nv, 3), np.float32)
     nrm = np.empty((nf, nv, 3), np.float32)
-    box = np.empty((nf, 2, 3), np.float32) if bounds is None else bounds
-    bad = kernels.written(np.ascontiguousarray(res.vertices, np.float64), np.ascontiguousarray(res.normals, np.float64),
-                          model.rest_vertices, model.rest_normals, pos, nrm, box)
-    return pos, nrm, np.nonzero(bad)[0]
+    box = np.empty((nf, 2, 3), np.float32)
+    bad = np.empty(nf, np.bool_)
+    kernels.written(np.ascontiguousarray(res.vertices, np.float64), np.ascontiguousarray(res.normals, np.float64),
+                    model.rest_vertices, model.rest_normals, pos, nrm, box, bad)
+    return pos, nrm, np.nonzero(bad)[0], box
