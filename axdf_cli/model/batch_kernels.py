@@ -57,26 +57,26 @@ def _fma(typingctx, a, b, c):
     return sig, codegen
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _matvec_row(m0, m1, m2, v0, v1, v2):
     """Row (m0, m1, m2) of numpy's ``@`` of a 3x3 matrix and a 3-vector, as its BLAS kernel
     (OpenBLAS dgemv on x86-64) rounds it: fma(m2, v2, fma(m0, v0, m1 v1))."""
     return _fma(m2, v2, _fma(m0, v0, m1 * v1))
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _dot(a0, a1, a2, b0, b1, b2):
     """numpy's ``einsum('...c,...c->...')`` of 3-vectors, operation for operation."""
     return 0.0 + ((a0 * b0 + a2 * b2) + a1 * b1)
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _sumsq(a0, a1, a2):
     """The sum under ``np.linalg.norm(axis=-1)`` (an add.reduce from 0, in order)."""
     return ((0.0 + a0 * a0) + a1 * a1) + a2 * a2
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _floor(x, lo):
     """``np.maximum(x, lo)``: NaN stays NaN."""
     return x if (x >= lo or x != x) else lo
