@@ -163,3 +163,54 @@ def test_axis_points_are_the_models(job):
         want, w = m.axis_points(world, q)
         assert p[:, batch.a_off[j]:batch.a_off[j + 1]].tobytes() == np.ascontiguousarray(want).tobytes()
         assert notes[j] == w
+
+
+def test_buffers_are_reused_only_once_no_result_refers_to_them():
+    """A chunk's outputs go into memory the batch hands out again, but never while a result
+    of an earlier call is alive: results kept across calls keep their values."""
+    plan, world, q, tension = _case("demo.yaml", 12)
+    batch = MuscleBatch(plan.models)
+    every = list(range(len(plan.models)))
+    p, _ = batch.axis_points(world, q, every)
+    a = batch.surfaces(world[:3], p[:3], tension[:3], None, every)
+    kept = {j: r.vertices.copy() for j, r in a.items()}
+    for _ in range(2 * len(batch.pool.buffers) + 2):  # more calls than the pool holds buffers
+        b = batch.surfaces(world[3:6], p[3:6], tension[3:6], None, every)
+        assert not np.shares_memory(b[0].vertices, a[0].vertices)
+    for j, r in a.items():
+        np.testing.assert_array_equal(r.vertices, kept[j])
+    base = b[0].vertices.base
+    del a, b, r
+    c = batch.surfaces(world[:3], p[:3], tension[:3], None, every)
+    assert any(np.shares_memory(c[0].vertices, buf) for buf in batch.pool.buffers)  # reused once free
+    assert base is not None
+
+
+def test_what_is_written_is_the_numpy_formulation():
+    """kernels.written (one compiled pass: float32, non-finite frames to the rest shape, each
+    frame's bounds) = astype(float32), isfinite, replacement and min/max in numpy, including
+    NaN, inf and a float64 too large for float32 in some frames."""
+    from axdf_cli.model import kernels
+
+    rng = np.random.default_rng(3)
+    f, v = 7, 53
+    verts = rng.normal(size=(f, v, 3)) * 0.1
+    norms = rng.normal(size=(f, v, 3))
+    verts[1, 5, 2] = np.nan
+    norms[3, 0, 0] = np.inf
+    verts[4, 9, 1] = 1e39  # finite in float64, inf in float32
+    verts[6, 2, 0] = -0.0
+    rest_v = rng.normal(size=(v, 3)).astype(np.float32)
+    rest_n = rng.normal(size=(v, 3)).astype(np.float32)
+    pos, nrm = np.empty((f, v, 3), np.float32), np.empty((f, v, 3), np.float32)
+    box, bad = np.empty((f, 2, 3), np.float32), np.empty(f, np.bool_)
+    kernels.written(verts, norms, rest_v, rest_n, pos, nrm, box, bad)
+    with np.errstate(over="ignore"):
+        want_p, want_n = verts.astype(np.float32), norms.astype(np.float32)
+    want_bad = ~(np.isfinite(want_p).all(axis=(1, 2)) & np.isfinite(want_n).all(axis=(1, 2)))
+    want_p[want_bad], want_n[want_bad] = rest_v, rest_n
+    np.testing.assert_array_equal(bad, want_bad)
+    assert list(np.nonzero(bad)[0]) == [1, 3, 4]
+    assert pos.tobytes() == want_p.tobytes() and nrm.tobytes() == want_n.tobytes()
+    np.testing.assert_array_equal(box[:, 0], want_p.min(axis=1))
+    np.testing.assert_array_equal(box[:, 1], want_p.max(axis=1))
