@@ -18,7 +18,7 @@ import pytest
 
 import reference_model
 from axdf_cli.model.batch import MuscleBatch
-from axdf_cli.model.muscle import MuscleModel
+from axdf_cli.model.muscle import FrameResult, MuscleModel
 from axdf_cli.model.pose import effective_tension, sample_activation, sample_coordinates
 from axdf_cli.model.skeleton import forward_kinematics
 
@@ -40,6 +40,11 @@ def _case(job: str, step: int):
     return plan, world, q, tension
 
 
+def _results(batch, *args, **kw) -> dict:
+    """MuscleBatch.surfaces as FrameResults."""
+    return {j: FrameResult(**f) for j, f in batch.surfaces(*args, **kw).items()}
+
+
 def _same_bits(a, b, name):
     for k in FIELDS:
         x, y = np.asarray(getattr(a, k)), np.asarray(getattr(b, k))
@@ -56,7 +61,7 @@ def test_every_muscle_at_once_is_numpys_step_1b_bit_for_bit(job, step):
     batch = MuscleBatch(plan.models)
     every = range(len(plan.models))
     p, _ = batch.axis_points(world, q, every)
-    got = batch.surfaces(world, p, tension, None, every)
+    got = _results(batch, world, p, tension, None, every)
     for j, m in enumerate(plan.models):
         want = reference_model.reference_step_1b(m, world, p[:, batch.a_off[j]:batch.a_off[j + 1]], tension[:, j],
                                                  blas=False)
@@ -88,7 +93,7 @@ def test_against_the_numpy_code_as_it_was_the_difference_is_the_arc_length_sum()
     batch = MuscleBatch(plan.models)
     every = range(len(plan.models))
     p, _ = batch.axis_points(world, q, every)
-    got = batch.surfaces(world, p, tension, None, every)
+    got = _results(batch, world, p, tension, None, every)
     for j, m in enumerate(plan.models):
         want = reference_model.reference_step_1b(m, world, p[:, batch.a_off[j]:batch.a_off[j + 1]], tension[:, j])
         a = got[j]
@@ -107,14 +112,14 @@ def test_packing_subsets_and_chunks_do_not_change_a_muscle():
     batch = MuscleBatch(plan.models)
     every = list(range(len(plan.models)))
     p, _ = batch.axis_points(world, q, every)
-    full = batch.surfaces(world, p, tension, None, every)
+    full = _results(batch, world, p, tension, None, every)
     some = [4, 1]
-    sub = batch.surfaces(world, p, tension[:, some], None, some)
+    sub = _results(batch, world, p, tension[:, some], None, some)
     for j in some:
         _same_bits(sub[j], full[j], plan.names[j])
     ref = np.stack([full[j].twist for j in every], axis=1)  # the unwrapped roll, as a reference
     for f in (0, 3, len(world) - 1):
-        one = batch.surfaces(world[f:f + 1], p[f:f + 1], tension[f:f + 1], np.radians(ref[f:f + 1]), every)
+        one = _results(batch, world[f:f + 1], p[f:f + 1], tension[f:f + 1], np.radians(ref[f:f + 1]), every)
         for j in every:
             for k in FIELDS:
                 assert np.asarray(getattr(one[j], k))[0].tobytes() == np.asarray(getattr(full[j], k))[f].tobytes(), \
@@ -127,7 +132,7 @@ def test_results_are_contiguous_per_muscle_and_independent():
     batch = MuscleBatch(plan.models)
     every = range(len(plan.models))
     p, _ = batch.axis_points(world, q, every)
-    res = batch.surfaces(world, p, tension, None, every)
+    res = _results(batch, world, p, tension, None, every)
     for j, m in enumerate(plan.models):
         v = res[j].vertices
         assert v.shape == (len(world), m.n_vertices, 3) and v.flags.c_contiguous and res[j].normals.flags.c_contiguous
@@ -172,16 +177,16 @@ def test_buffers_are_reused_only_once_no_result_refers_to_them():
     batch = MuscleBatch(plan.models)
     every = list(range(len(plan.models)))
     p, _ = batch.axis_points(world, q, every)
-    a = batch.surfaces(world[:3], p[:3], tension[:3], None, every)
+    a = _results(batch, world[:3], p[:3], tension[:3], None, every)
     kept = {j: r.vertices.copy() for j, r in a.items()}
     for _ in range(2 * len(batch.pool.buffers) + 2):  # more calls than the pool holds buffers
-        b = batch.surfaces(world[3:6], p[3:6], tension[3:6], None, every)
+        b = _results(batch, world[3:6], p[3:6], tension[3:6], None, every)
         assert not np.shares_memory(b[0].vertices, a[0].vertices)
     for j, r in a.items():
         np.testing.assert_array_equal(r.vertices, kept[j])
     base = b[0].vertices.base
     del a, b, r
-    c = batch.surfaces(world[:3], p[:3], tension[:3], None, every)
+    c = _results(batch, world[:3], p[:3], tension[:3], None, every)
     assert any(np.shares_memory(c[0].vertices, buf) for buf in batch.pool.buffers)  # reused once free
     assert base is not None
 

@@ -16,8 +16,8 @@ A chunk of F frames of K muscles is then two steps, as the run's stages need the
     in two compiled calls (:mod:`axdf_cli.model.batch_kernels`), with the roll's arctan2 and
     branch and the arc length's quadrature in numpy between them.
 
-The results are :class:`~axdf_cli.model.muscle.FrameResult` per muscle, their vertices and
-normals views of one buffer (each muscle's block (F, V_j, 3) contiguous). The arithmetic is
+The results are the fields of a :class:`~axdf_cli.model.muscle.FrameResult` per muscle, the
+vertices and normals views of one buffer (each muscle's block (F, V_j, 3) contiguous). The arithmetic is
 :meth:`MuscleModel.surface`'s, operation for operation (``tests/test_batch.py`` holds the two
 to the same bytes, or to the stated bound where a numpy kernel's order is not followed).
 """
@@ -77,8 +77,6 @@ class MuscleBatch:
     models), so it pickles small; build it once per run (:func:`axdf_cli.pipeline.evaluate.batch_of`)."""
 
     def __init__(self, models):
-        from axdf_cli.model.muscle import VolumeMode
-
         models = list(models)
         self.n = len(models)
         self.a_off = _offsets(m.n_axis for m in models)
@@ -111,8 +109,8 @@ class MuscleBatch:
         self.rend_local = np.array([m.rend_local for m in models], dtype=np.float64).reshape(-1, 3)
         self.l0 = np.array([m.l0 for m in models], dtype=np.float64)
         self.v0 = np.array([getattr(m, "v0", np.nan) for m in models], dtype=np.float64)
-        self.solve = np.array([m.volume_mode is VolumeMode.EXACT for m in models], dtype=np.bool_)
-        self.keep = np.array([m.volume_mode is VolumeMode.NONE for m in models], dtype=np.bool_)
+        self.solve = np.array([m.volume_mode.value == "exact" for m in models], dtype=np.bool_)  # (VolumeMode)
+        self.keep = np.array([m.volume_mode.value == "none" for m in models], dtype=np.bool_)
         self.m_off = _offsets(len(m.spec.sections) + 2 for m in models)
         self.u_off, self.u_idx, self.u_w = _rows([(m.u_idx, m.u_w) for m in models])
         self.v_off, self.v_idx, self.v_w = _rows([(m.v_idx, m.v_w) for m in models])
@@ -224,10 +222,10 @@ class MuscleBatch:
         the block); rest_volume: the volume ``exact`` keeps ("model": each model's own, None: no
         target, a number: that one); notes: {muscle: step 1a's [(frame index, warning)]};
         control_points: (F, ΣQ, 3) to receive the bound section control points as tessellated
-        (fixed + s scaled), or None. Returns {muscle: FrameResult} (:meth:`MuscleModel.surface`'s
-        fields). Their vertices and normals are views of buffers the batch hands out again
-        once no result of an earlier call refers to them (:class:`_Pool`)."""
-        from axdf_cli.model.muscle import FrameResult
+        (fixed + s scaled), or None. Returns {muscle: the fields of its
+        :class:`~axdf_cli.model.muscle.FrameResult`} (this room holds arrays only). The vertices
+        and normals are views of buffers the batch hands out again once no result of an
+        earlier call refers to them (:class:`_Pool`)."""
 
         js = np.asarray(list(muscles), dtype=np.int64)
         nf, nk, nq = world.shape[0], len(js), int(self.q_off[-1])
@@ -290,7 +288,7 @@ class MuscleBatch:
                 for i in np.nonzero(out_of[k])[0]:
                     warnings.append((int(i), f"section scale {scale[k, i]:.3g} clamped to "
                                              f"[{tol.SCALE_MIN}, {tol.SCALE_MAX}]"))
-            results[j] = FrameResult(vertices=out_v[a:b].reshape(nf, nv, 3), normals=out_n[a:b].reshape(nf, nv, 3),
-                                     length=length[k], volume=vol[k], scale=clipped[k], twist=twist[k],
-                                     tension=e[k], warnings=warnings)
+            results[j] = dict(vertices=out_v[a:b].reshape(nf, nv, 3), normals=out_n[a:b].reshape(nf, nv, 3),
+                              length=length[k], volume=vol[k], scale=clipped[k], twist=twist[k], tension=e[k],
+                              warnings=warnings)
         return results

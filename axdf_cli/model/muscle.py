@@ -42,6 +42,7 @@ from enum import Enum
 import numpy as np
 
 from axdf_cli.model import bspline, kernels, rmf
+from axdf_cli.model.batch import MuscleBatch
 from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.model.jiggle import JiggleSpec
@@ -439,13 +440,11 @@ class MuscleModel:
         nf = p.shape[0]
         tension = np.broadcast_to(np.asarray(tension, dtype=np.float64), (nf,))[:, None]
         ref = None if twist_reference is None else np.asarray(twist_reference, dtype=np.float64).reshape(nf, 1)
-        return self._batch().surfaces(world, p, tension, ref, [0], rest_volume, {0: list(warnings)},
-                                      control_points)[0]
+        return FrameResult(**self._batch().surfaces(world, p, tension, ref, [0], rest_volume, {0: list(warnings)},
+                                                    control_points)[0])
 
-    def _batch(self):
+    def _batch(self) -> MuscleBatch:
         """This muscle alone, packed for the compiled passes (made once, when first needed)."""
-        from axdf_cli.model.batch import MuscleBatch
-
         if getattr(self, "_one", None) is None:
             self._one = MuscleBatch([self])
         return self._one

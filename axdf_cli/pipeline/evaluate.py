@@ -250,8 +250,9 @@ def _surfaces(plan, chunk: Chunk, stages, state: list) -> Iterator[tuple[int, Fr
     js = list(chunk.muscles)
     tone = np.array([plan.muscles[j].tension for j in js], dtype=np.float64)
     tension = effective_tension(tone, chunk.activation[:, js])  # (C, K)
-    chunk.results = batch.surfaces(chunk.world, batch.pack(chunk.axis, len(chunk.frames)), tension,
-                                   chunk.twist[:, js], js, notes=chunk.notes)
+    fields = batch.surfaces(chunk.world, batch.pack(chunk.axis, len(chunk.frames)), tension, chunk.twist[:, js], js,
+                            notes=chunk.notes)
+    chunk.results = {j: FrameResult(**f) for j, f in fields.items()}
     for k, stage in enumerate(stages):
         state[k], chunk = stage(state[k], chunk)
     for j in chunk.muscles:
