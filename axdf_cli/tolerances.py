@@ -36,6 +36,18 @@ VOLUME_EXACT_PROMISE = 5e-3
 VOLUME_SOLVE_RTOL = 1e-10
 VOLUME_SOLVE_ITERS = 30
 
+# Imported MuJoCo muscles (axdf import mjcf): the axis is a quadratic B-spline fitted to the
+# wrapped path, and it cuts the path's corners (finger flexors fold by up to 140 degrees over
+# a few millimetres). Each muscle gets the fewest axis control points (AXIS_POINT_STEPS, up
+# to AXIS_POINTS_MAX) whose axis length stays within AXIS_LENGTH_TARGET of the path length
+# at the rest pose and at AXIS_PROBE_POSES poses drawn in the joints' ranges (seed
+# AXIS_PROBE_SEED): half the 1% the MuJoCo judge allows, so motions outside the probe keep a margin.
+AXIS_LENGTH_TARGET = 5e-3
+AXIS_POINT_STEPS = (32, 40, 48, 64, 80, 96, 128)
+AXIS_POINTS_MAX = 128
+AXIS_PROBE_POSES = 64
+AXIS_PROBE_SEED = 20
+
 # Degenerate geometry: an axis shorter than this (metres) or a section scale outside
 # [SCALE_MIN, SCALE_MAX] is reported as a per-muscle, per-frame warning.
 MIN_AXIS_LENGTH = 1e-6
@@ -58,6 +70,12 @@ YAML_MAX_DEPTH = 64
 BVH_MAX_BYTES = 512 * 1024 * 1024
 # numbers whose magnitude exceeds this are refused (metres, degrees, frames alike)
 MAX_ABS_NUMBER = 1e9
+# The highest frame rate a pose may have (and an importer may write): 100 kHz is beyond any
+# motion capture or simulation output we read; a rate past it is a unit mistake.
+MAX_FPS = 100000.0
+# Seeds (a data set's seed: and --seed): the same range in the file and on the command line,
+# within the numbers every axdf file accepts.
+MAX_SEED = 1_000_000_000
 
 # Rendering (tests/test_render_output.py). A vertex projected with camera.json is checked
 # against the EXR `id` and `Z` at the pixel containing it, when that pixel's centre falls
@@ -102,6 +120,28 @@ SEGMENT_SAMPLES = 16
 # A point is rigid with the root bone when it moves by less than this (metres) in the root's frame
 # over the sampled poses.
 ROOT_RIGID = 1e-6
+
+# A motion column of a coupled coordinate (a CoordinateCouplerConstraint's dependent) is
+# not read: the skeleton computes it. When it strays from the coupler's function of its
+# leader's column by more than this (OpenSim units, rad or m) the import warns. OpenSim's IK
+# satisfies the constraint to its assembly accuracy (the Rajagopal run: < 1e-8 rad); the
+# motion file's 8 printed decimals leave ~1e-8; 1e-5 rad (6e-4 deg, 10 µm) is far above
+# both and far below anything visible.
+COUPLED_COLUMN_ATOL = 1e-5
+
+# `axdf import osim --motion`: the axis (a smooth fit to the wrapped path) may fall this much
+# short of the path, as a fraction of its length, in any frame of the imported motion before
+# the importer raises the muscle's `axis_points` (by 4, up to AXIS_POINTS_RAISE_MAX). Half of the
+# 1% within which every imported muscle must match OpenSim's own length: the rest is room for
+# the wrapping's own tolerances. The shipped gait2392 walk and arm26 flexion reach 0.47% and
+# 0.31% at the default counts (they keep them); Rajagopal2016's running trial bends the knee
+# to 111°, where the hamstrings' 1.2 cm insertion hook cut by the default 12 points leaves
+# the axis 1.25% short.
+AXIS_SHORTFALL_MAX = 5e-3
+AXIS_POINTS_RAISE_MAX = 48
+# The shortfall is measured on at most this many frames of the motion, evenly spread (the
+# path moves smoothly: a 2000-frame sample of a long take misses no bend of it).
+AXIS_FIT_FRAMES = 2000
 
 # Data-set keypoints (axdf_cli/model/keypoints.py): two keypoints closer than this (metres) at
 # the rest pose are one point. Coincident by construction are BVH helper joints at offset 0

@@ -7,9 +7,19 @@ muscle activation from a controls file); plus ``import_report.json`` and ``IMPOR
 listing what was not imported (wrap objects, markers, ...). Nothing is written when an
 input is bad (exit 2, ``FILE:LINE:COL``).
 
+``mjcf`` reads a MuJoCo model (MJCF XML: bodies, hinge/slide/ball/free joints, joint
+couplings, spatial tendons with wrap geoms and sidesites, muscle actuators, mesh assets) and,
+given an npz with ``qpos``, writes a pose; the same layout and reports as ``osim``.
+
 ``bvh`` reads a Biovision motion-capture file and writes an axdf skeleton (Z-up, metres;
 end sites become ``<joint>_end`` tip bones) and a pose keyed at every frame; the length unit is
 guessed from the skeleton's height unless ``--scale`` gives it.
+
+All three follow the output rule (axdf_cli/fileio/outputs.py): ``--out`` is the import's own folder
+(its ``manifest.json``); ``--overwrite`` replaces an earlier import there and files outside it
+that the import wrote and nobody changed since; every YAML file is read back as ``axdf
+validate`` reads it before anything is written (:func:`write_imported`, which ``retarget`` and
+any new importer call too).
 """
 from __future__ import annotations
 
@@ -17,7 +27,21 @@ import argparse
 import sys
 from pathlib import Path
 
-from axdf_cli.fileio.atomic import write_bytes
+from axdf_cli.errors import Mark
+from axdf_cli.fileio.outputs import OutputSet, check_outputs, write_checked
+from axdf_cli.importers.check import check_documents
+
+
+def output_role(path, args) -> str:
+    """What names an output of ``axdf import osim`` in messages: its flag, or its role."""
+    p = Path(path)
+    for flag in ("skeleton_out", "pose_out"):
+        if getattr(args, flag, None) is not None and Path(getattr(args, flag)) == p:
+            return "--" + flag.replace("_", "-")
+    for flag in ("meshes_out", "muscles_out"):
+        if getattr(args, flag, None) is not None and Path(getattr(args, flag)) == p.parent:
+            return f"--{flag.replace('_', '-')} file"
+    return "output"
 
 
 def add_args(parser: argparse.ArgumentParser) -> None:
@@ -44,6 +68,35 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--no-meshes", action="store_true", help="do not convert bone geometry")
     p.add_argument("--palette", choices=("anatomical", "hashed"), default="anatomical",
                    help="muscle colours: muscle reds varied per muscle (default), or any hue from the name's hash")
+    add_overwrite_arg(p)
+
+    j = sub.add_parser("mjcf", help="MuJoCo model (MJCF .xml) with an optional qpos motion (.npz)",
+                       description="Import a MuJoCo model: skeleton (bodies, joints, couplings), muscles on spatial "
+                                   "tendons, bone meshes, and a pose from a qpos motion.")
+    g = j.add_mutually_exclusive_group()
+    g.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS, help="print only errors")
+    g.add_argument("-v", "--verbose", action="store_true", default=argparse.SUPPRESS, help="print more detail")
+    j.add_argument("model", metavar="MODEL.xml", type=Path)
+    j.add_argument("--motion", type=Path, metavar="QPOS.npz",
+                   help="npz with qpos (frames x nq, the model's order) and optional fps → a pose")
+    j.add_argument("--out", type=Path, required=True, metavar="DIR",
+                   help="output folder (report; default place of every other file)")
+    j.add_argument("--name", help="skeleton name (default: the model's name)")
+    j.add_argument("--skeleton-out", type=Path, metavar="FILE", help="skeleton YAML (default DIR/skeletons/NAME.yaml)")
+    j.add_argument("--meshes-out", type=Path, metavar="DIR",
+                   help="bone meshes folder (default: meshes/NAME beside the skeleton)")
+    j.add_argument("--muscles-out", type=Path, metavar="DIR", help="muscle YAML folder (default DIR/muscles)")
+    j.add_argument("--pose-out", type=Path, metavar="FILE", help="pose YAML (default DIR/MOTION.yaml)")
+    j.add_argument("--pose-name", help="pose name (default: the motion file's name)")
+    j.add_argument("--fps", type=float, help="frame rate of the motion (default: its fps, else 30)")
+    j.add_argument("--no-meshes", action="store_true", help="do not convert bone geometry")
+    j.add_argument("--max-faces", type=int, default=0, metavar="N",
+                   help="decimate each bone mesh to at most N triangles (default 0: keep all)")
+    j.add_argument("--mesh-edge", type=float, default=0.0, metavar="M",
+                   help="decimate each bone mesh to triangles of about this edge length in metres (default 0: off)")
+    j.add_argument("--palette", choices=("anatomical", "hashed"), default="anatomical",
+                   help="muscle colours: muscle reds varied per muscle (default), or any hue from the name's hash")
+    add_overwrite_arg(j)
 
     b = sub.add_parser("bvh", help="Biovision motion capture (.bvh) → skeleton and pose",
                        description="Import a BVH file: a skeleton (Z-up, metres) and a pose of its motion.")
@@ -59,24 +112,72 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     b.add_argument("--skeleton-out", type=Path, metavar="FILE", help="skeleton YAML (default DIR/skeletons/NAME.yaml)")
     b.add_argument("--pose-out", type=Path, metavar="FILE", help="pose YAML (default DIR/POSE.yaml)")
     b.add_argument("--pose-name", help="pose name (default: the skeleton's name)")
+    add_overwrite_arg(b)
+
+
+def write_imported(files: OutputSet, inputs, overwrite: bool, source, tick=lambda step: None) -> dict:
+    """What every importer does with its files (``import osim|bvh|mjcf``, ``retarget``): the
+    output rule's checks (axdf_cli/fileio/outputs.py), then every YAML file read back by the
+    file specs (what ``axdf validate`` accepts; errors name ``source``), then the write.
+    Nothing is written unless all of it passes. ``tick(step)``: the progress bar."""
+    checked = check_outputs(files, inputs=inputs, overwrite=overwrite)
+    check_documents(files, Mark(str(source)))
+    tick("check")
+    manifest = write_checked(checked)
+    tick("write")
+    return manifest
+
+
+def add_overwrite_arg(p) -> None:
+    """``--overwrite``, as every command that writes a set of files has it (fileio/outputs.py)."""
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace this command's earlier output in DIR (and files outside DIR that it wrote, "
+                        "unchanged since); nothing else is ever replaced")
+
+
+def progress_bar(steps, quiet: bool, desc: str):
+    """(tick(step), close()) for a tqdm bar over ``steps`` on stderr; silent when stderr is
+    not a terminal or with -q."""
+    if quiet or not sys.stderr.isatty():
+        return (lambda step: None), (lambda: None)
+    from tqdm import tqdm
+
+    bar = tqdm(total=len(steps), unit="step", file=sys.stderr, desc=desc, leave=False)
+
+    def tick(step: str) -> None:
+        bar.set_postfix_str(step)
+        bar.update(1)
+
+    return tick, bar.close
 
 
 def run(args) -> int:
     if args.source == "bvh":
         return run_bvh(args)
+    if args.source == "mjcf":
+        return run_mjcf(args)
     from axdf_cli.errors import UsageError
     from axdf_cli.importers.osim_import import build_import
 
     if args.fps is not None and not (0 < args.fps <= 10000):
         raise UsageError(f"--fps {args.fps}", "a frame rate in (0, 10000]")
-    res = build_import(args.model, args.out, name=args.name, motion=args.motion, controls=args.controls,
-                       skeleton_out=args.skeleton_out, muscles_out=args.muscles_out, pose_out=args.pose_out,
-                       meshes_out=args.meshes_out, pose_name=args.pose_name, fps=args.fps,
-                       meshes=not args.no_meshes, palette=args.palette)
+    tick, close = progress_bar(("read", "check", "write"), args.quiet, f"import {args.model.name}")
+    try:
+        res = build_import(args.model, args.out, name=args.name, motion=args.motion, controls=args.controls,
+                           skeleton_out=args.skeleton_out, muscles_out=args.muscles_out, pose_out=args.pose_out,
+                           meshes_out=args.meshes_out, pose_name=args.pose_name, fps=args.fps,
+                           meshes=not args.no_meshes, palette=args.palette)
+        tick("read")
+        files = OutputSet(args.out, "import osim")
+        for path, data in res.files.items():
+            files.add(path, data, output_role(path, args))
+        files.settings = {"name": args.name, "fps": args.fps, "pose_name": args.pose_name,
+                          "meshes": not args.no_meshes, "palette": args.palette}
+        write_imported(files, [args.model, args.motion, args.controls], args.overwrite, args.model, tick)
+    finally:
+        close()
     for w in res.warnings:
         print(f"axdf: warning: {w}", file=sys.stderr)
-    for path, data in sorted(res.files.items()):
-        write_bytes(path, data)
     if not args.quiet:
         c = res.report["counts"]
         print(f"imported {args.model.name}: {c['bodies']} bodies, {c['coordinates']} coordinates, "
@@ -89,6 +190,50 @@ def run(args) -> int:
         skipped = res.report.get("missing_meshes", [])
         if skipped:
             print(f"meshes skipped: {len(skipped)}")
+        if args.verbose:
+            for path in sorted(res.files):
+                print(path)
+        print(f"report: {Path(args.out) / 'IMPORT.md'}")
+    return 0
+
+
+def run_mjcf(args) -> int:
+    from axdf_cli.errors import UsageError
+    from axdf_cli.importers.mjcf_import import build_import
+
+    if args.fps is not None and not (0 < args.fps <= 10000):
+        raise UsageError(f"--fps {args.fps}", "a frame rate in (0, 10000]")
+    if not 0 <= args.max_faces <= 10_000_000:
+        raise UsageError(f"--max-faces {args.max_faces}", "a whole number in 0..10000000 (0: keep every triangle)")
+    if not 0 <= args.mesh_edge <= 1:
+        raise UsageError(f"--mesh-edge {args.mesh_edge}", "metres in [0, 1] (0: off)")
+    tick, close = progress_bar(("read", "check", "write"), args.quiet, f"import {args.model.name}")
+    try:
+        res = build_import(args.model, args.out, name=args.name, motion=args.motion, skeleton_out=args.skeleton_out,
+                           muscles_out=args.muscles_out, pose_out=args.pose_out, meshes_out=args.meshes_out,
+                           pose_name=args.pose_name, fps=args.fps, meshes=not args.no_meshes,
+                           max_faces=args.max_faces, mesh_edge=args.mesh_edge, palette=args.palette)
+        tick("read")
+        files = OutputSet(args.out, "import mjcf")
+        for path, data in res.files.items():
+            files.add(path, data, output_role(path, args))
+        files.settings = {"name": args.name, "fps": args.fps, "pose_name": args.pose_name,
+                          "meshes": not args.no_meshes, "max_faces": args.max_faces, "mesh_edge": args.mesh_edge,
+                          "palette": args.palette}
+        write_imported(files, [args.model, args.motion], args.overwrite, args.model, tick)
+    finally:
+        close()
+    for w in res.warnings:
+        print(f"axdf: warning: {w}", file=sys.stderr)
+    if not args.quiet:
+        c = res.report["counts"]
+        print(f"imported {args.model.name}: {c['bodies']} bodies, {c['coordinates']} coordinates "
+              f"({c['couplings']} coupled joints), {c['muscles']} muscles, {c['meshes']} bone meshes")
+        if res.report["ignored"]:
+            kinds: dict[str, int] = {}
+            for i in res.report["ignored"]:
+                kinds[i["kind"]] = kinds.get(i["kind"], 0) + 1
+            print("not imported: " + ", ".join(f"{n} {k}{'s' if n != 1 else ''}" for k, n in sorted(kinds.items())))
         if args.verbose:
             for path in sorted(res.files):
                 print(path)
@@ -110,16 +255,22 @@ def run_bvh(args) -> int:
             raise UsageError(f"--scale {args.scale}", f"a positive number of metres per unit, or one of {', '.join(UNITS)}")
     if not 1 <= args.step <= 10000:
         raise UsageError(f"--step {args.step}", "a whole number in 1..10000")
-    res = build_import(args.model, args.out, name=args.name, scale=scale, step=args.step,
-                       skeleton_out=args.skeleton_out, pose_out=args.pose_out, pose_name=args.pose_name)
-    for path, data in sorted(res.files.items()):
-        write_bytes(path, data)
+    from axdf_cli.importers.bvh import STEPS
+
+    tick, close = progress_bar(STEPS + ("check", "write"), args.quiet, f"import {args.model.name}")
+    try:
+        res = build_import(args.model, args.out, name=args.name, scale=scale, step=args.step,
+                           skeleton_out=args.skeleton_out, pose_out=args.pose_out, pose_name=args.pose_name,
+                           progress=tick)
+        write_imported(res.files, [args.model], args.overwrite, args.model, tick)
+    finally:
+        close()
     if not args.quiet:
         r = res.report
         for line in res.notes:
             print(line)
         print(f"imported {args.model.name}: {r['joints']} joints, {r['end_sites']} end sites, {r['channels']} channels, "
               f"{r['frames']} frames at {r['fps']:g} fps")
-        for path in sorted(res.files):
-            print(path)
+        for o in res.files:
+            print(o.path if not o.path.is_relative_to(Path.cwd()) else o.path.relative_to(Path.cwd()))
     return 0

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from axdf_cli import tolerances as tol
 from axdf_cli.model import bspline
 from axdf_cli.errors import InputError
 from axdf_cli.model.paths import wrap as W
@@ -61,6 +62,10 @@ class PathModel:
         self.method = np.zeros(nw, np.int64)
         self.on = np.zeros(nw, np.bool_)
         self.rng = np.zeros((nw, 2), np.int64)
+        self.has_side = np.zeros(nw, np.bool_)
+        self.side_bones = np.zeros(nw, np.int64)
+        self.side_at = np.zeros((nw, 4))
+        self.side_at[:, 3] = 1.0
         for i, w in enumerate(spec.wraps):
             m = np.eye(4)
             m[:3, :3] = euler_xyz(np.asarray(w.orient, dtype=np.float64))
@@ -73,6 +78,10 @@ class PathModel:
             self.on[i] = w.active
             lo, hi = w.range
             self.rng[i] = (0 if lo < 1 else lo - 1, npt - 1 if hi < 1 else hi - 1)
+            if w.side is not None:
+                self.has_side[i] = True
+                self.side_bones[i] = bone_of(bone_index, w.side[0], w.mark)
+                self.side_at[i, :3] = w.side[1]
         self.origin_bone = int(self.points.bones[0])
         self.insertion_bone = int(self.points.bones[-1])
         if spec.points[0].active is not None or spec.points[-1].active is not None:
@@ -90,13 +99,17 @@ class PathModel:
         nf = world.shape[0]
         xf = np.einsum("fwij,wjk->fwik", world[:, self.wrap_bones], self.wrap_local) if len(self.kind) else \
             np.zeros((nf, 0, 4, 4))
+        # side[f,w,c] = sum_k world[f,bone(w),c,k] at[w,k]  (zeros where a surface has no side point)
+        side = np.einsum("fwck,wk->fwc", world[:, self.side_bones, :3, :], self.side_at) if len(self.kind) else \
+            np.zeros((nf, 0, 3))
         samples = np.empty((nf, len(self.fractions), 3))
         length = np.empty(nf)
         inside = np.zeros(nf, np.int64)
         points = np.zeros((nf, pts.shape[1] + 2 * len(self.kind), 3))
         count = np.zeros(nf, np.int64)
         W.wrapped_paths(np.ascontiguousarray(pts), np.ascontiguousarray(active), np.ascontiguousarray(xf),
-                        self.kind, self.prm, self.axis, self.sign, self.method, self.on, self.rng, self.fractions,
+                        self.kind, self.prm, self.axis, self.sign, self.method, self.on, self.rng,
+                        np.ascontiguousarray(side), self.has_side, self.fractions,
                         samples, length, inside, points, count)
         self.last_points = (points, count)  # the current path (tangent points included), for tests
         return samples, length, inside
@@ -105,3 +118,16 @@ class PathModel:
         """Axis control points (F, n, 3) and the could-not-wrap flags (F,)."""
         samples, _, inside = self.wrapped(world, coords)
         return np.einsum("nk,fkc->fnc", self.fit, samples), inside
+
+    def shortfall(self, world: np.ndarray, coords: np.ndarray | None) -> np.ndarray:
+        """How much shorter the axis is than the wrapped path, as a fraction of the path: (F,)
+        ``1 − axis arc length / path length``. The axis is a smooth fit, so it cuts the path's
+        corners (a via point where the path turns sharply within less than a knot span);
+        more control points follow it closer."""
+        samples, length, _ = self.wrapped(world, coords)
+        ctrl = np.einsum("nk,fkc->fnc", self.fit, samples)
+        knots = bspline.clamped_knots(self.n, 2)
+        gt, gw = bspline.gauss_legendre_params(knots, 2, tol.LENGTH_GAUSS_POINTS)
+        # d[f, g, c] = sum_n dB[g, n] ctrl[f, n, c]: the axis' derivative at the Gauss points
+        d = np.einsum("gn,fnc->fgc", bspline.basis_matrix(knots, 2, gt, 1), ctrl)
+        return 1.0 - (np.linalg.norm(d, axis=-1) @ gw) / np.maximum(length, 1e-300)
