@@ -52,7 +52,8 @@ def _same_bits(a, b, name):
         assert x.tobytes() == y.tobytes(), (name, k, float(np.max(np.abs(x - y))))
 
 
-@pytest.mark.parametrize("job, step", [("demo.yaml", 3), ("arm26_flex.yaml", 2), ("gait2392_walk.yaml", 6)])
+@pytest.mark.parametrize("job, step", [("demo.yaml", 3), ("arm26_flex.yaml", 2), ("gait2392_walk.yaml", 6),
+                                       ("myoarm_elbow.yaml", 5)])
 def test_every_muscle_at_once_is_numpys_step_1b_bit_for_bit(job, step):
     """All muscles in one compiled pass (the run's path) = the numpy formulation, muscle by
     muscle, every float64 equal (demo: fixed axes, every volume mode and tension; arm26:
@@ -156,10 +157,11 @@ def test_coarse_roll_is_the_reference_roll():
         assert got[:, j].tobytes() == want.tobytes(), m.spec.name
 
 
-@pytest.mark.parametrize("job", ["demo.yaml", "arm26_flex.yaml", "gait2392_walk.yaml"])
+@pytest.mark.parametrize("job", ["demo.yaml", "arm26_flex.yaml", "gait2392_walk.yaml", "myoarm_elbow.yaml"])
 def test_axis_points_are_the_models(job):
     """The packed axis points (one compiled call for the fixed muscles, one for the paths:
-    moving and conditional points, wrap cylinders and ellipsoids) = each model's axis_points,
+    moving and conditional points, wrap cylinders and ellipsoids, MuJoCo's sphere and cylinder
+    wrapping with side points) = each model's axis_points,
     bit for bit, with the same could-not-wrap warnings."""
     plan, world, q, _ = _case(job, 3)
     batch = MuscleBatch(plan.models)

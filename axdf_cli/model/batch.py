@@ -143,6 +143,9 @@ class MuscleBatch:
         self.method = cat(lambda pm: pm.method, (), np.int64)
         self.on = cat(lambda pm: pm.on, (), np.bool_)
         self.rng = cat(lambda pm: pm.rng, (2,), np.int64)
+        self.side_bones = cat(lambda pm: pm.side_bones, (), np.int64)
+        self.side_at = cat(lambda pm: pm.side_at, (4,), np.float64)
+        self.has_side = cat(lambda pm: pm.has_side, (), np.bool_)
         self.fractions = cat(lambda pm: pm.fractions, (), np.float64)
         self.fit = cat(lambda pm: pm.fit, (), np.float64)
         self.wrap_names = [[] if pm is None else [w.name for w in pm.spec.wraps] for pm in paths]
@@ -182,7 +185,8 @@ class MuscleBatch:
             inside = np.zeros((self.n, nf), dtype=np.int64)
             K.axis_paths(js, world, self.pbones, loc, active, self.p_off, self.wbones, self.wlocal, self.w_off,
                          self.kind, self.prm, self.wrap_axis, self.wrap_sign, self.method, self.on, self.rng,
-                         self.fractions, self.k_off, self.fit, self.fit_off, self.a_off, p, inside)
+                         self.side_bones, self.side_at, self.has_side, self.fractions, self.k_off, self.fit,
+                         self.fit_off, self.a_off, p, inside)
             for j in js[inside[js].any(axis=1)]:
                 names = self.wrap_names[j]
                 notes[int(j)] = [(int(i), f"path cannot wrap over {names[int(inside[j, i]) - 1]!r}: an end point "

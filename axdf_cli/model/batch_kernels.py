@@ -100,21 +100,23 @@ def axis_fixed(js, world, bones, at, a_off, out):
 
 @njit(cache=True, error_model="numpy")
 def axis_paths(js, world, pbones, loc, active, p_off, wbones, wlocal, w_off, kind, prm, wrap_axis, wrap_sign,
-               method, on, rng, fractions, k_off, fit, fit_off, a_off, out, out_inside):
+               method, on, rng, side_bones, side_at, has_side, fractions, k_off, fit, fit_off, a_off, out, out_inside):
     """Axis control points of path muscles ``js``, as :meth:`PathModel.control_points`:
 
     world        : (F, B, 4, 4)
     pbones, loc  : (ΣP,) path points' bones, (F, ΣP, 3) their locations in them (moving
                    points already evaluated); active (F, ΣP) bool (conditional points)
     wbones, wlocal : (ΣW,), (ΣW, 4, 4) wrap surfaces' bones and transforms in them; kind,
-                   prm (ΣW, 3), wrap_axis, wrap_sign, method, on, rng (ΣW, 2): as PathModel's
+                   prm (ΣW, 3), wrap_axis, wrap_sign, method, on, rng (ΣW, 2): as PathModel's;
+                   side_bones, side_at (ΣW, 4), has_side: a surface's side point in its bone
     fractions    : (ΣK,) arc fractions of the path samples; fit (flat) the (n_j, K_j) least
                    squares map from samples to control points, row-major from fit_off[j]
     outputs      : out (F, ΣN, 3) rows a_off[j] ..; out_inside (M, F) the index + 1 of a
                    surface the path could not wrap over (an end point inside it), 0 if none
 
     Points: ``einsum('fpck,fpk->fpc', R, loc) + t`` (``0 + ((r0 l0 + r2 l2) + r1 l1)``), the
-    surfaces' transforms ``einsum('fwij,wjk->fwik')`` (in order from 0), the fit in order.
+    surfaces' transforms ``einsum('fwij,wjk->fwik')`` (in order from 0), their side points
+    ``einsum('fwck,wk->fwc')`` (``0 + ((p0 + p2) + (p1 + p3))``), the fit in order.
     """
     nf = world.shape[0]
     for kk in range(js.shape[0]):
@@ -126,6 +128,7 @@ def axis_paths(js, world, pbones, loc, active, p_off, wbones, wlocal, w_off, kin
         pts = np.empty((nf, npt, 3))
         act = np.empty((nf, npt), dtype=np.bool_)
         xf = np.zeros((nf, nw, 4, 4))
+        side = np.zeros((nf, nw, 3))
         for f in range(nf):
             for i in range(npt):
                 m = world[f, pbones[p0 + i]]
@@ -144,13 +147,18 @@ def axis_paths(js, world, pbones, loc, active, p_off, wbones, wlocal, w_off, kin
                         for q in range(4):
                             acc += m[r, q] * b[q, c]
                         xf[f, w, r, c] = 0.0 + acc
+                m = world[f, side_bones[w0 + w]]
+                sa = side_at[w0 + w]
+                for r in range(3):
+                    side[f, w, r] = 0.0 + ((m[r, 0] * sa[0] + m[r, 2] * sa[2]) + (m[r, 1] * sa[1] + m[r, 3] * sa[3]))
         samples = np.empty((nf, nk, 3))
         length = np.empty(nf)
         inside = np.zeros(nf, dtype=np.int64)
         points = np.zeros((nf, npt + 2 * nw, 3))
         count = np.zeros(nf, dtype=np.int64)
         W.wrapped_paths(pts, act, xf, kind[w0:w1], prm[w0:w1], wrap_axis[w0:w1], wrap_sign[w0:w1], method[w0:w1],
-                        on[w0:w1], rng[w0:w1], fractions[k0:k1], samples, length, inside, points, count)
+                        on[w0:w1], rng[w0:w1], side, has_side[w0:w1], fractions[k0:k1], samples, length, inside,
+                        points, count)
         n = a_off[j + 1] - a_off[j]
         for f in range(nf):
             out_inside[j, f] = inside[f]
