@@ -926,8 +926,9 @@ else:
     top = ""
 dt, dc = time.perf_counter() - t_ready, cpu() - c0
 nbytes = sum(p.stat().st_size for p in out.rglob("*") if p.is_file())
+hwm = next(int(l.split()[1]) for l in open("/proc/self/status") if l.startswith("VmHWM:")) * 1024
 print(json.dumps({"startup": t_ready - t_start, "seconds": dt, "cpu": dc, "bytes": nbytes, "top": top,
-                  "muscle_frames": len(plan.frames) * len(plan.models)}))
+                  "maxrss": hwm, "muscle_frames": len(plan.frames) * len(plan.models)}))
 """
 
 
@@ -1043,6 +1044,7 @@ def compiled_rows(table: "Table", tmp: Path, quick: bool, top: int = 0) -> list[
               f"<= {TARGET_RUN_US:g} µs/mf {_mark(r['seconds'] / mf * 1e6 <= TARGET_RUN_US)}")
     table.add("whole run, no meshes (evaluation, stats, manifest)", f"{base['seconds'] / mf * 1e6:.1f} µs/mf",
               f"CPU {base['cpu'] / mf * 1e6:.1f} µs/mf")
+    table.add("peak memory: npz / no meshes", f"{r['maxrss'] / 2**20:.0f} / {base['maxrss'] / 2**20:.0f} MiB")
     table.add("start-up (imports, plan, 92 models)", f"{r['startup']:.2f} s")
     cold, warm, nf = first_touch(job, 3 if quick else 7)
     table.add(f"step 1b, {mf // n} muscles x {nf} frames, outputs in fresh memory", f"{cold:.1f} µs/mf",
