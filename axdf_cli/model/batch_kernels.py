@@ -11,20 +11,30 @@ dimension first; the offsets ``*_off`` (M + 1,) say where muscle j's rows start 
    rotation-minimizing frame by double reflection (Wang, Jüttler, Zheng, Liu: "Computation
    of rotation minimizing frames", ACM TOG 27(1), 2008, Algorithm 1), the bound points'
    positions, tangents and untwisted reference vectors (one more reflection from the nearest
-   sample), the insertion roll's two arguments (arctan2's y and x) and the speeds at the
-   Gauss-Legendre points of the arc length;
+   sample), the insertion roll's two arguments (arctan2's y and x) and the arc length
+   (Gauss-Legendre);
 3. :func:`shape_pass`: the spread twist, the tension law, the volume-scaled and fixed parts of
    the bound control points, then the surface of :func:`axdf_cli.model.kernels.surface_frame`
    (tessellation, the exact volume solve, vertices and normals).
 
-Between 2 and 3 the caller takes arctan2 (the roll), its branch and the arc length's
-quadrature sum in numpy, as :class:`axdf_cli.model.muscle.MuscleModel` always did.
+Between 2 and 3 the caller takes numpy's arctan2 (the roll) and the roll's branch, as
+:class:`axdf_cli.model.muscle.MuscleModel` always did. (:func:`roll_pass`: step 2's roll alone,
+on the coarse samples of the twist references.)
 
 Same bytes as the numpy formulation (``tests/reference_model.py``): every quantity is formed
 by the same floating-point operations in the same order as numpy forms it (an ``einsum`` dot
 of 3-vectors is ``0 + ((a0 b0 + a2 b2) + a1 b1)``, a sum over an axis or a norm starts at 0
 and adds in order, a sparse basis row adds its three terms in order, a bone's rotation of a
-vector by ``@`` is OpenBLAS's fused ``fma(m2, v2, fma(m0, v0, m1 v1))``), no ``fastmath``.
+vector by ``@`` is OpenBLAS's fused ``fma(m2, v2, fma(m0, v0, m1 v1))``), no ``fastmath``;
+the one exception is the arc length, which numpy summed by ``@`` (see :func:`frames_pass`).
+
+Written for vector instructions, with the same operations per value: frames run innermost,
+LANES at a time, in :func:`frames_pass` and in the bound points of :func:`shape_pass`; the
+surface's grids are laid out so that the volume terms and normals are one long loop each
+(c-major, ghost columns around); ``error_model="numpy"`` (numba's zero-division check per
+divide, which no divisor here needs, keeps loops scalar), unsigned indices where an index
+is computed (numba's negative-index wraparound does too), and a scratch array of fixed shape
+for loops that write several results (so no overlap check per pair of outputs is needed).
 """
 from __future__ import annotations
 

@@ -1,16 +1,20 @@
-"""The muscle surface stage as one compiled loop per frame (numba).
+"""The muscle surface stage of one muscle, frame by frame (numba), and what is written.
 
-For every frame: build the control net [origin pole, sections..., insertion pole] of the
-fixed part A and the volume-scaled part W, tessellate both (separable: along, then around,
-3 basis functions each way), accumulate the mesh volume's cubic V(s) = c0 + c1 s + c2 s^2 +
-c3 s^3 over the quads, solve V(s) = V0 (``exact``), form the final grid A + s W, and write
-vertices, outward normals and volume. Everything for a frame stays in the CPU cache, where
-numpy needed a dozen full-size passes with temporaries (see README, Performance).
+For every frame (:func:`surface_frame`): build the control net [origin pole, sections...,
+insertion pole] of the fixed part A and the volume-scaled part W, tessellate both
+(separable: along, then around, 3 basis functions each way), accumulate the mesh volume's
+cubic V(s) = c0 + c1 s + c2 s^2 + c3 s^3 over the quads, solve V(s) = V0 (``exact``), form
+the final grid A + s W, and write vertices, outward normals and volume. The run's compiled
+pass over every muscle at once (:mod:`axdf_cli.model.batch_kernels`) does the same steps
+with the same operations, laid out for vector instructions; :func:`surface_stage` is the
+frame-by-frame form, which ``tests/test_kernel.py`` compares with the numpy formulation in
+``tests/reference_surface.py`` (``planar_volume_cubic``, ``planar_normals``).
+:func:`written` makes what the sinks write of a result (float32, non-finite frames to the
+rest shape, bounds).
 
-Same mathematics as the numpy reference formulation in ``tests/reference_surface.py``
-(``planar_volume_cubic``, ``planar_normals``), which ``tests/test_kernel.py`` compares it
-with. Compiled once and cached beside the module (numba ``cache=True``); no ``fastmath``, so the same
-inputs give the same bytes.
+Compiled once and cached beside the module (numba ``cache=True``); no ``fastmath`` (but for
+the bounds' minima and maxima, over finite numbers only), so the same inputs give the same
+bytes.
 """
 from __future__ import annotations
 

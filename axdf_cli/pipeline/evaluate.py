@@ -28,7 +28,7 @@ from axdf_cli.pipeline.plan import RunPlan
 from axdf_cli.pipeline.stages import Chunk, Scope, of_scope
 
 CHUNK_FRAMES = 128  # frames evaluated together: bounds memory for any sequence length
-EVAL_BUDGET_BYTES = 64 * 1024 * 1024  # the surfaces of one chunk, every muscle at once (see chunk_frames)
+EVAL_BUDGET_BYTES = 32 * 1024 * 1024  # the surfaces of one chunk, every muscle at once (see chunk_frames)
 TIME_BLOCK = CHUNK_FRAMES  # frames of the pose's timeline a TIME stage is given at once (always the same blocks)
 
 
