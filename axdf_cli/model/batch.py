@@ -29,6 +29,7 @@ import numpy as np
 
 from axdf_cli import tolerances as tol
 from axdf_cli.model import batch_kernels as K
+from axdf_cli.model.batch_kernels import LANES  # noqa: F401 (frames per vector: chunk sizes are multiples)
 from axdf_cli.model.rmf import STEP_RTOL
 
 _RTOL2 = STEP_RTOL ** 2  # (as rmf computes it)

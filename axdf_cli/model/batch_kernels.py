@@ -50,7 +50,7 @@ from axdf_cli.model.paths import wrap as W
 
 _EPS = 1e-30  # as axdf_cli.model.rmf._EPS
 _TINY = 1e-300  # the unit tangent's floor (as MuscleModel's _unit)
-LANES = 16  # frames made at once in the innermost loops (two AVX-512 vectors of float64)
+LANES = 8  # frames made at once in the innermost loops (one AVX-512 vector of float64)
 _U = np.uint64  # loop indices the compiler can vectorize over (no negative-index wraparound)
 
 
