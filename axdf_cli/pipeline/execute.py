@@ -318,7 +318,7 @@ def stats_csv(plan: RunPlan, stats: np.ndarray, warn_text: list) -> bytes:
     """stats.csv: a row per frame and muscle; numbers to 9 significant digits (-0 written 0).
     One ``%`` per row over plain floats (a tenth of the time of formatting each number alone)."""
     fmt = "%d,%s" + ",%.9g" * stats.shape[-1] + ",%s\n"
-    rows = (stats + 0.0).tolist()  # (+ 0.0: -0 becomes 0, as _g writes it)
+    rows = (stats + 0.0).tolist()  # (+ 0.0: -0 is written 0)
     out = ["frame,muscle,length,volume,volume_ratio,tension,twist,scale,warning\n"]
     names = plan.names
     for i, frame in enumerate(plan.frames.tolist()):
