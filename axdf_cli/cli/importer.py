@@ -115,12 +115,13 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     add_overwrite_arg(b)
 
 
-def write_imported(files: OutputSet, inputs, overwrite: bool, source, tick=lambda step: None) -> dict:
+def write_imported(files: OutputSet, inputs, overwrite: bool, source, tick=lambda step: None, assets=()) -> dict:
     """What every importer does with its files (``import osim|bvh|mjcf``, ``retarget``): the
     output rule's checks (axdf_cli/fileio/outputs.py), then every YAML file read back by the
     file specs (what ``axdf validate`` accepts; errors name ``source``), then the write.
-    Nothing is written unless all of it passes. ``tick(step)``: the progress bar."""
-    checked = check_outputs(files, inputs=inputs, overwrite=overwrite)
+    Nothing is written unless all of it passes. ``inputs`` (listed in the manifest) and
+    ``assets`` (not listed) are never outputs. ``tick(step)``: the progress bar."""
+    checked = check_outputs(files, inputs=inputs, overwrite=overwrite, assets=assets)
     check_documents(files, Mark(str(source)))
     tick("check")
     manifest = write_checked(checked)
@@ -173,7 +174,7 @@ def run(args) -> int:
             files.add(path, data, output_role(path, args))
         files.settings = {"name": args.name, "fps": args.fps, "pose_name": args.pose_name,
                           "meshes": not args.no_meshes, "palette": args.palette}
-        write_imported(files, [args.model, args.motion, args.controls], args.overwrite, args.model, tick)
+        write_imported(files, res.inputs, args.overwrite, args.model, tick)
     finally:
         close()
     for w in res.warnings:
@@ -220,7 +221,7 @@ def run_mjcf(args) -> int:
         files.settings = {"name": args.name, "fps": args.fps, "pose_name": args.pose_name,
                           "meshes": not args.no_meshes, "max_faces": args.max_faces, "mesh_edge": args.mesh_edge,
                           "palette": args.palette}
-        write_imported(files, [args.model, args.motion], args.overwrite, args.model, tick)
+        write_imported(files, res.inputs, args.overwrite, args.model, tick, assets=res.assets)
     finally:
         close()
     for w in res.warnings:

@@ -34,7 +34,6 @@ onto the muscle model's own skeleton, where every muscle keeps its path:
 """
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 from dataclasses import dataclass, field
@@ -44,6 +43,7 @@ import numpy as np
 
 from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError, Mark
+from axdf_cli.fileio.atomic import sha256_file
 from axdf_cli.fileio.yamlio import Fields, YMap, check_name, check_number, did_you_mean, load_yaml, mark_of
 from axdf_cli.importers.mocap import Mocap
 from axdf_cli.model.ik import FitResult, fit_frames, pose_points
@@ -459,10 +459,6 @@ def jumps(q: np.ndarray, fps: float) -> tuple[np.ndarray, np.ndarray, int]:
 # ----------------------------------------------------------------------------- files
 
 
-def _sha(path) -> str:
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
-
-
 def pose_document(res: Retargeted, name: str, skeleton_ref: str) -> dict:
     skel = res.rmap.skeleton
     q = res.fit.q
@@ -512,9 +508,9 @@ def report(res: Retargeted, name: str, files: dict) -> dict:
     s = res.world.scale
     return {
         "tool": "axdf retarget", "pose": name, "skeleton": skel.name,
-        "motion": {"file": Path(res.mocap.source).name, "sha256": _sha(res.mocap.source), "kind": res.mocap.kind,
+        "motion": {"file": Path(res.mocap.source).name, "sha256": sha256_file(res.mocap.source), "kind": res.mocap.kind,
                    "joints": len(res.mocap.names), "frames": int(res.mocap.positions.shape[0]), "fps": res.mocap.fps},
-        "map": {"file": Path(res.rmap.source).name, "sha256": _sha(res.rmap.source), "name": res.rmap.name},
+        "map": {"file": Path(res.rmap.source).name, "sha256": sha256_file(res.rmap.source), "name": res.rmap.name},
         "similarity": {"scale": s, "scale_from": res.scale_source, "yaw_deg": res.world.yaw_deg,
                        "shift_m": list(res.world.shift),
                        "meaning": "model = (R_z(-yaw) motion - shift) / scale; errors are in the motion's metres"},
@@ -554,7 +550,7 @@ def build_retarget(motion: Path | str, map_path: Path | str, out_dir: Path | str
     from axdf_cli.fileio.yamlio import NAME_ALLOWED, is_name, real_path
     from axdf_cli.importers import emit
     from axdf_cli.importers.mocap import read_motion
-    from axdf_cli.importers.osim_import import _rel
+    from axdf_cli.importers.result import relative_ref
 
     out_dir = Path(out_dir)
     rmap = load_map(map_path, skeleton, policy)
@@ -567,7 +563,7 @@ def build_retarget(motion: Path | str, map_path: Path | str, out_dir: Path | str
     pose_path = out_dir / f"{name}.yaml"
     header = (f"Retargeted from {Path(motion).name} onto {rmap.skeleton.name} by `axdf retarget` "
               f"(map {Path(map_path).name}).\nRegenerate with the command rather than editing by hand.")
-    text = emit.dump_yaml(pose_document(res, name, _rel(skel_file, out_dir)), header).encode()
+    text = emit.dump_yaml(pose_document(res, name, relative_ref(skel_file, out_dir)), header).encode()
     if len(text) > tol.YAML_MAX_BYTES:
         raise InputError(Mark(str(motion)), f"the pose would be {len(text)} bytes ({len(res.fit.q)} frames)",
                          f"axdf reads YAML files up to {tol.YAML_MAX_BYTES} bytes; a larger --step or a shorter take")
