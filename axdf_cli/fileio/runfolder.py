@@ -498,7 +498,10 @@ def prepare(out: Path, *, resume: bool = False, overwrite: bool = False, dirs=()
         raise InputError(None, f"output folder {out} is not empty (it holds an earlier {what})",
                          ("pass --resume to finish an interrupted run, --overwrite to replace it, or another --out"
                           if resumable else "pass --overwrite to replace it, or another --out"))
-    check_dirs(out, dirs)
+    # --overwrite deletes the old output's listed files that the new one lacks: the way to each
+    # must be made of real folders now, not found to be a link in the middle of the swap
+    old_dirs = sorted({PurePosixPath(rel).parent.as_posix() for rel in previous.files()} - {"."}) if overwrite else []
+    check_dirs(out, [*dirs, *old_dirs])
     return Target(out, previous, overwrite, tuple(dirs))
 
 
