@@ -31,3 +31,42 @@ def test_overwrite_checks_the_way_to_every_file_it_deletes_before_the_first_byte
     rc, _, err = run_main(imp.args("--out", "imp", "--overwrite"), capsys)
     assert rc == 2 and "imp/evil is a symbolic link" in err, err
     assert snapshot(tmp_path) == before and own_leftovers(proj / "imp") == []
+
+
+# ----------------------------------------------------------------------------- data sets
+
+
+@pytest.fixture
+def ds(tmp_path, monkeypatch):
+    from dataset_helpers import write_tiny
+
+    root = tmp_path / "ds"
+    write_tiny(root)
+    monkeypatch.chdir(root)
+    return root
+
+
+def test_dataset_out_a_dangling_link_is_refused_and_nothing_made_at_its_end(ds, capsys, tmp_path):
+    """`--out` a link to nothing was exit 3 ("cannot write (File exists)")."""
+    (ds / "d").symlink_to(tmp_path / "nowhere")
+    before = snapshot(tmp_path)
+    for extra in ([], ["--dry-run"], ["--overwrite"]):
+        rc, _, err = run_main(["dataset", "build", "tiny.yaml", "--out", "d", "-q", *extra], capsys)
+        assert rc == 2 and "d " in err and "Traceback" not in err, (extra, err)
+    assert snapshot(tmp_path) == before and not (tmp_path / "nowhere").exists()
+
+
+@pytest.mark.parametrize("key, value", [("shards", 0), ("shards", -1), ("seed", -5), ("seed", 10 ** 12)])
+def test_merge_refuses_a_dataset_json_with_impossible_counts_at_its_key(tmp_path, capsys, key, value):
+    """`shards: 0` with no sequences once wrote an index (exit 0); `shards: -1` was blamed on a
+    sequence "not complete"."""
+    d = tmp_path / "d"
+    d.mkdir()
+    dj = {"tool": "axdf", "dataset": "x", "seed": 1, "shards": 1, "image": {"passes": ["rgb"]}, "sequences": []}
+    dj[key] = value
+    (d / "dataset.json").write_text(json.dumps(dj, indent=1))
+    before = snapshot(tmp_path)
+    rc, _, err = run_main(["dataset", "merge", str(d)], capsys)
+    line = json.dumps(dj, indent=1).splitlines().index(f' "{key}": {value},') + 1
+    assert rc == 2 and f"dataset.json:{line}:" in err and key in err, err
+    assert snapshot(tmp_path) == before

@@ -36,6 +36,7 @@ from axdf_cli.fileio import atomic
 from axdf_cli.fileio.runfolder import (LOCK, MANIFEST, STAGING_PREFIX, Manifest, check_dirs, own_entry,
                                        plain_relpath, swap_in)
 from axdf_cli.fileio.yamlio import is_name
+from axdf_cli.tolerances import MAX_SEED
 
 DATASET_JSON = "dataset.json"
 INDEX = "index.parquet"
@@ -60,8 +61,10 @@ def read_dataset_json(path: Path, required: bool = True) -> Manifest | None:
     try:
         if m.data.get("tool") != "axdf" or "dataset" not in m.data:
             raise m.error(("tool",), "not a data set written by axdf", "a dataset.json with tool 'axdf' and dataset: NAME")
-        m.get(("seed",), int, "a whole number")
-        m.get(("shards",), int, "a whole number")
+        if not 0 <= m.get(("seed",), int, "a whole number") <= MAX_SEED:
+            raise m.error(("seed",), f"{m.data['seed']} is out of range", f"a seed in 0..{MAX_SEED}")
+        if m.get(("shards",), int, "a whole number") < 1:
+            raise m.error(("shards",), f"{m.data['shards']} shards", "a data set is built in 1 or more shards")
         passes = m.get(("image", "passes"), list, "a list of image passes")
         for i, p in enumerate(passes):
             m.get(("image", "passes", i), str, "a pass name")
@@ -154,6 +157,8 @@ def check(out: Path, dataset_json: bytes, names: list[str], dirs: list[str], *, 
     try:
         st = os.stat(out)
     except FileNotFoundError:
+        if os.path.lexists(out):  # a dangling link: nothing is made at its far end
+            raise InputError(None, f"--out {out} is a symbolic link to nothing", "give a folder") from None
         return Target(out, "new")
     except OSError as e:
         raise atomic.environment_problem(out, e) from None
