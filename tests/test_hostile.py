@@ -70,3 +70,22 @@ def test_merge_refuses_a_dataset_json_with_impossible_counts_at_its_key(tmp_path
     line = json.dumps(dj, indent=1).splitlines().index(f' "{key}": {value},') + 1
     assert rc == 2 and f"dataset.json:{line}:" in err and key in err, err
     assert snapshot(tmp_path) == before
+
+
+# ----------------------------------------------------------------------------- compare
+
+
+def test_compare_an_npz_with_a_member_axdf_does_not_write_is_an_error(proj, capsys):
+    """An NPZ with one more member (its CRC-32 right, numpy reads it) was PASS."""
+    import shutil
+    import zipfile
+
+    rc, _, err = run_main(["run", "poses/jobs/demo.yaml", "--no-render", "--frames", "0:2", "--format", "npz",
+                           "--out", "g", "-q"], capsys)
+    assert rc == 0, err
+    shutil.copytree(proj / "g", proj / "a")
+    with zipfile.ZipFile(proj / "a" / "npz" / "biceps_brachii.npz", "a") as z:
+        z.writestr("extra.npy", b"x")
+    rc, _, _ = run_main(["compare", "a", "g", "--report", "rep.json", "-q"], capsys)
+    verdicts = {f["path"]: (f["verdict"], f.get("detail", "")) for f in json.loads((proj / "rep.json").read_text())["files"]}
+    assert rc == 1 and verdicts["npz/biceps_brachii.npz"][0] == "error", verdicts
