@@ -89,3 +89,27 @@ def test_compare_an_npz_with_a_member_axdf_does_not_write_is_an_error(proj, caps
     rc, _, _ = run_main(["compare", "a", "g", "--report", "rep.json", "-q"], capsys)
     verdicts = {f["path"]: (f["verdict"], f.get("detail", "")) for f in json.loads((proj / "rep.json").read_text())["files"]}
     assert rc == 1 and verdicts["npz/biceps_brachii.npz"][0] == "error", verdicts
+
+
+# ----------------------------------------------------------------------------- transfer
+
+
+TRANSFER = ["transfer", "muscles/demo", "--from", "poses/skeletons/human_r.yaml", "--to",
+            "poses/skeletons/human_r.yaml", "--map", "map.yaml"]
+
+
+@pytest.mark.parametrize("out", ["muscles/demo/moved", "muscles/demo/a/../moved", "link_to_demo/moved"])
+def test_transfer_out_inside_its_input_folder_is_refused(proj, capsys, out):
+    """`transfer muscles/demo --out muscles/demo/moved` once wrote its muscles below the folder
+    it reads whole: the same command again then failed on "two muscle files named ..."."""
+    from axdf_cli.specs import load_skeleton
+
+    bones = [b.name for b in load_skeleton(proj / "poses" / "skeletons" / "human_r.yaml").bones]
+    (proj / "map.yaml").write_text("transfer: same\nbones:\n" + "".join(f"  {b}: {b}\n" for b in bones))
+    (proj / "link_to_demo").symlink_to(proj / "muscles" / "demo")
+    before = snapshot(proj)
+    rc, _, err = run_main([*TRANSFER, "--out", out], capsys)
+    assert rc == 2 and err.startswith("muscles/demo: ") and "read whole" in err, err
+    assert snapshot(proj) == before
+    assert run_main([*TRANSFER, "--out", "moved", "-q"], capsys)[0] == 0  # beside it: fine, and again
+    assert run_main([*TRANSFER, "--out", "moved", "--overwrite", "-q"], capsys)[0] == 0

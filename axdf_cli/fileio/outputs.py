@@ -146,11 +146,13 @@ def _recorded(previous: Manifest | None, key: str, rel: str) -> set:
     return {sha} if isinstance(sha, str) else set()
 
 
-def check_outputs(outputs: OutputSet, *, inputs=(), overwrite: bool = False, assets=()) -> Checked:
+def check_outputs(outputs: OutputSet, *, inputs=(), overwrite: bool = False, assets=(), input_dirs=()) -> Checked:
     """Every check of the output rule (module docstring); reads only. ``inputs``: the files
     the command read (never an output; listed in the manifest with their sha256); ``assets``:
     more files it read that are never an output either but are not listed (a MuJoCo model's
-    mesh files: many, and named by wherever a package installed them)."""
+    mesh files: many, and named by wherever a package installed them); ``input_dirs``: folders
+    the command read whole (every YAML file below ``transfer``'s MUSCLES folder): no output
+    lies below one, or the same command run again would read its own output."""
     out = outputs.out
     inside: dict = {}
     outside_files: list = []
@@ -185,6 +187,13 @@ def check_outputs(outputs: OutputSet, *, inputs=(), overwrite: bool = False, ass
         if clash:
             raise InputError(Mark(str(i)), f"this input is also an output: {clash}",
                              "an input is never overwritten; choose another output path")
+    for d in input_dirs:
+        real_d = _real(Path(d))
+        for o in [Output(top_out, b"", "output folder", str(out)), *outputs]:
+            if _real(o.path) == real_d or _real(o.path).startswith(real_d.rstrip(os.sep) + os.sep):
+                raise InputError(Mark(str(d)), f"{o} lies in this input folder, which is read whole",
+                                 "an output outside the input folders (the same command run again would "
+                                 "read its own output)")
     for i in inputs:
         if i is not None and os.path.isfile(i):
             recorded_inputs.append({"file": _shown(Path(i)), "sha256": _sha_of(Path(i))})
@@ -286,7 +295,7 @@ def _still(o: Output, sha: str | None) -> None:
         raise InputError(None, f"{o} changed while axdf was writing", "run again")
 
 
-def write_outputs(outputs: OutputSet, *, inputs=(), overwrite: bool = False) -> dict:
+def write_outputs(outputs: OutputSet, *, inputs=(), overwrite: bool = False, input_dirs=()) -> dict:
     """The one call: :func:`check_outputs` (every check, nothing written), then
     :func:`write_checked`. Returns the manifest written into OUT."""
-    return write_checked(check_outputs(outputs, inputs=inputs, overwrite=overwrite))
+    return write_checked(check_outputs(outputs, inputs=inputs, overwrite=overwrite, input_dirs=input_dirs))
