@@ -113,3 +113,24 @@ def test_transfer_out_inside_its_input_folder_is_refused(proj, capsys, out):
     assert snapshot(proj) == before
     assert run_main([*TRANSFER, "--out", "moved", "-q"], capsys)[0] == 0  # beside it: fine, and again
     assert run_main([*TRANSFER, "--out", "moved", "--overwrite", "-q"], capsys)[0] == 0
+
+
+# ----------------------------------------------------------------------------- a full disk
+
+
+@pytest.mark.parametrize("command", ["import", "run"])
+def test_a_full_disk_at_the_lock_is_exit_3_and_leaves_nothing(imp, proj, capsys, monkeypatch, command):
+    """A disk full to the last block still takes the lock file's inode but not its pid: that
+    write was an OSError (exit 70) and left OUT/.axdf-lock. Found on a filled tmpfs."""
+    import errno
+
+    def no_space(fd, length):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(os, "ftruncate", no_space)
+    before = snapshot(proj)
+    args = imp.args("--out", "new") if command == "import" else \
+        ["run", "poses/jobs/demo.yaml", "--no-render", "--frames", "0:1", "--out", "new"]
+    rc, _, err = run_main(args, capsys)
+    assert rc == 3 and "no space left on device" in err and "internal error" not in err, err
+    assert snapshot(proj) == before and not (proj / "new").exists()  # no lock, and no folder it made

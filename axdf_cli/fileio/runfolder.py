@@ -547,8 +547,12 @@ def lock_file(path: Path, folder: Path) -> int:
         except FileNotFoundError:
             same = False
         if same:
-            os.ftruncate(fd, 0)
-            os.write(fd, f"{os.getpid()}\n".encode())
+            try:
+                os.ftruncate(fd, 0)
+                os.write(fd, f"{os.getpid()}\n".encode())
+            except OSError as e:  # a full disk takes the lock's inode, not its pid's block
+                unlock_file(path, fd)
+                raise atomic.environment_problem(path, e) from None
             return fd
         os.close(fd)  # its holder removed it as we opened it: lock the file there now
     raise EnvironmentProblem(f"cannot lock {path}", "try again")
@@ -580,11 +584,14 @@ class Session:
         self.root = self.out / f"{STAGING_PREFIX}{os.getpid()}" if self.staged else self.out
         self.previous_files = target.previous.files() if target.previous is not None and not target.replace else {}
         self._fd = None
+        self._made = False  # OUT made by this session: removed again when it fails and leaves it empty
+        self._committed = False
 
     def __enter__(self) -> "Session":
+        self._made = not os.path.lexists(self.out)
         atomic.ensure_dir(self.out)
-        self._fd = lock_file(self.out / LOCK, self.out)
         try:
+            self._fd = lock_file(self.out / LOCK, self.out)
             self._verify()
             remove_stale(self.out, self.target.dirs)
             if self.staged:
@@ -592,6 +599,7 @@ class Session:
                 atomic.ensure_dir(self.root)
         except BaseException:
             self._unlock()
+            self._remove_made()
             raise
         return self
 
@@ -601,6 +609,15 @@ class Session:
                 shutil.rmtree(self.root, ignore_errors=True)
         finally:
             self._unlock()
+            if not self._committed:
+                self._remove_made()
+
+    def _remove_made(self) -> None:
+        if self._made:
+            try:
+                os.rmdir(self.out)  # only when empty: a failed command leaves no folder it made
+            except OSError:
+                pass
 
     def _unlock(self) -> None:
         if self._fd is not None:
@@ -628,6 +645,7 @@ class Session:
         ``interim``: keys added to the manifest OUT holds while swapping; ``during()``: work
         done in that window, before the files move (a command's files outside OUT)."""
         write_manifest(self.root, manifest)
+        self._committed = True
         if not self.staged:
             return
         old = self.target.previous if self.target.replace else None
