@@ -134,3 +134,29 @@ def test_a_full_disk_at_the_lock_is_exit_3_and_leaves_nothing(imp, proj, capsys,
     rc, _, err = run_main(args, capsys)
     assert rc == 3 and "no space left on device" in err and "internal error" not in err, err
     assert snapshot(proj) == before and not (proj / "new").exists()  # no lock, and no folder it made
+
+
+# ----------------------------------------------------------------------------- hostile inputs
+
+
+def test_a_yaml_integer_of_5000_digits_is_exit_2_at_its_position(proj, capsys):
+    """Python refuses to convert integers of more than 4300 digits: that ValueError was exit 70."""
+    from axdf_cli.specs import load_skeleton
+
+    bones = [b.name for b in load_skeleton(proj / "poses" / "skeletons" / "human_r.yaml").bones]
+    (proj / "map.yaml").write_text("transfer: same\nbones:\n" + "".join(f"  {b}: {b}\n" for b in bones[1:]) +
+                                   f"  {bones[0]}: {{to: {bones[0]}, scale: {'9' * 5000}}}\n")
+    before = snapshot(proj)
+    rc, _, err = run_main([*TRANSFER, "--out", "moved"], capsys)
+    assert rc == 2 and err.startswith(f"map.yaml:{len(bones) + 2}:") and "5000 characters" in err, err
+    assert snapshot(proj) == before
+
+
+@pytest.mark.parametrize("kind, root", [("mjcf", "mujoco"), ("osim", "OpenSimDocument")])
+def test_xml_nested_deeper_than_a_model_is_exit_2_at_the_element(tmp_path, capsys, monkeypatch, kind, root):
+    """3000 nested <body> elements were a RecursionError (exit 70) in the MJCF reader."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / f"deep.{kind}").write_text(f"<{root}>" + "<body>" * 3000 + "</body>" * 3000 + f"</{root}>\n")
+    rc, _, err = run_main(["import", kind, f"deep.{kind}", "--out", "imp"], capsys)
+    assert rc == 2 and err.startswith(f"deep.{kind}:1:") and "nested too deeply" in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == [f"deep.{kind}"]
