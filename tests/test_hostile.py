@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+import stat
 
 import pytest
 
@@ -160,3 +161,44 @@ def test_xml_nested_deeper_than_a_model_is_exit_2_at_the_element(tmp_path, capsy
     rc, _, err = run_main(["import", kind, f"deep.{kind}", "--out", "imp"], capsys)
     assert rc == 2 and err.startswith(f"deep.{kind}:1:") and "nested too deeply" in err, err
     assert sorted(p.name for p in tmp_path.iterdir()) == [f"deep.{kind}"]
+
+
+@pytest.fixture
+def two_copies(proj, capsys):
+    import shutil
+
+    rc, _, err = run_main(["run", "poses/jobs/demo.yaml", "--no-render", "--frames", "0:1", "--out", "g", "-q"], capsys)
+    assert rc == 0, err
+    shutil.copytree(proj / "g", proj / "a")
+    return proj
+
+
+@pytest.mark.parametrize("flag, path", [("--report", "g/stats.csv"), ("--report", "a/manifest.json"),
+                                        ("--junit", "poses/demo.yaml"), ("--report", "link.json"),
+                                        ("--junit", "fifo"), ("--report", "dangling.json")])
+def test_compare_never_writes_its_report_over_a_file_it_did_not_write(two_copies, capsys, flag, path):
+    """`compare a g --report g/stats.csv` replaced the golden file with the report (exit 1),
+    `--report a/manifest.json` the run's manifest, `--junit poses/demo.yaml` any file; a link
+    was swapped for a plain file, a FIFO replaced."""
+    (two_copies / "link.json").symlink_to(two_copies / "g" / "stats.csv")
+    (two_copies / "dangling.json").symlink_to(two_copies / "nowhere.json")
+    os.mkfifo(two_copies / "fifo")
+    fifo = two_copies / "fifo"  # (a snapshot would block reading it)
+    before = snapshot(two_copies, skip=fifo)
+    rc, _, err = run_main(["compare", "a", "g", flag, path], capsys)
+    assert rc == 2 and path in err and "Traceback" not in err, err
+    assert snapshot(two_copies, skip=fifo) == before and not (two_copies / "nowhere.json").exists()
+    assert stat.S_ISFIFO(os.lstat(fifo).st_mode)
+
+
+def test_compare_replaces_its_own_reports_and_refuses_one_path_for_both(two_copies, capsys):
+    for _ in range(2):  # a new report, then the same path again: ours, replaced
+        rc, _, err = run_main(["compare", "a", "g", "--report", "r.json", "--junit", "r.xml", "-q"], capsys)
+        assert rc == 0, err
+    assert json.loads((two_copies / "r.json").read_text())["tool"] == "axdf compare"
+    before = snapshot(two_copies)
+    rc, _, err = run_main(["compare", "a", "g", "--report", "r.json", "--junit", "./r.json"], capsys)
+    assert rc == 2 and "the same file" in err, err
+    rc, _, err = run_main(["compare", "a", "g", "--junit", "r.json"], capsys)  # a JSON report is not a JUnit file
+    assert rc == 2 and "was not written by axdf" in err, err
+    assert snapshot(two_copies) == before

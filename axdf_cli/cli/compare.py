@@ -75,12 +75,19 @@ def _flag_changes(args) -> dict:
     return ch
 
 
-def _output_path(text: str | None, flag: str) -> Path | None:
+JSON_HEAD = b'{\n "tool": "axdf compare"'  # how to_json's output starts
+JUNIT_HEAD = b'<testsuites name="axdf compare"'  # to_junit's root element, after the XML declaration
+
+
+def _output_path(text: str | None, flag: str, head: bytes) -> Path | None:
+    """--report / --junit: a new file or an earlier one of ours (never a golden file, a run's
+    manifest or anything else; the output rule, axdf_cli/fileio/outputs.py)."""
+    from axdf_cli.fileio.outputs import check_file_output
+
     if text is None:
         return None
     p = Path(text)
-    if p.is_dir():
-        raise UsageError(f"{flag} {p} is a folder", f"{flag} takes a file name")
+    check_file_output(p, flag, lambda data: head in data)
     return p
 
 
@@ -95,8 +102,10 @@ def run(args) -> int:
     tol = load_tolerances(args.tolerances) if args.tolerances else Tolerances()
     tol = replace(tol.with_flags(_flag_changes(args)), ignore=tol.ignore + tuple(args.ignore))
     actual, golden = Path(args.actual), Path(args.golden)
-    report_path = _output_path(args.report, "--report")
-    junit_path = _output_path(args.junit, "--junit")
+    if args.report and args.junit and os.path.realpath(args.report) == os.path.realpath(args.junit):
+        raise UsageError(f"--report and --junit are the same file {args.junit}", "give them different paths")
+    report_path = _output_path(args.report, "--report", JSON_HEAD)
+    junit_path = _output_path(args.junit, "--junit", JUNIT_HEAD)
     first_bless = args.update and actual.exists() and not os.path.lexists(golden)  # a new golden
     if first_bless:
         check_path("ACTUAL", actual)

@@ -299,3 +299,37 @@ def write_outputs(outputs: OutputSet, *, inputs=(), overwrite: bool = False, inp
     """The one call: :func:`check_outputs` (every check, nothing written), then
     :func:`write_checked`. Returns the manifest written into OUT."""
     return write_checked(check_outputs(outputs, inputs=inputs, overwrite=overwrite, input_dirs=input_dirs))
+
+
+def check_file_output(path: Path | str, what: str, recognise) -> None:
+    """A single file a command writes afresh on each call, without a manifest (``compare
+    --report``, ``--junit``): absent, or a regular file that ``recognise(head)`` (its first
+    :data:`HEAD_BYTES` bytes) says this command wrote; then it is replaced. A link (even to
+    a report), a FIFO, a folder, or any other file (a golden file, a run's manifest, your
+    YAML) is refused (exit 2) before anything is written: it is never replaced."""
+    path = Path(path)
+    try:
+        st = os.lstat(path)
+    except FileNotFoundError:
+        return
+    except OSError as e:
+        raise atomic.environment_problem(path, e) from None
+    if stat.S_ISLNK(st.st_mode):
+        raise InputError(None, f"{what} {path} is a symbolic link",
+                         "axdf never replaces a link or writes through one; give the file's own path")
+    if stat.S_ISDIR(st.st_mode):
+        raise InputError(None, f"{what} {path} is a folder", f"{what} takes a file name")
+    if not stat.S_ISREG(st.st_mode):
+        raise InputError(None, f"{what} {path} exists and is not a regular file", "a new file, or one axdf wrote")
+    try:
+        with open(path, "rb") as f:
+            head = f.read(HEAD_BYTES)
+    except OSError as e:
+        raise atomic.environment_problem(path, e) from None
+    if not recognise(head):
+        raise InputError(None, f"{what} {path} exists and was not written by axdf",
+                         "a new path, or an earlier output of the same option (axdf replaces only those); "
+                         "move the file away")
+
+
+HEAD_BYTES = 512  # what check_file_output reads of an existing file to recognise it
