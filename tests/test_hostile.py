@@ -202,3 +202,23 @@ def test_compare_replaces_its_own_reports_and_refuses_one_path_for_both(two_copi
     rc, _, err = run_main(["compare", "a", "g", "--junit", "r.json"], capsys)  # a JSON report is not a JUnit file
     assert rc == 2 and "was not written by axdf" in err, err
     assert snapshot(two_copies) == before
+
+
+def test_a_killed_overwrite_of_another_data_set_leaves_no_staging_after_the_next_build(ds, capsys):
+    """SIGKILL during `--overwrite --seed 5` leaves OUT/.axdf-new-<pid>; a later build of the
+    data set there (same seed, so not staged itself) kept that folder for good."""
+    import subprocess
+    import sys
+
+    assert run_main(["dataset", "build", "tiny.yaml", "--out", "d", "-q"], capsys)[0] == 0
+    ref = snapshot(ds / "d")
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()  # a process id that is gone
+    stale = ds / "d" / f".axdf-new-{dead.pid}"
+    (stale / "seq_00000").mkdir(parents=True)
+    (stale / "seq_00000" / "labels.npz").write_bytes(b"half")
+    for extra in (["--resume"], ["--overwrite"]):
+        rc, _, err = run_main(["dataset", "build", "tiny.yaml", "--out", "d", "-q", *extra], capsys)
+        assert rc == 0, err
+        assert not stale.exists() and snapshot(ds / "d") == ref
+        stale.mkdir()

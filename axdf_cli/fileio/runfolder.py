@@ -515,6 +515,12 @@ def remove_stale(out: Path, dirs=()) -> None:
     except OSError:
         pass
     atomic.remove_stale_temporaries(folders)
+    remove_stale_staging(out)
+
+
+def remove_stale_staging(out: Path) -> None:
+    """Staging folders (``OUT/.axdf-new-<pid>``) whose process is gone (a killed
+    ``--overwrite``): removed; a live process's stays."""
     for e in os.scandir(out):
         if e.name.startswith(STAGING_PREFIX) and e.is_dir(follow_symlinks=False):
             pid = atomic.temp_owner(e.name)
