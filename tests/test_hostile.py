@@ -222,3 +222,56 @@ def test_a_killed_overwrite_of_another_data_set_leaves_no_staging_after_the_next
         assert rc == 0, err
         assert not stale.exists() and snapshot(ds / "d") == ref
         stale.mkdir()
+
+
+# ----------------------------------------------------------------------------- Ctrl-C and workers
+
+
+def _sigint_blocked(shared, item) -> bool:
+    """In a worker: whether SIGINT is blocked in it (bit SIGINT-1 of SigBlk)."""
+    import signal
+
+    with open("/proc/self/status") as f:
+        mask = next(int(line.split()[1], 16) for line in f if line.startswith("SigBlk:"))
+    return bool(mask >> (signal.SIGINT - 1) & 1)
+
+
+@pytest.mark.parametrize("fresh", [False, True])
+def test_workers_and_the_fork_server_start_with_sigint_blocked(fresh):
+    """Ctrl-C at a random moment of a data-set build (the shell sends SIGINT to the whole
+    process group) printed a KeyboardInterrupt traceback from the fork server, which was
+    still importing its preload, or from a worker not yet started; the build itself said
+    "interrupted" (exit 130). Now every pool process is born with SIGINT blocked and the
+    parent gets the signal once its pool has started."""
+    import signal
+
+    from axdf_cli.workers import process_map
+
+    if not os.path.exists("/proc/self/status"):
+        pytest.skip("needs /proc")
+    assert process_map(_sigint_blocked, [0, 1], None, jobs=2, fresh=fresh) == [True, True]
+    assert signal.SIGINT not in signal.pthread_sigmask(signal.SIG_BLOCK, [])  # the parent's is restored
+    if fresh:
+        from multiprocessing import forkserver
+
+        pid = forkserver._forkserver._forkserver_pid
+        with open(f"/proc/{pid}/status") as f:
+            mask = next(int(line.split()[1], 16) for line in f if line.startswith("SigBlk:"))
+        assert mask >> (signal.SIGINT - 1) & 1
+
+
+def test_ctrl_c_while_the_subcommands_import_is_interrupted_not_a_traceback(monkeypatch, capsys):
+    """A Ctrl-C 0.1 s after start landed in build_parser (it imports every subcommand), before
+    main() caught signals: a KeyboardInterrupt traceback and death by SIGINT. The handler is
+    now installed first; the signal arrives as the real handler raises it."""
+    import signal
+
+    from axdf_cli.cli import main as cli_main
+
+    def importing():
+        signal.raise_signal(signal.SIGINT)  # what the terminal sends, into main's own handler
+        raise AssertionError("the signal did not interrupt")
+
+    monkeypatch.setattr(cli_main, "build_parser", importing)
+    rc, _, err = run_main(["run", "x.yaml"], capsys)
+    assert rc == 130 and err.strip() == "axdf: interrupted", err

@@ -53,11 +53,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    try:
-        args = parser.parse_args(argv)
-    except SystemExit as e:
-        return int(e.code or 0) if not isinstance(e.code, str) else 2
     from axdf_cli.fileio import atomic
 
     old = {}
@@ -66,15 +61,21 @@ def main(argv: list[str] | None = None) -> int:
             old[sig] = signal.signal(sig, atomic.on_signal)
         except ValueError:  # not the main thread (tests calling main in a thread)
             pass
+    args = None
     try:
+        parser = build_parser()  # (imports every subcommand: a Ctrl-C here is "interrupted" too)
+        try:
+            args = parser.parse_args(argv)
+        except SystemExit as e:
+            return int(e.code or 0) if not isinstance(e.code, str) else 2
         return int(args._module.run(args) or 0)
     except InputError as e:
-        if args.traceback:
+        if args is not None and args.traceback:
             raise
         print(f"axdf: {e}" if e.where is None else str(e), file=sys.stderr)
         return 2
     except EnvironmentProblem as e:
-        if args.traceback:
+        if args is not None and args.traceback:
             raise
         print(f"axdf: {e.problem}", file=sys.stderr)
         if e.hint:
@@ -84,7 +85,7 @@ def main(argv: list[str] | None = None) -> int:
         print("axdf: interrupted", file=sys.stderr)
         return 130
     except AxdfError as e:
-        if args.traceback:
+        if args is not None and args.traceback:
             raise
         print(f"axdf: {e}", file=sys.stderr)
         return e.exit_code
@@ -92,7 +93,7 @@ def main(argv: list[str] | None = None) -> int:
         print("axdf: out of memory; use fewer frames per run or a lower resolution", file=sys.stderr)
         return 3
     except Exception as e:  # a bug: say so plainly, without a traceback unless asked
-        if args.traceback:
+        if args is not None and args.traceback:
             raise
         print(f"axdf: internal error: {type(e).__name__}: {e}\n"
               "rerun with --traceback and report it", file=sys.stderr)
