@@ -275,3 +275,19 @@ def test_ctrl_c_while_the_subcommands_import_is_interrupted_not_a_traceback(monk
     monkeypatch.setattr(cli_main, "build_parser", importing)
     rc, _, err = run_main(["run", "x.yaml"], capsys)
     assert rc == 130 and err.strip() == "axdf: interrupted", err
+
+
+def test_a_read_only_place_for_a_file_outside_out_is_exit_3_before_out_is_written(imp, proj, capsys, monkeypatch):
+    """`--pose-out` on a read-only mount: the import wrote OUT's interim manifest (complete:
+    false, listing files that never came) and then failed at the pose (exit 3). Found with a
+    tmpfs remounted read-only; here os.access reports the folder as such."""
+    (proj / "ro").mkdir()
+    real = os.access
+    monkeypatch.setattr(os, "access", lambda p, mode, **k: False if os.path.abspath(p) == str(proj / "ro")
+                        and mode & os.W_OK else real(p, mode, **k))
+    before = snapshot(proj)
+    for flag, path in (("--pose-out", "ro/p.yaml"), ("--skeleton-out", "ro/sub/s.yaml"), ("--out", "ro/imp")):
+        args = imp.args("--out", "imp", flag, path) if flag != "--out" else imp.args("--out", path)
+        rc, _, err = run_main(args, capsys)
+        assert rc == 3 and "cannot write in" in err and "ro/" in err, err
+        assert snapshot(proj) == before and not (proj / "imp").exists()

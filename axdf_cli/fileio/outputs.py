@@ -48,7 +48,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from axdf_cli import __version__
-from axdf_cli.errors import InputError, Mark
+from axdf_cli.errors import EnvironmentProblem, InputError, Mark
 from axdf_cli.fileio import atomic
 from axdf_cli.fileio.runfolder import (LOCK, MANIFEST, STAGING_PREFIX, Manifest, Root, Session, plain_relpath,
                                        prepare)
@@ -256,7 +256,22 @@ def check_outputs(outputs: OutputSet, *, inputs=(), overwrite: bool = False, ass
                              "move it away or choose another path")
         outside[rel] = (o, sha)
 
+    _writable(top_out, f"output folder {out}")
+    for o, _ in outside.values():
+        _writable(o.path.parent, str(o))
     return Checked(outputs, target, inside, outside, sorted(recorded_inputs, key=lambda d: (d["file"], d["sha256"])))
+
+
+def _writable(folder: Path, what: str) -> None:
+    """The folder (or, where it is still to be made, its nearest existing parent) takes new
+    files: a read-only file system or folder is exit 3 here, before OUT's manifest is written
+    (a file outside OUT is written after it)."""
+    p = Path(folder)
+    while not os.path.lexists(p) and p != p.parent:
+        p = p.parent
+    if os.path.isdir(p) and not os.access(p, os.W_OK):
+        raise EnvironmentProblem(f"{what}: cannot write in {p} (a read-only file system or folder)",
+                                 "choose a writable output path")
 
 
 def write_checked(checked: Checked) -> dict:
