@@ -202,11 +202,7 @@ def run(args) -> int:
         c = res.report["counts"]
         print(f"imported {args.model.name}: {c['bodies']} bodies, {c['coordinates']} coordinates, "
               f"{c['muscles']} muscles, {c['meshes']} bone meshes")
-        kinds: dict[str, int] = {}
-        for i in res.report["ignored"]:
-            kinds[i["kind"]] = kinds.get(i["kind"], 0) + 1
-        if kinds:
-            print("not imported: " + ", ".join(f"{n} {k}{'s' if n != 1 else ''}" for k, n in sorted(kinds.items())))
+        _print_ignored(res.report["ignored"])
         skipped = res.report.get("missing_meshes", [])
         if skipped:
             print(f"meshes skipped: {len(skipped)}")
@@ -215,6 +211,15 @@ def run(args) -> int:
                 print(path)
         print(f"report: {Path(args.out) / 'IMPORT.md'}")
     return 0
+
+
+def _print_ignored(ignored: list) -> None:
+    """One line counting what an import left out, by kind (``not imported: 2 markers, ...``)."""
+    kinds: dict[str, int] = {}
+    for i in ignored:
+        kinds[i["kind"]] = kinds.get(i["kind"], 0) + 1
+    if kinds:
+        print("not imported: " + ", ".join(f"{n} {k}{'s' if n != 1 else ''}" for k, n in sorted(kinds.items())))
 
 
 def run_mjcf(args) -> int:
@@ -249,11 +254,7 @@ def run_mjcf(args) -> int:
         c = res.report["counts"]
         print(f"imported {args.model.name}: {c['bodies']} bodies, {c['coordinates']} coordinates "
               f"({c['couplings']} coupled joints), {c['muscles']} muscles, {c['meshes']} bone meshes")
-        if res.report["ignored"]:
-            kinds: dict[str, int] = {}
-            for i in res.report["ignored"]:
-                kinds[i["kind"]] = kinds.get(i["kind"], 0) + 1
-            print("not imported: " + ", ".join(f"{n} {k}{'s' if n != 1 else ''}" for k, n in sorted(kinds.items())))
+        _print_ignored(res.report["ignored"])
         if args.verbose:
             for path in sorted(res.files):
                 print(path)
