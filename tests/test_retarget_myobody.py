@@ -27,7 +27,7 @@ def myo_walk():
 def test_cmu_walk_on_myobody_joint_centres_within_3_percent_of_the_leg(myo_walk):
     res = myo_walk.retargeted
     errors = leg_joint_errors(res)
-    assert max(errors.values()) < 0.03, errors  # measured: 1.1-1.6%
+    assert max(errors.values()) < 0.03, errors  # measured: 1.4-2.2%
     # one scale for the whole model: myobody's legs (0.805 m hip to ankle) are the subject's (0.800 m)
     assert 0.95 < res.world.scale < 1.02
 
@@ -46,6 +46,8 @@ def test_cmu_walk_on_myobody_keeps_every_coordinate_in_range(myo_walk):
             assert coord.range[0] - 1e-9 <= q[:, c].min() and q[:, c].max() <= coord.range[1] + 1e-9, coord.name
         moved += np.ptp(q[:, c]) > 1.0
     assert moved >= 20  # the root, the lumbar joints and both legs move; the arms keep their rest pose
+    rotations = [c for c, coord in enumerate(pose.skeleton.coordinates) if coord.type == "rotation"]
+    assert np.abs(np.diff(q[:, rotations], axis=0)).max() <= 15.0 + 1e-6  # the map's max_speed at 30 fps
 
 
 @needs_bvh

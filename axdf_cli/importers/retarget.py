@@ -50,7 +50,7 @@ from axdf_cli.model.ik import FitResult, fit_frames, pose_points
 from axdf_cli.model.skeleton import Skeleton, forward_kinematics
 from axdf_cli.specs import RefPolicy, load_skeleton
 
-MAP_KEYS = ("retarget", "onto", "scale", "align", "smooth", "hold", "ranges", "joints")
+MAP_KEYS = ("retarget", "onto", "scale", "align", "smooth", "max_speed", "hold", "ranges", "joints")
 POINT_KEYS = ("bone", "at", "from", "weight")
 ALIGN = ("centre", "none")
 #: Rotational coordinates without a range are sampled this far (degrees) either side of their
@@ -84,6 +84,7 @@ class RetargetMap:
     scale: object  # "fit" | "none" | float (model -> subject)
     align: str
     smooth: float  # pull towards the previous frame: residual metres per degree
+    max_speed: float  # the fastest a rotation may turn, degrees per second (inf: no limit)
     marks: dict = field(default_factory=dict)  # key -> Mark (scale, align, joints)
     model: Skeleton | None = None  # the model's skeleton as loaded (poses are written for it)
 
@@ -107,6 +108,8 @@ def load_map(path: Path | str, skeleton: Skeleton | None = None, policy: RefPoli
     scale = _scale(f.raw("scale", default="fit"), f.vmark("scale"))
     align = f.choice("align", ALIGN, default="centre")
     smooth = float(f.number("smooth", default=tol.IK_SMOOTH_ROTATION, lo=0.0, hi=1.0))
+    max_speed = f.number("max_speed", default=None, lo=1.0, hi=1e6)
+    max_speed = np.inf if max_speed is None else float(max_speed)
     hold = _hold(f.mapping("hold", default=None), skeleton)
     ranges = _ranges(f.mapping("ranges", default=None), skeleton, hold)
     joints = f.mapping("joints", required=True)
@@ -117,7 +120,7 @@ def load_map(path: Path | str, skeleton: Skeleton | None = None, policy: RefPoli
                          "at least 2 (3 or more not on one line to place a body)")
     marks = {k: f.vmark(k) for k in ("scale", "align", "joints", "hold", "ranges")}
     return RetargetMap(name, str(path), _narrowed(skeleton, ranges), points, hold, ranges, scale, align, smooth,
-                       marks, skeleton)
+                       max_speed, marks, skeleton)
 
 
 def _scale(v, where: Mark):
@@ -427,7 +430,8 @@ def retarget(rmap: RetargetMap, mocap: Mocap, progress=None) -> Retargeted:
         s, source = (1.0, "none") if rmap.scale == "none" else (float(rmap.scale), "map")
     world = align_world(mp, rmap, targets, s)
     fitted = fit_frames(rmap.skeleton, mp.bones, mp.local, mp.weights, world.apply(targets), mp.free, mp.q_start,
-                        root=mp.root, root_points=mp.root_points, smooth=rmap.smooth, progress=progress)
+                        root=mp.root, root_points=mp.root_points, smooth=rmap.smooth,
+                        max_step=rmap.max_speed / mocap.fps, progress=progress)
     return Retargeted(rmap, mocap, mp, world, segs, fitted, source)
 
 

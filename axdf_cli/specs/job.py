@@ -12,7 +12,10 @@ from axdf_cli.specs.refs import RefPolicy
 from axdf_cli.fileio.yamlio import Fields, item_marks, load_yaml
 
 
-JOB_KEYS = ("muscles", "pose", "out", "format", "frames", "render", "jiggle")
+#: Job keys that switch a stage of the pipeline on or off (axdf_cli.pipeline.stages.STAGES; a
+#: test checks the two agree): `jiggle: false`, as --no-jiggle.
+STAGE_KEYS = ("jiggle",)
+JOB_KEYS = ("muscles", "pose", "out", "format", "frames", "render") + STAGE_KEYS
 
 
 @dataclass(frozen=True)
@@ -26,7 +29,7 @@ class Job:
     frames_mark: Mark | None
     render: object  # RenderSettings (disabled when the job has no `render:`)
     policy: RefPolicy = RefPolicy()  # the policy the job was read with (its muscles are read with it)
-    jiggle: bool = True  # `jiggle: false` switches the muscles' secondary motion off (as --no-jiggle)
+    stages: tuple = ()  # ((stage, True | False), ...): what the job's STAGE_KEYS say, in that order; unsaid: absent
 
 
 def load_job(path: Path | str, policy: RefPolicy | None = None) -> Job:
@@ -54,6 +57,6 @@ def load_job(path: Path | str, policy: RefPolicy | None = None) -> Job:
     frames = f.raw("frames")
     frames_mark = f.vmark("frames") if frames is not None else None
     render = parse_render_settings(f.raw("render"), f.vmark("render") if f.has("render") else top)
-    jiggle = f.boolean("jiggle", default=True)
+    stages = tuple((k, f.boolean(k)) for k in STAGE_KEYS if f.has(k))
     f.done()
-    return Job(str(path), tuple(muscles), pose, out, fmt, frames, frames_mark, render, policy, jiggle)
+    return Job(str(path), tuple(muscles), pose, out, fmt, frames, frames_mark, render, policy, stages)
