@@ -291,3 +291,37 @@ def test_a_read_only_place_for_a_file_outside_out_is_exit_3_before_out_is_writte
         rc, _, err = run_main(args, capsys)
         assert rc == 3 and "cannot write in" in err and "ro/" in err, err
         assert snapshot(proj) == before and not (proj / "imp").exists()
+
+
+# ----------------------------------------------------------------------------- limits
+
+
+def test_an_import_shows_its_progress_on_a_terminal(proj):
+    """Issue 17: `import bvh` of a 100k-joint file ran 813 s with no progress. On a terminal
+    (stderr a tty) an import now shows a bar through its steps, ending at the write."""
+    import pty
+    import subprocess
+    import sys
+
+    import fcntl
+    import struct
+    import termios
+
+    master, slave = pty.openpty()
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 100, 0, 0))  # a terminal 100 wide
+    p = subprocess.Popen([sys.executable, "-m", "axdf_cli", "import", "bvh", "walk.bvh", "--scale", "0.01", "--out",
+                          "imp"], cwd=proj, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=slave)
+    os.close(slave)
+    seen = b""
+    while True:
+        try:
+            chunk = os.read(master, 4096)
+        except OSError:  # the child closed the terminal
+            break
+        if not chunk:
+            break
+        seen += chunk
+    os.close(master)
+    assert p.wait(timeout=60) == 0, seen
+    text = seen.decode("utf-8", "replace")
+    assert "import walk.bvh" in text and "write" in text and "step" in text, text
