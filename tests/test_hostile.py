@@ -325,3 +325,45 @@ def test_an_import_shows_its_progress_on_a_terminal(proj):
     assert p.wait(timeout=60) == 0, seen
     text = seen.decode("utf-8", "replace")
     assert "import walk.bvh" in text and "write" in text and "step" in text, text
+
+
+@pytest.fixture
+def failing_png(tmp_path):
+    """Two runs (compare_helpers.make_run) whose frame 3 PNG differs: compare draws a picture."""
+    import numpy as np
+    from PIL import Image
+
+    from compare_helpers import make_run
+
+    golden, actual = make_run(tmp_path / "golden"), make_run(tmp_path / "actual")
+    g = np.asarray(Image.open(golden / "frames/0003.png"))
+    Image.fromarray(np.roll(g, 2, axis=1)).save(actual / "frames/0003.png")
+    return actual, golden
+
+
+def test_compare_removes_only_its_own_old_pictures(failing_png, tmp_path, capsys):
+    """`--diff-dir` removed every *.diff.png below it, a file of yours of that name too."""
+    actual, golden = failing_png
+    pics = tmp_path / "pics"
+    (pics / "holiday").mkdir(parents=True)
+    (pics / "holiday" / "beach.diff.png").write_bytes(b"\x89PNG mine")
+    args = ["compare", str(actual), str(golden), "--diff-dir", str(pics), "-q"]
+    assert run_main(args, capsys)[0] == 1
+    ours = pics / "frames" / "0003.png.diff.png"
+    assert ours.is_file() and (pics / "holiday" / "beach.diff.png").read_bytes() == b"\x89PNG mine"
+    (actual / "frames/0003.png").write_bytes((golden / "frames/0003.png").read_bytes())
+    rc, _, err = run_main(args, capsys)  # now passing: its old picture would mislead, and goes
+    assert not ours.exists() and (pics / "holiday" / "beach.diff.png").read_bytes() == b"\x89PNG mine", err
+
+
+def test_compare_never_draws_its_pictures_through_a_link(failing_png, tmp_path, capsys):
+    actual, golden = failing_png
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    (tmp_path / "pics").mkdir()
+    (tmp_path / "pics" / "frames").symlink_to(elsewhere)
+    (tmp_path / "linked").symlink_to(elsewhere)
+    for where in ("pics", "linked"):
+        rc, _, err = run_main(["compare", str(actual), str(golden), "--diff-dir", str(tmp_path / where)], capsys)
+        assert rc == 2 and "symbolic link" in err, err
+    assert list(elsewhere.iterdir()) == []

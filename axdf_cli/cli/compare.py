@@ -117,6 +117,9 @@ def run(args) -> int:
         diff_dir = beside.with_name(beside.stem + "-diffs")
     if diff_dir is not None and diff_dir.exists() and not diff_dir.is_dir():
         raise UsageError(f"--diff-dir {diff_dir} is a file", "--diff-dir takes a folder")
+    if diff_dir is not None and diff_dir.is_symlink():
+        raise UsageError(f"--diff-dir {diff_dir} is a symbolic link",
+                         "axdf never writes through a link; give the folder's own path")
     exclude = [p for p in (report_path, junit_path, diff_dir) if p is not None]
     steps = None
     if args.update:
@@ -162,12 +165,16 @@ def _print_changes(changes, golden: Path, args) -> None:
 
 
 def _clear_old_pictures(diff_dir: Path) -> None:
-    """Pictures of an earlier comparison would mislead: remove our own *.diff.png files."""
+    """Pictures of an earlier comparison would mislead: remove our own *.diff.png files (those
+    axdf compare made, by the mark in them; a file of yours of that name stays)."""
+    from axdf_cli.compare import is_own_picture
+
     for p in diff_dir.rglob("*.diff.png"):
-        try:
-            p.unlink()
-        except OSError:
-            pass
+        if is_own_picture(p):
+            try:
+                p.unlink()
+            except OSError:
+                pass
 
 
 class _Bar:
