@@ -367,3 +367,46 @@ def test_compare_never_draws_its_pictures_through_a_link(failing_png, tmp_path, 
         rc, _, err = run_main(["compare", str(actual), str(golden), "--diff-dir", str(tmp_path / where)], capsys)
         assert rc == 2 and "symbolic link" in err, err
     assert list(elsewhere.iterdir()) == []
+
+
+# ----------------------------------------------------------------------------- a FIFO where axdf reads its own files
+
+
+@pytest.mark.parametrize("where, args", [
+    ("run/manifest.json", ["render", "run", "--size", "32x32"]),
+    ("run/manifest.json", ["render", "run", "--out", "frames_elsewhere", "--size", "32x32"]),
+    ("run/manifest.json", ["run", "poses/jobs/demo.yaml", "--no-render", "--frames", "0:1", "--out", "run", "--resume"]),
+    ("imp/manifest.json", ["import", "bvh", "walk.bvh", "--scale", "0.01", "--out", "imp", "--overwrite"]),
+])
+def test_a_fifo_for_a_manifest_is_refused_not_a_hang(proj, capsys, where, args):
+    """A FIFO at OUT/manifest.json blocked `render`, `run --resume` and `import --overwrite`
+    for good (read_bytes on a FIFO waits for a writer); every manifest is read as inputs are."""
+    import subprocess
+    import sys
+
+    assert run_main(["run", "poses/jobs/demo.yaml", "--no-render", "--frames", "0:1", "--out", "run", "-q"],
+                    capsys)[0] == 0
+    assert run_main(["import", "bvh", "walk.bvh", "--scale", "0.01", "--out", "imp", "-q"], capsys)[0] == 0
+    (proj / where).unlink()
+    os.mkfifo(proj / where)
+    p = subprocess.run([sys.executable, "-m", "axdf_cli", *args], cwd=proj, capture_output=True, text=True,
+                       timeout=120)  # (in a child: a hang here is a timeout, not a stuck test run)
+    assert p.returncode == 2 and "Traceback" not in p.stderr, p.stderr
+    assert stat.S_ISFIFO(os.lstat(proj / where).st_mode) and not (proj / "frames_elsewhere").exists()
+
+
+def test_a_fifo_for_a_sequence_record_is_refused_not_a_hang(ds, capsys):
+    """`dataset merge` and `--resume` read every seq_*/sequence.json: a FIFO there hung both."""
+    import subprocess
+    import sys
+
+    assert run_main(["dataset", "build", "tiny.yaml", "--out", "d", "-q"], capsys)[0] == 0
+    rec = ds / "d" / "seq_00000" / "sequence.json"
+    rec.unlink()
+    os.mkfifo(rec)
+    p = subprocess.run([sys.executable, "-m", "axdf_cli", "dataset", "merge", "d"], cwd=ds, capture_output=True,
+                       text=True, timeout=120)
+    assert p.returncode == 2 and "seq_00000: its sequence.json is refused (is a FIFO" in p.stderr, p.stderr
+    p = subprocess.run([sys.executable, "-m", "axdf_cli", "dataset", "build", "tiny.yaml", "--out", "d", "--resume",
+                        "-q"], cwd=ds, capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0 and stat.S_ISREG(os.lstat(rec).st_mode), p.stderr  # the sequence made again

@@ -44,8 +44,10 @@ import stat
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 
+from axdf_cli import tolerances as tol
 from axdf_cli.fileio import atomic
 from axdf_cli.errors import EnvironmentProblem, InputError, Mark
+from axdf_cli.fileio.yamlio import FileRefused, read_regular
 
 MANIFEST = "manifest.json"
 STATS = "stats.csv"
@@ -251,9 +253,11 @@ class Manifest:
     def read(cls, path: Path) -> "Manifest":
         where = Mark(str(path))
         try:
-            raw = Path(path).read_bytes()
+            raw = read_regular(path, tol.INPUT_MAX_BYTES)  # a FIFO there blocked every reader
         except FileNotFoundError:
             raise InputError(where, "no manifest.json", "a folder written by axdf run") from None
+        except FileRefused as e:
+            raise InputError(where, e.problem, f"a {Path(path).name} written by axdf") from None
         except OSError as e:
             raise InputError(where, f"cannot read ({e.strerror})", "a readable manifest.json") from None
         try:
@@ -636,8 +640,8 @@ class Session:
             changed = any(not own_entry(n) for n in os.listdir(self.out))
         else:
             try:
-                changed = hashlib.sha256((self.out / MANIFEST).read_bytes()).hexdigest() != prev.sha
-            except OSError:
+                changed = hashlib.sha256(read_regular(self.out / MANIFEST, tol.INPUT_MAX_BYTES)).hexdigest() != prev.sha
+            except (OSError, FileRefused):
                 changed = True
         if changed:
             raise InputError(None, f"output folder {self.out} changed while axdf was checking it",
