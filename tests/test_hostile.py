@@ -410,3 +410,27 @@ def test_a_fifo_for_a_sequence_record_is_refused_not_a_hang(ds, capsys):
     p = subprocess.run([sys.executable, "-m", "axdf_cli", "dataset", "build", "tiny.yaml", "--out", "d", "--resume",
                         "-q"], cwd=ds, capture_output=True, text=True, timeout=300)
     assert p.returncode == 0 and stat.S_ISREG(os.lstat(rec).st_mode), p.stderr  # the sequence made again
+
+
+@pytest.mark.parametrize("damage", ["your file only", "a damaged run manifest"])
+def test_dataset_refuses_a_damaged_sequence_folder_before_making_any(ds, capsys, damage):
+    """A sequence folder holding your file and no run, or a damaged run manifest, was refused
+    by that sequence's own run (exit 2) after the sequences before it had been made again."""
+    import shutil
+
+    assert run_main(["dataset", "build", "tiny.yaml", "--out", "d", "-q"], capsys)[0] == 0
+    seq = ds / "d" / "seq_00002"
+    if damage == "your file only":
+        shutil.rmtree(seq)
+        seq.mkdir()
+        (seq / "mine.txt").write_text("mine\n")
+    else:
+        (seq / "sequence.json").unlink()
+        (seq / "manifest.json").write_text('{"tool": 5')
+    before = snapshot(ds)
+    inodes = {p: p.stat().st_ino for p in (ds / "d").rglob("*") if p.is_file()}  # (a file made again, even
+    for extra in (["--overwrite"], ["--resume"]):  # with the same bytes, is a new inode: atomic rename)
+        rc, _, err = run_main(["dataset", "build", "tiny.yaml", "--out", "d", "-q", *extra], capsys)
+        assert rc == 2 and "seq_00002" in err, (extra, err)
+        assert snapshot(ds) == before
+        assert {p: p.stat().st_ino for p in (ds / "d").rglob("*") if p.is_file()} == inodes

@@ -33,7 +33,7 @@ from pathlib import Path, PurePosixPath
 
 from axdf_cli.errors import EnvironmentProblem, InputError, Mark
 from axdf_cli.fileio import atomic
-from axdf_cli.fileio.runfolder import (LOCK, MANIFEST, STAGING_PREFIX, Manifest, check_dirs, own_entry,
+from axdf_cli.fileio.runfolder import (LOCK, MANIFEST, STAGING_PREFIX, Manifest, check_dirs, own_entry, prepare,
                                        plain_relpath, swap_in)
 from axdf_cli.fileio.yamlio import is_name
 from axdf_cli.tolerances import MAX_SEED
@@ -190,6 +190,9 @@ def check(out: Path, dataset_json: bytes, names: list[str], dirs: list[str], *, 
             raise InputError(None, f"{len(present)} sequence folder(s) of this run exist in {out} "
                              f"(first: {present[0]})",
                              "pass --resume to finish them, --overwrite to make them again, or another --out")
+        for n in present:  # each is an axdf run folder, finished or made again by the run's rule: its
+            # refusals (a damaged manifest, files but no run) come now, not after other sequences were made
+            prepare(out / n, resume=resume, overwrite=not resume)
         return Target(out, "same", old)
     if not overwrite:
         raise InputError(old.mark(("seed",)), f"output folder {out} holds another data set (its dataset.json differs: "
