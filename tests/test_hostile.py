@@ -434,3 +434,38 @@ def test_dataset_refuses_a_damaged_sequence_folder_before_making_any(ds, capsys,
         assert rc == 2 and "seq_00002" in err, (extra, err)
         assert snapshot(ds) == before
         assert {p: p.stat().st_ino for p in (ds / "d").rglob("*") if p.is_file()} == inodes
+
+
+# ----------------------------------------------------------------------------- odd paths
+
+
+@pytest.mark.parametrize("args", [
+    ["import", "bvh", "walk.bvh", "--scale", "0.01", "--out", "walk.bvh/x"],
+    ["import", "bvh", "walk.bvh", "--scale", "0.01", "--out", "imp", "--pose-out", "walk.bvh/p.yaml"],
+    ["import", "bvh", "walk.bvh", "--scale", "0.01", "--out", "loop/x"],
+    ["import", "bvh", "walk.bvh", "--scale", "0.01", "--out", "loop"],
+    ["run", "poses/jobs/demo.yaml", "--no-render", "--frames", "0:1", "--out", "walk.bvh/x"],
+    ["compare", "walk.bvh", "walk.bvh", "--report", "walk.bvh/r.json"],
+])
+def test_an_output_below_a_file_or_a_link_loop_is_exit_2(proj, capsys, args):
+    """`--out walk.bvh/x` was exit 3 ("cannot write (Not a directory)"), `--out` a link loop
+    (or below one) exit 70 (Path.resolve's RuntimeError): a path mistake is bad input."""
+    (proj / "loop").symlink_to("loop2")
+    (proj / "loop2").symlink_to("loop")
+    before = snapshot(proj)
+    rc, _, err = run_main(args, capsys)
+    assert rc == 2 and ("walk.bvh is not a folder" in err or "loop" in err) and "internal error" not in err, err
+    assert snapshot(proj) == before
+
+
+def test_a_file_name_that_is_not_utf8_is_exit_2(proj, capsys):
+    """A BVH named b'w\\xff.bvh' was exit 70 (the name, written into the YAML header, cannot be
+    UTF-8): every argument must be UTF-8 text."""
+    bad = os.fsdecode(b"w\xff.bvh")
+    (proj / bad).write_bytes((proj / "walk.bvh").read_bytes())
+    before = snapshot(proj)
+    for args in (["import", "bvh", bad, "--scale", "0.01", "--out", "imp"],
+                 ["import", "bvh", "walk.bvh", "--scale", "0.01", "--out", os.fsdecode(b"imp\xff")]):
+        rc, _, err = run_main(args, capsys)
+        assert rc == 2 and "is not UTF-8 text" in err, err
+    assert snapshot(proj) == before

@@ -13,7 +13,7 @@ import signal
 import sys
 
 from axdf_cli import __version__
-from axdf_cli.errors import AxdfError, EnvironmentProblem, InputError, Interrupted
+from axdf_cli.errors import AxdfError, EnvironmentProblem, InputError, Interrupted, UsageError
 
 # name -> (module, help). The order is the order of `axdf --help`.
 COMMANDS = {
@@ -63,6 +63,10 @@ def main(argv: list[str] | None = None) -> int:
             pass
     args = None
     try:
+        for a in sys.argv[1:] if argv is None else argv:
+            if isinstance(a, str) and any("\udc80" <= c <= "\udcff" for c in a):  # bytes that are not UTF-8
+                raise UsageError(f"argument {a.encode('utf-8', 'surrogateescape')!r} is not UTF-8 text",
+                                 "file and folder names in UTF-8 (axdf writes names into its text files)")
         parser = build_parser()  # (imports every subcommand: a Ctrl-C here is "interrupted" too)
         try:
             args = parser.parse_args(argv)

@@ -33,7 +33,7 @@ from pathlib import Path, PurePosixPath
 
 from axdf_cli.errors import EnvironmentProblem, InputError, Mark
 from axdf_cli.fileio import atomic
-from axdf_cli.fileio.runfolder import (LOCK, MANIFEST, STAGING_PREFIX, Manifest, check_dirs, own_entry, prepare,
+from axdf_cli.fileio.runfolder import (LOCK, MANIFEST, STAGING_PREFIX, Manifest, check_dirs, check_way, own_entry, prepare,
                                        plain_relpath, swap_in)
 from axdf_cli.fileio.yamlio import is_name
 from axdf_cli.tolerances import MAX_SEED
@@ -156,9 +156,10 @@ def check(out: Path, dataset_json: bytes, names: list[str], dirs: list[str], *, 
     out = Path(out)
     try:
         st = os.stat(out)
-    except FileNotFoundError:
+    except (FileNotFoundError, NotADirectoryError):
         if os.path.lexists(out):  # a dangling link: nothing is made at its far end
             raise InputError(None, f"--out {out} is a symbolic link to nothing", "give a folder") from None
+        check_way(out, "--out")
         return Target(out, "new")
     except OSError as e:
         raise atomic.environment_problem(out, e) from None
@@ -215,6 +216,8 @@ def check_dry(out: Path, *, resume: bool, overwrite: bool) -> None:
     out = Path(out)
     if os.path.lexists(out) and not out.is_dir():
         raise InputError(None, f"--out {out} exists and is not a folder", "give a folder")
+    if not os.path.lexists(out):
+        check_way(out, "--out")
     if not out.is_dir() or not [n for n in os.listdir(out) if not own_entry(n)]:
         return
     dj = out / DATASET_JSON

@@ -41,6 +41,7 @@ recognises.
 """
 from __future__ import annotations
 
+import errno
 import hashlib
 import os
 import stat
@@ -50,8 +51,8 @@ from pathlib import Path
 from axdf_cli import __version__
 from axdf_cli.errors import EnvironmentProblem, InputError, Mark
 from axdf_cli.fileio import atomic
-from axdf_cli.fileio.runfolder import (LOCK, MANIFEST, STAGING_PREFIX, Manifest, Root, Session, plain_relpath,
-                                       prepare)
+from axdf_cli.fileio.runfolder import (LOCK, MANIFEST, STAGING_PREFIX, Manifest, Root, Session, check_way,
+                                       plain_relpath, prepare)
 
 
 @dataclass(frozen=True)
@@ -234,8 +235,12 @@ def check_outputs(outputs: OutputSet, *, inputs=(), overwrite: bool = False, ass
         try:
             st = os.lstat(o.path)
         except FileNotFoundError:
+            check_way(o.path, o.what)
             outside[rel] = (o, None)
             continue
+        except NotADirectoryError:
+            check_way(o.path, o.what)
+            raise
         except OSError as e:
             raise atomic.environment_problem(o.path, e) from None
         if stat.S_ISLNK(st.st_mode):
@@ -325,9 +330,12 @@ def check_file_output(path: Path | str, what: str, recognise) -> None:
     path = Path(path)
     try:
         st = os.lstat(path)
-    except FileNotFoundError:
+    except (FileNotFoundError, NotADirectoryError):
+        check_way(path, what)
         return
     except OSError as e:
+        if e.errno == errno.ELOOP:
+            check_way(path, what)
         raise atomic.environment_problem(path, e) from None
     if stat.S_ISLNK(st.st_mode):
         raise InputError(None, f"{what} {path} is a symbolic link",

@@ -153,6 +153,35 @@ def check_dirs(root: Path, rel_dirs) -> bool:
     return whole
 
 
+def check_way(path: Path, what: str) -> None:
+    """A path still to be made (``path`` absent): the nearest of its parents that exists is a
+    folder. A file there (``--out walk.bvh/x``) or a link loop is bad input (exit 2), not a
+    machine that cannot write (it was exit 3, "Not a directory"; or 70)."""
+    p = Path(os.path.abspath(path)).parent
+    while True:
+        try:
+            st = os.stat(p)
+        except (FileNotFoundError, NotADirectoryError):
+            if p == p.parent:
+                return
+            p = p.parent
+            continue
+        except OSError as e:
+            if e.errno == errno.ELOOP:
+                raise InputError(None, f"{what} {path}: {_shown_path(p)} is a symbolic link loop",
+                                 "a path to a folder") from None
+            return  # (permissions and the like: the write reports them, exit 3)
+        if not stat.S_ISDIR(st.st_mode):
+            raise InputError(None, f"{what} {path}: {_shown_path(p)} is not a folder", "a path whose parents are folders")
+        return
+
+
+def _shown_path(p: Path) -> str:
+    """``p`` relative to the current folder when below it (messages name what the user typed)."""
+    rel = os.path.relpath(p)
+    return rel if not rel.startswith(os.pardir) else str(p)
+
+
 class Root:
     """A folder written into. :meth:`path` gives the path of a file below it after checking
     that the way there is made of real folders only (once per folder that exists; one that
@@ -471,11 +500,13 @@ def prepare(out: Path, *, resume: bool = False, overwrite: bool = False, dirs=()
         is_dir = out.is_dir()
         entries = [n for n in os.listdir(out) if not own_entry(n)] if is_dir else None
     except FileNotFoundError:
+        check_way(out, "output folder")
         return Target(out, None, False, tuple(dirs))
     except OSError as e:
         raise atomic.environment_problem(out, e) from None
     if entries is None:
         if not os.path.lexists(out):
+            check_way(out, "output folder")
             return Target(out, None, False, tuple(dirs))
         raise InputError(None, f"output folder {out} exists and is not a folder", "give a folder")
     if not entries:
