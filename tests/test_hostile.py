@@ -463,9 +463,12 @@ def test_a_file_name_that_is_not_utf8_is_exit_2(proj, capsys):
     UTF-8): every argument must be UTF-8 text."""
     bad = os.fsdecode(b"w\xff.bvh")
     (proj / bad).write_bytes((proj / "walk.bvh").read_bytes())
+    (proj / "mus").mkdir()  # found in a folder (transfer's MUSCLES): exit 70 writing TRANSFER.md
+    (proj / "mus" / os.fsdecode(b"b\xff.yaml")).write_bytes((proj / "muscles/demo/biceps_brachii.yaml").read_bytes())
     before = snapshot(proj)
     for args in (["import", "bvh", bad, "--scale", "0.01", "--out", "imp"],
-                 ["import", "bvh", "walk.bvh", "--scale", "0.01", "--out", os.fsdecode(b"imp\xff")]):
+                 ["import", "bvh", "walk.bvh", "--scale", "0.01", "--out", os.fsdecode(b"imp\xff")],
+                 [*TRANSFER[:1], "mus", *TRANSFER[2:], "--out", "moved"]):
         rc, _, err = run_main(args, capsys)
         assert rc == 2 and "is not UTF-8 text" in err, err
     assert snapshot(proj) == before
