@@ -472,3 +472,31 @@ def test_a_file_name_that_is_not_utf8_is_exit_2(proj, capsys):
         rc, _, err = run_main(args, capsys)
         assert rc == 2 and "is not UTF-8 text" in err, err
     assert snapshot(proj) == before
+
+
+def test_overwrite_still_knows_the_files_outside_out_an_earlier_import_wrote(proj, capsys):
+    """Files outside OUT are never deleted: `import mjcf --skeleton-out s.yaml --name a`, then
+    `--name b --overwrite`, left meshes/a/ beside s.yaml, and `--name a --overwrite` again was
+    refused on them ("not written by this command"). The manifest keeps recognising them
+    (outside_earlier) while their bytes are axdf's; one you changed is still refused."""
+    imp = Importer("mjcf")
+
+    def again(name):
+        return run_main(imp.args("--out", "imp", "--skeleton-out", "s.yaml", "--name", name, "--overwrite", "-q"),
+                        capsys)
+
+    assert run_main(imp.args("--out", "imp", "--skeleton-out", "s.yaml", "--name", "a", "-q"), capsys)[0] == 0
+    assert (proj / "meshes" / "a" / "upper.ply").is_file()
+    assert again("b")[0] == 0
+    m = json.loads((proj / "imp" / "manifest.json").read_text())
+    assert set(m["outside_earlier"]) == {"../meshes/a/upper.ply"} and "../meshes/b/upper.ply" in m["outside"]
+    rc, _, err = again("a")
+    assert rc == 0, err
+    assert set(json.loads((proj / "imp" / "manifest.json").read_text())["outside_earlier"]) == {"../meshes/b/upper.ply"}
+    (proj / "meshes" / "b" / "upper.ply").write_bytes(b"mine")  # yours now: no longer recognised
+    assert again("c")[0] == 0
+    assert set(json.loads((proj / "imp" / "manifest.json").read_text())["outside_earlier"]) == {"../meshes/a/upper.ply"}
+    before = snapshot(proj)
+    rc, _, err = again("b")
+    assert rc == 2 and "meshes/b/upper.ply" in err, err
+    assert snapshot(proj) == before

@@ -52,7 +52,7 @@ from axdf_cli import __version__
 from axdf_cli.errors import EnvironmentProblem, InputError, Mark
 from axdf_cli.fileio import atomic
 from axdf_cli.fileio.runfolder import (LOCK, MANIFEST, STAGING_PREFIX, Manifest, Root, Session, check_way,
-                                       plain_relpath, prepare)
+                                       is_file_with, plain_relpath, prepare)
 
 
 @dataclass(frozen=True)
@@ -253,7 +253,8 @@ def check_outputs(outputs: OutputSet, *, inputs=(), overwrite: bool = False, ass
                              f"pass --overwrite to replace a file axdf wrote (listed in {out / MANIFEST}), "
                              "or choose another path")
         sha = _sha_of(o.path)
-        if sha not in _recorded(previous, "outside", rel) | _recorded(previous, "outside_previous", rel):
+        if sha not in _recorded(previous, "outside", rel) | _recorded(previous, "outside_previous", rel) | \
+                _recorded(previous, "outside_earlier", rel):
             listed = bool(_recorded(previous, "outside", rel))
             raise InputError(None, f"{o} " + ("was changed since axdf wrote it" if listed else
                              f"was not written by this command into {out} (its manifest does not list it)"),
@@ -292,6 +293,9 @@ def write_checked(checked: Checked) -> dict:
         old_outside = {rel: sha for rel, (_, sha) in sorted(checked.outside.items()) if sha is not None}
         manifest = {"tool": "axdf", "version": __version__, "command": o.command, "complete": True,
                     "inputs": checked.inputs, "settings": o.settings, "files": files, "outside": new_outside}
+        earlier = _earlier_outside(checked, new_outside)
+        if earlier:
+            manifest["outside_earlier"] = earlier
 
         def write_outside() -> None:
             for rel, (x, sha) in sorted(checked.outside.items()):
@@ -301,6 +305,23 @@ def write_checked(checked: Checked) -> dict:
         session.commit(manifest, interim={"outside": new_outside, "outside_previous": old_outside},
                        during=write_outside)
     return manifest
+
+
+def _earlier_outside(checked: Checked, new_outside: dict) -> dict:
+    """Files outside OUT that an earlier output wrote and this one does not (never deleted:
+    they stay where they are): still recognised as axdf's while their bytes are unchanged, so
+    that a later ``--overwrite`` writing them again may replace them (an import with another
+    ``--name`` and then the first one again was refused on its own earlier files)."""
+    previous = checked.target.previous
+    out = os.path.abspath(checked.outputs.out)
+    earlier: dict = {}
+    for key in ("outside", "outside_earlier"):
+        got = previous.data.get(key) if previous is not None else None
+        for rel, sha in (got.items() if isinstance(got, dict) else ()):
+            if isinstance(rel, str) and rel not in new_outside and isinstance(sha, str) and rel not in earlier \
+                    and "\x00" not in rel and is_file_with(Path(os.path.normpath(os.path.join(out, rel))), sha):
+                earlier[rel] = sha
+    return dict(sorted(earlier.items()))
 
 
 def _still(o: Output, sha: str | None) -> None:

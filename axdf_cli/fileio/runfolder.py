@@ -62,7 +62,7 @@ LAYOUT_DIRS = ("meshes", "bones", "frames")
 
 # the manifest's keys, in the one order every writer uses (unknown keys follow, sorted)
 MANIFEST_KEYS = ("tool", "version", "command", "complete", "inputs", "settings", "frames", "muscles", "bones",
-                 "warnings", "files", "outside", "outside_previous", "bounds", "gl")
+                 "warnings", "files", "outside", "outside_previous", "outside_earlier", "bounds", "gl")
 #: The command that wrote a folder (``command`` in its manifest; a run's manifest has none).
 RUN_COMMAND = "run"
 
