@@ -68,3 +68,34 @@ RENDER_DEPTH_RTOL = 1e-4
 # Rasterizers snap vertices to a sub-pixel grid (Mesa llvmpipe: 1/256 px); a pixel centre
 # counts as inside a triangle only when at least this far (pixels) from each of its edges.
 RENDER_EDGE_MARGIN_PX = 0.02
+
+# Contact (axdf_cli/model/contact.py). Muscles keep CONTACT_MARGIN apart and CONTACT_BONE_MARGIN
+# off bones: the axis-space query reads the tessellated rings linearly, a little inside the
+# curved surface between them, so a small gap keeps the written meshes apart.
+CONTACT_MARGIN = 0.001
+CONTACT_BONE_MARGIN = 0.001
+# Jacobi passes (push, smooth, re-solve the volume); a fixed number, so the result is a
+# continuous function of the frame.
+CONTACT_ITERATIONS = 8
+# [1 2 1]/4 smoothing rounds of the pushes around and along the grid (no creases).
+CONTACT_SMOOTH_PASSES = 2
+# Fraction of a pass's push applied (1: all of it).
+CONTACT_RELAX = 1.0
+# A point pushed this far (m) is held wholly (not moved by the volume re-solve); less, partly.
+CONTACT_HOLD_LENGTH = 0.004
+# Bones' signed distance fields: grid step and padding around the mesh (m). Trilinear on a
+# 3 mm grid is within ~0.3 mm of the mesh's distance near its surface on the shipped bones.
+CONTACT_SDF_STEP = 0.003
+CONTACT_SDF_PAD = 0.02
+# Shares of an overlap: 0.5 each for equal yields, +CONTACT_SHARE_PER_LAYER per layer of
+# yield difference for the deeper muscle, at most CONTACT_SHARE_MAX.
+CONTACT_SHARE_PER_LAYER = 0.3
+CONTACT_SHARE_MAX = 0.8
+# A bone's field covers the muscles' rest meshes (in that bone's frame) grown by this (m):
+# far enough for a pose to bring a muscle near its neighbour bones (a muscle that moves further
+# from a bone than this between rest and pose is not measured against it), small enough not to
+# sample a whole floor or torso.
+CONTACT_REACH = 0.1
+# One yield layer (m of distance from the bone surface): a muscle whose middle lies
+# 1 cm nearer a bone gives way 0.3 more of an overlap (tol.CONTACT_SHARE_PER_LAYER).
+CONTACT_LAYER = 0.01

@@ -26,6 +26,11 @@ def add_args(p) -> None:
     g2.add_argument("--overwrite", action="store_true", help="replace the outputs of an earlier run in OUT")
     p.add_argument("--dry-run", action="store_true", help="check inputs and print what would be written; write nothing")
     p.add_argument("--strict", action="store_true", help="fail (exit 2) on any per-muscle, per-frame warning")
+    g3 = p.add_mutually_exclusive_group()
+    g3.add_argument("--no-contact", dest="contact", action="store_false", default=None,
+                    help="muscles may pass through each other and the bones (default: they collide; the job's "
+                         "contact: false does the same); stats.csv still measures how far they do")
+    g3.add_argument("--contact", dest="contact", action="store_true", help="muscles and bones collide (the default)")
     p.add_argument("--clamp-ranges", action="store_true",
                    help="hold coordinates inside their skeleton ranges (default: warn per frame)")
     p.add_argument("--allow-outside", action="store_true",
@@ -111,7 +116,7 @@ def plan_from_args(args):
         settings = replace(settings, enabled=args.render)
     return runner.plan_run(job, muscle_args=args.muscles, pose_arg=args.pose, out_arg=args.out,
                            fmt_arg=args.format, frames_arg=args.frames, render=settings_from_args(settings, args),
-                           policy=policy, clamp_ranges=args.clamp_ranges)
+                           policy=policy, clamp_ranges=args.clamp_ranges, contact=args.contact)
 
 
 def refuse_warnings(plan) -> None:

@@ -90,6 +90,18 @@ class Section:
 
 
 @dataclass(frozen=True)
+class ContactSpec:
+    """A muscle file's ``contact:`` mapping. ``group``: muscles of one group do not collide
+    with each other ('' = no group); ``ignore``: names this muscle does not collide with;
+    ``yield_``: how deep the muscle lies, in layers (None: from its depth at the rest pose,
+    :func:`auto_yield`); of two touching muscles the one with the larger yield gives way more."""
+
+    group: str = ""
+    ignore: tuple[str, ...] = ()
+    yield_: float | None = None
+
+
+@dataclass(frozen=True)
 class MuscleSpec:
     name: str
     color: tuple[float, float, float]
@@ -105,6 +117,7 @@ class MuscleSpec:
     source: str = ""
     group: str = ""  # the multi-head muscle this head belongs to ('' for single muscles)
     path: PathSpec | None = None  # a path (points, wrap surfaces) instead of fixed axis points
+    contact: ContactSpec = ContactSpec()  # the muscle file's ``contact:`` (axdf_cli/model/contact.py)
 
 
 def ellipse_outline(a: float, b: float, angle_deg: float) -> np.ndarray:
@@ -169,6 +182,7 @@ class FrameResult:
     twist: np.ndarray  # (F,) insertion roll spread along the axis (degrees, unwrapped)
     tension: np.ndarray  # (F,) effective tension
     warnings: list  # [(frame index in block, message)]
+    contact: np.ndarray | None = None  # (F, 3) inside another muscle, inside a bone (shares), deepest (m)
 
 
 class MuscleModel:

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from axdf_cli.model import rmf
+from axdf_cli.model import contact, rmf
 from axdf_cli.model.pose import effective_tension, sample_activation, sample_coordinates
 from axdf_cli.pipeline.plan import RunPlan
 from axdf_cli.model.skeleton import forward_kinematics
@@ -108,6 +108,8 @@ def chunk_frames(plan: RunPlan) -> int:
     """Frames per evaluation chunk: at most CHUNK_FRAMES, fewer for very fine meshes, so that
     one muscle's chunk (about 8 float64 arrays of (F, V, 3)) stays within EVAL_BUDGET_BYTES."""
     v = max(m.n_vertices for m in plan.models)
+    if plan.contact is not None:  # contact holds every muscle of a chunk at once
+        v = sum(m.n_vertices for m in plan.models)
     return int(np.clip(EVAL_BUDGET_BYTES // (v * 3 * 8 * 8), 1, CHUNK_FRAMES))
 
 
@@ -128,13 +130,25 @@ def evaluate_chunks(plan: RunPlan, chunk: int | None = None, twist_ref: np.ndarr
 
         def results(world=world, act=act, s=s, n=len(fr), q=q):
             which = list(range(len(plan.models))) if muscles is None else list(muscles)
+            if plan.contact is not None:
+                # a FRAME stage: every muscle of the chunk, then contact, then the ones asked for
+                everyone = list(range(len(plan.models)))
+                frames = batched_axis_frames(plan.models, everyone, world, coords=q)
+                done = {j: _evaluate(plan, j, world, act, twist_ref[s:s + n, j], frames.pop(j), q) for j in everyone}
+                contact.apply(plan.contact, done, world)
+                for j in which:
+                    yield j, done.pop(j)
+                return
             frames = batched_axis_frames(plan.models, which, world, coords=q)
             for j in which:
-                m = plan.models[j]
-                yield j, m.evaluate(world, effective_tension(m.spec.tension, act[:, j]), twist_ref[s:s + n, j],
-                                    frames=frames.pop(j), coords=q)
+                yield j, _evaluate(plan, j, world, act, twist_ref[s:s + n, j], frames.pop(j), q)
 
         yield slice(s, s + len(fr)), world, results()
+
+
+def _evaluate(plan: RunPlan, j: int, world, act, twist_ref, frames, q):
+    m = plan.models[j]
+    return m.evaluate(world, effective_tension(m.spec.tension, act[:, j]), twist_ref, frames=frames, coords=q)
 
 
 def finite_or_rest(res, model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -14,7 +14,7 @@ from axdf_cli.fileio import runfolder
 from axdf_cli.errors import InputError
 from axdf_cli.formats import WRITERS
 from axdf_cli.pipeline.evaluate import evaluate_chunks, finite_or_rest, twist_references
-from axdf_cli.pipeline.plan import RunPlan, display_path, framing
+from axdf_cli.pipeline.plan import RunPlan, display_path, framing, prepare_contact
 from axdf_cli.workers import check_parent, process_map
 from axdf_cli.pipeline.sequences import SequenceFiles, file_relpath, sequence_formats, write_run_files
 from axdf_cli.fileio.runfolder import (BONES_CSV, FRAME_EXTENSIONS, MANIFEST_INTERVAL_S, STATS, OutputWriter, bone_mesh_relpath,
@@ -48,6 +48,13 @@ def previous_subset(previous: dict, out: Path) -> dict:
     return {k: v for k, v in previous.items() if (out / k).is_file()}
 
 
+#: stats.csv's numeric columns (inside_muscle, inside_bone: shares of the muscle's vertices inside
+#: another muscle it collides with, inside a bone; depth: its deepest penetration, m)
+STATS_COLUMNS = ("length", "volume", "volume_ratio", "tension", "twist", "scale", "inside_muscle", "inside_bone",
+                 "depth")
+NSTATS = len(STATS_COLUMNS)
+
+
 def _fmt_rows(rows: list[list]) -> str:
     return "".join(",".join(r) + "\n" for r in rows)
 
@@ -68,6 +75,7 @@ def manifest_dict(plan: RunPlan, files: dict, warnings: list, complete: bool, ex
             "skeleton": plan.pose.skeleton.name,
             "fps": plan.pose.fps,
             "render": render_dict(plan.render),
+            "contact": bool(plan.contact_on),
         },
         "frames": [int(f) for f in plan.frames],
         "muscles": [
@@ -94,7 +102,8 @@ class MeshPassResult:
 
     muscles: list  # muscle indices, in order
     files: dict  # relpath -> sha256
-    stats: np.ndarray  # (F, len(muscles), 6) length, volume, ratio, tension, twist, scale
+    stats: np.ndarray  # (F, len(muscles), NSTATS) length, volume, ratio, tension, twist, scale, inside_muscle,
+    # inside_bone, depth
     warnings: list  # [(frame index, muscle index, message)]
     lo: np.ndarray  # (3,) bounds of every written vertex
     hi: np.ndarray
@@ -111,7 +120,7 @@ def mesh_pass(plan: RunPlan, muscles: list[int], twist_ref: np.ndarray, writer: 
     frame_formats = [f for f in plan.formats if f in WRITERS]
     writers = {(j, f): WRITERS[f](plan.models[j].faces, plan.muscles[j].name) for j in muscles for f in frame_formats}
     col = {j: k for k, j in enumerate(muscles)}
-    stats = np.zeros((len(plan.frames), len(muscles), 6))
+    stats = np.zeros((len(plan.frames), len(muscles), NSTATS))
     bone_rows = np.zeros((len(plan.frames), len(plan.pose.skeleton.bones), 7)) if bones else None
     warns: list = []
     lo = np.full(3, np.inf)
@@ -135,8 +144,9 @@ def mesh_pass(plan: RunPlan, muscles: list[int], twist_ref: np.ndarray, writer: 
                     seq.append(j, pos, nrm)
                 lo = np.minimum(lo, pos.reshape(-1, 3).min(axis=0))
                 hi = np.maximum(hi, pos.reshape(-1, 3).max(axis=0))
-                st = np.stack([res.length, res.volume, res.volume / plan.models[j].v0, res.tension,
-                               res.twist, res.scale], axis=1)
+                cm = res.contact if res.contact is not None else np.zeros((len(frames), 3))
+                st = np.concatenate([np.stack([res.length, res.volume, res.volume / plan.models[j].v0, res.tension,
+                                               res.twist, res.scale], axis=1), cm], axis=1)
                 stats[sl, col[j]] = np.where(np.isfinite(st), st, 0.0)
                 warns += [(sl.start + i, j, msg) for i, msg in res.warnings]
                 if progress:
@@ -206,7 +216,7 @@ def rendered_frames(plan: RunPlan, previous: dict, root: Path) -> set[int]:
 
 
 def stats_csv(plan: RunPlan, stats: np.ndarray, warn_text: list) -> bytes:
-    rows = [["frame", "muscle", "length", "volume", "volume_ratio", "tension", "twist", "scale", "warning"]]
+    rows = [["frame", "muscle", *STATS_COLUMNS, "warning"]]
     for i, frame in enumerate(plan.frames):
         for j, name in enumerate(plan.names):
             rows.append([str(int(frame)), name] + [_g(x) for x in stats[i, j]] + [_csv_text(warn_text[i][j])])
@@ -267,6 +277,7 @@ def execute(plan: RunPlan, *, resume: bool = False, overwrite: bool = False, pro
     each with its own GL context; this process never makes one); the output is the same
     bytes. With one job the frames are rendered in this process, after every fork."""
     target = check_output(plan, resume=resume, overwrite=overwrite)
+    plan = prepare_contact(plan)
     twist_ref = twist_references(plan)
     if strict:
         strict_check(plan, twist_ref)
@@ -296,7 +307,7 @@ def _write_run(plan: RunPlan, session, twist_ref, progress, render_progress, job
         else:
             checkpoint = Checkpoint(lambda: write_manifest(root, manifest_dict(plan, writer.files, [], complete=False)))
             parts = [mesh_pass(plan, list(range(nm)), twist_ref, writer, progress, checkpoint, bones=True)]
-        stats = np.zeros((nf, nm, 6))
+        stats = np.zeros((nf, nm, NSTATS))
         warn_text = [[""] * nm for _ in range(nf)]
         lo = np.min([p.lo for p in parts], axis=0)
         hi = np.max([p.hi for p in parts], axis=0)

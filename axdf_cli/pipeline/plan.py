@@ -33,6 +33,8 @@ class RunPlan:
     notes: list = field(default_factory=list)  # remarks printed with --verbose; not warnings
     bone_meshes: dict = field(default_factory=dict)  # bone index -> (vertices (V,3) f4, faces (T,3) i4, file bytes)
     frame_warnings: list = field(default_factory=list)  # [(frame index, muscle index, message)] known before evaluation
+    contact_on: bool = True  # muscles and bones collide (--no-contact, a job's contact: false)
+    contact: object = None  # model.contact.ContactModel once built (prepare_contact); None: no contact stage
 
     @property
     def names(self) -> list[str]:
@@ -86,12 +88,14 @@ def load_muscle_specs(files) -> list[MuscleSpec]:
 
 
 def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, fmt_arg=None,
-             frames_arg=None, render=None, policy: RefPolicy | None = None, clamp_ranges: bool = False) -> RunPlan:
+             frames_arg=None, render=None, policy: RefPolicy | None = None, clamp_ranges: bool = False,
+             contact: bool | None = None) -> RunPlan:
     """Load and check every input; build the muscle models. Writes nothing.
 
     ``render``: the RenderSettings to use (None: the job's ``render:``); ``policy``: where
     referenced files may lie (default: the job's); ``clamp_ranges``: hold coordinates inside
-    their ranges (as the pose's ``clamp_ranges``)."""
+    their ranges (as the pose's ``clamp_ranges``); ``contact``: muscles and bones collide (None:
+    the job's ``contact:``, default on)."""
     policy = policy or (job.policy if job is not None else RefPolicy())
     if pose_arg is not None:
         pose_path, pose_mark = Path(pose_arg), Mark(str(pose_arg))
@@ -149,6 +153,8 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
         render = job_render_settings(job)
 
     bone_meshes = {i: load_bone_mesh(b.mesh, pose.skeleton_path) for i, b in enumerate(skel.bones) if b.mesh}
+    if contact is None:
+        contact = job.contact if job is not None else True
 
     inputs = {}
     srcs = ([job.source] if job is not None else []) + [pose.source, pose.skeleton_path] + [str(f) for f in files]
@@ -157,7 +163,23 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
         if Path(s).is_file():
             inputs[display_path(Path(s))] = atomic.sha256_file(s)
     return RunPlan(pose, specs, models, frames, formats, out, inputs, render=render, warnings=warnings,
-                   bone_meshes=bone_meshes, notes=notes, frame_warnings=muscle_range_warnings(pose, frames, specs))
+                   bone_meshes=bone_meshes, notes=notes, frame_warnings=muscle_range_warnings(pose, frames, specs),
+                   contact_on=contact)
+
+
+def prepare_contact(plan: RunPlan) -> RunPlan:
+    """The plan with its contact stage built (the bones' distance fields: seconds, so only
+    for a run that evaluates, not for validate or --dry-run). With contact off the stage only
+    measures (stats.csv's inside_muscle, inside_bone, depth); the meshes are those without it."""
+    if plan.contact is not None:
+        return plan
+    from dataclasses import replace
+
+    from axdf_cli.model import contact as contact_model
+
+    rest = forward_kinematics(plan.pose.skeleton, plan.pose.skeleton.rest_coordinates()[None])[0]
+    return replace(plan, contact=contact_model.build(plan.muscles, plan.models, rest, plan.bone_meshes,
+                                                     enabled=plan.contact_on))
 
 
 def check_formats(formats, frames, frames_mark: Mark) -> None:

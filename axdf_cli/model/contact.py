@@ -1,0 +1,792 @@
+"""Contact: muscles push each other out of the way, bones push muscles (issue 18, parts 3-4).
+
+Pure, batch-first functions over all muscles of one frame (the pipeline's FRAME-scope stage
+calls :func:`resolve_frame` for every frame of a chunk). Nothing is carried from one frame to
+the next: the result is a function of the frame's no-contact meshes and bone poses only, so
+``--jobs``, ``--resume`` and any ``--frames`` subset give the same bytes.
+
+Geometry (every muscle is a tessellated tube: a (U, A) grid whose first and last rows
+collapse to the poles):
+
+- **Bones** collide through a signed distance field per bone, sampled once per run on a
+  bone-local grid (:func:`bone_field`; libigl's ``signed_distance`` with the fast winding
+  number sign of Barill et al. 2018, so a bone mesh that is not closed still has an inside:
+  the points whose generalized winding number (Jacobson et al. 2013) exceeds 1/2),
+  trilinear between grid points. Bones never give way.
+- **Muscles** are queried in axis space: a point x is compared with muscle j at the closest
+  point c of j's centre polyline (the rings' centroids between the two poles): its radial
+  distance rho from c, perpendicular to the polyline, against j's surface radius R in that
+  direction (the ray from c cut with the two neighbouring rings, projected into the plane
+  perpendicular to the polyline, linear between them). Inside when rho < R.
+
+Response (a fixed number of Jacobi passes, every muscle against every other's previous pass):
+
+1. each grid point x of muscle i that lies within the margin of a neighbour j is pushed out
+   along the direction from j's axis to the centre of x's own ring (the whole ring moves:
+   the section's centre leaves the line of action, and its near side flattens), by the
+   distance to leave j's section along that direction (a circle of radius R + margin), times
+   i's share of the pair (:func:`pair_shares`: a deeper muscle gives way more); a point
+   within the margin of a bone is pushed along the field's gradient;
+2. the pushes are smoothed over the grid (so the surface stays smooth), applied, and every
+   pushed point is *held* (weight 0..1, a smooth function of the push);
+3. the volume is solved exactly again: the free points move along their rest radial offsets
+   by sigma, the root of the mesh volume's cubic V(sigma) = V (the no-contact volume), as
+   in :func:`axdf_cli.model.kernels.surface_stage`.
+
+Every step is a continuous function of the frame's meshes (soft projections, no switching),
+so surfaces do not pop from frame to frame. A muscle nothing touches is returned unchanged,
+bit for bit.
+"""
+from __future__ import annotations
+
+import functools
+import hashlib
+from dataclasses import dataclass
+
+import numpy as np
+
+from axdf_cli import tolerances as tol
+from axdf_cli.model import kernels
+from axdf_cli.model.muscle import ContactSpec
+
+try:
+    from numba import njit
+except ImportError as e:  # a dependency: make setup installs it
+    raise ImportError(f"axdf needs numba ({e}); run `make setup` or `pip install numba`") from None
+
+
+# ----------------------------------------------------------------------------- settings
+
+
+def pair_shares(yields: np.ndarray) -> np.ndarray:
+    """Share of an overlap that muscle i takes against j: (M, M), share[i, j] + share[j, i] = 1.
+
+    0.5 for equal yields, growing by tol.CONTACT_SHARE_PER_LAYER per layer of difference up
+    to tol.CONTACT_SHARE_MAX (a deep muscle gives way to a superficial one)."""
+    d = yields[:, None] - yields[None, :]
+    return np.clip(0.5 + tol.CONTACT_SHARE_PER_LAYER * d, 1.0 - tol.CONTACT_SHARE_MAX, tol.CONTACT_SHARE_MAX)
+
+
+def pair_mask(names: list[str], specs: list[ContactSpec]) -> np.ndarray:
+    """Which pairs collide: (M, M) bool, symmetric, False on the diagonal, within a group and
+    where either muscle ignores the other."""
+    m = len(names)
+    ok = ~np.eye(m, dtype=bool)
+    for i, s in enumerate(specs):
+        for j in range(m):
+            if i != j and ((s.group and s.group == specs[j].group) or names[j] in s.ignore
+                           or names[i] in specs[j].ignore):
+                ok[i, j] = ok[j, i] = False
+    return ok
+
+
+# ----------------------------------------------------------------------------- bones
+
+
+@dataclass(frozen=True)
+class BoneField:
+    """A bone's signed distance field on a regular bone-local grid (negative inside).
+
+    origin (3,) the grid's first point, h the spacing (m), values (nx, ny, nz) float64."""
+
+    bone: int
+    origin: np.ndarray
+    h: float
+    values: np.ndarray
+
+
+def bone_field(bone: int, vertices: np.ndarray, faces: np.ndarray, clip: np.ndarray | None = None,
+               h: float = tol.CONTACT_SDF_STEP, pad: float = tol.CONTACT_SDF_PAD) -> BoneField | None:
+    """The signed distance field of a bone mesh (bone-local vertices (V, 3), faces (T, 3)) on a
+    grid of spacing ``h`` over its bounds grown by ``pad``, cut to the box ``clip`` (2, 3)
+    where muscles can reach (None where that leaves nothing). Computed once per mesh, box and
+    process (cached by their bytes)."""
+    v = np.ascontiguousarray(vertices, dtype=np.float64)
+    f = np.ascontiguousarray(faces, dtype=np.int64)
+    lo = v.min(axis=0) - pad
+    hi = v.max(axis=0) + pad
+    if clip is not None:
+        lo = np.maximum(lo, clip[0])
+        hi = np.minimum(hi, clip[1])
+        if np.any(hi <= lo):
+            return None
+    lo = np.floor(lo / h) * h  # on a grid fixed in the bone: the same field for any box
+    box = np.concatenate([lo, hi])
+    key = hashlib.sha256(v.tobytes() + f.tobytes() + np.array([h, *box]).tobytes()).hexdigest()
+    origin, values = _field_cached(key, v.tobytes(), f.tobytes(), v.shape[0], f.shape[0], h, box.tobytes())
+    return BoneField(bone, origin, h, values)
+
+
+@functools.lru_cache(maxsize=64)
+def _field_cached(key, vb, fb, nv, nt, h, boxb):
+    try:
+        import igl
+    except ImportError as e:
+        from axdf_cli.errors import EnvironmentProblem
+
+        raise EnvironmentProblem(f"contact needs libigl for the bones' distance fields ({e})",
+                                 "pip install libigl (make setup installs it), or run with --no-contact") from None
+    v = np.frombuffer(vb, dtype=np.float64).reshape(nv, 3)
+    f = np.frombuffer(fb, dtype=np.int64).reshape(nt, 3)
+    box = np.frombuffer(boxb, dtype=np.float64)
+    lo = box[:3]
+    n = np.ceil((box[3:] - lo) / h).astype(np.int64) + 1
+    axes = [lo[i] + h * np.arange(n[i]) for i in range(3)]
+    pts = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    sd = igl.signed_distance(pts, v, f, sign_type=igl.SIGNED_DISTANCE_TYPE_FAST_WINDING_NUMBER)[0]
+    return lo, np.ascontiguousarray(np.asarray(sd, dtype=np.float64).reshape(tuple(n)))
+
+
+@dataclass(frozen=True)
+class BoneFields:
+    """Every bone field of a skeleton, packed for the compiled kernels."""
+
+    bones: np.ndarray  # (K,) bone index of each field
+    origin: np.ndarray  # (K, 3)
+    h: np.ndarray  # (K,)
+    dims: np.ndarray  # (K, 3) int64
+    offset: np.ndarray  # (K + 1,) start of each field in ``values``
+    values: np.ndarray  # (sum of grid sizes,) float64
+
+    @staticmethod
+    def pack(fields: list[BoneField]) -> "BoneFields":
+        dims = np.array([f.values.shape for f in fields], dtype=np.int64).reshape(-1, 3)
+        sizes = np.prod(dims, axis=1) if len(fields) else np.zeros(0, np.int64)
+        return BoneFields(np.array([f.bone for f in fields], dtype=np.int64),
+                          np.array([f.origin for f in fields], dtype=np.float64).reshape(-1, 3),
+                          np.array([f.h for f in fields], dtype=np.float64), dims,
+                          np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64),
+                          np.concatenate([f.values.ravel() for f in fields]) if fields else np.zeros(0))
+
+
+@njit(cache=True)
+def _field_at(values, off, dims, origin, h, x0, x1, x2, out_g):
+    """Trilinear signed distance at a bone-local point and its gradient (into out_g);
+    returns (distance, inside the grid)."""
+    nx, ny, nz = dims[0], dims[1], dims[2]
+    fx = (x0 - origin[0]) / h
+    fy = (x1 - origin[1]) / h
+    fz = (x2 - origin[2]) / h
+    if not (fx >= 0.0 and fy >= 0.0 and fz >= 0.0 and fx <= nx - 1 and fy <= ny - 1 and fz <= nz - 1):
+        return 1e30, False
+    ix = min(int(fx), nx - 2)
+    iy = min(int(fy), ny - 2)
+    iz = min(int(fz), nz - 2)
+    tx = fx - ix
+    ty = fy - iy
+    tz = fz - iz
+    b = off + (ix * ny + iy) * nz + iz
+    sy = nz
+    sx = ny * nz
+    c0_ = values[b]
+    c1_ = values[b + 1]
+    c2_ = values[b + sy]
+    c3_ = values[b + sy + 1]
+    c4_ = values[b + sx]
+    c5_ = values[b + sx + 1]
+    c6_ = values[b + sx + sy]
+    c7_ = values[b + sx + sy + 1]
+    # c[a*4 + b*2 + d]
+    c00 = c0_ * (1 - tz) + c1_ * tz
+    c01 = c2_ * (1 - tz) + c3_ * tz
+    c10 = c4_ * (1 - tz) + c5_ * tz
+    c11 = c6_ * (1 - tz) + c7_ * tz
+    c0 = c00 * (1 - ty) + c01 * ty
+    c1 = c10 * (1 - ty) + c11 * ty
+    val = c0 * (1 - tx) + c1 * tx
+    out_g[0] = (c1 - c0) / h
+    out_g[1] = ((c01 - c00) * (1 - tx) + (c11 - c10) * tx) / h
+    dz0 = (c1_ - c0_) * (1 - ty) + (c3_ - c2_) * ty
+    dz1 = (c5_ - c4_) * (1 - ty) + (c7_ - c6_) * ty
+    out_g[2] = (dz0 * (1 - tx) + dz1 * tx) / h
+    return val, True
+
+
+@njit(cache=True)
+def _bone_query(x, inv, fb, fo, fh, fd, foff, fv, g_out):
+    """Smallest signed distance of world point x over every bone field (inv: (B, 4, 4) world
+    to bone-local), its world gradient in g_out; 1e30 where no field covers x."""
+    best = 1e30
+    g = g_out[3:6]
+    for k in range(fb.shape[0]):
+        m = inv[fb[k]]
+        l0 = m[0, 0] * x[0] + m[0, 1] * x[1] + m[0, 2] * x[2] + m[0, 3]
+        l1 = m[1, 0] * x[0] + m[1, 1] * x[1] + m[1, 2] * x[2] + m[1, 3]
+        l2 = m[2, 0] * x[0] + m[2, 1] * x[1] + m[2, 2] * x[2] + m[2, 3]
+        d, ok = _field_at(fv, foff[k], fd[k], fo[k], fh[k], l0, l1, l2, g)
+        if ok and d < best:
+            best = d
+            # world gradient = R g (R = inverse of inv's rotation = its transpose)
+            for c in range(3):
+                g_out[c] = m[0, c] * g_out[3] + m[1, c] * g_out[4] + m[2, c] * g_out[5]
+    return best
+
+
+# ----------------------------------------------------------------------------- muscles
+
+
+@njit(cache=True)
+def _centres(grid, off, nu, na, cen, coff):
+    """Ring centroids of every muscle (pole rows: the pole)."""
+    for m in range(nu.shape[0]):
+        U = nu[m]
+        A = na[m]
+        for u in range(U):
+            for c in range(3):
+                s = 0.0
+                for a in range(A):
+                    s += grid[off[m] + u * A + a, c]
+                cen[coff[m] + u, c] = s / A
+
+
+@njit(cache=True)
+def _ring_radius(grid, base, A, cx0, cx1, cx2, a0, a1, a2, b0, b1, b2):
+    """Radius of a ring (A points from ``base``) along (a0, a1, a2) from the centre (cx0, cx1,
+    cx2), in the plane of that direction and (b0, b1, b2): the ray cut with the ring's polygon
+    projected into that plane (0 when it misses)."""
+    best = 0.0
+    px0 = 0.0
+    py0 = 0.0
+    for k in range(A + 1):
+        i = base + (k % A)
+        dx = grid[i, 0] - cx0
+        dy = grid[i, 1] - cx1
+        dz = grid[i, 2] - cx2
+        px = dx * a0 + dy * a1 + dz * a2
+        py = dx * b0 + dy * b1 + dz * b2
+        if k > 0 and ((py0 <= 0.0 < py) or (py <= 0.0 < py0)):
+            xh = px0 + (px - px0) * py0 / (py0 - py)
+            if xh > best:
+                best = xh
+        px0 = px
+        py0 = py
+    return best
+
+
+@njit(cache=True)
+def _muscle_query(x, grid, off_j, U, A, cen, coff_j, out):
+    """Axis-space query of point x against muscle j. out = [rho, R, cx, cy, cz, rx, ry, rz]:
+    radial distance, surface radius, axis point, unit radial direction. Returns False when x
+    lies beyond j's ends."""
+    best = 1e300
+    bu = -1
+    bl = 0.0
+    for u in range(U - 1):
+        a0 = cen[coff_j + u, 0]
+        a1 = cen[coff_j + u, 1]
+        a2 = cen[coff_j + u, 2]
+        d0 = cen[coff_j + u + 1, 0] - a0
+        d1 = cen[coff_j + u + 1, 1] - a1
+        d2 = cen[coff_j + u + 1, 2] - a2
+        ll = d0 * d0 + d1 * d1 + d2 * d2
+        lam = 0.0
+        if ll > 0.0:
+            lam = ((x[0] - a0) * d0 + (x[1] - a1) * d1 + (x[2] - a2) * d2) / ll
+        if (u == 0 and lam < 0.0) or (u == U - 2 and lam > 1.0):
+            continue  # beyond an end: not inside
+        lam = min(max(lam, 0.0), 1.0)
+        e0 = x[0] - (a0 + lam * d0)
+        e1 = x[1] - (a1 + lam * d1)
+        e2 = x[2] - (a2 + lam * d2)
+        q = e0 * e0 + e1 * e1 + e2 * e2
+        if q < best:
+            best = q
+            bu = u
+            bl = lam
+    if bu < 0:
+        return False
+    p0 = coff_j + bu
+    p1 = p0 + 1
+    t0 = cen[p1, 0] - cen[p0, 0]
+    t1 = cen[p1, 1] - cen[p0, 1]
+    t2 = cen[p1, 2] - cen[p0, 2]
+    tl = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+    if tl == 0.0:
+        return False
+    cx0 = cen[p0, 0] + bl * t0
+    cx1 = cen[p0, 1] + bl * t1
+    cx2 = cen[p0, 2] + bl * t2
+    t0 /= tl
+    t1 /= tl
+    t2 /= tl
+    dt = (x[0] - cx0) * t0 + (x[1] - cx1) * t1 + (x[2] - cx2) * t2
+    r0 = x[0] - cx0 - dt * t0
+    r1 = x[1] - cx1 - dt * t1
+    r2 = x[2] - cx2 - dt * t2
+    rho = np.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+    if rho < 1e-12:
+        # on the axis: any perpendicular
+        r0 = t1 - t2
+        r1 = t2 - t0
+        r2 = t0 - t1
+        rl = np.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+        if rl < 1e-12:
+            r0 = -t1
+            r1 = t0
+            r2 = 0.0
+            rl = np.sqrt(r0 * r0 + r1 * r1)
+    else:
+        rl = rho
+    r0 /= rl
+    r1 /= rl
+    r2 /= rl
+    b0 = t1 * r2 - t2 * r1
+    b1 = t2 * r0 - t0 * r2
+    b2 = t0 * r1 - t1 * r0
+    ra = _ring_radius(grid, off_j + bu * A, A, cen[p0, 0], cen[p0, 1], cen[p0, 2], r0, r1, r2, b0, b1, b2)
+    rb = _ring_radius(grid, off_j + (bu + 1) * A, A, cen[p1, 0], cen[p1, 1], cen[p1, 2], r0, r1, r2, b0, b1, b2)
+    out[0] = rho
+    out[1] = (1.0 - bl) * ra + bl * rb
+    out[2] = cx0
+    out[3] = cx1
+    out[4] = cx2
+    out[5] = r0
+    out[6] = r1
+    out[7] = r2
+    return True
+
+
+@njit(cache=True)
+def _boxes(grid, off, box):
+    for m in range(off.shape[0] - 1):
+        for c in range(3):
+            box[m, c] = 1e300
+            box[m, 3 + c] = -1e300
+        for k in range(off[m], off[m + 1]):
+            for c in range(3):
+                v = grid[k, c]
+                if v < box[m, c]:
+                    box[m, c] = v
+                if v > box[m, 3 + c]:
+                    box[m, 3 + c] = v
+
+
+@njit(cache=True)
+def _pushes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb, fo, fh, fd, foff, fv,
+            margin_m, margin_b, push):
+    """One Jacobi pass: the push (Ng, 3) of every grid point of every muscle against its
+    neighbours (nbr[nbr_off[i]:nbr_off[i + 1]]: allowed pairs whose boxes meet) and every bone
+    field (module doc, step 1). Computed on every second ring and column (poles: their first
+    point), filled between by averages."""
+    M = nu.shape[0]
+    q = np.empty(8)
+    g = np.empty(6)
+    for i in range(M):
+        U = nu[i]
+        A = na[i]
+        for k in range(off[i], off[i + 1]):
+            for c in range(3):
+                push[k, c] = 0.0
+        for k in range(off[i], off[i + 1]):
+            x = grid[k]
+            u = (k - off[i]) // A
+            a = (k - off[i]) % A
+            if (u == 0 or u == U - 1) and a != 0:
+                continue  # pole rows: the first point stands for the pole
+            if 0 < u < U - 1 and (u % 2 == 0 or a % 2 == 1):
+                continue  # filled below
+            ci = cen[coff[i] + u]
+            if fb.shape[0] > 0:
+                d = _bone_query(x, inv, fb, fo, fh, fd, foff, fv, g)
+                if d < margin_b:
+                    gl = np.sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2])
+                    if gl > 1e-9:
+                        for c in range(3):
+                            push[k, c] += (margin_b - d) * g[c] / gl
+            for jj in range(nbr_off[i], nbr_off[i + 1]):
+                j = nbr[jj]
+                if (x[0] < box[j, 0] - margin_m or x[1] < box[j, 1] - margin_m or x[2] < box[j, 2] - margin_m
+                        or x[0] > box[j, 3] + margin_m or x[1] > box[j, 4] + margin_m or x[2] > box[j, 5] + margin_m):
+                    continue
+                if not _muscle_query(x, grid, off[j], nu[j], na[j], cen, coff[j], q):
+                    continue
+                rho = q[0]
+                rr = q[1] + margin_m
+                if rho >= rr or q[1] <= 0.0:
+                    continue
+                # direction: from j's axis point towards the centre of x's own ring
+                e0 = ci[0] - q[2]
+                e1 = ci[1] - q[3]
+                e2 = ci[2] - q[4]
+                # perpendicular to j's axis: remove the part along t = r x ... (use the radial plane)
+                el = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+                if el < 1e-9:
+                    e0 = q[5]
+                    e1 = q[6]
+                    e2 = q[7]
+                else:
+                    e0 /= el
+                    e1 /= el
+                    e2 /= el
+                # leave the circle of radius rr about the axis point along e: x + s e
+                rx = rho * q[5]
+                ry = rho * q[6]
+                rz = rho * q[7]
+                b = rx * e0 + ry * e1 + rz * e2
+                s = -b + np.sqrt(max(b * b + rr * rr - rho * rho, 0.0))
+                w = share[i, j] * s
+                push[k, 0] += w * e0
+                push[k, 1] += w * e1
+                push[k, 2] += w * e2
+        # fill: odd columns of computed rings, then the rings between
+        for u in range(1, U - 1, 2):
+            for a in range(1, A, 2):
+                k = off[i] + u * A + a
+                k0 = off[i] + u * A + a - 1
+                k1 = off[i] + u * A + (a + 1) % A
+                for c in range(3):
+                    push[k, c] = 0.5 * (push[k0, c] + push[k1, c])
+        for u in range(2, U - 1, 2):
+            for a in range(A):
+                k = off[i] + u * A + a
+                k0 = off[i] + (u - 1) * A + (a if u - 1 > 0 else 0)
+                k1 = off[i] + (u + 1) * A + (a if u + 1 < U - 1 else 0)
+                for c in range(3):
+                    push[k, c] = 0.5 * (push[k0, c] + push[k1, c])
+        # pole rows carry their first point's push
+        for u in (0, U - 1):
+            b0 = off[i] + u * A
+            for a in range(1, A):
+                for c in range(3):
+                    push[b0 + a, c] = push[b0, c]
+
+
+@njit(cache=True)
+def _smooth(push, off, nu, na, passes, tmp):
+    """``passes`` rounds of [1 2 1]/4 smoothing around and along each muscle's grid (poles:
+    the mean of their first ring)."""
+    for m in range(nu.shape[0]):
+        U = nu[m]
+        A = na[m]
+        o = off[m]
+        for _ in range(passes):
+            for u in range(U):
+                for a in range(A):
+                    k = o + u * A + a
+                    kp = o + u * A + (a - 1) % A
+                    kn = o + u * A + (a + 1) % A
+                    for c in range(3):
+                        tmp[k, c] = 0.5 * push[k, c] + 0.25 * (push[kp, c] + push[kn, c])
+            for u in range(U):
+                for a in range(A):
+                    k = o + u * A + a
+                    up = max(u - 1, 0)
+                    un = min(u + 1, U - 1)
+                    for c in range(3):
+                        push[k, c] = 0.5 * tmp[k, c] + 0.25 * (tmp[o + up * A + a, c] + tmp[o + un * A + a, c])
+            for u in (0, U - 1):
+                for c in range(3):
+                    s = 0.0
+                    for a in range(A):
+                        s += push[o + u * A + a, c]
+                    for a in range(A):
+                        push[o + u * A + a, c] = s / A
+
+
+@njit(cache=True)
+def _solve_offset(c0, c1, c2, c3, v0):
+    """The root sigma nearest 0 of the cubic c0 + c1 s + c2 s^2 + c3 s^3 = v0 (the volume along
+    the free points' radial offsets, increasing near 0): Newton from 0, safeguarded by
+    bisection on a bracket grown from 0. 0 when there is none (the volume is then kept as is)."""
+    f0 = c0 - v0
+    if f0 == 0.0:
+        return 0.0
+    step = 0.05 if f0 < 0.0 else -0.05
+    lo = 0.0
+    hi = step
+    fhi = ((c3 * hi + c2) * hi + c1) * hi + c0 - v0
+    n = 0
+    while fhi * f0 > 0.0 and n < 60:
+        lo = hi
+        hi *= 2.0
+        fhi = ((c3 * hi + c2) * hi + c1) * hi + c0 - v0
+        n += 1
+    if fhi * f0 > 0.0:
+        return 0.0
+    a = min(lo, hi)
+    b = max(lo, hi)
+    fa = ((c3 * a + c2) * a + c1) * a + c0 - v0
+    s = 0.5 * (a + b)
+    for _ in range(100):
+        fs = ((c3 * s + c2) * s + c1) * s + c0 - v0
+        if abs(fs) <= tol.VOLUME_SOLVE_RTOL * abs(v0):
+            break
+        if (fs < 0.0) == (fa < 0.0):
+            a = s
+            fa = fs
+        else:
+            b = s
+        df = (3.0 * c3 * s + 2.0 * c2) * s + c1
+        sn = s - fs / df if df != 0.0 else 0.5 * (a + b)
+        s = sn if a < sn < b else 0.5 * (a + b)
+    return s
+
+
+@njit(cache=True)
+def _apply_and_solve(grid, rad, hold, push, off, nu, na, active, target, omega, hold_len, ga, gw, sigma):
+    """Apply the smoothed pushes, hold pushed points, and solve the volume again (module doc,
+    steps 2-3): grid <- grid + omega push + sigma (1 - hold) rad with V = target."""
+    for m in range(nu.shape[0]):
+        if not active[m]:
+            continue
+        U = nu[m]
+        A = na[m]
+        o = off[m]
+        for u in range(U):
+            for a in range(A):
+                k = o + u * A + a
+                pl = 0.0
+                for c in range(3):
+                    grid[k, c] += omega * push[k, c]
+                    pl += push[k, c] * push[k, c]
+                x = min(np.sqrt(pl) / hold_len, 1.0)
+                hnew = x * x * (3.0 - 2.0 * x)
+                if hnew > hold[k]:
+                    hold[k] = hnew
+                for c in range(3):
+                    ga[u, a, c] = grid[k, c]
+                    gw[u, a, c] = (1.0 - hold[k]) * rad[k, c]
+        c0, c1, c2, c3 = kernels._volume_cubic(ga[:U, :A], gw[:U, :A])
+        s = _solve_offset(c0, c1, c2, c3, target[m])
+        sigma[m] += s
+        for u in range(U):
+            for a in range(A):
+                k = o + u * A + a
+                for c in range(3):
+                    grid[k, c] += s * (1.0 - hold[k]) * rad[k, c]
+
+
+@njit(cache=True)
+def _measure(grid, off, nu, na, cen, coff, box, nbr_off, nbr, inv, fb, fo, fh, fd, foff, fv, out):
+    """Per muscle: [share of points inside another muscle, share inside a bone, deepest
+    penetration (m)] over its vertices (pole rows counted once)."""
+    M = nu.shape[0]
+    q = np.empty(8)
+    g = np.empty(6)
+    for i in range(M):
+        U = nu[i]
+        A = na[i]
+        n_in_m = 0
+        n_in_b = 0
+        deep = 0.0
+        n = 0
+        for k in range(off[i], off[i + 1]):
+            u = (k - off[i]) // A
+            if (u == 0 or u == U - 1) and (k - off[i]) % A != 0:
+                continue
+            n += 1
+            x = grid[k]
+            if fb.shape[0] > 0:
+                d = _bone_query(x, inv, fb, fo, fh, fd, foff, fv, g)
+                if d < 0.0:
+                    n_in_b += 1
+                    if -d > deep:
+                        deep = -d
+            inside = False
+            for jj in range(nbr_off[i], nbr_off[i + 1]):
+                j = nbr[jj]
+                if (x[0] < box[j, 0] or x[1] < box[j, 1] or x[2] < box[j, 2]
+                        or x[0] > box[j, 3] or x[1] > box[j, 4] or x[2] > box[j, 5]):
+                    continue
+                if not _muscle_query(x, grid, off[j], nu[j], na[j], cen, coff[j], q):
+                    continue
+                if q[0] < q[1]:
+                    inside = True
+                    if q[1] - q[0] > deep:
+                        deep = q[1] - q[0]
+            if inside:
+                n_in_m += 1
+        out[i, 0] = n_in_m / n
+        out[i, 1] = n_in_b / n
+        out[i, 2] = deep
+
+
+@njit(cache=True)
+def _normals(grid, off, nu, na, m, out_v, out_n):
+    """Vertices and normals of muscle m's grid, as the surface stage writes them."""
+    U = nu[m]
+    A = na[m]
+    o = off[m]
+    ga = np.empty((U, A, 3))
+    for u in range(U):
+        for a in range(A):
+            for c in range(3):
+                ga[u, a, c] = grid[o + u * A + a, c]
+    e0 = np.empty((1, 3))
+    e1 = np.empty((1, 3))
+    for c in range(3):
+        s0 = 0.0
+        s1 = 0.0
+        for a in range(A):
+            s0 += ga[1, a, c]
+            s1 += ga[U - 2, a, c]
+        e0[0, c] = ga[0, 0, c] - s0 / A
+        e1[0, c] = ga[U - 1, 0, c] - s1 / A
+    kernels._ring_vertices(ga, out_v, out_n, 0)
+    kernels._pole_normals(ga, e0, e1, out_n, 0)
+
+
+# ----------------------------------------------------------------------------- the frame
+
+
+@dataclass(frozen=True)
+class ContactModel:
+    """What contact needs for a run: the pairs, their shares, the bone fields."""
+
+    allow: np.ndarray  # (M, M) bool
+    share: np.ndarray  # (M, M) float64
+    fields: BoneFields
+    shapes: tuple  # ((U, A) per muscle)
+    yields: np.ndarray  # (M,) layers
+    enabled: bool = True  # False: measure only (--no-contact)
+
+
+def vertices_to_grid(v: np.ndarray, U: int, A: int) -> np.ndarray:
+    """(V, 3) vertices with collapsed poles → (U * A, 3) grid rows (poles repeated)."""
+    rings = v[1:-1].reshape(U - 2, A, 3)
+    return np.concatenate([np.repeat(v[:1], A, axis=0), rings.reshape(-1, 3), np.repeat(v[-1:], A, axis=0)])
+
+
+def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np.ndarray,
+                  iterations: int = tol.CONTACT_ITERATIONS):
+    """Contact for one frame.
+
+    vertices : [(V_m, 3) float64] every muscle's no-contact mesh; world_inv : (B, 4, 4) world
+    to bone-local transforms. Returns (vertices [(V_m, 3)] (the input arrays themselves where
+    nothing touched), normals [(V_m, 3) or None where unchanged], changed (M,) bool,
+    before (M, 3), after (M, 3)): inside-muscle share, inside-bone share and deepest
+    penetration before and after contact."""
+    shapes = model.shapes
+    M = len(vertices)
+    if M == 0:
+        return [], [], np.zeros(0, bool), np.zeros((0, 3)), np.zeros((0, 3))
+    nu = np.array([s[0] for s in shapes], dtype=np.int64)
+    na = np.array([s[1] for s in shapes], dtype=np.int64)
+    off = np.concatenate([[0], np.cumsum(nu * na)]).astype(np.int64)
+    coff = np.concatenate([[0], np.cumsum(nu)]).astype(np.int64)
+    grid = np.concatenate([vertices_to_grid(v, *s) for v, s in zip(vertices, shapes)])
+    cen = np.empty((int(coff[-1]), 3))
+    box = np.empty((M, 6))
+    f = model.fields
+    args_b = (world_inv, f.bones, f.origin, f.h, f.dims, f.offset, f.values)
+    _centres(grid, off, nu, na, cen, coff)
+    _boxes(grid, off, box)
+    before = np.zeros((M, 3))
+    _measure(grid, off, nu, na, cen, coff, box, *_neighbours(box, model.allow, 0.0), *args_b, before)
+    rad = grid - np.repeat(cen, np.repeat(na, nu), axis=0)  # radial offsets of the no-contact shape
+    target = np.array([_grid_volume(grid[off[m]:off[m + 1]], nu[m], na[m]) for m in range(M)])
+    hold = np.zeros(len(grid))
+    push = np.zeros_like(grid)
+    tmp = np.zeros_like(grid)
+    sigma = np.zeros(M)
+    touched = np.zeros(M, dtype=np.bool_)
+    umax, amax = int(nu.max()), int(na.max())
+    ga = np.empty((umax, amax, 3))
+    gw = np.empty((umax, amax, 3))
+    for it in range(iterations):
+        nbr_off, nbr = _neighbours(box, model.allow, tol.CONTACT_MARGIN)
+        _pushes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, model.share, *args_b,
+                tol.CONTACT_MARGIN, tol.CONTACT_BONE_MARGIN, push)
+        for m in range(M):
+            touched[m] |= bool(np.any(push[off[m]:off[m + 1]] != 0.0))
+        _smooth(push, off, nu, na, tol.CONTACT_SMOOTH_PASSES, tmp)
+        _apply_and_solve(grid, rad, hold, push, off, nu, na, touched, target, tol.CONTACT_RELAX,
+                         tol.CONTACT_HOLD_LENGTH, ga, gw, sigma)
+        _centres(grid, off, nu, na, cen, coff)
+        _boxes(grid, off, box)
+    after = np.zeros((M, 3))
+    _measure(grid, off, nu, na, cen, coff, box, *_neighbours(box, model.allow, 0.0), *args_b, after)
+    out_v, out_n = [], []
+    for m in range(M):
+        if not touched[m]:
+            out_v.append(vertices[m])
+            out_n.append(None)
+            continue
+        nv = len(vertices[m])
+        v = np.empty((1, nv, 3))
+        n = np.empty((1, nv, 3))
+        _normals(grid, off, nu, na, m, v, n)
+        out_v.append(v[0])
+        out_n.append(n[0])
+    return out_v, out_n, touched, before, after
+
+
+def _neighbours(box: np.ndarray, allow: np.ndarray, margin: float):
+    """Allowed pairs whose boxes (M, 6) meet within ``margin``, as CSR rows (offsets, indices)."""
+    meet = np.all(box[:, None, :3] <= box[None, :, 3:] + margin, axis=-1) & np.all(
+        box[None, :, :3] <= box[:, None, 3:] + margin, axis=-1) & allow
+    idx = np.nonzero(meet)
+    return np.concatenate([[0], np.cumsum(np.bincount(idx[0], minlength=len(box)))]).astype(np.int64), \
+        idx[1].astype(np.int64)
+
+
+def _grid_volume(g: np.ndarray, U: int, A: int) -> float:
+    ga = np.ascontiguousarray(g.reshape(U, A, 3))
+    c0, _, _, _ = kernels._volume_cubic(ga, np.zeros_like(ga))
+    return float(c0)
+
+
+def build(specs, models, rest_world: np.ndarray, bone_meshes: dict, enabled: bool = True) -> "ContactModel":
+    """The run's contact: pairs (groups, ignore lists), shares from the yields (explicit, or
+    :func:`auto_yield`), and the bone fields, each cut to where the muscles' rest meshes,
+    grown by tol.CONTACT_REACH, lie in that bone. ``enabled`` False: measure only."""
+    names = [s.name for s in specs]
+    rest = np.concatenate([m.rest_vertices.astype(np.float64) for m in models])
+    fields = []
+    for b, (v, f, _) in sorted(bone_meshes.items()):
+        inv = np.linalg.inv(rest_world[b])
+        # L[p,c] = sum_k inv[c,k] X[p,k] + inv[c,3]
+        local = rest @ inv[:3, :3].T + inv[:3, 3]
+        clip = np.array([local.min(axis=0) - tol.CONTACT_REACH, local.max(axis=0) + tol.CONTACT_REACH])
+        fld = bone_field(b, v, f, clip)
+        if fld is not None:
+            fields.append(fld)
+    packed = BoneFields.pack(fields)
+    yields = np.array([s.contact.yield_ if s.contact.yield_ is not None else auto_yield(m, packed, rest_world)
+                       for s, m in zip(specs, models)])
+    return ContactModel(pair_mask(names, [s.contact for s in specs]), pair_shares(yields), packed,
+                        tuple(s.resolution for s in specs), yields, enabled)
+
+
+def auto_yield(model, fields: BoneFields, rest_world: np.ndarray) -> float:
+    """A muscle's depth in layers when its file gives none: minus the distance (in units of
+    tol.CONTACT_LAYER) from the bone surface of the centre of its rest mesh's middle ring, so
+    that a muscle lying on a bone gives way to one lying over it (0 where no bone is near)."""
+    U, A = model.spec.resolution
+    ring = model.rest_vertices[1 + ((U - 2) // 2) * A: 1 + ((U - 2) // 2 + 1) * A].astype(np.float64)
+    c = ring.mean(axis=0)
+    g = np.zeros(6)
+    d = _bone_query(c, np.linalg.inv(rest_world), fields.bones, fields.origin, fields.h, fields.dims,
+                    fields.offset, fields.values, g)
+    if d >= 1e29:
+        return 0.0
+    return round(-max(d, 0.0) / tol.CONTACT_LAYER, 6)
+
+
+def apply(model: "ContactModel", results: dict, world: np.ndarray) -> None:
+    """The FRAME-scope stage over a chunk: ``results`` maps every muscle index to its
+    FrameResult (F frames); each frame's meshes are resolved together (:func:`resolve_frame`)
+    and the results updated in place: vertices, normals and volume where contact moved a
+    muscle, ``contact`` (F, 3) the measures after contact, warnings for muscles that start a
+    frame wholly inside a bone. world : (F, B, 4, 4)."""
+    order = sorted(results)
+    nf = world.shape[0]
+    inv = np.linalg.inv(world)
+    for r in results.values():
+        r.contact = np.zeros((nf, 3))
+    for fi in range(nf):
+        verts = [results[j].vertices[fi] for j in order]
+        if not all(np.isfinite(v).all() for v in verts):
+            continue  # a frame that cannot be evaluated is written as the rest shape
+        v, n, touched, before, after = resolve_frame(model, verts, inv[fi],
+                                                     tol.CONTACT_ITERATIONS if model.enabled else 0)
+        for k, j in enumerate(order):
+            r = results[j]
+            r.contact[fi] = after[k]
+            if before[k, 1] >= 1.0:
+                r.warnings.append((fi, "wholly inside a bone at the start of the frame: contact cannot place it"))
+            if touched[k]:
+                r.vertices[fi] = v[k]
+                r.normals[fi] = n[k]
+                U, A = model.shapes[j]
+                r.volume[fi] = _grid_volume(vertices_to_grid(v[k], U, A), U, A)
