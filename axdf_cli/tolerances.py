@@ -99,3 +99,10 @@ CONTACT_REACH = 0.1
 # One yield layer (m of distance from the bone surface): a muscle whose middle lies
 # 1 cm nearer a bone gives way 0.3 more of an overlap (tol.CONTACT_SHARE_PER_LAYER).
 CONTACT_LAYER = 0.01
+# The box a bone's field covers is rounded out to whole steps of this (m), so that editing a
+# muscle a little keeps the same field (and its cache entry).
+CONTACT_CLIP_STEP = 0.05
+# A point is pushed out of a neighbour along the line from the neighbour's axis to the point's
+# own section centre, plus this many neighbour radii of the point's radial direction: the
+# direction stays defined (and continuous) where the two axes meet.
+CONTACT_RADIAL_BLEND = 0.25

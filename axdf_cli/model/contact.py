@@ -41,11 +41,16 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import io
+import os
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from axdf_cli import tolerances as tol
+from axdf_cli.errors import AxdfError
+from axdf_cli.fileio import atomic
 from axdf_cli.model import kernels
 from axdf_cli.model.muscle import ContactSpec
 
@@ -106,8 +111,10 @@ def bone_field(bone: int, vertices: np.ndarray, faces: np.ndarray, clip: np.ndar
     lo = v.min(axis=0) - pad
     hi = v.max(axis=0) + pad
     if clip is not None:
-        lo = np.maximum(lo, clip[0])
-        hi = np.minimum(hi, clip[1])
+        # the box in whole tol.CONTACT_CLIP_STEP: small edits to the muscles keep the same field (cache)
+        q = tol.CONTACT_CLIP_STEP
+        lo = np.maximum(lo, np.floor(clip[0] / q) * q)
+        hi = np.minimum(hi, np.ceil(clip[1] / q) * q)
         if np.any(hi <= lo):
             return None
     lo = np.floor(lo / h) * h  # on a grid fixed in the bone: the same field for any box
@@ -117,8 +124,36 @@ def bone_field(bone: int, vertices: np.ndarray, faces: np.ndarray, clip: np.ndar
     return BoneField(bone, origin, h, values)
 
 
+CACHE_VERSION = 1  # part of the cache key: bump when the field's computation changes
+
+
+def cache_dir() -> Path:
+    """Where computed bone fields are kept between runs: $XDG_CACHE_HOME/axdf/sdf (default
+    ~/.cache/axdf/sdf). Only ever a speed-up: a missing or unwritable cache computes again."""
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "axdf" / "sdf"
+
+
 @functools.lru_cache(maxsize=64)
 def _field_cached(key, vb, fb, nv, nt, h, boxb):
+    path = cache_dir() / f"{key}-v{CACHE_VERSION}.npz"
+    try:
+        with np.load(path) as z:
+            return z["origin"], np.ascontiguousarray(z["values"])
+    except (OSError, KeyError, ValueError):
+        pass
+    origin, values = _compute_field(vb, fb, nv, nt, h, boxb)
+    try:
+        buf = io.BytesIO()
+        np.savez(buf, origin=origin, values=values)
+        atomic.ensure_dir(path.parent)
+        atomic.write_bytes(path, buf.getvalue())
+    except (OSError, AxdfError):
+        pass  # the cache is only a speed-up
+    return origin, values
+
+
+def _compute_field(vb, fb, nv, nt, h, boxb):
     try:
         import igl
     except ImportError as e:
@@ -160,9 +195,8 @@ class BoneFields:
 
 
 @njit(cache=True)
-def _field_at(values, off, dims, origin, h, x0, x1, x2, out_g):
-    """Trilinear signed distance at a bone-local point and its gradient (into out_g);
-    returns (distance, inside the grid)."""
+def _field_at(values, off, dims, origin, h, x0, x1, x2):
+    """Trilinear signed distance at a bone-local point; (distance, inside the grid)."""
     nx, ny, nz = dims[0], dims[1], dims[2]
     fx = (x0 - origin[0]) / h
     fy = (x1 - origin[1]) / h
@@ -178,47 +212,56 @@ def _field_at(values, off, dims, origin, h, x0, x1, x2, out_g):
     b = off + (ix * ny + iy) * nz + iz
     sy = nz
     sx = ny * nz
-    c0_ = values[b]
-    c1_ = values[b + 1]
-    c2_ = values[b + sy]
-    c3_ = values[b + sy + 1]
-    c4_ = values[b + sx]
-    c5_ = values[b + sx + 1]
-    c6_ = values[b + sx + sy]
-    c7_ = values[b + sx + sy + 1]
-    # c[a*4 + b*2 + d]
-    c00 = c0_ * (1 - tz) + c1_ * tz
-    c01 = c2_ * (1 - tz) + c3_ * tz
-    c10 = c4_ * (1 - tz) + c5_ * tz
-    c11 = c6_ * (1 - tz) + c7_ * tz
+    c00 = values[b] * (1 - tz) + values[b + 1] * tz
+    c01 = values[b + sy] * (1 - tz) + values[b + sy + 1] * tz
+    c10 = values[b + sx] * (1 - tz) + values[b + sx + 1] * tz
+    c11 = values[b + sx + sy] * (1 - tz) + values[b + sx + sy + 1] * tz
     c0 = c00 * (1 - ty) + c01 * ty
     c1 = c10 * (1 - ty) + c11 * ty
-    val = c0 * (1 - tx) + c1 * tx
-    out_g[0] = (c1 - c0) / h
-    out_g[1] = ((c01 - c00) * (1 - tx) + (c11 - c10) * tx) / h
-    dz0 = (c1_ - c0_) * (1 - ty) + (c3_ - c2_) * ty
-    dz1 = (c5_ - c4_) * (1 - ty) + (c7_ - c6_) * ty
-    out_g[2] = (dz0 * (1 - tx) + dz1 * tx) / h
-    return val, True
+    return c0 * (1 - tx) + c1 * tx, True
 
 
 @njit(cache=True)
 def _bone_query(x, inv, fb, fo, fh, fd, foff, fv, g_out):
     """Smallest signed distance of world point x over every bone field (inv: (B, 4, 4) world
-    to bone-local), its world gradient in g_out; 1e30 where no field covers x."""
+    to bone-local) and, in g_out[:3], its world gradient by central differences of the
+    trilinear field over one grid step (continuous, unlike the trilinear's own gradient);
+    1e30 where no field covers x."""
     best = 1e30
-    g = g_out[3:6]
+    kb = -1
+    l0 = 0.0
+    l1 = 0.0
+    l2 = 0.0
     for k in range(fb.shape[0]):
         m = inv[fb[k]]
-        l0 = m[0, 0] * x[0] + m[0, 1] * x[1] + m[0, 2] * x[2] + m[0, 3]
-        l1 = m[1, 0] * x[0] + m[1, 1] * x[1] + m[1, 2] * x[2] + m[1, 3]
-        l2 = m[2, 0] * x[0] + m[2, 1] * x[1] + m[2, 2] * x[2] + m[2, 3]
-        d, ok = _field_at(fv, foff[k], fd[k], fo[k], fh[k], l0, l1, l2, g)
+        y0 = m[0, 0] * x[0] + m[0, 1] * x[1] + m[0, 2] * x[2] + m[0, 3]
+        y1 = m[1, 0] * x[0] + m[1, 1] * x[1] + m[1, 2] * x[2] + m[1, 3]
+        y2 = m[2, 0] * x[0] + m[2, 1] * x[1] + m[2, 2] * x[2] + m[2, 3]
+        d, ok = _field_at(fv, foff[k], fd[k], fo[k], fh[k], y0, y1, y2)
         if ok and d < best:
             best = d
-            # world gradient = R g (R = inverse of inv's rotation = its transpose)
-            for c in range(3):
-                g_out[c] = m[0, c] * g_out[3] + m[1, c] * g_out[4] + m[2, c] * g_out[5]
+            kb = k
+            l0 = y0
+            l1 = y1
+            l2 = y2
+    if kb < 0:
+        return best
+    h = fh[kb]
+    for c in range(3):
+        e0 = h if c == 0 else 0.0
+        e1 = h if c == 1 else 0.0
+        e2 = h if c == 2 else 0.0
+        dp, okp = _field_at(fv, foff[kb], fd[kb], fo[kb], h, l0 + e0, l1 + e1, l2 + e2)
+        dm, okm = _field_at(fv, foff[kb], fd[kb], fo[kb], h, l0 - e0, l1 - e1, l2 - e2)
+        if not okp:
+            dp = best
+        if not okm:
+            dm = best
+        g_out[3 + c] = (dp - dm) / (2.0 * h)
+    m = inv[fb[kb]]
+    # world gradient = R g, R = the transpose of inv's rotation
+    for c in range(3):
+        g_out[c] = m[0, c] * g_out[3] + m[1, c] * g_out[4] + m[2, c] * g_out[5]
     return best
 
 
@@ -264,6 +307,21 @@ def _ring_radius(grid, base, A, cx0, cx1, cx2, a0, a1, a2, b0, b1, b2):
 
 
 @njit(cache=True)
+def _centre_tangent(cen, coff_j, U, u):
+    """Unit tangent of a muscle's centre polyline at centre u (central difference; one-sided at
+    the poles)."""
+    a = coff_j + max(u - 1, 0)
+    b = coff_j + min(u + 1, U - 1)
+    d0 = cen[b, 0] - cen[a, 0]
+    d1 = cen[b, 1] - cen[a, 1]
+    d2 = cen[b, 2] - cen[a, 2]
+    dl = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    if dl == 0.0:
+        return 0.0, 0.0, 0.0
+    return d0 / dl, d1 / dl, d2 / dl
+
+
+@njit(cache=True)
 def _muscle_query(x, grid, off_j, U, A, cen, coff_j, out):
     """Axis-space query of point x against muscle j. out = [rho, R, cx, cy, cz, rx, ry, rz]:
     radial distance, surface radius, axis point, unit radial direction. Returns False when x
@@ -297,15 +355,19 @@ def _muscle_query(x, grid, off_j, U, A, cen, coff_j, out):
         return False
     p0 = coff_j + bu
     p1 = p0 + 1
-    t0 = cen[p1, 0] - cen[p0, 0]
-    t1 = cen[p1, 1] - cen[p0, 1]
-    t2 = cen[p1, 2] - cen[p0, 2]
+    cx0 = (1.0 - bl) * cen[p0, 0] + bl * cen[p1, 0]
+    cx1 = (1.0 - bl) * cen[p0, 1] + bl * cen[p1, 1]
+    cx2 = (1.0 - bl) * cen[p0, 2] + bl * cen[p1, 2]
+    # the axis direction blends the centres' tangents along the segment: the same at a shared
+    # centre from either segment, so the query is continuous where the nearest segment changes
+    ta0, ta1, ta2 = _centre_tangent(cen, coff_j, U, bu)
+    tb0, tb1, tb2 = _centre_tangent(cen, coff_j, U, bu + 1)
+    t0 = (1.0 - bl) * ta0 + bl * tb0
+    t1 = (1.0 - bl) * ta1 + bl * tb1
+    t2 = (1.0 - bl) * ta2 + bl * tb2
     tl = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
     if tl == 0.0:
         return False
-    cx0 = cen[p0, 0] + bl * t0
-    cx1 = cen[p0, 1] + bl * t1
-    cx2 = cen[p0, 2] + bl * t2
     t0 /= tl
     t1 /= tl
     t2 /= tl
@@ -404,13 +466,15 @@ def _pushes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb, fo,
                 rr = q[1] + margin_m
                 if rho >= rr or q[1] <= 0.0:
                     continue
-                # direction: from j's axis point towards the centre of x's own ring
-                e0 = ci[0] - q[2]
-                e1 = ci[1] - q[3]
-                e2 = ci[2] - q[4]
-                # perpendicular to j's axis: remove the part along t = r x ... (use the radial plane)
+                # direction: from j's axis point towards the centre of x's own ring, plus a
+                # little of x's own radial direction from j's axis (well defined where the
+                # two axes meet: no switching between frames)
+                bl = tol.CONTACT_RADIAL_BLEND * q[1]
+                e0 = ci[0] - q[2] + bl * q[5]
+                e1 = ci[1] - q[3] + bl * q[6]
+                e2 = ci[2] - q[4] + bl * q[7]
                 el = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
-                if el < 1e-9:
+                if el < 1e-12:
                     e0 = q[5]
                     e1 = q[6]
                     e2 = q[7]
