@@ -76,9 +76,9 @@ CONTACT_MARGIN = 0.001
 CONTACT_BONE_MARGIN = 0.001
 # Jacobi passes (push, smooth, re-solve the volume); a fixed number, so the result is a
 # continuous function of the frame.
-CONTACT_ITERATIONS = 8
+CONTACT_ITERATIONS = 12
 # [1 2 1]/4 smoothing rounds of the pushes around and along the grid (no creases).
-CONTACT_SMOOTH_PASSES = 2
+CONTACT_SMOOTH_PASSES = 4
 # Fraction of a pass's push applied (1: all of it).
 CONTACT_RELAX = 1.0
 # A point pushed this far (m) is held wholly (not moved by the volume re-solve); less, partly.
@@ -106,3 +106,9 @@ CONTACT_CLIP_STEP = 0.05
 # own section centre, plus this many neighbour radii of the point's radial direction: the
 # direction stays defined (and continuous) where the two axes meet.
 CONTACT_RADIAL_BLEND = 0.25
+# A point moves at most this far (m) in one contact pass: a deep overlap is cleared over
+# several passes instead of in one jump that overshoots into a third muscle.
+CONTACT_MAX_STEP = 0.004
+# Pushes from n neighbours at one point are summed and divided by n ** CONTACT_MEAN_POWER
+# (1: their mean, 0: their sum; on the walk the sum left fewer points inside and popped less).
+CONTACT_MEAN_POWER = 0.0

@@ -24,7 +24,10 @@ so figures are noisy and only ratios taken in the same run are compared with tar
    them against ``ndarray.tofile`` of the same bytes in one file, and ``axdf run`` of the job
    (pose stretched to the bench's frames) per format against the same run writing no meshes,
    with peak memory.
-9. rendering split over processes: ``make demo``'s first job (poses/jobs/demo.yaml, meshes and
+9. contact: the gait2392 walk evaluated with and without the contact stage (µs per
+   muscle-frame, the ratio), and the shares of vertices inside another muscle or a bone and
+   the deepest penetration before and after (the product's own measures, stats.csv's);
+10. rendering split over processes: ``make demo``'s first job (poses/jobs/demo.yaml, meshes and
    512x512 frames; every 2nd frame with ``--quick``) as a subprocess at ``--jobs 1`` and
    ``--jobs 2``, and their ratio.
 
@@ -748,6 +751,66 @@ def long_memory(job: Path, n_frames: int = LONG_FRAMES) -> dict:
 # ----------------------------------------------------------------------------- the table
 
 
+#: Contact may at most double evaluation (issue 18), and its targets on the walk.
+TARGET_CONTACT_COST = 2.0
+TARGET_INSIDE_MUSCLE = 0.02
+TARGET_INSIDE_BONE = 0.005
+TARGET_DEPTH = 0.003
+
+
+def contact_pass(plan, contact_model) -> tuple[float, np.ndarray]:
+    """Evaluate the plan's frames with ``contact_model`` (None: no contact stage): wall time (s)
+    and the contact measures (F, M, 3), zeros without the stage."""
+    import dataclasses as dc
+
+    from axdf_cli.pipeline.evaluate import evaluate_chunks, twist_references
+
+    p = dc.replace(plan, contact=contact_model)
+    tw = twist_references(p)
+    out = np.zeros((len(p.frames), len(p.models), 3))
+    t0 = time.perf_counter()
+    for sl, _, results in evaluate_chunks(p, twist_ref=tw):
+        for j, r in results:
+            if r.contact is not None:
+                out[sl, j] = r.contact
+    return time.perf_counter() - t0, out
+
+
+def contact_rows(table: "Table", quick: bool) -> None:
+    """The shipped gait2392 walk (every frame; every 6th with --quick): evaluation without the
+    contact stage, with it measuring only (--no-contact's stats), and with contact; the shares
+    of vertices inside another muscle and inside a bone (mean over muscle-frames) and the
+    deepest penetration, before and after."""
+    import dataclasses as dc
+
+    from axdf_cli.pipeline.plan import plan_run, prepare_contact
+    from axdf_cli.specs import load_job
+
+    plan = plan_run(load_job(GAIT_JOB), frames_arg="18:84:6" if quick else None)
+    t0 = time.perf_counter()
+    plan = prepare_contact(plan)
+    t_fields = time.perf_counter() - t0
+    mf = len(plan.frames) * len(plan.models)
+    t_none, _ = contact_pass(plan, None)
+    t_meas, before = contact_pass(plan, dc.replace(plan.contact, enabled=False))
+    t_con, after = contact_pass(plan, plan.contact)
+    table.section(f"contact (gait2392 walk, {len(plan.frames)} frames x {len(plan.models)} muscles; bone fields "
+                  f"{t_fields:.1f} s, cached on disk after the first run)")
+    us = lambda t: t / mf * 1e6  # noqa: E731
+    table.add("evaluate with contact", f"{us(t_con):.0f} µs/mf", f"without {us(t_none):.0f} µs/mf",
+              f"{t_con / t_none:.2f}x", f"<= {TARGET_CONTACT_COST:g}x {_mark(t_con / t_none <= TARGET_CONTACT_COST)}")
+    table.add("evaluate, contact measured only (--no-contact)", f"{us(t_meas):.0f} µs/mf",
+              f"without {us(t_none):.0f} µs/mf", f"{t_meas / t_none:.2f}x")
+    for k, (what, target) in enumerate((("vertices inside another muscle", TARGET_INSIDE_MUSCLE),
+                                        ("vertices inside a bone", TARGET_INSIDE_BONE))):
+        a, b = after[..., k].mean(), before[..., k].mean()
+        table.add(what, f"{a * 100:.2f}%", f"before {b * 100:.2f}%", f"{a / max(b, 1e-12):.3f}x",
+                  f"<= {target * 100:g}% {_mark(a <= target)}")
+    a, b = after[..., 2].max(), before[..., 2].max()
+    table.add("deepest penetration", f"{a * 1000:.1f} mm", f"before {b * 1000:.1f} mm", f"{a / max(b, 1e-12):.2f}x",
+              f"<= {TARGET_DEPTH * 1000:g} mm {_mark(a <= TARGET_DEPTH)}")
+
+
 def _mark(ok: bool) -> str:
     return "✓" if ok else "✗"
 
@@ -837,6 +900,10 @@ def main(argv=None) -> int:
             n_us = time_evaluation(nc.models(6, RESOLUTIONS[0]), nc.world, nc.tension, reps, coords=nc.coords)
             table.add("evaluate with wrapping", f"{w_us:.1f} µs/mf", f"without {n_us:.1f} µs/mf", f"{w_us / n_us:.2f}x",
                       f"<= {TARGET_WRAP:g}x {_mark(w_us / n_us <= TARGET_WRAP)}")
+
+        # 2c. contact
+        if GAIT_JOB.is_file():
+            contact_rows(table, args.quick)
 
         # 3. geomdl
         table.section("peer: geomdl (NURBS-Python) tessellating the same surface, per muscle-frame")

@@ -425,7 +425,7 @@ def _boxes(grid, off, box):
 
 @njit(cache=True)
 def _pushes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb, fo, fh, fd, foff, fv,
-            margin_m, margin_b, push):
+            margin_m, margin_b, radial_blend, mean_power, push):
     """One Jacobi pass: the push (Ng, 3) of every grid point of every muscle against its
     neighbours (nbr[nbr_off[i]:nbr_off[i + 1]]: allowed pairs whose boxes meet) and every bone
     field (module doc, step 1). Computed on every second ring and column (poles: their first
@@ -455,6 +455,10 @@ def _pushes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb, fo,
                     if gl > 1e-9:
                         for c in range(3):
                             push[k, c] += (margin_b - d) * g[c] / gl
+            mp0 = 0.0
+            mp1 = 0.0
+            mp2 = 0.0
+            nm = 0
             for jj in range(nbr_off[i], nbr_off[i + 1]):
                 j = nbr[jj]
                 if (x[0] < box[j, 0] - margin_m or x[1] < box[j, 1] - margin_m or x[2] < box[j, 2] - margin_m
@@ -469,7 +473,7 @@ def _pushes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb, fo,
                 # direction: from j's axis point towards the centre of x's own ring, plus a
                 # little of x's own radial direction from j's axis (well defined where the
                 # two axes meet: no switching between frames)
-                bl = tol.CONTACT_RADIAL_BLEND * q[1]
+                bl = radial_blend * q[1]
                 e0 = ci[0] - q[2] + bl * q[5]
                 e1 = ci[1] - q[3] + bl * q[6]
                 e2 = ci[2] - q[4] + bl * q[7]
@@ -489,9 +493,16 @@ def _pushes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb, fo,
                 b = rx * e0 + ry * e1 + rz * e2
                 s = -b + np.sqrt(max(b * b + rr * rr - rho * rho, 0.0))
                 w = share[i, j] * s
-                push[k, 0] += w * e0
-                push[k, 1] += w * e1
-                push[k, 2] += w * e2
+                mp0 += w * e0
+                mp1 += w * e1
+                mp2 += w * e2
+                nm += 1
+            if nm > 0:
+                # several neighbours: their mean push (a sum overshoots into a third muscle)
+                wn = 1.0 / nm ** mean_power
+                push[k, 0] += wn * mp0
+                push[k, 1] += wn * mp1
+                push[k, 2] += wn * mp2
         # fill: odd columns of computed rings, then the rings between
         for u in range(1, U - 1, 2):
             for a in range(1, A, 2):
@@ -587,7 +598,7 @@ def _solve_offset(c0, c1, c2, c3, v0):
 
 
 @njit(cache=True)
-def _apply_and_solve(grid, rad, hold, push, off, nu, na, active, target, omega, hold_len, ga, gw, sigma):
+def _apply_and_solve(grid, rad, hold, push, off, nu, na, active, target, omega, hold_len, max_step, ga, gw, sigma):
     """Apply the smoothed pushes, hold pushed points, and solve the volume again (module doc,
     steps 2-3): grid <- grid + omega push + sigma (1 - hold) rad with V = target."""
     for m in range(nu.shape[0]):
@@ -601,9 +612,12 @@ def _apply_and_solve(grid, rad, hold, push, off, nu, na, active, target, omega, 
                 k = o + u * A + a
                 pl = 0.0
                 for c in range(3):
-                    grid[k, c] += omega * push[k, c]
                     pl += push[k, c] * push[k, c]
-                x = min(np.sqrt(pl) / hold_len, 1.0)
+                pl = np.sqrt(pl)
+                cap = 1.0 if pl <= max_step else max_step / pl  # at most max_step a pass
+                for c in range(3):
+                    grid[k, c] += omega * cap * push[k, c]
+                x = min(pl / hold_len, 1.0)
                 hnew = x * x * (3.0 - 2.0 * x)
                 if hnew > hold[k]:
                     hold[k] = hnew
@@ -750,12 +764,12 @@ def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np
     for it in range(iterations):
         nbr_off, nbr = _neighbours(box, model.allow, tol.CONTACT_MARGIN)
         _pushes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, model.share, *args_b,
-                tol.CONTACT_MARGIN, tol.CONTACT_BONE_MARGIN, push)
+                tol.CONTACT_MARGIN, tol.CONTACT_BONE_MARGIN, tol.CONTACT_RADIAL_BLEND, tol.CONTACT_MEAN_POWER, push)
         for m in range(M):
             touched[m] |= bool(np.any(push[off[m]:off[m + 1]] != 0.0))
         _smooth(push, off, nu, na, tol.CONTACT_SMOOTH_PASSES, tmp)
         _apply_and_solve(grid, rad, hold, push, off, nu, na, touched, target, tol.CONTACT_RELAX,
-                         tol.CONTACT_HOLD_LENGTH, ga, gw, sigma)
+                         tol.CONTACT_HOLD_LENGTH, tol.CONTACT_MAX_STEP, ga, gw, sigma)
         _centres(grid, off, nu, na, cen, coff)
         _boxes(grid, off, box)
     after = np.zeros((M, 3))
