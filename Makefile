@@ -2,7 +2,7 @@
 #   make demo   set up (.venv, packages, Mesa EGL if missing) and run the demo job into out/demo
 #   make test   set up and run the whole test suite (CI calls this through .ci/run); also
 #               creates .venv-blender (bpy) for the Blender check
-#   make dataset  set up and build a small example data set into out/demo_small
+#   make dataset  set up and build a small gait2392 data set into out/gait2392_small
 #   make bench  set up and print the benchmark table (BENCH_ARGS="--quick", "--long")
 PY     ?= python3
 VENV   := .venv
@@ -40,11 +40,15 @@ sysdeps:
 	fi
 
 $(STAMP): pyproject.toml
+	@echo "set-up 1/3: Mesa's EGL libraries (headless rendering), when missing"
 	@$(MAKE) --no-print-directory sysdeps
-	$(PY) -m venv $(VENV)
-	$(BIN)/python -m pip install -q --upgrade pip
-	$(BIN)/python -m pip install -q -e '.[test]'
+	@echo "set-up 2/3: a virtual environment in $(VENV)"
+	@$(PY) -m venv $(VENV)
+	@$(BIN)/python -m pip install -q --upgrade pip
+	@echo "set-up 3/3: axdf and its packages into $(VENV) (numpy, scipy, numba, moderngl, OpenEXR, ...; about a minute)"
+	@$(BIN)/python -m pip install -q -e '.[test]'
 	@touch $@
+	@echo "set-up done: $(BIN)/axdf"
 
 blender: $(BLENDER_STAMP)
 
@@ -54,19 +58,23 @@ $(BLENDER_STAMP):
 	   && $(BLENDER_VENV)/bin/python -c "import bpy"; then touch $@; \
 	else echo "warning: could not install bpy into $(BLENDER_VENV); tests/test_blender.py will skip" >&2; fi
 
+DEMO_JOBS := $(DEMO):out/demo poses/jobs/gait2392_walk.yaml:out/gait2392_walk \
+  poses/jobs/paper_deltoid_arm26.yaml:out/paper_deltoid_arm26 \
+  poses/jobs/paper_gastrocnemius_gait2392.yaml:out/paper_gastrocnemius_gait2392 poses/jobs/cmu_walk.yaml:out/cmu_walk \
+  poses/jobs/gait2392_cmu_walk.yaml:out/gait2392_cmu_walk
+
 demo: $(STAMP)
-	$(BIN)/axdf run $(DEMO) --out out/demo --overwrite
-	$(BIN)/axdf run poses/jobs/gait2392_walk.yaml --out out/gait2392_walk --overwrite
-	$(BIN)/axdf run poses/jobs/paper_deltoid_arm26.yaml --out out/paper_deltoid_arm26 --overwrite
-	$(BIN)/axdf run poses/jobs/paper_gastrocnemius_gait2392.yaml --out out/paper_gastrocnemius_gait2392 --overwrite
-	$(BIN)/axdf run poses/jobs/cmu_walk.yaml --out out/cmu_walk --overwrite
-	@echo "demo results in out/: demo, gait2392_walk, paper_deltoid_arm26, paper_gastrocnemius_gait2392, cmu_walk"
+	@n=0; for jo in $(DEMO_JOBS); do n=$$((n + 1)); job=$${jo%%:*}; out=$${jo#*:}; \
+	  echo "demo $$n/6: axdf run $$job --out $$out (meshes, then rendered frames)"; \
+	  $(BIN)/axdf run $$job --out $$out --overwrite || exit $$?; done
+	@echo "demo results in out/: demo, gait2392_walk, paper_deltoid_arm26, paper_gastrocnemius_gait2392, cmu_walk, gait2392_cmu_walk"
 	@echo "  each with meshes/, frames/ (PNG + EXR), camera.json, stats.csv, bones.csv, manifest.json"
 
-# A small data set (7 sequences, 32 samples: sampled and perturbed poses, 2 random views each).
+# A small data set: gait2392's 92 muscles (see poses/datasets/gait2392_small.yaml).
 dataset: $(STAMP)
-	$(BIN)/axdf dataset build poses/datasets/demo_small.yaml --out out/demo_small --overwrite --jobs 2
-	@echo "data set in out/demo_small: index.parquet, dataset.json, seq_*/ (views/, labels.npz, meshes/)"
+	@echo "dataset: axdf dataset build poses/datasets/gait2392_small.yaml --out out/gait2392_small --jobs 2"
+	$(BIN)/axdf dataset build poses/datasets/gait2392_small.yaml --out out/gait2392_small --overwrite --jobs 2
+	@echo "data set in out/gait2392_small: index.parquet, dataset.json, seq_*/ (views/, labels.npz, amodal.json, meshes/)"
 
 test: $(STAMP) $(BLENDER_STAMP)
 	$(BIN)/python -m pytest -q tests
@@ -87,7 +95,16 @@ bench: $(STAMP)
 # (+ meshes/), poses/arm26_flex.yaml, poses/gait2392_walk.yaml. Reports: muscles/*/IMPORT.md.
 # And the CMU walk: poses/skeletons/cmu_131_01.yaml and poses/cmu_131_01_walk.yaml (BVH at 30 fps),
 # muscles/cmu/ (the demo muscles moved onto it through poses/maps/human_r_to_cmu.yaml; TRANSFER.md).
+# And the same take fitted onto gait2392 (poses/maps/cmu_to_gait2392.yaml): poses/retargeted/.
 import: $(STAMP)
+	@if [ ! -f "$(OSIM)/arm26/arm26.osim" ] || [ ! -f "$(OSIM)/gait2392/gait2392_thelen2003muscle.osim" ] \
+	   || [ ! -f "$(BVH)" ]; then \
+	  echo "make import: the source data is not at DATA=$(DATA)" >&2; \
+	  echo "  it needs $(OSIM)/arm26/ (arm26.osim, arm26_Kinematics_q.sto, arm26_controls.sto, Geometry/)," >&2; \
+	  echo "  $(OSIM)/gait2392/ (gait2392_thelen2003muscle.osim, subject01_walk1_ik.mot," >&2; \
+	  echo "  subject01_walk1_controls.sto, Geometry/) and $(BVH)" >&2; \
+	  echo "  where to get them: README.md, 'Regenerating the library'; then: make import DATA=/path/to/data" >&2; \
+	  exit 2; fi
 	$(BIN)/axdf import osim $(OSIM)/arm26/arm26.osim --name arm26 \
 	  --motion $(OSIM)/arm26/arm26_Kinematics_q.sto --controls $(OSIM)/arm26/arm26_controls.sto \
 	  --fps 60 --pose-name arm26_flex --palette anatomical --out muscles/arm26 --muscles-out muscles/arm26 \
@@ -100,6 +117,8 @@ import: $(STAMP)
 	  --skeleton-out poses/skeletons/cmu_131_01.yaml --pose-out poses/cmu_131_01_walk.yaml
 	$(BIN)/axdf transfer muscles/demo --from poses/skeletons/human_r.yaml --to poses/skeletons/cmu_131_01.yaml \
 	  --map poses/maps/human_r_to_cmu.yaml --out muscles/cmu
+	$(BIN)/axdf retarget $(BVH) --onto poses/skeletons/gait2392.yaml --map poses/maps/cmu_to_gait2392.yaml --step 4 \
+	  --name cmu_131_01_walk_gait2392 --out poses/retargeted/cmu_131_01_walk_gait2392
 
 clean:
 	rm -rf out .pytest_cache

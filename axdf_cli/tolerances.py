@@ -69,6 +69,47 @@ RENDER_DEPTH_RTOL = 1e-4
 # counts as inside a triangle only when at least this far (pixels) from each of its edges.
 RENDER_EDGE_MARGIN_PX = 0.02
 
+# Retargeting (axdf retarget, axdf_cli/model/ik.py). Each frame's least squares stops when
+# the cost changes by less than IK_FTOL relative or the step by less than IK_XTOL relative
+# (exact data is fitted to ~1 µm; mocap is good to ~1 mm), or after IK_MAX_EVALUATIONS
+# (a warm-started frame takes 3-10).
+IK_FTOL = 1e-10
+IK_XTOL = 1e-10
+IK_GTOL = 1e-10
+IK_MAX_EVALUATIONS = 200
+# The pull towards the previous frame (a retarget map's `smooth:` default), as residual metres
+# per degree of a rotation: a 10 degree change between frames costs as much as 1 cm of joint
+# centre error. Where the points decide a coordinate it is negligible (a 0.4 m lever moves its
+# end 7 mm per degree, ~50 times the pull's weight in the cost: a lag of ~2% of a frame's
+# change); it decides what the points barely tell: a hip's rotation about a nearly straight
+# leg, a toe's flexion on a 5 cm lever (CMU's noisy toe joints turned the toes through 60 deg
+# in a 30th of a second with 1e-4). Translations: 0.01 m per metre (the root is seen directly).
+IK_SMOOTH_ROTATION = 1e-3
+IK_SMOOTH_TRANSLATION = 1e-2
+# A free coordinate within this share of its range's width of an end is reported as held there.
+IK_AT_BOUND = 1e-6
+# Scaling the model to the subject (`scale: fit`): a pair of mapped points is a segment when its
+# distance changes by less than SEGMENT_MODEL_RIGIDITY (relative) over sampled poses of the model
+# (gait2392's coupled knee translations move the hip-knee distance by up to 7% over the knee's
+# whole range, 2.5% over a walk: the thighs count, and they carry the legs' proportions) and by less than
+# SEGMENT_MOCAP_RIGIDITY between the 10th and 90th percentile of the motion (marker noise and
+# soft tissue: a few per cent), and is at least SEGMENT_MIN_LENGTH metres long in both.
+SEGMENT_MODEL_RIGIDITY = 0.08
+SEGMENT_MOCAP_RIGIDITY = 0.05
+SEGMENT_MIN_LENGTH = 0.02
+# Poses sampled to find the model's rigid pairs and points rigid with the root (seeded, fixed).
+SEGMENT_SAMPLES = 16
+# A point is rigid with the root bone when it moves by less than this (metres) in the root's frame
+# over the sampled poses.
+ROOT_RIGID = 1e-6
+
+# Data-set keypoints (axdf_cli/model/keypoints.py): two keypoints closer than this (metres) at
+# the rest pose are one point. Coincident by construction are BVH helper joints at offset 0
+# from their parent (CMU's LHipJoint, lowerback, lowerneck, the collars, lhand, LThumb) and the
+# radius's head 2 cm beside the humero-ulnar joint (human_r); distinct anatomical keypoints of
+# the shipped skeletons are 2.8 cm apart or more (CMU's fingers' base to their end site).
+KEYPOINT_MERGE = 0.025
+
 # Contact (axdf_cli/model/contact.py). Muscles keep CONTACT_MARGIN apart and CONTACT_BONE_MARGIN
 # off bones: the axis-space query reads the tessellated rings linearly, a little inside the
 # curved surface between them, so a small gap keeps the written meshes apart.

@@ -6,7 +6,7 @@ Rows (medians of repeated runs timed with ``time.perf_counter``; the machine may
 so figures are noisy and only ratios taken in the same run are compared with targets):
 
 1. evaluation: µs per muscle-frame of ``MuscleModel.evaluate`` at 48x24 and 96x48, over
-   1000 frames in chunks of ``run.CHUNK_FRAMES``, for 1, 10 and 92 muscles (the gait2392
+   1000 frames in chunks of ``pipeline.CHUNK_FRAMES``, for 1, 10 and 92 muscles (the gait2392
    library and walk when shipped, else demo muscles replicated and perturbed on the demo
    skeleton with a synthetic pose);
 2. the limit: numpy filling the same outputs (``np.copyto`` into preallocated (F, V, 3)
@@ -30,9 +30,15 @@ so figures are noisy and only ratios taken in the same run are compared with tar
 10. rendering split over processes: ``make demo``'s first job (poses/jobs/demo.yaml, meshes and
    512x512 frames; every 2nd frame with ``--quick``) as a subprocess at ``--jobs 1`` and
    ``--jobs 2``, and their ratio.
+10. retargeting: ``axdf retarget``'s fit of the CMU walk onto gait2392 (frames per second at 30
+   and 120 fps; every 4th frame of the take with ``--quick``), and one Jacobian of the mapped
+   points by the analytic formula against central differences batched as frames of one
+   forward-kinematics call (the alternative the fit could use).
+
+``--only retarget`` prints just the retargeting rows.
 
 ``--long`` adds the memory check of 10,000 frames x 92 muscles streamed through
-``run.evaluate_chunks`` in a subprocess (several minutes). Helpers are importable for the
+``pipeline.evaluate_chunks`` in a subprocess (several minutes). Helpers are importable for the
 smoke test (``tests/test_bench_smoke.py``), which runs them on a tiny case.
 """
 from __future__ import annotations
@@ -53,7 +59,7 @@ from pathlib import Path
 import numpy as np
 
 from axdf_cli.fileio import atomic
-from axdf_cli.formats import ObjWriter, PlyWriter
+from axdf_cli.formats import FORMATS, ObjWriter, PlyWriter, read_preference
 from axdf_cli.specs import Pose, expand_muscle_paths, load_muscle_file, load_pose
 from axdf_cli.model.muscle import OCT, MuscleModel, MuscleSpec
 from axdf_cli.model.pose import effective_tension, sample_activation, sample_coordinates
@@ -412,8 +418,8 @@ def _cum(stats: pstats.Stats, file_end: str, func: str) -> float:
 
 
 def profile_run(job: Path, out: Path, fmt: str = "ply", top: int = 0) -> dict:
-    """Run ``execute`` in-process under cProfile (no rendering): seconds in evaluation (twist
-    references, kinematics, ``MuscleModel.evaluate``), in writing (encode, sha256, atomic
+    """Run ``execute`` in-process under cProfile (no rendering): seconds in evaluation (the
+    pipeline's pre-pass, chunks and surfaces: ``pipeline.evaluate``), in writing (encode, sha256, atomic
     writes) and in total; ``top`` functions by own time as text."""
     from axdf_cli.specs import load_job
     from axdf_cli.pipeline import execute, plan_run
@@ -426,11 +432,10 @@ def profile_run(job: Path, out: Path, fmt: str = "ply", top: int = 0) -> dict:
     prof.runcall(execute, plan)
     total = time.perf_counter() - t0
     st = pstats.Stats(prof)
-    # evaluation: evaluate + twist references + kinematics (those inside twist_references once)
-    fk_in_twist = sum(cv[3] for (f, _, fn), v in st.stats.items() if fn == "forward_kinematics"
-                      and f.endswith("skeleton.py") for (_, _, cfn), cv in v[4].items() if cfn == "twist_references")
-    ev = (_cum(st, "muscle.py", "evaluate") + _cum(st, "evaluate.py", "twist_references")
-          + _cum(st, "skeleton.py", "forward_kinematics") - fk_in_twist)
+    # evaluation: the pre-pass (twist references, time stages' states), the chunks (kinematics,
+    # axis points, time stages) and their surfaces (RMF, surface, frame stages), as the mesh pass reads them
+    ev = (_cum(st, "evaluate.py", "prepare") + _cum(st, "evaluate.py", "evaluate_plan")
+          + _cum(st, "evaluate.py", "_surfaces"))
     enc = _cum(st, f"{fmt}.py", "encode")
     wr = _cum(st, "runfolder.py", "write")  # OutputWriter.write: sha256 + atomic write
     text = ""
@@ -444,23 +449,22 @@ def profile_run(job: Path, out: Path, fmt: str = "ply", top: int = 0) -> dict:
 
 # ----------------------------------------------------------------------------- packed formats
 
-PACKED_FORMATS = ("npz", "pc2", "mdd", "usd")
+PACKED_FORMATS = tuple(read_preference(FORMATS))  # every per-sequence format, fastest to read first
 TARGET_PACKED = 1.5  # pc2 and npz writing within 1.5x of ndarray.tofile of the same bytes in one file
 
 
 def time_sequence_writers(models: list[MuscleModel], world: np.ndarray, tension: np.ndarray, folder: Path,
                           n_muscles: int, repeats: int, fps: float = 60.0) -> dict:
     """Seconds to write ``n_muscles`` muscles x F frames in each per-sequence format as the run
-    streams them (chunks of ``run.CHUNK_FRAMES`` frames, muscle by muscle in each chunk, then
+    streams them (chunks of ``pipeline.CHUNK_FRAMES`` frames, muscle by muscle in each chunk, then
     every file completed: headers, CRC, rename), without and with the sha256 the manifest
     records, against ``ndarray.tofile`` of the same bytes into one file (written in the same
     chunks). Medians of ``repeats`` rounds; in each round the three variants of a format run
     back to back, each after ``os.sync()`` (a variant that meets the previous one's dirty
     pages being written back is slowed by the disk, not by its own work). The frames are evaluated once beforehand (``models`` cycled over the
     muscles, each file its own)."""
-    from axdf_cli.formats.sequence import SequenceInfo
+    from axdf_cli.formats.packed import SequenceInfo
     from axdf_cli.pipeline import CHUNK_FRAMES
-    from axdf_cli.pipeline.sequences import SEQUENCE_WRITERS
 
     F = world.shape[0]
     data = []
@@ -470,7 +474,7 @@ def time_sequence_writers(models: list[MuscleModel], world: np.ndarray, tension:
     frames = np.arange(F)
 
     def write(fmt: str, sha256: bool) -> int:
-        cls = SEQUENCE_WRITERS[fmt]
+        cls = FORMATS[fmt].writer
         d = folder / fmt
         d.mkdir(parents=True)
         writers = [cls(d / f"m{j}.{cls.extension}", SequenceInfo(frames, fps, f"m{j}"), data[j % len(data)][0].faces,
@@ -490,7 +494,7 @@ def time_sequence_writers(models: list[MuscleModel], world: np.ndarray, tension:
                 for j in range(n_muscles):
                     _, pos, nrm = data[j % len(data)]
                     pos[s:s + CHUNK_FRAMES].tofile(fh)
-                    if fmt in ("npz", "usd"):  # the formats that carry normals
+                    if FORMATS[fmt].normals:
                         nrm[s:s + CHUNK_FRAMES].tofile(fh)
         return ref.stat().st_size
 
@@ -619,7 +623,7 @@ def time_dataset(n_samples: int, jobs: int, out: Path) -> dict:
 def dataset_evaluation(n_sequences: int) -> float:
     """Seconds per sample of the evaluation inside a sequence's run (twist references,
     kinematics, ``evaluate``), timed alone on the data set's first sequences."""
-    from axdf_cli.dataset import runner
+    from axdf_cli.dataset import door
     from axdf_cli.dataset.worker import build_context, sequence_pose
     from axdf_cli.specs import RefPolicy
 
@@ -628,9 +632,9 @@ def dataset_evaluation(n_sequences: int) -> float:
     n = 0
     for seq in ctx.sequences[:n_sequences]:
         pose, frames = sequence_pose(ctx, seq)
-        plan = runner.sequence_plan(pose, frames, ctx.muscles, ctx.models, "ply", Path("unused"), {})
+        plan = door.sequence_plan(pose, frames, ctx.muscles, ctx.models, "ply", Path("unused"), {}, ctx.stages)
         t0 = time.perf_counter()
-        for _, _, results in runner.evaluate_chunks(plan):
+        for _, _, results in door.evaluate_chunks(plan):
             for _ in results:
                 pass
         t += time.perf_counter() - t0
@@ -702,6 +706,64 @@ def render_jobs_rows(table: "Table", tmp: Path, quick: bool) -> None:
               f"faster than --jobs 1 {_mark(two['wall'] < one['wall'])}")
 
 
+# ----------------------------------------------------------------------------- retargeting
+
+CMU_BVH = ROOT.parent / "shared" / "data" / "bvh" / "cmu_131_01_walk_scaled.bvh"
+CMU_MAP = ROOT / "poses" / "maps" / "cmu_to_gait2392.yaml"
+
+
+def jacobian_times(rmap, repeats: int) -> tuple[float, float, float]:
+    """µs per Jacobian of the map's points at one pose: analytic (``point_jacobian``) and central
+    differences batched as 2C + 1 frames of one ``forward_kinematics`` call; and their largest
+    difference (metres per unit)."""
+    from axdf_cli.importers.retarget import model_points
+    from axdf_cli.model.ik import pose_points, subskeleton
+    from axdf_cli.model.skeleton import dof_frames, point_jacobian
+
+    mp = model_points(rmap)
+    skel, old = subskeleton(rmap.skeleton, mp.bones)
+    bones = np.searchsorted(old, mp.bones)
+    q = mp.samples[1]
+    n = len(q)
+
+    def analytic():
+        world, frames = dof_frames(skel, q[None])
+        return point_jacobian(skel, frames, world, bones, mp.local)[1][0]
+
+    h = 1e-6
+    steps = np.concatenate([np.zeros((1, n)), h * np.eye(n), -h * np.eye(n)])
+
+    def batched():
+        pts = pose_points(skel, q + steps, bones, mp.local)  # (2C + 1, P, 3)
+        return np.moveaxis((pts[1:n + 1] - pts[n + 1:]) / (2 * h), 0, -1)
+
+    diff = float(np.abs(analytic() - batched()).max())
+    return median_time(analytic, repeats) * 1e6, median_time(batched, repeats) * 1e6, diff
+
+
+def retarget_rows(table: "Table", quick: bool) -> None:
+    from axdf_cli.importers.mocap import read_motion
+    from axdf_cli.importers.retarget import load_map, retarget
+
+    if not CMU_BVH.is_file():
+        table.section("retargeting: the CMU walk is not here (../shared/data/bvh); skipped")
+        return
+    rmap = load_map(CMU_MAP)
+    table.section(f"retargeting: {CMU_BVH.name} onto gait2392 ({len(rmap.points)} points; map "
+                  f"{CMU_MAP.relative_to(ROOT)}), per-frame least squares warm-started from the previous frame")
+    for step in ((4,) if quick else (4, 1)):
+        mocap = read_motion(CMU_BVH, step=step)
+        t0 = time.perf_counter()
+        res = retarget(rmap, mocap)
+        dt = time.perf_counter() - t0
+        n = len(res.fit.q)
+        table.add(f"fit {n} frames at {mocap.fps:g} fps ({len(res.points.free)} coordinates)", f"{n / dt:.0f} frames/s",
+                  f"{dt:.1f} s; {res.fit.evaluations.mean():.1f} evaluations per frame")
+    a, b, diff = jacobian_times(rmap, 20 if quick else 100)
+    table.add("Jacobian: analytic (point_jacobian)", f"{a:.0f} µs", f"batched central differences {b:.0f} µs",
+              f"{b / a:.1f}x", f"max |Δ| {diff:.1e}")
+
+
 # ----------------------------------------------------------------------------- --long
 
 LONG_SCRIPT = r"""
@@ -758,48 +820,46 @@ TARGET_INSIDE_BONE = 0.005
 TARGET_DEPTH = 0.003
 
 
-def contact_pass(plan, contact_model) -> tuple[float, np.ndarray]:
-    """Evaluate the plan's frames with ``contact_model`` (None: no contact stage): wall time (s)
-    and the contact measures (F, M, 3), zeros without the stage."""
-    import dataclasses as dc
+def contact_pass(plan) -> tuple[float, np.ndarray]:
+    """Evaluate every frame of ``plan`` (with its stages): wall time (s) and the contact
+    measures (F, M, 3), zeros where no stage measured."""
+    from axdf_cli.pipeline.evaluate import evaluate_plan
 
-    from axdf_cli.pipeline.evaluate import evaluate_chunks, twist_references
-
-    p = dc.replace(plan, contact=contact_model)
-    tw = twist_references(p)
-    out = np.zeros((len(p.frames), len(p.models), 3))
+    out = np.zeros((len(plan.frames), len(plan.models), 3))
     t0 = time.perf_counter()
-    for sl, _, results in evaluate_chunks(p, twist_ref=tw):
+    for chunk, results in evaluate_plan(plan):
         for j, r in results:
             if r.contact is not None:
-                out[sl, j] = r.contact
+                out[chunk.rows, j] = r.contact
     return time.perf_counter() - t0, out
 
 
 def contact_rows(table: "Table", quick: bool) -> None:
-    """The shipped gait2392 walk (every frame; every 6th with --quick): evaluation without the
-    contact stage, with it measuring only (--no-contact's stats), and with contact; the shares
-    of vertices inside another muscle and inside a bone (mean over muscle-frames) and the
-    deepest penetration, before and after."""
-    import dataclasses as dc
-
-    from axdf_cli.pipeline.plan import plan_run, prepare_contact
+    """The shipped gait2392 walk (every frame; every 6th with --quick): evaluation without any
+    stage, with the penetration stage alone (--no-contact: measures only), and with contact;
+    the shares of vertices inside another muscle and inside a bone (mean over muscle-frames)
+    and the deepest penetration, before and after."""
+    from axdf_cli.pipeline.plan import plan_run
+    from axdf_cli.pipeline.stages import ContactStage
     from axdf_cli.specs import load_job
 
-    plan = plan_run(load_job(GAIT_JOB), frames_arg="18:84:6" if quick else None)
+    frames = "18:84:6" if quick else None
+    plans = {k: plan_run(load_job(GAIT_JOB), frames_arg=frames, stages=sw) for k, sw in
+             (("none", {"contact": False, "penetration": False}), ("measure", {"contact": False}), ("contact", None))}
     t0 = time.perf_counter()
-    plan = prepare_contact(plan)
+    ContactStage().start(plans["contact"])  # the bone fields (from the disk cache after the first run)
     t_fields = time.perf_counter() - t0
+    plan = plans["contact"]
     mf = len(plan.frames) * len(plan.models)
-    t_none, _ = contact_pass(plan, None)
-    t_meas, before = contact_pass(plan, dc.replace(plan.contact, enabled=False))
-    t_con, after = contact_pass(plan, plan.contact)
+    t_none, _ = contact_pass(plans["none"])
+    t_meas, before = contact_pass(plans["measure"])
+    t_con, after = contact_pass(plan)
     table.section(f"contact (gait2392 walk, {len(plan.frames)} frames x {len(plan.models)} muscles; bone fields "
-                  f"{t_fields:.1f} s, cached on disk after the first run)")
+                  f"{t_fields:.1f} s)")
     us = lambda t: t / mf * 1e6  # noqa: E731
     table.add("evaluate with contact", f"{us(t_con):.0f} µs/mf", f"without {us(t_none):.0f} µs/mf",
               f"{t_con / t_none:.2f}x", f"<= {TARGET_CONTACT_COST:g}x {_mark(t_con / t_none <= TARGET_CONTACT_COST)}")
-    table.add("evaluate, contact measured only (--no-contact)", f"{us(t_meas):.0f} µs/mf",
+    table.add("evaluate, measures only (--no-contact)", f"{us(t_meas):.0f} µs/mf",
               f"without {us(t_none):.0f} µs/mf", f"{t_meas / t_none:.2f}x")
     for k, (what, target) in enumerate((("vertices inside another muscle", TARGET_INSIDE_MUSCLE),
                                         ("vertices inside a bone", TARGET_INSIDE_BONE))):
@@ -847,11 +907,19 @@ def main(argv=None) -> int:
     ap.add_argument("--long", action="store_true", help=f"also {LONG_FRAMES} frames x all muscles: peak memory")
     ap.add_argument("--profile", action="store_true", help="print the top functions of the slow rows")
     ap.add_argument("--tmp", default=None, help="folder for the written files (default: a new temporary folder)")
+    ap.add_argument("--only", choices=("retarget",), default=None,
+                    help="print only these rows (retarget: the retargeting fit)")
     ap.add_argument("--dataset-samples", type=int, default=None, metavar="N",
                     help=f"samples of the data-set rows (default {DATASET_SAMPLES}, 100 with --quick; 0: skip them)")
     args = ap.parse_args(argv)
 
     t_start = time.perf_counter()
+    if args.only == "retarget":
+        table = Table()
+        retarget_rows(table, args.quick)
+        print(table.text())
+        print(f"(total bench time {time.perf_counter() - t_start:.0f} s)")
+        return 0
     n_frames = 200 if args.quick else 1000
     reps = 2 if args.quick else 3
     counts = (1, 10) if args.quick else MUSCLE_COUNTS
@@ -866,7 +934,7 @@ def main(argv=None) -> int:
               file=sys.stderr)
 
         # 1-2. evaluation against the limit
-        table.section(f"evaluation ({case.name}, {n_frames} frames in chunks of run.CHUNK_FRAMES) vs numpy "
+        table.section(f"evaluation ({case.name}, {n_frames} frames in chunks of pipeline.CHUNK_FRAMES) vs numpy "
                       "filling the same outputs (vertices + normals, 2 x (F, V, 3) float64)")
         eval_us: dict = {}
         worst_limit = 0.0
@@ -971,11 +1039,14 @@ def main(argv=None) -> int:
         if "error" not in rf:
             render_jobs_rows(table, tmp, args.quick)
 
+        # 10. retargeting
+        retarget_rows(table, args.quick)
+
         # --long
         if args.long:
             lj = GAIT_JOB if GAIT_JOB.is_file() else DEMO_JOB
             lr = long_memory(lj)
-            table.section(f"--long: {LONG_FRAMES} frames x all muscles through run.evaluate_chunks "
+            table.section(f"--long: {LONG_FRAMES} frames x all muscles through pipeline.evaluate_chunks "
                           "(+ stats and the manifest's file list)")
             table.add(f"peak memory ({lr['muscle_frames']} muscle-frames, chunk {lr['chunk']})",
                       f"{lr['maxrss'] / 2**20:.0f} MiB", f"{lr['seconds']:.0f} s evaluating",

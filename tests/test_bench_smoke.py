@@ -78,3 +78,11 @@ def test_packed_writers(case, tmp_path):
         assert d["bytes"] > 0 and d["tofile_bytes"] > 0
         assert all(d[k] > 0 for k in ("write", "sha256", "tofile")), fmt
     assert not any((tmp_path / "w").rglob("*.*"))  # all removed again
+
+
+def test_retarget_jacobian_timing():
+    from axdf_cli.importers.retarget import load_map
+
+    a, b, diff = bench.jacobian_times(load_map(bench.CMU_MAP), repeats=1)
+    assert a > 0 and b > 0
+    assert diff < 1e-6  # the analytic Jacobian is the finite differences' limit

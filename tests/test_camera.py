@@ -27,8 +27,9 @@ def _project(cam: dict, P: np.ndarray) -> np.ndarray:
     return uvw[:, :2] / uvw[:, 2:3]
 
 
-def test_camera_ignores_the_frame_subset_and_the_muscles(repo_root, tmp_path, capsys):
-    """The same camera for frame 100 whichever frames are written and whatever the muscles."""
+def test_camera_ignores_the_frame_subset_and_frames_the_muscles(repo_root, tmp_path, capsys):
+    """The same camera for frame 100 whichever frames are written; other muscles, another
+    framing (the camera frames the run's muscles, issue 17 F)."""
     runs = {
         "one": DEMO + ["--frames", "100"],
         "many": DEMO + ["--frames", "0,100,150"],
@@ -41,10 +42,11 @@ def test_camera_ignores_the_frame_subset_and_the_muscles(repo_root, tmp_path, ca
         rc, _, err = run_main(argv + ["--out", tmp_path / name, "-q"], capsys)
         assert rc == 0, err
         cams[name] = _cams(tmp_path / name)[100]
-    for a, b in (("one", "many"), ("one", "other muscles"), ("orbit", "orbit subset")):
+    for a, b in (("one", "many"), ("orbit", "orbit subset")):
         np.testing.assert_allclose(np.array(cams[a][0]["world_to_camera"]), np.array(cams[b][0]["world_to_camera"]),
                                    rtol=0, atol=1e-12, err_msg=f"{a} vs {b}")
     assert not np.allclose(cams["one"][0]["world_to_camera"], cams["orbit"][0]["world_to_camera"])
+    assert not np.allclose(cams["one"][0]["world_to_camera"], cams["other muscles"][0]["world_to_camera"])
     # the framing is recorded, so `axdf render` of the run gives the same camera
     manifest = json.loads((tmp_path / "one" / "manifest.json").read_text())
     assert manifest["framing"]["first_frame"] == 0 and len(manifest["framing"]["points"]) > 8
@@ -76,7 +78,8 @@ def test_fit_is_tight_and_centred():
 
 
 def test_every_demo_muscle_stays_in_view(repo_root, tmp_path, capsys):
-    """The framing comes from the bones alone; the pad keeps the muscles inside the image."""
+    """The framing carries each muscle's rest mesh on its anchors' bones; every vertex of every
+    frame stays inside the image."""
     from axdf_cli.formats.ply import read_ply
 
     out = tmp_path / "o"
@@ -173,3 +176,109 @@ bones:
     pts = subject_points(pose, {})
     assert pts[:, 0].min() > 4.9 and pts[:, 0].max() < 6.1  # the walk, not the world origin
     assert pts[:, 2].min() < -0.4 < 0.0 < pts[:, 2].max()
+
+
+def _vertices(out: Path, frame: int) -> np.ndarray:
+    from axdf_cli.formats.ply import read_ply
+
+    return np.concatenate([read_ply(p.read_bytes()).vertices.astype(np.float64)
+                           for p in sorted((out / "meshes").rglob(f"*_{frame:04d}.ply"))])
+
+
+def test_few_muscles_are_framed_on_them_not_on_the_skeleton(repo_root, tmp_path, capsys):
+    """The paper's deltoid on arm26 (issue 17 F: a 20 px blob at 512x512 when the whole arm and
+    trunk were framed): its vertices over the whole elevation span most of the image, and
+    stay inside it at every frame."""
+    from axdf_cli.pipeline.plan import plan_run
+    from axdf_cli.model.pose import subject_points
+    from axdf_cli.specs import load_job
+
+    out = tmp_path / "d"
+    argv = ["run", "poses/jobs/paper_deltoid_arm26.yaml", "--size", "96x96", "--supersample", "1",
+            "--frames", "0:47:6", "--out", out, "-q"]
+    rc, _, err = run_main(argv, capsys)
+    assert rc == 0, err
+    cams = _cams(out)
+    uv = np.concatenate([_project(cams[f][0], _vertices(out, f)) for f in cams])
+    assert uv.min() >= 0 and uv.max() <= 96
+    span = (uv.max(0) - uv.min(0)) / 96
+    assert span.max() > 0.7, span  # the deltoid over its sampled frames spans most of the image
+    # the skeleton's framing (bones over the pose) would have shown it several times smaller
+    plan = plan_run(load_job("poses/jobs/paper_deltoid_arm26.yaml"))
+    bones = subject_points(plan.pose, {i: v for i, (v, _, _) in plan.bone_meshes.items()})
+    muscles = np.array(json.loads((out / "manifest.json").read_text())["framing"]["points"])
+    assert np.ptp(bones, axis=0).max() > 4 * np.ptp(muscles, axis=0).max()
+
+
+def _centre(cam: dict) -> np.ndarray:
+    M = np.array(cam["world_to_camera"])
+    return -M[:3, :3].T @ M[:3, 3]
+
+
+def _bone_origins(out: Path, bone: str) -> dict[int, np.ndarray]:
+    import csv
+
+    with open(out / "bones.csv", newline="") as fh:
+        return {int(r["frame"]): np.array([float(r[k]) for k in "xyz"]) for r in csv.DictReader(fh) if r["bone"] == bone}
+
+
+@pytest.mark.parametrize("how", ["follow", "offset", "fixed", "job"])
+def test_camera_aims_at_a_bone_at_every_frame(repo_root, tmp_path, capsys, how):
+    """--camera-target bone:NAME: the bone's origin projects to the image centre at every frame;
+    with no position the camera moves with the bone (a constant offset: automatic, or
+    --camera-offset), with --camera-position it stays put and turns; in a job's render: block
+    too; the camera of a frame never depends on the --frames subset."""
+    frames = "0,60,75,100"
+    extra = {"follow": ["--camera-target", "bone:ulna_r"],
+             "offset": ["--camera-target", "bone:ulna_r", "--camera-offset", "0.4,-0.9,0.3"],
+             "fixed": ["--camera-target", "bone:ulna_r", "--camera-position=0.5,-2.5,1.6"],
+             "job": []}[how]
+    argv = DEMO + extra
+    if how == "job":
+        job = tmp_path / "job.yaml"
+        job.write_text(f"muscles: [{REPO_ROOT}/muscles/demo]\npose: {REPO_ROOT}/poses/demo.yaml\n"
+                       "render: {size: [64, 64], supersample: 1, camera: {target: {bone: ulna_r}}}\n")
+        argv = ["run", job, "--allow-outside"]
+    out = tmp_path / "o"
+    rc, _, err = run_main(argv + ["--frames", frames, "--out", out, "-q"], capsys)
+    assert rc == 0, err
+    cams, origin = _cams(out), _bone_origins(out, "ulna_r")
+    offsets = []
+    for f, (cam,) in cams.items():
+        np.testing.assert_allclose(_project(cam, origin[f][None]), [[32, 32]], atol=1e-6)
+        offsets.append(_centre(cam) - origin[f])
+    assert np.ptp([np.linalg.norm(origin[f] - origin[0]) for f in cams]) > 0.01  # the bone moves
+    if how == "fixed":
+        for cam in cams.values():
+            np.testing.assert_allclose(_centre(cam[0]), [0.5, -2.5, 1.6], atol=1e-12)
+    else:
+        np.testing.assert_allclose(offsets, np.broadcast_to(offsets[0], (len(offsets), 3)), atol=1e-9)
+        if how == "offset":
+            np.testing.assert_allclose(offsets[0], [0.4, -0.9, 0.3], atol=1e-12)
+    if how == "follow":
+        rc, _, err = run_main(argv + ["--frames", "75", "--out", tmp_path / "one", "-q"], capsys)
+        assert rc == 0, err
+        np.testing.assert_allclose(_cams(tmp_path / "one")[75][0]["world_to_camera"], cams[75][0]["world_to_camera"],
+                                   rtol=0, atol=1e-12)
+        # axdf render of a run rendered without it aims the same way
+        plain = tmp_path / "plain"
+        assert run_main(DEMO + ["--frames", frames, "--no-render", "--out", plain, "-q"], capsys)[0] == 0
+        rc, _, err = run_main(["render", plain, "--size", "64x64", "--supersample", "1", "--camera-target",
+                               "bone:ulna_r", "-q"], capsys)
+        assert rc == 0, err
+        for f, (cam,) in _cams(plain).items():
+            # bones.csv holds the positions to 9 significant digits
+            np.testing.assert_allclose(cam["world_to_camera"], cams[f][0]["world_to_camera"], rtol=0, atol=1e-7)
+
+
+def test_a_bone_target_that_is_not_a_bone_is_refused_before_writing(repo_root, tmp_path, capsys):
+    rc, _, err = run_main(DEMO + ["--frames", "0", "--camera-target", "bone:humerus_x", "--out", tmp_path / "x"],
+                          capsys)
+    assert rc == 2 and err.startswith("--camera-target: ") and "humerus_r" in err and not (tmp_path / "x").exists()
+    rc, _, err = run_main(DEMO + ["--frames", "0", "--camera-offset", "1,0,0", "--out", tmp_path / "y"], capsys)
+    assert rc == 2 and err.startswith("--camera-offset: ") and not (tmp_path / "y").exists()
+    out = tmp_path / "o"
+    assert run_main(DEMO + ["--frames", "0", "--no-render", "--out", out, "-q"], capsys)[0] == 0
+    before = sorted(p.name for p in out.rglob("*"))
+    rc, _, err = run_main(["render", out, "--camera-target", "bone:nope"], capsys)
+    assert rc == 2 and "nope" in err and sorted(p.name for p in out.rglob("*")) == before

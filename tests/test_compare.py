@@ -11,7 +11,7 @@ import pytest
 from PIL import Image
 
 from axdf_cli.cli.main import main
-from axdf_cli.compare import tolerances as T
+from axdf_cli.compare import thresholds as T
 from axdf_cli.compare.images import read_exr
 from compare_helpers import (SIZE, blob, exr_channels, make_run, tree_bytes, tube, write_exr, write_obj,
                              write_png, write_ply)

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from axdf_cli.cli.main import main
-from axdf_cli.compare import tolerances as T
+from axdf_cli.compare import thresholds as T
 from axdf_cli.compare.images import channel_class, read_exr
 from axdf_cli.formats.obj import read_obj
 from axdf_cli.formats.ply import read_ply

@@ -9,7 +9,6 @@ alone; --jobs and --frames subsets give the same bytes; a muscle wholly inside a
 warned and refused under --strict; the contact keys are read and checked."""
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import json
 
@@ -21,9 +20,9 @@ from conftest import DEMO_JOB, REPO_ROOT
 from winding import inside_shares
 
 from axdf_cli.model import contact
-from axdf_cli.model.skeleton import forward_kinematics
-from axdf_cli.pipeline.evaluate import evaluate_chunks
-from axdf_cli.pipeline.plan import plan_run, prepare_contact
+from axdf_cli.pipeline.evaluate import evaluate_plan
+from axdf_cli.pipeline.plan import plan_run
+from axdf_cli.pipeline.stages import ContactStage
 from axdf_cli.specs import RefPolicy, load_job
 
 FRAMES = "20,70"  # knee flexed with plantarflexion; shoulder abducted
@@ -42,14 +41,13 @@ def demo(tmp_path_factory):
     [[(V, 3)] per muscle] per frame)."""
     twin = tmp_path_factory.mktemp("twin") / "biceps_twin.yaml"
     twin.write_text(TWIN)
-    plan = prepare_contact(plan_run(load_job(DEMO_JOB), frames_arg=FRAMES,
-                                    muscle_args=[str(REPO_ROOT / "muscles" / "demo"), str(twin)],
-                                    policy=RefPolicy(allow_outside=True)))
-    raw = dataclasses.replace(plan, contact=None)
-    (sl, world, results), = list(evaluate_chunks(raw))
+    plan = plan_run(load_job(DEMO_JOB), frames_arg=FRAMES, muscle_args=[str(REPO_ROOT / "muscles" / "demo"), str(twin)],
+                    policy=RefPolicy(allow_outside=True), stages={"contact": False, "penetration": False})
+    (chunk, results), = list(evaluate_plan(plan))
     res = dict(results)
     frames = [[res[j].vertices[f] for j in range(len(plan.models))] for f in range(len(plan.frames))]
-    return plan, world, frames
+    plan.contact = ContactStage().start(plan)  # the stage's state: the run's ContactModel
+    return plan, chunk.world, frames
 
 
 def _bones_world(plan, world):
@@ -143,8 +141,8 @@ def test_no_contact_writes_the_evaluation_alone(tmp_path):
     out = tmp_path / "nc"
     assert run_cli(REPO_ROOT, "run", str(DEMO_JOB), "--frames", FRAMES, "--no-render", "--no-contact",
                    "--out", str(out), "--quiet") == 0
-    plan = plan_run(load_job(DEMO_JOB), frames_arg=FRAMES)
-    (sl, world, results), = list(evaluate_chunks(plan))  # plan.contact is None: no stage at all
+    plan = plan_run(load_job(DEMO_JOB), frames_arg=FRAMES, stages={"contact": False, "penetration": False})
+    (_, results), = list(evaluate_plan(plan))  # no stage at all
     for j, res in results:
         name = plan.names[j]
         w = PlyWriter(plan.models[j].faces, name)
@@ -152,7 +150,7 @@ def test_no_contact_writes_the_evaluation_alone(tmp_path):
             data = w.encode(res.vertices[i].astype(np.float32), res.normals[i].astype(np.float32))
             assert (out / "meshes" / name / f"{name}_{int(f):04d}.ply").read_bytes() == data
     man = json.loads((out / "manifest.json").read_text())
-    assert man["settings"]["contact"] is False
+    assert [s["name"] for s in man["settings"]["stages"]] == ["penetration"]
     rows = (out / "stats.csv").read_text().splitlines()
     assert rows[0].split(",")[8:11] == ["inside_muscle", "inside_bone", "depth"]
     assert max(float(r.split(",")[9]) for r in rows[1:]) > 0.05  # the deltoid lies partly in the humerus
@@ -168,7 +166,8 @@ def test_jobs_and_frames_give_the_same_bytes(tmp_path):
     assert da == db
     meshes_c = {k: v for k, v in dc.items() if k.startswith("meshes/")}
     assert meshes_c and all(da[k] == v for k, v in meshes_c.items())
-    assert json.loads((a / "manifest.json").read_text())["settings"]["contact"] is True
+    assert [s["name"] for s in json.loads((a / "manifest.json").read_text())["settings"]["stages"]] == [
+        "contact", "penetration"]
 
 
 BURIED = """\

@@ -152,9 +152,9 @@ KILLER = """\
 # loaded by every Python process of the test (PYTHONPATH): the worker that makes seq_00003
 # dies right after writing its meshes, as a worker killed by the OOM killer would
 import os
-from axdf_cli.dataset import runner
+from axdf_cli.dataset import door
 
-_real = runner.run_sequence
+_real = door.run_sequence
 
 
 def _dies(plan, resume):
@@ -164,7 +164,7 @@ def _dies(plan, resume):
     return out
 
 
-runner.run_sequence = _dies
+door.run_sequence = _dies
 """
 
 
@@ -215,8 +215,9 @@ def test_readme_loading_snippet_runs(tiny):
     block = text[text.index("## Data sets"):].split("```python\n", 1)[1].split("```", 1)[0]
     assert len(block.strip().splitlines()) <= 10
     scope: dict = {}
-    exec(block.replace('"out/demo_small"', repr(str(tiny / "ref"))), scope)
-    assert scope["image"].shape == (48, 40, 4) and scope["uv"].shape == (5, 2) and scope["visible"].dtype == bool
+    exec(block.replace('"out/gait2392_small"', repr(str(tiny / "ref"))), scope)
+    # the chain's keypoints: its 4 articulated joints (b0, a root without DOFs, has none)
+    assert scope["image"].shape == (48, 40, 4) and scope["uv"].shape == (4, 2) and scope["visible"].dtype == bool
 
 
 

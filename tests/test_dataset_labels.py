@@ -64,7 +64,8 @@ def test_joint_pixels_show_their_ball_at_the_right_depth(rig):
     ball = _ball_ids(rig)
     for seq in ("seq_00000", "seq_00001", "seq_00002", "seq_00003"):
         lab = np.load(rig / seq / "labels.npz")
-        names = list(lab["joint_names"])
+        names = [str(lab["bone_names"][b]) for b in lab["joint_bones"]]  # each keypoint's ball
+        assert list(lab["joint_names"]) == ["b0_b1", "b1_b2", "b2_b3", "b3_b4"]  # b0: no DOFs, no joint
         for fi, f in enumerate(lab["frames"]):
             for vi, view in enumerate(lab["view_names"]):
                 if view == "below":
@@ -82,7 +83,7 @@ def test_joint_pixels_show_their_ball_at_the_right_depth(rig):
 def test_every_ball_pixel_unprojects_onto_its_ball(rig):
     ball = _ball_ids(rig)
     lab = np.load(rig / "seq_00001" / "labels.npz")
-    names = list(lab["joint_names"])
+    names = list(lab["bone_names"])
     for vi, view in enumerate(lab["view_names"]):
         exr = read_exr(rig / "seq_00001" / "views" / view / "0001.exr")
         K, M = lab["K"][vi], lab["world_to_camera"][1, vi]
@@ -92,8 +93,9 @@ def test_every_ball_pixel_unprojects_onto_its_ball(rig):
         # p_cam = z K^-1 [u, v, 1] at the pixel centre; p_world = R^T (p_cam - t)
         pc = z[:, None] * (np.stack([cols + 0.5, rows + 0.5, np.ones_like(z)], 1) @ np.linalg.inv(K).T)
         pw = (pc - M[:3, 3]) @ M[:3, :3]
-        centre = lab["joints3d"][1][[names.index(n) for n in
-                                     [next(k for k, v in ball.items() if v == i) for i in exr["id"][rows, cols]]]]
+        centre = lab["bone_world"][1][[names.index(n) for n in
+                                       [next(k for k, v in ball.items() if v == i) for i in exr["id"][rows, cols]]],
+                                      :3, 3]
         dist = np.linalg.norm(pw - centre, axis=1)
         assert np.abs(dist - BALL_R).max() < DEPTH_TOL
 
@@ -104,7 +106,7 @@ def test_hidden_joints_are_not_visible(rig):
     uv = lab["joints2d"][0, vi]
     assert np.abs(uv - uv[-1]).max() < 1.0  # looking up the chain: every joint on one pixel
     # only the lowest ball (b4) shows; the others are 0.1 m or more behind its surface
-    assert list(lab["visible"][0, vi]) == [False, False, False, False, True]
+    assert list(lab["visible"][0, vi]) == [False, False, False, True]
     assert lab["visible"][0, :vi].all()
 
 
@@ -118,7 +120,8 @@ def test_coordinates_reproduce_bone_frames_and_tables(rig):
         assert list(lab["coord_names"]) == [c.name for c in skel.coordinates]
         world = forward_kinematics(skel, lab["coords"])
         np.testing.assert_allclose(lab["bone_world"], world, rtol=0, atol=1e-12)
-        np.testing.assert_allclose(lab["joints3d"], world[:, :, :3, 3], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(lab["joints3d"], world[:, 1:, :3, 3], rtol=0, atol=1e-12)
+        assert list(lab["joint_bones"]) == [1, 2, 3, 4] and list(lab["joint_parents"]) == [-1, 0, 1, 2]
         with open(rig / seq / "bones.csv", newline="") as fh:
             rows = list(csv.DictReader(fh))
         xyz = np.array([[float(r[k]) for k in "xyz"] for r in rows]).reshape(len(lab["frames"]), -1, 3)

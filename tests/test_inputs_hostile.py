@@ -203,7 +203,7 @@ def test_exponent_numbers_through_the_real_loaders_give_the_same_meshes(project,
 
 
 def test_exponent_tolerances_load(tmp_path):
-    from axdf_cli.compare.tolerances import load_tolerances
+    from axdf_cli.compare.thresholds import load_tolerances
 
     (tmp_path / "t.yaml").write_text("mesh: {max_distance: 1e-5, rms_distance: 2E-6}\n"
                                      "table: {atol: 1e-9, rtol: 1.0e-6}\n")

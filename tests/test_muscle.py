@@ -167,12 +167,12 @@ def test_ellipse_outline_touches_the_ellipse():
 def test_rest_pose_through_the_pipeline_equals_rest(demo, repo_root):
     """Frame 0 of the demo pose is the rest pose with zero activation: every muscle equals
     its rest shape (plan_run + evaluate_chunks, the code path of `axdf run`)."""
-    from axdf_cli import pipeline as runner
+    from axdf_cli import pipeline
     from axdf_cli.specs import RefPolicy, load_job
 
     policy = RefPolicy.for_command(["poses/jobs/demo.yaml"])  # as `axdf run` does
-    plan = runner.plan_run(load_job("poses/jobs/demo.yaml", policy), frames_arg="0")
-    (_, world, results), = list(runner.evaluate_chunks(plan))
+    plan = pipeline.plan_run(load_job("poses/jobs/demo.yaml", policy), frames_arg="0")
+    (_, world, results), = list(pipeline.evaluate_chunks(plan))
     np.testing.assert_allclose(world[0], demo.rest, rtol=0, atol=1e-15)
     for spec, model, (_, res) in zip(plan.muscles, plan.models, results):
         direct = tessellate_net(model, model.rest_control_points, rest_axis_points(model, demo.rest))

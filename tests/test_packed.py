@@ -107,7 +107,7 @@ def test_npz_holds_the_ply_frames_and_is_byte_deterministic(packed):
 def test_npz_zip64_records_read_by_zipfile_and_numpy(tmp_path, monkeypatch):
     """Entries past 4 GiB use ZIP64 records; forced here with a tiny limit."""
     from axdf_cli.formats import npz
-    from axdf_cli.formats.sequence import SequenceInfo
+    from axdf_cli.formats.packed import SequenceInfo
 
     monkeypatch.setattr(npz, "ZIP32_MAX", 64)
     rng = np.random.default_rng(5)

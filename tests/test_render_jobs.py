@@ -135,7 +135,7 @@ def test_process_map_results_in_order_and_a_dead_worker_is_an_error():
 
 
 def test_frame_blocks_cover_every_frame_once():
-    from axdf_cli.render.sequence import RENDER_CHUNK, frame_blocks
+    from axdf_cli.render.framefiles import RENDER_CHUNK, frame_blocks
 
     for n, jobs in [(1, 2), (5, 2), (8, 2), (100, 3), (7, 16)]:
         frames = list(range(10, 10 + 2 * n, 2))

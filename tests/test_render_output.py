@@ -10,7 +10,7 @@ from axdf_cli import tolerances as tol
 from axdf_cli.errors import EnvironmentProblem
 from axdf_cli.render.context import create_gl_context
 from axdf_cli.render.renderer import render_frames
-from axdf_cli.render.sequence import benchmark_fps, render_sequence
+from axdf_cli.render.framefiles import benchmark_fps, render_sequence
 from axdf_cli.specs.render import CameraSpec, RenderSettings
 from axdf_cli.render.synthetic import synthetic_scene
 

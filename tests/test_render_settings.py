@@ -28,6 +28,14 @@ def test_all_keys():
     s = parse("render:\n  camera: {position: [0, -2, 1], target: [0, 0, 1], fov: 25}\n  background: [1, 0, 0]\n")
     assert s.camera.position == (0, -2, 1) and s.camera.up == (0, 0, 1) and s.camera.fov == 25
     assert s.background == (1, 0, 0, 1)
+    # a bone target: both spellings; a position, an offset or neither (the camera follows)
+    for text in ("bone:humerus_r", "{bone: humerus_r}"):
+        s = parse(f"render:\n  camera: {{target: {text}}}\n")
+        assert s.camera.target_bone == "humerus_r" and s.camera.position is None and s.camera.follows
+    s = parse("render:\n  camera: {target: bone:ulna_r, offset: [0.4, -1, 0.3]}\n")
+    assert s.camera.offset == (0.4, -1, 0.3) and s.camera.follows
+    s = parse("render:\n  camera: {target: bone:ulna_r, position: [0, -3, 1]}\n")
+    assert not s.camera.follows
 
 
 @pytest.mark.parametrize("text, where, words", [
@@ -40,6 +48,10 @@ def test_all_keys():
     ("render:\n  view: front\n  camera: {position: [0, 0, 1], target: [0, 0, 0]}\n", "job.yaml:3:3", "not both"),
     ("render:\n  camera: {position: [0, 0, 1], target: [0, 0, 0]}\n", "job.yaml:2:22", "parallel"),
     ("render:\n  camera: {target: [0, 0, 0]}\n", "job.yaml:2:11", "position"),
+    ("render:\n  camera: {target: [0, 0, 0], offset: [1, 0, 0]}\n", "job.yaml:2:39", "without a bone target"),
+    ("render:\n  camera: {target: bone:a, position: [1, 0, 0], offset: [1, 0, 0]}\n", "job.yaml:2:57", "both"),
+    ("render:\n  camera: {target: {bone: 'a b'}}\n", "job.yaml:2:20", "bone:NAME"),
+    ("render:\n  camera: {target: humerus}\n", "job.yaml:2:20", "bone:NAME"),
 ])
 def test_errors_have_positions(text, where, words):
     with pytest.raises(InputError) as e:

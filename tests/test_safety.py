@@ -431,13 +431,13 @@ def frame_files(run: Path) -> list[str]:
 
 
 def test_an_interrupted_render_is_incomplete_and_resumes(small_run, capsys, monkeypatch, tmp_path):
-    from axdf_cli.render import sequence
+    from axdf_cli.render import framefiles
 
     reference = tmp_path / "reference"
     shutil.copytree(small_run, reference)
     assert run_main(["render", reference, "--size", "48x32", "-q"], capsys)[0] == 0
 
-    real = sequence.FRAME_WRITERS["exr"]
+    real = framefiles.FRAME_WRITERS["exr"]
     calls = {"n": 0}
 
     def interrupted(path, img):
@@ -446,7 +446,7 @@ def test_an_interrupted_render_is_incomplete_and_resumes(small_run, capsys, monk
             raise KeyboardInterrupt
         return real(path, img)
 
-    monkeypatch.setitem(sequence.FRAME_WRITERS, "exr", interrupted)
+    monkeypatch.setitem(framefiles.FRAME_WRITERS, "exr", interrupted)
     rc, _, err = run_main(["render", small_run, "--size", "48x32"], capsys)
     monkeypatch.undo()
     assert rc == 130, err

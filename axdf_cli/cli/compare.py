@@ -89,7 +89,7 @@ def run(args) -> int:
 
     from axdf_cli.compare import check_path, check_paths, compare_paths
     from axdf_cli.compare.report import shown, summary, to_json, to_junit
-    from axdf_cli.compare.tolerances import Tolerances, load_tolerances
+    from axdf_cli.compare.thresholds import Tolerances, load_tolerances
 
     # everything that can be bad usage is checked before anything is written
     tol = load_tolerances(args.tolerances) if args.tolerances else Tolerances()

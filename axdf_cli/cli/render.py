@@ -61,7 +61,7 @@ def _frame_files(frames) -> list[str]:
 
 def run(args: argparse.Namespace) -> int:
     from axdf_cli.render.runio import load_run_source, recorded_render_settings
-    from axdf_cli.render.sequence import check_render, render_frames_of
+    from axdf_cli.render.framefiles import check_render, render_frames_of
 
     run_dir = Path(args.run_dir)
     if not run_dir.is_dir():
@@ -107,7 +107,9 @@ def run(args: argparse.Namespace) -> int:
         todo = [f for f in chosen if f not in done]
     settings = check_render(settings, on_note=lambda text: print(f"note: {text}", file=sys.stderr))
     new_render = settings_to_dict(settings)
-    scene, source, _ = load_run_source(run_dir, run_manifest, frames=todo)
+    cam = settings.camera
+    aim = (cam.target_bone, cam.target_mark) if cam is not None and cam.target_bone is not None else None
+    scene, source, _ = load_run_source(run_dir, run_manifest, frames=todo, target_bone=aim)
 
     stale = set(_frame_files(todo)) | {CAMERA}
     if old is not None:

@@ -26,18 +26,30 @@ def add_args(p) -> None:
     g2.add_argument("--overwrite", action="store_true", help="replace the outputs of an earlier run in OUT")
     p.add_argument("--dry-run", action="store_true", help="check inputs and print what would be written; write nothing")
     p.add_argument("--strict", action="store_true", help="fail (exit 2) on any per-muscle, per-frame warning")
-    g3 = p.add_mutually_exclusive_group()
-    g3.add_argument("--no-contact", dest="contact", action="store_false", default=None,
-                    help="muscles may pass through each other and the bones (default: they collide; the job's "
-                         "contact: false does the same); stats.csv still measures how far they do")
-    g3.add_argument("--contact", dest="contact", action="store_true", help="muscles and bones collide (the default)")
     p.add_argument("--clamp-ranges", action="store_true",
                    help="hold coordinates inside their skeleton ranges (default: warn per frame)")
     p.add_argument("--allow-outside", action="store_true",
                    help="allow paths inside YAML files to leave the project folder tree")
+    add_stage_args(p)
     from axdf_cli.specs.render import add_render_args
 
     add_render_args(p)
+
+
+def add_stage_args(p) -> None:
+    """``--no-<stage>`` for every stage of the table (:data:`axdf_cli.pipeline.stages.STAGES`)."""
+    from axdf_cli.pipeline.stages import STAGES
+
+    for name in STAGES:
+        p.add_argument(f"--no-{name}", dest=f"stage_{name}", action="store_false", default=None,
+                       help=f"leave out the {name} stage (default: on)")
+
+
+def stage_switches(args) -> dict:
+    """The stages switched off on the command line: name -> False."""
+    from axdf_cli.pipeline.stages import STAGES
+
+    return {name: False for name in STAGES if getattr(args, f"stage_{name}", None) is False}
 
 
 def _positive(text: str) -> int:
@@ -53,7 +65,7 @@ def _positive(text: str) -> int:
 
 
 def run(args) -> int:
-    from axdf_cli import pipeline as runner
+    from axdf_cli import pipeline
 
     plan = plan_from_args(args)
     if args.verbose:
@@ -69,7 +81,7 @@ def run(args) -> int:
         refuse_warnings(plan)
     total = len(plan.frames) * len(plan.models)
     if args.dry_run:
-        runner.check_output(plan, resume=args.resume, overwrite=args.overwrite)
+        pipeline.check_output(plan, resume=args.resume, overwrite=args.overwrite)
         print(f"would write {total} meshes ({len(plan.models)} muscles x {len(plan.frames)} frames, "
               f"{plan.fmt}) to {plan.out}, plus stats.csv, bones.csv, manifest.json")
         for s, m in zip(plan.muscles, plan.models):
@@ -84,7 +96,7 @@ def run(args) -> int:
         if plan.rendering:
             rbar = tqdm(total=len(plan.frames), unit="frame", file=sys.stderr, desc="frames")
     try:
-        summary = runner.execute(plan, resume=args.resume, overwrite=args.overwrite,
+        summary = pipeline.execute(plan, resume=args.resume, overwrite=args.overwrite,
                                  progress=bar.update if bar else None, strict=args.strict, jobs=args.jobs,
                                  render_progress=(lambda _f: rbar.update(1)) if rbar else None,
                                  on_note=lambda text: print(f"note: {text}", file=sys.stderr))
@@ -106,17 +118,17 @@ def plan_from_args(args):
     calls it too). Files named on the command line, and their folders, are trusted roots."""
     from dataclasses import replace
 
-    from axdf_cli import pipeline as runner
+    from axdf_cli import pipeline
     from axdf_cli.specs.render import settings_from_args
 
     policy = RefPolicy.for_command([args.job, args.pose] + list(args.muscles or []), args.allow_outside)
     job = load_job(args.job, policy) if args.job else None
-    settings = runner.job_render_settings(job)
+    settings = pipeline.job_render_settings(job)
     if args.render is not None:
         settings = replace(settings, enabled=args.render)
-    return runner.plan_run(job, muscle_args=args.muscles, pose_arg=args.pose, out_arg=args.out,
+    return pipeline.plan_run(job, muscle_args=args.muscles, pose_arg=args.pose, out_arg=args.out,
                            fmt_arg=args.format, frames_arg=args.frames, render=settings_from_args(settings, args),
-                           policy=policy, clamp_ranges=args.clamp_ranges, contact=args.contact)
+                           policy=policy, clamp_ranges=args.clamp_ranges, stages=stage_switches(args))
 
 
 def refuse_warnings(plan) -> None:

@@ -72,6 +72,13 @@ def validate_file(path: Path, policy, args) -> tuple[str, str | None, list[str]]
 
         m = load_map(path, policy=policy)
         return f"transfer map {m.name}: {len(m.pairs)} bones, {m.skel_a.name} -> {m.skel_b.name}", kind, []
+    if kind == "retarget":
+        from axdf_cli.importers.retarget import load_map as load_retarget_map
+
+        r = load_retarget_map(path, policy=policy)
+        joints = sorted({j for p in r.points for j, _ in p.sources})
+        return (f"retarget map {r.name}: {len(r.points)} points of {r.skeleton.name} from {len(joints)} mocap "
+                "joints (checked against a motion by axdf retarget)"), kind, []
     raise loaders.kind_error(doc, Mark(str(path), 1, 1))
 
 

@@ -18,7 +18,7 @@ from typing import Callable, Iterable
 from axdf_cli.fileio.atomic import write_bytes
 from axdf_cli.compare.files import list_files, nested, read_compared
 from axdf_cli.compare.result import ERROR, EXTRA, FAIL, MISSING, PASS, FileResult, Outcome, Report, read_side
-from axdf_cli.compare.tolerances import FileTol, Tolerances, as_dict
+from axdf_cli.compare.thresholds import FileTol, Tolerances, as_dict
 from axdf_cli.errors import AxdfError, UsageError
 from axdf_cli.formats import FORMATS, MeshReadError
 from axdf_cli.fileio.yamlio import real_path
@@ -47,10 +47,10 @@ def _compare_kind(kind: str, a: Path, g: Path, ab: bytes, gb: bytes, t: FileTol)
         from axdf_cli.compare.meshes import compare_mesh_files
         return compare_mesh_files(ab, gb, a.suffix.lower(), g.suffix.lower(), t.mesh)
     if kind == "sequence":
-        from axdf_cli.compare.sequences import compare_sequence_files
+        from axdf_cli.compare.packed import compare_sequence_files
         return compare_sequence_files(a, g, t.mesh)
     if kind == "stage":
-        from axdf_cli.compare.sequences import compare_usd_layers
+        from axdf_cli.compare.packed import compare_usd_layers
         return compare_usd_layers(a, g, t.json.atol, t.json.rtol)
     if kind == "png":
         from axdf_cli.compare.images import compare_png

@@ -24,7 +24,7 @@ from typing import Iterable
 from axdf_cli.fileio.atomic import write_parts
 from axdf_cli.compare.files import check_compared, list_files, nested, read_compared
 from axdf_cli.compare.result import Report, Unreadable
-from axdf_cli.compare.tolerances import Tolerances
+from axdf_cli.compare.thresholds import Tolerances
 from axdf_cli.errors import EnvironmentProblem, UsageError
 from axdf_cli.fileio.yamlio import real_path
 

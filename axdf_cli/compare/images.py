@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from axdf_cli.compare.result import Outcome, Unreadable, read_side
-from axdf_cli.compare.tolerances import ChannelTol, ExrTol, PngTol
+from axdf_cli.compare.thresholds import ChannelTol, ExrTol, PngTol
 from axdf_cli.errors import EnvironmentProblem
 
 # the heat map reaches white at this many times the per-pixel tolerance

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from axdf_cli.compare.result import Outcome, read_side
-from axdf_cli.compare.tolerances import MeshTol
+from axdf_cli.compare.thresholds import MeshTol
 from axdf_cli.formats import Mesh, read_mesh
 
 

@@ -10,7 +10,7 @@ import math
 import numpy as np
 
 from axdf_cli.compare.result import Outcome, Unreadable, read_side
-from axdf_cli.compare.tolerances import MAX_LISTED, NumTol
+from axdf_cli.compare.thresholds import MAX_LISTED, NumTol
 
 # ----------------------------------------------------------------------------- CSV
 

@@ -20,8 +20,8 @@ from axdf_cli.fileio import atomic
 from axdf_cli.dataset import worker as wk
 from axdf_cli.dataset.index import write_index
 from axdf_cli.errors import AxdfError, EnvironmentProblem, InputError, Interrupted, Mark
-from axdf_cli.dataset import runner
-from axdf_cli.dataset.runner import own_entry
+from axdf_cli.dataset import door
+from axdf_cli.dataset.door import own_entry
 from axdf_cli.fileio.yamlio import is_name
 
 ENGINES = ("local", "ray")
@@ -212,9 +212,9 @@ def _run_local(ctx, mine, out, jobs, resume, done, where) -> None:
         done(r)
 
     try:
-        runner.process_map(_pool_task, list(mine), (where, str(Path(out).resolve()), resume), jobs=jobs,
+        door.process_map(_pool_task, list(mine), (where, str(Path(out).resolve()), resume), jobs=jobs,
                            on_result=finished, fresh=True, preload=("axdf_cli.dataset.worker",))
-    except runner.WorkerDied:
+    except door.WorkerDied:
         raise WorkerFailed(f"a worker process died (killed, or out of memory) while making "
                            f"{_names(ctx, sorted(left))}; the other sequences of this run are complete; "
                            "rerun the same command with --resume to finish") from None

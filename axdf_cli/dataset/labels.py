@@ -66,7 +66,7 @@ def view_cameras(spec: DatasetSpec, seq: Sequence, frames: np.ndarray, subject: 
     """Cameras of every view at every frame, from the skeleton only (never the muscles):
     ``subject`` (F, P, 3) are the points of :func:`subject_points`. Returns ``K`` (V, 3, 3),
     ``world_to_camera`` (F, V, 4, 4), ``clip`` (F, V, 2) near and far."""
-    from axdf_cli.dataset.runner import intrinsics, look_at
+    from axdf_cli.dataset.door import intrinsics, look_at
 
     W, H = spec.render.size
     nf = len(frames)

@@ -9,14 +9,15 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from axdf_cli.dataset.runner import (FRAME_WRITERS, RenderSettings, load_muscle_specs, motion_pose, parse_camera,
-                                     parse_render_settings)
+from axdf_cli.dataset.door import (FRAME_WRITERS, RenderSettings, load_muscle_specs, motion_pose, parse_camera,
+                                   parse_render_settings, retarget_pose)
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.formats import WRITERS
 from axdf_cli.specs import Pose, RefPolicy, expand_muscle_paths, load_pose, load_skeleton
 from axdf_cli.fileio.yamlio import Fields, check_name, check_number, check_vector, item_marks, load_yaml, mark_of
 
 SAMPLE_MODES = ("uniform", "perturb")
+MOTION_KINDS = ("pose", "motion", "retarget")
 ACTIVATION_MODES = ("motion", "uniform", "none")
 CAMERA_PER = ("sequence", "frame")
 MAX_SEQUENCES = 10_000_000
@@ -39,14 +40,18 @@ class CoordinateRule:
 
 @dataclass(frozen=True)
 class Motion:
-    """A named motion: a pose file or an OpenSim motion (.mot/.sto), optionally a frame subset."""
+    """A named motion: a pose file, an OpenSim motion (.mot/.sto), or motion capture (BVH, npz
+    joints) retargeted onto the data set's skeleton through a map; optionally a frame subset."""
 
     name: str
-    kind: str  # "pose" | "motion"
+    kind: str  # "pose" | "motion" | "retarget"
     path: str
     frames: object  # raw frames spec (parse_frames) or None
     fps: float | None  # OpenSim motions: resample to this rate (None: the file's rows)
     mark: Mark = field(default=Mark(""), compare=False)
+    map: str | None = None  # retarget: the map file
+    step: int = 1  # retarget: every step-th frame of the take
+    scale: float | None = None  # retarget: metres per unit of the take (None: as axdf retarget)
 
 
 @dataclass(frozen=True)
@@ -230,22 +235,35 @@ def _parse_motions(value, where: Mark, path: Path, policy: RefPolicy) -> dict:
         km = value.key_mark(mname)
         check_name(mname, km, "motion name")
         mf = Fields(mval, value.value_mark(mname), f"motion {mname}")
-        has_pose, has_mot = mf.has("pose"), mf.has("motion")
-        if has_pose == has_mot:
-            raise InputError(value.value_mark(mname), f"motion {mname} needs one of pose or motion",
-                             "{pose: FILE.yaml} or {motion: FILE.mot|.sto}")
-        key = "pose" if has_pose else "motion"
+        kinds = [k for k in MOTION_KINDS if mf.has(k)]
+        if len(kinds) != 1:
+            raise InputError(value.value_mark(mname), f"motion {mname} needs one of pose, motion or retarget",
+                             "{pose: FILE.yaml}, {motion: FILE.mot|.sto} or {retarget: FILE.bvh|.npz, map: MAP.yaml}")
+        key = kinds[0]
         ref = mf.string(key, required=True)
         p = policy.resolve(path, ref, mf.vmark(key), f"{key} file")
         if not p.is_file():
             raise InputError(mf.vmark(key), f"{key} file {ref!r} not found", "a path relative to the dataset file")
         frames = mf.raw("frames")
         fps = mf.number("fps", default=None, lo=0.0, hi=100000.0, lo_open=True)
-        if fps is not None and has_pose:
-            raise InputError(mf.kmark("fps"), "fps is for OpenSim motions", "a pose file has its own fps")
+        if fps is not None and key != "motion":
+            raise InputError(mf.kmark("fps"), "fps is for OpenSim motions",
+                             "a pose file has its own fps; a retargeted take's is its own / step")
+        map_path, step, scale = None, 1, None
+        for k in ("map", "step", "scale"):
+            if key != "retarget" and mf.has(k):
+                raise InputError(mf.kmark(k), f"{k} is for retargeted motion capture", "{retarget: FILE, map: MAP, ...}")
+        if key == "retarget":
+            mref = mf.string("map", required=True)
+            map_path = policy.resolve(path, mref, mf.vmark("map"), "map file")
+            if not map_path.is_file():
+                raise InputError(mf.vmark("map"), f"map file {mref!r} not found", "a path relative to the dataset file")
+            step = int(mf.number("step", default=1, lo=1, hi=10000, integer=True))
+            scale = mf.number("scale", default=None, lo=0.0, hi=1e6, lo_open=True)
         mf.done()
         out[mname] = Motion(mname, key, str(p), frames, fps, mf.vmark("frames") if frames is not None
-                            else value.value_mark(mname))
+                            else value.value_mark(mname), None if map_path is None else str(map_path), step,
+                            None if scale is None else float(scale))
     return out
 
 
@@ -376,6 +394,11 @@ def _parse_cameras(value, where: Mark, skel):
     return None, Sphere(views, dist, elev, azim, fov, target, per)
 
 
+#: Passes of a data set beyond the image files: ``amodal``, each muscle's full extent per view
+#: and frame (``<seq>/amodal.json``, COCO RLE; :mod:`axdf_cli.dataset.amodal`).
+DATASET_PASSES = ("amodal",)
+
+
 def _parse_render(value, where: Mark):
     if value is None:
         return RenderSettings(enabled=True, size=(256, 256)), tuple(FRAME_WRITERS)
@@ -388,9 +411,10 @@ def _parse_render(value, where: Mark):
     if "passes" in value:
         pv = value["passes"]
         pm = value.value_mark("passes")
-        if not isinstance(pv, list) or not pv or any(p not in FRAME_WRITERS for p in pv) or len(set(pv)) != len(pv):
-            raise InputError(pm, f"passes is {pv!r}", f"a non-empty list of {', '.join(FRAME_WRITERS)}")
-        passes = tuple(p for p in FRAME_WRITERS if p in pv)
+        allowed = tuple(FRAME_WRITERS) + DATASET_PASSES
+        if not isinstance(pv, list) or not pv or any(p not in allowed for p in pv) or len(set(pv)) != len(pv):
+            raise InputError(pm, f"passes is {pv!r}", f"a non-empty list of {', '.join(allowed)}")
+        passes = tuple(p for p in allowed if p in pv)
     rest = type(value)({k: v for k, v in value.items() if k != "passes"})
     rest.mark, rest.key_marks, rest.value_marks = value.mark, value.key_marks, value.value_marks
     if "size" not in rest:
@@ -422,11 +446,13 @@ _MOTION_CACHE: dict = {}  # motions by file, content and skeleton (a worker load
 
 def load_motion(spec: DatasetSpec, name: str) -> Pose:
     """The named motion as a Pose of the data set's skeleton (pose files are loaded with
-    :func:`loaders.load_pose`; OpenSim motions go through the importer's reader and unit rules)."""
+    :func:`loaders.load_pose`; OpenSim motions go through the importer's reader and unit rules;
+    motion capture is retargeted onto the skeleton through its map, as ``axdf retarget`` does)."""
     from axdf_cli.fileio.atomic import sha256_file
 
     m = spec.motions[name]
-    key = (m.path, sha256_file(m.path), m.kind, m.fps, spec.skeleton_path, sha256_file(spec.skeleton_path))
+    key = (m.path, sha256_file(m.path), m.kind, m.fps, spec.skeleton_path, sha256_file(spec.skeleton_path),
+           m.map, None if m.map is None else sha256_file(m.map), m.step, m.scale)
     if key in _MOTION_CACHE:
         return _MOTION_CACHE[key]
     skel = load_skeleton(spec.skeleton_path, spec.policy)
@@ -435,6 +461,8 @@ def load_motion(spec: DatasetSpec, name: str) -> Pose:
         if Path(pose.skeleton_path).resolve() != Path(spec.skeleton_path).resolve():
             raise InputError(m.mark, f"pose {Path(m.path).name} uses skeleton {pose.skeleton_path}",
                              f"the data set's skeleton {spec.skeleton_path}")
+    elif m.kind == "retarget":
+        pose = retarget_pose(Path(m.path), Path(m.map), skel, name, m.step, m.scale, spec.policy)
     else:
         pose = motion_pose(Path(m.path), skel, name, m.fps)
     _MOTION_CACHE[key] = pose

@@ -2,7 +2,7 @@
 
 The context (dataset spec, skeleton, muscle models, bone meshes, scene topology) is built once
 per process: the models depend only on the skeleton's rest pose, so every sequence reuses
-them. A sequence is a run of ``axdf run``'s own code (:mod:`axdf_cli.dataset.runner`) into
+them. A sequence is a run of ``axdf run``'s own code (:mod:`axdf_cli.dataset.door`) into
 ``OUT/<sequence>/`` (meshes, stats.csv, bones.csv, manifest.json), then its views are
 rendered into ``OUT/<sequence>/views/<view>/<frame>.png|.exr``, its labels written to
 ``labels.npz``, and last ``sequence.json``, whose presence marks the sequence complete.
@@ -20,16 +20,19 @@ import numpy as np
 
 from axdf_cli import __version__
 from axdf_cli.fileio import atomic
+from axdf_cli.dataset import amodal as coco
 from axdf_cli.dataset import labels as lab
-from axdf_cli.dataset import runner
+from axdf_cli.dataset import door
 from axdf_cli.dataset.sampling import sample_pose, with_activation
 from axdf_cli.dataset.spec import (DatasetSpec, Sequence, expand_sequences, load_dataset, load_motion,
                                    motion_frames)
 from axdf_cli.specs import load_skeleton
+from axdf_cli.model.keypoints import skeleton_keypoints
 from axdf_cli.model.pose import sample_activation, sample_coordinates
 from axdf_cli.model.skeleton import forward_kinematics
 
 RECORD = "sequence.json"  # written last: the sequence is complete
+AMODAL = "amodal.json"  # with the amodal pass: COCO annotations of each muscle's full extent
 DATASET_JSON = "dataset.json"
 INDEX = "index.parquet"
 LABELS = "labels.npz"
@@ -44,6 +47,7 @@ class Context:
     muscles: list
     models: list
     bone_meshes: dict  # bone index -> (vertices, faces, bytes)
+    keypoints: object  # axdf_cli.model.keypoints.Keypoints: the labelled joints and end points
     inputs: dict  # display path -> sha256 (dataset file, skeleton, muscles, bone meshes)
     motion_inputs: dict  # motion name -> {display path: sha256}
     scene: object
@@ -51,6 +55,7 @@ class Context:
     dataset_json: bytes
     digest: str
     timing: dict = field(default_factory=dict)
+    stages: tuple = ()  # the run's stages (axdf_cli.pipeline.stages), applied to every sequence
 
     @property
     def names(self) -> list[str]:
@@ -64,20 +69,21 @@ def build_context(path: Path | str, seed: int | None = None, policy=None) -> Con
 
     spec = load_dataset(path, seed, policy)
     skel = load_skeleton(spec.skeleton_path, spec.policy)
-    muscles = runner.load_muscle_specs(spec.muscle_files)
-    models = runner.build_models(muscles, skel)
-    bone_meshes = {i: runner.load_bone_mesh(b.mesh, spec.skeleton_path) for i, b in enumerate(skel.bones) if b.mesh}
+    muscles = door.load_muscle_specs(spec.muscle_files)
+    models = door.build_models(muscles, skel)
+    bone_meshes = {i: door.load_bone_mesh(b.mesh, spec.skeleton_path) for i, b in enumerate(skel.bones) if b.mesh}
     srcs = [spec.source, spec.skeleton_path, *spec.muscle_files, *sorted({b.mesh for b in skel.bones if b.mesh})]
-    inputs = {runner.display_path(Path(s)): atomic.sha256_file(s) for s in srcs}
-    motion_inputs = {m.name: {runner.display_path(Path(m.path)): atomic.sha256_file(m.path)}
+    inputs = {door.display_path(Path(s)): atomic.sha256_file(s) for s in srcs}
+    motion_inputs = {m.name: {door.display_path(Path(p)): atomic.sha256_file(p) for p in (m.path, m.map) if p}
                      for m in spec.motions.values()}
     scene_bones = sorted(bone_meshes) if spec.render.bones else []
     scene = Scene(muscles=tuple(SceneMuscle(s.name, s.color, m.faces) for s, m in zip(muscles, models)),
                   bones=tuple(SceneBone(skel.bones[i].name, bone_meshes[i][0], bone_meshes[i][1]) for i in scene_bones),
                   bounds=np.zeros((2, 3)), frames=())
     sequences = expand_sequences(spec)
-    ctx = Context(spec, sequences, skel, runner.without_meshes(skel), muscles, models, bone_meshes, inputs,
-                  motion_inputs, scene, scene_bones, b"", "")
+    keypoints = skeleton_keypoints(skel, {i: m[0] for i, m in bone_meshes.items()})
+    ctx = Context(spec, sequences, skel, door.without_meshes(skel), muscles, models, bone_meshes, keypoints,
+                  inputs, motion_inputs, scene, scene_bones, b"", "", stages=door.build_stages())
     ctx.dataset_json = (json.dumps(dataset_dict(ctx), indent=1) + "\n").encode()
     ctx.digest = hashlib.sha256(ctx.dataset_json).hexdigest()
     return ctx
@@ -94,27 +100,37 @@ def dataset_dict(ctx: Context) -> dict:
         "skeleton": skel.name,
         "coordinates": [{"name": c.name, "type": c.type, "unit": "deg" if c.type == "rotation" else "m"}
                         for c in skel.coordinates],
-        "joints": [b.name for b in skel.bones],
-        "parents": [b.parent for b in skel.bones],
+        "joints": list(ctx.keypoints.names),
+        "joint_parents": ctx.keypoints.parents.tolist(),
+        "joint_bones": [skel.bones[b].name for b in ctx.keypoints.bones],
+        "joint_kinds": list(ctx.keypoints.kinds),
+        "bone_names": [b.name for b in skel.bones],
+        "bone_parents": [b.parent for b in skel.bones],
         "muscles": ctx.names,
         "views": list(spec.views),
         "image": {"width": W, "height": H, "passes": list(spec.passes)},
-        "render": runner.settings_to_dict(spec.render),
-        "ids": runner.id_map(ctx.scene, spec.render.bones),
+        "render": door.settings_to_dict(spec.render),
+        "ids": door.id_map(ctx.scene, spec.render.bones),
         "format": spec.format,
         "shards": spec.shards,
         "bones": {skel.bones[i].name: f"bones/{skel.bones[i].name}.ply" for i in sorted(ctx.bone_meshes)},
         "convention": ("world Z up, metres, degrees; cameras OpenCV (x right, y down, z forward), "
                        "world_to_camera maps world to camera, K in pixels with pixel (0,0)'s centre at (0.5,0.5); "
-                       "joint j of bone j is the origin of its joint frame"),
+                       "joints are named anatomical keypoints fixed in bones: a joint where a bone with DOFs "
+                       "attaches to its parent (the origin of its joint frame), or an end point (head top, "
+                       "fingertips, toe tips)"),
         "labels": {
             "frames": "(F,) frame numbers", "coords": "(F, C) coordinate values (deg, m)",
-            "bone_world": "(F, B, 4, 4) bone frames in the world", "joints3d": "(F, J, 3) world joint centres",
+            "bone_world": "(F, B, 4, 4) bone frames in the world", "joints3d": "(F, J, 3) world keypoints",
             "joints2d": "(F, V, J, 2) pixels", "joints_depth": "(F, V, J) camera z (m)",
             "visible": "(F, V, J) bool", "muscle_length": "(F, M) m", "muscle_volume": "(F, M) m^3",
             "muscle_activation": "(F, M) 0..1", "K": "(V, 3, 3)", "world_to_camera": "(F, V, 4, 4)",
         },
         "visibility_tolerance": spec.visibility_tolerance,
+        **({"amodal": f"<sequence>/{AMODAL}: COCO annotations per view and frame, each muscle's full extent "
+                      "(occluders ignored) as uncompressed RLE, category id = the muscle's EXR id"}
+           if "amodal" in spec.passes else {}),
+        **({"stages": door.stages_record(ctx.stages)} if ctx.stages else {}),
         "sequences": [{"name": s.name, "source": spec.entries[s.entry].label, "frames": s.n_frames}
                       for s in ctx.sequences],
     }
@@ -191,38 +207,48 @@ def build_sequence(ctx: Context, index: int, out: Path, resume: bool) -> tuple[d
     inputs = dict(ctx.inputs)
     if entry.motion is not None:
         inputs.update(ctx.motion_inputs[entry.motion])
-    plan = runner.sequence_plan(pose, frames, ctx.muscles, ctx.models, spec.format, folder, inputs)
-    summary = runner.run_sequence(plan, resume and folder.exists())
+    plan = door.sequence_plan(pose, frames, ctx.muscles, ctx.models, spec.format, folder, inputs, ctx.stages)
+    summary = door.run_sequence(plan, resume and folder.exists())
     t1 = time.perf_counter()
     timing["run"] = t1 - t0
 
     coords = sample_coordinates(pose, frames)
     world = forward_kinematics(ctx.skeleton, coords)
-    joints = lab.joint_centres(ctx.skeleton, world)
+    joints = ctx.keypoints.positions(world)
     subject = lab.subject_points(ctx.skeleton, world, ctx.bone_meshes)
     K, w2c, clip = lab.view_cameras(spec, seq, frames, subject, world, ctx.skeleton.bone_index)
     uv, z = lab.project(K, w2c, joints)
     views = spec.views
     nf, nv = len(frames), len(views)
+    W, H = spec.render.size
     visible = np.zeros((nf, nv, joints.shape[1]), bool)
     files: dict = {}
+    amodal = "amodal" in spec.passes
+    coco_images: list[dict] = []
+    coco_anns: list[dict] = []
     t_read = t_render = 0.0
     t_write = time.perf_counter() - t1  # labels so far
     vr = view_renderer(ctx)  # once per process
     for fi, frame in enumerate(frames):
         ta = time.perf_counter()
-        pos, nrm = runner.written_meshes(plan, int(frame))
+        pos, nrm = door.written_meshes(plan, int(frame))
         cams = [view_camera(views[v], K[v], w2c[fi, v], clip[fi, v, 0], clip[fi, v, 1], spec.render.size)
                 for v in range(nv)]
         bw = world[fi, ctx.scene_bones] if ctx.scene_bones else None
         tb = time.perf_counter()
         imgs = vr.render(int(frame), pos, nrm, bw, cams)
+        masks = [vr.renderer.amodal(c) for c in cams] if amodal else []
         tc = time.perf_counter()
         depth = np.stack([im.depth for im in imgs])[None]  # (1, V, H, W)
         visible[fi] = lab.visibility(uv[fi:fi + 1], z[fi:fi + 1], depth, spec.visibility_tolerance)[0]
         for v, im in enumerate(imgs):
             rel = f"views/{views[v]}"
             files.update(write_view_images(folder / rel, rel, im, spec.passes))
+            if amodal:
+                image_id = len(coco_images)
+                coco_images.append({"id": image_id, "file_name": f"{rel}/{int(frame):04d}.png", "width": W,
+                                    "height": H, "frame": int(frame), "view": views[v]})
+                coco_anns += coco.annotations(masks[v], im.ids, image_id, len(coco_anns))
         t_read += tb - ta
         t_render += tc - tb
         t_write += time.perf_counter() - tc
@@ -235,10 +261,14 @@ def build_sequence(ctx: Context, index: int, out: Path, resume: bool) -> tuple[d
         "muscle_length": stats[..., 0], "muscle_volume": stats[..., 1], "muscle_activation": act,
         "K": K, "world_to_camera": w2c,
         "coord_names": np.array([c.name for c in ctx.skeleton.coordinates]),
-        "joint_names": np.array([b.name for b in ctx.skeleton.bones]),
+        "joint_names": np.array(list(ctx.keypoints.names)), "joint_parents": ctx.keypoints.parents,
+        "joint_bones": ctx.keypoints.bones, "bone_names": np.array([b.name for b in ctx.skeleton.bones]),
         "muscle_names": np.array(ctx.names), "view_names": np.array(list(views)),
     }
     files[LABELS] = atomic.write_bytes(folder / LABELS, lab.npz_bytes(arrays))
+    if amodal:
+        files[AMODAL] = atomic.write_text(folder / AMODAL, json.dumps(
+            coco.coco_dict(ctx.names, coco_images, coco_anns), separators=(",", ":")) + "\n")
     manifest = json.loads((folder / "manifest.json").read_text())
     files.update(manifest.get("files", {}))
     files["manifest.json"] = atomic.sha256_file(folder / "manifest.json")

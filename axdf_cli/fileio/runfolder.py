@@ -10,8 +10,9 @@ One module for everything that knows the layout (README "What a run writes"), sh
     bones/<bone>.ply
     stats.csv, bones.csv
     frames/<frame:04d>.png|exr, camera.json
-    <fmt>/<m>.<ext>               per-sequence formats: usd/<m>.usdc, pc2/<m>.pc2, mdd/<m>.mdd,
-                                  npz/<m>.npz; pc2/<m>.ply, mdd/<m>.ply rest meshes
+    <folder>/<m>.<ext>            per-sequence formats (each format's folder: its FORMATS entry):
+                                  usd/<m>.usdc, pc2/<m>.pc2, mdd/<m>.mdd, npz/<m>.npz;
+                                  pc2/<m>.ply, mdd/<m>.ply rest meshes
     scene.usda, usd/bones.usdc    the USD stage of the run and its bone meshes
     .axdf-lock                    while a run or render writes (flock); never in the manifest
     .axdf-new-<pid>/              --overwrite builds the new run here, then swaps it in
@@ -66,19 +67,18 @@ def mesh_relpath(muscle: str, frame: int, fmt: str) -> str:
     return f"meshes/{muscle}/{muscle}_{frame:04d}.{fmt}"
 
 
-def sequence_relpath(muscle: str, fmt: str, extension: str) -> str:
-    """A per-sequence file: one muscle, every frame."""
-    return f"{fmt}/{muscle}.{extension}"
+def sequence_relpath(muscle: str, folder: str, extension: str) -> str:
+    """A per-sequence file: one muscle, every frame (``folder``: its format's)."""
+    return f"{folder}/{muscle}.{extension}"
 
 
-def rest_mesh_relpath(muscle: str, fmt: str) -> str:
-    """The rest mesh a point cache (pc2, mdd) applies to, beside it."""
-    return f"{fmt}/{muscle}.ply"
+def rest_mesh_relpath(muscle: str, folder: str) -> str:
+    """The rest mesh a point cache (pc2, mdd) applies to, beside it in its format's ``folder``."""
+    return f"{folder}/{muscle}.ply"
 
 
 USD_STAGE = "scene.usda"
 USD_BONES = "usd/bones.usdc"
-SEQUENCE_FOLDERS = ("usd", "pc2", "mdd", "npz")  # one per per-sequence format
 
 
 def bone_mesh_relpath(bone: str) -> str:
@@ -429,6 +429,7 @@ class Target:
     out: Path
     previous: Manifest | None  # the run already there (None: the folder is absent or empty)
     replace: bool  # --overwrite of an earlier run: build the new one beside it, swap at the end
+    dirs: tuple = ()  # the folders below OUT the writer writes into (stale temporaries are removed there)
 
 
 def read_run_manifest(folder: Path) -> Manifest:
@@ -454,16 +455,16 @@ def prepare(out: Path, *, resume: bool = False, overwrite: bool = False, dirs=()
         is_dir = out.is_dir()
         entries = [n for n in os.listdir(out) if not own_entry(n)] if is_dir else None
     except FileNotFoundError:
-        return Target(out, None, False)
+        return Target(out, None, False, tuple(dirs))
     except OSError as e:
         raise atomic.environment_problem(out, e) from None
     if entries is None:
         if not out.exists():
-            return Target(out, None, False)
+            return Target(out, None, False, tuple(dirs))
         raise InputError(None, f"output folder {out} exists and is not a folder", "give a folder")
     if not entries:
         check_dirs(out, dirs)
-        return Target(out, None, False)
+        return Target(out, None, False, tuple(dirs))
     try:
         previous = read_run_manifest(out)
     except InputError:
@@ -479,14 +480,14 @@ def prepare(out: Path, *, resume: bool = False, overwrite: bool = False, dirs=()
         raise InputError(None, f"output folder {out} is not empty (it holds an earlier run)",
                          "pass --resume to finish an interrupted run, --overwrite to replace it, or another --out")
     check_dirs(out, dirs)
-    return Target(out, previous, overwrite)
+    return Target(out, previous, overwrite, tuple(dirs))
 
 
-def remove_stale(out: Path) -> None:
-    """Temporaries and staging folders in OUT's layout whose process is gone (never a live
-    one's, never below a link)."""
+def remove_stale(out: Path, dirs=()) -> None:
+    """Temporaries and staging folders in OUT's layout (and in ``dirs`` below it: the folders
+    of a run's formats) whose process is gone (never a live one's, never below a link)."""
     out = Path(out)
-    folders = [out] + [out / d for d in LAYOUT_DIRS + SEQUENCE_FOLDERS]
+    folders = [out] + [out / d for d in LAYOUT_DIRS + tuple(dirs)]
     try:
         folders += [Path(e.path) for e in os.scandir(out / "meshes") if e.is_dir(follow_symlinks=False)]
     except OSError:
@@ -520,7 +521,7 @@ class Session:
         self._lock()
         try:
             self._verify()
-            remove_stale(self.out)
+            remove_stale(self.out, self.target.dirs)
             if self.target.replace:
                 shutil.rmtree(self.root, ignore_errors=True)
                 atomic.ensure_dir(self.root)

@@ -1,8 +1,13 @@
 """Mesh formats: one module per format holding its writer and its reader side by side,
-registered in one table, :data:`FORMATS` (as meshio and trimesh do).
+registered in one table, :data:`FORMATS` (as meshio and trimesh do). An entry carries every
+capability of its format (:class:`Format`): layout, the run folder's folder for it, what it
+holds (faces, normals, which frames), its preference when a run is read back, and what the
+machine needs to write it. A new format is one module and one entry.
 
-Every consumer goes through the table: ``axdf run --format`` (the writers), ``axdf compare``,
-``axdf render RUN_DIR`` and bone meshes (the readers, by file suffix).
+Every consumer goes through the table: ``axdf run --format`` (the writers, the checks before
+the first byte, the point caches' rest meshes), ``axdf compare``, ``axdf render RUN_DIR``
+(the readers, by suffix and read order), bone meshes, the data set's ``format:`` and the
+tests (parametrized over the table).
 
 A format is laid out per frame or per sequence (:attr:`Format.layout`):
 
@@ -12,12 +17,12 @@ A format is laid out per frame or per sequence (:attr:`Format.layout`):
   -> bytes`` and ``.write(path, positions, normals, sha256=False)``. The reader turns one
   file's bytes into one :class:`Mesh`.
 - ``"sequence"``: one file per muscle holding every frame (USD, PC2, MDD, NPZ: packed
-  formats, :mod:`axdf_cli.formats.sequence`). The writer streams:
+  formats, :mod:`axdf_cli.formats.packed`). The writer streams:
   ``writer(path, SequenceInfo(frames, fps, name, color), faces, n_vertices)``, then
   ``.append(positions (C, V, 3), normals (C, V, 3))`` chunk by chunk in frame order, then
   ``.finish() -> sha256`` (whole or absent). The reader takes the file's path (a long
   sequence is memory-mapped or read a frame at a time, never whole) and returns a
-  :class:`~axdf_cli.formats.sequence.PointSequence`.
+  :class:`~axdf_cli.formats.packed.PointSequence`.
 """
 from __future__ import annotations
 
@@ -30,11 +35,12 @@ import numpy as np
 from axdf_cli.formats.mesh import Mesh, MeshReadError
 from axdf_cli.formats.npz import NpzWriter, read_npz
 from axdf_cli.formats.obj import ObjWriter, read_obj
-from axdf_cli.formats.pc2 import MddWriter, Pc2Writer, read_mdd, read_pc2
+from axdf_cli.formats.pc2 import MddWriter, Pc2Writer, check_frames, read_mdd, read_pc2
 from axdf_cli.formats.ply import PlyWriter, read_ply
-from axdf_cli.formats.usd import UsdWriter, read_usd
+from axdf_cli.formats.usd import UsdWriter, pxr, read_usd
 
 LAYOUTS = ("frame", "sequence")
+FRAME_SETS = ("any", "even")  # which frames a format holds: any, or evenly spaced (one start, one step)
 
 
 @dataclass(frozen=True)
@@ -42,23 +48,55 @@ class Format:
     name: str  # the --format value
     suffix: str  # the file suffix, with its dot
     writer: type  # see the module doc for the per-frame and per-sequence interfaces
-    reader: Callable  # file bytes -> Mesh ("frame"); file path -> PointSequence ("sequence")
+    reader: Callable  # file bytes -> Mesh ("frame"); file path [, fps if timed] -> PointSequence ("sequence")
     layout: str = "frame"  # one of LAYOUTS
+    folder: str = "meshes"  # in a run: meshes/<m>/<m>_<frame:04d><suffix> ("frame"), <folder>/<m><suffix> ("sequence")
+    faces: bool = True  # holds the faces; False: a point cache, the run writes a rest mesh <folder>/<m>.ply beside it
+    normals: bool = True  # holds per-vertex normals
+    decimals: int | None = None  # positions and normals rounded to this many decimals (text); None: float32 exactly
+    frames: str = "any"  # one of FRAME_SETS
+    read_order: int = 0  # reading a run back, the per-sequence format it wrote with the lowest is read (fastest)
+    timed: bool = False  # stores times, not frame numbers: its reader takes the fps (MDD)
+    check: Callable | None = None  # () -> None, raises EnvironmentProblem (exit 3, with the install hint)
+    #                                when this machine cannot write the format
 
 
 FORMATS: dict[str, Format] = {
     "ply": Format("ply", ".ply", PlyWriter, read_ply),
-    "obj": Format("obj", ".obj", ObjWriter, read_obj),
-    "usd": Format("usd", ".usdc", UsdWriter, read_usd, "sequence"),  # (+ the run's stage scene.usda)
-    "pc2": Format("pc2", ".pc2", Pc2Writer, read_pc2, "sequence"),
-    "mdd": Format("mdd", ".mdd", MddWriter, read_mdd, "sequence"),
-    "npz": Format("npz", ".npz", NpzWriter, read_npz, "sequence"),
+    "obj": Format("obj", ".obj", ObjWriter, read_obj, decimals=6),
+    # (+ the run's stage scene.usda and usd/bones.usdc)
+    "usd": Format("usd", ".usdc", UsdWriter, read_usd, "sequence", folder="usd", read_order=3, check=pxr),
+    "pc2": Format("pc2", ".pc2", Pc2Writer, read_pc2, "sequence", folder="pc2", faces=False, normals=False,
+                  frames="even", read_order=1),
+    "mdd": Format("mdd", ".mdd", MddWriter, read_mdd, "sequence", folder="mdd", faces=False, normals=False,
+                  frames="even", read_order=2, timed=True),
+    "npz": Format("npz", ".npz", NpzWriter, read_npz, "sequence", folder="npz", read_order=0),
 }
-assert all(f.layout in LAYOUTS and f.suffix == "." + f.writer.extension for f in FORMATS.values())
+assert all(f.layout in LAYOUTS and f.frames in FRAME_SETS and f.suffix == "." + f.writer.extension
+           and (f.layout == "sequence" or (f.folder == "meshes" and f.faces)) for f in FORMATS.values())
+assert len({f.folder for f in FORMATS.values() if f.layout == "sequence"}) == len(
+    [f for f in FORMATS.values() if f.layout == "sequence"])  # one folder each
 
 # The per-frame formats and their writer classes: a view of FORMATS, for the call sites that
-# only build per-frame writers (the per-sequence ones: axdf_cli.pipeline.sequences).
+# only build per-frame writers (the per-sequence ones: axdf_cli.pipeline.packed).
 WRITERS = {name: f.writer for name, f in FORMATS.items() if f.layout == "frame"}
+
+
+def of_layout(layout: str, formats=None) -> list[str]:
+    """The names (of ``formats``, default the table's, in that order) laid out per ``layout``."""
+    return [n for n in (FORMATS if formats is None else formats) if FORMATS[n].layout == layout]
+
+
+def read_preference(formats) -> list[str]:
+    """The per-sequence ``formats`` in the order a run is read back from them (fastest first)."""
+    return sorted(of_layout("sequence", formats), key=lambda n: FORMATS[n].read_order)
+
+
+def frames_problem(formats, frames) -> tuple[list[str], str | None]:
+    """The ``formats`` that cannot hold ``frames``, and why (None: all can)."""
+    even = [n for n in formats if FORMATS[n].frames == "even"]
+    why = check_frames(frames) if even else None
+    return (even, why) if why else ([], None)
 
 
 FORMAT_ALIASES = {"usdc": "usd"}  # --format usdc: the USD layers are usdc, the stage is the format
@@ -109,9 +147,12 @@ def read_mesh(data: bytes, suffix: str) -> Mesh:
     return format_of(suffix).reader(data)
 
 
-def read_sequence(path: Path | str):
-    """A per-sequence file -> :class:`~axdf_cli.formats.sequence.PointSequence` by its suffix."""
-    return format_of(Path(path).suffix, "sequence").reader(path)
+def read_sequence(path: Path | str, fps: float | None = None):
+    """A per-sequence file -> :class:`~axdf_cli.formats.packed.PointSequence` by its suffix.
+    ``fps``: a format that stores times (MDD) gives frame numbers time x fps; without it, the
+    frame indices 0, 1, ..."""
+    f = format_of(Path(path).suffix, "sequence")
+    return f.reader(path, fps) if f.timed else f.reader(path)
 
 
 def read_triangles(data: bytes, suffix: str) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
@@ -142,6 +183,7 @@ def load_triangles_and_bytes(path: Path | str) -> tuple[tuple, bytes]:
         raise InputError(Mark(str(path)), f"not a readable mesh ({e})", allowed) from None
 
 
-__all__ = ["FORMATS", "Format", "LAYOUTS", "WRITERS", "Mesh", "MeshReadError", "PlyWriter", "ObjWriter",
-           "format_of", "format_names", "parse_formats", "read_mesh", "read_sequence", "read_triangles",
+__all__ = ["FORMATS", "FRAME_SETS", "Format", "LAYOUTS", "WRITERS", "Mesh", "MeshReadError", "PlyWriter", "ObjWriter",
+           "format_of", "format_names", "frames_problem", "of_layout", "parse_formats", "read_mesh",
+           "read_preference", "read_sequence", "read_triangles",
            "load_triangles", "load_triangles_and_bytes"]

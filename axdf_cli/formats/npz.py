@@ -26,7 +26,7 @@ import numpy as np
 from zlib_ng.zlib_ng import crc32  # zlib's CRC-32, ~5x faster (folding with carry-less multiply)
 
 from axdf_cli.formats.mesh import MeshReadError
-from axdf_cli.formats.sequence import PointSequence, SequenceWriter
+from axdf_cli.formats.packed import PointSequence, SequenceWriter
 
 ENTRIES = ("frames", "fps", "faces", "points", "normals")
 ZIP32_MAX = 0xFFFFFFFF  # sizes and offsets at or past this need ZIP64 records

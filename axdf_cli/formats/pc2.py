@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from axdf_cli.formats.mesh import MeshReadError
-from axdf_cli.formats.sequence import InOrderHash, PointSequence, SequenceWriter, uniform_step
+from axdf_cli.formats.packed import InOrderHash, PointSequence, SequenceWriter, uniform_step
 
 PC2_MAGIC = b"POINTCACHE2\0"
 PC2_HEADER = struct.Struct("<12siiffi")  # magic, version, numPoints, startFrame, sampleRate, numSamples

@@ -32,7 +32,7 @@ import numpy as np
 from axdf_cli.fileio import atomic
 from axdf_cli.errors import EnvironmentProblem
 from axdf_cli.formats.mesh import MeshReadError
-from axdf_cli.formats.sequence import PointSequence, SequenceWriter
+from axdf_cli.formats.packed import PointSequence, SequenceWriter
 
 ROOT = "/axdf"
 SPOOL_BLOCK = 128  # frames read back from a muscle's spool at a time

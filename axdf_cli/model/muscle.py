@@ -208,7 +208,7 @@ class MuscleModel:
         self._stage_belly_weights()  # 5
         self._stage_surface_basis()  # 6
         # 7: the rest surface, evaluated without a volume target, gives V0
-        rest = self.evaluate(rest_world[None], np.zeros(1), rest_volume=None, frames=(rest_p, x, t, r))
+        rest = self.surface(rest_world[None], rest_p, np.zeros(1), rest_volume=None, frames=(x, t, r))
         self.v0 = float(rest.volume[0])
         self.rest_vertices = rest.vertices[0].astype(np.float32)
         self.rest_normals = rest.normals[0].astype(np.float32)
@@ -223,7 +223,6 @@ class MuscleModel:
         that places the axis control points every frame."""
         spec = self.spec
         self.rest_q = skeleton.rest_coordinates()[None] if skeleton is not None else None
-        self._last = (None, None)  # (control points, could-not-wrap flags) of the last path evaluation
         if spec.path is not None:
             from axdf_cli.model.paths.path import PathModel
 
@@ -343,16 +342,25 @@ class MuscleModel:
         self.n_vertices = 2 + (along - 2) * around
 
     # -- pieces ---------------------------------------------------------------------------
-    def _axis_points(self, world: np.ndarray, coords: np.ndarray | None = None) -> np.ndarray:
-        """Axis control points in world space: world (F, B, 4, 4) (and coordinates (F, C) for
-        paths that need them) → (F, n, 3)."""
+    def axis_points(self, world: np.ndarray, coords: np.ndarray | None = None) -> tuple[np.ndarray, list]:
+        """Step 1a of the deformation: the axis control points in world space, world (F, B, 4, 4)
+        (and coordinates (F, C) for paths that need them) → ((F, n, 3), warnings [(frame
+        index, message)]: frames where a path could not wrap over a surface)."""
         if self.path is not None:
             p, inside = self.path.control_points(world, coords)
-            self._last = (p, inside)
-            return p
+            warnings = []
+            for i in np.nonzero(inside)[0]:
+                w = self.spec.path.wraps[int(inside[i]) - 1]
+                warnings.append((int(i), f"path cannot wrap over {w.name!r}: an end point lies inside it; "
+                                         "kept the straight segment"))
+            return p, warnings
         m = world[:, self.bones]  # (F, n, 4, 4)
         # P[f,i,c] = sum_k M[f,i,c,k] at[i,k] + M[f,i,c,3]
-        return np.einsum("fick,ik->fic", m[..., :3, :3], self.at) + m[..., :3, 3]
+        return np.einsum("fick,ik->fic", m[..., :3, :3], self.at) + m[..., :3, 3], []
+
+    def _axis_points(self, world: np.ndarray, coords: np.ndarray | None = None) -> np.ndarray:
+        """:meth:`axis_points` without the warnings: (F, n, 3)."""
+        return self.axis_points(world, coords)[0]
 
     def _apply(self, b: str, p: np.ndarray) -> np.ndarray:
         """X[f,s,c] = sum_i B[s,i] P[f,i,c] for the basis matrix named ``b`` (its sparse rows)."""
@@ -418,41 +426,55 @@ class MuscleModel:
         return rmf.signed_angle(r_end, target, t_end)
 
     # -- evaluation -----------------------------------------------------------------------
-    def rmf_inputs(self, world: np.ndarray, coarse: bool = False, coords: np.ndarray | None = None):
+    def rmf_inputs(self, world: np.ndarray, coarse: bool = False, coords: np.ndarray | None = None,
+                   points: np.ndarray | None = None):
         """Axis control points (F, n, 3), samples x (F, S, 3), unit tangents t and start vectors
-        r0 (F, 3): what :func:`rmf.propagate` needs (batched over muscles by the caller)."""
-        p = self._axis_points(world, coords)
+        r0 (F, 3): what :func:`rmf.propagate` needs (batched over muscles by the caller).
+        ``points``: the axis control points (F, n, 3) when already placed (step 1a, perhaps
+        changed by a stage since); else they are placed from ``world`` and ``coords``."""
+        p = self._axis_points(world, coords) if points is None else points
         b, db = ("Bc", "dBc") if coarse else ("Bs", "dBs")
         x, t = self._samples(p, b, db)
         r0 = rmf.perpendicular_unit(world[:, self.origin_bone, :3, :3] @ self.r0_local, t[:, 0])
         return p, x, t, r0
 
-    def axis_frames(self, world: np.ndarray, coords: np.ndarray | None = None):
+    def axis_frames(self, world: np.ndarray, coords: np.ndarray | None = None, points: np.ndarray | None = None):
         """(p, x, t, r): control points, samples, tangents and RMF reference vectors (F, S, 3)."""
-        p, x, t, r0 = self.rmf_inputs(world, coords=coords)
+        p, x, t, r0 = self.rmf_inputs(world, coords=coords, points=points)
         return p, x, t, rmf.propagate(x, t, r0)
 
     def evaluate(self, world: np.ndarray, tension: np.ndarray, twist_reference: np.ndarray | None = None,
-                 rest_volume: float | None | str = "model", frames=None,
-                 coords: np.ndarray | None = None) -> FrameResult:
-        """Deform for a block of frames.
+                 rest_volume: float | None | str = "model", coords: np.ndarray | None = None) -> FrameResult:
+        """Deform for a block of frames: :meth:`axis_points` (step 1a), then :meth:`surface`
+        (step 1b) from those points. The run (:mod:`axdf_cli.pipeline.evaluate`) calls the
+        two steps itself, so that stages may change the axis between them; see :meth:`surface`
+        for the arguments, and ``coords`` (F, C) skeleton coordinates for paths with moving
+        or conditional points."""
+        p, warnings = self.axis_points(world, coords)
+        return self.surface(world, p, tension, twist_reference, rest_volume, warnings=warnings)
 
-        world : (F, n_bones, 4, 4) bone world transforms; tension : (F,) effective tension 0..1;
-        twist_reference : (F,) unwrapped coarse insertion roll (radians) choosing the branch of
-        the exact roll, or None (roll unwrapped within the block); frames : the result of
-        :meth:`axis_frames` when the caller computed it (batched over several muscles);
-        rest_volume : the volume V0 that ``exact`` keeps ("model": the model's own rest volume;
-        None: no target, the start scale as it is); coords : (F, C) skeleton coordinates, for
-        paths with moving or conditional points.
+    def surface(self, world: np.ndarray, points: np.ndarray, tension: np.ndarray,
+                twist_reference: np.ndarray | None = None, rest_volume: float | None | str = "model",
+                frames=None, warnings=()) -> FrameResult:
+        """Step 1b of the deformation: RMF, bound sections, twist, tension, volume, surface and
+        normals, from the axis control points.
+
+        world : (F, n_bones, 4, 4) bone world transforms (the bones of the start vector and of
+        the insertion roll); points : (F, n, 3) axis control points in the world (step 1a's,
+        or as a stage left them); tension : (F,) effective tension 0..1; twist_reference :
+        (F,) unwrapped coarse insertion roll (radians) choosing the branch of the exact roll,
+        or None (roll unwrapped within the block); rest_volume : the volume V0 that ``exact``
+        keeps ("model": the model's own rest volume; None: no target, the start scale as it
+        is); frames : (x, t, r) the RMF samples, tangents and reference vectors (F, S, 3) of
+        ``points`` when the caller computed them (batched over several muscles); warnings :
+        [(frame index, message)] of step 1a, listed first in the result's.
         """
-        warnings: list = []
-        p, x, t, r = frames if frames is not None else self.axis_frames(world, coords)
-        if self.path is not None:
-            inside = self._last[1] if self._last[0] is p else self.path.control_points(world, coords)[1]
-            for i in np.nonzero(inside)[0]:
-                w = self.spec.path.wraps[int(inside[i]) - 1]
-                warnings.append((int(i), f"path cannot wrap over {w.name!r}: an end point lies inside it; "
-                                         "kept the straight segment"))
+        warnings = list(warnings)
+        p = points
+        if frames is None:
+            _, x, t, r = self.axis_frames(world, points=p)
+        else:
+            x, t, r = frames
         theta = self._roll(world, t[:, -1], r[:, -1])
         if twist_reference is None:
             theta = np.unwrap(theta)

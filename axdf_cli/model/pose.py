@@ -207,22 +207,23 @@ def hull_points(points: np.ndarray) -> np.ndarray:
         return points[np.unique(np.argmax(points @ d.T, axis=0))]
 
 
-def subject_points(pose, bone_vertices: dict) -> np.ndarray:
+def subject_points(pose, bone_vertices: dict, joints: bool = True) -> np.ndarray:
     """Points (N, 3) whose convex hull holds the subject over *every* frame of the pose: each
-    bone's mesh (``bone_vertices``: bone index -> (V, 3) bone-local vertices) and its joint,
-    and the joints at both ends of every stick (:meth:`Skeleton.stick_parents`; a mesh-less
-    root such as a floating base's world origin is no part of the subject), posed by forward
-    kinematics (batched over frames), grown by FRAMING_PAD (at most a share of the extent) each
-    way. What a camera frames: it depends on the skeleton and the whole pose, never on which
-    frames are written or on the muscles."""
+    bone's points (``bone_vertices``: bone index -> (V, 3) bone-local points: its mesh, or
+    the muscles it carries) and, with ``joints``, its joint and the joints at both ends of
+    every stick (:meth:`Skeleton.stick_parents`; a mesh-less root such as a floating base's
+    world origin is no part of the subject), posed by forward kinematics (batched over
+    frames), grown by FRAMING_PAD (at most a share of the extent) each way. What a camera
+    frames: it depends on the points and the whole pose, never on which frames are written."""
     from axdf_cli.model.skeleton import forward_kinematics
 
     skel = pose.skeleton
+    with_joints = joints
     joints = set(bone_vertices)
     for b, p in enumerate(skel.stick_parents()):
         if p >= 0:
             joints |= {b, p}
-    joints = joints or set(range(len(skel.bones)))
+    joints = (joints or set(range(len(skel.bones)))) if with_joints else set()
     origin = np.zeros((1, 3))
     empty = np.zeros((0, 3))
     dirs = sphere_directions(FRAMING_DIRECTIONS)

@@ -18,6 +18,7 @@ units.
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -34,6 +35,9 @@ class Constant:
     def __call__(self, x: np.ndarray) -> np.ndarray:
         return np.full_like(x, self.value, dtype=np.float64)
 
+    def derivative(self, x: np.ndarray) -> np.ndarray:
+        return np.zeros_like(x, dtype=np.float64)
+
 
 @dataclass(frozen=True)
 class Linear:
@@ -43,6 +47,9 @@ class Linear:
     def __call__(self, x):
         return self.slope * x + self.intercept
 
+    def derivative(self, x):
+        return np.full_like(x, self.slope, dtype=np.float64)
+
 
 @dataclass(frozen=True)
 class Polynomial:
@@ -50,6 +57,10 @@ class Polynomial:
 
     def __call__(self, x):
         return np.polynomial.polynomial.polyval(x, np.asarray(self.coefficients))
+
+    def derivative(self, x):
+        c = np.polynomial.polynomial.polyder(np.asarray(self.coefficients, dtype=np.float64))
+        return np.polynomial.polynomial.polyval(np.asarray(x, dtype=np.float64), c) + np.zeros_like(x, dtype=np.float64)
 
 
 @dataclass(frozen=True)
@@ -59,6 +70,9 @@ class Multiplier:
 
     def __call__(self, x):
         return self.scale * self.function(x)
+
+    def derivative(self, x):
+        return self.scale * self.function.derivative(x)
 
 
 @dataclass(frozen=True, eq=False)
@@ -97,6 +111,15 @@ class Spline:
         val = np.where(lo, y[0] + (xq - x[0]) * self.b[0], val)
         val = np.where(hi, y[-1] + (xq - x[-1]) * self.b[-1], val)
         return val
+
+    def derivative(self, xq):
+        """d/dx of the spline: ``b_i + 2 c_i dx + 3 d_i dx^2``; the end slopes outside."""
+        xq = np.asarray(xq, dtype=np.float64)
+        x = self.x
+        i = np.clip(np.searchsorted(x, xq, side="right") - 1, 0, len(x) - 1)
+        dx = xq - x[i]
+        val = self.b[i] + dx * (2.0 * self.c[i] + 3.0 * dx * self.d[i])
+        return np.where(xq < x[0], self.b[0], np.where(xq > x[-1], self.b[-1], val))
 
 
 def _fmm_coefficients(x: np.ndarray, y: np.ndarray):
@@ -254,12 +277,35 @@ def euler_xyz(deg) -> np.ndarray:
 
 def axis_angle(axis: np.ndarray, angle_rad: np.ndarray) -> np.ndarray:
     """Rotations about one unit ``axis`` (3,) by ``angle_rad`` (F,): (F, 3, 3) (Rodrigues)."""
-    x, y, z = axis
+    eye, k, kk = _rodrigues_parts(tuple(float(a) for a in axis))
     c = np.cos(angle_rad)[:, None, None]
     s = np.sin(angle_rad)[:, None, None]
-    k = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-    kk = np.outer(axis, axis)
-    return c * np.eye(3) + s * k + (1.0 - c) * kk
+    return c * eye + s * k + (1.0 - c) * kk
+
+
+@functools.lru_cache(maxsize=4096)
+def _rodrigues_parts(axis: tuple) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """I, the cross-product matrix K and the outer product a aᵀ of a unit axis: the parts of
+    Rodrigues' formula that do not depend on the angle (cached: a skeleton poses the same axes
+    over and over; the arrays are never written to)."""
+    x, y, z = axis
+    a = np.array(axis)
+    parts = (np.eye(3), np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]]), np.outer(a, a))
+    for m in parts:
+        m.flags.writeable = False
+    return parts
+
+
+@functools.lru_cache(maxsize=4096)
+def _joint_frames(offset: tuple, orient: tuple, post_offset: tuple, post_orient: tuple):
+    """A bone's constant parts: ``T(offset) R(orient)`` and ``(T(post_offset) R(post_orient))^-1``
+    (None when both are zero); cached, read-only."""
+    pre = rigid(euler_xyz(orient), offset)
+    post = np.linalg.inv(rigid(euler_xyz(post_orient), post_offset)) if any(post_offset) or any(post_orient) else None
+    for m in (pre, post):
+        if m is not None:
+            m.flags.writeable = False
+    return pre, post
 
 
 def rigid(rot: np.ndarray, trans) -> np.ndarray:
@@ -298,15 +344,106 @@ def dof_values(skel: Skeleton, q: np.ndarray) -> list[list[np.ndarray]]:
 
 def forward_kinematics(skel: Skeleton, q: np.ndarray) -> np.ndarray:
     """World transform of every bone: ``q`` (F, C) coordinates → (F, n_bones, 4, 4) float64."""
+    return _kinematics(skel, q, None)
+
+
+@dataclass(frozen=True)
+class DofFrames:
+    """Where every DOF of a skeleton acts, posed (from :func:`dof_frames`); D DOFs in bone order.
+
+    ``axis`` (F, D, 3) the DOF's unit axis in the world, ``origin`` (F, D, 3) the origin of the
+    frame it acts in (a rotation turns about the line through it), ``rate`` (F, D) the DOF's
+    value per unit of its coordinate (1, or the function's derivative), ``rotation`` (D,) bool,
+    ``coord`` (D,) the coordinate index (-1: a constant DOF), ``bone`` (D,) the bone index."""
+
+    axis: np.ndarray
+    origin: np.ndarray
+    rate: np.ndarray
+    rotation: np.ndarray
+    coord: np.ndarray
+    bone: np.ndarray
+
+
+def dof_frames(skel: Skeleton, q: np.ndarray) -> tuple[np.ndarray, DofFrames]:
+    """:func:`forward_kinematics` that also records where every DOF acts: (world (F, B, 4, 4),
+    :class:`DofFrames`). What :func:`point_jacobian` needs."""
+    record: list = []
+    world = _kinematics(skel, q, record)
+    cidx = skel.coord_index
+    q = np.asarray(q, dtype=np.float64)
+    dofs = [(b, dof) for b, bone in enumerate(skel.bones) for dof in bone.dofs]
+    n_frames = q.shape[0]
+    rate = np.ones((n_frames, len(dofs)))
+    for d, (_, dof) in enumerate(dofs):
+        if dof.coord is None:
+            rate[:, d] = 0.0
+        elif dof.function is not None:
+            rate[:, d] = dof.function.derivative(q[:, cidx[dof.coord]])
+    if record:
+        axis = np.stack([a for a, _ in record], axis=1)
+        origin = np.stack([o for _, o in record], axis=1)
+    else:
+        axis = origin = np.zeros((n_frames, 0, 3))
+    return world, DofFrames(axis, origin, rate, np.array([dof.type == "rotation" for _, dof in dofs], bool),
+                            np.array([cidx[dof.coord] if dof.coord is not None else -1 for _, dof in dofs], int),
+                            np.array([b for b, _ in dofs], int))
+
+
+def point_jacobian(skel: Skeleton, frames: DofFrames, world: np.ndarray, bones: np.ndarray,
+                   local: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Points fixed in bones, posed, and their derivatives by the coordinates (analytic).
+
+    ``bones`` (P,) bone indices, ``local`` (P, 3) the points in their bones' frames, ``world``
+    and ``frames`` from :func:`dof_frames`. Returns (points (F, P, 3), jacobian (F, P, 3, C)):
+    a rotation DOF about the world axis a through o turns a point x at ``a × (x − o)`` per
+    radian (π/180 per degree), a translation DOF moves it along a; times the DOF's rate by its
+    coordinate; summed over the DOFs of the point's bone and its ancestors."""
+    bones = np.asarray(bones, dtype=int)
+    local = np.asarray(local, dtype=np.float64)
+    # x[f, p, i] = R[f, b_p, i, j] local[p, j] + t[f, b_p, i]
+    posed = world[:, bones]  # (F, P, 4, 4)
+    x = np.einsum("fpij,pj->fpi", posed[..., :3, :3], local) + posed[..., :3, 3]
+    n_coords = len(skel.coordinates)
+    moves = _dof_moves(skel, frames.bone)[bones]  # (P, D): DOF d moves the bone of point p
+    arm = x[:, :, None, :] - frames.origin[:, None, :, :]  # (F, P, D, 3)
+    axis = np.broadcast_to(frames.axis[:, None, :, :], arm.shape)
+    rot = np.cross(axis, arm) * (np.pi / 180.0)
+    per_dof = np.where(frames.rotation[None, None, :, None], rot, axis)
+    per_dof = per_dof * (frames.rate[:, None, :, None] * moves[None, :, :, None])
+    onehot = np.zeros((len(frames.coord), n_coords))
+    driven = frames.coord >= 0
+    onehot[np.nonzero(driven)[0], frames.coord[driven]] = 1.0
+    # J[f, p, i, c] = sum_d per_dof[f, p, d, i] onehot[d, c]
+    return x, np.einsum("fpdi,dc->fpic", per_dof, onehot)
+
+
+def _dof_moves(skel: Skeleton, dof_bone: np.ndarray) -> np.ndarray:
+    """(B, D) bool: DOF d (on bone ``dof_bone[d]``) moves bone b (its own bone or an ancestor's)."""
+    anc = np.zeros((len(skel.bones), len(skel.bones)), bool)  # anc[b, a]: a is b or an ancestor of b
+    for b, bone in enumerate(skel.bones):
+        anc[b, b] = True
+        if bone.parent >= 0:
+            anc[b] |= anc[bone.parent]
+    return anc[:, dof_bone]
+
+
+def _kinematics(skel: Skeleton, q: np.ndarray, record: list | None) -> np.ndarray:
+    """Forward kinematics; with ``record`` a list, appends (world axis (F, 3), world origin
+    (F, 3)) of every DOF in bone order, taken in the frame the DOF acts in."""
     q = np.asarray(q, dtype=np.float64)
     n_frames = q.shape[0]
     values = dof_values(skel, q)
     world = np.empty((n_frames, len(skel.bones), 4, 4))
     for b, bone in enumerate(skel.bones):
-        pre = rigid(euler_xyz(bone.orient), bone.offset)
+        pre, post = _joint_frames(tuple(bone.offset), tuple(bone.orient), tuple(bone.post_offset),
+                                  tuple(bone.post_orient))
         local = np.broadcast_to(pre, (n_frames, 4, 4)).copy()
         for dof, v in zip(bone.dofs, values[b]):
             axis = np.asarray(dof.axis)
+            if record is not None:
+                at = local if bone.parent < 0 else world[:, bone.parent] @ local
+                # a[f] = R_at[f] @ axis: the DOF's axis in the world; its frame's origin t_at[f]
+                record.append((np.einsum("fij,j->fi", at[:, :3, :3], axis), at[:, :3, 3].copy()))
             if dof.type == "rotation":
                 r = axis_angle(axis, np.radians(v))
                 # local[f] = local[f] @ [r 0; 0 1]
@@ -314,8 +451,7 @@ def forward_kinematics(skel: Skeleton, q: np.ndarray) -> np.ndarray:
             else:
                 # local[f] = local[f] @ T(v axis): translation expressed in the current frame
                 local[:, :3, 3] += np.einsum("fij,j->fi", local[:, :3, :3], axis) * v[:, None]
-        if any(bone.post_offset) or any(bone.post_orient):
-            post = np.linalg.inv(rigid(euler_xyz(bone.post_orient), bone.post_offset))
+        if post is not None:
             local = local @ post
         world[:, b] = local if bone.parent < 0 else world[:, bone.parent] @ local
     return world

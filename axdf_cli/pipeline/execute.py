@@ -1,8 +1,15 @@
 """Executing a plan: the mesh pass (in this process or forked workers), the tables, the
 render pass (in this process or render workers) and the manifest, written into the run
-folder (:mod:`axdf_cli.fileio.runfolder`)."""
+folder (:mod:`axdf_cli.fileio.runfolder`).
+
+How ``--jobs`` splits the mesh pass follows from the plan's stages (:func:`split_of`):
+without a FRAME stage each worker takes some muscles over every frame; with one (it needs
+every muscle of a frame) each takes blocks of frames with every muscle, and the per-muscle
+packed files are then streamed from the blocks' raw meshes (spilled to temporaries in OUT)
+in frame order, muscles split over the workers again: the same bytes as one process."""
 from __future__ import annotations
 
+import os
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path, PurePosixPath
@@ -12,11 +19,13 @@ import numpy as np
 from axdf_cli import __version__
 from axdf_cli.fileio import runfolder
 from axdf_cli.errors import InputError
+from axdf_cli.fileio import atomic
 from axdf_cli.formats import WRITERS
-from axdf_cli.pipeline.evaluate import evaluate_chunks, finite_or_rest, twist_references
-from axdf_cli.pipeline.plan import RunPlan, display_path, framing, prepare_contact
+from axdf_cli.pipeline.evaluate import Prepass, chunk_frames, evaluate_plan, finite_or_rest, prepare
+from axdf_cli.pipeline.plan import RunPlan, display_path, framing
+from axdf_cli.pipeline.stages import Scope, of_scope, stages_record
 from axdf_cli.workers import check_parent, process_map
-from axdf_cli.pipeline.sequences import SequenceFiles, file_relpath, sequence_formats, write_run_files
+from axdf_cli.pipeline.packed import SequenceFiles, file_relpath, sequence_formats, write_run_files
 from axdf_cli.fileio.runfolder import (BONES_CSV, FRAME_EXTENSIONS, MANIFEST_INTERVAL_S, STATS, OutputWriter, bone_mesh_relpath,
                                 describe_differences, frame_relpath, gl_record, is_file_with, mesh_relpath,
                                 write_manifest)
@@ -49,7 +58,8 @@ def previous_subset(previous: dict, out: Path) -> dict:
 
 
 #: stats.csv's numeric columns (inside_muscle, inside_bone: shares of the muscle's vertices inside
-#: another muscle it collides with, inside a bone; depth: its deepest penetration, m)
+#: another muscle it collides with, inside a bone; depth: its deepest penetration, m; 0 when
+#: the run has neither the contact nor the penetration stage)
 STATS_COLUMNS = ("length", "volume", "volume_ratio", "tension", "twist", "scale", "inside_muscle", "inside_bone",
                  "depth")
 NSTATS = len(STATS_COLUMNS)
@@ -75,7 +85,6 @@ def manifest_dict(plan: RunPlan, files: dict, warnings: list, complete: bool, ex
             "skeleton": plan.pose.skeleton.name,
             "fps": plan.pose.fps,
             "render": render_dict(plan.render),
-            "contact": bool(plan.contact_on),
         },
         "frames": [int(f) for f in plan.frames],
         "muscles": [
@@ -91,6 +100,9 @@ def manifest_dict(plan: RunPlan, files: dict, warnings: list, complete: bool, ex
         "warnings": warnings,
         "files": files,
     }
+    stages = stages_record(plan.stages)
+    if stages is not None:  # (left out without stages: the manifests of such runs are as they were)
+        m["settings"]["stages"] = stages
     if extra:
         m.update(extra)
     return m
@@ -98,41 +110,90 @@ def manifest_dict(plan: RunPlan, files: dict, warnings: list, complete: bool, ex
 
 @dataclass
 class MeshPassResult:
-    """What a mesh pass over some muscles returns (picklable, for worker processes)."""
+    """What a mesh pass over some muscles and frames returns (picklable, for worker processes)."""
 
     muscles: list  # muscle indices, in order
+    rows: slice  # the frames covered (positions in plan.frames)
     files: dict  # relpath -> sha256
-    stats: np.ndarray  # (F, len(muscles), NSTATS) length, volume, ratio, tension, twist, scale, inside_muscle,
-    # inside_bone, depth
+    stats: np.ndarray  # (R, len(muscles), NSTATS): STATS_COLUMNS
     warnings: list  # [(frame index, muscle index, message)]
     lo: np.ndarray  # (3,) bounds of every written vertex
     hi: np.ndarray
     skipped: int = 0
-    bone_rows: np.ndarray | None = None  # (F, B, 7) x y z qw qx qy qz, when asked for
+    bone_rows: np.ndarray | None = None  # (R, B, 7) x y z qw qx qy qz, when asked for
+    spill: str | None = None  # the raw meshes of these frames, for the packed files (see Spill)
 
 
-def mesh_pass(plan: RunPlan, muscles: list[int], twist_ref: np.ndarray, writer: OutputWriter,
-              progress=None, on_chunk=None, bones: bool = False) -> MeshPassResult:
-    """Evaluate and write the meshes of ``muscles`` for every selected frame, chunk by chunk,
-    in every selected format (per-frame files through ``writer``; per-sequence files streamed
-    by :class:`SequenceFiles` and completed at the end); with ``bones``, also return every
-    bone's world pose (from the same kinematics)."""
+def split_of(plan: RunPlan) -> str:
+    """How ``--jobs`` splits the mesh pass: ``"frames"`` when a FRAME stage needs every muscle
+    of a frame together, else ``"muscles"``."""
+    return "frames" if of_scope(plan.stages, Scope.FRAME) else "muscles"
+
+
+class Spill:
+    """Every muscle's positions and normals over a block of R frames, raw float32 in one
+    ``.npy`` (2, R, sum V, 3) at a temporary name in OUT (so that a killed run's is removed
+    as any temporary): a frames worker's share of the packed files, streamed in frame order
+    by :func:`_sequence_worker`."""
+
+    def __init__(self, path: Path, plan: RunPlan, n_rows: int):
+        sizes = [m.n_vertices for m in plan.models]
+        self.offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+        self.path = path
+        try:
+            self.data = np.lib.format.open_memmap(path, mode="w+", dtype="<f4",
+                                                  shape=(2, n_rows, int(self.offsets[-1]), 3))
+        except OSError as e:
+            raise atomic.environment_problem(path, e) from None
+
+    def put(self, j: int, rows: slice, positions: np.ndarray, normals: np.ndarray) -> None:
+        a, b = self.offsets[j], self.offsets[j + 1]
+        self.data[0, rows, a:b] = positions
+        self.data[1, rows, a:b] = normals
+
+    def close(self) -> None:
+        try:
+            self.data.flush()
+        except OSError as e:
+            raise atomic.environment_problem(self.path, e) from None
+        del self.data
+
+
+def mesh_pass(plan: RunPlan, prep: Prepass, writer: OutputWriter, muscles: list[int] | None = None,
+              rows: slice | None = None, progress=None, on_chunk=None, bones: bool = False,
+              spill: Path | None = None) -> MeshPassResult:
+    """Evaluate and write the meshes of ``muscles`` (default all) for the selected frames
+    ``rows`` (default all), chunk by chunk, in every selected format: per-frame files through
+    ``writer``; per-sequence files streamed by :class:`SequenceFiles` and completed at the end
+    (every frame only), or with ``spill`` raw into that file for :func:`_sequence_worker`.
+    With ``bones``, also return every bone's world pose (from the same kinematics)."""
+    nm = len(plan.models)
+    muscles = list(range(nm)) if muscles is None else list(muscles)
+    rows = slice(0, len(plan.frames)) if rows is None else rows
+    n_rows = rows.stop - rows.start
     frame_formats = [f for f in plan.formats if f in WRITERS]
     writers = {(j, f): WRITERS[f](plan.models[j].faces, plan.muscles[j].name) for j in muscles for f in frame_formats}
     col = {j: k for k, j in enumerate(muscles)}
-    stats = np.zeros((len(plan.frames), len(muscles), NSTATS))
-    bone_rows = np.zeros((len(plan.frames), len(plan.pose.skeleton.bones), 7)) if bones else None
+    stats = np.zeros((n_rows, len(muscles), NSTATS))
+    bone_rows = np.zeros((n_rows, len(plan.pose.skeleton.bones), 7)) if bones else None
     warns: list = []
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
-    seq = SequenceFiles(plan, muscles, writer) if sequence_formats(plan.formats) else None
+    packed = bool(sequence_formats(plan.formats))
+    seq = SequenceFiles(plan, muscles, writer) if packed and spill is None else None
+    raw = None
     try:
-        for sl, world, results in evaluate_chunks(plan, twist_ref=twist_ref, muscles=muscles):
-            frames = plan.frames[sl]
+        raw = Spill(spill, plan, n_rows) if packed and spill is not None else None
+        for chunk, results in evaluate_plan(plan, prep, rows, muscles):
+            sl = chunk.rows
+            here = slice(sl.start - rows.start, sl.stop - rows.start)
+            frames = chunk.frames
             if bones:
-                bone_rows[sl, :, :3] = world[:, :, :3, 3]
-                bone_rows[sl, :, 3:] = matrix_to_quaternion(world[:, :, :3, :3])
+                bone_rows[here, :, :3] = chunk.world[:, :, :3, 3]
+                bone_rows[here, :, 3:] = matrix_to_quaternion(chunk.world[:, :, :3, :3])
             for j, res in results:
+                if j not in col:  # (a FRAME stage carries every muscle)
+                    continue
                 name = plan.muscles[j].name
                 pos, nrm, bad = finite_or_rest(res, plan.models[j])
                 res.warnings += [(int(i), "non-finite vertices; the rest shape was written instead") for i in bad]
@@ -142,18 +203,22 @@ def mesh_pass(plan: RunPlan, muscles: list[int], twist_ref: np.ndarray, writer: 
                         writer.write(mesh_relpath(name, int(frame), f), w.encode(pos[i], nrm[i]))
                 if seq is not None:
                     seq.append(j, pos, nrm)
+                if raw is not None:
+                    raw.put(j, here, pos, nrm)
                 lo = np.minimum(lo, pos.reshape(-1, 3).min(axis=0))
                 hi = np.maximum(hi, pos.reshape(-1, 3).max(axis=0))
-                cm = res.contact if res.contact is not None else np.zeros((len(frames), 3))
+                cm = res.contact if res.contact is not None else np.zeros((len(res.length), 3))
                 st = np.concatenate([np.stack([res.length, res.volume, res.volume / plan.models[j].v0, res.tension,
                                                res.twist, res.scale], axis=1), cm], axis=1)
-                stats[sl, col[j]] = np.where(np.isfinite(st), st, 0.0)
+                stats[here, col[j]] = np.where(np.isfinite(st), st, 0.0)
                 warns += [(sl.start + i, j, msg) for i, msg in res.warnings]
                 if progress:
                     progress(len(frames))
             if on_chunk:
                 on_chunk()
         writer.flush()
+        if raw is not None:
+            raw.close()
         if seq is not None:
             files, skipped = seq.finish()
             writer.files.update(files)
@@ -161,28 +226,76 @@ def mesh_pass(plan: RunPlan, muscles: list[int], twist_ref: np.ndarray, writer: 
     except BaseException:
         if seq is not None:
             seq.abort()
+        if spill is not None:
+            Path(spill).unlink(missing_ok=True)
         raise
-    return MeshPassResult(list(muscles), writer.files, stats, warns, lo, hi, writer.skipped, bone_rows)
+    return MeshPassResult(muscles, rows, writer.files, stats, warns, lo, hi, writer.skipped, bone_rows,
+                          str(spill) if raw is not None else None)
 
 
 def _mesh_worker(shared: dict, task) -> MeshPassResult:
-    muscles, bones = task
+    muscles, rows, bones, spill = task
     writer = OutputWriter(shared["root"], shared["previous"])
     try:
-        return mesh_pass(shared["plan"], muscles, shared["twist_ref"], writer, on_chunk=check_parent, bones=bones)
+        return mesh_pass(shared["plan"], shared["prep"], writer, muscles, rows, on_chunk=check_parent, bones=bones,
+                         spill=spill)
     finally:
         writer.close(cancel=True)
 
 
-def _parallel_mesh_pass(plan: RunPlan, root: Path, jobs: int, twist_ref, previous: dict,
+def _sequence_worker(shared: dict, muscles: list[int]) -> tuple[dict, int]:
+    """Stream ``muscles``' packed files from the spilled blocks, in frame order."""
+    plan = shared["plan"]
+    writer = OutputWriter(shared["root"], shared["previous"])
+    seq = SequenceFiles(plan, muscles, writer)
+    try:
+        for path in shared["spills"]:
+            data = np.load(path, mmap_mode="r")
+            offsets = np.concatenate([[0], np.cumsum([m.n_vertices for m in plan.models])])
+            for j in muscles:
+                a, b = offsets[j], offsets[j + 1]
+                seq.append(j, data[0, :, a:b], data[1, :, a:b])
+            check_parent()
+        return seq.finish()
+    except BaseException:
+        seq.abort()
+        raise
+    finally:
+        writer.close(cancel=True)
+
+
+def _parallel_mesh_pass(plan: RunPlan, root: Path, jobs: int, prep: Prepass, previous: dict,
                         progress) -> list[MeshPassResult]:
-    """Split the muscles over ``jobs`` forked processes (round robin: similar work each); the
-    first also returns the bones' poses."""
-    groups = [list(range(k, len(plan.models), jobs)) for k in range(jobs)]
-    tasks = [(g, k == 0) for k, g in enumerate(groups) if g]
-    on_result = (lambda r: progress(len(r.muscles) * len(plan.frames))) if progress else None
-    shared = {"plan": plan, "root": root, "twist_ref": twist_ref, "previous": previous}
-    return process_map(_mesh_worker, tasks, shared, on_result=on_result)
+    """The mesh pass over ``jobs`` forked processes, split as the stages allow (:func:`split_of`):
+    the muscles round robin (similar work each; the first also returns the bones' poses), or
+    blocks of frames with every muscle, then the packed files streamed from the blocks."""
+    nm, nf = len(plan.models), len(plan.frames)
+    shared = {"plan": plan, "root": root, "prep": prep, "previous": previous}
+    if split_of(plan) == "muscles":
+        groups = [list(range(k, nm, jobs)) for k in range(jobs)]
+        tasks = [(g, None, k == 0, None) for k, g in enumerate(groups) if g]
+        on_result = (lambda r: progress(len(r.muscles) * nf)) if progress else None
+        return process_map(_mesh_worker, tasks, shared, on_result=on_result)
+    size = max(1, min(chunk_frames(plan, list(range(nm))), -(-nf // jobs)))
+    packed = bool(sequence_formats(plan.formats))
+    tasks = [(None, slice(s, min(s + size, nf)), True,
+              root / f"{atomic.TMP_PREFIX}{os.getpid()}-frames-{s:09d}.npy" if packed else None)
+             for s in range(0, nf, size)]
+    on_result = (lambda r: progress((r.rows.stop - r.rows.start) * nm)) if progress else None
+    parts: list = []
+    try:
+        parts = process_map(_mesh_worker, tasks, shared, jobs=jobs, on_result=on_result)
+        if packed:
+            shared["spills"] = [p.spill for p in parts]
+            groups = [g for g in (list(range(k, nm, jobs)) for k in range(jobs)) if g]
+            for files, skipped in process_map(_sequence_worker, groups, shared):
+                parts[0].files.update(files)
+                parts[0].skipped += skipped
+    finally:
+        for t in tasks:
+            if t[3] is not None:
+                Path(t[3]).unlink(missing_ok=True)
+    return parts
 
 
 class Checkpoint:
@@ -231,10 +344,11 @@ def bones_csv(plan: RunPlan, bone_rows: np.ndarray) -> bytes:
     return _fmt_rows(rows).encode()
 
 
-def strict_check(plan: RunPlan, twist_ref: np.ndarray) -> None:
+def strict_check(plan: RunPlan, prep: Prepass) -> None:
     """Evaluate everything once: with --strict, any warning stops the run before it writes."""
     found = [f"{plan.names[j]} frame {int(plan.frames[i])}: {msg}" for i, j, msg in plan.frame_warnings]
-    for sl, _, results in evaluate_chunks(plan, twist_ref=twist_ref):
+    for chunk, results in evaluate_plan(plan, prep):
+        sl = chunk.rows
         for j, res in results:
             found += [f"{plan.names[j]} frame {int(plan.frames[sl.start + i])}: {msg}" for i, msg in res.warnings]
             bad = ~(np.isfinite(res.vertices).all(axis=(1, 2)) & np.isfinite(res.normals).all(axis=(1, 2)))
@@ -273,23 +387,22 @@ def execute(plan: RunPlan, *, resume: bool = False, overwrite: bool = False, pro
     Every check comes first (the output folder, --resume against the earlier manifest,
     --strict, EGL and the render size): a refused run writes nothing. With ``jobs`` > 1 the
     muscles are split over forked worker processes for the mesh pass, then the frames over
-    render workers (:func:`axdf_cli.render.sequence.render_frames_of`: from a fork server,
+    render workers (:func:`axdf_cli.render.framefiles.render_frames_of`: from a fork server,
     each with its own GL context; this process never makes one); the output is the same
     bytes. With one job the frames are rendered in this process, after every fork."""
     target = check_output(plan, resume=resume, overwrite=overwrite)
-    plan = prepare_contact(plan)
-    twist_ref = twist_references(plan)
+    prep = prepare(plan)
     if strict:
-        strict_check(plan, twist_ref)
+        strict_check(plan, prep)
     if plan.rendering:
-        from axdf_cli.render.sequence import check_render
+        from axdf_cli.render.framefiles import check_render
 
         plan = replace(plan, render=check_render(plan.render, on_note))
     with runfolder.Session(target) as session:
-        return _write_run(plan, session, twist_ref, progress, render_progress, jobs)
+        return _write_run(plan, session, prep, progress, render_progress, jobs)
 
 
-def _write_run(plan: RunPlan, session, twist_ref, progress, render_progress, jobs: int) -> dict:
+def _write_run(plan: RunPlan, session, prep: Prepass, progress, render_progress, jobs: int) -> dict:
     root = session.root
     previous = session.previous_files
     write_manifest(root, manifest_dict(plan, previous_subset(previous, root), [], complete=False))
@@ -298,24 +411,28 @@ def _write_run(plan: RunPlan, session, twist_ref, progress, render_progress, job
     writer = OutputWriter(root, previous)
     rendered = {"files": {}}  # frames rendered so far
     try:
-        if jobs > 1 and nm > 1:
+        if jobs > 1 and (nm if split_of(plan) == "muscles" else nf) > 1:
             try:
-                parts = _parallel_mesh_pass(plan, root, min(jobs, nm), twist_ref, previous, progress)
+                parts = _parallel_mesh_pass(plan, root, min(jobs, nm if split_of(plan) == "muscles" else nf), prep,
+                                            previous, progress)
             except BaseException:
-                runfolder.remove_stale(root)  # a worker killed mid-write (the others finish their file)
+                runfolder.remove_stale(root, run_dirs(plan))  # a worker killed mid-write (the others finish theirs)
                 raise
         else:
             checkpoint = Checkpoint(lambda: write_manifest(root, manifest_dict(plan, writer.files, [], complete=False)))
-            parts = [mesh_pass(plan, list(range(nm)), twist_ref, writer, progress, checkpoint, bones=True)]
+            parts = [mesh_pass(plan, prep, writer, progress=progress, on_chunk=checkpoint, bones=True)]
         stats = np.zeros((nf, nm, NSTATS))
         warn_text = [[""] * nm for _ in range(nf)]
         lo = np.min([p.lo for p in parts], axis=0)
         hi = np.max([p.hi for p in parts], axis=0)
         all_warns = list(plan.frame_warnings)
         writer.skipped = sum(p.skipped for p in parts)  # (one pass in this process: its writer is ours)
+        bone_rows = np.zeros((nf, len(bones), 7))
         for part in parts:
             writer.files.update(part.files)
-            stats[:, part.muscles] = part.stats
+            stats[part.rows, part.muscles] = part.stats
+            if part.bone_rows is not None:
+                bone_rows[part.rows] = part.bone_rows
             all_warns += part.warnings
         warnings: list[str] = list(plan.warnings)
         for fi, j, msg in sorted(all_warns, key=lambda w: (w[0], w[1])):
@@ -325,17 +442,17 @@ def _write_run(plan: RunPlan, session, twist_ref, progress, render_progress, job
         for i, (_, _, data) in sorted(plan.bone_meshes.items()):
             writer.write(bone_mesh_relpath(bones[i].name), data)
         writer.write(STATS, stats_csv(plan, stats, warn_text))
-        writer.write(BONES_CSV, bones_csv(plan, parts[0].bone_rows))
+        writer.write(BONES_CSV, bones_csv(plan, bone_rows))
         frame_pts = framing(plan)
         extra = {"bounds": [[float(f"{x:.9g}") for x in lo], [float(f"{x:.9g}") for x in hi]],
                  "framing": {"first_frame": int(plan.pose.first), "points": frame_pts.tolist()}}
         if sequence_formats(plan.formats):
-            write_run_files(plan, writer, parts[0].bone_rows, np.array([lo, hi]), frame_pts)
+            write_run_files(plan, writer, bone_rows, np.array([lo, hi]), frame_pts)
         if plan.rendering:
             writer.flush()
             write_manifest(root, manifest_dict(plan, writer.files, warnings, complete=False, extra=extra))
             info = _render_pass(plan, root, previous, writer, rendered, lambda files: manifest_dict(
-                plan, files, warnings, complete=False, extra=extra), np.array([lo, hi]), twist_ref, frame_pts,
+                plan, files, warnings, complete=False, extra=extra), np.array([lo, hi]), prep, frame_pts,
                 render_progress, jobs)
             extra["gl"] = gl_record(info["gl_renderer"], info["gl_version"])
         writer.flush()
@@ -344,7 +461,7 @@ def _write_run(plan: RunPlan, session, twist_ref, progress, render_progress, job
         writer.close(cancel=True)
         writer.files.update(rendered["files"])
         if jobs > 1:
-            runfolder.remove_stale(root)  # a render worker killed mid-write (the others finish their file)
+            runfolder.remove_stale(root, run_dirs(plan))  # a render worker killed mid-write (the others finish theirs)
         if root == plan.out:  # stopped: list what is whole, for --resume (a staging folder goes)
             runfolder.try_write_manifest(root, manifest_dict(plan, writer.files, [], complete=False))
         raise
@@ -358,7 +475,7 @@ def _write_run(plan: RunPlan, session, twist_ref, progress, render_progress, job
 
 
 def _render_pass(plan: RunPlan, root: Path, previous: dict, writer: OutputWriter, rendered: dict, manifest,
-                 bounds: np.ndarray, twist_ref, frame_pts, progress, jobs: int) -> dict:
+                 bounds: np.ndarray, prep: Prepass, frame_pts, progress, jobs: int) -> dict:
     """Render the plan's frames into ``root`` over ``jobs`` processes; the frames an
     interrupted run rendered whole are kept (--resume). ``rendered["files"]`` follows the
     frames' files as they are written; ``manifest(files)`` is the in-progress manifest,
@@ -378,7 +495,7 @@ def _render_pass(plan: RunPlan, root: Path, previous: dict, writer: OutputWriter
         checkpoint()
 
     todo = [int(f) for f in plan.frames if int(f) not in done]
-    info = render_plan(plan, root, bounds, twist_ref, progress, frame_pts, jobs, todo, on_frame)
+    info = render_plan(plan, root, bounds, prep, progress, frame_pts, jobs, todo, on_frame)
     writer.files.update(info["files"])
     return info
 

@@ -15,6 +15,7 @@ from axdf_cli.specs import Job, Pose, RefPolicy, expand_muscle_paths, load_muscl
 from axdf_cli.model.muscle import MuscleModel, MuscleSpec
 from axdf_cli.model.pose import activation_problems, muscle_range_warnings, parse_frames, subject_points
 from axdf_cli.model.skeleton import forward_kinematics
+from axdf_cli.pipeline.stages import build_stages
 
 DEFAULT_OUT = "out/run"
 
@@ -33,8 +34,7 @@ class RunPlan:
     notes: list = field(default_factory=list)  # remarks printed with --verbose; not warnings
     bone_meshes: dict = field(default_factory=dict)  # bone index -> (vertices (V,3) f4, faces (T,3) i4, file bytes)
     frame_warnings: list = field(default_factory=list)  # [(frame index, muscle index, message)] known before evaluation
-    contact_on: bool = True  # muscles and bones collide (--no-contact, a job's contact: false)
-    contact: object = None  # model.contact.ContactModel once built (prepare_contact); None: no contact stage
+    stages: tuple = ()  # the run's stages (axdf_cli.pipeline.stages: build_stages), in order within each scope
 
     @property
     def names(self) -> list[str]:
@@ -89,13 +89,14 @@ def load_muscle_specs(files) -> list[MuscleSpec]:
 
 def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, fmt_arg=None,
              frames_arg=None, render=None, policy: RefPolicy | None = None, clamp_ranges: bool = False,
-             contact: bool | None = None) -> RunPlan:
+             stages=None) -> RunPlan:
     """Load and check every input; build the muscle models. Writes nothing.
 
     ``render``: the RenderSettings to use (None: the job's ``render:``); ``policy``: where
     referenced files may lie (default: the job's); ``clamp_ranges``: hold coordinates inside
-    their ranges (as the pose's ``clamp_ranges``); ``contact``: muscles and bones collide (None:
-    the job's ``contact:``, default on)."""
+    their ranges (as the pose's ``clamp_ranges``); ``stages``: stage name -> on, from the
+    command line and the job (:func:`axdf_cli.pipeline.stages.build_stages`; default every
+    registered stage)."""
     policy = policy or (job.policy if job is not None else RefPolicy())
     if pose_arg is not None:
         pose_path, pose_mark = Path(pose_arg), Mark(str(pose_arg))
@@ -151,10 +152,9 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
         out = Path(DEFAULT_OUT)
     if render is None:
         render = job_render_settings(job)
+    check_camera_bone(render, pose.skeleton)
 
     bone_meshes = {i: load_bone_mesh(b.mesh, pose.skeleton_path) for i, b in enumerate(skel.bones) if b.mesh}
-    if contact is None:
-        contact = job.contact if job is not None else True
 
     inputs = {}
     srcs = ([job.source] if job is not None else []) + [pose.source, pose.skeleton_path] + [str(f) for f in files]
@@ -164,38 +164,32 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
             inputs[display_path(Path(s))] = atomic.sha256_file(s)
     return RunPlan(pose, specs, models, frames, formats, out, inputs, render=render, warnings=warnings,
                    bone_meshes=bone_meshes, notes=notes, frame_warnings=muscle_range_warnings(pose, frames, specs),
-                   contact_on=contact)
+                   stages=build_stages(job_switches(job, stages)))
 
 
-def prepare_contact(plan: RunPlan) -> RunPlan:
-    """The plan with its contact stage built (the bones' distance fields: seconds, so only
-    for a run that evaluates, not for validate or --dry-run). With contact off the stage only
-    measures (stats.csv's inside_muscle, inside_bone, depth); the meshes are those without it."""
-    if plan.contact is not None:
-        return plan
-    from dataclasses import replace
-
-    from axdf_cli.model import contact as contact_model
-
-    rest = forward_kinematics(plan.pose.skeleton, plan.pose.skeleton.rest_coordinates()[None])[0]
-    return replace(plan, contact=contact_model.build(plan.muscles, plan.models, rest, plan.bone_meshes,
-                                                     enabled=plan.contact_on))
+def job_switches(job: Job | None, switches) -> dict:
+    """The stage switches of the command line (name -> on), with the job's (``contact: false``)
+    where the command line says nothing."""
+    out = dict(switches or {})
+    if job is not None and not job.contact:
+        out.setdefault("contact", False)
+    return out
 
 
 def check_formats(formats, frames, frames_mark: Mark) -> None:
-    """What the selected formats need, checked before anything is written: evenly spaced
-    frames for point caches; Pixar's USD modules for usd (exit 3 with the install hint)."""
-    from axdf_cli.formats.pc2 import check_frames
+    """What the selected formats need (their ``FORMATS`` entries), checked before anything is
+    written: the frames they can hold (evenly spaced for point caches); what the machine needs
+    to write them (Pixar's USD modules for usd: exit 3 with the install hint)."""
+    from axdf_cli.formats import FORMATS, frames_problem, of_layout
 
-    caches = [f for f in formats if f in ("pc2", "mdd")]
-    why = check_frames(frames) if caches else None
+    cannot, why = frames_problem(formats, frames)
     if why:
-        raise InputError(frames_mark, f"frames {_frames_text(frames)} for {', '.join(caches)}",
-                         why + "; or write usd or npz, which keep any frames")
-    if "usd" in formats:
-        from axdf_cli.formats.usd import pxr
-
-        pxr()
+        keep = [n for n in of_layout("sequence") if FORMATS[n].frames == "any"]
+        raise InputError(frames_mark, f"frames {_frames_text(frames)} for {', '.join(cannot)}",
+                         why + f"; or write {' or '.join(keep)}, which keep any frames")
+    for name in formats:
+        if FORMATS[name].check is not None:
+            FORMATS[name].check()
 
 
 def _frames_text(frames) -> str:
@@ -222,7 +216,54 @@ def load_bone_mesh(path: str, skeleton_file: str):
 
 
 def framing(plan: RunPlan) -> np.ndarray:
-    """What the automatic camera frames: the skeleton over the whole pose (not the muscles,
-    not the selected frames), rounded to 1 µm so that the manifest holds it exactly."""
-    pts = subject_points(plan.pose, {i: v for i, (v, _, _) in plan.bone_meshes.items()})
+    """What the automatic camera frames: the run's muscles swept over the whole pose (not the
+    selected frames), rounded to 1 µm so that the manifest holds it exactly. Each muscle's
+    rest mesh rides rigidly on the bones of its two nearest anchors (axis control points or
+    path points) at rest, posed by forward kinematics at every frame of the pose
+    (:func:`muscle_anchored_points`, :func:`axdf_cli.model.pose.subject_points`): a muscle
+    between two bones lies between the copies its bones carry, so the hull holds it while
+    the camera frames the muscles, not the whole skeleton, and never depends on ``--frames``."""
+    pts = subject_points(plan.pose, muscle_anchored_points(plan.models, plan.pose.skeleton), joints=False)
     return np.round(pts, 6) + 0.0
+
+
+def muscle_anchored_points(models, skel) -> dict:
+    """Bone index -> (N, 3) bone-local points: each muscle's rest vertices (V, 3), carried by
+    the bones of the two anchors nearest each vertex at rest (its axis control points'
+    bones, or its path points' for a path muscle)."""
+    rest = forward_kinematics(skel, skel.rest_coordinates()[None])[0]  # (B, 4, 4)
+    out: dict[int, list] = {}
+    for m in models:
+        src = m.path.points if m.path is not None else m
+        bones, at = np.asarray(src.bones), np.asarray(src.at, dtype=np.float64)
+        # a[k,i] = sum_j R[bones_k,i,j] at[k,j] + t[bones_k,i]: the anchors at rest (world)
+        anchors = np.einsum("kij,kj->ki", rest[bones, :3, :3], at) + rest[bones, :3, 3]
+        v = m.rest_vertices.astype(np.float64)  # (V, 3) world at rest
+        d = np.linalg.norm(v[:, None] - anchors[None], axis=2)  # (V, K)
+        near = np.argsort(d, axis=1, kind="stable")[:, :2]  # (V, 2) the two nearest anchors
+        for b in np.unique(bones):
+            sel = np.isin(bones[near], b).any(axis=1)
+            R, t = rest[b, :3, :3], rest[b, :3, 3]
+            out.setdefault(int(b), []).append((v[sel] - t) @ R)  # world -> bone-local: R^T (v - t)
+    return {b: np.concatenate(p) for b, p in out.items()}
+
+
+def camera_targets(plan: RunPlan, frames=None) -> np.ndarray | None:
+    """(F, 3) the origin of the render camera's target bone at ``frames`` (default: the plan's),
+    or None when the camera does not aim at a bone."""
+    from axdf_cli.model.pose import sample_coordinates
+
+    cam = plan.render.camera if plan.render is not None else None
+    if cam is None or cam.target_bone is None:
+        return None
+    frames = plan.frames if frames is None else np.asarray(frames)
+    b = plan.pose.skeleton.bone_index[cam.target_bone]
+    return forward_kinematics(plan.pose.skeleton, sample_coordinates(plan.pose, frames))[:, b, :3, 3]
+
+
+def check_camera_bone(render, skel) -> None:
+    """A camera that aims at a bone names a bone of the skeleton (checked before any output)."""
+    cam = render.camera if render is not None else None
+    if cam is not None and cam.target_bone is not None and cam.target_bone not in skel.bone_index:
+        raise InputError(cam.target_mark, f"the camera's target bone {cam.target_bone!r} is not a bone of "
+                         f"skeleton {skel.name!r}", "bones: " + ", ".join(b.name for b in skel.bones))

@@ -10,12 +10,12 @@ from axdf_cli.specs.render import (RenderSettings, CameraSpec, add_render_args, 
 
 
 def render_sequence(*args, **kwargs):
-    from axdf_cli.render.sequence import render_sequence as f
+    from axdf_cli.render.framefiles import render_sequence as f
     return f(*args, **kwargs)
 
 
 def benchmark_fps(*args, **kwargs):
-    from axdf_cli.render.sequence import benchmark_fps as f
+    from axdf_cli.render.framefiles import benchmark_fps as f
     return f(*args, **kwargs)
 
 

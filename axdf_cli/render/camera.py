@@ -201,7 +201,9 @@ def sequence_cameras(scene, settings: RenderSettings) -> list[list[Camera]]:
     angles = [settings.orbit * (f - first) for f in frames]
     points = framing_points(scene)
     if settings.camera is not None:
-        return [[_explicit(settings, points, a)] for a in angles]
+        targets = bone_targets(scene, settings, len(frames))
+        offset = follow_offset(settings, points) if settings.camera.follows else None
+        return [[_explicit(settings, points, a, t, offset)] for a, t in zip(angles, targets)]
 
     views = SHEET_VIEWS if settings.view == "sheet" else (settings.view,)
     fov = settings.fov
@@ -240,15 +242,53 @@ def sequence_cameras(scene, settings: RenderSettings) -> list[list[Camera]]:
     return out
 
 
-def _explicit(settings: RenderSettings, points: np.ndarray, angle: float) -> Camera:
+def bone_targets(scene, settings: RenderSettings, n: int) -> list:
+    """Per frame of ``scene.frames``: the camera's target bone's origin (3,), or None for a
+    point target (``scene.targets`` holds the bone's positions)."""
+    cam = settings.camera
+    if cam is None or cam.target_bone is None:
+        return [None] * n
+    targets = getattr(scene, "targets", None)
+    if targets is None or len(targets) != n:
+        raise ValueError(f"the camera aims at bone {cam.target_bone!r}: Scene.targets must hold its {n} positions")
+    return [np.asarray(t, dtype=np.float64) for t in targets]
+
+
+def follow_offset(settings: RenderSettings, points: np.ndarray) -> np.ndarray:
+    """(3,) the offset from a followed bone to the camera: the camera's ``offset``, or the
+    ``auto`` view's direction at the distance that shows every framing point about their
+    centre (:func:`fit_distance`), so the framed subject fits whatever the bone does."""
+    cam = settings.camera
+    if cam.offset is not None:
+        return np.asarray(cam.offset, dtype=np.float64)
+    W, H = settings.size
+    tan_y = math.tan(math.radians(cam.fov) / 2) * (1 - 2 * FRAME_MARGIN)
+    fwd, up = _view_axes("auto", 0.0)
+    centre = 0.5 * (points.min(axis=0) + points.max(axis=0))
+    dist = fit_distance(points - centre, look_at(np.zeros(3), fwd, up)[:3, :3], tan_y * W / H, tan_y)
+    return -max(dist, MIN_EXTENT) * fwd
+
+
+def _explicit(settings: RenderSettings, points: np.ndarray, angle: float, bone: np.ndarray | None = None,
+              offset: np.ndarray | None = None) -> Camera:
+    """The explicit camera at one frame: ``bone`` is its target bone's origin at that frame, or
+    None (a point target); ``offset``: from the bone to a camera that follows it
+    (:func:`follow_offset`)."""
     cam = settings.camera
     W, H = settings.size
     centre = 0.5 * (points.min(axis=0) + points.max(axis=0))
-    target = np.asarray(cam.target if cam.target is not None else centre, float)
+    if bone is not None:
+        target = bone
+        position = target + offset if cam.follows else np.asarray(cam.position, float)
+    else:
+        target = np.asarray(cam.target if cam.target is not None else centre, float)
+        position = np.asarray(cam.position, float)
     Rz = rot_z(angle)
-    pos = target + Rz @ (np.asarray(cam.position, float) - target)
+    pos = target + Rz @ (position - target)
     up = Rz @ np.asarray(cam.up, float)
     fwd = target - pos
+    if np.linalg.norm(fwd) < 1e-12:
+        fwd = Rz @ np.array([0.0, 1.0, 0.0])  # a fixed camera the bone passed through: look ahead
     if np.linalg.norm(np.cross(fwd, up)) < 1e-9 * max(np.linalg.norm(fwd), 1e-12):
         up = Rz @ np.array([0.0, 1.0, 0.0])  # looking along up (a default target straight below)
     M = look_at(pos, fwd, up)

@@ -14,6 +14,13 @@ Per frame and per panel (view) two passes are drawn:
 
 Ids: 0 = background, ``1 .. M`` = ``Scene.muscles`` in order, ``M+1 .. M+B`` = bones.
 
+An optional **amodal** pass (:meth:`Renderer.amodal`, data sets) gives each muscle's full
+extent in the image, occluders ignored: every muscle is drawn without depth test into its
+own channel of a few RGBA8 targets (4 channels x MASK_TARGETS targets: 16 muscles per
+draw round), blended with MAX so that a channel is 1 wherever any of its muscle's triangles
+covers the pixel centre (the sampling of the data pass, so a visible muscle pixel of the
+``id`` pass is always inside its amodal mask).
+
 Bones: a bone with a mesh is drawn as its mesh; a bone without one as a stick (a thin
 cylinder) from its parent's joint to its own, so a skeleton without meshes still shows
 (:class:`BoneLayout` turns a skeleton's poses into the scene bones' transforms).
@@ -41,6 +48,26 @@ STICK_MIN_RADIUS = 0.002  # metres
 WIRE_DARKEN = 0.55  # wire colour = albedo * this
 WIRE_DEPTH_BIAS = 2e-4  # NDC depth pulled towards the camera so edges win over their faces
 BACKGROUND_ID = 0
+MASK_TARGETS = 4  # RGBA8 colour attachments of the amodal pass: 16 muscles per round
+
+_MASK_VERT = """
+#version 330
+uniform mat4 u_view;
+uniform mat4 u_proj;
+in vec3 in_pos;
+void main() { gl_Position = u_proj * (u_view * vec4(in_pos, 1.0)); }
+"""
+
+_MASK_FRAG = """
+#version 330
+uniform int u_target;   // which attachment holds this muscle
+uniform vec4 u_channel; // and which of its channels
+%s
+void main() {
+%s
+}
+""" % ("\n".join(f"layout(location = {k}) out vec4 f_mask{k};" for k in range(MASK_TARGETS)),
+       "\n".join(f"    f_mask{k} = u_target == {k} ? u_channel : vec4(0.0);" for k in range(MASK_TARGETS)))
 
 _VERT = """
 #version 330
@@ -280,6 +307,7 @@ class Renderer:
                                         index_buffer=ibo, index_element_size=4)
                 self.bones.append((j, vao, dvao, float(1 + len(scene.muscles) + j)))
         self._ident = np.eye(4, dtype="f4").T.tobytes()
+        self._mask = None  # the amodal pass's program, targets and vertex arrays: made on first use
 
     # ---------------------------------------------------------------------------------------
     def _draw_all(self, prog, data: bool, bone_world: np.ndarray | None, wire: bool = False):
@@ -357,6 +385,47 @@ class Renderer:
                            normals=np.ascontiguousarray(data[..., :3]),
                            ids=np.rint(idf).astype(np.uint32), cameras=tuple(cameras))
 
+    def amodal(self, camera: Camera) -> np.ndarray:
+        """(M, H, W) bool: each muscle's full extent seen by ``camera`` (a whole-image camera),
+        occluders ignored, sampled at pixel centres; the muscles of the last :meth:`render`."""
+        ctx = self.ctx
+        check_same_process(ctx)
+        W, H = self.settings.size
+        if self._mask is None:
+            prog = ctx.program(vertex_shader=_MASK_VERT, fragment_shader=_MASK_FRAG)
+            texs = [ctx.texture((W, H), 4, dtype="f1") for _ in range(MASK_TARGETS)]
+            fbo = ctx.framebuffer(texs)
+            vaos = [ctx.vertex_array(prog, [(vpos, "3f", "in_pos")], index_buffer=vao.index_buffer,
+                                     index_element_size=4) for vpos, _, vao, *_ in self.muscles]
+            self._mask = (prog, texs, fbo, vaos)
+        prog, texs, fbo, vaos = self._mask
+        per = 4 * MASK_TARGETS
+        out = np.zeros((len(vaos), H, W), dtype=bool)
+        fbo.use()
+        fbo.viewport = (0, 0, W, H)
+        prog["u_view"].write(np.asarray(camera.world_to_camera, "f4").T.tobytes())
+        prog["u_proj"].write(np.asarray(camera.projection_gl(), "f4").T.tobytes())
+        ctx.enable_only(ctx.BLEND)
+        ctx.blend_func = ctx.ONE, ctx.ONE
+        ctx.blend_equation = ctx.MAX
+        try:
+            for start in range(0, len(vaos), per):
+                fbo.clear(0.0, 0.0, 0.0, 0.0)
+                for i in range(start, min(start + per, len(vaos))):
+                    k = i - start
+                    prog["u_target"].value = k // 4
+                    prog["u_channel"].value = tuple(float(c == k % 4) for c in range(4))
+                    vaos[i].render()
+                for t in range((min(per, len(vaos) - start) + 3) // 4):
+                    raw = fbo.read(components=4, dtype="f1", attachment=t, viewport=(0, 0, W, H))
+                    m = np.frombuffer(raw, dtype=np.uint8).reshape(H, W, 4)[::-1] > 127  # (H, W, 4)
+                    n = min(4, len(vaos) - start - 4 * t)
+                    out[start + 4 * t:start + 4 * t + n] = np.moveaxis(m[..., :n], -1, 0)
+        finally:
+            ctx.blend_equation = ctx.FUNC_ADD
+            ctx.enable_only(ctx.DEPTH_TEST)
+        return out
+
     def frames(self, chunks: Iterable[FrameChunk], cameras: dict) -> Iterator[FrameImages]:
         """Render every frame of ``chunks`` (in order); ``cameras``: frame number -> its
         cameras (one per panel)."""
@@ -371,6 +440,10 @@ class Renderer:
         for obj in (self.color_fbo, self.data_fbo, self.color_tex, self.data_tex, self.id_tex,
                     self.prog, self.dprog):
             obj.release()
+        if self._mask is not None:
+            prog, texs, fbo, vaos = self._mask
+            for obj in (*vaos, fbo, *texs, prog):
+                obj.release()
 
 
 def render_frames(ctx, scene: Scene, chunks: Iterable[FrameChunk], settings: RenderSettings,

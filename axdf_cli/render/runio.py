@@ -27,7 +27,7 @@ from typing import Iterator
 import numpy as np
 
 from axdf_cli.errors import InputError, Mark
-from axdf_cli.formats import FORMATS, MeshReadError, load_triangles, read_sequence
+from axdf_cli.formats import FORMATS, MeshReadError, load_triangles, read_preference, read_sequence
 from axdf_cli.specs.render import RenderSettings, parse_render_settings
 from axdf_cli.fileio.runfolder import BONES_CSV, Manifest, mesh_relpath, read_run_manifest
 from axdf_cli.fileio.runfolder import plain_relpath as _plain
@@ -86,26 +86,23 @@ class _SequenceFile:
         return np.asarray(self.seq.points[k], np.float32), nrm, self.faces
 
 
-SEQUENCE_READ_ORDER = ("npz", "pc2", "mdd", "usd")  # read back in this order of preference (fastest first)
-
-
 def muscle_frames(run_dir: Path, name: str, formats, frames: tuple[int, ...], fps=None):
     """Where a muscle's frames are read from: its per-frame meshes when the run wrote a
     per-frame format, else its per-sequence file (npz, pc2, mdd, usd: the first the run
-    wrote), whose frames must be the run's. ``.read(frame)`` gives (V, 3) float32 positions,
+    wrote in its order of preference: ``Format.read_order``), whose frames must be the run's. ``.read(frame)`` gives (V, 3) float32 positions,
     normals or None, (T, 3) faces."""
     from axdf_cli.fileio.runfolder import rest_mesh_relpath, sequence_relpath
 
     for fmt in formats:
         if FORMATS[fmt].layout == "frame":
             return _FrameFiles(run_dir, name, fmt)
-    fmt = next(f for f in SEQUENCE_READ_ORDER if f in formats)
-    path = run_dir / sequence_relpath(name, fmt, FORMATS[fmt].writer.extension)
+    fmt = read_preference(formats)[0]
+    path = run_dir / sequence_relpath(name, FORMATS[fmt].folder, FORMATS[fmt].writer.extension)
     if not path.is_file() or path.is_symlink():
         raise InputError(Mark(str(path)), "file missing (or not a regular file)",
                          f"the run folder must hold every muscle's {fmt} file")
     try:
-        seq = read_sequence(path) if fmt != "mdd" else FORMATS[fmt].reader(path, fps)
+        seq = read_sequence(path, fps)
     except MeshReadError as e:
         raise InputError(Mark(str(path)), f"not readable ({e})", f"a {fmt} file written by axdf run") from None
     if len(seq.frames) != len(frames) or not np.allclose(seq.frames, frames):
@@ -113,7 +110,7 @@ def muscle_frames(run_dir: Path, name: str, formats, frames: tuple[int, ...], fp
                          "the file of the same run")
     faces = seq.faces
     if faces is None:  # a point cache: the topology is its rest mesh's
-        faces = load_triangles(run_dir / rest_mesh_relpath(name, fmt))[2]
+        faces = load_triangles(run_dir / rest_mesh_relpath(name, FORMATS[fmt].folder))[2]
     return _SequenceFile(path, seq, faces)
 
 
@@ -131,10 +128,11 @@ def load_run_scene(run_dir: Path, manifest: Manifest | None = None, frames=None
     return scene, source.chunks(source.selected), settings
 
 
-def load_run_source(run_dir: Path, manifest: Manifest | None = None, frames=None
+def load_run_source(run_dir: Path, manifest: Manifest | None = None, frames=None, target_bone=None
                     ) -> tuple[Scene, "RunFrames", RenderSettings]:
     """:func:`load_run_scene` with the frames as a :class:`RunFrames` (a render worker reads
-    its own)."""
+    its own). ``target_bone``: (name, Mark) of the bone a camera aims at, or None: its origin
+    at every frame of the run (``bones.csv``) becomes ``Scene.targets``."""
     run_dir = Path(run_dir)
     m = manifest or read_run_manifest(run_dir)
     all_frames = tuple(m.frames())
@@ -196,15 +194,22 @@ def load_run_source(run_dir: Path, manifest: Manifest | None = None, frames=None
     layout = bone_layout(bone_names, parents, meshes, extent)
     world = _read_bones_csv(run_dir / BONES_CSV, selected, bone_names if layout.bones else [])
     bone_world = layout.transforms(world)
+    targets = None
+    if target_bone is not None:
+        name, where = target_bone
+        if name not in bone_names:
+            raise InputError(where, f"the camera's target bone {name!r} is not a bone of this run",
+                             "bones: " + ", ".join(bone_names))
+        targets = _read_bones_csv(run_dir / BONES_CSV, all_frames, [name])[:, 0, :3, 3]
     scene = Scene(tuple(muscles), layout.bones, bounds.astype(np.float64), all_frames,
-                  framing=framing, first_frame=first_frame)
+                  framing=framing, first_frame=first_frame, targets=targets)
 
     source = RunFrames(run_dir, names, formats, all_frames, fps, selected, bone_world, sources)
     return scene, source, settings
 
 
 class RunFrames:
-    """A finished run's frames for the renderer (a :class:`~axdf_cli.render.sequence.FrameSource`):
+    """A finished run's frames for the renderer (a :class:`~axdf_cli.render.framefiles.FrameSource`):
     each muscle's mesh read a frame at a time (its per-frame files, or its per-sequence file,
     opened in the process that reads: a render worker opens its own), normals computed where
     the format has none; the bones' transforms of the ``selected`` frames."""

@@ -33,6 +33,7 @@ class Scene:
     frames: tuple[int, ...]  # every output frame number, in order
     framing: np.ndarray | None = None  # (N, 3) points the automatic camera frames (pose.subject_points)
     first_frame: int | None = None  # the pose's first frame: where an orbit's angle is 0
+    targets: np.ndarray | None = None  # (F, 3) the camera's target bone's origin at each of `frames`
 
 
 @dataclass(frozen=True)

@@ -54,9 +54,10 @@ class ViewRenderer:
 
 
 def write_view_images(folder: Path, rel_folder: str, img: FrameImages, passes) -> dict:
-    """Write ``<folder>/<frame:04d>.<pass>`` for each pass (png, exr); return {relative path: sha256}."""
+    """Write ``<folder>/<frame:04d>.<pass>`` for each image pass (png, exr; others are not
+    files of a view); return {relative path: sha256}."""
     out = {}
-    for ext in passes:
+    for ext in (p for p in passes if p in FRAME_WRITERS):
         name = f"{img.frame:04d}.{ext}"
         out[f"{rel_folder}/{name}"] = FRAME_WRITERS[ext](Path(folder) / name, img)
     return out

@@ -1,4 +1,4 @@
-"""Telling a YAML file's kind (skeleton, pose, muscle, job, transfer map) from its top-level keys."""
+"""Telling a YAML file's kind (skeleton, pose, muscle, job, transfer or retarget map) from its top-level keys."""
 from __future__ import annotations
 
 from axdf_cli.errors import InputError, Mark
@@ -6,9 +6,9 @@ from axdf_cli.fileio.yamlio import YMap, did_you_mean, mark_of
 
 
 #: The keys that tell a file's kind (see :func:`detect_kind`).
-KIND_KEYS = ("skeleton", "bones", "pose", "keys", "muscle", "muscles", "transfer")
-KINDS_ALLOWED = ("a skeleton (skeleton:, bones:), pose (pose:, keys:), muscle (muscle:), job (muscles:, pose:) "
-                 "or transfer map (transfer:, bones:)")
+KIND_KEYS = ("skeleton", "bones", "pose", "keys", "muscle", "muscles", "transfer", "retarget")
+KINDS_ALLOWED = ("a skeleton (skeleton:, bones:), pose (pose:, keys:), muscle (muscle:), job (muscles:, pose:), "
+                 "transfer map (transfer:, bones:) or retarget map (retarget:, joints:)")
 
 
 def detect_kind(doc) -> str | None:
@@ -16,6 +16,8 @@ def detect_kind(doc) -> str | None:
         return None
     if "transfer" in doc:
         return "transfer"
+    if "retarget" in doc:
+        return "retarget"
     if "skeleton" in doc and "bones" in doc:
         return "skeleton"
     if "pose" in doc and "keys" in doc:

@@ -20,9 +20,14 @@ supersample     1..8: render s times larger, box-downsample  3
 device          ``default`` or an EGL device index           default
 ==============  ===========================================  =================================
 
-``camera`` and ``view`` exclude each other. In ``camera``: ``position`` (required) and
-``target`` are world points (metres; ``target`` defaults to the centre of the automatic
-framing), ``up`` defaults to [0, 0, 1], ``fov`` to the ``fov`` above.
+``camera`` and ``view`` exclude each other. In ``camera``: ``position`` and ``target`` are
+world points (metres; ``target`` defaults to the centre of the automatic framing), ``up``
+defaults to [0, 0, 1], ``fov`` to the ``fov`` above. ``target`` may name a bone instead
+(``bone:NAME`` or ``{bone: NAME}``): the camera aims at that bone's origin at every frame.
+With a bone target, ``position`` (a fixed camera that turns to follow the bone) is
+optional: ``offset: [x, y, z]`` (world axes, metres) makes a camera that moves with the bone
+at that offset from it, and with neither the camera moves with the bone at the automatic
+view's direction and distance (the ``auto`` view, fitted to the framing).
 
 Every setting is read by one parser from :data:`RANGES`, for YAML values and for flags
 alike: a flag's text is read as a YAML value (``--size 512x256`` or ``--size "[512, 256]"``,
@@ -33,10 +38,10 @@ from __future__ import annotations
 
 import argparse
 import re
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 from axdf_cli.errors import InputError, Mark
-from axdf_cli.fileio.yamlio import Fields, check_number, check_vector, parse_yaml
+from axdf_cli.fileio.yamlio import NAME_ALLOWED, Fields, check_number, check_vector, is_name, parse_yaml
 
 VIEWS = ("auto", "front", "side", "top", "sheet")
 
@@ -56,10 +61,18 @@ DEFAULT_FOV = 30.0
 
 @dataclass(frozen=True)
 class CameraSpec:
-    position: tuple[float, float, float]
+    position: tuple[float, float, float] | None  # None: only with a bone target (offset or automatic)
     target: tuple[float, float, float] | None = None  # None: the centre of the automatic framing
     up: tuple[float, float, float] = (0.0, 0.0, 1.0)
     fov: float = DEFAULT_FOV  # vertical, degrees
+    target_bone: str | None = None  # aim at this bone's origin at every frame (target is None)
+    offset: tuple[float, float, float] | None = None  # with target_bone: move with the bone at this offset
+    target_mark: Mark | None = field(default=None, compare=False)  # where the bone was named (checks)
+
+    @property
+    def follows(self) -> bool:
+        """The camera moves with its target bone (an offset, or no position: automatic)."""
+        return self.target_bone is not None and self.position is None
 
 
 @dataclass(frozen=True)
@@ -137,24 +150,66 @@ def parse_device(v, where: Mark) -> int | None:
     return int(_ranged("device", v, where, integer=True))
 
 
+def parse_target(v, where: Mark, what: str = "target"):
+    """A camera target: ``[x, y, z]`` / ``"x,y,z"`` (a point), or ``bone:NAME`` / ``{bone: NAME}``
+    (a bone, returned as the string ``bone:NAME``)."""
+    if isinstance(v, dict) and set(v) == {"bone"} and isinstance(v["bone"], str):
+        v = "bone:" + v["bone"]
+    if isinstance(v, str) and v.startswith("bone:"):
+        if not is_name(v[5:]):
+            raise InputError(where, f"{what} names the bone {v[5:]!r}", f"bone:NAME with a bone name ({NAME_ALLOWED})")
+        return v
+    if isinstance(v, (dict, str)) and not isinstance(_numbers_text(v), list):
+        raise InputError(where, f"{what} is {v!r}", "a point [x, y, z] or x,y,z, or a bone: bone:NAME or {bone: NAME}")
+    return parse_point(v, where, what)
+
+
+def _with_target(cam: CameraSpec, target, where: Mark) -> CameraSpec:
+    if isinstance(target, str):
+        return replace(cam, target=None, target_bone=target[5:], target_mark=where)
+    return replace(cam, target=target, target_bone=None, target_mark=None)
+
+
 def parse_camera(value, where: Mark, fov: float = DEFAULT_FOV) -> CameraSpec:
-    f = Fields(value, where, "camera", keys=("position", "target", "up", "fov"))
-    position = parse_point(f.raw("position", required=True), f.vmark("position"), "position")
-    target = parse_point(f.raw("target"), f.vmark("target"), "target") if f.has("target") else None
+    f = Fields(value, where, "camera", keys=("position", "target", "offset", "up", "fov"))
+    position = parse_point(f.raw("position"), f.vmark("position"), "position") if f.has("position") else None
+    cam = CameraSpec(position=position)
+    if f.has("target"):
+        cam = _with_target(cam, parse_target(f.raw("target"), f.vmark("target")), f.vmark("target"))
+    offset = parse_point(f.raw("offset"), f.vmark("offset"), "offset") if f.has("offset") else None
     up = parse_point(f.raw("up"), f.vmark("up"), "up") if f.has("up") else (0.0, 0.0, 1.0)
     fov = float(_ranged("fov", f.raw("fov"), f.vmark("fov"))) if f.has("fov") else fov
     f.done()
-    cam = CameraSpec(position=position, target=target, up=up, fov=fov)
-    check_camera(cam, f.vmark("up") if f.has("up") else f.vmark("position"), f.vmark("position"))
+    cam = replace(cam, offset=offset, up=up, fov=fov)
+    at = {k: f.vmark(k) for k in ("position", "target", "offset", "up") if f.has(k)}
+    check_camera(cam, at.get("up") or at.get("position") or at.get("offset") or where,
+                 at.get("position") or where, at.get("offset") or where)
     return cam
 
 
-def check_camera(cam: CameraSpec, where_up: Mark, where_pos: Mark) -> None:
-    if cam.target is None:
-        return  # checked against the framing centre when the camera is built
-    d = [p - t for p, t in zip(cam.position, cam.target)]
+def check_camera(cam: CameraSpec, where_up: Mark, where_pos: Mark, where_offset: Mark | None = None) -> None:
+    """A camera that can be built: a position unless the target is a bone, an offset only with
+    a bone target and without a position, a viewing direction that is not along ``up``."""
+    allowed = ("give position [x, y, z]; or a bone target (target: bone:NAME) with a position, an offset, "
+               "or neither (the camera moves with the bone)")
+    if cam.offset is not None:
+        if cam.target_bone is None:
+            raise InputError(where_offset or where_pos, "a camera offset without a bone target", allowed)
+        if cam.position is not None:
+            raise InputError(where_offset or where_pos, "both a camera position and an offset are given",
+                             "a position (a fixed camera) or an offset (a camera that moves with the bone)")
+        d = tuple(-x for x in cam.offset)
+    elif cam.position is None:
+        if cam.target_bone is None:
+            raise InputError(where_pos, "the camera has no position", allowed)
+        return  # the automatic direction (view auto)
+    elif cam.target is None:
+        return  # checked against the framing centre or the bone when the camera is built
+    else:
+        d = tuple(p - t for p, t in zip(cam.position, cam.target))
     if sum(x * x for x in d) < 1e-12:
-        raise InputError(where_pos, "camera position equals its target", "put the camera away from the target")
+        raise InputError(where_offset if cam.offset is not None else where_pos, "camera position equals its target",
+                         "put the camera away from the target")
     up = cam.up
     cross = (d[1] * up[2] - d[2] * up[1], d[2] * up[0] - d[0] * up[2], d[0] * up[1] - d[1] * up[0])
     if sum(x * x for x in cross) < 1e-12 * max(sum(x * x for x in d), 1e-12):
@@ -206,8 +261,11 @@ def add_render_args(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--view", choices=VIEWS, help="named view (auto = three-quarter front)")
     g.add_argument("--fov", metavar="DEG", help=f"vertical field of view, degrees ({rng('fov')})")
     g.add_argument("--camera-position", metavar="X,Y,Z", help="explicit camera position (world, metres)")
-    g.add_argument("--camera-target", metavar="X,Y,Z",
-                   help="point the explicit camera looks at (default: the centre of the framing)")
+    g.add_argument("--camera-target", metavar="X,Y,Z|bone:NAME",
+                   help="point the explicit camera looks at (default: the centre of the framing), or a bone "
+                        "it aims at every frame (with no --camera-position: a camera that moves with the bone)")
+    g.add_argument("--camera-offset", metavar="X,Y,Z",
+                   help="with --camera-target bone:NAME: the camera moves with the bone at this offset (world, m)")
     g.add_argument("--camera-up", metavar="X,Y,Z", help="explicit camera's up direction (default 0,0,1)")
     g.add_argument("--orbit", metavar="DEG", help=f"turntable: degrees per frame about +Z ({rng('orbit')})")
     g.add_argument("--wireframe", action=argparse.BooleanOptionalAction, default=None,
@@ -284,20 +342,28 @@ def settings_from_args(settings: RenderSettings, args: argparse.Namespace) -> Re
 def _camera_flags(s: RenderSettings, args) -> RenderSettings:
     pos, wp = _flag(args, "camera_position")
     tgt, wt = _flag(args, "camera_target")
+    off, wo = _flag(args, "camera_offset")
     up, wu = _flag(args, "camera_up")
-    if not (wp or wt or wu):
+    if not (wp or wt or wo or wu):
         return s
     if getattr(args, "view", None) is not None:
         raise InputError(Mark("--view"), "both --view and --camera-* are given",
                          "give an explicit camera or a named view, not both")
+    target = parse_target(tgt, wt, "camera target") if wt else None
     cam = s.camera
-    if cam is None and not wp:
-        raise InputError(wt or wu, "an explicit camera needs --camera-position", "give --camera-position X,Y,Z")
-    cam = cam or CameraSpec(position=(0.0, 0.0, 0.0), fov=s.fov)
-    cam = replace(cam, position=parse_point(pos, wp, "camera position") if wp else cam.position,
-                  target=parse_point(tgt, wt, "camera target") if wt else cam.target,
-                  up=parse_point(up, wu, "camera up") if wu else cam.up)
-    check_camera(cam, wu or wp or wt, wp or wt)
+    if cam is None and not wp and not isinstance(target, str):
+        raise InputError(wt or wo or wu, "an explicit camera needs --camera-position or --camera-target bone:NAME",
+                         "give --camera-position X,Y,Z, or --camera-target bone:NAME")
+    cam = cam or CameraSpec(position=None, fov=s.fov)
+    if wp:  # a new position replaces an offset, a new offset a position
+        cam = replace(cam, position=parse_point(pos, wp, "camera position"), offset=None)
+    if wo:
+        cam = replace(cam, offset=parse_point(off, wo, "camera offset"), position=None)
+    if wt:
+        cam = _with_target(cam, target, wt)
+    if wu:
+        cam = replace(cam, up=parse_point(up, wu, "camera up"))
+    check_camera(cam, wu or wp or wt or wo, wp or wt or wo, wo)
     return replace(s, camera=cam, view="auto")
 
 
@@ -308,9 +374,13 @@ def settings_to_dict(s: RenderSettings) -> dict:
          "wireframe": s.wireframe, "background": list(s.background), "bones": s.bones,
          "supersample": s.supersample}
     if s.camera is not None:
-        d["camera"] = {"position": list(s.camera.position), "up": list(s.camera.up), "fov": s.camera.fov}
-        if s.camera.target is not None:
-            d["camera"]["target"] = list(s.camera.target)
+        c = s.camera
+        d["camera"] = {k: v for k, v in (
+            ("position", list(c.position) if c.position is not None else None),
+            ("target", "bone:" + c.target_bone if c.target_bone is not None
+             else list(c.target) if c.target is not None else None),
+            ("offset", list(c.offset) if c.offset is not None else None),
+            ("up", list(c.up)), ("fov", c.fov)) if v is not None}
     else:
         d["view"] = s.view
     return d

@@ -1,5 +1,6 @@
-"""Tolerances of ``axdf compare``: the defaults (all in one place, each with its reason), the
-tolerance YAML reader, and per-file resolution of glob overrides.
+"""The thresholds of ``axdf compare`` (what its tolerance YAML and flags set; the model's own
+numeric tolerances are :mod:`axdf_cli.tolerances`): the defaults (all in one place, each with
+its reason), the tolerance YAML reader, and per-file resolution of glob overrides.
 
 Two requirements fix the image defaults (README "Golden comparison" repeats them):
 

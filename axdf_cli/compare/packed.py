@@ -15,10 +15,10 @@ import numpy as np
 
 from axdf_cli.compare.meshes import hausdorff
 from axdf_cli.compare.result import Outcome, Unreadable
-from axdf_cli.compare.tolerances import MeshTol
+from axdf_cli.compare.thresholds import MeshTol
 from axdf_cli.formats import read_sequence
 from axdf_cli.formats.mesh import MeshReadError
-from axdf_cli.formats.sequence import PointSequence
+from axdf_cli.formats.packed import PointSequence
 
 BLOCK_BYTES = 64 << 20  # frames compared per block: bounded memory on long sequences
 MAX_LISTED = 10

@@ -16,18 +16,22 @@ from axdf_cli.render.renderer import id_map  # noqa: F401  (the EXR id pass's ta
 from axdf_cli.render.passes import FRAME_WRITERS  # noqa: F401  (image passes: png, exr)
 from axdf_cli.specs.render import RenderSettings, parse_render_settings, settings_to_dict  # noqa: F401
 from axdf_cli.specs.render import parse_camera  # noqa: F401  (a job's camera: mapping)
-from axdf_cli.pipeline import RunPlan, evaluate_chunks, execute, load_bone_mesh  # noqa: F401
+from axdf_cli.pipeline import RunPlan, build_stages, evaluate_chunks, execute, load_bone_mesh  # noqa: F401
+from axdf_cli.pipeline.stages import stages_record  # noqa: F401  (dataset.json names the stages)
 from axdf_cli.pipeline.plan import display_path, load_muscle_specs  # noqa: F401  (as a run's manifest shows paths)
 from axdf_cli.workers import WorkerDied, process_map  # noqa: F401  (worker processes, as axdf run's)
 from axdf_cli.fileio.runfolder import own_entry  # noqa: F401  (the lock and temporaries axdf leaves while writing)
 from axdf_cli.model.skeleton import forward_kinematics
 
 
-def sequence_plan(pose: Pose, frames: np.ndarray, muscles, models, fmt: str, out: Path, inputs: dict) -> RunPlan:
+def sequence_plan(pose: Pose, frames: np.ndarray, muscles, models, fmt: str, out: Path, inputs: dict,
+                  stages: tuple = ()) -> RunPlan:
     """A run plan for one sequence: the data set's muscles and models (built once per worker)
-    over an in-memory pose. Bone meshes are stored once for the whole data set, not per run."""
+    over an in-memory pose, with the data set's stages (``build_stages``, made with its
+    context). Bone meshes are stored once for the whole data set, not per run."""
     return RunPlan(pose=pose, muscles=list(muscles), models=list(models), frames=np.asarray(frames),
-                   formats=(fmt,), out=Path(out), inputs=dict(inputs), render=None, bone_meshes={})
+                   formats=(fmt,), out=Path(out), inputs=dict(inputs), render=None, bone_meshes={},
+                   stages=tuple(stages))
 
 
 def run_sequence(plan: RunPlan, resume: bool) -> dict:
@@ -80,6 +84,18 @@ def motion_pose(path: Path, skeleton, name: str, fps: float | None = None) -> Po
     first, last = doc["frames"]
     return Pose(name, skeleton, float(doc["fps"]), int(first), int(last), "linear", keys, {}, {},
                 str(path), skeleton.source)
+
+
+def retarget_pose(path: Path, map_path: Path, skeleton, name: str, step: int = 1, scale: float | None = None,
+                  policy=None) -> Pose:
+    """Motion capture (a BVH take, an npz of joints) as a Pose of ``skeleton``, fitted through
+    the retarget map as ``axdf retarget`` fits it (the map's ``onto:`` gives way to the data
+    set's skeleton)."""
+    from axdf_cli.importers.mocap import read_motion
+    from axdf_cli.importers.retarget import as_pose, load_map, retarget
+
+    rmap = load_map(map_path, skeleton, policy)
+    return as_pose(retarget(rmap, read_motion(path, scale=scale, step=step)), name)
 
 
 def without_meshes(skeleton):

@@ -1,4 +1,5 @@
-"""Render a whole sequence to ``OUT/frames/<frame:04d>.png|.exr`` and ``OUT/camera.json``.
+"""The frames of a sequence rendered into files: ``OUT/frames/<frame:04d>.png|.exr`` and
+``OUT/camera.json``.
 
 :func:`render_frames_of` is what ``axdf run --render`` (through :func:`render_plan`) and
 ``axdf render`` call: the frames of a :class:`FrameSource`, in this process
@@ -130,7 +131,7 @@ def render_frames_of(scene: Scene, source: FrameSource, frames: list[int], setti
 
     shared = (scene, source, settings, cameras, root.root)
     process_map(_render_block, blocks, shared, jobs=jobs, on_result=done, fresh=True,
-                preload=("axdf_cli.render.sequence",) + tuple(getattr(source, "preload", ())))
+                preload=("axdf_cli.render.framefiles",) + tuple(getattr(source, "preload", ())))
     files[CAMERA] = _write_camera(root, scene, settings, cameras)
     renderer, version = gl[0]
     return {"gl_renderer": renderer, "gl_version": version, "files": files}

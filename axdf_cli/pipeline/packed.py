@@ -1,4 +1,5 @@
-"""Per-sequence (packed) formats in a run: one file per muscle holding every frame.
+"""The packed sink: a run's per-sequence (packed) files, one per muscle and format holding
+every frame (each format's folder, faces and rest mesh: its ``FORMATS`` entry).
 
 The mesh pass evaluates all its muscles chunk by chunk; :class:`SequenceFiles` streams each
 chunk into every selected per-sequence format on its own background thread (so writing
@@ -20,22 +21,22 @@ from pathlib import Path
 import numpy as np
 
 from axdf_cli.fileio import atomic
-from axdf_cli.formats import FORMATS
-from axdf_cli.formats.sequence import SequenceInfo
+from axdf_cli.formats import FORMATS, of_layout
+from axdf_cli.formats.packed import SequenceInfo
 from axdf_cli.fileio.runfolder import USD_BONES, USD_STAGE, is_file_with, rest_mesh_relpath, sequence_relpath
 
-# --format name -> streaming writer of a per-sequence format (a view of FORMATS)
-SEQUENCE_WRITERS = {name: f.writer for name, f in FORMATS.items() if f.layout == "sequence"}
-CACHE_FORMATS = ("pc2", "mdd")  # formats without faces: a rest mesh is written beside each file
 MAX_PENDING_CHUNKS = 8  # chunks queued for the sequence thread (bounds memory)
 
 
 def sequence_formats(formats) -> list[str]:
-    return [f for f in formats if f in SEQUENCE_WRITERS]
+    """The per-sequence formats among ``formats``, in that order."""
+    return of_layout("sequence", formats)
 
 
 def file_relpath(muscle: str, fmt: str) -> str:
-    return sequence_relpath(muscle, fmt, SEQUENCE_WRITERS[fmt].extension)
+    """Where muscle's file of the per-sequence format ``fmt`` lies in the run."""
+    f = FORMATS[fmt]
+    return sequence_relpath(muscle, f.folder, f.writer.extension)
 
 
 def unchanged(previous: dict, path: Path, rel: str, sha: str) -> bool:
@@ -62,8 +63,8 @@ class SequenceFiles:
                 for fmt in sequence_formats(plan.formats):
                     rel = file_relpath(spec.name, fmt)
                     path = writer.root.path(rel)  # (the way there checked for links)
-                    self.writers[(j, fmt)] = (rel, path, SEQUENCE_WRITERS[fmt](path, info, model.faces,
-                                                                               model.n_vertices))
+                    self.writers[(j, fmt)] = (rel, path, FORMATS[fmt].writer(path, info, model.faces,
+                                                                             model.n_vertices))
         except BaseException:
             self.abort()
             raise
@@ -116,9 +117,9 @@ def write_run_files(plan, writer, bone_rows: np.ndarray, bounds: np.ndarray, fra
     from axdf_cli.formats.ply import PlyWriter
 
     for fmt in sequence_formats(plan.formats):
-        if fmt in CACHE_FORMATS:
+        if not FORMATS[fmt].faces:  # a point cache: the rest mesh it applies to, beside it
             for spec, m in zip(plan.muscles, plan.models):
-                writer.write(rest_mesh_relpath(spec.name, fmt),
+                writer.write(rest_mesh_relpath(spec.name, FORMATS[fmt].folder),
                              PlyWriter(m.faces, spec.name).encode(m.rest_vertices, m.rest_normals))
     if "usd" in plan.formats:
         writer.flush()
@@ -143,13 +144,14 @@ def _write_usd_stage(plan, writer, bone_rows, bounds, framing) -> None:
 def usd_camera(plan, bounds, framing) -> dict:
     """The run's camera for the USD stage: the first panel of the render settings' view, the
     camera ``axdf run --render`` uses (framed on ``framing``)."""
+    from axdf_cli.pipeline.plan import camera_targets
     from axdf_cli.render.camera import sequence_cameras
     from axdf_cli.specs.render import RenderSettings
     from axdf_cli.render.scene import Scene
 
     settings = plan.render if plan.render is not None else RenderSettings()
     scene = Scene((), (), np.asarray(bounds, np.float64), tuple(int(f) for f in plan.frames),
-                  framing=framing, first_frame=int(plan.pose.first))
+                  framing=framing, first_frame=int(plan.pose.first), targets=camera_targets(plan))
     cams = sequence_cameras(scene, settings)
     first = cams[0][0]
     return {"world_to_camera": np.stack([c[0].world_to_camera for c in cams]), "K": first.K,

@@ -1,0 +1,105 @@
+"""Move a motion onto a muscle model's skeleton: ``axdf retarget MOTION --onto SKELETON --map MAP --out DIR``.
+
+MOTION is a BVH take or an ``.npz`` of 3D joint positions (``joints`` (F, J, 3), ``names``,
+optional ``fps``). The model's coordinates are fitted to the motion's joint centres frame by
+frame (least squares within the coordinates' ranges, warm-started from the previous frame)
+after sizing the model to the subject with one scale factor; the map (docs/FORMATS.md,
+"Retarget map") says which mocap joint drives which point of the model. DIR receives the
+pose (``NAME.yaml``, for SKELETON), ``retarget.csv`` (per frame: RMS and max joint-centre
+error in metres, and every point's) and ``retarget_report.json`` (scale, segments, per point
+and per coordinate figures). Bad input writes nothing (exit 2, ``FILE:LINE:COL``).
+"""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from axdf_cli.fileio.atomic import write_bytes
+
+
+def add_args(p) -> None:
+    p.add_argument("motion", metavar="MOTION", help="a BVH take (.bvh) or joint positions (.npz: joints, names, fps)")
+    p.add_argument("--onto", metavar="SKELETON", help="the muscle model's skeleton YAML (default: the map's onto:)")
+    p.add_argument("--map", required=True, metavar="MAP.yaml", help="mocap joints → model points (docs/FORMATS.md)")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder (the pose and the report)")
+    p.add_argument("--name", help="pose name (default: MOTION's name and the skeleton's)")
+    p.add_argument("--scale", metavar="S",
+                   help="metres per unit of MOTION: a number, or m, cm, mm, in (default: a BVH's is guessed from "
+                        "its height as `axdf import bvh` does; an npz is in metres)")
+    p.add_argument("--step", type=int, default=1, metavar="N", help="keep every N-th frame of MOTION (fps / N)")
+    p.add_argument("--up", choices=("z", "y"), default="z",
+                   help="an npz's up axis: z (axdf's world) or y (SMPL, most pose estimators); a BVH is Y-up")
+    p.add_argument("--allow-outside", action="store_true",
+                   help="allow paths inside YAML files to leave the project folder tree")
+
+
+def run(args) -> int:
+    from axdf_cli.errors import UsageError
+    from axdf_cli.importers.bvh import UNITS
+    from axdf_cli.importers.retarget import build_retarget
+    from axdf_cli.specs import RefPolicy, load_skeleton
+
+    scale = None
+    if args.scale is not None:
+        try:
+            scale = UNITS[args.scale] if args.scale in UNITS else float(args.scale)
+        except ValueError:
+            scale = float("nan")
+        if not (0 < scale < 1e6):
+            raise UsageError(f"--scale {args.scale}", f"a positive number of metres per unit, or one of {', '.join(UNITS)}")
+    if not 1 <= args.step <= 10000:
+        raise UsageError(f"--step {args.step}", "a whole number in 1..10000")
+    policy = RefPolicy.for_command([args.map, args.onto, args.motion], args.allow_outside)
+    skel = load_skeleton(Path(args.onto), policy) if args.onto else None
+    bar = _Bar() if not args.quiet and sys.stderr.isatty() else None
+    try:
+        res = build_retarget(Path(args.motion), Path(args.map), Path(args.out), skeleton=skel,
+                             skeleton_path=Path(args.onto) if args.onto else None, name=args.name, scale=scale,
+                             step=args.step, up=args.up, policy=policy, progress=bar)
+    finally:
+        if bar is not None:
+            bar.close()
+    for path, data in sorted(res.files.items()):
+        write_bytes(path, data)
+    if not args.quiet:
+        for line in res.notes:
+            print(line)
+        print("\n".join(summary(res.report, args.verbose)))
+        print(f"report: {Path(args.out) / 'retarget_report.json'}")
+    return 0
+
+
+class _Bar:
+    """A tqdm bar on stderr, opened at the first fitted frame."""
+
+    def __init__(self):
+        self.bar = None
+
+    def __call__(self, n: int) -> None:
+        if self.bar is None:
+            from tqdm import tqdm
+
+            self.bar = tqdm(unit="frame", desc="fit", file=sys.stderr, leave=False)
+        self.bar.update(n)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+
+def summary(rep: dict, verbose: bool = False) -> list[str]:
+    """The report in a few lines: the fit's size, error and the worst points."""
+    m, sim, err = rep["motion"], rep["similarity"], rep["error"]
+    lines = [f"retargeted {m['file']} ({m['frames']} frames at {m['fps']:g} fps) onto {rep['skeleton']}: "
+             f"pose {rep['pose']}",
+             f"scale {sim['scale']:.4f} ({sim['scale_from']}), turned {sim['yaw_deg']:.1f} deg; "
+             f"joint-centre error RMS {err['rms_m'] * 1000:.1f} mm, max {err['max_m'] * 1000:.1f} mm "
+             f"(frame {err['worst_frame']})"]
+    points = sorted(rep["points"].items(), key=lambda kv: -kv[1]["rms_m"])
+    shown = points if verbose else points[:3]
+    lines.append("  " + ", ".join(f"{k} {v['rms_m'] * 1000:.1f} mm RMS" for k, v in shown)
+                 + ("" if verbose else " (worst; -v for all)"))
+    ends = [f"{c} {v['frames_at_range_end']}" for c, v in rep["coordinates"].items() if v["frames_at_range_end"]]
+    if ends:
+        lines.append("  frames at a range's end: " + ", ".join(ends))
+    return lines

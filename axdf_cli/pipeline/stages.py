@@ -1,0 +1,166 @@
+"""Stages: what a run does to a chunk of frames between the muscle model's two steps, and after.
+
+A run evaluates its selected frames chunk by chunk (:mod:`axdf_cli.pipeline.evaluate`); a
+:class:`Chunk` is all carried muscles of a block of consecutive frames, batch dimension first,
+indexed by muscle. In order:
+
+1a. **axis** (the model, :meth:`MuscleModel.axis_points`): each muscle's axis control points in
+    the world, ``chunk.axis[j]`` (C, n_j, 3), from the bones' world transforms and paths;
+2.  **TIME stages** (scope ``time``): across time, on ``chunk.axis``. A TIME stage carries its
+    state from the pose's first frame through every frame in order (secondary motion: damped
+    oscillators on the axis control points);
+1b. **surface** (the model, :meth:`MuscleModel.surface`): RMF, binding, twist, tension, volume,
+    surface and normals from ``chunk.axis``, into ``chunk.results[j]``;
+3.  **FRAME stages** (scope ``frame``): across muscles, on ``chunk.results`` (contact between
+    muscles and with bones). The last word on where a surface is;
+
+then the sinks (meshes, packed sequences, tables, frames) consume the results. Stages are
+pure functions of ``(state, chunk)``; the object only holds its settings.
+
+What a stage declares decides how a run is split and resumed, never a special case in the
+runner (:func:`axdf_cli.pipeline.execute.execute`):
+
+- no stage: each frame is evaluated alone; ``--jobs`` splits the muscles over workers;
+- a TIME stage: its chunks are always the same blocks of the pose's timeline (every frame
+  from the pose's first, :data:`axdf_cli.pipeline.evaluate.TIME_BLOCK` at a time, all muscles),
+  called in order from :meth:`Stage.start`'s state. A pre-pass keeps the states at the
+  blocks' starts, so that any ``--frames`` subset, ``--resume``, mesh workers and render
+  workers see exactly the axis a whole run computes (same bytes). Contract: the stage acts
+  on ``chunk.axis`` (and its state) only, and for muscle j only from muscle j's history;
+- a FRAME stage: all muscles of a frame are evaluated together (``chunk.muscles`` is every
+  muscle), so ``--jobs`` splits the frames, not the muscles; per-muscle packed sequences
+  still come out in frame order, byte-identical. Contract: a frame's output depends on that
+  frame's chunk rows only (never on which other frames share the chunk).
+
+Adding a stage: write it (a class with ``name``, ``scope``, ``start`` and ``__call__``), add
+its factory to :data:`STAGES`. ``axdf run --no-<name>`` comes from the table
+(:func:`axdf_cli.cli.run.add_args`); a job key ``<name>: false`` goes in
+:mod:`axdf_cli.specs.job` and reaches :func:`build_stages` through ``plan_run(stages=...)``.
+The stages a run used (names and each one's ``settings``) are recorded in its manifest's
+``settings.stages``, so ``--resume`` refuses a change.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import Enum
+from typing import Callable, Mapping, Protocol
+
+import numpy as np
+
+from axdf_cli import tolerances as tol
+from axdf_cli.model import contact
+from axdf_cli.model.muscle import FrameResult
+from axdf_cli.model.skeleton import forward_kinematics
+
+
+class Scope(str, Enum):
+    """What a stage needs at once: one muscle (the model itself), time (the frames before,
+    per muscle), or a frame (all muscles of it)."""
+
+    MUSCLE = "muscle"
+    TIME = "time"
+    FRAME = "frame"
+
+
+@dataclass
+class Chunk:
+    """All carried muscles of a block of consecutive frames (batch dimension first).
+
+    For a FRAME stage and the sinks, the frames are consecutive *selected* frames and
+    ``rows`` their positions in ``plan.frames``. For a TIME stage they are every frame of one
+    block of the pose's timeline (selected or not) and ``rows`` their positions in
+    ``plan.pose.frames``."""
+
+    rows: slice  # positions of these frames (see above)
+    frames: np.ndarray  # (C,) frame numbers
+    coords: np.ndarray  # (C, Q) skeleton coordinates
+    world: np.ndarray  # (C, B, 4, 4) bone world transforms
+    activation: np.ndarray  # (C, M) activation of every muscle (NaN: none given)
+    muscles: list[int]  # the muscles carried (all of them whenever a FRAME stage runs)
+    axis: dict[int, np.ndarray]  # muscle -> (C, n_j, 3) axis control points, world (after TIME stages)
+    results: dict[int, FrameResult] = field(default_factory=dict)  # muscle -> surfaces (after 1b, then FRAME)
+    twist: np.ndarray | None = None  # (C, M) unwrapped twist references (radians) of the selected frames
+    notes: dict[int, list] = field(default_factory=dict)  # muscle -> step 1a's [(frame index, warning)]
+
+
+class Stage(Protocol):
+    """A stage of the run (module doc). ``start(plan)`` is its state before the pose's first
+    frame; ``stage(state, chunk)`` returns the next state and the chunk (changed in place or
+    anew). ``settings`` (optional): a JSON-able mapping of what changes its output, recorded
+    in the manifest."""
+
+    name: str
+    scope: Scope
+
+    def start(self, plan) -> object: ...
+
+    def __call__(self, state, chunk: Chunk) -> tuple[object, Chunk]: ...
+
+
+def _contact_model(plan, enabled: bool):
+    rest = forward_kinematics(plan.pose.skeleton, plan.pose.skeleton.rest_coordinates()[None])[0]
+    return contact.build(plan.muscles, plan.models, rest, plan.bone_meshes, enabled=enabled)
+
+
+class ContactStage:
+    """Muscles push each other out of the way, bones push muscles (:mod:`axdf_cli.model.contact`).
+    Its state is the run's :class:`~axdf_cli.model.contact.ContactModel` (the bones' distance
+    fields, the pairs and their shares), built once by :meth:`start`; each frame of a chunk is
+    resolved alone. Leaves the measures after contact in ``FrameResult.contact``."""
+
+    name = "contact"
+    scope = Scope.FRAME
+
+    @property
+    def settings(self) -> dict:
+        return {"iterations": tol.CONTACT_ITERATIONS}
+
+    def start(self, plan):
+        return _contact_model(plan, True)
+
+    def __call__(self, state, chunk: Chunk):
+        contact.apply(state, chunk.results, chunk.world)
+        return state, chunk
+
+
+class PenetrationStage:
+    """The contact measures (stats.csv's inside_muscle, inside_bone, depth) of the meshes as
+    they are, where the contact stage did not run (``--no-contact``): changes no vertex."""
+
+    name = "penetration"
+    scope = Scope.FRAME
+
+    def start(self, plan):
+        return _contact_model(plan, False)
+
+    def __call__(self, state, chunk: Chunk):
+        if any(r.contact is None for r in chunk.results.values()):
+            contact.apply(state, chunk.results, chunk.world)
+        return state, chunk
+
+
+#: The stages a run may use: name -> factory (no arguments), in the order they run within
+#: their scope. Each is on unless switched off (``--no-<name>``, a job's ``<name>: false``).
+STAGES: dict[str, Callable[[], Stage]] = {"contact": ContactStage, "penetration": PenetrationStage}
+
+
+def build_stages(switches: Mapping[str, bool] | None = None) -> tuple[Stage, ...]:
+    """The run's stages: every registered stage that ``switches`` (name -> on) does not turn off."""
+    switches = switches or {}
+    unknown = sorted(set(switches) - set(STAGES))
+    if unknown:
+        raise ValueError(f"unknown stage(s) {', '.join(unknown)}; known: {', '.join(STAGES) or 'none'}")
+    return tuple(make() for name, make in STAGES.items() if switches.get(name, True))
+
+
+def of_scope(stages, scope: Scope) -> tuple[Stage, ...]:
+    return tuple(s for s in stages if Scope(s.scope) is scope)
+
+
+def stages_record(stages) -> list[dict] | None:
+    """What the manifest's ``settings.stages`` says of the stages (None: no stage, and the
+    key is left out, so runs without stages keep their manifests)."""
+    if not stages:
+        return None
+    return [{"name": s.name, "scope": Scope(s.scope).value, **dict(getattr(s, "settings", None) or {})}
+            for s in stages]

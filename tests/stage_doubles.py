@@ -1,0 +1,97 @@
+"""Stages for the tests of the pipeline's rules (tests/test_stages.py), not for the package.
+
+- :class:`SmoothAxis` (TIME) carries a real state across frames: exponential smoothing of
+  every axis control point, s_f = a x_f + (1 - a) s_(f-1), starting at the pose's first frame.
+  A frame's axis therefore depends on every frame before it.
+- :class:`PushByOthers` (FRAME) really depends on all muscles of a frame: each muscle moves by
+  GAIN x the mean of the other muscles' centroids.
+- :class:`WarnFirst` (FRAME) adds a warning to the first muscle at every frame.
+
+:func:`register` puts them in the package's table (``axdf_cli.pipeline.stages.STAGES``), as a
+stage engineer's one-line change would; run as a script, this module registers the stages
+named in ``AXDF_TEST_STAGES`` and calls ``axdf`` (for tests that kill a real process).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from axdf_cli.pipeline.stages import Scope
+
+ALPHA = 0.25  # weight of the current frame in the smoothing
+GAIN = 0.05  # share of the others' mean centroid a muscle is moved by
+
+
+class SmoothAxis:
+    name = "smooth"
+    scope = Scope.TIME
+    settings = {"alpha": ALPHA}
+
+    def start(self, plan):
+        return {}  # muscle -> (n, 3) the last smoothed axis; empty before the first frame
+
+    def __call__(self, state, chunk):
+        state = dict(state)
+        for j in chunk.muscles:
+            x = chunk.axis[j]  # (C, n, 3)
+            out = np.empty_like(x)
+            s = state.get(j, x[0])
+            for k in range(len(x)):
+                s = ALPHA * x[k] + (1.0 - ALPHA) * s
+                out[k] = s
+            chunk.axis[j] = out
+            state[j] = s
+        return state, chunk
+
+
+class PushByOthers:
+    name = "push"
+    scope = Scope.FRAME
+    settings = {"gain": GAIN}
+
+    def start(self, plan):
+        return None
+
+    def __call__(self, state, chunk):
+        js = chunk.muscles
+        cent = {j: chunk.results[j].vertices.mean(axis=1) for j in js}  # (C, 3) each
+        total = np.sum([cent[j] for j in js], axis=0)
+        for j in js:
+            others = (total - cent[j]) / max(len(js) - 1, 1)
+            r = chunk.results[j]
+            r.vertices = r.vertices + GAIN * others[:, None, :]
+        return state, chunk
+
+
+class WarnFirst:
+    name = "warn"
+    scope = Scope.FRAME
+
+    def start(self, plan):
+        return None
+
+    def __call__(self, state, chunk):
+        j = chunk.muscles[0]
+        chunk.results[j].warnings += [(i, "a test stage's warning") for i in range(len(chunk.frames))]
+        return state, chunk
+
+
+DOUBLES = {s.name: s for s in (SmoothAxis, PushByOthers, WarnFirst)}
+
+
+def register(table: dict, names) -> None:
+    """Put the named doubles into ``table`` (the STAGES registry), alone (the product's own
+    stages are left out), in the order given."""
+    table.clear()
+    for n in names:
+        table[n] = DOUBLES[n]
+
+
+if __name__ == "__main__":
+    import os
+    import sys
+
+    from axdf_cli.cli.main import main
+    from axdf_cli.pipeline.stages import STAGES
+
+    register(STAGES, [n for n in os.environ.get("AXDF_TEST_STAGES", "").split(",") if n])
+    sys.exit(main(sys.argv[1:]))
