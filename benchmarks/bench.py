@@ -34,8 +34,11 @@ so figures are noisy and only ratios taken in the same run are compared with tar
    and 120 fps; every 4th frame of the take with ``--quick``), and one Jacobian of the mapped
    points by the analytic formula against central differences batched as frames of one
    forward-kinematics call (the alternative the fit could use).
+11. jiggle: ``evaluate_plan`` of the gait2392 walk (92 muscles, the whole trial; 54 jiggle)
+   with and without the jiggle stage (timed in turn, medians of 5), µs per muscle-frame, and
+   the stage alone; and a ``--frames`` subset's extra cost (frames not selected are advanced too).
 
-``--only retarget`` prints just the retargeting rows.
+``--only retarget`` prints just the retargeting rows, ``--only jiggle`` the jiggle rows.
 
 ``--long`` adds the memory check of 10,000 frames x 92 muscles streamed through
 ``pipeline.evaluate_chunks`` in a subprocess (several minutes). Helpers are importable for the
@@ -795,6 +798,76 @@ print(json.dumps({"seconds": dt, "muscle_frames": n * nm, "chunk": chunk_frames(
 """
 
 
+def time_chunks(plan, repeats: int) -> float:
+    """Median seconds of evaluating every selected frame of ``plan`` (all muscles, no writing)
+    through ``evaluate_plan``, its pre-pass (twist references, TIME stages' block states)
+    included."""
+    return time_pair(plan, plan, repeats)[0]
+
+
+def time_pair(a, b, repeats: int) -> tuple[float, float]:
+    """Median seconds of evaluating plans ``a`` and ``b`` (as :func:`time_chunks`), timed in
+    turn (a, b, a, b, ...): on a shared machine both see the same load."""
+    from axdf_cli.pipeline.evaluate import evaluate_plan
+
+    def once(plan):
+        t0 = time.perf_counter()
+        for _, results in evaluate_plan(plan):
+            for _ in results:
+                pass
+        return time.perf_counter() - t0
+
+    ts = [(once(a), once(b)) for _ in range(max(1, repeats))]
+    return float(np.median([t[0] for t in ts])), float(np.median([t[1] for t in ts]))
+
+
+def time_jiggle_stage(plan, repeats: int) -> tuple[float, int]:
+    """Median seconds of the jiggle stage alone over the pose's frames from its first to the
+    last selected (the axis placed once, outside the timing), and the number of jiggling
+    muscles."""
+    from axdf_cli.pipeline.evaluate import TIME_BLOCK, _chunk
+    from axdf_cli.pipeline.jiggle_stage import JiggleStage
+
+    stage = JiggleStage()
+    which = list(range(len(plan.models)))
+    frames = plan.pose.frames[plan.pose.frames <= plan.frames.max()]
+    chunks = [_chunk(plan, slice(s, s + TIME_BLOCK), frames[s:s + TIME_BLOCK], which)
+              for s in range(0, len(frames), TIME_BLOCK)]
+
+    def once():
+        state = stage.start(plan)
+        for ck in chunks:
+            state, _ = stage(state, ck)
+
+    return median_time(once, repeats), len(stage.start(plan).muscles)
+
+
+def jiggle_rows(table: "Table", reps: int) -> None:
+    """Rows 10: the jiggle stage's cost on the gait2392 walk (or the demo when not shipped)."""
+    from axdf_cli.pipeline.plan import plan_run
+    from axdf_cli.specs import load_job
+
+    job = load_job(GAIT_JOB if GAIT_JOB.is_file() else DEMO_JOB)
+    base = plan_run(job)
+    plan = dataclasses.replace(base, frames=base.pose.frames)  # the whole trial
+    off = dataclasses.replace(plan, stages=())
+    nm, nf = len(plan.models), len(plan.frames)
+    mf = nm * nf
+    t_on, t_off = time_pair(plan, off, reps)
+    t_stage, n_jig = time_jiggle_stage(plan, reps)
+    table.section(f"jiggle ({plan.pose.name}: {nm} muscles, {n_jig} with jiggle, {nf} frames): evaluate_plan "
+                  "(all muscles, no writing) with the stage vs without")
+    table.add("evaluate with jiggle", f"{t_on / mf * 1e6:.1f} µs/mf", f"without {t_off / mf * 1e6:.1f} µs/mf",
+              f"{t_on / t_off:.3f}x")
+    table.add("the jiggle stage alone (axis placed outside)", f"{t_stage / mf * 1e6:.2f} µs/mf",
+              f"{t_stage / (n_jig * nf) * 1e6:.2f} µs per jiggling muscle-frame")
+    every4 = dataclasses.replace(plan, frames=plan.frames[::4])
+    t_sub, t_sub_off = time_pair(every4, dataclasses.replace(every4, stages=()), reps)
+    per = nm * len(every4.frames)
+    table.add("--frames every 4th (frames between advanced too)", f"{t_sub / per * 1e6:.1f} µs/mf",
+              f"without {t_sub_off / per * 1e6:.1f} µs/mf", f"{t_sub / t_sub_off:.3f}x")
+
+
 def long_memory(job: Path, n_frames: int = LONG_FRAMES) -> dict:
     """Stream ``n_frames`` (the job's pose stretched) x all muscles through evaluate_chunks in
     a subprocess, keeping what ``execute`` keeps (stats, the manifest's file list); peak RSS."""
@@ -907,8 +980,8 @@ def main(argv=None) -> int:
     ap.add_argument("--long", action="store_true", help=f"also {LONG_FRAMES} frames x all muscles: peak memory")
     ap.add_argument("--profile", action="store_true", help="print the top functions of the slow rows")
     ap.add_argument("--tmp", default=None, help="folder for the written files (default: a new temporary folder)")
-    ap.add_argument("--only", choices=("retarget",), default=None,
-                    help="print only these rows (retarget: the retargeting fit)")
+    ap.add_argument("--only", choices=("retarget", "jiggle"), default=None,
+                    help="print only these rows (retarget: the retargeting fit; jiggle: the jiggle stage)")
     ap.add_argument("--dataset-samples", type=int, default=None, metavar="N",
                     help=f"samples of the data-set rows (default {DATASET_SAMPLES}, 100 with --quick; 0: skip them)")
     args = ap.parse_args(argv)
@@ -919,6 +992,12 @@ def main(argv=None) -> int:
         retarget_rows(table, args.quick)
         print(table.text())
         print(f"(total bench time {time.perf_counter() - t_start:.0f} s)")
+        return 0
+    if args.only == "jiggle":
+        table = Table()
+        jiggle_rows(table, 3 if args.quick else 5)
+        print(table.text())
+        print(f"(µs/mf: microseconds per muscle-frame; total bench time {time.perf_counter() - t_start:.0f} s)")
         return 0
     n_frames = 200 if args.quick else 1000
     reps = 2 if args.quick else 3
@@ -1041,6 +1120,9 @@ def main(argv=None) -> int:
 
         # 10. retargeting
         retarget_rows(table, args.quick)
+
+        # 11. jiggle
+        jiggle_rows(table, 2 * reps - 1)
 
         # --long
         if args.long:

@@ -80,6 +80,19 @@ def test_packed_writers(case, tmp_path):
     assert not any((tmp_path / "w").rglob("*.*"))  # all removed again
 
 
+def test_jiggle_rows_helpers(repo_root):
+    import dataclasses
+
+    from axdf_cli.pipeline.plan import plan_run
+    from axdf_cli.specs import load_job
+
+    plan = plan_run(load_job(bench.DEMO_JOB), frames_arg="0:5")
+    plan = dataclasses.replace(plan, models=plan.models[-2:], muscles=plan.muscles[-2:])  # the gastrocnemius heads (jiggle)
+    assert bench.time_chunks(plan, repeats=1) > 0
+    seconds, n = bench.time_jiggle_stage(plan, repeats=1)
+    assert seconds > 0 and n == 2
+
+
 def test_retarget_jacobian_timing():
     from axdf_cli.importers.retarget import load_map
 

@@ -31,12 +31,16 @@ SETS = [("smooth",), ("push",), ("smooth", "push")]
 SMALL_BLOCK = 32  # the timeline block in these tests, so that 150 frames span several
 
 
+PRODUCT_FRAME_STAGES = ("contact", "penetration")
+
+
 def use_stages(monkeypatch, names, block: int | None = SMALL_BLOCK) -> None:
-    """Register the test stages ``names`` in the package's table, alone (the product's own,
-    contact and penetration, are left out; forked workers inherit the table)."""
+    """Register the test stages ``names`` in the package's table (the product's FRAME stages,
+    contact and penetration, are left out; the real jiggle stays; forked workers inherit the
+    table)."""
     from axdf_cli.pipeline import evaluate, stages
 
-    monkeypatch.setattr(stages, "STAGES", {})
+    monkeypatch.setattr(stages, "STAGES", {k: v for k, v in stages.STAGES.items() if k not in PRODUCT_FRAME_STAGES})
     for n in names:
         monkeypatch.setitem(stages.STAGES, n, stage_doubles.DOUBLES[n])
     if block is not None:
@@ -87,11 +91,12 @@ def test_the_split_follows_the_declared_scopes(project, monkeypatch):
     def plan():
         return plan_run(load_job("poses/jobs/demo.yaml"), frames_arg="0:3")
 
-    assert [s.name for s in plan().stages] == ["contact", "penetration"] and split_of(plan()) == "frames"
+    # the demo's gastrocnemius jiggles (TIME); contact and its measures are FRAME stages
+    assert [s.name for s in plan().stages] == ["jiggle", "contact", "penetration"] and split_of(plan()) == "frames"
     use_stages(monkeypatch, [])
-    assert plan().stages == () and split_of(plan()) == "muscles"
+    assert [s.name for s in plan().stages] == ["jiggle"] and split_of(plan()) == "muscles"
     use_stages(monkeypatch, ["smooth"])
-    assert [s.name for s in plan().stages] == ["smooth"] and split_of(plan()) == "muscles"
+    assert [s.name for s in plan().stages] == ["jiggle", "smooth"] and split_of(plan()) == "muscles"
     (chunk, results), = list(evaluate_plan(plan(), muscles=[2]))
     assert chunk.muscles == [2] and [j for j, _ in results] == [2]
     use_stages(monkeypatch, ["push"])
@@ -141,7 +146,7 @@ def test_a_subset_computes_the_frames_before_it(project, capsys, monkeypatch):
     from axdf_cli.specs import load_job
 
     use_stages(monkeypatch, ["smooth"])
-    plan = plan_run(load_job("poses/jobs/demo.yaml"), frames_arg="149")
+    plan = plan_run(load_job("poses/jobs/demo.yaml"), frames_arg="149", stages={"jiggle": False})
     prep = evaluate.prepare(plan)
     assert sorted(prep.states) == [149 // SMALL_BLOCK]  # one state kept: the block holding frame 149
     (_, results), = list(evaluate_plan(plan, prep))
@@ -242,17 +247,17 @@ def test_strict_and_stats_see_a_stage_s_warnings(project, capsys, monkeypatch):
 
 def test_the_manifest_records_the_stages_and_resume_refuses_a_change(project, capsys, monkeypatch):
     use_stages(monkeypatch, [])
-    run(capsys, "none", "--frames", "0:2")
+    run(capsys, "none", "--frames", "0:2", "--no-jiggle")  # (the demo's gastrocnemius jiggles)
     use_stages(monkeypatch, ["smooth", "push"])
-    run(capsys, "both", "--frames", "0:2")
+    run(capsys, "both", "--frames", "0:2", "--no-jiggle")
     settings = json.loads((project / "both" / "manifest.json").read_text())["settings"]
     assert settings["stages"] == [{"name": "smooth", "scope": "time", "alpha": stage_doubles.ALPHA},
                                   {"name": "push", "scope": "frame", "gain": stage_doubles.GAIN}]
     assert "stages" not in json.loads((project / "none" / "manifest.json").read_text())["settings"]
-    rc, _, err = run_main(RUN + ["--out", "both", "--frames", "0:2", "--resume", "--no-push"], capsys)
+    rc, _, err = run_main(RUN + ["--out", "both", "--frames", "0:2", "--resume", "--no-push", "--no-jiggle"], capsys)
     assert rc == 2 and "--resume would mix two runs" in err and "settings.stages" in err, err
     # every stage switched off: the bytes of a run without stages, manifest included
-    run(capsys, "off", "--frames", "0:2", "--no-push", "--no-smooth")
+    run(capsys, "off", "--frames", "0:2", "--no-push", "--no-smooth", "--no-jiggle")
     assert all_files(project / "off") == all_files(project / "none")
 
 

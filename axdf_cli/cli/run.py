@@ -128,7 +128,15 @@ def plan_from_args(args):
         settings = replace(settings, enabled=args.render)
     return pipeline.plan_run(job, muscle_args=args.muscles, pose_arg=args.pose, out_arg=args.out,
                            fmt_arg=args.format, frames_arg=args.frames, render=settings_from_args(settings, args),
-                           policy=policy, clamp_ranges=args.clamp_ranges, stages=stage_switches(args))
+                           policy=policy, clamp_ranges=args.clamp_ranges,
+                           stages={**job_switches(job), **stage_switches(args)})
+
+
+def job_switches(job) -> dict:
+    """The stages a job switches off (``jiggle: false``, ``contact: false``): name -> False."""
+    if job is None:
+        return {}
+    return {name: False for name, on in (("jiggle", job.jiggle), ("contact", job.contact)) if not on}
 
 
 def refuse_warnings(plan) -> None:

@@ -83,7 +83,7 @@ def build_context(path: Path | str, seed: int | None = None, policy=None) -> Con
     sequences = expand_sequences(spec)
     keypoints = skeleton_keypoints(skel, {i: m[0] for i, m in bone_meshes.items()})
     ctx = Context(spec, sequences, skel, door.without_meshes(skel), muscles, models, bone_meshes, keypoints,
-                  inputs, motion_inputs, scene, scene_bones, b"", "", stages=door.build_stages())
+                  inputs, motion_inputs, scene, scene_bones, b"", "", stages=door.build_stages(muscles=muscles))
     ctx.dataset_json = (json.dumps(dataset_dict(ctx), indent=1) + "\n").encode()
     ctx.digest = hashlib.sha256(ctx.dataset_json).hexdigest()
     return ctx

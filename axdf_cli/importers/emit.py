@@ -36,6 +36,7 @@ import yaml
 
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.importers.osim import Axis, FConst, FLinear, FMult, FPoly, FSpline, Model, Muscle
+from axdf_cli.model.jiggle import JiggleSpec
 from axdf_cli.model.skeleton import Skeleton, Spline, forward_kinematics
 
 DEG = 180.0 / math.pi
@@ -65,6 +66,36 @@ BELLY_PROFILE = ((0.04, 0.45), (0.15, 0.8), (0.32, 0.97), (0.5, 1.0), (0.68, 0.9
 #: MIN_TENDON_FRACTION of the path gets none (the belly tapers into the attachment).
 TENDON_SECTIONS = (0.3, 0.75)
 MIN_TENDON_FRACTION = 0.02
+
+#: Secondary motion (``jiggle:``, README "Jiggle") of the calf's and the thigh's muscles, by
+#: name without the side suffix (OpenSim's gait2392/gait2354 names). Soft tissue of the leg
+#: rings at 10-50 Hz after a heel strike (Wakeling & Nigg 2001, skin-mounted accelerometers);
+#: animators' jiggle sits lower (a few Hz: a slow, visible sway). We take the bottom of the
+#: measured range: it still shows at the library's 60 fps (6 frames per cycle; above half the
+#: frame rate a ring aliases) and keeps a hard landing's sag to about 2 cm (the amplitude of a
+#: stop goes as speed / (2 pi f)), where 5 Hz sagged the calf by 4 cm. The thigh's bellies are
+#: heavier: a little lower. Relaxed, damping 0.2 lets a stop ring for about two visible cycles
+#: (each extremum 0.53 of the last). A tensed muscle rings faster and dies out sooner (measured
+#: frequency and damping both rise with muscle force).
+JIGGLE_CALF = JiggleSpec(10.0, 0.2, tensed_frequency=16.0, tensed_damping_ratio=0.45)
+JIGGLE_THIGH = JiggleSpec(8.0, 0.2, tensed_frequency=14.0, tensed_damping_ratio=0.45)
+JIGGLE = {**{m: JIGGLE_CALF for m in ("med_gas", "lat_gas", "soleus", "tib_ant", "tib_post", "per_long",
+                                      "per_brev", "per_tert", "ext_dig", "ext_hal", "flex_dig", "flex_hal")},
+          **{m: JIGGLE_THIGH for m in ("rect_fem", "vas_med", "vas_int", "vas_lat", "bifemlh", "bifemsh",
+                                       "semimem", "semiten", "sar", "grac", "add_long", "add_brev", "add_mag1",
+                                       "add_mag2", "add_mag3")}}
+
+
+def jiggle_doc(spec: JiggleSpec) -> dict:
+    """A muscle's ``jiggle:`` mapping (docs/FORMATS.md), optional keys only when set."""
+    d = {"frequency": spec.frequency, "damping_ratio": spec.damping_ratio}
+    if spec.weight is not None:
+        d["weight"] = list(spec.weight)
+    tensed = {k: v for k, v in (("frequency", spec.tensed_frequency), ("damping_ratio", spec.tensed_damping_ratio))
+              if v is not None}
+    if tensed:
+        d["tensed"] = tensed
+    return d
 
 
 # ----------------------------------------------------------------------------- functions
@@ -321,8 +352,10 @@ def muscle_doc(m: Muscle, skel: Skeleton, world: np.ndarray, model: Model | None
     def document(r: float) -> dict:
         sections = [{"t": t, "radii": [r_t, r_t] if f is None else [f * r, f * r], "angle": 0.0}
                     for t, f in zip(ts, factors)]
+        jig = JIGGLE.get(SIDE_SUFFIX.sub("", m.name))
         return {"muscle": m.name, "color": PALETTES[palette](m.name), "volume": "exact", "path": path,
-                **({"wrap": wraps} if wraps else {}), "sections": sections, "tendons": [t_o, t_i]}
+                **({"wrap": wraps} if wraps else {}), "sections": sections, "tendons": [t_o, t_i],
+                **({"jiggle": jiggle_doc(jig)} if jig is not None else {})}
 
     # a first guess from the profile's mean squared radius, then the model's own exact-volume
     # solve (belly points scale, tendon points do not) gives the widest radius R

@@ -378,6 +378,8 @@ def muscle_doc(spec: MuscleSpec) -> dict:
     d["resolution"] = list(spec.resolution)
     if spec.weights is not None:
         d["weights"] = list(spec.weights)
+    if spec.jiggle is not None:
+        d["jiggle"] = emit.jiggle_doc(spec.jiggle)
     return d
 
 

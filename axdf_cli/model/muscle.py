@@ -44,6 +44,7 @@ import numpy as np
 from axdf_cli.model import bspline, kernels, rmf
 from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError, Mark
+from axdf_cli.model.jiggle import JiggleSpec
 from axdf_cli.model.paths.points import PathSpec
 from axdf_cli.model.skeleton import bone_of
 
@@ -117,6 +118,7 @@ class MuscleSpec:
     source: str = ""
     group: str = ""  # the multi-head muscle this head belongs to ('' for single muscles)
     path: PathSpec | None = None  # a path (points, wrap surfaces) instead of fixed axis points
+    jiggle: JiggleSpec | None = None  # secondary motion of the axis (model/jiggle.py); None: none
     contact: ContactSpec = ContactSpec()  # the muscle file's ``contact:`` (axdf_cli/model/contact.py)
 
 

@@ -162,17 +162,28 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
     for s in srcs:
         if Path(s).is_file():
             inputs[display_path(Path(s))] = atomic.sha256_file(s)
+    built = build_stages(stages, specs)
+    if any(st.name == "jiggle" for st in built):
+        notes += jiggle_notes(pose, specs)
     return RunPlan(pose, specs, models, frames, formats, out, inputs, render=render, warnings=warnings,
                    bone_meshes=bone_meshes, notes=notes, frame_warnings=muscle_range_warnings(pose, frames, specs),
-                   stages=build_stages(job_switches(job, stages)))
+                   stages=built)
 
 
-def job_switches(job: Job | None, switches) -> dict:
-    """The stage switches of the command line (name -> on), with the job's (``contact: false``)
-    where the command line says nothing."""
-    out = dict(switches or {})
-    if job is not None and not job.contact:
-        out.setdefault("contact", False)
+def jiggle_notes(pose: Pose, specs) -> list[str]:
+    """Remarks on ``jiggle:`` frequencies that the pose's frames cannot show: above the
+    Nyquist frequency fps / 2 the ring aliases between frames (the motion is still exact)."""
+    over: dict[float, list[str]] = {}  # highest frequency -> muscles
+    for s in specs:
+        j = s.jiggle
+        top = 0.0 if j is None else max(j.frequency, j.tensed_frequency or 0.0)
+        if top > 0.5 * pose.fps:
+            over.setdefault(top, []).append(s.name)
+    out = []
+    for top, names in sorted(over.items()):
+        who = ", ".join(names[:3]) + (f" and {len(names) - 3} more" if len(names) > 3 else "")
+        out.append(f"jiggle at up to {top:g} Hz ({who}) is above half the pose's {pose.fps:g} fps: the ring "
+                   "aliases between frames (a pose with more frames per second shows it)")
     return out
 
 

@@ -51,6 +51,7 @@ from axdf_cli import tolerances as tol
 from axdf_cli.model import contact
 from axdf_cli.model.muscle import FrameResult
 from axdf_cli.model.skeleton import forward_kinematics
+from axdf_cli.pipeline.jiggle_stage import JiggleStage
 
 
 class Scope(str, Enum):
@@ -141,16 +142,24 @@ class PenetrationStage:
 
 #: The stages a run may use: name -> factory (no arguments), in the order they run within
 #: their scope. Each is on unless switched off (``--no-<name>``, a job's ``<name>: false``).
-STAGES: dict[str, Callable[[], Stage]] = {"contact": ContactStage, "penetration": PenetrationStage}
+STAGES: dict[str, Callable[[], Stage]] = {
+    "jiggle": JiggleStage,  # TIME: secondary motion of the axis (muscles' `jiggle:`)
+    "contact": ContactStage,  # FRAME: muscles push each other, bones push muscles
+    "penetration": PenetrationStage,  # FRAME: the contact measures where contact is off
+}
 
 
-def build_stages(switches: Mapping[str, bool] | None = None) -> tuple[Stage, ...]:
-    """The run's stages: every registered stage that ``switches`` (name -> on) does not turn off."""
+def build_stages(switches: Mapping[str, bool] | None = None, muscles=None) -> tuple[Stage, ...]:
+    """The run's stages: every registered stage that ``switches`` (name -> on) does not turn
+    off and, given the run's ``muscles`` (specs), that acts on one of them: a stage may say
+    so with ``needed(muscles) -> bool`` (jiggle: a muscle has ``jiggle``), so a run it would
+    not change neither pays for it nor records it."""
     switches = switches or {}
     unknown = sorted(set(switches) - set(STAGES))
     if unknown:
         raise ValueError(f"unknown stage(s) {', '.join(unknown)}; known: {', '.join(STAGES) or 'none'}")
-    return tuple(make() for name, make in STAGES.items() if switches.get(name, True))
+    out = (make() for name, make in STAGES.items() if switches.get(name, True))
+    return tuple(s for s in out if muscles is None or getattr(s, "needed", None) is None or s.needed(muscles))
 
 
 def of_scope(stages, scope: Scope) -> tuple[Stage, ...]:

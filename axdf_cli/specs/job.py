@@ -12,7 +12,7 @@ from axdf_cli.specs.refs import RefPolicy
 from axdf_cli.fileio.yamlio import Fields, item_marks, load_yaml
 
 
-JOB_KEYS = ("muscles", "pose", "out", "format", "frames", "render", "contact")
+JOB_KEYS = ("muscles", "pose", "out", "format", "frames", "render", "jiggle", "contact")
 
 
 @dataclass(frozen=True)
@@ -26,6 +26,7 @@ class Job:
     frames_mark: Mark | None
     render: object  # RenderSettings (disabled when the job has no `render:`)
     policy: RefPolicy = RefPolicy()  # the policy the job was read with (its muscles are read with it)
+    jiggle: bool = True  # `jiggle: false` switches the muscles' secondary motion off (as --no-jiggle)
     contact: bool = True  # muscles and bones collide (`contact: false` turns it off)
 
 
@@ -54,6 +55,7 @@ def load_job(path: Path | str, policy: RefPolicy | None = None) -> Job:
     frames = f.raw("frames")
     frames_mark = f.vmark("frames") if frames is not None else None
     render = parse_render_settings(f.raw("render"), f.vmark("render") if f.has("render") else top)
+    jiggle = f.boolean("jiggle", default=True)
     contact = f.boolean("contact", default=True)
     f.done()
-    return Job(str(path), tuple(muscles), pose, out, fmt, frames, frames_mark, render, policy, contact)
+    return Job(str(path), tuple(muscles), pose, out, fmt, frames, frames_mark, render, policy, jiggle, contact)

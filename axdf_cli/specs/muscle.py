@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from axdf_cli.errors import InputError, Mark
+from axdf_cli.model.jiggle import JiggleSpec
 from axdf_cli.model.muscle import OCT, VOLUME_MODES, AxisPoint, ContactSpec, MuscleSpec, Section, outline_area
 from axdf_cli.specs.kinds import kind_error
 from axdf_cli.specs.skeleton import parse_function
@@ -40,7 +41,7 @@ def default_color(name: str) -> tuple[float, float, float]:
 
 
 MUSCLE_KEYS = ("muscle", "color", "strength", "tension", "volume", "axis", "path", "wrap", "axis_points",
-               "sections", "tendons", "twist", "resolution", "weights", "contact")
+               "sections", "tendons", "twist", "resolution", "weights", "jiggle", "contact")
 CONTACT_KEYS = ("group", "ignore", "yield")
 
 
@@ -126,10 +127,11 @@ def _parse_muscle(value, where: Mark, file: str, group: str = "") -> MuscleSpec:
     if weights is not None and len(weights) != len(sections):
         raise InputError(f.vmark("weights"), f"{len(weights)} weights for {len(sections)} sections",
                          "one weight per section")
+    jiggle = parse_jiggle(f) if f.has("jiggle") else None
     contact = parse_contact(f) if f.has("contact") else ContactSpec()
     f.done()
     return MuscleSpec(name, color, tuple(axis), tuple(sections), strength, tension, volume,
-                      tendons, twist, resolution, weights, file, group, path, contact)
+                      tendons, twist, resolution, weights, file, group, path, jiggle, contact)
 
 
 def parse_contact(f: Fields) -> ContactSpec:
@@ -141,6 +143,39 @@ def parse_contact(f: Fields) -> ContactSpec:
     yld = cf.number("yield", default=None, lo=-100.0, hi=100.0)
     cf.done()
     return ContactSpec(group, ignore, None if yld is None else float(yld))
+
+
+#: Bounds of ``jiggle:`` (docs/FORMATS.md): an exact step is stable at any frequency; these
+#: only keep the numbers physical (soft tissue rings at 10-50 Hz; 1 kHz is far above any
+#: frame rate) and the step's exponentials finite.
+JIGGLE_MAX_HZ = 1000.0
+JIGGLE_MAX_DAMPING = 100.0
+
+
+def parse_jiggle(f: Fields):
+    """The muscle's ``jiggle: {frequency, damping_ratio, weight, tensed: {frequency,
+    damping_ratio}}`` → :class:`~axdf_cli.model.jiggle.JiggleSpec`."""
+    jf = Fields(f.raw("jiggle"), f.vmark("jiggle"), "jiggle", keys=("frequency", "damping_ratio", "weight", "tensed"))
+    freq = jf.number("frequency", required=True, lo=0.0, hi=JIGGLE_MAX_HZ, lo_open=True)
+    zeta = jf.number("damping_ratio", required=True, lo=0.0, hi=JIGGLE_MAX_DAMPING)
+    weight = jf.vector("weight", default=None, lo=0.0, hi=1.0, min_len=2)
+    if weight is not None:
+        if len(weight) > 64:
+            raise InputError(jf.vmark("weight"), f"weight profile has {len(weight)} values", "at most 64")
+        marks = item_marks(jf.m["weight"], jf.vmark("weight"))
+        for i in (0, len(weight) - 1):
+            if weight[i] != 0.0:
+                raise InputError(marks[i], f"weight[{i}] is {weight[i]:g}",
+                                 "the origin and insertion are held by their bones: the first and last weights are 0")
+    tensed_f = tensed_z = None
+    if jf.has("tensed"):
+        tf = Fields(jf.mapping("tensed"), jf.vmark("tensed"), "jiggle tensed", keys=("frequency", "damping_ratio"))
+        tensed_f = tf.number("frequency", default=None, lo=0.0, hi=JIGGLE_MAX_HZ, lo_open=True)
+        tensed_z = tf.number("damping_ratio", default=None, lo=0.0, hi=JIGGLE_MAX_DAMPING)
+        tf.done()
+    jf.done()
+    return JiggleSpec(float(freq), float(zeta), weight, None if tensed_f is None else float(tensed_f),
+                      None if tensed_z is None else float(tensed_z))
 
 
 # ----------------------------------------------------------------------------- muscle paths and wrap surfaces

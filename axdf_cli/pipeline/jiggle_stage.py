@@ -1,0 +1,119 @@
+"""The jiggle stage (scope TIME): the secondary motion of :mod:`axdf_cli.model.jiggle`
+carried through time, on the axis control points before the surfaces are built (the twist
+and the exact-volume solve come after it, as always).
+
+The runner hands a TIME stage every frame of the pose's timeline in order, a block at a
+time, from :meth:`JiggleStage.start`'s state (:mod:`axdf_cli.pipeline.stages`): the
+oscillators therefore advance over every pose frame, selected or not, and a ``--frames``
+subset, ``--resume``, mesh and render workers all see the axis a whole run computes.
+
+State: for every muscle with ``jiggle``, its oscillators' positions and velocities (n, 3) in
+the world and its targets and effective tension at the frame the state is at, plus what the
+law needs of the muscle (spec, weights, tone). Before the first chunk it is empty: the first
+frame of the pose starts at rest on its target (the muscle has held that pose for ever: a
+settled pre-roll). Every muscle's oscillators are independent and every operation is
+elementwise per control point, so a muscle moves to the same bytes whichever muscles share
+its chunk.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from axdf_cli.model import jiggle
+from axdf_cli.model.pose import effective_tension
+
+
+@dataclass
+class Oscillators:
+    """One muscle's law (spec, weights (n,), tone) and state: positions x and velocities v
+    (n, 3), the targets (n, 3) and effective tension at the state's frame (x None: not started)."""
+
+    spec: jiggle.JiggleSpec
+    weights: np.ndarray
+    tone: float
+    x: np.ndarray | None = None
+    v: np.ndarray | None = None
+    target: np.ndarray | None = None
+    tension: float = 0.0
+
+
+@dataclass
+class JiggleState:
+    """Every jiggling muscle's :class:`Oscillators`, at pose frame ``frame`` (None: before the
+    pose's first frame); dt the pose's frame time (s)."""
+
+    first: int
+    dt: float
+    muscles: dict = field(default_factory=dict)  # muscle index -> Oscillators
+    frame: int | None = None
+
+
+class JiggleStage:
+    """Damped oscillators on the free axis control points of the muscles with ``jiggle``
+    (docs/FORMATS.md, "Jiggle"); switched off by ``--no-jiggle`` or a job's ``jiggle: false``."""
+
+    name = "jiggle"
+    scope = "time"  # Scope.TIME (its value: :mod:`.stages` registers this stage, so it is not imported here)
+
+    @staticmethod
+    def needed(specs) -> bool:
+        """Whether the stage acts on any of these muscles (a run without one leaves it out)."""
+        return any(s.jiggle is not None for s in specs)
+
+    def start(self, plan) -> JiggleState:
+        muscles = {j: Oscillators(s.jiggle, jiggle.control_weights(s.jiggle.weight, plan.models[j].n_axis),
+                                  float(s.tension))
+                   for j, s in enumerate(plan.muscles) if s.jiggle is not None}
+        return JiggleState(int(plan.pose.first), 1.0 / float(plan.pose.fps), muscles)
+
+    def __call__(self, state: JiggleState, chunk):
+        """Advance every jiggling muscle of ``chunk`` over its frames (consecutive pose frames
+        right after the state's: (C,) frames, axis (C, n, 3) each) and move its axis to
+        ``target + weight (x - target)``."""
+        js = [j for j in chunk.muscles if j in state.muscles]
+        if not js:
+            return state, chunk
+        frames = np.asarray(chunk.frames, dtype=np.int64)
+        start = state.first if state.frame is None else state.frame + 1
+        if int(frames[0]) != start or np.any(np.diff(frames) != 1):
+            raise ValueError(f"the jiggle stage needs the pose's frames in order from {start}; "
+                             f"got {int(frames[0])}..{int(frames[-1])} ({len(frames)} frames)")
+        osc = [state.muscles[j] for j in js]
+        if any(o.x is None for o in osc) and state.frame is not None:
+            raise ValueError("a jiggling muscle joined after the pose's first frame")
+        sizes = [len(o.weights) for o in osc]
+        cuts = np.cumsum([0] + sizes)
+        targets = np.concatenate([chunk.axis[j] for j in js], axis=1)  # (C, P, 3)
+        tone = np.array([o.tone for o in osc])
+        tension = effective_tension(tone, chunk.activation[:, js])  # (C, M')
+        if state.frame is None:  # the pose's first frame: at rest on its target
+            skip, prev_t, prev_e = 1, targets[0].copy(), tension[0].copy()
+            x, v = prev_t.copy(), np.zeros_like(prev_t)
+        else:
+            skip = 0
+            prev_t = np.concatenate([o.target for o in osc])
+            prev_e = np.array([o.tension for o in osc])
+            x = np.concatenate([o.x for o in osc])
+            v = np.concatenate([o.v for o in osc])
+        moved = {j: chunk.axis[j].copy() for j in js}  # (the first frame at rest stays on its target)
+        if len(frames) > skip:
+            tgt, ten = targets[skip:], tension[skip:]
+            # a step's stiffness and damping: at the mean effective tension of its two frames
+            mid = 0.5 * (np.concatenate([prev_e[None], ten[:-1]]) + ten)  # (S, M')
+            phi = np.empty((len(tgt), cuts[-1], 2, 2))
+            for k, o in enumerate(osc):
+                omega, zeta = jiggle.parameters(o.spec, mid[:, k])
+                phi[:, cuts[k]:cuts[k + 1]] = jiggle.step_matrices(omega, zeta, state.dt)[:, None]
+            xs, x, v = jiggle.oscillate(x, v, np.concatenate([prev_t[None], tgt]), phi, state.dt)
+            w = np.concatenate([o.weights for o in osc])[None, :, None]
+            out = tgt + w * (xs - tgt)  # what is written: T + w (x - T)
+            for k, j in enumerate(js):
+                moved[j][skip:] = out[:, cuts[k]:cuts[k + 1]]
+            prev_t, prev_e = tgt[-1], ten[-1]
+        after = {j: replace(o, x=x[cuts[k]:cuts[k + 1]].copy(), v=v[cuts[k]:cuts[k + 1]].copy(),
+                            target=prev_t[cuts[k]:cuts[k + 1]].copy(), tension=float(prev_e[k]))
+                 for k, (j, o) in enumerate(zip(js, osc))}
+        return (replace(state, muscles={**state.muscles, **after}, frame=int(frames[-1])),
+                replace(chunk, axis={**chunk.axis, **moved}))
