@@ -772,6 +772,8 @@ def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np
                          tol.CONTACT_HOLD_LENGTH, tol.CONTACT_MAX_STEP, ga, gw, sigma)
         _centres(grid, off, nu, na, cen, coff)
         _boxes(grid, off, box)
+    if not touched.any():  # nothing moved (or no pass): the measures are the first ones
+        return list(vertices), [None] * M, touched, before, before.copy()
     after = np.zeros((M, 3))
     _measure(grid, off, nu, na, cen, coff, box, *_neighbours(box, model.allow, 0.0), *args_b, after)
     out_v, out_n = [], []
