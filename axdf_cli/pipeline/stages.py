@@ -100,7 +100,8 @@ class Stage(Protocol):
 
 def _contact_model(plan, enabled: bool):
     rest = forward_kinematics(plan.pose.skeleton, plan.pose.skeleton.rest_coordinates()[None])[0]
-    return contact.build(plan.muscles, plan.models, rest, plan.bone_meshes, enabled=enabled)
+    meshes = plan.bone_meshes or getattr(plan, "collision_meshes", None) or {}
+    return contact.build(plan.muscles, plan.models, rest, meshes, enabled=enabled)
 
 
 class ContactStage:
