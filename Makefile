@@ -20,8 +20,11 @@ DEMO   ?= poses/jobs/demo.yaml
 DATA   ?= ../shared/data
 OSIM   := $(DATA)/opensim
 BVH    := $(DATA)/bvh/cmu_131_01_walk_scaled.bvh
+# MyoSuite models (the installed myo-sim package) written as MJCF files, and their motions.
+MYO    := out/myo-sim
+MJCF_MESHES := --max-faces 2000 --mesh-edge 0.004
 
-.PHONY: all setup sysdeps demo dataset test bench golden clean import blender
+.PHONY: all setup sysdeps demo dataset test bench golden clean import import-mjcf blender
 
 all: demo
 
@@ -119,6 +122,21 @@ import: $(STAMP)
 	  --map poses/maps/human_r_to_cmu.yaml --out muscles/cmu
 	$(BIN)/axdf retarget $(BVH) --onto poses/skeletons/gait2392.yaml --map poses/maps/cmu_to_gait2392.yaml --step 4 \
 	  --name cmu_131_01_walk_gait2392 --out poses/retargeted/cmu_131_01_walk_gait2392
+	$(MAKE) --no-print-directory import-mjcf
+
+# The MyoSuite library (myo-sim, Apache-2.0): muscles/{myoarm,myobody}, poses/skeletons/{myoarm,myobody}.yaml
+# (+ meshes/), poses/myoarm_elbow.yaml (arm26's elbow flexion), poses/myobody_gait.yaml (MyoSuite's gait cycle).
+import-mjcf: $(STAMP)
+	$(BIN)/python tools/myo_sim_xml.py myoarm $(MYO)/myoarm.xml
+	$(BIN)/python tools/myo_sim_xml.py myofullbody $(MYO)/myofullbody.xml
+	$(BIN)/python tools/myo_motion.py arm26 $(MYO)/myoarm.xml $(MYO)/myoarm_elbow.npz $(OSIM)/arm26/arm26_Kinematics_q.sto
+	$(BIN)/python tools/myo_motion.py gait $(MYO)/myofullbody.xml $(MYO)/myobody_gait.npz
+	$(BIN)/axdf import mjcf $(MYO)/myoarm.xml --name myoarm --motion $(MYO)/myoarm_elbow.npz $(MJCF_MESHES) \
+	  --out muscles/myoarm --muscles-out muscles/myoarm --skeleton-out poses/skeletons/myoarm.yaml \
+	  --pose-out poses/myoarm_elbow.yaml
+	$(BIN)/axdf import mjcf $(MYO)/myofullbody.xml --name myobody --motion $(MYO)/myobody_gait.npz $(MJCF_MESHES) \
+	  --out muscles/myobody --muscles-out muscles/myobody --skeleton-out poses/skeletons/myobody.yaml \
+	  --pose-out poses/myobody_gait.yaml
 
 clean:
 	rm -rf out .pytest_cache

@@ -36,6 +36,18 @@ VOLUME_EXACT_PROMISE = 5e-3
 VOLUME_SOLVE_RTOL = 1e-10
 VOLUME_SOLVE_ITERS = 30
 
+# Imported MuJoCo muscles (axdf import mjcf): the axis is a quadratic B-spline fitted to the
+# wrapped path, and it cuts the path's corners (finger flexors fold by up to 140 degrees over
+# a few millimetres). Each muscle gets the fewest axis control points (AXIS_POINT_STEPS, up
+# to AXIS_POINTS_MAX) whose axis length stays within AXIS_LENGTH_TARGET of the path length
+# at the rest pose and at AXIS_PROBE_POSES poses drawn in the joints' ranges (seed
+# AXIS_PROBE_SEED): half the 1% the MuJoCo judge allows, so motions outside the probe keep a margin.
+AXIS_LENGTH_TARGET = 5e-3
+AXIS_POINT_STEPS = (32, 40, 48, 64, 80, 96, 128)
+AXIS_POINTS_MAX = 128
+AXIS_PROBE_POSES = 64
+AXIS_PROBE_SEED = 20
+
 # Degenerate geometry: an axis shorter than this (metres) or a section scale outside
 # [SCALE_MIN, SCALE_MAX] is reported as a per-muscle, per-frame warning.
 MIN_AXIS_LENGTH = 1e-6

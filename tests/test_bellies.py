@@ -26,7 +26,9 @@ REPO = Path(__file__).resolve().parents[1]
 
 #: Frames measured: the walk's stride (the right knee flexes 70° at 62, the left 62° at 29) and
 #: the elbow flexion 0 -> 90°.
-MOTIONS = {"gait2392": ("gait2392_walk.yaml", [18, 29, 40, 51, 62, 73]), "arm26": ("arm26_flex.yaml", [0, 19, 38, 57])}
+MOTIONS = {"gait2392": ("gait2392_walk.yaml", [18, 29, 40, 51, 62, 73]), "arm26": ("arm26_flex.yaml", [0, 19, 38, 57]),
+           "myoarm": ("myoarm_elbow.yaml", [0, 19, 38, 57]),
+           "myobody": ("myobody_gait.yaml", [0, 20, 40, 60, 80, 100, 123])}
 
 #: Muscles that may go below 1.5 (rest or motion), and why; IMPORT.md explains each.
 SQUAT = {
@@ -37,6 +39,12 @@ SQUAT = {
     "glut_med1_r": "a third of the gluteus medius fan on a 12 cm path, shortened further by hip extension in the walk",
     "glut_med3_l": "a third of the gluteus medius fan on an 11 cm path",
     "glut_med3_r": "a third of the gluteus medius fan on an 11 cm path",
+    # myobody (MuJoCo imports are thinned to 1.5 at rest; these dip below it in the gait cycle)
+    "glmed1_r": "a third of the gluteus medius fan; the hip's motion shortens its path",
+    "glmed3_r": "a third of the gluteus medius fan; the hip's motion shortens its path",
+    "glmed3_l": "a third of the gluteus medius fan; the hip's motion shortens its path",
+    "SUBSC": "subscapularis: a broad sheet drawn as one short line (1.49 with the arm at its side)",
+    "SUBSC_l": "subscapularis: a broad sheet drawn as one short line (1.49 with the arm at its side)",
 }
 #: Muscles that may go below 1.2 in motion (never at rest), and why.
 BELOW_1_2 = {

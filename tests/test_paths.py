@@ -19,7 +19,7 @@ def _wrap_one(kind, prm, p1, p2, quadrant="all", method="hybrid"):
     arc = np.empty((W.ARC_SEGMENTS + 1, 3))
     ax, sg = W.QUADRANTS[quadrant]
     return W.wrap_line(kind, np.asarray(prm, float), ax, sg, W.METHODS[method], np.asarray(p1, float),
-                       np.asarray(p2, float), arc), arc
+                       np.asarray(p2, float), arc, np.zeros(3), False), arc
 
 
 def _planar_length(p1, p2, r):

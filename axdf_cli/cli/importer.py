@@ -7,6 +7,10 @@ muscle activation from a controls file); plus ``import_report.json`` and ``IMPOR
 listing what was not imported (wrap objects, markers, ...). Nothing is written when an
 input is bad (exit 2, ``FILE:LINE:COL``).
 
+``mjcf`` reads a MuJoCo model (MJCF XML: bodies, hinge/slide/ball/free joints, joint
+couplings, spatial tendons with wrap geoms and sidesites, muscle actuators, mesh assets) and,
+given an npz with ``qpos``, writes a pose; the same layout and reports as ``osim``.
+
 ``bvh`` reads a Biovision motion-capture file and writes an axdf skeleton (Z-up, metres;
 end sites become ``<joint>_end`` tip bones) and a pose keyed at every frame; the length unit is
 guessed from the skeleton's height unless ``--scale`` gives it.
@@ -45,6 +49,33 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--palette", choices=("anatomical", "hashed"), default="anatomical",
                    help="muscle colours: muscle reds varied per muscle (default), or any hue from the name's hash")
 
+    j = sub.add_parser("mjcf", help="MuJoCo model (MJCF .xml) with an optional qpos motion (.npz)",
+                       description="Import a MuJoCo model: skeleton (bodies, joints, couplings), muscles on spatial "
+                                   "tendons, bone meshes, and a pose from a qpos motion.")
+    g = j.add_mutually_exclusive_group()
+    g.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS, help="print only errors")
+    g.add_argument("-v", "--verbose", action="store_true", default=argparse.SUPPRESS, help="print more detail")
+    j.add_argument("model", metavar="MODEL.xml", type=Path)
+    j.add_argument("--motion", type=Path, metavar="QPOS.npz",
+                   help="npz with qpos (frames x nq, the model's order) and optional fps → a pose")
+    j.add_argument("--out", type=Path, required=True, metavar="DIR",
+                   help="output folder (report; default place of every other file)")
+    j.add_argument("--name", help="skeleton name (default: the model's name)")
+    j.add_argument("--skeleton-out", type=Path, metavar="FILE", help="skeleton YAML (default DIR/skeletons/NAME.yaml)")
+    j.add_argument("--meshes-out", type=Path, metavar="DIR",
+                   help="bone meshes folder (default: meshes/NAME beside the skeleton)")
+    j.add_argument("--muscles-out", type=Path, metavar="DIR", help="muscle YAML folder (default DIR/muscles)")
+    j.add_argument("--pose-out", type=Path, metavar="FILE", help="pose YAML (default DIR/MOTION.yaml)")
+    j.add_argument("--pose-name", help="pose name (default: the motion file's name)")
+    j.add_argument("--fps", type=float, help="frame rate of the motion (default: its fps, else 30)")
+    j.add_argument("--no-meshes", action="store_true", help="do not convert bone geometry")
+    j.add_argument("--max-faces", type=int, default=0, metavar="N",
+                   help="decimate each bone mesh to at most N triangles (default 0: keep all)")
+    j.add_argument("--mesh-edge", type=float, default=0.0, metavar="M",
+                   help="decimate each bone mesh to triangles of about this edge length in metres (default 0: off)")
+    j.add_argument("--palette", choices=("anatomical", "hashed"), default="anatomical",
+                   help="muscle colours: muscle reds varied per muscle (default), or any hue from the name's hash")
+
     b = sub.add_parser("bvh", help="Biovision motion capture (.bvh) → skeleton and pose",
                        description="Import a BVH file: a skeleton (Z-up, metres) and a pose of its motion.")
     g = b.add_mutually_exclusive_group()
@@ -64,6 +95,8 @@ def add_args(parser: argparse.ArgumentParser) -> None:
 def run(args) -> int:
     if args.source == "bvh":
         return run_bvh(args)
+    if args.source == "mjcf":
+        return run_mjcf(args)
     from axdf_cli.errors import UsageError
     from axdf_cli.importers.osim_import import build_import
 
@@ -89,6 +122,40 @@ def run(args) -> int:
         skipped = res.report.get("missing_meshes", [])
         if skipped:
             print(f"meshes skipped: {len(skipped)}")
+        if args.verbose:
+            for path in sorted(res.files):
+                print(path)
+        print(f"report: {Path(args.out) / 'IMPORT.md'}")
+    return 0
+
+
+def run_mjcf(args) -> int:
+    from axdf_cli.errors import UsageError
+    from axdf_cli.importers.mjcf_import import build_import
+
+    if args.fps is not None and not (0 < args.fps <= 10000):
+        raise UsageError(f"--fps {args.fps}", "a frame rate in (0, 10000]")
+    if not 0 <= args.max_faces <= 10_000_000:
+        raise UsageError(f"--max-faces {args.max_faces}", "a whole number in 0..10000000 (0: keep every triangle)")
+    if not 0 <= args.mesh_edge <= 1:
+        raise UsageError(f"--mesh-edge {args.mesh_edge}", "metres in [0, 1] (0: off)")
+    res = build_import(args.model, args.out, name=args.name, motion=args.motion, skeleton_out=args.skeleton_out,
+                       muscles_out=args.muscles_out, pose_out=args.pose_out, meshes_out=args.meshes_out,
+                       pose_name=args.pose_name, fps=args.fps, meshes=not args.no_meshes, max_faces=args.max_faces,
+                       mesh_edge=args.mesh_edge, palette=args.palette)
+    for w in res.warnings:
+        print(f"axdf: warning: {w}", file=sys.stderr)
+    for path, data in sorted(res.files.items()):
+        write_bytes(path, data)
+    if not args.quiet:
+        c = res.report["counts"]
+        print(f"imported {args.model.name}: {c['bodies']} bodies, {c['coordinates']} coordinates "
+              f"({c['couplings']} coupled joints), {c['muscles']} muscles, {c['meshes']} bone meshes")
+        if res.report["ignored"]:
+            kinds: dict[str, int] = {}
+            for i in res.report["ignored"]:
+                kinds[i["kind"]] = kinds.get(i["kind"], 0) + 1
+            print("not imported: " + ", ".join(f"{n} {k}{'s' if n != 1 else ''}" for k, n in sorted(kinds.items())))
         if args.verbose:
             for path in sorted(res.files):
                 print(path)

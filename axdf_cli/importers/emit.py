@@ -259,6 +259,14 @@ def wrap_doc(w) -> dict:
         d.update({k: float(v) for k, v in zip(WRAP_SIZE_KEYS[w.shape], w.size)})
     d["at"] = [float(v) for v in w.at]
     d["orient"] = [float(v) for v in w.orient]
+    if w.side is not None:
+        d["side"] = {"bone": w.side[0], "at": [float(v) for v in w.side[1]]}
+    if w.shape in ("mujoco_sphere", "mujoco_cylinder"):
+        if tuple(w.range) != (-1, -1):
+            d["range"] = [int(v) for v in w.range]
+        if not w.active:
+            d["active"] = False
+        return d
     d["quadrant"] = w.quadrant
     if w.shape == "ellipsoid":
         d["method"] = w.method
@@ -302,7 +310,25 @@ def path_docs(model: Model, m: Muscle) -> tuple[list, list]:
 
 def muscle_doc(m: Muscle, skel: Skeleton, world: np.ndarray, model: Model | None = None,
                palette: str = "anatomical") -> tuple[dict, dict]:
-    """One muscle YAML document and a summary row for the import report.
+    """One OpenSim muscle's YAML document and summary row for the import report: its path
+    (:func:`path_docs`) sized by :func:`belly_doc` from its Hill-type parameters."""
+    path, wraps = path_docs(model, m)
+    doc, row = belly_doc(m.name, path, wraps, m.max_isometric_force, m.optimal_fiber_length, m.tendon_slack_length,
+                         m.pennation_angle, skel, world, palette, jiggle=JIGGLE.get(SIDE_SUFFIX.sub("", m.name)))
+    row.update({"type": m.type, "path_points": len(m.points),
+                "conditional": [p.name for p in m.points if p.kind == "conditional"],
+                "conditional_inactive_at_rest": [p.name for p in m.points if not p.active_at_rest],
+                "moving": [p.name for p in m.points if p.kind == "moving"], "wraps": [w.wrap for w in m.wraps]})
+    return doc, rounded(row)
+
+
+def belly_doc(name: str, path: list, wraps: list, max_force: float, fibre_length: float, tendon_slack: float,
+              pennation: float, skel: Skeleton, world: np.ndarray, palette: str = "anatomical",
+              axis_points: int = 0, min_slenderness: float = 0.0,
+              jiggle: JiggleSpec | None = None) -> tuple[dict, dict]:
+    """A path muscle's YAML document sized by its model's own numbers, and its summary row
+    (unrounded): the path and wrap documents ``path``, ``wraps``, the max isometric force (N),
+    optimal fibre length, tendon slack length (m) and pennation (rad).
 
     The belly law (README, "OpenSim models"), from the model's own numbers:
 
@@ -319,24 +345,28 @@ def muscle_doc(m: Muscle, skel: Skeleton, world: np.ndarray, model: Model | None
     - tendon sections (TENDON_SECTIONS inside each free tendon) of radius r_t with
       π r_t² = F_max / TENDON_STRESS; ``tendons`` are the free tendons' arc fractions.
 
+    With ``min_slenderness`` (MuJoCo imports), a belly squatter than that at rest is thinned
+    (R scaled down, the volume falls below the law's) until it is not; the row's
+    ``thinned_from_radius`` keeps the law's R. ``axis_points`` (0: the path's default) is
+    written into the document.
+
     Positions are fractions of the rest arc length written as curve parameters t (mapped
     through the rest axis); sections are circular; ``volume: exact`` keeps the rest volume.
     The row also carries the belly's slenderness (:mod:`axdf_cli.model.measure`) at rest.
     """
     from axdf_cli.model.measure import belly_slenderness
 
-    path, wraps = path_docs(model, m)
-    rest_ctrl, path_length = _rest_path(m.name, path, wraps, skel, world)
+    rest_ctrl, path_length = _rest_path(name, path, wraps, skel, world, axis_points)
     t_of, axis_length = _arc_parameter_of(rest_ctrl)
-    pcsa = m.max_isometric_force / SPECIFIC_TENSION
-    volume = pcsa * m.optimal_fiber_length
-    fibres = m.optimal_fiber_length * math.cos(m.pennation_angle)
-    free = min(max(min(FREE_TENDON_SHARE * m.tendon_slack_length, path_length - fibres), 0.0),
+    pcsa = max_force / SPECIFIC_TENSION
+    volume = pcsa * fibre_length
+    fibres = fibre_length * math.cos(pennation)
+    free = min(max(min(FREE_TENDON_SHARE * tendon_slack, path_length - fibres), 0.0),
                MAX_TENDON_FRACTION * path_length)
     belly_length = path_length - free
     t_o = ORIGIN_TENDON_SHARE * free / path_length
     t_i = free / path_length - t_o
-    r_t = math.sqrt(m.max_isometric_force / TENDON_STRESS / math.pi)
+    r_t = math.sqrt(max_force / TENDON_STRESS / math.pi)
     target = volume + math.pi * r_t * r_t * free  # the belly and the free tendons (tubes)
     fractions, factors = [], []  # (arc fraction, radius factor: None for a tendon section)
     if t_o > MIN_TENDON_FRACTION:
@@ -352,34 +382,39 @@ def muscle_doc(m: Muscle, skel: Skeleton, world: np.ndarray, model: Model | None
     def document(r: float) -> dict:
         sections = [{"t": t, "radii": [r_t, r_t] if f is None else [f * r, f * r], "angle": 0.0}
                     for t, f in zip(ts, factors)]
-        jig = JIGGLE.get(SIDE_SUFFIX.sub("", m.name))
-        return {"muscle": m.name, "color": PALETTES[palette](m.name), "volume": "exact", "path": path,
-                **({"wrap": wraps} if wraps else {}), "sections": sections, "tendons": [t_o, t_i],
-                **({"jiggle": jiggle_doc(jig)} if jig is not None else {})}
+        return {"muscle": name, "color": PALETTES[palette](name), "volume": "exact", "path": path,
+                **({"wrap": wraps} if wraps else {}), **({"axis_points": axis_points} if axis_points else {}),
+                "sections": sections, "tendons": [t_o, t_i],
+                **({"jiggle": jiggle_doc(jiggle)} if jiggle is not None else {})}
 
     # a first guess from the profile's mean squared radius, then the model's own exact-volume
     # solve (belly points scale, tendon points do not) gives the widest radius R
     mean_sq = float(np.mean([f * f for _, f in BELLY_PROFILE]))
     guess = math.sqrt(volume / (math.pi * belly_length * mean_sq))
-    mm = _model(document(guess), m.name, skel, world)
+    mm = _model(document(guess), name, skel, world)
     res = mm.evaluate(world[None], np.zeros(1), rest_volume=target, coords=skel.rest_coordinates()[None])
     r = guess * float(res.scale[0])
     doc = document(r)
-    mm = _model(doc, m.name, skel, world)
+    mm = _model(doc, name, skel, world)
     slender = belly_slenderness(mm.rest_vertices, mm.faces)
-    conditional = [p.name for p in m.points if p.kind == "conditional"]
-    dropped = [p.name for p in m.points if not p.active_at_rest]
-    moving = [p.name for p in m.points if p.kind == "moving"]
-    row = {"muscle": m.name, "type": m.type, "path_points": len(m.points), "control_points": len(rest_ctrl),
-           "rest_axis_length": axis_length,
-           "conditional": conditional, "conditional_inactive_at_rest": dropped, "moving": moving,
-           "wraps": [w.wrap for w in m.wraps], "rest_path_length": path_length, "pcsa_m2": pcsa, "volume_m3": volume,
-           "optimal_fiber_length": m.optimal_fiber_length, "pennation_deg": math.degrees(m.pennation_angle),
-           "tendon_slack_length": m.tendon_slack_length, "free_tendon": free, "belly_length": belly_length,
+    law_radius = r
+    for _ in range(6):  # a squat belly thinned to ``min_slenderness`` (its width scales with R)
+        if slender.ratio >= min_slenderness:
+            break
+        r *= slender.ratio / min_slenderness * (1.0 - 1e-3)
+        doc = document(r)
+        mm = _model(doc, name, skel, world)
+        slender = belly_slenderness(mm.rest_vertices, mm.faces)
+    row = {"muscle": name, "control_points": len(rest_ctrl), "rest_axis_length": axis_length,
+           "rest_path_length": path_length, "pcsa_m2": pcsa, "volume_m3": volume,
+           "optimal_fiber_length": fibre_length, "pennation_deg": math.degrees(pennation),
+           "tendon_slack_length": tendon_slack, "free_tendon": free, "belly_length": belly_length,
            "fibre_projection": fibres,
            "belly_radius": r, "tendon_radius": r_t, "tendons": [t_o, t_i], "rest_volume_m3": mm.v0,
            "slenderness": slender.ratio, "widest_diameter": slender.width}
-    return doc, rounded(row)
+    if r != law_radius:
+        row["thinned_from_radius"] = law_radius
+    return doc, row
 
 
 def _model(doc: dict, name: str, skel: Skeleton, world: np.ndarray):
@@ -391,14 +426,14 @@ def _model(doc: dict, name: str, skel: Skeleton, world: np.ndarray):
     return MuscleModel(spec, skel.bone_index, world, skel)
 
 
-def _rest_path(name: str, path: list, wraps: list, skel: Skeleton, world: np.ndarray):
+def _rest_path(name: str, path: list, wraps: list, skel: Skeleton, world: np.ndarray, axis_points: int = 0):
     """The path documents read back through the loader, evaluated at the rest pose: the axis
     control points (n, 3) and the wrapped path's length."""
     from axdf_cli.specs import parse_muscle_path
     from axdf_cli.model.paths.path import PathModel
     from axdf_cli.fileio.yamlio import Fields
 
-    doc = {"path": path, "wrap": wraps}
+    doc = {"path": path, "wrap": wraps, **({"axis_points": axis_points} if axis_points else {})}
     spec = parse_muscle_path(Fields(doc, Mark(f"<{name}>"), "muscle"))
     pm = PathModel(spec, skel.bone_index, skel.coord_index)
     q = skel.rest_coordinates()[None]

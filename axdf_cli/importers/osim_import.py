@@ -456,6 +456,15 @@ BELLY_NOTES = {
     "TRIlat": "the lateral head arises along the back of the humeral shaft: the model's effective origin leaves a "
               "short path. Not lengthened beyond the path",
     "BRA": "brachialis arises along the lower half of the humerus: a short, thick muscle over the elbow",
+    # MuJoCo's MyoSuite models (myo-sim): names as there
+    "glmed": "one of three lines standing for the gluteus medius fan from the iliac crest to the greater trochanter",
+    "glmin": "one of three lines standing for the gluteus minimus fan under gluteus medius",
+    "SUBSC": "subscapularis fills the subscapular fossa: a broad flat sheet drawn as one short line to the humerus",
+    "INFSP": "infraspinatus fills the infraspinous fossa: a broad sheet drawn as one short line to the humerus",
+    "PQ": "pronator quadratus is a flat square across the distal forearm, shorter than it is wide in anatomy too",
+    "ANC": "anconeus is a small triangle behind the elbow, short and thick in anatomy too",
+    "OP": "opponens pollicis is a short thick thenar muscle over the first metacarpal",
+    "MF_": "a multifidus slip: short fascicles spanning two to four vertebrae, with a large force on a short path",
 }
 
 
@@ -498,6 +507,10 @@ def belly_markdown(r: dict) -> list[str]:
         if m["belly_length"] < m["fibre_projection"]:
             why.append(f"the path is shorter than the fibres ({m['fibre_projection'] * 100:.1f} cm along it): "
                        "the model's origin-to-insertion line is shorter than the muscle; not lengthened")
+        if "thinned_from_radius" in m:
+            why.append(f"thinned from Ø {m['thinned_from_radius'] * 2e3:.1f} mm (the law's volume on this path) to "
+                       f"Ø {m['belly_radius'] * 2e3:.1f} mm, slenderness {m['slenderness']:.2f}: "
+                       f"{m['rest_volume_m3'] * 1e6:.0f} cm³ instead of {m['volume_m3'] * 1e6:.0f} cm³")
         note = belly_note(m["muscle"])
         if note:
             why.append(note)

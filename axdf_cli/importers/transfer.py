@@ -233,7 +233,8 @@ def muscle_bones(spec: MuscleSpec) -> list[str]:
     """The bones a muscle uses: its axis points', or its path points' and wrap surfaces'."""
     if spec.path is None:
         return [p.bone for p in spec.axis]
-    return [p.bone for p in spec.path.points] + [w.bone for w in spec.path.wraps]
+    return [p.bone for p in spec.path.points] + [w.bone for w in spec.path.wraps] + \
+        [w.side[0] for w in spec.path.wraps if w.side is not None]
 
 
 class NotCarried(Exception):
@@ -303,17 +304,21 @@ def _carry_point(p, t: PairTransform, index: int):
     return replace(p, bone=t.dst, at=tuple(float(x) for x in at), moving=moving)
 
 
-def _carry_wrap(w, t: PairTransform):
+def _carry_wrap(w, t: PairTransform, side: PairTransform | None = None):
     """A wrap surface on B: its frame through the bone's map (position mapped, orientation turned
     by the rest rotation), its sizes times k; quadrant, range, method and flag kept (the quadrant
-    names the surface's own axes, which turn with it)."""
+    names the surface's own axes, which turn with it); a side point through its own bone's map
+    (``side``)."""
     from scipy.spatial.transform import Rotation
 
     lin, off = t.matrix[:3, :3], t.matrix[:3, 3]
     turn = (lin / t.scale) @ euler_xyz(w.orient)
     orient = Rotation.from_matrix(turn).as_euler("XYZ", degrees=True)  # intrinsic X-Y-Z: Rx·Ry·Rz
+    side_b = None
+    if w.side is not None:
+        side_b = (side.dst, tuple(float(x) for x in side.matrix[:3, :3] @ np.asarray(w.side[1]) + side.matrix[:3, 3]))
     return replace(w, bone=t.dst, at=tuple(float(x) for x in lin @ np.asarray(w.at) + off),
-                   orient=tuple(float(x) for x in orient), size=tuple(v * t.scale for v in w.size))
+                   orient=tuple(float(x) for x in orient), size=tuple(v * t.scale for v in w.size), side=side_b)
 
 
 def transfer_spec(spec: MuscleSpec, tf: dict[str, PairTransform],
@@ -337,7 +342,8 @@ def transfer_spec(spec: MuscleSpec, tf: dict[str, PairTransform],
             raise NotCarried("coordinates its path points follow are not coordinates of the target skeleton: "
                              + ", ".join(lacking))
         points = tuple(_carry_point(p, tf[p.bone], i) for i, p in enumerate(spec.path.points))
-        wraps = tuple(_carry_wrap(w, tf[w.bone]) for w in spec.path.wraps)
+        wraps = tuple(_carry_wrap(w, tf[w.bone], tf[w.side[0]] if w.side is not None else None)
+                      for w in spec.path.wraps)
         return replace(spec, path=replace(spec.path, points=points, wraps=wraps), sections=tuple(secs)), [], k
     axis = []
     for p in spec.axis:

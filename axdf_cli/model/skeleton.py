@@ -232,12 +232,16 @@ class Skeleton:
 
     def stick_parents(self) -> list[int]:
         """Per bone: its parent when the two form one segment (what a stick between their joints
-        draws), else -1: for the root, and for a bone a coordinate translates directly (a
-        floating base such as a BVH's hips, whose "segment" to the world origin is no bone)."""
+        draws), else -1: for the root, for a bone a coordinate translates directly (a
+        floating base such as a BVH's hips, whose "segment" to the world origin is no bone),
+        and for a child of a root named ``world`` without a mesh (MuJoCo's world body, as
+        ``axdf import mjcf`` writes it: a body fixed in space is not a segment from the origin)."""
         out = []
         for bone in self.bones:
             free = any(d.type == "translation" and d.coord is not None and d.function is None for d in bone.dofs)
-            out.append(-1 if bone.parent < 0 or free else bone.parent)
+            root = self.bones[bone.parent] if bone.parent >= 0 else None
+            bare_root = root is not None and root.parent < 0 and root.name == "world" and root.mesh is None
+            out.append(-1 if bone.parent < 0 or free or bare_root else bone.parent)
         return out
 
     def moved_bones(self) -> dict[str, frozenset[int]]:

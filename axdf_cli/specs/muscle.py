@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.model.jiggle import JiggleSpec
 from axdf_cli.model.muscle import OCT, VOLUME_MODES, AxisPoint, ContactSpec, MuscleSpec, Section, outline_area
@@ -182,14 +183,14 @@ def parse_jiggle(f: Fields):
 # (a block of its own: ``path:``, ``wrap:`` and ``axis_points:`` of a muscle; docs/FORMATS.md)
 
 WRAP_SIZE_KEYS = {"cylinder": ("radius", "length"), "sphere": ("radius",), "ellipsoid": ("radii",),
-                  "torus": ("inner", "outer")}
+                  "torus": ("inner", "outer"), "mujoco_sphere": ("radius",), "mujoco_cylinder": ("radius",)}
 
 
 def parse_muscle_path(f: Fields):
     """The muscle's ``path`` (points: fixed, ``moving``, ``active``), ``wrap`` (surfaces) and
     ``axis_points`` → :class:`~axdf_cli.model.paths.PathSpec`."""
     from axdf_cli.model.paths import Moving, PathPoint, PathSpec, WrapSurface
-    from axdf_cli.model.paths.wrap import METHODS, QUADRANTS
+    from axdf_cli.model.paths.wrap import METHODS, MUJOCO_SHAPES, QUADRANTS
 
     seq = f.seq("path", required=True)
     if len(seq) < 2:
@@ -268,11 +269,26 @@ def parse_muscle_path(f: Fields):
         if rng[0] > 0 and rng[1] > 0 and rng[1] <= rng[0]:
             raise InputError(wf.vmark("range"), f"range {list(rng)} holds no segment", "first < last")
         active = wf.boolean("active", default=True)
+        side = None
+        if wf.has("side"):
+            if shape not in MUJOCO_SHAPES:
+                raise InputError(wf.kmark("side"), f"a {shape} has no side point",
+                                 "side: {bone, at} on " + " or ".join(MUJOCO_SHAPES))
+            sf = Fields(wf.raw("side"), wf.vmark("side"), "side point", keys=("bone", "at"))
+            side = (sf.name("bone", required=True), tuple(float(v) for v in sf.vector("at", 3, default=(0.0, 0.0, 0.0))))
+            sf.done()
+        if shape in MUJOCO_SHAPES:
+            for key, default in (("quadrant", "all"), ("method", "hybrid")):
+                if wf.has(key) and (quadrant if key == "quadrant" else method) != default:
+                    raise InputError(wf.vmark(key), f"{key} does not apply to a {shape}",
+                                     "leave it out: MuJoCo's shapes pick their side by the side point or the shorter way")
         wf.done()
-        wraps.append(WrapSurface(name, bone, shape, size, at, orient, quadrant, method, rng, active, wf.vmark("shape")))
-    n = f.number("axis_points", default=0, lo=0, hi=64, integer=True)
+        wraps.append(WrapSurface(name, bone, shape, size, at, orient, quadrant, method, rng, active, wf.vmark("shape"),
+                                 side))
+    n = f.number("axis_points", default=0, lo=0, hi=tol.AXIS_POINTS_MAX, integer=True)
     if n and n < 4:
-        raise InputError(f.vmark("axis_points"), f"axis_points is {n}", "4..64 (or leave it out for the default)")
+        raise InputError(f.vmark("axis_points"), f"axis_points is {n}",
+                         f"4..{tol.AXIS_POINTS_MAX} (or leave it out for the default)")
     return PathSpec(tuple(points), tuple(wraps), int(n))
 
 

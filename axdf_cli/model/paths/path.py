@@ -61,6 +61,10 @@ class PathModel:
         self.method = np.zeros(nw, np.int64)
         self.on = np.zeros(nw, np.bool_)
         self.rng = np.zeros((nw, 2), np.int64)
+        self.has_side = np.zeros(nw, np.bool_)
+        self.side_bones = np.zeros(nw, np.int64)
+        self.side_at = np.zeros((nw, 4))
+        self.side_at[:, 3] = 1.0
         for i, w in enumerate(spec.wraps):
             m = np.eye(4)
             m[:3, :3] = euler_xyz(np.asarray(w.orient, dtype=np.float64))
@@ -73,6 +77,10 @@ class PathModel:
             self.on[i] = w.active
             lo, hi = w.range
             self.rng[i] = (0 if lo < 1 else lo - 1, npt - 1 if hi < 1 else hi - 1)
+            if w.side is not None:
+                self.has_side[i] = True
+                self.side_bones[i] = bone_of(bone_index, w.side[0], w.mark)
+                self.side_at[i, :3] = w.side[1]
         self.origin_bone = int(self.points.bones[0])
         self.insertion_bone = int(self.points.bones[-1])
         if spec.points[0].active is not None or spec.points[-1].active is not None:
@@ -90,13 +98,17 @@ class PathModel:
         nf = world.shape[0]
         xf = np.einsum("fwij,wjk->fwik", world[:, self.wrap_bones], self.wrap_local) if len(self.kind) else \
             np.zeros((nf, 0, 4, 4))
+        # side[f,w,c] = sum_k world[f,bone(w),c,k] at[w,k]  (zeros where a surface has no side point)
+        side = np.einsum("fwck,wk->fwc", world[:, self.side_bones, :3, :], self.side_at) if len(self.kind) else \
+            np.zeros((nf, 0, 3))
         samples = np.empty((nf, len(self.fractions), 3))
         length = np.empty(nf)
         inside = np.zeros(nf, np.int64)
         points = np.zeros((nf, pts.shape[1] + 2 * len(self.kind), 3))
         count = np.zeros(nf, np.int64)
         W.wrapped_paths(np.ascontiguousarray(pts), np.ascontiguousarray(active), np.ascontiguousarray(xf),
-                        self.kind, self.prm, self.axis, self.sign, self.method, self.on, self.rng, self.fractions,
+                        self.kind, self.prm, self.axis, self.sign, self.method, self.on, self.rng,
+                        np.ascontiguousarray(side), self.has_side, self.fractions,
                         samples, length, inside, points, count)
         self.last_points = (points, count)  # the current path (tangent points included), for tests
         return samples, length, inside

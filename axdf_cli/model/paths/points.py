@@ -39,9 +39,10 @@ class PathPoint:
 class WrapSurface:
     name: str
     bone: str
-    shape: str  # cylinder | sphere | ellipsoid | torus
+    shape: str  # cylinder | sphere | ellipsoid | torus | mujoco_sphere | mujoco_cylinder
     size: tuple[float, float, float]  # cylinder (radius, length, 0); sphere (radius, 0, 0);
-    #                                   ellipsoid semi-axes; torus (inner, outer, 0)
+    #                                   ellipsoid semi-axes; torus (inner, outer, 0);
+    #                                   mujoco_sphere, mujoco_cylinder (radius, 0, 0)
     at: tuple[float, float, float] = (0.0, 0.0, 0.0)
     orient: tuple[float, float, float] = (0.0, 0.0, 0.0)  # degrees, body-fixed X-Y-Z
     quadrant: str = "all"
@@ -49,6 +50,7 @@ class WrapSurface:
     range: tuple[int, int] = (-1, -1)  # 1-based path point indices; -1: the path's ends
     active: bool = True
     mark: Mark = field(default=Mark(""), compare=False)
+    side: tuple[str, tuple[float, float, float]] | None = None  # MuJoCo shapes: (bone, at) of the side point
 
 
 @dataclass(frozen=True)
