@@ -99,6 +99,9 @@ bench: $(STAMP)
 # And the CMU walk: poses/skeletons/cmu_131_01.yaml and poses/cmu_131_01_walk.yaml (BVH at 30 fps),
 # muscles/cmu/ (the demo muscles moved onto it through poses/maps/human_r_to_cmu.yaml; TRANSFER.md).
 # And the same take fitted onto gait2392 (poses/maps/cmu_to_gait2392.yaml): poses/retargeted/.
+# Each command's --out holds its manifest.json, which lists the files it wrote there and
+# outside it (the skeletons, poses and bone meshes): --overwrite replaces only those, and only
+# while they are as the import wrote them (axdf_cli/fileio/outputs.py).
 import: $(STAMP)
 	@if [ ! -f "$(OSIM)/arm26/arm26.osim" ] || [ ! -f "$(OSIM)/gait2392/gait2392_thelen2003muscle.osim" ] \
 	   || [ ! -f "$(BVH)" ]; then \
@@ -111,17 +114,18 @@ import: $(STAMP)
 	$(BIN)/axdf import osim $(OSIM)/arm26/arm26.osim --name arm26 \
 	  --motion $(OSIM)/arm26/arm26_Kinematics_q.sto --controls $(OSIM)/arm26/arm26_controls.sto \
 	  --fps 60 --pose-name arm26_flex --palette anatomical --out muscles/arm26 --muscles-out muscles/arm26 \
-	  --skeleton-out poses/skeletons/arm26.yaml --pose-out poses/arm26_flex.yaml
+	  --skeleton-out poses/skeletons/arm26.yaml --pose-out poses/arm26_flex.yaml --overwrite
 	$(BIN)/axdf import osim $(OSIM)/gait2392/gait2392_thelen2003muscle.osim --name gait2392 \
 	  --motion $(OSIM)/gait2392/subject01_walk1_ik.mot --controls $(OSIM)/gait2392/subject01_walk1_controls.sto \
 	  --pose-name gait2392_walk --palette anatomical --out muscles/gait2392 --muscles-out muscles/gait2392 \
-	  --skeleton-out poses/skeletons/gait2392.yaml --pose-out poses/gait2392_walk.yaml
-	$(BIN)/axdf import bvh $(BVH) --name cmu_131_01 --pose-name cmu_131_01_walk --step 4 --out poses \
-	  --skeleton-out poses/skeletons/cmu_131_01.yaml --pose-out poses/cmu_131_01_walk.yaml
+	  --skeleton-out poses/skeletons/gait2392.yaml --pose-out poses/gait2392_walk.yaml --overwrite
+	$(BIN)/axdf import bvh $(BVH) --name cmu_131_01 --pose-name cmu_131_01_walk --step 4 \
+	  --out poses/imports/cmu_131_01 --skeleton-out poses/skeletons/cmu_131_01.yaml \
+	  --pose-out poses/cmu_131_01_walk.yaml --overwrite
 	$(BIN)/axdf transfer muscles/demo --from poses/skeletons/human_r.yaml --to poses/skeletons/cmu_131_01.yaml \
-	  --map poses/maps/human_r_to_cmu.yaml --out muscles/cmu
+	  --map poses/maps/human_r_to_cmu.yaml --out muscles/cmu --overwrite
 	$(BIN)/axdf retarget $(BVH) --onto poses/skeletons/gait2392.yaml --map poses/maps/cmu_to_gait2392.yaml --step 4 \
-	  --name cmu_131_01_walk_gait2392 --out poses/retargeted/cmu_131_01_walk_gait2392
+	  --name cmu_131_01_walk_gait2392 --out poses/retargeted/cmu_131_01_walk_gait2392 --overwrite
 	$(MAKE) --no-print-directory import-mjcf
 
 # The MyoSuite library (myo-sim, Apache-2.0): muscles/{myoarm,myobody}, poses/skeletons/{myoarm,myobody}.yaml

@@ -70,6 +70,12 @@ YAML_MAX_DEPTH = 64
 BVH_MAX_BYTES = 512 * 1024 * 1024
 # numbers whose magnitude exceeds this are refused (metres, degrees, frames alike)
 MAX_ABS_NUMBER = 1e9
+# The highest frame rate a pose may have (and an importer may write): 100 kHz is beyond any
+# motion capture or simulation output we read; a rate past it is a unit mistake.
+MAX_FPS = 100000.0
+# Seeds (a data set's seed: and --seed): the same range in the file and on the command line,
+# within the numbers every axdf file accepts.
+MAX_SEED = 1_000_000_000
 
 # Rendering (tests/test_render_output.py). A vertex projected with camera.json is checked
 # against the EXR `id` and `Z` at the pixel containing it, when that pixel's centre falls
@@ -114,6 +120,28 @@ SEGMENT_SAMPLES = 16
 # A point is rigid with the root bone when it moves by less than this (metres) in the root's frame
 # over the sampled poses.
 ROOT_RIGID = 1e-6
+
+# A motion column of a coupled coordinate (a CoordinateCouplerConstraint's dependent) is
+# not read: the skeleton computes it. When it strays from the coupler's function of its
+# leader's column by more than this (OpenSim units, rad or m) the import warns. OpenSim's IK
+# satisfies the constraint to its assembly accuracy (the Rajagopal run: < 1e-8 rad); the
+# motion file's 8 printed decimals leave ~1e-8; 1e-5 rad (6e-4 deg, 10 µm) is far above
+# both and far below anything visible.
+COUPLED_COLUMN_ATOL = 1e-5
+
+# `axdf import osim --motion`: the axis (a smooth fit to the wrapped path) may fall this much
+# short of the path, as a fraction of its length, in any frame of the imported motion before
+# the importer raises the muscle's `axis_points` (by 4, up to AXIS_POINTS_RAISE_MAX). Half of the
+# 1% within which every imported muscle must match OpenSim's own length: the rest is room for
+# the wrapping's own tolerances. The shipped gait2392 walk and arm26 flexion reach 0.47% and
+# 0.31% at the default counts (they keep them); Rajagopal2016's running trial bends the knee
+# to 111°, where the hamstrings' 1.2 cm insertion hook cut by the default 12 points leaves
+# the axis 1.25% short.
+AXIS_SHORTFALL_MAX = 5e-3
+AXIS_POINTS_RAISE_MAX = 48
+# The shortfall is measured on at most this many frames of the motion, evenly spread (the
+# path moves smoothly: a 2000-frame sample of a long take misses no bend of it).
+AXIS_FIT_FRAMES = 2000
 
 # Data-set keypoints (axdf_cli/model/keypoints.py): two keypoints closer than this (metres) at
 # the rest pose are one point. Coincident by construction are BVH helper joints at offset 0

@@ -94,8 +94,8 @@ def import_and_compare(xml: Path, qpos: np.ndarray, fps: float, out: Path, **kw)
     (names, axdf (F, M), mujoco (F, M))."""
     from axdf_cli.cli.main import main
 
-    out.mkdir(parents=True, exist_ok=True)
-    npz = out / "motion.npz"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    npz = out.parent / f"{out.name}_motion.npz"  # an input: beside the import's own folder, not in it
     with open(npz, "wb") as fh:
         np.savez(fh, qpos=qpos, fps=np.float64(fps))
     args = ["import", "mjcf", str(xml), "--motion", str(npz), "--out", str(out), "--name", "judged", "-q",

@@ -222,18 +222,20 @@ def test_readme_loading_snippet_runs(tiny):
 
 
 @pytest.mark.parametrize("bad", ["..", "."])
-def test_overwrite_removes_only_the_old_data_sets_sequence_folders(tiny, monkeypatch, capsys, bad):
-    """--overwrite of another data set removes the sequence folders its dataset.json names;
-    a name such as '..' or '.' (a hand-edited file) names no sequence and removes nothing."""
+def test_overwrite_of_a_hand_edited_dataset_json_is_refused_and_removes_nothing(tiny, monkeypatch, capsys, bad):
+    """A dataset.json whose sequence names are not names ('..', '.': a hand-edited file) is
+    exit 2 at its line and column; nothing is deleted (it once removed OUT's parent)."""
+    from test_safety import snapshot
+
     monkeypatch.chdir(tiny)
     holder = tiny / f"holder{len(bad)}"
     (holder / "ds" / "seq_x").mkdir(parents=True)
     (holder / "keep.txt").write_text("beside OUT")
     (holder / "ds" / "mine.txt").write_text("in OUT, not the data set's")
     (holder / "ds" / "dataset.json").write_text(json.dumps(
-        {"tool": "axdf", "dataset": "old", "sequences": [{"name": bad}, {"name": "seq_x"}]}))
-    rc, out, err = run_main(["dataset", "build", "tiny.yaml", "--out", str(holder / "ds"), "--overwrite",
-                             "--shard", "0/3"], capsys)
-    assert rc == 0, err
-    assert (holder / "keep.txt").read_text() == "beside OUT"
-    assert (holder / "ds" / "mine.txt").is_file() and not (holder / "ds" / "seq_x").exists()
+        {"tool": "axdf", "dataset": "old", "seed": 1, "shards": 1, "image": {"passes": ["png"]},
+         "sequences": [{"name": bad}, {"name": "seq_x"}]}, indent=1))
+    before = snapshot(holder)
+    rc, out, err = run_main(["dataset", "build", "tiny.yaml", "--out", str(holder / "ds"), "--overwrite"], capsys)
+    assert rc == 2 and "dataset.json:" in err and "not a sequence name" in err, err
+    assert snapshot(holder) == before

@@ -197,7 +197,7 @@ def test_same_inputs_same_bytes(tmp_path):
                        "--allow-outside") == 0
         outs.append({p.name: p.read_bytes() for p in sorted((tmp_path / out).iterdir())})
     assert outs[0] == outs[1]
-    assert sorted(outs[0]) == ["retarget.csv", "retarget_report.json", "walk_gait2392.yaml"]
+    assert sorted(outs[0]) == ["manifest.json", "retarget.csv", "retarget_report.json", "walk_gait2392.yaml"]
     for data in outs[0].values():
         assert str(tmp_path).encode() not in data  # no absolute paths
 

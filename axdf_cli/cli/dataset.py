@@ -8,6 +8,7 @@ from pathlib import Path
 
 from axdf_cli.cli.run import _positive
 from axdf_cli.errors import UsageError
+from axdf_cli.tolerances import MAX_SEED
 
 _SHARD_RE = re.compile(r"^(\d+)/(\d+)$")
 
@@ -67,19 +68,16 @@ def _build(args) -> int:
     from axdf_cli.specs import RefPolicy
 
     shard = parse_shard(args.shard)
-    if args.seed is not None and not 0 <= args.seed < 2**63:
-        raise UsageError(f"--seed {args.seed}", "a whole number in 0..2^63-1")
+    if args.seed is not None and not 0 <= args.seed <= MAX_SEED:
+        raise UsageError(f"--seed {args.seed}", f"a whole number in 0..{MAX_SEED} (as a dataset file's seed:)")
     policy = RefPolicy.for_command([args.dataset], args.allow_outside)
+    if args.dry_run:
+        return _dry_run(args, shard, policy)
     ctx = build_context(args.dataset, args.seed, policy)
     out = Path(args.out or f"out/{ctx.spec.name}")
     mine = [s for s in ctx.sequences if s.index % shard[1] == shard[0]]
     views = len(ctx.spec.views)
     total = sum(s.n_frames for s in mine) * views
-    if args.dry_run:
-        print(f"would make {len(mine)} of {len(ctx.sequences)} sequences ({total} samples: frames x {views} "
-              f"view(s)) in {out}, {len(ctx.muscles)} muscles, {ctx.spec.format} meshes, "
-              f"{'+'.join(ctx.spec.passes)} images {ctx.spec.render.size[0]}x{ctx.spec.render.size[1]}")
-        return 0
     bar = None
     if not args.quiet and sys.stderr.isatty():
         from tqdm import tqdm
@@ -94,6 +92,29 @@ def _build(args) -> int:
             bar.close()
     if not args.quiet:
         print(summary_text(res, shard))
+    return 0
+
+
+def _dry_run(args, shard, policy) -> int:
+    """Check every input and what OUT holds; print what would be made (counted, not listed:
+    bounded memory and time for any number of sequences). Writes nothing."""
+    from axdf_cli.dataset.folder import check_dry
+    from axdf_cli.dataset.spec import count
+    from axdf_cli.dataset.worker import build_context
+
+    ctx = build_context(args.dataset, args.seed, policy, listed=False)
+    out = Path(args.out or f"out/{ctx.spec.name}")
+    check_dry(out, resume=args.resume, overwrite=args.overwrite)
+    if args.engine == "ray":
+        from axdf_cli.dataset.raycluster import check_address, import_ray
+
+        import_ray()
+        check_address(args.address)
+    n_all, n_mine, frames = count(ctx.spec, shard)
+    views = len(ctx.spec.views)
+    print(f"would make {n_mine} of {n_all} sequences ({frames * views} samples: frames x {views} "
+          f"view(s)) in {out}, {len(ctx.muscles)} muscles, {ctx.spec.format} meshes, "
+          f"{'+'.join(ctx.spec.passes)} images {ctx.spec.render.size[0]}x{ctx.spec.render.size[1]}")
     return 0
 
 

@@ -14,6 +14,12 @@ given an npz with ``qpos``, writes a pose; the same layout and reports as ``osim
 ``bvh`` reads a Biovision motion-capture file and writes an axdf skeleton (Z-up, metres;
 end sites become ``<joint>_end`` tip bones) and a pose keyed at every frame; the length unit is
 guessed from the skeleton's height unless ``--scale`` gives it.
+
+All three follow the output rule (axdf_cli/fileio/outputs.py): ``--out`` is the import's own folder
+(its ``manifest.json``); ``--overwrite`` replaces an earlier import there and files outside it
+that the import wrote and nobody changed since; every YAML file is read back as ``axdf
+validate`` reads it before anything is written (:func:`write_imported`, which ``retarget`` and
+any new importer call too).
 """
 from __future__ import annotations
 
@@ -21,7 +27,21 @@ import argparse
 import sys
 from pathlib import Path
 
-from axdf_cli.fileio.atomic import write_bytes
+from axdf_cli.errors import Mark
+from axdf_cli.fileio.outputs import OutputSet, check_outputs, write_checked
+from axdf_cli.importers.check import check_documents
+
+
+def output_role(path, args) -> str:
+    """What names an output of ``axdf import osim`` in messages: its flag, or its role."""
+    p = Path(path)
+    for flag in ("skeleton_out", "pose_out"):
+        if getattr(args, flag, None) is not None and Path(getattr(args, flag)) == p:
+            return "--" + flag.replace("_", "-")
+    for flag in ("meshes_out", "muscles_out"):
+        if getattr(args, flag, None) is not None and Path(getattr(args, flag)) == p.parent:
+            return f"--{flag.replace('_', '-')} file"
+    return "output"
 
 
 def add_args(parser: argparse.ArgumentParser) -> None:
@@ -48,6 +68,7 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--no-meshes", action="store_true", help="do not convert bone geometry")
     p.add_argument("--palette", choices=("anatomical", "hashed"), default="anatomical",
                    help="muscle colours: muscle reds varied per muscle (default), or any hue from the name's hash")
+    add_overwrite_arg(p)
 
     j = sub.add_parser("mjcf", help="MuJoCo model (MJCF .xml) with an optional qpos motion (.npz)",
                        description="Import a MuJoCo model: skeleton (bodies, joints, couplings), muscles on spatial "
@@ -75,6 +96,7 @@ def add_args(parser: argparse.ArgumentParser) -> None:
                    help="decimate each bone mesh to triangles of about this edge length in metres (default 0: off)")
     j.add_argument("--palette", choices=("anatomical", "hashed"), default="anatomical",
                    help="muscle colours: muscle reds varied per muscle (default), or any hue from the name's hash")
+    add_overwrite_arg(j)
 
     b = sub.add_parser("bvh", help="Biovision motion capture (.bvh) → skeleton and pose",
                        description="Import a BVH file: a skeleton (Z-up, metres) and a pose of its motion.")
@@ -90,6 +112,43 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     b.add_argument("--skeleton-out", type=Path, metavar="FILE", help="skeleton YAML (default DIR/skeletons/NAME.yaml)")
     b.add_argument("--pose-out", type=Path, metavar="FILE", help="pose YAML (default DIR/POSE.yaml)")
     b.add_argument("--pose-name", help="pose name (default: the skeleton's name)")
+    add_overwrite_arg(b)
+
+
+def write_imported(files: OutputSet, inputs, overwrite: bool, source, tick=lambda step: None) -> dict:
+    """What every importer does with its files (``import osim|bvh|mjcf``, ``retarget``): the
+    output rule's checks (axdf_cli/fileio/outputs.py), then every YAML file read back by the
+    file specs (what ``axdf validate`` accepts; errors name ``source``), then the write.
+    Nothing is written unless all of it passes. ``tick(step)``: the progress bar."""
+    checked = check_outputs(files, inputs=inputs, overwrite=overwrite)
+    check_documents(files, Mark(str(source)))
+    tick("check")
+    manifest = write_checked(checked)
+    tick("write")
+    return manifest
+
+
+def add_overwrite_arg(p) -> None:
+    """``--overwrite``, as every command that writes a set of files has it (fileio/outputs.py)."""
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace this command's earlier output in DIR (and files outside DIR that it wrote, "
+                        "unchanged since); nothing else is ever replaced")
+
+
+def progress_bar(steps, quiet: bool, desc: str):
+    """(tick(step), close()) for a tqdm bar over ``steps`` on stderr; silent when stderr is
+    not a terminal or with -q."""
+    if quiet or not sys.stderr.isatty():
+        return (lambda step: None), (lambda: None)
+    from tqdm import tqdm
+
+    bar = tqdm(total=len(steps), unit="step", file=sys.stderr, desc=desc, leave=False)
+
+    def tick(step: str) -> None:
+        bar.set_postfix_str(step)
+        bar.update(1)
+
+    return tick, bar.close
 
 
 def run(args) -> int:
@@ -102,14 +161,23 @@ def run(args) -> int:
 
     if args.fps is not None and not (0 < args.fps <= 10000):
         raise UsageError(f"--fps {args.fps}", "a frame rate in (0, 10000]")
-    res = build_import(args.model, args.out, name=args.name, motion=args.motion, controls=args.controls,
-                       skeleton_out=args.skeleton_out, muscles_out=args.muscles_out, pose_out=args.pose_out,
-                       meshes_out=args.meshes_out, pose_name=args.pose_name, fps=args.fps,
-                       meshes=not args.no_meshes, palette=args.palette)
+    tick, close = progress_bar(("read", "check", "write"), args.quiet, f"import {args.model.name}")
+    try:
+        res = build_import(args.model, args.out, name=args.name, motion=args.motion, controls=args.controls,
+                           skeleton_out=args.skeleton_out, muscles_out=args.muscles_out, pose_out=args.pose_out,
+                           meshes_out=args.meshes_out, pose_name=args.pose_name, fps=args.fps,
+                           meshes=not args.no_meshes, palette=args.palette)
+        tick("read")
+        files = OutputSet(args.out, "import osim")
+        for path, data in res.files.items():
+            files.add(path, data, output_role(path, args))
+        files.settings = {"name": args.name, "fps": args.fps, "pose_name": args.pose_name,
+                          "meshes": not args.no_meshes, "palette": args.palette}
+        write_imported(files, [args.model, args.motion, args.controls], args.overwrite, args.model, tick)
+    finally:
+        close()
     for w in res.warnings:
         print(f"axdf: warning: {w}", file=sys.stderr)
-    for path, data in sorted(res.files.items()):
-        write_bytes(path, data)
     if not args.quiet:
         c = res.report["counts"]
         print(f"imported {args.model.name}: {c['bodies']} bodies, {c['coordinates']} coordinates, "
@@ -139,14 +207,24 @@ def run_mjcf(args) -> int:
         raise UsageError(f"--max-faces {args.max_faces}", "a whole number in 0..10000000 (0: keep every triangle)")
     if not 0 <= args.mesh_edge <= 1:
         raise UsageError(f"--mesh-edge {args.mesh_edge}", "metres in [0, 1] (0: off)")
-    res = build_import(args.model, args.out, name=args.name, motion=args.motion, skeleton_out=args.skeleton_out,
-                       muscles_out=args.muscles_out, pose_out=args.pose_out, meshes_out=args.meshes_out,
-                       pose_name=args.pose_name, fps=args.fps, meshes=not args.no_meshes, max_faces=args.max_faces,
-                       mesh_edge=args.mesh_edge, palette=args.palette)
+    tick, close = progress_bar(("read", "check", "write"), args.quiet, f"import {args.model.name}")
+    try:
+        res = build_import(args.model, args.out, name=args.name, motion=args.motion, skeleton_out=args.skeleton_out,
+                           muscles_out=args.muscles_out, pose_out=args.pose_out, meshes_out=args.meshes_out,
+                           pose_name=args.pose_name, fps=args.fps, meshes=not args.no_meshes,
+                           max_faces=args.max_faces, mesh_edge=args.mesh_edge, palette=args.palette)
+        tick("read")
+        files = OutputSet(args.out, "import mjcf")
+        for path, data in res.files.items():
+            files.add(path, data, output_role(path, args))
+        files.settings = {"name": args.name, "fps": args.fps, "pose_name": args.pose_name,
+                          "meshes": not args.no_meshes, "max_faces": args.max_faces, "mesh_edge": args.mesh_edge,
+                          "palette": args.palette}
+        write_imported(files, [args.model, args.motion], args.overwrite, args.model, tick)
+    finally:
+        close()
     for w in res.warnings:
         print(f"axdf: warning: {w}", file=sys.stderr)
-    for path, data in sorted(res.files.items()):
-        write_bytes(path, data)
     if not args.quiet:
         c = res.report["counts"]
         print(f"imported {args.model.name}: {c['bodies']} bodies, {c['coordinates']} coordinates "
@@ -177,16 +255,22 @@ def run_bvh(args) -> int:
             raise UsageError(f"--scale {args.scale}", f"a positive number of metres per unit, or one of {', '.join(UNITS)}")
     if not 1 <= args.step <= 10000:
         raise UsageError(f"--step {args.step}", "a whole number in 1..10000")
-    res = build_import(args.model, args.out, name=args.name, scale=scale, step=args.step,
-                       skeleton_out=args.skeleton_out, pose_out=args.pose_out, pose_name=args.pose_name)
-    for path, data in sorted(res.files.items()):
-        write_bytes(path, data)
+    from axdf_cli.importers.bvh import STEPS
+
+    tick, close = progress_bar(STEPS + ("check", "write"), args.quiet, f"import {args.model.name}")
+    try:
+        res = build_import(args.model, args.out, name=args.name, scale=scale, step=args.step,
+                           skeleton_out=args.skeleton_out, pose_out=args.pose_out, pose_name=args.pose_name,
+                           progress=tick)
+        write_imported(res.files, [args.model], args.overwrite, args.model, tick)
+    finally:
+        close()
     if not args.quiet:
         r = res.report
         for line in res.notes:
             print(line)
         print(f"imported {args.model.name}: {r['joints']} joints, {r['end_sites']} end sites, {r['channels']} channels, "
               f"{r['frames']} frames at {r['fps']:g} fps")
-        for path in sorted(res.files):
-            print(path)
+        for o in res.files:
+            print(o.path if not o.path.is_relative_to(Path.cwd()) else o.path.relative_to(Path.cwd()))
     return 0

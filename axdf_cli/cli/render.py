@@ -10,6 +10,7 @@ with ``--overwrite``; ``--resume`` finishes an interrupted render with the same 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import sys
 import time
@@ -18,7 +19,7 @@ from pathlib import Path
 from axdf_cli.cli.run import _positive
 from axdf_cli.errors import InputError, Mark, UsageError
 from axdf_cli.specs.render import add_render_args, settings_from_args, settings_to_dict
-from axdf_cli.fileio.runfolder import (CAMERA, FRAME_EXTENSIONS, MANIFEST_INTERVAL_S, Root, Session, Target,
+from axdf_cli.fileio.runfolder import (RUN_COMMAND, command_of, CAMERA, FRAME_EXTENSIONS, MANIFEST_INTERVAL_S, Root, Session, Target,
                                 check_dirs, describe_differences, frame_relpath, gl_record, is_file_with, prepare,
                                 read_run_manifest, try_write_manifest, write_manifest)
 
@@ -59,6 +60,17 @@ def _frame_files(frames) -> list[str]:
     return [frame_relpath(f, ext) for f in frames for ext in FRAME_EXTENSIONS]
 
 
+#: What makes a render folder's frames those of a run: the run's inputs, settings (but the
+#: render settings) and frames.
+IDENTITY = ("inputs", "frames", "muscles")
+
+
+def _identity(manifest: dict) -> dict:
+    settings = manifest.get("settings")
+    settings = {k: v for k, v in settings.items() if k != "render"} if isinstance(settings, dict) else settings
+    return {"settings": settings, **{k: manifest.get(k) for k in IDENTITY}}
+
+
 def run(args: argparse.Namespace) -> int:
     from axdf_cli.render.runio import load_run_source, recorded_render_settings
     from axdf_cli.render.framefiles import check_render, render_frames_of
@@ -67,6 +79,9 @@ def run(args: argparse.Namespace) -> int:
     if not run_dir.is_dir():
         raise UsageError(f"{run_dir} is not a folder", "give the output folder of `axdf run`")
     run_manifest = read_run_manifest(run_dir)
+    if command_of(run_manifest) != RUN_COMMAND:
+        raise InputError(run_manifest.mark(("command",)), f"{run_dir} holds the output of axdf "
+                         f"{command_of(run_manifest)}, not a run", "give the output folder of `axdf run`")
     all_frames = run_manifest.frames()
     chosen = all_frames if args.frames is None else _select(args.frames, all_frames)
     settings = settings_from_args(recorded_render_settings(run_manifest), args)
@@ -75,15 +90,23 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else run_dir
     if out.resolve() == run_dir.resolve():
         target = Target(run_dir, run_manifest, False)
-    else:  # another folder: new, or one this command wrote before
-        target = Target(out, prepare(out, resume=True).previous, False)
+    else:  # another folder: new, or one `axdf render --out` wrote before from this run
+        target = prepare(out, resume=True, command="render")
+        if target.previous is not None and _identity(target.previous.data) != _identity(run_manifest.data):
+            changed = describe_differences(target.previous, run_manifest.data, keys=("settings",) + IDENTITY)
+            if not args.overwrite:
+                raise InputError(target.previous.mark(("inputs",)),
+                                 f"{out} holds frames rendered from another run ({'; '.join(changed)[:300]})",
+                                 "pass --overwrite to replace them (only once the new frames are complete), "
+                                 "or another --out")
+            target = dataclasses.replace(target, replace=True)  # staged, then swapped in
     check_dirs(out, [os.path.dirname(frame_relpath(0, "png"))])
-    old = target.previous
+    old = target.previous if not target.replace else None
     old_files = old.files() if old is not None else {}
     new_render = settings_to_dict(settings)
     old_settings = old.get(("settings",), dict, "an object", required=False, default={}) if old is not None else {}
     old_render = old_settings.get("render")
-    existing = [f for f in chosen if any(os.path.lexists(out / r) or r in old_files for r in _frame_files([f]))]
+    existing = [f for f in chosen if any(os.path.lexists(out / r) for r in _frame_files([f]))]
     if existing and not (args.overwrite or args.resume):
         raise UsageError(f"{len(existing)} of the frames are rendered already in {out} "
                          f"(frames/{existing[0]:04d}.png ...)",
@@ -116,25 +139,28 @@ def run(args: argparse.Namespace) -> int:
         base = dict(old.data)
     else:  # a new folder for the frames: the run's description, none of its files
         base = {k: v for k, v in run_manifest.data.items() if k not in ("files", "gl", "bounds")}
+        base["command"] = "render"
     kept = {r: s for r, s in old_files.items() if r not in stale}
     base.update(complete=False, settings={**(base.get("settings") or {}), "render": new_render}, files=kept)
 
     bar = progress_bar(len(todo), args.quiet)
     with Session(target) as session:
-        write_manifest(out, base)  # incomplete while frames are written
+        root = session.root  # OUT, or the staging folder when the frames of another run are replaced
+        write_manifest(root, base)  # incomplete while frames are written
         clock = {"t": time.monotonic(), "files": {}}
 
         def checkpoint(files: dict) -> None:
             clock["files"] = files
             if time.monotonic() - clock["t"] >= MANIFEST_INTERVAL_S:
-                write_manifest(out, dict(base, files={**kept, **files}))
+                write_manifest(root, dict(base, files={**kept, **files}))
                 clock["t"] = time.monotonic()
 
         try:
-            result = render_frames_of(scene, source, todo, settings, Root(out), args.jobs,
+            result = render_frames_of(scene, source, todo, settings, Root(root), args.jobs,
                                       progress=(lambda f: bar.update(1)) if bar else None, on_frame=checkpoint)
-        except BaseException:  # stopped: list the whole frames, for --resume
-            try_write_manifest(out, dict(base, files={**kept, **clock["files"]}))
+        except BaseException:  # stopped: list the whole frames, for --resume (a staging folder goes)
+            if not target.replace:
+                try_write_manifest(out, dict(base, files={**kept, **clock["files"]}))
             raise
         finally:
             if bar is not None:

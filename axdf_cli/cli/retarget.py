@@ -7,14 +7,18 @@ after sizing the model to the subject with one scale factor; the map (docs/FORMA
 "Retarget map") says which mocap joint drives which point of the model. DIR receives the
 pose (``NAME.yaml``, for SKELETON), ``retarget.csv`` (per frame: RMS and max joint-centre
 error in metres, and every point's) and ``retarget_report.json`` (scale, segments, per point
-and per coordinate figures). Bad input writes nothing (exit 2, ``FILE:LINE:COL``).
+and per coordinate figures), and ``manifest.json``: DIR is the command's own folder, which
+``--overwrite`` replaces (the output rule, axdf_cli/fileio/outputs.py; the pose is read back as
+``axdf validate`` reads it before anything is written). Bad input writes nothing (exit 2,
+``FILE:LINE:COL``).
 """
 from __future__ import annotations
 
 import sys
 from pathlib import Path
 
-from axdf_cli.fileio.atomic import write_bytes
+from axdf_cli.cli.importer import add_overwrite_arg, write_imported
+from axdf_cli.fileio.outputs import OutputSet
 
 
 def add_args(p) -> None:
@@ -31,6 +35,7 @@ def add_args(p) -> None:
                    help="an npz's up axis: z (axdf's world) or y (SMPL, most pose estimators); a BVH is Y-up")
     p.add_argument("--allow-outside", action="store_true",
                    help="allow paths inside YAML files to leave the project folder tree")
+    add_overwrite_arg(p)
 
 
 def run(args) -> int:
@@ -59,8 +64,12 @@ def run(args) -> int:
     finally:
         if bar is not None:
             bar.close()
-    for path, data in sorted(res.files.items()):
-        write_bytes(path, data)
+    files = OutputSet(args.out, "retarget")
+    for path, data in res.files.items():
+        files.add(path, data, "output")
+    files.settings = {"name": res.report.get("pose"), "scale": args.scale, "step": args.step, "up": args.up}
+    write_imported(files, [args.motion, args.map, args.onto or res.retargeted.rmap.skeleton.source],
+                   args.overwrite, args.motion)
     if not args.quiet:
         for line in res.notes:
             print(line)

@@ -6,14 +6,17 @@ points (or path points and wrap surfaces) keep their place along each bone's seg
 by the bones' length ratio; section radii scale with the muscle's bones. Muscles on bones the
 map does not name, or whose paths cannot be carried, are skipped and listed with the reason
 (exit 0 with a warning). DIR receives one file per muscle file (same
-name), ``transfer_report.json`` and ``TRANSFER.md``. A bad map or muscle writes nothing (exit 2).
+name), ``transfer_report.json``, ``TRANSFER.md`` and ``manifest.json``: DIR is the command's own folder
+(``--overwrite`` replaces an earlier transfer there; axdf_cli/fileio/outputs.py). A bad map or
+muscle writes nothing (exit 2).
 """
 from __future__ import annotations
 
 import sys
 from pathlib import Path
 
-from axdf_cli.fileio.atomic import write_bytes
+from axdf_cli.cli.importer import add_overwrite_arg
+from axdf_cli.fileio.outputs import OutputSet, write_outputs
 
 
 def add_args(p) -> None:
@@ -26,6 +29,7 @@ def add_args(p) -> None:
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.add_argument("--allow-outside", action="store_true",
                    help="allow paths inside YAML files to leave the project folder tree")
+    add_overwrite_arg(p)
 
 
 def run(args) -> int:
@@ -39,8 +43,10 @@ def run(args) -> int:
     skel_b = load_skeleton(Path(args.skel_to), policy) if args.skel_to else None
     files = expand_muscle_paths([(Path(m), Mark(m)) for m in args.muscles], policy)
     res = build_transfer(files, skel_a, skel_b, Path(args.map), Path(args.out), policy)
-    for path, data in sorted(res.files.items()):
-        write_bytes(path, data)
+    out = OutputSet(args.out, "transfer")
+    for path, data in res.files.items():
+        out.add(path, data, "output")
+    write_outputs(out, inputs=res.inputs, overwrite=args.overwrite)
     for s in res.skipped:
         print(f"axdf: warning: {s['file']}: muscle {s['muscle']} skipped: {s['why']}", file=sys.stderr)
     if not args.quiet:

@@ -151,6 +151,9 @@ def compare_pair(rel: str, a: Path | None, g: Path | None, tolerances: Tolerance
     try:
         ab = read_side("actual", read_compared, a, roots[0])
         gb = read_side("golden", read_compared, g, roots[1])
+        if kind == "sequence":  # a packed file's checksums and frame times, identical or not
+            from axdf_cli.compare.packed import verify_files
+            verify_files(a, g, ab == gb)
         if ab == gb and kind != "manifest":
             return FileResult(rel, kind, PASS, (), (), {"identical": True}, tol_dict,
                               seconds=time.perf_counter() - t0)

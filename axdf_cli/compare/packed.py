@@ -16,7 +16,7 @@ import numpy as np
 from axdf_cli.compare.meshes import hausdorff
 from axdf_cli.compare.result import Outcome, Unreadable
 from axdf_cli.compare.thresholds import MeshTol
-from axdf_cli.formats import read_sequence
+from axdf_cli.formats import read_sequence, verify_sequence
 from axdf_cli.formats.mesh import MeshReadError
 from axdf_cli.formats.packed import PointSequence
 
@@ -98,6 +98,17 @@ def compare_sequences(a: PointSequence, g: PointSequence, tol: MeshTol) -> Outco
 def _frames_list(frames) -> str:
     f = [f"{x:g}" for x in frames[:MAX_LISTED]]
     return ", ".join(f) + (f" ... ({len(frames) - MAX_LISTED} more)" if len(frames) > MAX_LISTED else "")
+
+
+def verify_files(a: Path, g: Path, identical: bool) -> None:
+    """Each side's own checks (:func:`axdf_cli.formats.verify_sequence`: an NPZ's CRC-32 of
+    every member, point caches' frame times, a USD layer's samples), once when the files are
+    byte-identical: a broken packed file is an ERROR verdict, never SAME. A USD layer that
+    is not a muscle sequence (``usd/bones.usdc``) is checked value by value instead."""
+    for side, path in (("actual", a),) if identical else (("actual", a), ("golden", g)):
+        if path.suffix.lower() == ".usdc" and not _is_sequence_layer(path):
+            continue
+        _side(side, verify_sequence, path)
 
 
 def compare_sequence_files(a: Path, g: Path, tol: MeshTol) -> Outcome:

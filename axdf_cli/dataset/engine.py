@@ -9,6 +9,8 @@ scheduler here.
 """
 from __future__ import annotations
 
+import contextlib
+import hashlib
 import json
 import os
 import shutil
@@ -17,15 +19,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from axdf_cli.fileio import atomic
+from axdf_cli.fileio.runfolder import Root
+from axdf_cli.dataset import folder as dsfolder
 from axdf_cli.dataset import worker as wk
 from axdf_cli.dataset.index import write_index
-from axdf_cli.errors import AxdfError, EnvironmentProblem, InputError, Interrupted, Mark
+from axdf_cli.errors import AxdfError, EnvironmentProblem, InputError, Interrupted
 from axdf_cli.dataset import door
-from axdf_cli.dataset.door import own_entry
-from axdf_cli.fileio.yamlio import is_name
 
 ENGINES = ("local", "ray")
-RAY_HINT = "pip install 'ray>=2.9' (or the project's extra: pip install -e '.[ray]')"
 
 
 @dataclass
@@ -55,67 +56,58 @@ class WorkerFailed(AxdfError):
 # ----------------------------------------------------------------------------- the output folder
 
 
-def prepare_out(out: Path, ctx: wk.Context, mine: list[int], resume: bool, overwrite: bool) -> None:
-    """Refuse an OUT that holds something else; make room for this run's sequences."""
-    out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise InputError(None, f"--out {out} exists and is not a folder", "give a folder")
+def check_out(out: Path, ctx: wk.Context, mine: list[int], resume: bool, overwrite: bool,
+              shards: int = 1) -> dsfolder.Target:
+    """Every check of OUT before anything is written (dataset/folder.py): what it holds,
+    whether this build may write it, no links on the way to any folder it writes."""
     names = [ctx.sequences[i].name for i in mine]
-    dj = out / wk.DATASET_JSON
-    for n in names + ["bones"]:
-        if os.path.islink(out / n):
-            raise InputError(None, f"{out / n} is a link", "a data set's folders are plain folders (no links)")
-    if out.is_dir() and any(not own_entry(n) for n in os.listdir(out)):
-        old = _read_dataset_json(dj)
-        if old is None:
-            raise InputError(None, f"output folder {out} is not empty and holds no axdf data set (no dataset.json "
-                             "written by axdf)", "--overwrite and --resume only replace or finish axdf's own data "
-                             "sets; choose an empty or new output folder")
-        same = dj.read_bytes() == ctx.dataset_json
-        if not same and not overwrite:
-            raise InputError(None, f"output folder {out} holds another data set (its dataset.json differs: "
-                             "other inputs, settings or seed)",
-                             "pass --overwrite to replace it, or another --out (shards of one data set share one --out)")
-        if not same:  # --overwrite: remove what the old data set wrote there, nothing else
-            olds = [s.get("name") for s in old.get("sequences", []) if isinstance(s, dict)]
-            for n in sorted({n for n in olds if is_name(n)} | set(names)):
-                if not os.path.islink(out / n):
-                    shutil.rmtree(out / n, ignore_errors=True)
-            shutil.rmtree(out / "bones", ignore_errors=True)
-            for f in (wk.DATASET_JSON, wk.INDEX):
-                (out / f).unlink(missing_ok=True)
-        else:
-            present = [n for n in names if (out / n).exists()]
-            if present and not (resume or overwrite):
-                raise InputError(None, f"{len(present)} sequence folder(s) of this run exist in {out} "
-                                 f"(first: {present[0]})",
-                                 "pass --resume to finish them, --overwrite to make them again, or another --out")
-            if overwrite:
-                for n in present:
-                    shutil.rmtree(out / n)
+    dirs = dsfolder.sequence_dirs(names, ctx.spec.views, ctx.names, ctx.spec.format)
+    return dsfolder.check(out, ctx.dataset_json, names, dirs, resume=resume, overwrite=overwrite, shards=shards)
+
+
+def claim(target: dsfolder.Target, ctx: wk.Context, mine: list[int], resume: bool, shared: bool) -> int:
+    """Create OUT, lock it (exclusive while claiming), check that it is still what
+    :func:`check_out` saw, write dataset.json and the bone meshes (into the staging folder
+    when replacing another data set); returns the lock's descriptor (shared afterwards when
+    ``shared``: the shards of one data set write side by side)."""
+    out = target.out
     atomic.ensure_dir(out)
-    if resume:  # temporaries of a killed build in the data set's own folders (a run cleans its own)
-        folders = [out, out / "bones"]
-        for n in names:
-            folders += [out / n] + [out / n / "views" / v for v in ctx.spec.views]
-        atomic.remove_stale_temporaries(folders)
-    atomic.write_bytes(dj, ctx.dataset_json)
-    for i, (_, _, data) in sorted(ctx.bone_meshes.items()):
-        p = out / "bones" / f"{ctx.skeleton.bones[i].name}.ply"
-        if not (p.is_file() and p.read_bytes() == data):
-            atomic.write_bytes(p, data)
+    fd = dsfolder.lock_folder(out, what=str(out))
+    try:
+        dj = out / wk.DATASET_JSON
+        now = dj.read_bytes() if dj.is_file() and not dj.is_symlink() else None
+        if (now not in (None, ctx.dataset_json) if target.mode == "new" else
+                now is None or hashlib.sha256(now).hexdigest() != target.old.sha):
+            raise InputError(None, f"output folder {out} changed while axdf was checking it",
+                             "another process wrote there; run again")
+        root = target.root
+        if target.mode == "replace":
+            shutil.rmtree(root, ignore_errors=True)
+        atomic.ensure_dir(root)
+        names = [ctx.sequences[i].name for i in mine]
+        if resume:  # temporaries and lock files of a killed build in the data set's own folders
+            folders = [root, root / dsfolder.BONES]
+            for n in names:
+                folders += [root / n] + [root / n / "views" / v for v in ctx.spec.views]
+                dsfolder.remove_stale_lock(root / n)
+            atomic.remove_stale_temporaries(folders)
+        rroot = Root(root)
+        if not (root / wk.DATASET_JSON).is_file() or (root / wk.DATASET_JSON).read_bytes() != ctx.dataset_json:
+            atomic.write_bytes(rroot.path(wk.DATASET_JSON), ctx.dataset_json)
+        for i, (_, _, data) in sorted(ctx.bone_meshes.items()):
+            p = rroot.path(f"{dsfolder.BONES}/{ctx.skeleton.bones[i].name}.ply")
+            if not (p.is_file() and not p.is_symlink() and p.read_bytes() == data):
+                atomic.write_bytes(p, data)
+        if shared:
+            dsfolder.relock_folder(fd, True, str(out))
+    except BaseException:
+        dsfolder.discard_staging(target)
+        dsfolder.unlock_folder(fd)
+        raise
+    return fd
 
 
 # ----------------------------------------------------------------------------- workers
-
-
-def _read_dataset_json(path: Path) -> dict | None:
-    """An axdf data set's dataset.json, or None when ``path`` is not one."""
-    try:
-        d = json.loads(path.read_text())
-    except (OSError, ValueError):
-        return None
-    return d if isinstance(d, dict) and d.get("tool") == "axdf" and "dataset" in d else None
 
 
 def _safe_build(ctx: wk.Context, index: int, out: Path, resume: bool) -> tuple:
@@ -225,41 +217,45 @@ def _pool_task(shared: tuple, index: int) -> tuple:
     return _worker_task(where, out, index, resume)
 
 
-def _run_ray(ctx, mine, out, jobs, resume, done, address, where) -> None:
-    try:
-        import ray
-    except ImportError:
-        raise EnvironmentProblem("cannot import ray (--engine ray)", RAY_HINT) from None
-    started = False
-    if not ray.is_initialized():
-        if address:
-            ray.init(address=address, log_to_driver=False)
-        else:
-            ray.init(num_cpus=jobs, include_dashboard=False, log_to_driver=False)
-        started = True
-    try:
-        task = ray.remote(num_cpus=1)(_worker_task)
-        refs = {task.remote(where, str(Path(out).resolve()), i, resume): i for i in mine}
-        left = set(mine)
-        while refs:
-            ready, _ = ray.wait(list(refs), num_returns=1)
-            i = refs.pop(ready[0])
-            try:
-                r = ray.get(ready[0])
-            except Exception as e:  # ray.exceptions.RayError: the worker died, or the task could not run
-                for ref in refs:
-                    ray.cancel(ref, force=True)
-                raise WorkerFailed(f"Ray task for {ctx.sequences[i].name} failed ({type(e).__name__}); "
-                                   f"not finished: {_names(ctx, sorted(left))}; rerun with --resume to finish") from None
-            left.discard(i)
-            if r[0] != "ok":
-                for ref in refs:
-                    ray.cancel(ref, force=True)
-                _raise_failure(ctx, r, sorted(left))
-            done(r)
-    finally:
-        if started:
-            ray.shutdown()
+def _run_ray(ray, ctx, mine, out, resume, done, where) -> None:
+    """One Ray task per sequence on a started Ray (:class:`raycluster.RayEngine`). Stopped
+    (Ctrl-C, SIGTERM, a failure): Ray is shut down with its workers, and what they leave is
+    cleaned (:func:`clean_stopped`)."""
+    task = ray.remote(num_cpus=1)(_worker_task)
+    refs = {task.remote(where, str(Path(out).resolve()), i, resume): i for i in mine}
+    left = set(mine)
+    # stopped, no ray.cancel: cancelling tasks as they complete trips a check inside Ray (2.60:
+    # "Tried to complete task that was not pending", abort); Ray is shut down instead
+    while refs:
+        ready, _ = ray.wait(list(refs), num_returns=1)
+        i = refs.pop(ready[0])
+        try:
+            r = ray.get(ready[0])
+        except Exception as e:  # ray.exceptions.RayError: the worker died, or the task could not run
+            raise WorkerFailed(f"Ray task for {ctx.sequences[i].name} failed ({type(e).__name__}); "
+                               f"not finished: {_names(ctx, sorted(left))}; rerun with --resume to finish") from None
+        left.discard(i)
+        if r[0] != "ok":
+            _raise_failure(ctx, r, sorted(left))
+        done(r)
+
+
+def clean_stopped(root: Path, names: list[str], views) -> None:
+    """After workers were killed (a stopped Ray build): in this build's sequence folders, the
+    temporaries and staging folders of processes that are gone and lock files nobody holds
+    (never a live process's, never through a link)."""
+    from axdf_cli.fileio import runfolder
+
+    for n in names:
+        folder = Path(root) / n
+        if not folder.is_dir() or folder.is_symlink():
+            continue
+        dsfolder.remove_stale_lock(folder)
+        try:
+            runfolder.remove_stale(folder)
+        except OSError:
+            pass
+        atomic.remove_stale_temporaries([folder / "views" / v for v in views])
 
 
 # ----------------------------------------------------------------------------- build and merge
@@ -270,50 +266,74 @@ def build(path: Path | str, out: Path | str, *, seed: int | None = None, jobs: i
           progress=None, policy=None, ctx: wk.Context | None = None) -> Outcome:
     """Make this run's sequences (``shard`` = (K, N)); write the index when the whole data set
     is complete. ``progress(samples)`` is called as sequences finish; ``policy``: the command's
-    RefPolicy (the workers read the inputs with it)."""
+    RefPolicy (the workers read the inputs with it).
+
+    Order: every check of OUT (reads only), then the engine (a Ray address that does not
+    answer is refused here), then OUT is locked and written (dataset/folder.py)."""
     out = Path(out)
     ctx = ctx or wk.build_context(path, seed, policy)
     k, n = shard
     mine = [s.index for s in ctx.sequences if s.index % n == k]
-    prepare_out(out, ctx, mine, resume, overwrite)
-    res = Outcome(out, sequences=len(mine), samples=sum(_samples(ctx, i) for i in mine))
-    t0 = time.perf_counter()
-
-    def done(r):
-        _, i, _, timing, renderer = r
-        if timing.get("skipped"):
-            res.skipped += 1
-        else:
-            res.built += 1
-            res.built_samples += _samples(ctx, i)
-            for key in res.timing:
-                res.timing[key] += timing[key]
-        res.gl_renderer = res.gl_renderer or renderer
-        if progress:
-            progress(_samples(ctx, i))
-
-    where = _where(path, seed, ctx.spec.policy)
+    target = check_out(out, ctx, mine, resume, overwrite, n)
+    ray_engine = None
     if engine == "ray":
-        _run_ray(ctx, mine, out, jobs, resume, done, address, where)
-    else:
-        _run_local(ctx, mine, out, jobs, resume, done, where)
-    res.seconds = time.perf_counter() - t0
-    idx, rows, missing = finish(out, ctx.dataset_json)
-    res.index, res.rows, res.missing = idx, rows, missing
+        from axdf_cli.dataset.raycluster import RayEngine
+
+        ray_engine = RayEngine(address, jobs)
+    with contextlib.ExitStack() as stack:
+        if ray_engine is not None:  # (runs last: once Ray and its workers are gone)
+            stack.callback(clean_stopped, target.root, [ctx.sequences[i].name for i in mine], ctx.spec.views)
+        ray = stack.enter_context(ray_engine) if ray_engine is not None else None
+        fd = claim(target, ctx, mine, resume, shared=n > 1 and target.mode != "replace")
+        stack.callback(dsfolder.unlock_folder, fd)
+        stack.callback(dsfolder.discard_staging, target)
+        res = Outcome(out, sequences=len(mine), samples=sum(_samples(ctx, i) for i in mine))
+        t0 = time.perf_counter()
+
+        def done(r):
+            _, i, _, timing, renderer = r
+            if timing.get("skipped"):
+                res.skipped += 1
+            else:
+                res.built += 1
+                res.built_samples += _samples(ctx, i)
+                for key in res.timing:
+                    res.timing[key] += timing[key]
+            res.gl_renderer = res.gl_renderer or renderer
+            if progress:
+                progress(_samples(ctx, i))
+
+        where = _where(path, seed, ctx.spec.policy)
+        if ray is not None:
+            _run_ray(ray, ctx, mine, target.root, resume, done, where)
+        else:
+            _run_local(ctx, mine, target.root, jobs, resume, done, where)
+        res.seconds = time.perf_counter() - t0
+        idx, rows, missing = finish(target.root, ctx.dataset_json)
+        if target.mode == "replace":
+            if missing:  # (cannot happen: one process made every sequence)
+                raise WorkerFailed(f"the new data set is incomplete ({', '.join(missing[:3])}); the old one stays")
+            dsfolder.commit_replace(target)
+            idx = out / wk.INDEX
+        res.index, res.rows, res.missing = idx, rows, missing
     return res
 
 
 def finish(out: Path, dataset_json: bytes) -> tuple[Path | None, int, list[str]]:
-    """Write ``OUT/index.parquet`` when every sequence is complete: (path or None, rows, missing names)."""
-    import hashlib
+    """Write ``OUT/index.parquet`` when every sequence is complete: (path or None, rows,
+    missing names)."""
+    idx, rows, missing = _finish(out, dataset_json)
+    return idx, rows, [name for name, _ in missing]
 
+
+def _finish(out: Path, dataset_json: bytes) -> tuple[Path | None, int, list[tuple[str, str]]]:
     d = json.loads(dataset_json)
     digest = hashlib.sha256(dataset_json).hexdigest()
     records, missing = [], []
     for s in d["sequences"]:
-        rec = wk.read_record(Path(out) / s["name"], digest)
+        rec, why = wk.record_state(Path(out) / s["name"], digest)
         if rec is None:
-            missing.append(s["name"])
+            missing.append((s["name"], why))
         else:
             records.append(rec)
     if missing:
@@ -324,20 +344,30 @@ def finish(out: Path, dataset_json: bytes) -> tuple[Path | None, int, list[str]]
 
 
 def merge(out: Path | str) -> tuple[Path, int]:
-    """``axdf dataset merge OUT``: join the shards' sequences into the index."""
+    """``axdf dataset merge OUT``: join the shards' sequences into the index (OUT locked; a
+    folder that holds no axdf data set, or a damaged dataset.json, is exit 2 with its
+    position)."""
     out = Path(out)
-    dj = out / wk.DATASET_JSON
+    m = dsfolder.check_merge(out)
+    fd = dsfolder.lock_folder(out, what=str(out))
     try:
-        data = dj.read_bytes()
-        json.loads(data)
-    except FileNotFoundError:
-        raise InputError(Mark(str(dj)), "no dataset.json", "give a folder written by axdf dataset build") from None
-    except (OSError, ValueError) as e:
-        raise InputError(Mark(str(dj)), f"unreadable dataset.json ({e})", "give a folder written by axdf dataset build") \
-            from None
-    idx, rows, missing = finish(out, data)
+        data = (out / wk.DATASET_JSON).read_bytes()
+        if hashlib.sha256(data).hexdigest() != m.sha:
+            raise InputError(None, f"{out / wk.DATASET_JSON} changed while axdf was reading it", "run again")
+        idx, rows, missing = _finish(out, data)
+    finally:
+        dsfolder.unlock_folder(fd)
     if missing:
+        other = [n for n, why in missing if why.startswith("made for another data set")]
+        names = [n for n, _ in missing]
         more = f" and {len(missing) - 8} more" if len(missing) > 8 else ""
-        raise InputError(None, f"{len(missing)} sequence(s) of {out} are not complete: {', '.join(missing[:8])}{more}",
+        if other:
+            raise InputError(m.mark(("seed",)), f"{len(other)} sequence(s) of {out} were made for another data set "
+                             f"than its dataset.json (other seed, inputs or settings; first: {other[0]}); "
+                             f"{len(missing)} not complete: {', '.join(names[:8])}{more}",
+                             "build every shard with the same dataset file and --seed (rerun the others with "
+                             "--overwrite), then merge")
+        raise InputError(None, f"{len(missing)} sequence(s) of {out} are not complete: {', '.join(names[:8])}{more} "
+                         f"({missing[0][0]}: {missing[0][1]})",
                          "finish every shard (rerun it with --resume), then merge")
     return idx, rows

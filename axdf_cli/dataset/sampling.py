@@ -10,7 +10,7 @@ on how the work is split: any worker, shard or cluster node draws the same numbe
 Poses. A sampled sequence is a :class:`~axdf_cli.specs.Pose` (the type ``load_pose``
 returns), never a file. ``uniform``: at each key frame every coordinate is drawn uniformly in
 its range (the dataset file's ``coordinates:`` range, else the skeleton's; ``fixed`` ones are
-held), and frames between keys are interpolated with PCHIP, which never leaves the span of
+held; coupled coordinates are not drawn: they follow theirs), and frames between keys are interpolated with PCHIP, which never leaves the span of
 its keys, so every frame stays within range. ``perturb``: the base motion plus Gaussian
 noise of the given spread (``default`` for every rotation; a translation only when named),
 drawn at key frames and interpolated linearly, then clipped to the range (a coordinate
@@ -54,13 +54,17 @@ def key_frames(frames: np.ndarray, keys: int | None) -> np.ndarray:
 
 def coordinate_bounds(spec: DatasetSpec, skeleton) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Per coordinate (skeleton order): lo (C,), hi (C,), whether it is held (C,) bool and its
-    held value (C,). Without any range lo/hi are -inf/+inf."""
+    held value (C,). Without any range lo/hi are -inf/+inf. A coupled coordinate is held at
+    its rest value here (it is never keyed: it follows its leader when the pose is sampled)."""
     n = len(skeleton.coordinates)
     lo, hi = np.full(n, -np.inf), np.full(n, np.inf)
     held, value = np.zeros(n, bool), skeleton.rest_coordinates()
     for i, c in enumerate(skeleton.coordinates):
         rule = spec.coordinates.get(c.name)
-        if rule is not None and rule.fixed is not None:
+        if c.follows is not None:
+            held[i] = True
+            lo[i] = hi[i] = value[i]
+        elif rule is not None and rule.fixed is not None:
             held[i], value[i] = True, rule.fixed
             lo[i] = hi[i] = rule.fixed
         elif rule is not None and rule.range is not None:
@@ -80,7 +84,8 @@ def sample_pose(spec: DatasetSpec, seq: Sequence, skeleton, base: Pose | None, f
         # q[k, c] = lo[c] + u[k, c] (hi[c] - lo[c]) at key frame k; held coordinates keep their value
         u = np.stack([rng_for(spec.seed, STREAM_POSE, seq.index, f).random(len(names)) for f in kf])
         q = np.where(held, value, lo + u * (hi - lo))
-        keys = {c: (tuple(int(f) for f in kf), tuple(float(x) for x in q[:, i])) for i, c in enumerate(names)}
+        keys = {c: (tuple(int(f) for f in kf), tuple(float(x) for x in q[:, i])) for i, c in enumerate(names)
+                if skeleton.coordinates[i].follows is None}  # coupled coordinates follow their keyed leaders
         pose = Pose(seq.name, skeleton, spec.fps, int(frames[0]), int(frames[-1]),
                     "cubic" if len(kf) >= 3 else "linear", keys, {}, {}, "", skeleton.source)
     else:
@@ -97,7 +102,8 @@ def sample_pose(spec: DatasetSpec, seq: Sequence, skeleton, base: Pose | None, f
             q = q + np.stack([np.interp(every, kf, noise[:, i]) for i in range(len(names))], axis=1)
         q = np.where(held, value, np.clip(q, lo, hi))
         fr = tuple(int(f) for f in every)
-        keys = {c: (fr, tuple(float(x) for x in q[:, i])) for i, c in enumerate(names)}
+        keys = {c: (fr, tuple(float(x) for x in q[:, i])) for i, c in enumerate(names)
+                if skeleton.coordinates[i].follows is None}
         pose = replace(base, name=seq.name, skeleton=skeleton, keys=keys, interpolation="linear",
                        activation_marks={})
     return pose

@@ -12,6 +12,7 @@ from pathlib import Path
 from axdf_cli.dataset.door import (FRAME_WRITERS, RenderSettings, load_muscle_specs, motion_pose, parse_camera,
                                    parse_render_settings, retarget_pose)
 from axdf_cli.errors import InputError, Mark
+from axdf_cli.tolerances import MAX_ABS_NUMBER, MAX_FPS, MAX_SEED
 from axdf_cli.formats import WRITERS
 from axdf_cli.specs import Pose, RefPolicy, expand_muscle_paths, load_pose, load_skeleton
 from axdf_cli.fileio.yamlio import Fields, check_name, check_number, check_vector, item_marks, load_yaml, mark_of
@@ -23,6 +24,9 @@ CAMERA_PER = ("sequence", "frame")
 MAX_SEQUENCES = 10_000_000
 MAX_FRAMES = 100_000
 MAX_VIEWS = 64
+#: A sphere camera's nearest distance to its target (m): closer, the view matrix loses its
+#: precision (1e-300 gave NaN cameras and labels); 1 mm is far below any useful view.
+MIN_CAMERA_DISTANCE = 1e-3
 DEFAULT_VISIBILITY_TOLERANCE = 0.1  # metres; see labels.visibility
 RENDER_KEYS_ELSEWHERE = ("enabled", "view", "camera", "orbit", "fov")
 DATASET_KEYS = ("dataset", "seed", "skeleton", "muscles", "fps", "coordinates", "motions", "sequences", "activation",
@@ -145,7 +149,7 @@ def load_dataset(path: Path | str, seed: int | None = None, policy: RefPolicy | 
     top = Mark(str(path), 1, 1)
     f = Fields(doc, top, "dataset file", keys=DATASET_KEYS)
     name = f.name("dataset", required=True)
-    file_seed = int(f.number("seed", default=0, lo=0, hi=2**63 - 1, integer=True))
+    file_seed = int(f.number("seed", default=0, lo=0, hi=MAX_SEED, integer=True))
     skel_ref = f.string("skeleton", required=True)
     skel_path = policy.resolve(path, skel_ref, f.vmark("skeleton"), "skeleton")
     if not skel_path.is_file():
@@ -167,7 +171,7 @@ def load_dataset(path: Path | str, seed: int | None = None, policy: RefPolicy | 
     files = expand_muscle_paths(entries_paths, policy, path.parent)
     muscle_names = [m.name for m in load_muscle_specs(files)]
 
-    fps = float(f.number("fps", default=30.0, lo=0.0, hi=100000.0, lo_open=True))
+    fps = float(f.number("fps", default=30.0, lo=0.0, hi=MAX_FPS, lo_open=True))
     coords = _parse_coordinates(f.mapping("coordinates", default=None), f.vmark("coordinates"), skel)
     motions = _parse_motions(f.mapping("motions", default=None), f.vmark("motions"), path, policy)
     seq_raw = f.seq("sequences", required=True, min_len=1)
@@ -206,6 +210,10 @@ def _parse_coordinates(value, where: Mark, skel) -> dict:
         if cname not in skel.coord_index:
             raise InputError(km, f"unknown coordinate {cname!r}",
                              f"coordinates of skeleton {skel.name}: {', '.join(skel.coord_index)}")
+        leader = skel.coordinates[skel.coord_index[cname]].follows
+        if leader is not None:
+            raise InputError(km, f"coordinate {cname!r} is coupled: it follows {leader!r}",
+                             f"set {leader!r} instead; coupled coordinates are never drawn")
         cf = Fields(cval, value.value_mark(cname), f"coordinate {cname}")
         rng = cf.vector("range", 2, default=None)
         fixed = cf.number("fixed", default=None)
@@ -292,7 +300,7 @@ def _parse_entry(value, where: Mark, motions: dict, skel, coords: dict) -> Entry
         # every sampled coordinate needs a range (the skeleton's, or one given here)
         for c in skel.coordinates:
             rule = coords.get(c.name)
-            if rule is None and c.range is None:
+            if rule is None and c.range is None and c.follows is None:
                 raise InputError(f.vmark("sample"), f"coordinate {c.name!r} has no range to sample",
                                  f"give coordinates: {{{c.name}: {{range: [lo, hi]}}}} or {{fixed: value}} "
                                  "in the dataset file, or a range in the skeleton")
@@ -310,6 +318,10 @@ def _parse_entry(value, where: Mark, motions: dict, skel, coords: dict) -> Entry
             if cname != "default" and cname not in skel.coord_index:
                 raise InputError(sm.key_mark(cname), f"unknown coordinate {cname!r}",
                                  f"'default' or coordinates of skeleton {skel.name}")
+            if cname != "default" and skel.coordinates[skel.coord_index[cname]].follows is not None:
+                raise InputError(sm.key_mark(cname), f"coordinate {cname!r} is coupled: it follows "
+                                 f"{skel.coordinates[skel.coord_index[cname]].follows!r}",
+                                 "spread free coordinates; coupled ones follow theirs")
             spread[cname] = float(check_number(v, sm.value_mark(cname), f"spread of {cname}", lo=0.0))
     f.done()
     return Entry(mode, count, base, frames, None if keys is None else int(keys), spread, where)
@@ -367,7 +379,7 @@ def _parse_cameras(value, where: Mark, skel):
         return tuple(rig), None
     s = Fields(f.mapping("sphere"), f.vmark("sphere"), "sphere")
     views = int(s.number("views", default=1, lo=1, hi=MAX_VIEWS, integer=True))
-    dist = s.vector("distance", 2, required=True, lo=0.0, lo_open=True)
+    dist = s.vector("distance", 2, required=True, lo=MIN_CAMERA_DISTANCE, hi=MAX_ABS_NUMBER)
     elev = s.vector("elevation", 2, default=(0.0, 30.0), lo=-80.0, hi=80.0)
     azim = s.vector("azimuth", 2, default=(0.0, 360.0), lo=-720.0, hi=720.0)
     for key, v in (("distance", dist), ("elevation", elev), ("azimuth", azim)):
@@ -424,6 +436,28 @@ def _parse_render(value, where: Mark):
 
 
 # ----------------------------------------------------------------------------- sequences
+
+
+def entry_frames(spec: DatasetSpec, k: int) -> int:
+    """Frames of each sequence of entry ``k``."""
+    e = spec.entries[k]
+    return e.frames if e.kind == "uniform" else len(motion_frames(spec, e.motion))
+
+
+def count(spec: DatasetSpec, shard=(0, 1)) -> tuple[int, int, int]:
+    """(sequences of the data set, sequences of shard K/N, their frames), counted without
+    listing them: ``--dry-run`` stays small and fast for any number of sequences."""
+    k, n = shard
+    start = total = mine = frames = 0
+    for i, e in enumerate(spec.entries):
+        # indices start .. start + count - 1 that are k modulo n
+        first = start + (k - start) % n
+        m = 0 if first >= start + e.count else (start + e.count - 1 - first) // n + 1
+        mine += m
+        frames += m * entry_frames(spec, i)
+        start += e.count
+        total += e.count
+    return total, mine, frames
 
 
 def expand_sequences(spec: DatasetSpec) -> list[Sequence]:

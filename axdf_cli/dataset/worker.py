@@ -19,10 +19,13 @@ from pathlib import Path
 import numpy as np
 
 from axdf_cli import __version__
-from axdf_cli.fileio import atomic
+from axdf_cli.fileio import atomic, runfolder
 from axdf_cli.dataset import amodal as coco
+from axdf_cli.dataset import folder as dsfolder
+from axdf_cli.dataset.folder import DATASET_JSON, INDEX, RECORD  # noqa: F401  (RECORD: written last)
 from axdf_cli.dataset import labels as lab
 from axdf_cli.dataset import door
+from axdf_cli.errors import InputError
 from axdf_cli.dataset.sampling import sample_pose, with_activation
 from axdf_cli.dataset.spec import (DatasetSpec, Sequence, expand_sequences, load_dataset, load_motion,
                                    motion_frames)
@@ -31,10 +34,7 @@ from axdf_cli.model.keypoints import skeleton_keypoints
 from axdf_cli.model.pose import sample_activation, sample_coordinates
 from axdf_cli.model.skeleton import forward_kinematics
 
-RECORD = "sequence.json"  # written last: the sequence is complete
 AMODAL = "amodal.json"  # with the amodal pass: COCO annotations of each muscle's full extent
-DATASET_JSON = "dataset.json"
-INDEX = "index.parquet"
 LABELS = "labels.npz"
 
 
@@ -62,9 +62,11 @@ class Context:
         return [m.name for m in self.muscles]
 
 
-def build_context(path: Path | str, seed: int | None = None, policy=None) -> Context:
+def build_context(path: Path | str, seed: int | None = None, policy=None, listed: bool = True) -> Context:
     """Load and check everything (InputError on bad input); build the muscle models once.
-    ``policy``: the command's :class:`~axdf_cli.specs.RefPolicy` (where referenced files may lie)."""
+    ``policy``: the command's :class:`~axdf_cli.specs.RefPolicy` (where referenced files may
+    lie). ``listed`` False: the sequences are not listed and dataset.json not made (``--dry-run``:
+    memory and time independent of the number of sequences; :func:`spec.count` counts them)."""
     from axdf_cli.render.scene import Scene, SceneBone, SceneMuscle
 
     spec = load_dataset(path, seed, policy)
@@ -80,10 +82,12 @@ def build_context(path: Path | str, seed: int | None = None, policy=None) -> Con
     scene = Scene(muscles=tuple(SceneMuscle(s.name, s.color, m.faces) for s, m in zip(muscles, models)),
                   bones=tuple(SceneBone(skel.bones[i].name, bone_meshes[i][0], bone_meshes[i][1]) for i in scene_bones),
                   bounds=np.zeros((2, 3)), frames=())
-    sequences = expand_sequences(spec)
+    sequences = expand_sequences(spec) if listed else []
     keypoints = skeleton_keypoints(skel, {i: m[0] for i, m in bone_meshes.items()})
     ctx = Context(spec, sequences, skel, door.without_meshes(skel), muscles, models, bone_meshes, keypoints,
                   inputs, motion_inputs, scene, scene_bones, b"", "", stages=door.build_stages(muscles=muscles))
+    if not listed:
+        return ctx
     ctx.dataset_json = (json.dumps(dataset_dict(ctx), indent=1) + "\n").encode()
     ctx.digest = hashlib.sha256(ctx.dataset_json).hexdigest()
     return ctx
@@ -141,15 +145,30 @@ def dataset_dict(ctx: Context) -> dict:
 
 def read_record(folder: Path, digest: str) -> dict | None:
     """The sequence's record when it is complete (same data set, every listed file present)."""
+    return record_state(folder, digest)[0]
+
+
+def record_state(folder: Path, digest: str) -> tuple[dict | None, str]:
+    """(the record, "") when the sequence is complete; else (None, why not)."""
     try:
         rec = json.loads((folder / RECORD).read_text())
-    except (OSError, ValueError):
-        return None
-    if not isinstance(rec, dict) or rec.get("dataset") != digest:
-        return None
-    if not all((folder / rel).is_file() for rel in rec.get("files", {})):
-        return None
-    return rec
+    except FileNotFoundError:
+        return None, "not made yet (no sequence.json)"
+    except (OSError, ValueError, RecursionError) as e:
+        return None, f"its sequence.json is unreadable ({type(e).__name__})"
+    if not isinstance(rec, dict):
+        return None, "its sequence.json is not an object"
+    if rec.get("dataset") != digest:
+        return None, ("made for another data set (its sequence.json names another dataset.json: other seed, "
+                      "inputs or settings)")
+    files = rec.get("files")
+    if not isinstance(files, dict):
+        return None, "its sequence.json lists no files"
+    gone = [rel for rel in files if not (isinstance(rel, str) and runfolder.plain_relpath(rel)
+                                         and (folder / rel).is_file())]
+    if gone:
+        return None, f"{gone[0]} is missing"
+    return rec, ""
 
 
 def sequence_pose(ctx: Context, seq: Sequence):
@@ -189,11 +208,11 @@ def release_renderer() -> None:
 
 def build_sequence(ctx: Context, index: int, out: Path, resume: bool) -> tuple[dict, dict]:
     """Make sequence ``index`` whole in ``out``; return (its record, seconds per stage).
-    With ``resume`` a complete sequence is kept as it is and a partial one finished."""
-    from axdf_cli.render.views import view_camera, write_view_images
-
+    With ``resume`` a complete sequence is kept as it is and a partial one finished;
+    otherwise it is made again: the files its earlier record lists and the new one lacks
+    are deleted once the new record is written, nothing else (dataset/folder.py). The
+    sequence folder is locked while it is made (another writer: exit 3)."""
     seq = ctx.sequences[index]
-    spec = ctx.spec
     folder = Path(out) / seq.name
     timing = {"run": 0.0, "read": 0.0, "render": 0.0, "write": 0.0, "cpu": 0.0, "skipped": 0}
     if resume:
@@ -201,6 +220,25 @@ def build_sequence(ctx: Context, index: int, out: Path, resume: bool) -> tuple[d
         if rec is not None:
             timing["skipped"] = 1
             return rec, timing
+    runfolder.check_dirs(Path(out), [seq.name])
+    atomic.ensure_dir(folder)
+    fd = dsfolder.lock_folder(folder, what=str(folder))
+    try:
+        dsfolder.remove_stale_lock(folder)
+        return _make_sequence(ctx, seq, folder, resume, timing)
+    finally:
+        dsfolder.unlock_folder(fd)
+
+
+def _make_sequence(ctx: Context, seq: Sequence, folder: Path, resume: bool, timing: dict) -> tuple[dict, dict]:
+    from axdf_cli.render.views import view_camera, write_view_images
+
+    spec = ctx.spec
+    old = _json_file(folder / RECORD)
+    old_files = [r for r in (old.get("files") or {}) if runfolder.plain_relpath(r)] \
+        if isinstance(old, dict) and isinstance(old.get("files"), dict) else []
+    if os.path.lexists(folder / RECORD):  # made again: incomplete until the new record is written
+        runfolder.remove_listed(runfolder.Root(folder), RECORD)
     t0, c0 = time.perf_counter(), time.process_time()
     pose, frames = sequence_pose(ctx, seq)
     entry = spec.entries[seq.entry]
@@ -209,7 +247,7 @@ def build_sequence(ctx: Context, index: int, out: Path, resume: bool) -> tuple[d
         inputs.update(ctx.motion_inputs[entry.motion])
     plan = door.sequence_plan(pose, frames, ctx.muscles, ctx.models, spec.format, folder, inputs, ctx.stages,
                               ctx.bone_meshes)
-    summary = door.run_sequence(plan, resume and folder.exists())
+    summary = door.run_sequence(plan, resume)
     t1 = time.perf_counter()
     timing["run"] = t1 - t0
 
@@ -219,6 +257,7 @@ def build_sequence(ctx: Context, index: int, out: Path, resume: bool) -> tuple[d
     subject = lab.subject_points(ctx.skeleton, world, ctx.bone_meshes)
     K, w2c, clip = lab.view_cameras(spec, seq, frames, subject, world, ctx.skeleton.bone_index)
     uv, z = lab.project(K, w2c, joints)
+    _check_finite(seq.name, K=K, world_to_camera=w2c, joints3d=joints, joints2d=uv, joints_depth=z)
     views = spec.views
     nf, nv = len(frames), len(views)
     W, H = spec.render.size
@@ -230,6 +269,7 @@ def build_sequence(ctx: Context, index: int, out: Path, resume: bool) -> tuple[d
     t_read = t_render = 0.0
     t_write = time.perf_counter() - t1  # labels so far
     vr = view_renderer(ctx)  # once per process
+    root = runfolder.Root(folder)  # never through a link (views, views/<view>)
     for fi, frame in enumerate(frames):
         ta = time.perf_counter()
         pos, nrm = door.written_meshes(plan, int(frame))
@@ -244,7 +284,7 @@ def build_sequence(ctx: Context, index: int, out: Path, resume: bool) -> tuple[d
         visible[fi] = lab.visibility(uv[fi:fi + 1], z[fi:fi + 1], depth, spec.visibility_tolerance)[0]
         for v, im in enumerate(imgs):
             rel = f"views/{views[v]}"
-            files.update(write_view_images(folder / rel, rel, im, spec.passes))
+            files.update(write_view_images(root.path(f"{rel}/{int(frame):04d}").parent, rel, im, spec.passes))
             if amodal:
                 image_id = len(coco_images)
                 coco_images.append({"id": image_id, "file_name": f"{rel}/{int(frame):04d}.png", "width": W,
@@ -266,16 +306,35 @@ def build_sequence(ctx: Context, index: int, out: Path, resume: bool) -> tuple[d
         "joint_bones": ctx.keypoints.bones, "bone_names": np.array([b.name for b in ctx.skeleton.bones]),
         "muscle_names": np.array(ctx.names), "view_names": np.array(list(views)),
     }
-    files[LABELS] = atomic.write_bytes(folder / LABELS, lab.npz_bytes(arrays))
+    files[LABELS] = atomic.write_bytes(root.path(LABELS), lab.npz_bytes(arrays))
     if amodal:
-        files[AMODAL] = atomic.write_text(folder / AMODAL, json.dumps(
+        files[AMODAL] = atomic.write_text(root.path(AMODAL), json.dumps(
             coco.coco_dict(ctx.names, coco_images, coco_anns), separators=(",", ":")) + "\n")
     manifest = json.loads((folder / "manifest.json").read_text())
     files.update(manifest.get("files", {}))
     files["manifest.json"] = atomic.sha256_file(folder / "manifest.json")
     rec = {"dataset": ctx.digest, "sequence": seq.name, "index": seq.index, "source": entry.label,
            "frames": [int(f) for f in frames], "views": list(views), "files": dict(sorted(files.items()))}
-    atomic.write_text(folder / RECORD, json.dumps(rec, indent=1) + "\n")
+    atomic.write_text(root.path(RECORD), json.dumps(rec, indent=1) + "\n")
+    for rel in old_files:  # what the earlier record listed and this one does not (never anything else)
+        if rel not in files and rel != RECORD:
+            runfolder.remove_listed(root, rel)
     t_write += time.perf_counter() - t2
     timing.update(read=t_read, render=t_render, write=t_write, cpu=time.process_time() - c0)
     return rec, timing
+
+
+def _check_finite(name: str, **arrays) -> None:
+    """Labels are finite numbers, or the sequence is refused before its views are written."""
+    for key, a in arrays.items():
+        if not np.all(np.isfinite(a)):
+            raise InputError(None, f"{name}: its labels' {key} are not finite numbers (a camera at the subject's "
+                             "centre, or a degenerate view)", "cameras at a distance from the subject "
+                             "(cameras: sphere distance, or rig positions away from their targets)")
+
+
+def _json_file(path: Path):
+    try:
+        return json.loads(Path(path).read_text()) if not os.path.islink(path) else None
+    except (OSError, ValueError, RecursionError):
+        return None

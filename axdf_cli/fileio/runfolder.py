@@ -59,8 +59,16 @@ STAGING_PREFIX = ".axdf-new-"
 LAYOUT_DIRS = ("meshes", "bones", "frames")
 
 # the manifest's keys, in the one order every writer uses (unknown keys follow, sorted)
-MANIFEST_KEYS = ("tool", "version", "complete", "inputs", "settings", "frames", "muscles", "bones",
-                 "warnings", "files", "bounds", "gl")
+MANIFEST_KEYS = ("tool", "version", "command", "complete", "inputs", "settings", "frames", "muscles", "bones",
+                 "warnings", "files", "outside", "outside_previous", "bounds", "gl")
+#: The command that wrote a folder (``command`` in its manifest; a run's manifest has none).
+RUN_COMMAND = "run"
+
+
+def command_of(manifest: "Manifest") -> str:
+    """The command whose output a manifest describes: ``run`` unless it says otherwise."""
+    c = manifest.data.get("command", RUN_COMMAND)
+    return c if isinstance(c, str) else repr(c)
 
 
 def mesh_relpath(muscle: str, frame: int, fmt: str) -> str:
@@ -444,13 +452,17 @@ def read_run_manifest(folder: Path) -> Manifest:
     return m
 
 
-def prepare(out: Path, *, resume: bool = False, overwrite: bool = False, dirs=()) -> Target:
+def prepare(out: Path, *, resume: bool = False, overwrite: bool = False, dirs=(), command: str = RUN_COMMAND,
+            resumable: bool = True) -> Target:
     """Check an output folder before anything is written (this only reads).
 
-    Absent or empty: a new run. Holding an axdf run: refused unless ``resume`` or
-    ``overwrite``. Anything else that is not empty: refused. ``dirs``: the folders below OUT
-    that will be written into; none of them may be a link."""
+    Absent or empty: a new run. Holding the output of ``command`` (its manifest says
+    ``tool: axdf`` and that command): refused unless ``resume`` or ``overwrite``. The output
+    of another axdf command, or anything else that is not empty: refused. ``dirs``: the
+    folders below OUT that will be written into; none of them may be a link. ``resumable``:
+    whether the command has ``--resume`` (the messages say what to pass)."""
     out = Path(out)
+    what = "axdf run" if command == RUN_COMMAND else f"axdf {command}"
     try:
         is_dir = out.is_dir()
         entries = [n for n in os.listdir(out) if not own_entry(n)] if is_dir else None
@@ -459,7 +471,7 @@ def prepare(out: Path, *, resume: bool = False, overwrite: bool = False, dirs=()
     except OSError as e:
         raise atomic.environment_problem(out, e) from None
     if entries is None:
-        if not out.exists():
+        if not os.path.lexists(out):
             return Target(out, None, False, tuple(dirs))
         raise InputError(None, f"output folder {out} exists and is not a folder", "give a folder")
     if not entries:
@@ -472,13 +484,20 @@ def prepare(out: Path, *, resume: bool = False, overwrite: bool = False, dirs=()
             raise  # a damaged manifest of what may be a run: say where
         previous = None
     if previous is None:
-        raise InputError(None, f"output folder {out} is not empty and holds no axdf run "
-                         "(no manifest.json with tool 'axdf')",
-                         "--overwrite and --resume only replace or finish axdf's own runs; "
-                         "choose an empty or new output folder")
+        raise InputError(None, f"output folder {out} is not empty and holds no "
+                         f"{'axdf run' if command == RUN_COMMAND else 'axdf output'} (no manifest.json with tool 'axdf')",
+                         f"{'--overwrite and --resume only replace or finish' if resumable else '--overwrite only replaces'}"
+                         " axdf's own output; choose an empty or new output folder")
+    if command_of(previous) != command:
+        theirs = command_of(previous)
+        raise InputError(previous.mark(("command",) if "command" in previous.data else ("tool",)),
+                         f"output folder {out} holds the output of "
+                         f"{'axdf run' if theirs == RUN_COMMAND else 'axdf ' + theirs}, not of {what}",
+                         f"{what} writes only into an empty or new folder or one it wrote; choose another output folder")
     if not (resume or overwrite):
-        raise InputError(None, f"output folder {out} is not empty (it holds an earlier run)",
-                         "pass --resume to finish an interrupted run, --overwrite to replace it, or another --out")
+        raise InputError(None, f"output folder {out} is not empty (it holds an earlier {what})",
+                         ("pass --resume to finish an interrupted run, --overwrite to replace it, or another --out"
+                          if resumable else "pass --overwrite to replace it, or another --out"))
     check_dirs(out, dirs)
     return Target(out, previous, overwrite, tuple(dirs))
 
@@ -500,29 +519,72 @@ def remove_stale(out: Path, dirs=()) -> None:
                 shutil.rmtree(e.path, ignore_errors=True)
 
 
+def lock_file(path: Path, folder: Path) -> int:
+    """Take ``flock`` on the lock file ``path`` (created, never through a link) for the one
+    writer of ``folder``; return its descriptor. Another holder: exit 3 naming its pid."""
+    import fcntl
+
+    for _ in range(8):
+        try:
+            fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644)
+        except OSError as e:
+            if e.errno == errno.ELOOP:
+                raise _refuse_link(path) from None
+            raise atomic.environment_problem(path, e) from None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            owner = os.read(fd, 32).decode("ascii", "replace").strip()
+            os.close(fd)
+            raise EnvironmentProblem(
+                f"another axdf process{f' (pid {owner})' if owner.isdigit() else ''} is writing {folder}",
+                "wait for it to finish, or choose another output folder") from None
+        try:
+            same = os.fstat(fd).st_ino == os.stat(path, follow_symlinks=False).st_ino
+        except FileNotFoundError:
+            same = False
+        if same:
+            os.ftruncate(fd, 0)
+            os.write(fd, f"{os.getpid()}\n".encode())
+            return fd
+        os.close(fd)  # its holder removed it as we opened it: lock the file there now
+    raise EnvironmentProblem(f"cannot lock {path}", "try again")
+
+
+def unlock_file(path: Path, fd: int) -> None:
+    """Release :func:`lock_file`'s lock and remove the file (a waiting writer locks anew)."""
+    try:
+        os.unlink(path)
+    except OSError:
+        pass
+    os.close(fd)
+
+
 class Session:
     """The one writer in an output folder, from the lock to the final manifest.
 
     ``with Session(target) as s``: creates OUT, takes the lock (another writer: exit 3),
     checks that OUT is still what :func:`prepare` saw, removes stale temporaries; ``s.root``
-    is where to write (a staging folder when replacing a run). :meth:`commit` writes the
-    final manifest (and swaps a replacement in); leaving the block releases the lock and,
-    without a commit, removes the staging folder (the old run stays as it was)."""
+    is where to write (a staging folder when replacing a run, or always with ``stage``: a
+    one-shot command's output appears whole). :meth:`commit` writes the final manifest (and
+    swaps a staged output in); leaving the block releases the lock and, without a commit,
+    removes the staging folder (the old output stays as it was)."""
 
-    def __init__(self, target: Target):
+    def __init__(self, target: Target, stage: bool = False):
         self.target = target
         self.out = target.out
-        self.root = self.out / f"{STAGING_PREFIX}{os.getpid()}" if target.replace else self.out
+        self.staged = target.replace or stage
+        self.root = self.out / f"{STAGING_PREFIX}{os.getpid()}" if self.staged else self.out
         self.previous_files = target.previous.files() if target.previous is not None and not target.replace else {}
         self._fd = None
 
     def __enter__(self) -> "Session":
         atomic.ensure_dir(self.out)
-        self._lock()
+        self._fd = lock_file(self.out / LOCK, self.out)
         try:
             self._verify()
             remove_stale(self.out, self.target.dirs)
-            if self.target.replace:
+            if self.staged:
                 shutil.rmtree(self.root, ignore_errors=True)
                 atomic.ensure_dir(self.root)
         except BaseException:
@@ -532,51 +594,15 @@ class Session:
 
     def __exit__(self, *exc) -> None:
         try:
-            if self.target.replace:
+            if self.staged:
                 shutil.rmtree(self.root, ignore_errors=True)
         finally:
             self._unlock()
 
-    def _lock(self) -> None:
-        import fcntl
-
-        path = self.out / LOCK
-        for _ in range(8):
-            try:
-                fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644)
-            except OSError as e:
-                if e.errno == errno.ELOOP:
-                    raise _refuse_link(path) from None
-                raise atomic.environment_problem(path, e) from None
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except OSError:
-                owner = os.read(fd, 32).decode("ascii", "replace").strip()
-                os.close(fd)
-                raise EnvironmentProblem(
-                    f"another axdf process{f' (pid {owner})' if owner.isdigit() else ''} is writing {self.out}",
-                    "wait for it to finish, or choose another output folder") from None
-            try:
-                same = os.fstat(fd).st_ino == os.stat(path, follow_symlinks=False).st_ino
-            except FileNotFoundError:
-                same = False
-            if same:
-                os.ftruncate(fd, 0)
-                os.write(fd, f"{os.getpid()}\n".encode())
-                self._fd = fd
-                return
-            os.close(fd)  # its holder removed it as we opened it: lock the file there now
-        raise EnvironmentProblem(f"cannot lock {path}", "try again")
-
     def _unlock(self) -> None:
-        if self._fd is None:
-            return
-        try:
-            os.unlink(self.out / LOCK)
-        except OSError:
-            pass
-        os.close(self._fd)
-        self._fd = None
+        if self._fd is not None:
+            unlock_file(self.out / LOCK, self._fd)
+            self._fd = None
 
     def _verify(self) -> None:
         prev = self.target.previous
@@ -591,42 +617,58 @@ class Session:
             raise InputError(None, f"output folder {self.out} changed while axdf was checking it",
                              "another process wrote there; run again")
 
-    def commit(self, manifest: dict) -> None:
-        """Write the final manifest; when replacing a run, swap the new run in: the old run's
-        listed files that the new one lacks are deleted, the new files renamed into place,
-        the manifest last. Signals wait until the swap is done."""
+    def commit(self, manifest: dict, interim: dict | None = None, during=None) -> None:
+        """Write the final manifest; when the output was staged, swap it in: the old
+        output's listed files that the new one lacks are deleted, the new files renamed into
+        place, the manifest last. Signals wait until the swap is done.
+
+        ``interim``: keys added to the manifest OUT holds while swapping; ``during()``: work
+        done in that window, before the files move (a command's files outside OUT)."""
         write_manifest(self.root, manifest)
-        if not self.target.replace:
+        if not self.staged:
             return
-        old = self.target.previous
-        old_files = old.files()
+        old = self.target.previous if self.target.replace else None
+        old_data = old.data if old is not None else {k: manifest[k] for k in ("tool", "version", "command")
+                                                     if k in manifest}
+        old_files = old.files() if old is not None else {}
         new_files = manifest.get("files", {})
         with atomic.deferred_signals():
-            # while swapping, the manifest says "incomplete" and lists both runs' files: a
+            # while swapping, the manifest says "incomplete" and lists both outputs' files: a
             # kill here leaves a folder that --overwrite replaces again
-            write_manifest(self.out, dict(old.data, complete=False, files={**old_files, **new_files}))
-            dest = Root(self.out)
-            emptied = set()
+            write_manifest(self.out, dict(old_data, **(interim or {}), complete=False,
+                                          files={**old_files, **new_files}))
+            if during is not None:
+                during()
+            swap_in(self.root, self.out, old_files, new_files)
+
+
+def swap_in(staging: Path, out: Path, old_files, new_files, last: str = MANIFEST) -> None:
+    """Replace an output by a complete one built in ``staging``: delete ``old_files`` (the
+    old manifest's) that ``new_files`` lacks, rename every new file into place (never
+    through a link), ``last`` (the manifest) last; remove ``staging`` and the folders the old files
+    leave empty. Machine errors are exit 3."""
+    staging, out = Path(staging), Path(out)
+    dest = Root(out)
+    emptied = set()
+    try:
+        for rel in old_files:
+            if rel not in new_files:
+                remove_listed(dest, rel)
+                emptied.add(PurePosixPath(rel).parent)
+        for rel in [r for r in new_files if r != last] + [last]:
+            path = dest.path(rel)
+            atomic.ensure_dir(path.parent)
+            os.replace(staging / rel, path)
+    except OSError as e:
+        raise atomic.environment_problem(out, e) from None
+    shutil.rmtree(staging, ignore_errors=True)
+    for d in sorted(emptied, key=lambda p: -len(p.parts)):
+        while d.parts:  # folders the old files leave empty
             try:
-                for rel in old_files:
-                    if rel not in new_files:
-                        remove_listed(dest, rel)
-                        emptied.add(PurePosixPath(rel).parent)
-                for rel in new_files:
-                    path = dest.path(rel)
-                    atomic.ensure_dir(path.parent)
-                    os.replace(self.root / rel, path)
-                os.replace(self.root / MANIFEST, self.out / MANIFEST)
-            except OSError as e:
-                raise atomic.environment_problem(self.out, e) from None
-            shutil.rmtree(self.root, ignore_errors=True)
-            for d in sorted(emptied, key=lambda p: -len(p.parts)):
-                while d.parts:  # folders the old run's files leave empty
-                    try:
-                        os.rmdir(self.out / d)
-                    except OSError:
-                        break
-                    d = d.parent
+                os.rmdir(out / d)
+            except OSError:
+                break
+            d = d.parent
 
 
 def remove_listed(root: Root, rel: str) -> None:

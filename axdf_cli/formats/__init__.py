@@ -33,11 +33,11 @@ from typing import Callable
 import numpy as np
 
 from axdf_cli.formats.mesh import Mesh, MeshReadError
-from axdf_cli.formats.npz import NpzWriter, read_npz
+from axdf_cli.formats.npz import NpzWriter, read_npz, verify_npz
 from axdf_cli.formats.obj import ObjWriter, read_obj
-from axdf_cli.formats.pc2 import MddWriter, Pc2Writer, check_frames, read_mdd, read_pc2
+from axdf_cli.formats.pc2 import MddWriter, Pc2Writer, check_frames, read_mdd, read_pc2, verify_mdd, verify_pc2
 from axdf_cli.formats.ply import PlyWriter, read_ply
-from axdf_cli.formats.usd import UsdWriter, pxr, read_usd
+from axdf_cli.formats.usd import UsdWriter, pxr, read_usd, verify_usd
 
 LAYOUTS = ("frame", "sequence")
 FRAME_SETS = ("any", "even")  # which frames a format holds: any, or evenly spaced (one start, one step)
@@ -59,18 +59,21 @@ class Format:
     timed: bool = False  # stores times, not frame numbers: its reader takes the fps (MDD)
     check: Callable | None = None  # () -> None, raises EnvironmentProblem (exit 3, with the install hint)
     #                                when this machine cannot write the format
+    verify: Callable | None = None  # ("sequence") file path -> None: the file's own checks (checksums, frame
+    #                                  times), MeshReadError naming the first problem (axdf compare)
 
 
 FORMATS: dict[str, Format] = {
     "ply": Format("ply", ".ply", PlyWriter, read_ply),
     "obj": Format("obj", ".obj", ObjWriter, read_obj, decimals=6),
     # (+ the run's stage scene.usda and usd/bones.usdc)
-    "usd": Format("usd", ".usdc", UsdWriter, read_usd, "sequence", folder="usd", read_order=3, check=pxr),
+    "usd": Format("usd", ".usdc", UsdWriter, read_usd, "sequence", folder="usd", read_order=3, check=pxr,
+                  verify=verify_usd),
     "pc2": Format("pc2", ".pc2", Pc2Writer, read_pc2, "sequence", folder="pc2", faces=False, normals=False,
-                  frames="even", read_order=1),
+                  frames="even", read_order=1, verify=verify_pc2),
     "mdd": Format("mdd", ".mdd", MddWriter, read_mdd, "sequence", folder="mdd", faces=False, normals=False,
-                  frames="even", read_order=2, timed=True),
-    "npz": Format("npz", ".npz", NpzWriter, read_npz, "sequence", folder="npz", read_order=0),
+                  frames="even", read_order=2, timed=True, verify=verify_mdd),
+    "npz": Format("npz", ".npz", NpzWriter, read_npz, "sequence", folder="npz", read_order=0, verify=verify_npz),
 }
 assert all(f.layout in LAYOUTS and f.frames in FRAME_SETS and f.suffix == "." + f.writer.extension
            and (f.layout == "sequence" or (f.folder == "meshes" and f.faces)) for f in FORMATS.values())
@@ -153,6 +156,13 @@ def read_sequence(path: Path | str, fps: float | None = None):
     frame indices 0, 1, ..."""
     f = format_of(Path(path).suffix, "sequence")
     return f.reader(path, fps) if f.timed else f.reader(path)
+
+
+def verify_sequence(path: Path | str) -> None:
+    """A per-sequence file's own checks by its suffix (:attr:`Format.verify`)."""
+    f = format_of(Path(path).suffix, "sequence")
+    if f.verify is not None:
+        f.verify(path)
 
 
 def read_triangles(data: bytes, suffix: str) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:

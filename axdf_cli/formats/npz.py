@@ -26,7 +26,7 @@ import numpy as np
 from zlib_ng.zlib_ng import crc32  # zlib's CRC-32, ~5x faster (folding with carry-less multiply)
 
 from axdf_cli.formats.mesh import MeshReadError
-from axdf_cli.formats.packed import PointSequence, SequenceWriter
+from axdf_cli.formats.packed import PointSequence, SequenceWriter, check_frame_times
 
 ENTRIES = ("frames", "fps", "faces", "points", "normals")
 ZIP32_MAX = 0xFFFFFFFF  # sizes and offsets at or past this need ZIP64 records
@@ -195,3 +195,43 @@ def _entry_array(path, z, name: str) -> np.ndarray:
     if n == 0:
         return np.zeros(shape, dtype)
     return np.memmap(path, dtype, "r", offset=offset, shape=shape)
+
+
+VERIFY_BLOCK = 64 << 20  # bytes hashed at a time: bounded memory on any file
+
+
+def verify_npz(path: Path | str) -> None:
+    """The archive's own checks: the CRC-32 of every member (``np.load`` checks them only for
+    the entries it reads, memory-mapped ones never) and frame numbers finite and strictly
+    increasing; MeshReadError naming the first problem."""
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(path) as z, open(path, "rb") as f:
+            for info in z.infolist():
+                if info.compress_type != 0:  # deflated: zipfile checks the CRC as it reads to the end
+                    with z.open(info) as m:
+                        while m.read(VERIFY_BLOCK):
+                            pass
+                    continue
+                f.seek(info.header_offset)
+                local = f.read(_LOCAL.size)
+                if len(local) != _LOCAL.size or _LOCAL.unpack(local)[0] != 0x04034B50:
+                    raise MeshReadError(f"NPZ member {info.filename}: bad local header")
+                n_name, n_extra = _LOCAL.unpack(local)[-2:]
+                f.seek(info.header_offset + _LOCAL.size + n_name + n_extra)
+                crc, left = 0, info.compress_size
+                while left:
+                    block = f.read(min(left, VERIFY_BLOCK))
+                    if not block:
+                        raise MeshReadError(f"NPZ member {info.filename}: the file ends inside it")
+                    crc = crc32(block, crc)
+                    left -= len(block)
+                if crc != info.CRC:
+                    raise MeshReadError(f"NPZ member {info.filename}: CRC-32 {crc:08x}, the archive says "
+                                        f"{info.CRC:08x} (the bytes were changed after writing)")
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as e:
+        if isinstance(e, MeshReadError):
+            raise
+        raise MeshReadError(f"not a readable NPZ ({e})") from None
+    check_frame_times(read_npz(path).frames, "frames")

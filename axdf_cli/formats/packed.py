@@ -158,3 +158,18 @@ def uniform_step(frames) -> float | None:
         return 1.0
     d = np.diff(f)
     return float(d[0]) if np.all(d == d[0]) and d[0] > 0 else None
+
+
+def check_frame_times(times, what: str = "frame numbers") -> None:
+    """A packed file's frame numbers (or times) are finite and strictly increasing, as every
+    reader of a sequence assumes; MeshReadError naming the first that is not."""
+    t = np.asarray(times, np.float64).reshape(-1)
+    bad = np.flatnonzero(~np.isfinite(t))
+    if len(bad):
+        raise MeshReadError(f"{what}: entry {int(bad[0])} is {t[bad[0]]!r}; finite numbers")
+    if len(t) > 1:
+        back = np.flatnonzero(np.diff(t) <= 0)
+        if len(back):
+            k = int(back[0]) + 1
+            raise MeshReadError(f"{what}: entry {k} ({t[k]:g}) does not follow entry {k - 1} ({t[k - 1]:g}); "
+                                "strictly increasing")

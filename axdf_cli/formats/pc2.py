@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from axdf_cli.formats.mesh import MeshReadError
-from axdf_cli.formats.packed import InOrderHash, PointSequence, SequenceWriter, uniform_step
+from axdf_cli.formats.packed import InOrderHash, PointSequence, SequenceWriter, check_frame_times, uniform_step
 
 PC2_MAGIC = b"POINTCACHE2\0"
 PC2_HEADER = struct.Struct("<12siiffi")  # magic, version, numPoints, startFrame, sampleRate, numSamples
@@ -138,3 +138,22 @@ def read_mdd(path: Path | str, fps: float | None = None) -> PointSequence:
     times = np.fromfile(path, ">f4", n_frames, offset=MDD_HEADER.size).astype(np.float64)
     frames = np.rint(times * fps) if fps else np.arange(n_frames, dtype=np.float64)
     return PointSequence(frames, _frames_of(path, ">f4", start, n_frames, n_points), None, None, fps)
+
+
+def verify_pc2(path: Path | str) -> None:
+    """A PC2's own checks: its header's size agrees with the file (:func:`read_pc2`), and
+    startFrame and sampleRate give finite, strictly increasing frames (sampleRate > 0)."""
+    seq = read_pc2(path)
+    head, _ = _open(path, PC2_HEADER.size)
+    _, _, _, start, rate, n = PC2_HEADER.unpack(head)
+    if not (np.isfinite(start) and np.isfinite(rate) and (rate > 0 or n <= 1)):
+        raise MeshReadError(f"PC2 header: startFrame {start!r}, sampleRate {rate!r}; finite, sampleRate > 0")
+    check_frame_times(seq.frames, "PC2 frames")
+
+
+def verify_mdd(path: Path | str) -> None:
+    """An MDD's own checks: its header's size agrees with the file (:func:`read_mdd`), and its
+    frame times are finite and strictly increasing."""
+    seq = read_mdd(path)
+    times = np.fromfile(path, ">f4", len(seq.frames), offset=MDD_HEADER.size)
+    check_frame_times(times, "MDD frame times")

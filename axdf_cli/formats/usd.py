@@ -278,3 +278,23 @@ def read_usd(path: Path | str) -> PointSequence:
     normals = _Frames(stage, na, times, n_vertices) if na.GetTimeSamples() == times else None
     return PointSequence(np.asarray(times, np.float64), _Frames(stage, pa, times, n_vertices), normals,
                          idx.reshape(-1, 3).astype(np.int32), stage.GetTimeCodesPerSecond())
+
+
+def verify_usd(path: Path | str) -> None:
+    """A muscle layer's checks as far as USD allows (it has no checksum): it opens as a
+    layer whose default prim is a triangle Mesh (:func:`read_usd`), its time codes are
+    finite and strictly increasing, and every time sample holds as many finite points (and
+    normals) as the first."""
+    from axdf_cli.formats.packed import check_frame_times
+
+    seq = read_usd(path)
+    check_frame_times(seq.frames, "USD time samples")
+    n = seq.points.shape[1]
+    for k in range(len(seq.frames)):
+        for what, arr in (("points", seq.points), ("normals", seq.normals)):
+            if arr is None:
+                continue
+            a = np.asarray(arr[k])
+            if a.shape != (n, 3) or not np.isfinite(a).all():
+                raise MeshReadError(f"USD {what} at time {seq.frames[k]:g}: shape {a.shape}"
+                                    + ("" if a.shape != (n, 3) else ", not all finite") + f"; ({n}, 3) finite")

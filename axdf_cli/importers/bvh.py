@@ -82,6 +82,20 @@ class BVH:
     frame_time_text: str
     data: np.ndarray  # (N, n_channels) float64, columns in joint order, channel order
     frames_mark: Mark
+    frame_time_mark: Mark = Mark("")
+    row_lines: tuple = ()  # (N,) the 1-based line of each motion row
+
+    def value_mark(self, row: int, col: int) -> Mark:
+        """Where motion value ``col`` of row ``row`` is in the file (read again: only on error)."""
+        if row >= len(self.row_lines):
+            return self.frames_mark
+        line = self.row_lines[row]
+        with open(self.source, "rb") as f:
+            for k, text in enumerate(f, 1):
+                if k == line:
+                    cols = [m.start() + 1 for m in re.finditer(rb"\S+", text)]
+                    return Mark(self.source, line, cols[col] if col < len(cols) else 1)
+        return Mark(self.source, line, 1)
 
     @property
     def columns(self) -> list[tuple[int, str]]:
@@ -306,8 +320,10 @@ def read_bvh(path: Path | str) -> BVH:
         ft = float(ttext)
     except ValueError:
         ft = float("nan")
-    if not (math.isfinite(ft) and 0 < ft <= 3600):
-        raise InputError(Mark(shown, tline, tcol), f"Frame Time is {ttext!r}", "seconds per frame, in (0, 3600]")
+    if not (math.isfinite(ft) and 1.0 / tol.MAX_FPS <= ft <= 3600):
+        raise InputError(Mark(shown, tline, tcol), f"Frame Time is {ttext!r}",
+                         f"seconds per frame, in [{1.0 / tol.MAX_FPS:g}, 3600] (at most {tol.MAX_FPS:g} fps, "
+                         "what a pose may have)")
     n_cols = sum(len(j.channels) for j in joints)
     rows: list[str] = []
     row_lines: list[int] = []
@@ -324,7 +340,8 @@ def read_bvh(path: Path | str) -> BVH:
         raise InputError(Mark(shown, last, 1), f"the file ends after {len(rows)} of {n_frames} motion rows "
                          f"('Frames: {n_frames}' at line {nline}; truncated?)", "as many rows as Frames says")
     data = _motion(rows, row_lines, n_cols, shown)
-    return BVH(shown, tuple(joints), ft, ttext, data, Mark(shown, nline, ncol))
+    return BVH(shown, tuple(joints), ft, ttext, data, Mark(shown, nline, ncol), Mark(shown, tline, tcol),
+               tuple(row_lines))
 
 
 def _motion(rows: list[str], row_lines: list[int], n_cols: int, shown: str) -> np.ndarray:
@@ -447,22 +464,51 @@ def pose_doc(bvh: BVH, name: str, skeleton_ref: str, scale: float, step: int) ->
 
 @dataclass
 class ImportResult:
-    files: dict[str, bytes]  # output path → bytes
+    files: object  # OutputSet: every output path with its bytes (nothing written yet)
     report: dict
     notes: list[str]  # lines for the user (the unit guess)
 
 
+def check_limits(bvh: BVH, scale: float) -> None:
+    """What the skeleton and pose files may hold, checked at the BVH's own line and column:
+    names (bones, and coordinates ``<bone>_<channel>``), lengths times ``scale`` within
+    ±MAX_ABS_NUMBER metres."""
+    names = bone_names(bvh)
+    for j, bname in zip(bvh.joints, names):
+        longest = max([bname] + [coordinate_name(bname, c) for c in j.channels], key=len)
+        if not is_name(longest):
+            raise InputError(j.mark, f"joint {j.name[:40]!r}{'...' if len(j.name) > 40 else ''} becomes the name "
+                             f"{longest[:40]!r}... ({len(longest)} characters)", f"{NAME_ALLOWED}; rename the joint")
+        far = [abs(v) * scale > tol.MAX_ABS_NUMBER for v in j.offset]
+        if any(far):
+            raise InputError(j.mark, f"OFFSET {j.offset[far.index(True)]:g} x --scale {scale:g} is beyond "
+                             f"{tol.MAX_ABS_NUMBER:g} m", f"lengths within ±{tol.MAX_ABS_NUMBER:g} m after --scale")
+    cols = [k for k, (_, c) in enumerate(bvh.columns) if CHANNELS[c.lower()][0] == "translation"]
+    if cols and len(bvh.data):
+        far = np.abs(bvh.data[:, cols]) * scale > tol.MAX_ABS_NUMBER
+        if far.any():
+            row, k = map(int, np.argwhere(far)[0])
+            raise InputError(bvh.value_mark(row, cols[k]), f"position {bvh.data[row, cols[k]]:g} x --scale {scale:g} "
+                             f"is beyond {tol.MAX_ABS_NUMBER:g} m", f"positions within ±{tol.MAX_ABS_NUMBER:g} m "
+                             "after --scale")
+
+
 def build_import(bvh_path: Path | str, out_dir: Path | str, *, name: str | None = None, scale: float | None = None,
                  step: int = 1, skeleton_out: Path | str | None = None, pose_out: Path | str | None = None,
-                 pose_name: str | None = None) -> ImportResult:
+                 pose_name: str | None = None, progress=None) -> ImportResult:
     """Read ``bvh_path`` and build the skeleton and pose files' bytes (nothing is written here).
 
     Layout (defaults under ``out_dir``): ``skeletons/NAME.yaml`` and ``POSE.yaml``; the pose
     refers to the skeleton by a path relative to itself. ``scale`` None: the guessed unit.
+    ``progress(step)``: called after each of :data:`STEPS`.
     """
+    from axdf_cli.fileio.outputs import OutputSet
+
+    tick = progress or (lambda step: None)
     bvh_path = Path(bvh_path)
     out_dir = Path(out_dir)
     bvh = read_bvh(bvh_path)
+    tick("read")
     name = name or safe_name(bvh_path.stem)
     pname = pose_name or name
     for what, v in (("--name", name), ("--pose-name", pname)):
@@ -474,17 +520,28 @@ def build_import(bvh_path: Path | str, out_dir: Path | str, *, name: str | None 
     if scale is None:
         scale = UNITS[unit]
         notes.append(f"using --scale {scale:g} (pass --scale to override)")
+    check_limits(bvh, scale)
     skel_path = Path(skeleton_out) if skeleton_out else out_dir / "skeletons" / f"{name}.yaml"
     pose_path = Path(pose_out) if pose_out else out_dir / f"{pname}.yaml"
     header = f"Imported from {bvh_path.name} by `axdf import bvh` (--scale {scale:g}).\n" \
              "Regenerate with the importer rather than editing by hand."
-    files = {str(skel_path): emit.dump_yaml(skeleton_doc(bvh, name, scale), header).encode()}
+    files = OutputSet(out_dir, "import bvh")
+    files.add(skel_path, emit.dump_yaml(skeleton_doc(bvh, name, scale), header).encode(),
+              "--skeleton-out" if skeleton_out else "the skeleton")
+    tick("skeleton")
     pdoc, fps = pose_doc(bvh, pname, _rel(skel_path, pose_path.parent), scale, step)
-    files[str(pose_path)] = emit.dump_yaml(pdoc, f"Imported from {bvh_path.name} by `axdf import bvh` "
-                                                 f"(every {step} of {len(bvh.data)} rows).").encode()
+    files.add(pose_path, emit.dump_yaml(pdoc, f"Imported from {bvh_path.name} by `axdf import bvh` "
+                                              f"(every {step} of {len(bvh.data)} rows).").encode(),
+              "--pose-out" if pose_out else "the pose")
+    tick("pose")
     report = {"source": {"file": bvh_path.name, "sha256": _sha(bvh_path)}, "tool": "axdf import bvh",
               "skeleton": name, "pose": pname, "scale": scale, "guessed_unit": unit, "rest_height_units": height,
               "joints": sum(not j.end_site for j in bvh.joints), "end_sites": sum(j.end_site for j in bvh.joints),
               "channels": int(bvh.data.shape[1]), "rows": int(len(bvh.data)), "step": step,
               "frames": int(len(bvh.data[::step])), "fps": fps}
+    files.settings = {"scale": scale, "step": step, "name": name, "pose_name": pname}
     return ImportResult(files, report, notes)
+
+
+#: The steps :func:`build_import` reports (its progress bar's units).
+STEPS = ("read", "skeleton", "pose")

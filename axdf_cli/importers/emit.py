@@ -17,6 +17,10 @@ Conversions (OpenSim → axdf):
   sums them in the parent frame), then rotations (a body-fixed sequence). Axes whose function
   is the constant 0 are dropped; an identity ``LinearFunction`` of a coordinate of the
   axis's own type becomes a plain DOF; anything else a coupled DOF with ``function``.
+- Coupled coordinates: the dependent coordinate of a ``CoordinateCouplerConstraint`` is
+  written ``follows: {coord: INDEPENDENT, function: scale · f}`` (no default, no range: the
+  skeleton sets it from the coordinate it follows), its function converted like a DOF's
+  (input in the independent coordinate's units, output in its own).
 - Units: rotational coordinates and rotation outputs rad → degrees. A function
   ``y = f(x)`` in OpenSim units becomes ``y' = k_out · f(k_in · x')`` with
   ``k_in = π/180`` for a rotational coordinate and ``k_out = 180/π`` for a rotation axis:
@@ -27,6 +31,7 @@ Conversions (OpenSim → axdf):
 from __future__ import annotations
 
 import colorsys
+import functools
 import hashlib
 import math
 import re
@@ -166,6 +171,11 @@ def skeleton_doc(model: Model, name: str, meshes: dict[str, str]) -> dict:
     coords = {}
     for c in model.coordinates.values():
         k = DEG if c.type == "rotation" else 1.0
+        if c.follows is not None:  # a CoordinateCouplerConstraint's dependent: no default, no range of its own
+            k_in = math.pi / 180.0 if model.coordinates[c.follows].type == "rotation" else 1.0
+            coords[c.name] = {"type": c.type, "follows": {"coord": c.follows,
+                                                          "function": function_doc(convert_function(c.function, k_in, k))}}
+            continue
         cd = {"type": c.type, "default": c.default * k}
         if c.range is not None:
             cd["range"] = [c.range[0] * k, c.range[1] * k]
@@ -308,17 +318,65 @@ def path_docs(model: Model, m: Muscle) -> tuple[list, list]:
     return path, wraps
 
 
+def axis_points_for(name: str, path: list, wraps: list, skel: Skeleton, world: np.ndarray,
+                    motion_q: np.ndarray | None) -> tuple[int, int, float, float]:
+    """The axis control points a path muscle needs over the imported motion: ``(n, default
+    n, shortfall at n, shortfall at the default)``. The default count (``PathModel``) is kept
+    unless the axis falls more than ``AXIS_SHORTFALL_MAX`` short of the wrapped path in some
+    frame of ``motion_q`` (F, C) (at most ``AXIS_FIT_FRAMES`` of them, evenly spread); then
+    the smallest count in steps of 4 up to ``AXIS_POINTS_RAISE_MAX`` that keeps it within, or the
+    best of them. Without a motion: the default, measured at the rest pose."""
+    import dataclasses
+
+    from axdf_cli import tolerances as tol
+    from axdf_cli.fileio.yamlio import Fields
+    from axdf_cli.model.paths.path import PathModel
+    from axdf_cli.specs import parse_muscle_path
+
+    spec = parse_muscle_path(Fields({"path": path, "wrap": wraps}, Mark(f"<{name}>"), "muscle"))
+    q = skel.rest_coordinates()[None]
+    if motion_q is not None and len(motion_q):
+        pick = np.unique(np.linspace(0, len(motion_q) - 1, min(len(motion_q), tol.AXIS_FIT_FRAMES)).astype(np.int64))
+        q = np.concatenate([q, motion_q[pick]])
+    frames_world = forward_kinematics(skel, q)
+    n0 = PathModel(spec, skel.bone_index, skel.coord_index).n
+
+    def worst(n: int) -> float:
+        pm = PathModel(dataclasses.replace(spec, control_points=n), skel.bone_index, skel.coord_index)
+        return float(np.max(pm.shortfall(frames_world, q)))
+
+    best = (n0, worst(n0))
+    s0 = best[1]
+    if motion_q is None or s0 <= tol.AXIS_SHORTFALL_MAX:
+        return n0, n0, s0, s0
+    for n in range(n0 + 4, tol.AXIS_POINTS_RAISE_MAX + 1, 4):
+        sn = worst(n)
+        if sn < best[1]:
+            best = (n, sn)
+        if sn <= tol.AXIS_SHORTFALL_MAX:
+            break
+    return best[0], n0, best[1], s0
+
+
 def muscle_doc(m: Muscle, skel: Skeleton, world: np.ndarray, model: Model | None = None,
-               palette: str = "anatomical") -> tuple[dict, dict]:
+               palette: str = "anatomical", motion_q: np.ndarray | None = None) -> tuple[dict, dict]:
     """One OpenSim muscle's YAML document and summary row for the import report: its path
-    (:func:`path_docs`) sized by :func:`belly_doc` from its Hill-type parameters."""
+    (:func:`path_docs`) sized by :func:`belly_doc` from its Hill-type parameters, with the
+    calf's and thigh's jiggle (``JIGGLE``). ``axis_points`` is written when the imported
+    motion ``motion_q`` (F, C) needs more than the default (:func:`axis_points_for`)."""
     path, wraps = path_docs(model, m)
+    n_axis, n_default, shortfall, shortfall_default = axis_points_for(m.name, path, wraps, skel, world, motion_q)
+    raised = n_axis != n_default
     doc, row = belly_doc(m.name, path, wraps, m.max_isometric_force, m.optimal_fiber_length, m.tendon_slack_length,
-                         m.pennation_angle, skel, world, palette, jiggle=JIGGLE.get(SIDE_SUFFIX.sub("", m.name)))
+                         m.pennation_angle, skel, world, palette, n_axis if raised else 0,
+                         jiggle=JIGGLE.get(SIDE_SUFFIX.sub("", m.name)))
     row.update({"type": m.type, "path_points": len(m.points),
                 "conditional": [p.name for p in m.points if p.kind == "conditional"],
                 "conditional_inactive_at_rest": [p.name for p in m.points if not p.active_at_rest],
                 "moving": [p.name for p in m.points if p.kind == "moving"], "wraps": [w.wrap for w in m.wraps]})
+    if raised:  # the worst shortfall over the motion at the default count and at the count written
+        row["axis_points_raised"] = {"from": n_default, "to": n_axis, "shortfall_at_default": shortfall_default,
+                                     "shortfall": shortfall}
     return doc, rounded(row)
 
 
@@ -353,6 +411,8 @@ def belly_doc(name: str, path: list, wraps: list, max_force: float, fibre_length
     Positions are fractions of the rest arc length written as curve parameters t (mapped
     through the rest axis); sections are circular; ``volume: exact`` keeps the rest volume.
     The row also carries the belly's slenderness (:mod:`axdf_cli.model.measure`) at rest.
+    ``axis_points`` is written when the imported motion ``motion_q`` (F, C) needs more than
+    the default (:func:`axis_points_for`).
     """
     from axdf_cli.model.measure import belly_slenderness
 
@@ -515,9 +575,22 @@ def _scalar(v) -> str:
     if v is None:
         return "null"
     s = str(v)
-    if _PLAIN.match(s) and yaml.safe_load(s) == s:
+    if _plain_string(s):
         return s
     return '"' + s.replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+_RESOLVER = yaml.resolver.Resolver()
+_STR_TAG = "tag:yaml.org,2002:str"
+
+
+@functools.lru_cache(maxsize=1 << 20)
+def _plain_string(s: str) -> bool:
+    """Whether ``s`` may be written unquoted: it looks like a name and PyYAML's implicit
+    resolvers read it back as this string (not ``true``, ``null``, ``on``, a number). The
+    resolver's pattern match only: parsing every string as a document was most of an
+    import's time."""
+    return bool(_PLAIN.match(s)) and _RESOLVER.resolve(yaml.ScalarNode, s, (True, False)) == _STR_TAG
 
 
 def _flow(v) -> str:
@@ -534,14 +607,33 @@ def _simple(v) -> bool:
     return not isinstance(v, dict)
 
 
+def _inline_text(v, limit: int = 120) -> str | None:
+    """``v`` on one line (flow style) when it goes there: a scalar, a list of scalars, a small
+    mapping of simple values (at most ``limit`` characters); else None. Each text is built
+    once (it was built twice: to measure it, then to write it)."""
+    if isinstance(v, (list, tuple)):
+        return _flow(v) if _simple(v) else None
+    if isinstance(v, dict):
+        if not all(_simple(x) or isinstance(x, dict) for x in v.values()):
+            return None
+        parts = []
+        n = 2
+        for k, x in v.items():
+            t = _flow(x) if _simple(x) else _inline_text(x, limit)
+            if t is None:
+                return None
+            parts.append(f"{_scalar(k)}: {t}")
+            n += len(parts[-1]) + 2
+            if n > limit + 2:
+                return None
+        text = "{" + ", ".join(parts) + "}"
+        return text if len(text) <= limit else None
+    return _scalar(v)
+
+
 def _inline_ok(v, limit: int = 120) -> bool:
     """Small mappings of simple values, and lists of scalars, go on one line."""
-    if isinstance(v, (list, tuple)):
-        return _simple(v)
-    if isinstance(v, dict):
-        return all(_simple(x) or (isinstance(x, dict) and _inline_ok(x, limit)) for x in v.values()) and \
-            len(_flow(v)) <= limit
-    return True
+    return _inline_text(v, limit) is not None
 
 
 #: Mappings whose entries are always written on one line each (pose keys, activation curves).
@@ -556,31 +648,27 @@ def dump_yaml(doc, header: str = "") -> str:
     if header:
         lines += ["# " + h if h else "#" for h in header.splitlines()]
 
-    def block(x) -> bool:
-        return isinstance(x, (dict, list, tuple)) and bool(x) and not _inline_ok(x)
-
     def emit(v, indent: int, flow_children: bool = False):
         pad = " " * indent
         if isinstance(v, dict):
             for k, x in v.items():
                 key = _scalar(k)
-                if block(x) and not flow_children:
+                text = _flow(x) if flow_children or not isinstance(x, (dict, list, tuple)) or not x \
+                    else _inline_text(x)
+                if text is None:
                     lines.append(f"{pad}{key}:")
                     emit(x, indent + 2, k in FLOW_CHILDREN)
                 else:
-                    lines.append(f"{pad}{key}: {_flow(x)}")
+                    lines.append(f"{pad}{key}: {text}")
         elif isinstance(v, (list, tuple)):
             for x in v:
-                if isinstance(x, dict) and block(x):
-                    saved = lines[:]
-                    lines.clear()
+                text = _inline_text(x) if isinstance(x, dict) and x else None
+                if isinstance(x, dict) and x and text is None:
+                    start = len(lines)  # the mapping's first line becomes the item's "- " line
                     emit(x, indent + 2)
-                    sub = lines[:]
-                    lines[:] = saved
-                    lines.append(f"{pad}- {sub[0][indent + 2:]}")
-                    lines.extend(sub[1:])
+                    lines[start] = f"{pad}- {lines[start][indent + 2:]}"
                 else:
-                    lines.append(f"{pad}- {_flow(x)}")
+                    lines.append(f"{pad}- {text if text is not None else _flow(x)}")
         else:
             lines.append(pad + _scalar(v))
 

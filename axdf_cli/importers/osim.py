@@ -3,7 +3,8 @@
 Everything here stays in OpenSim's units and frames (radians, metres, Y-up ground); the
 conversion to axdf (degrees, Z-up) happens in :mod:`axdf_cli.importers.emit`. What the
 parser does not model is listed in :attr:`Model.ignored` (wrap objects, markers,
-constraints, non-muscle forces, ...), never dropped silently.
+constraints, non-muscle forces, muscles on a ``FunctionBasedPath``, ...), never dropped
+silently.
 
 Semantics (confirmed against Simbody / OpenSim sources):
 
@@ -27,7 +28,7 @@ Semantics (confirmed against Simbody / OpenSim sources):
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -79,6 +80,14 @@ class Coordinate:
     locked: bool
     joint: str
     mark: Mark
+    #: OpenSim's motion type: 'rotational' | 'translational' | 'coupled' (see :func:`motion_type`)
+    motion: str = "rotational"
+    #: the dependent coordinate of a CoordinateCouplerConstraint: the coordinate it follows ...
+    follows: str | None = None
+    #: ... and its value as a function of that one (OpenSim units, the scale factor included)
+    function: object | None = None
+    #: ... and the constraint's name
+    coupler: str | None = None
 
 
 @dataclass(frozen=True)
@@ -327,13 +336,15 @@ class _Parser:
         self.joint_nodes = self._joint_nodes(model)
         joints, coords = self._joints()
         self.coords = coords
+        self._couplers(model)
         muscles = self._forces(model)
         for tag, kind in (("MarkerSet", "marker"), ("ConstraintSet", "constraint"), ("ContactGeometrySet", "contact geometry"),
                           ("ControllerSet", "controller"), ("ProbeSet", "probe"), ("ComponentSet", "component")):
             s = model.find(tag)
             objs = s.find("objects") if s is not None else None
             for o in (objs.children if objs is not None else []):
-                self.ignore(kind, o.name, o, f"{o.tag}: not used by axdf")
+                if o.tag != "CoordinateCouplerConstraint":  # _couplers has taken or listed these
+                    self.ignore(kind, o.name, o, f"{o.tag}: not used by axdf")
         for c in coords.values():
             if c.locked:
                 self.ignored.append({"kind": "coordinate lock", "name": c.name, "where": str(c.mark),
@@ -342,6 +353,70 @@ class _Parser:
                      (model.find("credits").text if model.find("credits") is not None else ""),
                      (model.find("publications").text if model.find("publications") is not None else ""),
                      self.ignored, self.wrap_objects)
+
+    # constraints ----------------------------------------------------------
+
+    def _couplers(self, model: Node) -> None:
+        """``CoordinateCouplerConstraint``: the dependent coordinate follows
+        ``scale_factor · f(independent)`` (Simbody enforces ``scale·f(q_ind) − q_dep = 0``). A
+        coupler that axdf cannot follow (disabled, or a function of several coordinates) is
+        listed and its dependent coordinate stays free."""
+        objs = model.path("ConstraintSet", "objects")
+        for c in (objs.children if objs is not None else []):
+            if c.tag != "CoordinateCouplerConstraint":
+                continue
+            enforced = _bool(c.find("isEnforced"), True) and not _bool(c.find("isDisabled"), False)
+            dn = _need(c, "dependent_coordinate_name", f"CoordinateCouplerConstraint {c.name!r}")
+            dep = self._coord(dn)
+            ind_node = _need(c, "independent_coordinate_names", f"CoordinateCouplerConstraint {c.name!r}")
+            names = ind_node.text.split() if ind_node.text else []
+            if not enforced:
+                self.ignore("constraint", c.name, c, f"CoordinateCouplerConstraint not enforced: {dep.name} stays free")
+                continue
+            if len(names) != 1:
+                self.ignore("constraint", c.name, c, f"CoordinateCouplerConstraint of {len(names)} coordinates "
+                            f"({', '.join(names) or 'none'}): axdf couples to one; {dep.name} stays free")
+                continue
+            fnode = _need(c, "coupled_coordinates_function", f"CoordinateCouplerConstraint {c.name!r}")
+            inner = [n for n in fnode.children if n.tag in FUNCTION_TAGS]
+            if len(inner) != 1:
+                kinds = ", ".join(n.tag for n in fnode.children) or "none"
+                self.ignore("constraint", c.name, c, f"CoordinateCouplerConstraint function {kinds}: axdf follows "
+                            f"one of {', '.join(FUNCTION_TAGS)}; {dep.name} stays free")
+                continue
+            ind = self._coord_named(names[0], ind_node.mark)
+            if ind.name == dep.name:
+                raise InputError(ind_node.mark, f"{c.name} couples {dep.name} to itself",
+                                 "an independent coordinate other than the dependent one")
+            if dep.follows is not None:
+                raise InputError(dn.mark, f"coordinate {dep.name!r} is the dependent of two CoordinateCouplerConstraints",
+                                 "one coupler per dependent coordinate")
+            fn = parse_function(inner[0])
+            sn = c.find("scale_factor")
+            scale = _numbers(sn, 1)[0] if sn is not None and sn.text else 1.0
+            if scale != 1.0:
+                fn = FMult(scale, fn)
+            self.coords[dep.name] = replace(dep, follows=ind.name, function=fn, coupler=c.name)
+        # a chain of couplers must end at a free coordinate
+        for name, c in self.coords.items():
+            seen = [name]
+            while c.follows is not None:
+                if c.follows in seen:
+                    raise InputError(self.coords[name].mark, f"coordinate {name!r} is coupled in a cycle "
+                                     f"({' -> '.join(seen + [c.follows])})", "couplers whose chains end at a free coordinate")
+                seen.append(c.follows)
+                c = self.coords[c.follows]
+        # rest values: a dependent coordinate's default is its function of its leader's (what
+        # OpenSim's assembly makes of the model's defaults)
+        done = False
+        while not done:
+            done = True
+            for name, c in self.coords.items():
+                if c.follows is not None:
+                    v = evaluate_function(c.function, self.coords[c.follows].default)
+                    if v != c.default:
+                        self.coords[name] = replace(c, default=v)
+                        done = False
 
     # bodies ---------------------------------------------------------------
 
@@ -530,7 +605,8 @@ class _Parser:
                 default = _numbers(d, 1)[0] if d is not None and d.text else 0.0
                 r = c.find("range")
                 rng = _numbers(r, 2) if r is not None and r.text else None
-                coords[c.name] = Coordinate(c.name, ctype, default, rng, _bool(c.find("locked")), j.name, c.mark)
+                coords[c.name] = Coordinate(c.name, ctype, default, rng, _bool(c.find("locked")), j.name, c.mark,
+                                            motion_type(axes, c.name))
             by_child[child.body] = Joint(j.name, j.tag, parent, child, tuple(axes), j.mark)
         # check axes name known coordinates
         for jt in by_child.values():
@@ -629,6 +705,10 @@ class _Parser:
         names = set()
         for f in (fs.children if fs is not None else []):
             gp = f.find("GeometryPath")
+            if gp is None and f.find("FunctionBasedPath") is not None:
+                self.ignore("muscle", f.name, f, f"{f.tag} on a FunctionBasedPath (its length a function of "
+                            "coordinates, no path points to build a belly along): skipped; give it a GeometryPath")
+                continue
             if gp is None or f.find("max_isometric_force") is None:
                 self.ignore("force", f.name, f, f"{f.tag}: not a muscle with a path")
                 continue
@@ -733,11 +813,31 @@ class _Parser:
         return pts
 
     def _coord(self, node: Node) -> Coordinate:
-        name = _last(node.text)
+        return self._coord_named(_last(node.text), node.mark)
+
+    def _coord_named(self, name: str, mark: Mark) -> Coordinate:
         if name not in self.coords:
-            raise InputError(node.mark, f"unknown coordinate {name!r}",
+            raise InputError(mark, f"unknown coordinate {name!r}",
                              "coordinates of the model: " + ", ".join(sorted(self.coords)))
         return self.coords[name]
+
+
+def motion_type(axes: list[Axis], coord: str) -> str:
+    """OpenSim's motion type of a joint's coordinate (``CustomJoint::constructCoordinates``):
+    over the axes in OpenSim's order (rotation1..3, translation1..3) that the coordinate
+    drives, one whose function is linear with slope ±1 makes it ``rotational`` or
+    ``translational`` (a later such axis wins); any other function makes it ``coupled``
+    unless a pure axis decided already. OpenSim writes a ``coupled`` coordinate's motion
+    column in radians whatever the header's ``inDegrees`` says."""
+    mt = None
+    for a in sorted(axes, key=lambda a: a.type != "rotation"):  # stable: rotations 1..3, translations 1..3
+        if a.coord != coord:
+            continue
+        if isinstance(a.function, FLinear) and abs(a.function.slope) == 1.0:
+            mt = "rotational" if a.type == "rotation" else "translational"
+        elif mt is None:
+            mt = "coupled"
+    return mt or "rotational"
 
 
 def _offset_from_matrix(body: str, m: np.ndarray) -> Offset:

@@ -53,7 +53,9 @@ from axdf_cli.errors import InputError, Mark
 from axdf_cli.formats.ply import PlyWriter
 from axdf_cli.importers import emit
 from axdf_cli.specs import RefPolicy, parse_skeleton_text
+from axdf_cli.fileio.outputs import UniqueFiles
 from axdf_cli.fileio.yamlio import NAME_ALLOWED, check_name, is_name
+from axdf_cli.importers.osim import Coordinate as OsimCoordinate
 from axdf_cli.importers.osim import Model, load_osim
 from axdf_cli.importers.storage import Table, read_storage
 from axdf_cli.importers.vtp import read_vtp
@@ -184,13 +186,61 @@ def _num(x: float) -> float | int:
     return int(x) if x.is_integer() and abs(x) < 2**53 else x
 
 
+def _coupled(model: Model, c: str) -> bool:
+    """Whether OpenSim writes coordinate ``c``'s motion column in radians whatever the
+    header says: a rotation whose motion type is Coupled (``osim.motion_type``)."""
+    coord = model.coordinates[c]
+    return coord.type == "rotation" and getattr(coord, "motion", None) == "coupled"
+
+
+def _axdf_function(model: Model, c: str):
+    """Coupled coordinate ``c``'s function in axdf units (degrees, metres): an OpenSim
+    model's is converted; a skeleton's (``axdf dataset`` motions) already is."""
+    coord = model.coordinates[c]
+    if not isinstance(coord, OsimCoordinate):
+        return coord.function
+    k_in = math.pi / 180.0 if model.coordinates[coord.follows].type == "rotation" else 1.0
+    return emit.convert_function(coord.function, k_in, emit.DEG if coord.type == "rotation" else 1.0)
+
+
+def followed_columns(model: Model, motion: Table, pairs: list[tuple[int, str]], degrees: bool,
+                     warnings: list[str]) -> dict:
+    """The motion's columns of coupled coordinates (not read: the skeleton computes them), each
+    with the largest difference from its coupler's function of the leader's column (axdf
+    units), when the motion holds the leader too; a warning beyond COUPLED_COLUMN_ATOL."""
+    cols = {c: i for i, c in pairs}
+
+    def axdf_units(k, name):  # column k of coordinate ``name`` in axdf units
+        v = motion.data[:, k]
+        return np.degrees(v) if model.coordinates[name].type == "rotation" and (not degrees or _coupled(model, name)) else v
+
+    out = {}
+    for i, c in pairs:
+        coord = model.coordinates[c]
+        if coord.follows is None:
+            continue
+        row = {"follows": coord.follows}
+        j = cols.get(coord.follows)
+        if j is not None:
+            dev = float(np.max(np.abs(_axdf_function(model, c)(axdf_units(j, coord.follows)) - axdf_units(i, c))))
+            row["max_deviation"] = dev
+            if (math.radians(dev) if coord.type == "rotation" else dev) > tol.COUPLED_COLUMN_ATOL:
+                unit = "°" if coord.type == "rotation" else " m"
+                warnings.append(f"{motion.label_marks[i]}: column {c} differs from its coupler's function of "
+                                f"{coord.follows} by up to {dev:.3g}{unit}; the coupler's value is used")
+        out[c] = row
+    return out
+
+
 def pose_doc(model: Model, motion: Table, controls: Table | None, pose_name: str, skeleton_ref: str,
              fps: float | None, muscle_names: list[str], report: dict, warnings: list[str]) -> dict:
     pairs, skipped = coordinate_columns(motion, model)
-    rot = [i for i, c in pairs if model.coordinates[c].type == "rotation"]
+    rot = [i for i, c in pairs if model.coordinates[c].type == "rotation" and not _coupled(model, c)]
     degrees, warn = angle_unit(motion, rot)
     if warn:
         warnings.append(warn)
+    followed = followed_columns(model, motion, pairs, degrees, warnings)
+    pairs = [(i, c) for i, c in pairs if c not in followed]
     times, fps, direct = _frame_times(motion, fps)
     data = motion.data if direct else _interp(motion.time, motion.data, times)
     keys: dict[int, dict] = {}
@@ -198,7 +248,7 @@ def pose_doc(model: Model, motion: Table, controls: Table | None, pose_name: str
         row = {}
         for i, c in pairs:
             v = float(data[f, i])
-            if model.coordinates[c].type == "rotation" and not degrees:
+            if model.coordinates[c].type == "rotation" and (not degrees or _coupled(model, c)):
                 v = math.degrees(v)
             row[c] = v
         keys[f] = row
@@ -209,6 +259,11 @@ def pose_doc(model: Model, motion: Table, controls: Table | None, pose_name: str
                         "resampled": not direct, "rotations_read_as": "degrees" if degrees else "radians",
                         "header_inDegrees": motion.header.get("indegrees"), "coordinates": [c for _, c in pairs],
                         "skipped_columns": skipped}
+    if followed:
+        report["motion"]["coupled_columns"] = followed
+    coupled = [c for _, c in pairs if _coupled(model, c)]
+    if coupled:
+        report["motion"]["coupled_read_as_radians"] = coupled
     if controls is not None:
         act: dict[str, dict] = {}
         names = set(muscle_names)
@@ -242,6 +297,17 @@ def pose_doc(model: Model, motion: Table, controls: Table | None, pose_name: str
                               "muscles": [n for _, n in cols], "ignored_columns": ignored, "clipped_values": clipped,
                               "keyed_frames": [int(frames[0]), int(frames[-1])] if len(frames) else []}
     return doc
+
+
+def pose_coordinates(skel, pdoc: dict) -> np.ndarray:
+    """The coordinates (F, C) of every frame of a pose document on ``skel`` (keyed ones as
+    written, the others at rest, coupled ones following): what ``axdf run`` samples there."""
+    q = np.broadcast_to(skel.rest_coordinates(), (len(pdoc["keys"]), len(skel.coordinates))).copy()
+    cidx = skel.coord_index
+    for f, row in enumerate(pdoc["keys"].values()):
+        for c, v in row.items():
+            q[f, cidx[c]] = v
+    return skel.couple(q)
 
 
 # ----------------------------------------------------------------------------- meshes
@@ -329,10 +395,11 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
     mus_dir = Path(muscles_out) if muscles_out else out_dir / "muscles"
     pose_path = (Path(pose_out) if pose_out else out_dir / f"{pname}.yaml") if motion is not None else None
 
-    warnings: list[str] = []
+    warnings: list[str] = [f"{i['where']}: muscle {i['name']} skipped: {i['why']}" for i in model.ignored
+                           if i["kind"] == "muscle"]
     report: dict = {"source": {"model": model_path.name, "sha256": _sha(model_path), "model_name": model.name},
                     "tool": "axdf import osim", "skeleton": name}
-    files: dict[str, bytes] = {}
+    files: dict[str, bytes] = UniqueFiles()  # a path twice: exit 2, never one file lost
     mesh_bytes = body_meshes(model, model_path, warnings, report) if meshes else {}
     mesh_refs = {}
     for body, data in sorted(mesh_bytes.items()):
@@ -349,13 +416,7 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
     skel = parse_skeleton_text(text, skel_path, RefPolicy(allow_outside=True))
     world = emit.rest_world(skel)
 
-    rows = []
-    for m in model.muscles:
-        mdoc, row = emit.muscle_doc(m, skel, world, model, palette)
-        rows.append(row)
-        files[str(mus_dir / f"{m.name}.yaml")] = emit.dump_yaml(mdoc, f"{m.name}: imported from {model_path.name} "
-                                                                      f"({m.type}) by `axdf import osim`.").encode()
-    report["muscles"] = rows
+    motion_q = None
     if motion_t is not None:
         pdoc = pose_doc(model, motion_t, controls_t, pname, _rel(skel_path, pose_path.parent), fps,
                         [m.name for m in model.muscles], report, warnings)
@@ -365,6 +426,18 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
                              f"the pose would be {len(text)} bytes ({len(pdoc['keys'])} frames)",
                              f"axdf reads YAML files up to {tol.YAML_MAX_BYTES} bytes; a lower --fps or a shorter motion")
         files[str(pose_path)] = text
+        motion_q = pose_coordinates(skel, pdoc)
+    rows = []
+    for m in model.muscles:
+        mdoc, row = emit.muscle_doc(m, skel, world, model, palette, motion_q)
+        rows.append(row)
+        files[str(mus_dir / f"{m.name}.yaml")] = emit.dump_yaml(mdoc, f"{m.name}: imported from {model_path.name} "
+                                                                      f"({m.type}) by `axdf import osim`.").encode()
+    report["muscles"] = rows
+    coupled = [{"coordinate": c.name, "follows": c.follows, "constraint": c.coupler}
+               for c in model.coordinates.values() if c.follows is not None]
+    if coupled:
+        report["coupled_coordinates"] = coupled
     report["counts"] = {"bodies": len(model.bodies), "joints": len(model.joints), "coordinates": len(model.coordinates),
                         "muscles": len(model.muscles), "meshes": len(mesh_bytes),
                         "path_points": sum(r["path_points"] for r in rows),
@@ -414,6 +487,17 @@ def import_markdown(r: dict) -> str:
         co = r["controls"]
         lines += [f"Controls: `{co['file']}`, {len(co['muscles'])} muscles; ignored columns: "
                   f"{', '.join(co['ignored_columns']) or 'none'}.", ""]
+    if r.get("coupled_coordinates"):
+        lines += ["Coupled coordinates (no pose keys them: the skeleton computes each from the coordinate it "
+                  "follows, as OpenSim's constraint does; a motion's column of one is checked, not read):", ""]
+        lines += [f"- `{c['coordinate']}` follows `{c['follows']}` (CoordinateCouplerConstraint `{c['constraint']}`)"
+                  for c in r["coupled_coordinates"]] + [""]
+    raised = [m for m in r["muscles"] if "axis_points_raised" in m]
+    if raised:
+        lines += ["Axis control points raised where the motion bends the path more sharply than the default count "
+                  f"follows (the axis falls short of the path by more than {tol.AXIS_SHORTFALL_MAX:.1%} in some frame):", ""]
+        lines += [f"- {m['muscle']}: {a['from']} → {a['to']} (shortfall {a['shortfall_at_default']:.2%} → "
+                  f"{a['shortfall']:.2%})" for m in raised for a in [m["axis_points_raised"]]] + [""]
     lines += ["## Warnings", ""] + ([f"- {w}" for w in r["warnings"]] or ["- none"]) + [""]
     lines += ["## Not imported", "", "| kind | name | where | why |", "|---|---|---|---|"]
     lines += [f"| {i['kind']} | {i['name']} | {i['where']} "

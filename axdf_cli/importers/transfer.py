@@ -41,7 +41,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -51,10 +51,17 @@ from axdf_cli.importers import emit
 from axdf_cli.specs import RefPolicy, load_muscle_file, load_skeleton
 from axdf_cli.model.muscle import AxisPoint, MuscleModel, MuscleSpec
 from axdf_cli.model.skeleton import Constant, Linear, Multiplier, Polynomial, Skeleton, Spline, axis_angle, euler_xyz
+from axdf_cli.fileio.outputs import UniqueFiles
 from axdf_cli.fileio.yamlio import Fields, check_name, check_vector, item_marks, load_yaml
 
 #: A segment shorter than this (metres) has no direction: the entry is treated as segment-less.
 MIN_SEGMENT = 1e-6
+#: A map's bone scale k (given, or the ratio of the segment lengths) lies in
+#: [1/MAX_BONE_SCALE, MAX_BONE_SCALE]: a muscle a thousand times longer or shorter is a unit
+#: mistake or a degenerate segment (a 1 µm segment once made a 164 km muscle).
+MAX_BONE_SCALE = 1000.0
+#: An explicit segment (``segment:``, ``to_segment:``) is at least this long (m).
+MIN_SEGMENT_LENGTH = 1e-3
 
 
 # ----------------------------------------------------------------------------- the map
@@ -70,6 +77,7 @@ class BonePair:
     rotate: tuple[float, float, float] | None
     roll: float
     mark: Mark
+    segment_marks: tuple = (None, None)  # where segment / to_segment are written
 
 
 @dataclass(frozen=True)
@@ -139,11 +147,12 @@ def load_map(path: Path | str, skel_a: Skeleton | None = None, skel_b: Skeleton 
         seg_a = _segment_spec(e.raw("segment"), e.vmark("segment"), skel_a, "segment") if e.has("segment") else None
         seg_b = _segment_spec(e.raw("to_segment"), e.vmark("to_segment"), skel_b, "to_segment") \
             if e.has("to_segment") else None
-        scale = e.number("scale", default=None, lo=0.0, lo_open=True)
+        scale = e.number("scale", default=None, lo=1.0 / MAX_BONE_SCALE, hi=MAX_BONE_SCALE)
         rotate = e.vector("rotate", 3, default=None)
         roll = e.number("roll", default=0.0, lo=-360.0, hi=360.0)
         e.done()
-        pairs[src] = BonePair(src, dst, seg_a, seg_b, scale, rotate, float(roll), km)
+        pairs[src] = BonePair(src, dst, seg_a, seg_b, scale, rotate, float(roll), km,
+                              (e.vmark("segment") if seg_a else None, e.vmark("to_segment") if seg_b else None))
     return BoneMap(name, pairs, str(path), skel_a, skel_b)
 
 
@@ -204,6 +213,11 @@ def pair_transforms(bmap: BoneMap, skel_a: Skeleton, skel_b: Skeleton) -> dict[s
         b0, b1 = _segment(skel_b, wb, p.dst, p.dst_segment)
         la = float(np.linalg.norm(a1 - a0)) if a1 is not None else 0.0
         lb = float(np.linalg.norm(b1 - b0)) if b1 is not None else 0.0
+        for given, length, where, side in ((p.src_segment, la, p.segment_marks[0], skel_a.name),
+                                           (p.dst_segment, lb, p.segment_marks[1], skel_b.name)):
+            if given is not None and len(given) == 2 and length < MIN_SEGMENT_LENGTH:
+                raise InputError(where or p.mark, f"bone {p.src}: this segment on {side} is {length:.3g} m long",
+                                 f"a segment (anchor to tip) of at least {MIN_SEGMENT_LENGTH:g} m, or only an anchor")
         both = la > MIN_SEGMENT and lb > MIN_SEGMENT
         segs[p.src] = (a0, b0, (a1 - a0) / la if both else None, (b1 - b0) / lb if both else None,
                        (la, lb) if both else None)
@@ -213,6 +227,12 @@ def pair_transforms(bmap: BoneMap, skel_a: Skeleton, skel_b: Skeleton) -> dict[s
     for p in bmap.pairs.values():
         a0, b0, ua, ub, lengths = segs[p.src]
         k = p.scale if p.scale is not None else (lengths[1] / lengths[0] if lengths else median)
+        if not 1.0 / MAX_BONE_SCALE <= k <= MAX_BONE_SCALE:
+            why = (f"its segments are {lengths[0]:.3g} m on {skel_a.name} and {lengths[1]:.3g} m on {skel_b.name}"
+                   if lengths else "the median of the other entries' scales")
+            raise InputError(p.mark, f"bone {p.src} -> {p.dst} would scale by {k:.3g} ({why})",
+                             f"a scale in [{1.0 / MAX_BONE_SCALE:g}, {MAX_BONE_SCALE:g}]: give `segment`/`to_segment` "
+                             "ends that span the bones, or `scale`")
         if p.rotate is not None:
             r = euler_xyz(p.rotate)
         elif ua is not None:
@@ -404,6 +424,7 @@ class TransferResult:
     files: dict[str, bytes]  # output path -> bytes
     report: dict
     skipped: list[dict]
+    inputs: list = field(default_factory=list)  # every file read (the map, both skeletons, the muscles)
 
 
 def build_transfer(muscle_files: list[Path], skel_a: Skeleton | None, skel_b: Skeleton | None,
@@ -415,9 +436,10 @@ def build_transfer(muscle_files: list[Path], skel_a: Skeleton | None, skel_b: Sk
     skel_a, skel_b = bmap.skel_a, bmap.skel_b
     tf = pair_transforms(bmap, skel_a, skel_b)
     wa, wb = emit.rest_world(skel_a), emit.rest_world(skel_b)
-    files: dict[str, bytes] = {}
+    files: dict[str, bytes] = UniqueFiles()
     rows, skipped = [], []
     names: dict[str, Path] = {}
+    defined: dict[str, Path] = {}
     for path in muscle_files:
         if path.name in names:
             raise InputError(Mark(str(path)), f"two muscle files named {path.name} ({names[path.name]} and {path})",
@@ -426,6 +448,10 @@ def build_transfer(muscle_files: list[Path], skel_a: Skeleton | None, skel_b: Sk
         specs = load_muscle_file(path)
         kept = []
         for spec in specs:
+            if spec.name in defined:
+                raise InputError(muscle_mark(path, spec.name), f"muscle {spec.name!r} is also defined in "
+                                 f"{defined[spec.name]}", "muscle names are unique among the transferred files")
+            defined[spec.name] = path
             try:
                 new, missing, k = transfer_spec(spec, tf, skel_b.coord_index)
             except NotCarried as e:
@@ -458,7 +484,22 @@ def build_transfer(muscle_files: list[Path], skel_a: Skeleton | None, skel_b: Sk
     report = emit.rounded(report)  # as the YAML files: no CPU-dependent last digits
     files[str(out_dir / "transfer_report.json")] = (json.dumps(report, indent=1, sort_keys=True) + "\n").encode()
     files[str(out_dir / "TRANSFER.md")] = transfer_markdown(report).encode()
-    return TransferResult(files, report, skipped)
+    return TransferResult(files, report, skipped, [Path(map_path), Path(skel_a.source), Path(skel_b.source),
+                                                   *muscle_files])
+
+
+def muscle_mark(path: Path, name: str) -> Mark:
+    """Where muscle ``name`` is named in its file (read again: only for a message)."""
+    doc = load_yaml(path)
+    if isinstance(doc, dict):
+        if doc.get("muscle") == name and hasattr(doc, "value_mark"):
+            return doc.value_mark("muscle")
+        heads = doc.get("muscles")
+        if isinstance(heads, list):
+            for item in heads:
+                if isinstance(item, dict) and item.get("muscle") == name and hasattr(item, "value_mark"):
+                    return item.value_mark("muscle")
+    return Mark(str(path), 1, 1)
 
 
 def transfer_markdown(r: dict) -> str:

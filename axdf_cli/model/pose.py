@@ -63,7 +63,8 @@ def interpolate(frames: np.ndarray, key_frames, key_values, mode: str) -> np.nda
 
 def sample_coordinates(pose, frames: np.ndarray, clamp: bool | None = None) -> np.ndarray:
     """Coordinates of the pose's skeleton at ``frames``: (F, C) float64, axdf units; held
-    inside their ranges when ``clamp`` (default: the pose's ``clamp_ranges``)."""
+    inside their ranges when ``clamp`` (default: the pose's ``clamp_ranges``); coupled
+    coordinates then follow their (held) leaders (:meth:`Skeleton.couple`)."""
     skel = pose.skeleton
     clamp = pose.clamp_ranges if clamp is None else clamp
     q = np.broadcast_to(skel.rest_coordinates(), (len(frames), len(skel.coordinates))).copy()
@@ -73,7 +74,7 @@ def sample_coordinates(pose, frames: np.ndarray, clamp: bool | None = None) -> n
         rng = skel.coordinates[i].range
         if clamp and rng is not None:
             np.clip(q[:, i], rng[0], rng[1], out=q[:, i])
-    return q
+    return skel.couple(q)
 
 
 def range_warnings(pose, frames: np.ndarray) -> list[tuple[int, str, str]]:

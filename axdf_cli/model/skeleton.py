@@ -14,12 +14,17 @@ ordered parents before children (checked at load time).
 
 Coordinate values are in axdf units: degrees for rotational coordinates, metres for
 translational ones. A function maps its coordinate's value to the DOF's value in the DOF's
-units.
+units. A *coupled coordinate* (``Coordinate.follows``, OpenSim's ``CoordinateCouplerConstraint``)
+is no input: its value is a function of the coordinate it follows, set by
+:meth:`Skeleton.couple` wherever coordinates are made (the rest pose, a pose's samples) and
+before forward kinematics, so every consumer of ``q`` (kinematics, moving and conditional
+path points, labels) sees the same value.
 """
 from __future__ import annotations
 
 import functools
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -197,6 +202,10 @@ class Coordinate:
     type: str  # 'rotation' | 'translation'
     default: float = 0.0
     range: tuple[float, float] | None = None
+    #: a coupled coordinate: the coordinate it follows (None: a free coordinate, set by poses)
+    follows: str | None = None
+    #: its value ``function(q[follows])``, from the leader's units to its own
+    function: object | None = None
 
 
 @dataclass(frozen=True)
@@ -227,8 +236,35 @@ class Skeleton:
         return {c.name: i for i, c in enumerate(self.coordinates)}
 
     def rest_coordinates(self) -> np.ndarray:
-        """(C,) float64 default values: the rest pose."""
-        return np.array([c.default for c in self.coordinates], dtype=np.float64)
+        """(C,) float64 default values: the rest pose (coupled coordinates follow theirs)."""
+        q = np.array([c.default for c in self.coordinates], dtype=np.float64)
+        return self.couple(q[None])[0]
+
+    @cached_property
+    def followers(self) -> tuple[tuple[int, int, object], ...]:
+        """Coupled coordinates as ``(index, leader index, function)``, every leader before the
+        coordinates that follow it (the loader refuses cycles)."""
+        idx = self.coord_index
+        pending = [c for c in self.coordinates if c.follows is not None]
+        done = {c.name for c in self.coordinates if c.follows is None}
+        out = []
+        while pending:
+            ready = [c for c in pending if c.follows in done]
+            if not ready:
+                raise ValueError(f"coupled coordinates form a cycle: {', '.join(c.name for c in pending)}")
+            for c in ready:
+                out.append((idx[c.name], idx[c.follows], c.function))
+                done.add(c.name)
+            pending = [c for c in pending if c.name not in done]
+        return tuple(out)
+
+    def couple(self, q: np.ndarray) -> np.ndarray:
+        """``q`` (F, C) with every coupled coordinate set to its function of its leader
+        (in place; returned): ``q[:, i] = f_i(q[:, leader(i)])``, leaders first. What a
+        ``CoordinateCouplerConstraint`` enforces in OpenSim, applied before kinematics."""
+        for i, j, fn in self.followers:
+            q[:, i] = fn(q[:, j])
+        return q
 
     def stick_parents(self) -> list[int]:
         """Per bone: its parent when the two form one segment (what a stick between their joints
@@ -248,9 +284,12 @@ class Skeleton:
         """Coordinate → indices of the bones it moves (those whose DOFs it drives, and their
         descendants)."""
         moved: dict[str, set[int]] = {c.name: set() for c in self.coordinates}
+        leads: dict[str, set[str]] = {c.name: {c.name} for c in self.coordinates}  # coordinate -> it and its leaders
+        for i, j, _ in self.followers:  # leaders first: a leader's own leaders are complete
+            leads[self.coordinates[i].name] |= leads[self.coordinates[j].name]
         drivers: list[set[str]] = []  # per bone: every coordinate moving it
         for b, bone in enumerate(self.bones):
-            own = {d.coord for d in bone.dofs if d.coord is not None}
+            own = set().union(*(leads[d.coord] for d in bone.dofs if d.coord is not None))
             drivers.append(own | (drivers[bone.parent] if bone.parent >= 0 else set()))
             for c in drivers[b]:
                 moved[c].add(b)

@@ -17,7 +17,7 @@ from axdf_cli.specs.job import JOB_KEYS, Job, load_job
 from axdf_cli.specs.kinds import KIND_KEYS, KINDS_ALLOWED, detect_kind, kind_error
 from axdf_cli.specs.muscle import (MUSCLE_KEYS, WRAP_SIZE_KEYS, default_color, load_muscle_file, muscles_from_document,
                                    parse_color, parse_muscle_path, parse_muscle_text)
-from axdf_cli.specs.pose import INTERPOLATIONS, MOTION_IMPORTS, POSE_KEYS, Pose, load_pose
+from axdf_cli.specs.pose import INTERPOLATIONS, MOTION_IMPORTS, POSE_KEYS, Pose, load_pose, parse_pose_text
 from axdf_cli.specs.refs import LIBRARY_ROOTS, RefPolicy, expand_muscle_paths
 from axdf_cli.specs.skeleton import (DOF_TYPES, FUNCTION_KINDS, load_skeleton, parse_function, parse_skeleton_text,
                                      skeleton_from_document)
@@ -26,4 +26,4 @@ __all__ = ["DOF_TYPES", "FUNCTION_KINDS", "INTERPOLATIONS", "JOB_KEYS", "KINDS_A
            "MOTION_IMPORTS", "MUSCLE_KEYS", "POSE_KEYS", "WRAP_SIZE_KEYS", "Job", "Pose", "RefPolicy", "default_color",
            "detect_kind", "expand_muscle_paths", "kind_error", "load_job", "load_muscle_file", "load_pose",
            "load_skeleton", "muscles_from_document", "parse_color", "parse_function", "parse_muscle_path",
-           "parse_muscle_text", "parse_skeleton_text", "skeleton_from_document"]
+           "parse_muscle_text", "parse_pose_text", "parse_skeleton_text", "skeleton_from_document"]

@@ -1,11 +1,13 @@
 """Pose files (``pose:``, ``keys:``) → a frozen :class:`Pose` on its skeleton (docs/FORMATS.md)."""
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.model.skeleton import Skeleton
 from axdf_cli.specs.refs import RefPolicy
@@ -59,17 +61,35 @@ def load_pose(path: Path | str, policy: RefPolicy | None = None) -> Pose:
     if path.suffix.lower() in MOTION_IMPORTS:
         raise InputError(Mark(str(path)), f"a {path.suffix} motion is not an axdf pose",
                          f"import it first ({MOTION_IMPORTS[path.suffix.lower()]}) and pass the pose YAML it writes")
-    doc = load_yaml(path)
+    return pose_from_document(load_yaml(path), path, policy)
+
+
+def parse_pose_text(text: str, path: Path | str, skeletons: dict | None = None,
+                    policy: RefPolicy | None = None) -> Pose:
+    """A pose from YAML text that will live at ``path``; ``skeletons``: skeletons not on disk
+    yet, by path (an importer checks what it is about to write)."""
+    from axdf_cli.fileio.yamlio import parse_yaml
+
+    return pose_from_document(parse_yaml(text, str(path)), Path(path), policy or RefPolicy(), skeletons)
+
+
+def pose_from_document(doc, path: Path, policy: RefPolicy, skeletons: dict | None = None) -> Pose:
     top = Mark(str(path), 1, 1)
     f = Fields(doc, top, "pose file", keys=POSE_KEYS)
     name = f.name("pose", required=True)
     skel_ref = f.string("skeleton", required=True)
     skel_path = policy.resolve(path, skel_ref, f.vmark("skeleton"))
-    if not skel_path.is_file():
-        raise InputError(f.vmark("skeleton"), f"skeleton file {skel_ref!r} not found",
-                         "a path relative to the pose file")
-    skel = load_skeleton(skel_path, policy)
-    fps = f.number("fps", default=30.0, lo=0.0, hi=100000.0, lo_open=True)
+    known = {os.path.realpath(k): v for k, v in (skeletons or {}).items()}
+    skel = known.get(os.path.realpath(skel_path))
+    if skel is None and skeletons is not None and not skel_path.is_file():
+        # a pose about to be written: its folder may not exist yet, so '..' is taken lexically
+        skel_path = Path(os.path.normpath(skel_path))
+    if skel is None:
+        if not skel_path.is_file():
+            raise InputError(f.vmark("skeleton"), f"skeleton file {skel_ref!r} not found",
+                             "a path relative to the pose file")
+        skel = load_skeleton(skel_path, policy)
+    fps = f.number("fps", default=30.0, lo=0.0, hi=tol.MAX_FPS, lo_open=True)
     fr = f.raw("frames", required=True)
     first, last = check_vector(fr, f.vmark("frames"), "frames", 2, 0, 10_000_000)
     if not (float(first).is_integer() and float(last).is_integer()) or last < first:
@@ -91,6 +111,10 @@ def load_pose(path: Path | str, policy: RefPolicy | None = None) -> Pose:
             if coord not in cidx:
                 raise InputError(cm, f"unknown coordinate {coord!r}",
                                  f"{did_you_mean(coord, cidx)}coordinates of skeleton {skel.name}: {', '.join(cidx)}")
+            leader = skel.coordinates[cidx[coord]].follows
+            if leader is not None:
+                raise InputError(cm, f"coordinate {coord!r} is coupled: it follows {leader!r} through the "
+                                 f"skeleton's function", f"key {leader!r} instead; a pose sets free coordinates only")
             x = check_number(val, values.value_mark(coord) if isinstance(values, YMap) else vm, coord)
             series.setdefault(coord, []).append((fnum, float(x)))
             key_marks.setdefault(coord, cm)

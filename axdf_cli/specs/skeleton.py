@@ -101,14 +101,30 @@ def skeleton_from_document(doc, path: Path, policy: RefPolicy | None = None) -> 
 
     declared: dict[str, Coordinate] = {}
     ranges: dict[str, list] = {}  # coordinate -> [(range, mark)] from its declaration and its dofs
+    follows: dict[str, tuple[str, object, Mark, Mark]] = {}  # coupled coordinate -> (leader, fn, marks)
     if coords_map is not None:
         for cname, cval in coords_map.items():
             km = coords_map.key_mark(cname)
             check_name(cname, km, "coordinate name")
-            cf = Fields(cval, coords_map.value_mark(cname), f"coordinate {cname}", keys=("type", "default", "range"))
+            cf = Fields(cval, coords_map.value_mark(cname), f"coordinate {cname}",
+                        keys=("type", "default", "range", "follows"))
             ctype = cf.choice("type", DOF_TYPES, required=True)
             default = cf.number("default", default=0.0)
             rng = _check_range(cf.vector("range", 2, default=None), cf.vmark("range"), f"coordinate {cname}")
+            if cf.has("follows"):
+                for key in ("default", "range"):
+                    if cf.has(key):
+                        raise InputError(cf.kmark(key), f"coupled coordinate {cname!r} has a {key}",
+                                         "a coordinate with `follows` takes its value from the coordinate it "
+                                         "follows: give only type and follows")
+                ff = Fields(cf.raw("follows"), cf.vmark("follows"), f"follows of {cname}", keys=("coord", "function"))
+                leader = ff.name("coord", required=True)
+                fn = parse_function(ff.raw("function", required=True), ff.vmark("function"))
+                ff.done()
+                if leader == cname:
+                    raise InputError(ff.vmark("coord"), f"coordinate {cname!r} follows itself",
+                                     "another coordinate of the skeleton")
+                follows[cname] = (leader, fn, ff.vmark("coord"), km)
             cf.done()
             declared[cname] = Coordinate(cname, ctype, float(default), None)
             if rng is not None:
@@ -117,7 +133,7 @@ def skeleton_from_document(doc, path: Path, policy: RefPolicy | None = None) -> 
     bones: list[Bone] = []
     index: dict[str, int] = {}
     used: dict[str, str] = {}  # coordinate -> type inferred from direct use
-    order: list[str] = list(declared)
+    order: dict[str, None] = dict.fromkeys(declared)  # coordinates in order of appearance (a set: linear time)
     for bval, bm in zip(bones_seq, item_marks(bones_seq, top)):
         bf = Fields(bval, bm, "bone", keys=("name", "parent", "offset", "orient", "post_offset", "post_orient",
                                             "mesh", "dofs"))
@@ -164,6 +180,10 @@ def skeleton_from_document(doc, path: Path, policy: RefPolicy | None = None) -> 
                 if coord is None:
                     raise InputError(df.vmark("range"), "range on a dof of no coordinate",
                                      "a dof's range is its coordinate's range: give coord: NAME")
+                if coord in follows:
+                    raise InputError(df.vmark("range"), f"range on a dof of coupled coordinate {coord!r}",
+                                     f"a coupled coordinate has no range of its own: bound {follows[coord][0]!r}, "
+                                     "the coordinate it follows")
                 ranges.setdefault(coord, []).append((rng, df.vmark("range")))
             if coord is not None:
                 if fn is None:
@@ -174,18 +194,39 @@ def skeleton_from_document(doc, path: Path, policy: RefPolicy | None = None) -> 
                     if coord in declared and declared[coord].type != dtype:
                         raise InputError(df.vmark("coord"), f"coordinate {coord!r} is declared {declared[coord].type}",
                                          f"use it on a {declared[coord].type} dof or through a function")
-                if coord not in order:
-                    order.append(coord)
+                order.setdefault(coord)
             dofs.append(Dof(dtype, axis, coord, fn))
         bf.done()
         index[bname] = len(bones)
         bones.append(Bone(bname, parent, offset, orient, tuple(dofs), post_offset, post_orient, mesh))
 
+    for cname, (leader, _, at, _) in follows.items():
+        if leader not in order:
+            raise InputError(at, f"coordinate {cname!r} follows unknown coordinate {leader!r}",
+                             f"{did_you_mean(leader, order)}coordinates of the skeleton: {', '.join(order)}")
+    _check_no_cycle(follows)
     coords = []
     for c in order:
         base = declared.get(c) or Coordinate(c, used.get(c, "rotation"), 0.0, None)
-        coords.append(Coordinate(base.name, base.type, base.default, _joint_range(c, ranges.get(c, []))))
+        leader, fn = follows[c][:2] if c in follows else (None, None)
+        coords.append(Coordinate(base.name, base.type, base.default, _joint_range(c, ranges.get(c, [])), leader, fn))
     return Skeleton(name, tuple(bones), tuple(coords), str(path))
+
+
+def _check_no_cycle(follows: dict) -> None:
+    """Coupled coordinates must end at a free coordinate: ``a`` follows ``b`` follows ``a`` is
+    refused at the first coordinate of the cycle."""
+    for start in follows:
+        seen = [start]
+        c = follows[start][0]
+        while c in follows:
+            if c == start:
+                raise InputError(follows[start][2], f"coupled coordinates follow each other in a cycle: "
+                                 f"{' -> '.join(seen + [start])}", "each chain of `follows` ends at a free coordinate")
+            if c in seen:
+                break  # a cycle not through start: reported from its own members
+            seen.append(c)
+            c = follows[c][0]
 
 
 def _joint_range(coord: str, given: list) -> tuple[float, float] | None:

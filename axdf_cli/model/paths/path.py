@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from axdf_cli import tolerances as tol
 from axdf_cli.model import bspline
 from axdf_cli.errors import InputError
 from axdf_cli.model.paths import wrap as W
@@ -117,3 +118,16 @@ class PathModel:
         """Axis control points (F, n, 3) and the could-not-wrap flags (F,)."""
         samples, _, inside = self.wrapped(world, coords)
         return np.einsum("nk,fkc->fnc", self.fit, samples), inside
+
+    def shortfall(self, world: np.ndarray, coords: np.ndarray | None) -> np.ndarray:
+        """How much shorter the axis is than the wrapped path, as a fraction of the path: (F,)
+        ``1 − axis arc length / path length``. The axis is a smooth fit, so it cuts the path's
+        corners (a via point where the path turns sharply within less than a knot span);
+        more control points follow it closer."""
+        samples, length, _ = self.wrapped(world, coords)
+        ctrl = np.einsum("nk,fkc->fnc", self.fit, samples)
+        knots = bspline.clamped_knots(self.n, 2)
+        gt, gw = bspline.gauss_legendre_params(knots, 2, tol.LENGTH_GAUSS_POINTS)
+        # d[f, g, c] = sum_n dB[g, n] ctrl[f, n, c]: the axis' derivative at the Gauss points
+        d = np.einsum("gn,fnc->fgc", bspline.basis_matrix(knots, 2, gt, 1), ctrl)
+        return 1.0 - (np.linalg.norm(d, axis=-1) @ gw) / np.maximum(length, 1e-300)
