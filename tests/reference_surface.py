@@ -122,7 +122,11 @@ def _solve_cubic(coef: np.ndarray, v0: float, s0: np.ndarray):
 
 
 def reference_surface(model, fixed, scaled, p, t, s0, v0):
-    """What ``MuscleModel._surface`` computes, in numpy: (vertices, normals, volume, s, bad)."""
+    """What :func:`axdf_cli.model.kernels.surface_stage` computes, in numpy, from the bound
+    control points fixed, scaled (F, Q, 3), the axis points p (F, n, 3; its ends are the poles),
+    the unit tangents t (F, S, 3; its first and last give the pole normals' fallback), the
+    start scales s0 (F,) and the volume v0 to keep (None: keep s0): (vertices, normals,
+    volume, s, bad)."""
     nf = fixed.shape[0]
     m = len(model.spec.sections) + 2
     bv = np.concatenate([model.Bv, model.Bv[:1]])  # wrapped: column A repeats column 0

@@ -99,3 +99,14 @@ def test_retarget_jacobian_timing():
     a, b, diff = bench.jacobian_times(load_map(bench.CMU_MAP), repeats=1)
     assert a > 0 and b > 0
     assert diff < 1e-6  # the analytic Jacobian is the finite differences' limit
+
+
+def test_compiled_pass_rows(tmp_path):
+    """The compiled pass's helpers: a whole run in a subprocess (the demo job, 3 frames, 8x6),
+    tofile of its bytes, step 1b into fresh memory and in steady state."""
+    r = bench.whole_run(bench.DEMO_JOB, 3, "npz", tmp_path / "run", resolution="8x6")
+    assert r["muscle_frames"] == 3 * 7 and r["bytes"] > 0 and r["seconds"] > 0 and r["startup"] > 0
+    assert not (tmp_path / "run").exists()
+    assert bench.tofile_seconds(r["bytes"], tmp_path) > 0
+    cold, warm, nf = bench.first_touch(bench.DEMO_JOB, repeats=1)
+    assert cold > 0 and warm > 0 and nf >= 1

@@ -10,29 +10,38 @@ import pytest
 from axdf_cli.model.pose import sample_coordinates
 from axdf_cli.model.skeleton import forward_kinematics
 from axdf_cli.model.muscle import MuscleModel
+import reference_model
+from axdf_cli.model import kernels
 from reference_surface import reference_surface
 
 
 @pytest.mark.parametrize("volume", ["exact", "paper", "none"])
-def test_kernel_matches_the_numpy_reference(demo, monkeypatch, volume):
+def test_kernel_matches_the_numpy_reference(demo, volume):
+    """surface_stage on the bound control points of the demo's muscles over its pose (as
+    tests/reference_model.py forms them, the old numpy step 1b) against reference_surface."""
     frames = demo.pose.frames[::7]
     world = forward_kinematics(demo.skel, sample_coordinates(demo.pose, frames))
     tension = np.linspace(0.0, 1.0, len(frames))
     for model in demo.models:
         model = MuscleModel(dataclasses.replace(model.spec, volume=volume), demo.skel.bone_index, demo.rest)
         calls = []
-        orig = model._surface
+        real = kernels.surface_stage
 
-        def spy(*args, orig=orig):
-            out = orig(*args)
-            calls.append((args, out))
-            return out
+        def spy(*args):
+            calls.append(args)
+            return real(*args)
 
-        monkeypatch.setattr(model, "_surface", spy)
-        model.evaluate(world, tension)
-        monkeypatch.undo()
-        (args, (v, n, vol, s, bad)), = calls
-        rv, rn, rvol, rs, rbad = reference_surface(model, *args)
+        p = model._axis_points(world)
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setattr(reference_model.kernels, "surface_stage", spy)
+            reference_model.reference_step_1b(model, world, p, tension)
+        (args,) = calls
+        fixed, scaled, pole0, pole1, end0, end1 = args[:6]
+        exact, v0, s0 = args[10], args[11], args[12]
+        target = v0 if exact else None
+        v, n, vol, s, bad = args[17:22]
+        ends = np.stack([-end0, end1], axis=1)  # (F, 2, 3): the tangents at t = 0 and 1
+        rv, rn, rvol, rs, rbad = reference_surface(model, fixed, scaled, p, ends, s0, target)
         name = model.spec.name
         np.testing.assert_allclose(s, rs, rtol=1e-12, err_msg=name)
         np.testing.assert_array_equal(bad, rbad)

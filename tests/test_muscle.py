@@ -29,23 +29,11 @@ from conftest import (CHAIN_MUSCLE_YAML, CHAIN_SKELETON_YAML, DEMO_MUSCLE_FILES,
 
 
 def evaluate_with_control_points(model, world, tension, monkeypatch, **kw):
-    """Evaluate and also return the deformed section control points (F, 8N, 3).
-
-    ``evaluate`` hands ``fixed`` and ``scaled`` to its surface stage (``_surface``), which
-    tessellates ``fixed + s * scaled``; the spy records both, so the control points are read
-    from the real code path."""
-    calls = []
-    orig = model._surface
-
-    def spy(fixed, scaled, *args):
-        calls.append((np.array(fixed), np.array(scaled)))
-        return orig(fixed, scaled, *args)
-
-    monkeypatch.setattr(model, "_surface", spy)
-    res = model.evaluate(world, tension, **kw)
-    monkeypatch.undo()
-    (fixed, scaled), = calls
-    return fixed + res.scale[:, None, None] * scaled, res
+    """Evaluate and also return the deformed section control points (F, 8N, 3): the compiled
+    pass writes the ``fixed + s * scaled`` it tessellates (the real code path)."""
+    cp = np.full((len(world), len(model.bind_t), 3), np.nan)
+    res = model.evaluate(world, tension, control_points=cp, **kw)
+    return cp, res
 
 
 def tessellate_net(model, control_points, axis_points):

@@ -1,16 +1,20 @@
-"""The muscle surface stage as one compiled loop per frame (numba).
+"""The muscle surface stage of one muscle, frame by frame (numba), and what is written.
 
-For every frame: build the control net [origin pole, sections..., insertion pole] of the
-fixed part A and the volume-scaled part W, tessellate both (separable: along, then around,
-3 basis functions each way), accumulate the mesh volume's cubic V(s) = c0 + c1 s + c2 s^2 +
-c3 s^3 over the quads, solve V(s) = V0 (``exact``), form the final grid A + s W, and write
-vertices, outward normals and volume. Everything for a frame stays in the CPU cache, where
-numpy needed a dozen full-size passes with temporaries (see README, Performance).
+For every frame (:func:`surface_frame`): build the control net [origin pole, sections...,
+insertion pole] of the fixed part A and the volume-scaled part W, tessellate both
+(separable: along, then around, 3 basis functions each way), accumulate the mesh volume's
+cubic V(s) = c0 + c1 s + c2 s^2 + c3 s^3 over the quads, solve V(s) = V0 (``exact``), form
+the final grid A + s W, and write vertices, outward normals and volume. The run's compiled
+pass over every muscle at once (:mod:`axdf_cli.model.batch_kernels`) does the same steps
+with the same operations, laid out for vector instructions; :func:`surface_stage` is the
+frame-by-frame form, which ``tests/test_kernel.py`` compares with the numpy formulation in
+``tests/reference_surface.py`` (``planar_volume_cubic``, ``planar_normals``).
+:func:`written` makes what the sinks write of a result (float32, non-finite frames to the
+rest shape, bounds).
 
-Same mathematics as the numpy reference formulation in ``tests/reference_surface.py``
-(``planar_volume_cubic``, ``planar_normals``), which ``tests/test_kernel.py`` compares it
-with. Compiled once and cached beside the module (numba ``cache=True``); no ``fastmath``, so the same
-inputs give the same bytes.
+Compiled once and cached beside the module (numba ``cache=True``); no ``fastmath`` (but for
+the bounds' minima and maxima, over finite numbers only), so the same inputs give the same
+bytes.
 """
 from __future__ import annotations
 
@@ -230,23 +234,53 @@ def _pole_normals(ga, end0, end1, out_n, f):
 
 
 @njit(cache=True)
-def surface_stage(fixed, scaled, pole0, pole1, end0, end1, u_idx, u_w, v_idx, v_w,
-                  exact, v0, s_in, s_min, s_max, iters, rtol,
-                  out_v, out_n, out_vol, out_s, out_bad):
-    """Per frame f (F frames, Q = 8 N bound points, U rows, A columns):
+def surface_frame(fixed, scaled, pole0, pole1, end0, end1, u_idx, u_w, v_idx, v_w, exact, v0, s0, s_min, s_max,
+                  iters, rtol, net_a, net_w, ta, tw, ga, gw, out_v, out_n, f):
+    """Frame f of one muscle (Q = 8 N bound points, U rows, A columns, m = N + 2):
 
     fixed, scaled : (F, Q, 3)  bound control points: the part that keeps its size, and the
                     part multiplied by the section scale s
     pole0, pole1  : (F, 3)     axis ends (the pole rows of the net)
     end0, end1    : (F, 3)     outward axis directions at the poles (-T(0), T(1))
-    u_idx, u_w    : (U, 3)     along basis (rational), sparse rows over the m = N + 2 net rows
+    u_idx, u_w    : (U, 3)     along basis (rational), sparse rows over the m net rows
     v_idx, v_w    : (A, 3)     around basis (closed), sparse rows over the 8 columns
-    s_in          : (F,)       starting scale (the paper's sqrt(l0/l1), or 1)
-    outputs       : out_v, out_n (F, V, 3) with V = 2 + (U-2) A; out_vol, out_s (F,); out_bad (F,)
+    exact, v0     : whether to solve for the scale that gives volume v0
+    s0            : frame f's starting scale (the paper's sqrt(l0/l1), or 1)
+    scratch       : net_a, net_w (m, 8, 3); ta, tw (U, 8, 3); ga, gw (U, A, 3)
+    outputs       : out_v[f], out_n[f] (V, 3) with V = 2 + (U-2) A
+    returns       : (volume, scale s, no-solution flag)
 
-    The pipeline per frame: net (1), tessellation (2), volume cubic (3), scale (4, ``exact``
-    only), vertices and ring normals of A + s W (5), pole normals (6).
+    The pipeline: net (1), tessellation (2), volume cubic (3), scale (4, ``exact`` only),
+    vertices and ring normals of A + s W (5), pole normals (6).
     """
+    nu = u_idx.shape[0]
+    na = v_idx.shape[0]
+    _fill_net(net_a, net_w, fixed, scaled, pole0, pole1, f)
+    _tessellate(net_a, net_w, u_idx, u_w, v_idx, v_w, ta, tw, ga, gw)
+    c0, c1, c2, c3 = _volume_cubic(ga, gw)
+    s = s0
+    bad = False
+    if exact:
+        s, bad = _solve_scale(c0, c1, c2, c3, v0, s0, iters, rtol)
+    sc = min(max(s, s_min), s_max)
+    volume = ((c3 * sc + c2) * sc + c1) * sc + c0
+    for u in range(nu):
+        for a in range(na):
+            for c in range(3):
+                ga[u, a, c] += sc * gw[u, a, c]
+    _ring_vertices(ga, out_v, out_n, f)
+    _pole_normals(ga, end0, end1, out_n, f)
+    return volume, s, bad
+
+
+@njit(cache=True)
+def surface_stage(fixed, scaled, pole0, pole1, end0, end1, u_idx, u_w, v_idx, v_w,
+                  exact, v0, s_in, s_min, s_max, iters, rtol,
+                  out_v, out_n, out_vol, out_s, out_bad):
+    """:func:`surface_frame` over the F frames: fixed, scaled (F, Q, 3); pole0, pole1, end0,
+    end1 (F, 3); s_in (F,) starting scales (the paper's sqrt(l0/l1), or 1); exact: solve for
+    the scale that keeps volume v0; outputs out_v, out_n (F, V, 3) with V = 2 + (U-2) A;
+    out_vol, out_s (F,); out_bad (F,) no solution (the start scale kept)."""
     nf = fixed.shape[0]
     nu = u_idx.shape[0]
     na = v_idx.shape[0]
@@ -258,21 +292,63 @@ def surface_stage(fixed, scaled, pole0, pole1, end0, end1, u_idx, u_w, v_idx, v_
     ga = np.empty((nu, na, 3))
     gw = np.empty((nu, na, 3))
     for f in range(nf):
-        _fill_net(net_a, net_w, fixed, scaled, pole0, pole1, f)
-        _tessellate(net_a, net_w, u_idx, u_w, v_idx, v_w, ta, tw, ga, gw)
-        c0, c1, c2, c3 = _volume_cubic(ga, gw)
-        s0 = s_in[f]
-        s = s0
-        bad = False
-        if exact:
-            s, bad = _solve_scale(c0, c1, c2, c3, v0, s0, iters, rtol)
-        out_bad[f] = bad
+        vol, s, bad = surface_frame(fixed, scaled, pole0, pole1, end0, end1, u_idx, u_w, v_idx, v_w, exact, v0,
+                                    s_in[f], s_min, s_max, iters, rtol, net_a, net_w, ta, tw, ga, gw, out_v, out_n, f)
+        out_vol[f] = vol
         out_s[f] = s
-        sc = min(max(s, s_min), s_max)
-        out_vol[f] = ((c3 * sc + c2) * sc + c1) * sc + c0
-        for u in range(nu):
-            for a in range(na):
-                for c in range(3):
-                    ga[u, a, c] += sc * gw[u, a, c]
-        _ring_vertices(ga, out_v, out_n, f)
-        _pole_normals(ga, end0, end1, out_n, f)
+        out_bad[f] = bad
+
+
+@njit(cache=True, error_model="numpy")
+def written(vertices, normals, rest_v, rest_n, out_v, out_n, bounds, bad):
+    """What is written of a muscle's frames: vertices, normals (F, V, 3) float64 → out_v, out_n
+    (F, V, 3) float32 (rounded as numpy's ``astype``), a frame with any non-finite float32
+    value replaced by the rest shape rest_v, rest_n (V, 3) float32 (its flag set in bad (F,));
+    bounds (F, 2, 3) each frame's smallest and largest written coordinates."""
+    nf, nv = vertices.shape[0], vertices.shape[1]
+    flat_v = vertices.reshape(nf, -1)
+    flat_n = normals.reshape(nf, -1)
+    o_v = out_v.reshape(nf, -1)
+    o_n = out_n.reshape(nf, -1)
+    n3 = _U(3 * nv)
+    for f in range(nf):
+        ok = True
+        for i in range(n3):  # (x - x is 0 for a finite x, NaN otherwise; an and of flags: vector code)
+            x = np.float32(flat_v[f, i])
+            y = np.float32(flat_n[f, i])
+            o_v[f, i] = x
+            o_n[f, i] = y
+            ok = ok & ((x - x) == 0.0) & ((y - y) == 0.0)
+        bad[f] = not ok
+        if not ok:
+            out_v[f] = rest_v
+            out_n[f] = rest_n
+        _bounds(out_v[f], bounds[f])
+
+
+@njit(cache=True, error_model="numpy", fastmath={"nnan", "nsz"})
+def _bounds(v, out):
+    """Smallest and largest of each coordinate of finite points v (V, 3) into out (2, 3)
+    (no NaN here, so the compiler may take the minima in any order: vector code)."""
+    lo0 = v[0, 0]
+    lo1 = v[0, 1]
+    lo2 = v[0, 2]
+    hi0 = lo0
+    hi1 = lo1
+    hi2 = lo2
+    for i in range(_U(1), _U(v.shape[0])):
+        lo0 = min(lo0, v[i, 0])
+        lo1 = min(lo1, v[i, 1])
+        lo2 = min(lo2, v[i, 2])
+        hi0 = max(hi0, v[i, 0])
+        hi1 = max(hi1, v[i, 1])
+        hi2 = max(hi2, v[i, 2])
+    out[0, 0] = lo0
+    out[0, 1] = lo1
+    out[0, 2] = lo2
+    out[1, 0] = hi0
+    out[1, 1] = hi1
+    out[1, 2] = hi2
+
+
+_U = np.uint64  # loop indices the compiler can vectorize over (no negative-index wraparound)

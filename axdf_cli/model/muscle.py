@@ -42,6 +42,7 @@ from enum import Enum
 import numpy as np
 
 from axdf_cli.model import bspline, kernels, rmf
+from axdf_cli.model.batch import MuscleBatch
 from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.model.jiggle import JiggleSpec
@@ -185,6 +186,9 @@ class FrameResult:
     tension: np.ndarray  # (F,) effective tension
     warnings: list  # [(frame index in block, message)]
     contact: np.ndarray | None = None  # (F, 3) inside another muscle, inside a bone (shares), deepest (m)
+    # what the sinks write of it, made after every stage (axdf_cli.pipeline.evaluate.finite_or_rest):
+    # positions, normals (F, V, 3) float32, the frames replaced by the rest shape, bounds (F, 2, 3)
+    written: tuple | None = None
 
 
 class MuscleModel:
@@ -210,8 +214,9 @@ class MuscleModel:
         self._stage_belly_weights()  # 5
         self._stage_surface_basis()  # 6
         # 7: the rest surface, evaluated without a volume target, gives V0
-        rest = self.surface(rest_world[None], rest_p, np.zeros(1), rest_volume=None, frames=(x, t, r))
+        rest = self.surface(rest_world[None], rest_p, np.zeros(1), rest_volume=None)
         self.v0 = float(rest.volume[0])
+        self._one = None  # (packed again with V0 when next needed)
         self.rest_vertices = rest.vertices[0].astype(np.float32)
         self.rest_normals = rest.normals[0].astype(np.float32)
         self.rest_control_points = p_rest  # (8N, 3) world, rest pose (for tests)
@@ -414,52 +419,26 @@ class MuscleModel:
             t = np.clip(t + step, 0.0, 1.0)
         return t
 
-    def end_twist(self, world: np.ndarray, coarse: bool = True, r_end: np.ndarray | None = None,
-                  coords: np.ndarray | None = None) -> np.ndarray:
-        """Insertion roll (radians, wrapped to (-pi, pi]) for frames world (F, B, 4, 4): (F,).
-        ``r_end`` (F, 3): the propagated reference vector at t = 1, when already computed."""
-        _, x, t, r0 = self.rmf_inputs(world, coarse, coords)
-        if r_end is None:
-            r_end = rmf.propagate(x, t, r0)[:, -1]
-        return self._roll(world, t[:, -1], r_end)
-
-    def _roll(self, world, t_end, r_end):
-        target = rmf.perpendicular_unit(world[:, self.insertion_bone, :3, :3] @ self.rend_local, t_end)
-        return rmf.signed_angle(r_end, target, t_end)
-
     # -- evaluation -----------------------------------------------------------------------
-    def rmf_inputs(self, world: np.ndarray, coarse: bool = False, coords: np.ndarray | None = None,
-                   points: np.ndarray | None = None):
-        """Axis control points (F, n, 3), samples x (F, S, 3), unit tangents t and start vectors
-        r0 (F, 3): what :func:`rmf.propagate` needs (batched over muscles by the caller).
-        ``points``: the axis control points (F, n, 3) when already placed (step 1a, perhaps
-        changed by a stage since); else they are placed from ``world`` and ``coords``."""
-        p = self._axis_points(world, coords) if points is None else points
-        b, db = ("Bc", "dBc") if coarse else ("Bs", "dBs")
-        x, t = self._samples(p, b, db)
-        r0 = rmf.perpendicular_unit(world[:, self.origin_bone, :3, :3] @ self.r0_local, t[:, 0])
-        return p, x, t, r0
-
-    def axis_frames(self, world: np.ndarray, coords: np.ndarray | None = None, points: np.ndarray | None = None):
-        """(p, x, t, r): control points, samples, tangents and RMF reference vectors (F, S, 3)."""
-        p, x, t, r0 = self.rmf_inputs(world, coords=coords, points=points)
-        return p, x, t, rmf.propagate(x, t, r0)
-
     def evaluate(self, world: np.ndarray, tension: np.ndarray, twist_reference: np.ndarray | None = None,
-                 rest_volume: float | None | str = "model", coords: np.ndarray | None = None) -> FrameResult:
+                 rest_volume: float | None | str = "model", coords: np.ndarray | None = None,
+                 control_points: np.ndarray | None = None) -> FrameResult:
         """Deform for a block of frames: :meth:`axis_points` (step 1a), then :meth:`surface`
         (step 1b) from those points. The run (:mod:`axdf_cli.pipeline.evaluate`) calls the
         two steps itself, so that stages may change the axis between them; see :meth:`surface`
         for the arguments, and ``coords`` (F, C) skeleton coordinates for paths with moving
         or conditional points."""
         p, warnings = self.axis_points(world, coords)
-        return self.surface(world, p, tension, twist_reference, rest_volume, warnings=warnings)
+        return self.surface(world, p, tension, twist_reference, rest_volume, warnings=warnings,
+                            control_points=control_points)
 
     def surface(self, world: np.ndarray, points: np.ndarray, tension: np.ndarray,
                 twist_reference: np.ndarray | None = None, rest_volume: float | None | str = "model",
-                frames=None, warnings=()) -> FrameResult:
+                warnings=(), control_points: np.ndarray | None = None) -> FrameResult:
         """Step 1b of the deformation: RMF, bound sections, twist, tension, volume, surface and
-        normals, from the axis control points.
+        normals, from the axis control points (compiled: :meth:`MuscleBatch.surfaces
+        <axdf_cli.model.batch.MuscleBatch.surfaces>` of this muscle alone; a run makes every
+        muscle of a chunk in one call).
 
         world : (F, n_bones, 4, 4) bone world transforms (the bones of the start vector and of
         the insertion roll); points : (F, n, 3) axis control points in the world (step 1a's,
@@ -467,88 +446,27 @@ class MuscleModel:
         (F,) unwrapped coarse insertion roll (radians) choosing the branch of the exact roll,
         or None (roll unwrapped within the block); rest_volume : the volume V0 that ``exact``
         keeps ("model": the model's own rest volume; None: no target, the start scale as it
-        is); frames : (x, t, r) the RMF samples, tangents and reference vectors (F, S, 3) of
-        ``points`` when the caller computed them (batched over several muscles); warnings :
-        [(frame index, message)] of step 1a, listed first in the result's.
+        is); warnings : [(frame index, message)] of step 1a, listed first in the result's;
+        control_points : (F, 8N, 3) to receive the bound section control points as the surface
+        is made from them (fixed + s scaled), or None.
         """
-        warnings = list(warnings)
-        p = points
-        if frames is None:
-            _, x, t, r = self.axis_frames(world, points=p)
-        else:
-            x, t, r = frames
-        theta = self._roll(world, t[:, -1], r[:, -1])
-        if twist_reference is None:
-            theta = np.unwrap(theta)
-        else:
-            theta = theta + 2.0 * np.pi * np.round((twist_reference - theta) / (2.0 * np.pi))
+        p = np.ascontiguousarray(points, dtype=np.float64)
+        nf = p.shape[0]
+        tension = np.broadcast_to(np.asarray(tension, dtype=np.float64), (nf,))[:, None]
+        ref = None if twist_reference is None else np.asarray(twist_reference, dtype=np.float64).reshape(nf, 1)
+        return FrameResult(**self._batch().surfaces(world, p, tension, ref, [0], rest_volume, {0: list(warnings)},
+                                                    control_points)[0])
 
-        # bound points: position and frame at t, then the spread twist about T
-        c = self._apply("Bb", p)
-        tt = _unit(self._apply("dBb", p))
-        rr = rmf.reflect_step(x[:, self.bind_j], t[:, self.bind_j], r[:, self.bind_j], c, tt)
-        ss = np.cross(tt, rr)
-        ang = theta[:, None] * self.lam[None, :]  # (F, Q)
-        ca, sa = np.cos(ang)[..., None], np.sin(ang)[..., None]
-        rr, ss = ca * rr + sa * ss, ca * ss - sa * rr
-        u, v, w = self.uvw[:, 0, None], self.uvw[:, 1, None], self.uvw[:, 2, None]
-        off = u * tt + v * rr + w * ss  # (F, Q, 3) world offsets
+    def _batch(self) -> MuscleBatch:
+        """This muscle alone, packed for the compiled passes (made once, when first needed)."""
+        if getattr(self, "_one", None) is None:
+            self._one = MuscleBatch([self])
+        return self._one
 
-        length = self._length(p)
-        e = np.clip(np.asarray(tension, dtype=np.float64), 0.0, 1.0)
-        ratio = self.l0 / np.maximum(length, tol.MIN_AXIS_LENGTH)
-        s = start_scale(self.volume_mode, ratio)
-        # Tension law. tau[f,q]: radial factor, sqrt of the area factor 1 + g e (2 b - 1).
-        # The share h = e b of each belly point (the middle, at full tension) keeps the
-        # length-only scale s0; the rest (1 - h) takes the volume scale s, so the ends give
-        # way for the middle:  k = tau (h s0 + (1 - h) s), affine in s.
-        tau = np.sqrt(1.0 + tol.TENSION_GAIN * e[:, None] * (2.0 * self.bump[None, :] - 1.0) * self.beta[None, :])
-        h = e[:, None] * self.bump[None, :]  # (F, Q)
-        beta = self.beta[None, :, None]
-        held = (beta * (tau * h * s[:, None])[..., None]) * off
-        fixed = c + (1.0 - beta) * off + held  # part that does not scale with s
-        scaled = beta * (tau * (1.0 - h))[..., None] * off  # part multiplied by s
-        if isinstance(rest_volume, str):
-            rest_volume = self.v0
-        target = rest_volume if self.volume_mode in SOLVED_MODES else None
-        verts, norms, volume, s, bad = self._surface(fixed, scaled, p, t, s, target)
-        for i in np.nonzero(bad)[0]:
-            warnings.append((int(i), "exact volume has no solution; used the paper's scale"))
-        for i in np.nonzero(length < tol.MIN_AXIS_LENGTH)[0]:
-            warnings.append((int(i), f"axis length {length[i]:.3g} m is degenerate"))
-        for i in np.nonzero((s < tol.SCALE_MIN) | (s > tol.SCALE_MAX))[0]:
-            warnings.append((int(i), f"section scale {s[i]:.3g} clamped to [{tol.SCALE_MIN}, {tol.SCALE_MAX}]"))
-        return FrameResult(
-            vertices=verts,
-            normals=norms,
-            length=length,
-            volume=volume,
-            scale=np.clip(s, tol.SCALE_MIN, tol.SCALE_MAX),
-            twist=np.degrees(theta),
-            tension=e,
-            warnings=warnings,
-        )
-
-    def _surface(self, fixed: np.ndarray, scaled: np.ndarray, p: np.ndarray, t: np.ndarray,
-                 s0: np.ndarray, v0: float | None):
-        """The surface stage (compiled, :func:`axdf_cli.model.kernels.surface_stage`): bound control
-        points fixed + s * scaled (F, 8N, 3), axis control points p (F, n, 3), sample tangents
-        t (F, S, 3), starting scales s0 (F,), the volume to keep v0 (None: keep s0) → vertices (F, V, 3), normals (F, V, 3), volume
-        (F,), scale (F,), no-solution flags (F,)."""
-        nf = fixed.shape[0]
-        verts = np.empty((nf, self.n_vertices, 3))
-        norms = np.empty((nf, self.n_vertices, 3))
-        volume = np.empty(nf)
-        s = np.empty(nf)
-        bad = np.zeros(nf, dtype=np.bool_)
-        kernels.surface_stage(np.ascontiguousarray(fixed), np.ascontiguousarray(scaled),
-                              np.ascontiguousarray(p[:, 0]), np.ascontiguousarray(p[:, -1]),
-                              np.ascontiguousarray(-t[:, 0]), np.ascontiguousarray(t[:, -1]),
-                              self.u_idx, self.u_w, self.v_idx, self.v_w, v0 is not None,
-                              float(v0 or 0.0), np.ascontiguousarray(s0, dtype=np.float64),
-                              tol.SCALE_MIN, tol.SCALE_MAX, tol.VOLUME_SOLVE_ITERS, tol.VOLUME_SOLVE_RTOL,
-                              verts, norms, volume, s, bad)
-        return verts, norms, volume, s, bad
+    def __getstate__(self):
+        state = dict(self.__dict__)
+        state["_one"] = None  # (made again where needed: pickles stay small)
+        return state
 
 
 def _spec_mark(spec: MuscleSpec) -> Mark:

@@ -19,7 +19,8 @@ from typing import Iterator
 
 import numpy as np
 
-from axdf_cli.model import rmf
+from axdf_cli.model import kernels
+from axdf_cli.model.batch import LANES, MuscleBatch
 from axdf_cli.model.muscle import FrameResult
 from axdf_cli.model.pose import effective_tension, sample_activation, sample_coordinates
 from axdf_cli.model.skeleton import forward_kinematics
@@ -27,8 +28,7 @@ from axdf_cli.pipeline.plan import RunPlan
 from axdf_cli.pipeline.stages import Chunk, Scope, of_scope
 
 CHUNK_FRAMES = 128  # frames evaluated together: bounds memory for any sequence length
-EVAL_BUDGET_BYTES = 128 * 1024 * 1024  # per-muscle chunk memory budget (see chunk_frames)
-FRAME_BUDGET_BYTES = 256 * 1024 * 1024  # a chunk of every muscle at once (a FRAME stage runs; see chunk_frames)
+EVAL_BUDGET_BYTES = 40 * 1024 * 1024  # the surfaces of one chunk, every muscle at once (see chunk_frames)
 TIME_BLOCK = CHUNK_FRAMES  # frames of the pose's timeline a TIME stage is given at once (always the same blocks)
 
 
@@ -99,43 +99,37 @@ def _coarse_roll(plan: RunPlan, frames: np.ndarray) -> np.ndarray:
     """Coarse insertion roll (wrapped) of every muscle at ``frames``: (len(frames), M)."""
     q = sample_coordinates(plan.pose, frames)
     world = forward_kinematics(plan.pose.skeleton, q)
-    axes = batched_axis_frames(plan.models, range(len(plan.models)), world, coarse=True, coords=q)
-    return np.stack([m.end_twist(world, r_end=axes[j][3][:, -1], coords=q) for j, m in enumerate(plan.models)],
-                    axis=1)
+    batch, every = batch_of(plan), range(len(plan.models))
+    p, _ = batch.axis_points(world, q, every)
+    return batch.coarse_roll(world, p, every)
 
 
-def batched_axis_frames(models, indices, world: np.ndarray, coarse: bool = False, coords=None,
-                        points: dict | None = None) -> dict:
-    """Axis frames (p, x, t, r) of several muscles at once, by muscle index. Muscles with the
-    same number of axis samples share one double-reflection recurrence, so its loop over the
-    samples runs once per group, not once per muscle (row by row the same arithmetic).
-    ``points``: muscle -> (F, n, 3) axis control points already placed (step 1a)."""
-    groups: dict[int, list[int]] = {}
-    for j in indices:
-        m = models[j]
-        groups.setdefault(len(m.Bc) if coarse else len(m.ts), []).append(j)
-    nf = world.shape[0]
-    out = {}
-    for js in groups.values():
-        ins = [models[j].rmf_inputs(world, coarse, coords, None if points is None else points[j]) for j in js]
-        r = rmf.propagate(np.concatenate([i[1] for i in ins]), np.concatenate([i[2] for i in ins]),
-                          np.concatenate([i[3] for i in ins]))
-        for k, j in enumerate(js):
-            p, x, t, _ = ins[k]
-            out[j] = (p, x, t, r[k * nf:(k + 1) * nf])
-    return out
+_BATCHES: list = []  # [(models, MuscleBatch)], the most recent last
+
+
+def batch_of(plan: RunPlan) -> MuscleBatch:
+    """The plan's muscle models packed for the compiled passes (:mod:`axdf_cli.model.batch`),
+    made once for the same models (a data set's sequences share theirs; a few are kept)."""
+    key = tuple(plan.models)
+    for models, batch in _BATCHES:
+        if len(models) == len(key) and all(a is b for a, b in zip(models, key)):
+            return batch
+    batch = MuscleBatch(key)
+    _BATCHES.append((key, batch))
+    del _BATCHES[:-4]
+    return batch
 
 
 def chunk_frames(plan: RunPlan, together: list[int] | None = None) -> int:
-    """Frames per evaluation chunk: at most CHUNK_FRAMES, fewer for very fine meshes, so that
-    one muscle's chunk (about 8 float64 arrays of (F, V, 3)) stays within EVAL_BUDGET_BYTES;
-    with ``together`` (the muscles whose results are held at once, for a FRAME stage: 2
-    arrays each, plus one muscle's working set), within FRAME_BUDGET_BYTES."""
-    v = max(m.n_vertices for m in plan.models)
-    if together is None:
-        return int(np.clip(EVAL_BUDGET_BYTES // (v * 3 * 8 * 8), 1, CHUNK_FRAMES))
-    held = sum(plan.models[j].n_vertices for j in together) * 3 * 8 * 2
-    return int(np.clip(FRAME_BUDGET_BYTES // (held + v * 3 * 8 * 8), 1, CHUNK_FRAMES))
+    """Frames per evaluation chunk: at most CHUNK_FRAMES, fewer so that the surfaces of the
+    muscles made at once (``together``, default all: vertices and normals, 2 float64 arrays
+    (F, V, 3) each, and the bound points' frames) stay within EVAL_BUDGET_BYTES; a multiple of
+    the compiled pass's LANES when at least that many (its loops over frames run as vector
+    instructions LANES frames at a time: 7 frames take 3.5x as long as 8 in the RMF)."""
+    together = range(len(plan.models)) if together is None else together
+    held = sum(plan.models[j].n_vertices * 3 * 8 * 2 + len(plan.models[j].bind_t) * 3 * 8 * 3 for j in together)
+    n = int(np.clip(EVAL_BUDGET_BYTES // max(held, 1), 1, CHUNK_FRAMES))
+    return n - n % LANES if n >= LANES else n
 
 
 # ----------------------------------------------------------------------------- the pre-pass
@@ -199,10 +193,9 @@ def _chunk(plan: RunPlan, rows: slice, frames: np.ndarray, muscles: list[int], t
     q = sample_coordinates(plan.pose, frames)
     world = forward_kinematics(plan.pose.skeleton, q)
     act = sample_activation(plan.pose, plan.names, frames)
-    axis, notes = {}, {}
-    for j in muscles:
-        axis[j], notes[j] = plan.models[j].axis_points(world, q)
-    return Chunk(rows, frames, q, world, act, muscles, axis, twist=twist, notes=notes)
+    batch = batch_of(plan)
+    p, notes = batch.axis_points(world, q, muscles)
+    return Chunk(rows, frames, q, world, act, muscles, batch.unpack(p, muscles), twist=twist, notes=notes)
 
 
 # ----------------------------------------------------------------------------- the chunks
@@ -214,15 +207,15 @@ def evaluate_plan(plan: RunPlan, prep: Prepass | None = None, rows: slice | None
     """The selected frames ``rows`` (positions in ``plan.frames``, default all) of ``muscles``
     (default all; every muscle when a FRAME stage runs), in chunks of at most ``size`` frames:
     yields ``(chunk, results)`` in frame order, where ``results`` yields ``(muscle, FrameResult)``
-    in ``chunk.muscles`` order, after every stage. Without a FRAME stage the surfaces are made
-    as ``results`` is read (a sink handling one muscle at a time holds one muscle's chunk in
-    memory); with one, all of them are made, then the FRAME stages run, then they are handed
-    out. ``prep``: :func:`prepare`'s pre-pass (made here when None)."""
+    in ``chunk.muscles`` order, after every stage. The surfaces of all carried muscles are made
+    at once (one compiled pass, :mod:`axdf_cli.model.batch`; chunks sized by
+    :func:`chunk_frames`), then the FRAME stages run, then they are handed out. ``prep``:
+    :func:`prepare`'s pre-pass (made here when None)."""
     prep = prepare(plan) if prep is None else prep
     rows = slice(0, len(plan.frames)) if rows is None else rows
     time_st, frame_st = of_scope(plan.stages, Scope.TIME), of_scope(plan.stages, Scope.FRAME)
     carried = list(range(len(plan.models))) if frame_st or muscles is None else list(muscles)
-    size = size or chunk_frames(plan, carried if frame_st else None)
+    size = size or chunk_frames(plan, carried)
     frame_state = [s.start(plan) for s in frame_st]
     for chunk in (_time_chunks(plan, prep, rows, carried, size, time_st) if time_st else
                   _plain_chunks(plan, prep, rows, carried, size)):
@@ -253,26 +246,22 @@ def _time_chunks(plan, prep, rows: slice, carried, size: int, stages) -> Iterato
 
 
 def _surfaces(plan, chunk: Chunk, stages, state: list) -> Iterator[tuple[int, FrameResult]]:
-    """Step 1b of the chunk's muscles, then the FRAME ``stages`` (``state``: theirs, kept
-    from chunk to chunk); yields (muscle, result) in ``chunk.muscles`` order."""
-    frames = batched_axis_frames(plan.models, chunk.muscles, chunk.world, points=chunk.axis)
-
-    def surface(j: int) -> FrameResult:
-        m = plan.models[j]
-        _, x, t, r = frames.pop(j)
-        return m.surface(chunk.world, chunk.axis[j], effective_tension(m.spec.tension, chunk.activation[:, j]),
-                         chunk.twist[:, j], frames=(x, t, r), warnings=chunk.notes.get(j, ()))
-
-    if not stages:
-        for j in chunk.muscles:
-            yield j, surface(j)
-        return
-    for j in chunk.muscles:
-        chunk.results[j] = surface(j)
+    """Step 1b of the chunk's muscles, all at once (:meth:`MuscleBatch.surfaces`), then the
+    FRAME ``stages`` (``state``: theirs, kept from chunk to chunk); yields (muscle, result) in
+    ``chunk.muscles`` order."""
+    batch = batch_of(plan)
+    js = list(chunk.muscles)
+    tone = np.array([plan.muscles[j].tension for j in js], dtype=np.float64)
+    tension = effective_tension(tone, chunk.activation[:, js])  # (C, K)
+    fields = batch.surfaces(chunk.world, batch.pack(chunk.axis, len(chunk.frames)), tension, chunk.twist[:, js], js,
+                            notes=chunk.notes)
+    chunk.results = {j: FrameResult(**f) for j, f in fields.items()}
     for k, stage in enumerate(stages):
         state[k], chunk = stage(state[k], chunk)
     for j in chunk.muscles:
-        yield j, chunk.results.pop(j)
+        res = chunk.results.pop(j)
+        res.written = written_arrays(res, plan.models[j])
+        yield j, res
 
 
 def evaluate_chunks(plan: RunPlan, chunk: int | None = None, twist_ref: np.ndarray | None = None,
@@ -284,12 +273,28 @@ def evaluate_chunks(plan: RunPlan, chunk: int | None = None, twist_ref: np.ndarr
         yield c.rows, c.world, results
 
 
-def finite_or_rest(res, model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def finite_or_rest(res, model, bounds: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A result's vertices and normals as float32, frames with any non-finite value replaced
-    by the rest shape (what is written and rendered): (positions, normals, replaced frame indices)."""
-    pos = res.vertices.astype(np.float32)
-    nrm = res.normals.astype(np.float32)
-    bad = np.nonzero(~(np.isfinite(pos).all(axis=(1, 2)) & np.isfinite(nrm).all(axis=(1, 2))))[0]
-    pos[bad] = model.rest_vertices
-    nrm[bad] = model.rest_normals
+    by the rest shape (what is written and rendered): (positions, normals, replaced frame
+    indices); ``bounds`` (F, 2, 3), when given, receives each frame's smallest and largest
+    written coordinates. :func:`evaluate_plan` makes them for every result after the stages
+    (``res.written``); otherwise one compiled pass here (:func:`axdf_cli.model.kernels.written`)."""
+    if res.written is None:
+        res.written = written_arrays(res, model)
+    pos, nrm, bad, box = res.written
+    if bounds is not None:
+        bounds[...] = box
     return pos, nrm, bad
+
+
+def written_arrays(res, model) -> tuple:
+    """(positions, normals (F, V, 3) float32, replaced frame indices, bounds (F, 2, 3)) of a
+    result (:func:`finite_or_rest`)."""
+    nf, nv = res.vertices.shape[:2]
+    pos = np.empty((nf, nv, 3), np.float32)
+    nrm = np.empty((nf, nv, 3), np.float32)
+    box = np.empty((nf, 2, 3), np.float32)
+    bad = np.empty(nf, np.bool_)
+    kernels.written(np.ascontiguousarray(res.vertices, np.float64), np.ascontiguousarray(res.normals, np.float64),
+                    model.rest_vertices, model.rest_normals, pos, nrm, box, bad)
+    return pos, nrm, np.nonzero(bad)[0], box

@@ -65,14 +65,6 @@ STATS_COLUMNS = ("length", "volume", "volume_ratio", "tension", "twist", "scale"
 NSTATS = len(STATS_COLUMNS)
 
 
-def _fmt_rows(rows: list[list]) -> str:
-    return "".join(",".join(r) + "\n" for r in rows)
-
-
-def _g(x: float) -> str:
-    return f"{x + 0.0:.9g}"
-
-
 def manifest_dict(plan: RunPlan, files: dict, warnings: list, complete: bool, extra: dict | None = None) -> dict:
     m = {
         "tool": "axdf",
@@ -195,7 +187,7 @@ def mesh_pass(plan: RunPlan, prep: Prepass, writer: OutputWriter, muscles: list[
                 if j not in col:  # (a FRAME stage carries every muscle)
                     continue
                 name = plan.muscles[j].name
-                pos, nrm, bad = finite_or_rest(res, plan.models[j])
+                pos, nrm, bad = finite_or_rest(res, plan.models[j], box := np.empty((len(frames), 2, 3), np.float32))
                 res.warnings += [(int(i), "non-finite vertices; the rest shape was written instead") for i in bad]
                 for f in frame_formats:
                     w = writers[(j, f)]
@@ -205,8 +197,8 @@ def mesh_pass(plan: RunPlan, prep: Prepass, writer: OutputWriter, muscles: list[
                     seq.append(j, pos, nrm)
                 if raw is not None:
                     raw.put(j, here, pos, nrm)
-                lo = np.minimum(lo, pos.reshape(-1, 3).min(axis=0))
-                hi = np.maximum(hi, pos.reshape(-1, 3).max(axis=0))
+                lo = np.minimum(lo, box[:, 0].min(axis=0))
+                hi = np.maximum(hi, box[:, 1].max(axis=0))
                 cm = res.contact if res.contact is not None else np.zeros((len(res.length), 3))
                 st = np.concatenate([np.stack([res.length, res.volume, res.volume / plan.models[j].v0, res.tension,
                                                res.twist, res.scale], axis=1), cm], axis=1)
@@ -214,6 +206,8 @@ def mesh_pass(plan: RunPlan, prep: Prepass, writer: OutputWriter, muscles: list[
                 warns += [(sl.start + i, j, msg) for i, msg in res.warnings]
                 if progress:
                     progress(len(frames))
+            if seq is not None:
+                seq.end_chunk()
             if on_chunk:
                 on_chunk()
         writer.flush()
@@ -255,6 +249,7 @@ def _sequence_worker(shared: dict, muscles: list[int]) -> tuple[dict, int]:
             for j in muscles:
                 a, b = offsets[j], offsets[j + 1]
                 seq.append(j, data[0, :, a:b], data[1, :, a:b])
+            seq.end_chunk()
             check_parent()
         return seq.finish()
     except BaseException:
@@ -329,19 +324,26 @@ def rendered_frames(plan: RunPlan, previous: dict, root: Path) -> set[int]:
 
 
 def stats_csv(plan: RunPlan, stats: np.ndarray, warn_text: list) -> bytes:
-    rows = [["frame", "muscle", *STATS_COLUMNS, "warning"]]
-    for i, frame in enumerate(plan.frames):
-        for j, name in enumerate(plan.names):
-            rows.append([str(int(frame)), name] + [_g(x) for x in stats[i, j]] + [_csv_text(warn_text[i][j])])
-    return _fmt_rows(rows).encode()
+    """stats.csv: a row per frame and muscle; numbers to 9 significant digits (-0 written 0).
+    One ``%`` per row over plain floats (a tenth of the time of formatting each number alone)."""
+    fmt = "%d,%s" + ",%.9g" * stats.shape[-1] + ",%s\n"
+    rows = (stats + 0.0).tolist()  # (+ 0.0: -0 is written 0)
+    out = [",".join(("frame", "muscle", *STATS_COLUMNS, "warning")) + "\n"]
+    names = plan.names
+    for i, frame in enumerate(plan.frames.tolist()):
+        row, warn = rows[i], warn_text[i]
+        out += [fmt % (frame, name, *row[j], _csv_text(warn[j])) for j, name in enumerate(names)]
+    return "".join(out).encode()
 
 
 def bones_csv(plan: RunPlan, bone_rows: np.ndarray) -> bytes:
-    rows = [["frame", "bone", "x", "y", "z", "qw", "qx", "qy", "qz"]]
-    for i, frame in enumerate(plan.frames):
-        for b, bone in enumerate(plan.pose.skeleton.bones):
-            rows.append([str(int(frame)), bone.name] + [_g(x) for x in bone_rows[i, b]])
-    return _fmt_rows(rows).encode()
+    fmt = "%d,%s" + ",%.9g" * bone_rows.shape[-1] + "\n"
+    rows = (bone_rows + 0.0).tolist()
+    out = ["frame,bone,x,y,z,qw,qx,qy,qz\n"]
+    names = [b.name for b in plan.pose.skeleton.bones]
+    for i, frame in enumerate(plan.frames.tolist()):
+        out += [fmt % (frame, name, *rows[i][b]) for b, name in enumerate(names)]
+    return "".join(out).encode()
 
 
 def strict_check(plan: RunPlan, prep: Prepass) -> None:

@@ -25,7 +25,8 @@ from axdf_cli.formats import FORMATS, of_layout
 from axdf_cli.formats.packed import SequenceInfo
 from axdf_cli.fileio.runfolder import USD_BONES, USD_STAGE, is_file_with, rest_mesh_relpath, sequence_relpath
 
-MAX_PENDING_CHUNKS = 8  # chunks queued for the sequence thread (bounds memory)
+MAX_PENDING_CHUNKS = 2  # chunks (every muscle's frames of one) queued for the sequence thread (bounds memory)
+CLOSE_THREADS = 2  # files completed (headers, sha256 read back) at once at the end; USD layers one at a time
 
 
 def sequence_formats(formats) -> list[str]:
@@ -68,32 +69,55 @@ class SequenceFiles:
         except BaseException:
             self.abort()
             raise
+        self._by_muscle: dict = {}
+        for (k, _), (_, _, w) in self.writers.items():
+            self._by_muscle.setdefault(k, []).append(w)
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="axdf-sequences")
         self._pending: list = []
+        self._chunk: list = []
 
     def append(self, j: int, positions: np.ndarray, normals: np.ndarray) -> None:
-        ws = [w for (k, _), (_, _, w) in self.writers.items() if k == j]
-        self._pending.append(self._pool.submit(_append_all, ws, positions, normals))
+        """Muscle j's next frames; handed to the thread with the rest of the chunk at
+        :meth:`end_chunk` (one hand-over per chunk, not per muscle: each costs a thread switch)."""
+        self._chunk.append((self._by_muscle.get(j, []), positions, normals))
+
+    def end_chunk(self) -> None:
+        """Queue the chunk's appends for the sequence thread (at most MAX_PENDING_CHUNKS wait)."""
+        if self._chunk:
+            self._pending.append(self._pool.submit(_append_chunk, self._chunk))
+            self._chunk = []
         while len(self._pending) > MAX_PENDING_CHUNKS:
             self._pending.pop(0).result()
 
     def finish(self) -> tuple[dict, int]:
+        self.end_chunk()
         for fut in self._pending:
             fut.result()
         self._pending = []
+        self._pool.shutdown()
         files, skipped = {}, 0
-        for rel, path, w in self.writers.values():  # one at a time: one muscle's USD layer in memory
-            sha = self._pool.submit(w.close).result()
+        entries = list(self.writers.items())
+        # USD layers one at a time (one muscle's layer in memory); the others' closing (headers,
+        # and reading a file back for its sha256) CLOSE_THREADS at a time
+        usd = [e for e in entries if e[0][1] == "usd"]
+        rest = [e for e in entries if e[0][1] != "usd"]
+        with ThreadPoolExecutor(max_workers=CLOSE_THREADS, thread_name_prefix="axdf-close") as pool:
+            closing = [(e, pool.submit(e[1][2].close)) for e in rest]
+            shas = {e[0]: fut.result() for e, fut in closing}
+        for e in usd:
+            shas[e[0]] = e[1][2].close()
+        for key, (rel, path, w) in entries:
+            sha = shas[key]
             if unchanged(self.previous, path, rel, sha):
                 w.abort()
                 skipped += 1
             else:
                 w.commit()
             files[rel] = sha
-        self._pool.shutdown()
         return files, skipped
 
     def abort(self) -> None:
+        self._chunk = []
         pool = getattr(self, "_pool", None)
         if pool is not None:
             for fut in self._pending:
@@ -103,9 +127,10 @@ class SequenceFiles:
             w.abort()
 
 
-def _append_all(writers, positions, normals) -> None:
-    for w in writers:
-        w.append(positions, normals)
+def _append_chunk(items) -> None:
+    for writers, positions, normals in items:
+        for w in writers:
+            w.append(positions, normals)
 
 
 def write_run_files(plan, writer, bone_rows: np.ndarray, bounds: np.ndarray, framing: np.ndarray) -> None:

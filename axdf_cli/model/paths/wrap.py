@@ -989,9 +989,11 @@ def _path_length(n_ent, pos, ent_w, ent_side, arc_len):
     for e in range(1, n_ent):
         if ent_w[e] >= 0 and ent_w[e - 1] == ent_w[e] and ent_side[e] == 2:
             length += arc_len[ent_w[e]]
-        else:
-            d = pos[e] - pos[e - 1]
-            length += math.sqrt(_dot(d, d))
+        else:  # |pos[e] - pos[e-1]|, in scalars (no temporary array)
+            d0 = pos[e, 0] - pos[e - 1, 0]
+            d1 = pos[e, 1] - pos[e - 1, 1]
+            d2 = pos[e, 2] - pos[e - 1, 2]
+            length += math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
     return length
 
 
@@ -1151,9 +1153,11 @@ def wrapped_paths(points, active, wrap_xf, kind, prm, wrap_axis, wrap_sign, meth
             dense[nd] = pos[e]
             nd += 1
         cum[0] = 0.0
-        for g in range(1, nd):
-            d = dense[g] - dense[g - 1]
-            cum[g] = cum[g - 1] + math.sqrt(_dot(d, d))
+        for g in range(1, nd):  # (in scalars: no temporary array per point)
+            d0 = dense[g, 0] - dense[g - 1, 0]
+            d1 = dense[g, 1] - dense[g - 1, 1]
+            d2 = dense[g, 2] - dense[g - 1, 2]
+            cum[g] = cum[g - 1] + math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
         total = cum[nd - 1]
         g = 0
         for k in range(fractions.shape[0]):
@@ -1163,4 +1167,5 @@ def wrapped_paths(points, active, wrap_xf, kind, prm, wrap_axis, wrap_sign, meth
             span = cum[g + 1] - cum[g]
             u = (s - cum[g]) / span if span > 0.0 else 0.0
             u = min(max(u, 0.0), 1.0)
-            out_samples[f, k] = dense[g] + u * (dense[g + 1] - dense[g])
+            for c in range(3):
+                out_samples[f, k, c] = dense[g, c] + u * (dense[g + 1, c] - dense[g, c])
