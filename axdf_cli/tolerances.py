@@ -155,15 +155,13 @@ KEYPOINT_MERGE = 0.025
 # curved surface between them, so a small gap keeps the written meshes apart.
 CONTACT_MARGIN = 0.001
 CONTACT_BONE_MARGIN = 0.001
-# Jacobi passes (push, smooth, re-solve the volume); a fixed number, so the result is a
-# continuous function of the frame.
-CONTACT_ITERATIONS = 12
-# [1 2 1]/4 smoothing rounds of the pushes around and along the grid (no creases).
+# Jacobi passes (push, fit the rings' modes, re-solve the volume); a fixed number, so the result
+# is a continuous function of the frame. More passes clear more overlap but, the volume being
+# kept, press it into the next layer: on the walk 3 passes kept the deepest penetration nearest
+# its no-contact value with the fewest pops (README, Contact).
+CONTACT_ITERATIONS = 3
+# [1 2 1]/4 smoothing rounds of the rings' modes along the muscle (no creases).
 CONTACT_SMOOTH_PASSES = 4
-# Fraction of a pass's push applied (1: all of it).
-CONTACT_RELAX = 1.0
-# A point pushed this far (m) is held wholly (not moved by the volume re-solve); less, partly.
-CONTACT_HOLD_LENGTH = 0.004
 # Bones' signed distance fields: grid step and padding around the mesh (m). Trilinear on a
 # 3 mm grid is within ~0.3 mm of the mesh's distance near its surface on the shipped bones.
 CONTACT_SDF_STEP = 0.003
@@ -190,6 +188,11 @@ CONTACT_RADIAL_BLEND = 0.25
 # A point moves at most this far (m) in one contact pass: a deep overlap is cleared over
 # several passes instead of in one jump that overshoots into a third muscle.
 CONTACT_MAX_STEP = 0.004
-# Pushes from n neighbours at one point are summed and divided by n ** CONTACT_MEAN_POWER
-# (1: their mean, 0: their sum; on the walk the sum left fewer points inside and popped less).
-CONTACT_MEAN_POWER = 0.0
+# A point nearer a neighbour's axis than CONTACT_DEEP_FADE[1] of its radius is pushed less,
+# not at all nearer than CONTACT_DEEP_FADE[0] (smoothstep between): muscles on one line of
+# action have no side to push each other to, and pushing them anyway piles them up.
+CONTACT_DEEP_FADE = (0.15, 0.5)
+# The pushes are sampled at A / CONTACT_SAMPLE_COLUMNS evenly spaced points (8 of 24) of every
+# CONTACT_SAMPLE_RINGS-th ring; each sampled ring's displacement modes are fitted to them.
+CONTACT_SAMPLE_COLUMNS = 3
+CONTACT_SAMPLE_RINGS = 2

@@ -222,9 +222,9 @@ def _field_at(values, off, dims, origin, h, x0, x1, x2):
 
 
 @njit(cache=True)
-def _bone_query(x, inv, fb, fo, fh, fd, foff, fv, g_out):
-    """Smallest signed distance of world point x over every bone field (inv: (B, 4, 4) world
-    to bone-local) and, in g_out[:3], its world gradient by central differences of the
+def _bone_query(x, inv, fb, fo, fh, fd, foff, fv, fsel, f0, f1, g_out):
+    """Smallest signed distance of world point x over the bone fields fsel[f0:f1] (inv: (B, 4,
+    4) world to bone-local) and, in g_out[:3], its world gradient by central differences of the
     trilinear field over one grid step (continuous, unlike the trilinear's own gradient);
     1e30 where no field covers x."""
     best = 1e30
@@ -232,7 +232,8 @@ def _bone_query(x, inv, fb, fo, fh, fd, foff, fv, g_out):
     l0 = 0.0
     l1 = 0.0
     l2 = 0.0
-    for k in range(fb.shape[0]):
+    for kk in range(f0, f1):
+        k = fsel[kk]
         m = inv[fb[k]]
         y0 = m[0, 0] * x[0] + m[0, 1] * x[1] + m[0, 2] * x[2] + m[0, 3]
         y1 = m[1, 0] * x[0] + m[1, 1] * x[1] + m[1, 2] * x[2] + m[1, 3]
@@ -424,138 +425,208 @@ def _boxes(grid, off, box):
 
 
 @njit(cache=True)
-def _pushes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb, fo, fh, fd, foff, fv,
-            margin_m, margin_b, radial_blend, mean_power, push):
-    """One Jacobi pass: the push (Ng, 3) of every grid point of every muscle against its
-    neighbours (nbr[nbr_off[i]:nbr_off[i + 1]]: allowed pairs whose boxes meet) and every bone
-    field (module doc, step 1). Computed on every second ring and column (poles: their first
-    point), filled between by averages."""
-    M = nu.shape[0]
-    q = np.empty(8)
-    g = np.empty(6)
-    for i in range(M):
-        U = nu[i]
-        A = na[i]
-        for k in range(off[i], off[i + 1]):
-            for c in range(3):
-                push[k, c] = 0.0
-        for k in range(off[i], off[i + 1]):
-            x = grid[k]
-            u = (k - off[i]) // A
-            a = (k - off[i]) % A
-            if (u == 0 or u == U - 1) and a != 0:
-                continue  # pole rows: the first point stands for the pole
-            if 0 < u < U - 1 and (u % 2 == 0 or a % 2 == 1):
-                continue  # filled below
-            ci = cen[coff[i] + u]
-            if fb.shape[0] > 0:
-                d = _bone_query(x, inv, fb, fo, fh, fd, foff, fv, g)
-                if d < margin_b:
-                    gl = np.sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2])
-                    if gl > 1e-9:
-                        for c in range(3):
-                            push[k, c] += (margin_b - d) * g[c] / gl
-            mp0 = 0.0
-            mp1 = 0.0
-            mp2 = 0.0
-            nm = 0
-            for jj in range(nbr_off[i], nbr_off[i + 1]):
-                j = nbr[jj]
-                if (x[0] < box[j, 0] - margin_m or x[1] < box[j, 1] - margin_m or x[2] < box[j, 2] - margin_m
-                        or x[0] > box[j, 3] + margin_m or x[1] > box[j, 4] + margin_m or x[2] > box[j, 5] + margin_m):
-                    continue
-                if not _muscle_query(x, grid, off[j], nu[j], na[j], cen, coff[j], q):
-                    continue
-                rho = q[0]
-                rr = q[1] + margin_m
-                if rho >= rr or q[1] <= 0.0:
-                    continue
-                # direction: from j's axis point towards the centre of x's own ring, plus a
-                # little of x's own radial direction from j's axis (well defined where the
-                # two axes meet: no switching between frames)
-                bl = radial_blend * q[1]
-                e0 = ci[0] - q[2] + bl * q[5]
-                e1 = ci[1] - q[3] + bl * q[6]
-                e2 = ci[2] - q[4] + bl * q[7]
-                el = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
-                if el < 1e-12:
-                    e0 = q[5]
-                    e1 = q[6]
-                    e2 = q[7]
-                else:
-                    e0 /= el
-                    e1 /= el
-                    e2 /= el
-                # leave the circle of radius rr about the axis point along e: x + s e
-                rx = rho * q[5]
-                ry = rho * q[6]
-                rz = rho * q[7]
-                b = rx * e0 + ry * e1 + rz * e2
-                s = -b + np.sqrt(max(b * b + rr * rr - rho * rho, 0.0))
-                w = share[i, j] * s
-                mp0 += w * e0
-                mp1 += w * e1
-                mp2 += w * e2
-                nm += 1
-            if nm > 0:
-                # several neighbours: their mean push (a sum overshoots into a third muscle)
-                wn = 1.0 / nm ** mean_power
-                push[k, 0] += wn * mp0
-                push[k, 1] += wn * mp1
-                push[k, 2] += wn * mp2
-        # fill: odd columns of computed rings, then the rings between
-        for u in range(1, U - 1, 2):
-            for a in range(1, A, 2):
-                k = off[i] + u * A + a
-                k0 = off[i] + u * A + a - 1
-                k1 = off[i] + u * A + (a + 1) % A
-                for c in range(3):
-                    push[k, c] = 0.5 * (push[k0, c] + push[k1, c])
-        for u in range(2, U - 1, 2):
-            for a in range(A):
-                k = off[i] + u * A + a
-                k0 = off[i] + (u - 1) * A + (a if u - 1 > 0 else 0)
-                k1 = off[i] + (u + 1) * A + (a if u + 1 < U - 1 else 0)
-                for c in range(3):
-                    push[k, c] = 0.5 * (push[k0, c] + push[k1, c])
-        # pole rows carry their first point's push
-        for u in (0, U - 1):
-            b0 = off[i] + u * A
-            for a in range(1, A):
-                for c in range(3):
-                    push[b0 + a, c] = push[b0, c]
+def _smoothstep(x):
+    """0 below 0, 1 above 1, 3x^2 - 2x^3 between: a continuous switch with continuous slope."""
+    if x <= 0.0:
+        return 0.0
+    if x >= 1.0:
+        return 1.0
+    return x * x * (3.0 - 2.0 * x)
+
+
+#: The modes of a ring's displacement around its angle theta (module doc, step 2): the
+#: section's shift (1), its shift and tilt of one side (cos, sin theta), its flattening (cos,
+#: sin 2 theta).
+NMODES = 5
 
 
 @njit(cache=True)
-def _smooth(push, off, nu, na, passes, tmp):
-    """``passes`` rounds of [1 2 1]/4 smoothing around and along each muscle's grid (poles:
-    the mean of their first ring)."""
+def _modes(theta, b):
+    b[0] = 1.0
+    b[1] = np.cos(theta)
+    b[2] = np.sin(theta)
+    b[3] = np.cos(2.0 * theta)
+    b[4] = np.sin(2.0 * theta)
+
+
+@njit(cache=True)
+def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb, fo, fh, fd, foff, fv,
+                fl_off, fl, margin_m, margin_b, deep0, deep1, radial_blend, q, g, p):
+    """The push p[:3] that point x of muscle i (its ring's centre ci) asks for: out of every
+    bone field by (margin_b - d) along the field's gradient where d < margin_b, and out of
+    every neighbour j it lies within the margin of, by i's share of the distance to leave j's
+    section (a circle of j's radius + margin about j's axis point) along the line from j's axis
+    to ci (plus a little of x's radial direction from j's axis), faded out smoothly for points
+    nearer j's axis than deep1 of j's radius (none below deep0: two muscles on one line of
+    action have no side to push to, and pushing them anyway piles them up); p[3]: the signed
+    distance to the nearest bone (1e30: none near). Returns how many neighbours pushed."""
+    p[0] = 0.0
+    p[1] = 0.0
+    p[2] = 0.0
+    p[3] = 1e30
+    if fl_off[i + 1] > fl_off[i]:
+        d = _bone_query(x, inv, fb, fo, fh, fd, foff, fv, fl, fl_off[i], fl_off[i + 1], g)
+        p[3] = d
+        if d < margin_b:
+            gl = np.sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2])
+            if gl > 1e-9:
+                for c in range(3):
+                    p[c] += (margin_b - d) * g[c] / gl
+    nm = 0
+    for jj in range(nbr_off[i], nbr_off[i + 1]):
+        j = nbr[jj]
+        if (x[0] < box[j, 0] - margin_m or x[1] < box[j, 1] - margin_m or x[2] < box[j, 2] - margin_m
+                or x[0] > box[j, 3] + margin_m or x[1] > box[j, 4] + margin_m or x[2] > box[j, 5] + margin_m):
+            continue
+        if not _muscle_query(x, grid, off[j], nu[j], na[j], cen, coff[j], q):
+            continue
+        rho = q[0]
+        rr = q[1] + margin_m
+        if rho >= rr or q[1] <= 0.0:
+            continue
+        fade = _smoothstep((rho / q[1] - deep0) / (deep1 - deep0))
+        if fade <= 0.0:
+            continue
+        bl = radial_blend * q[1]
+        e0 = ci[0] - q[2] + bl * q[5]
+        e1 = ci[1] - q[3] + bl * q[6]
+        e2 = ci[2] - q[4] + bl * q[7]
+        el = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+        if el < 1e-12:
+            e0 = q[5]
+            e1 = q[6]
+            e2 = q[7]
+        else:
+            e0 /= el
+            e1 /= el
+            e2 /= el
+        # leave the circle of radius rr about the axis point along e: x + s e
+        b = rho * (q[5] * e0 + q[6] * e1 + q[7] * e2)
+        s = -b + np.sqrt(max(b * b + rr * rr - rho * rho, 0.0))
+        w = fade * share[i, j] * s
+        p[0] += w * e0
+        p[1] += w * e1
+        p[2] += w * e2
+        nm += 1
+    return nm
+
+
+@njit(cache=True)
+def _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb, fo, fh, fd, foff, fv, fl_off, fl,
+                margin_m, margin_b, deep0, deep1, radial_blend, cstep, rstep, coef, touched, buried):
+    """One Jacobi pass (module doc, steps 1-2), every muscle from the same state: the pushes at
+    ``ns`` = A / ``cstep`` evenly spaced points of every ``rstep``-th ring (and the last inner
+    ring), and per such ring their low-pass around the ring, the least-squares fit of the
+    :data:`NMODES` modes, which for evenly spaced samples are the discrete Fourier coefficients
+    (the modes are orthogonal there): C_0 = mean p, C_k = (2 / ns) sum p b_k. coef (rings,
+    NMODES, 3); rings between sampled ones: linear between theirs; poles: 0. touched (M,):
+    set where a sample was pushed; buried (M,): the share of samples inside a bone."""
+    q = np.empty(8)
+    g = np.empty(6)
+    p = np.empty(4)
+    b = np.empty(NMODES)
+    for i in range(nu.shape[0]):
+        U = nu[i]
+        A = na[i]
+        ns = A // cstep
+        last = -1
+        nb = 0
+        nsamp = 0
+        u = 1
+        while u <= U - 2:
+            ci = cen[coff[i] + u]
+            r0 = coff[i] + u
+            for r in range(NMODES):
+                for c in range(3):
+                    coef[r0, r, c] = 0.0
+            for si in range(ns):
+                a = si * A // ns
+                k = off[i] + u * A + a
+                _point_push(grid[k], ci, i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb, fo, fh,
+                            fd, foff, fv, fl_off, fl, margin_m, margin_b, deep0, deep1, radial_blend, q, g, p)
+                nsamp += 1
+                if p[3] < 0.0:
+                    nb += 1
+                if p[0] != 0.0 or p[1] != 0.0 or p[2] != 0.0:
+                    touched[i] = True
+                _modes(2.0 * np.pi * a / A, b)
+                for r in range(NMODES):
+                    w = (1.0 if r == 0 else 2.0) / ns
+                    for c in range(3):
+                        coef[r0, r, c] += w * b[r] * p[c]
+            # rings between the previous sampled ring and this one: linear
+            if last > 0:
+                for v in range(last + 1, u):
+                    t = (v - last) / (u - last)
+                    for r in range(NMODES):
+                        for c in range(3):
+                            coef[coff[i] + v, r, c] = (1.0 - t) * coef[coff[i] + last, r, c] + t * coef[r0, r, c]
+            last = u
+            if u == U - 2:
+                break
+            u = min(u + rstep, U - 2)
+        for v in (0, U - 1):
+            for r in range(NMODES):
+                for c in range(3):
+                    coef[coff[i] + v, r, c] = 0.0
+        buried[i] = nb / max(nsamp, 1)
+
+
+@njit(cache=True)
+def _smooth_rings(coef, nu, coff, passes, tmp):
+    """``passes`` rounds of [1 2 1]/4 smoothing of the modes along each muscle (the poles stay
+    at 0: the attachments do not move)."""
+    for i in range(nu.shape[0]):
+        U = nu[i]
+        o = coff[i]
+        for _ in range(passes):
+            for u in range(1, U - 1):
+                for r in range(NMODES):
+                    for c in range(3):
+                        tmp[u, r, c] = 0.25 * coef[o + u - 1, r, c] + 0.5 * coef[o + u, r, c] + 0.25 * coef[o + u + 1, r, c]
+            for u in range(1, U - 1):
+                for r in range(NMODES):
+                    for c in range(3):
+                        coef[o + u, r, c] = tmp[u, r, c]
+
+
+@njit(cache=True)
+def _apply_and_solve(grid, rad, coef, off, nu, na, coff, active, target, max_step, ga, sigma):
+    """Move every ring of an active muscle by its modes (the displacement's length soft-capped
+    at max_step: max_step tanh(|D| / max_step)), then solve the volume exactly again (module
+    doc, step 3): grid <- grid + D + sigma rad with V = target (rad: the no-contact shape's
+    offsets from its ring centres, so the section grows about its centre)."""
+    b = np.empty(NMODES)
     for m in range(nu.shape[0]):
+        if not active[m]:
+            continue
         U = nu[m]
         A = na[m]
         o = off[m]
-        for _ in range(passes):
+        for a in range(A):
+            _modes(2.0 * np.pi * a / A, b)
             for u in range(U):
-                for a in range(A):
-                    k = o + u * A + a
-                    kp = o + u * A + (a - 1) % A
-                    kn = o + u * A + (a + 1) % A
-                    for c in range(3):
-                        tmp[k, c] = 0.5 * push[k, c] + 0.25 * (push[kp, c] + push[kn, c])
-            for u in range(U):
-                for a in range(A):
-                    k = o + u * A + a
-                    up = max(u - 1, 0)
-                    un = min(u + 1, U - 1)
-                    for c in range(3):
-                        push[k, c] = 0.5 * tmp[k, c] + 0.25 * (tmp[o + up * A + a, c] + tmp[o + un * A + a, c])
-            for u in (0, U - 1):
+                k = o + u * A + a
+                d0 = 0.0
+                d1 = 0.0
+                d2 = 0.0
+                for r in range(NMODES):
+                    d0 += b[r] * coef[coff[m] + u, r, 0]
+                    d1 += b[r] * coef[coff[m] + u, r, 1]
+                    d2 += b[r] * coef[coff[m] + u, r, 2]
+                dl = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+                f = 1.0 if dl < 1e-12 else max_step * np.tanh(dl / max_step) / dl
+                grid[k, 0] += f * d0
+                grid[k, 1] += f * d1
+                grid[k, 2] += f * d2
                 for c in range(3):
-                    s = 0.0
-                    for a in range(A):
-                        s += push[o + u * A + a, c]
-                    for a in range(A):
-                        push[o + u * A + a, c] = s / A
+                    ga[u, a, c] = grid[k, c]
+        c0, c1, c2, c3 = kernels._volume_cubic(ga[:U, :A], rad[o:o + U * A].reshape(U, A, 3))
+        s = _solve_offset(c0, c1, c2, c3, target[m])
+        sigma[m] += s
+        for k in range(o, o + U * A):
+            for c in range(3):
+                grid[k, c] += s * rad[k, c]
 
 
 @njit(cache=True)
@@ -598,44 +669,7 @@ def _solve_offset(c0, c1, c2, c3, v0):
 
 
 @njit(cache=True)
-def _apply_and_solve(grid, rad, hold, push, off, nu, na, active, target, omega, hold_len, max_step, ga, gw, sigma):
-    """Apply the smoothed pushes, hold pushed points, and solve the volume again (module doc,
-    steps 2-3): grid <- grid + omega push + sigma (1 - hold) rad with V = target."""
-    for m in range(nu.shape[0]):
-        if not active[m]:
-            continue
-        U = nu[m]
-        A = na[m]
-        o = off[m]
-        for u in range(U):
-            for a in range(A):
-                k = o + u * A + a
-                pl = 0.0
-                for c in range(3):
-                    pl += push[k, c] * push[k, c]
-                pl = np.sqrt(pl)
-                cap = 1.0 if pl <= max_step else max_step / pl  # at most max_step a pass
-                for c in range(3):
-                    grid[k, c] += omega * cap * push[k, c]
-                x = min(pl / hold_len, 1.0)
-                hnew = x * x * (3.0 - 2.0 * x)
-                if hnew > hold[k]:
-                    hold[k] = hnew
-                for c in range(3):
-                    ga[u, a, c] = grid[k, c]
-                    gw[u, a, c] = (1.0 - hold[k]) * rad[k, c]
-        c0, c1, c2, c3 = kernels._volume_cubic(ga[:U, :A], gw[:U, :A])
-        s = _solve_offset(c0, c1, c2, c3, target[m])
-        sigma[m] += s
-        for u in range(U):
-            for a in range(A):
-                k = o + u * A + a
-                for c in range(3):
-                    grid[k, c] += s * (1.0 - hold[k]) * rad[k, c]
-
-
-@njit(cache=True)
-def _measure(grid, off, nu, na, cen, coff, box, nbr_off, nbr, inv, fb, fo, fh, fd, foff, fv, out):
+def _measure(grid, off, nu, na, cen, coff, box, nbr_off, nbr, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, out):
     """Per muscle: [share of points inside another muscle, share inside a bone, deepest
     penetration (m)] over its vertices (pole rows counted once)."""
     M = nu.shape[0]
@@ -654,8 +688,8 @@ def _measure(grid, off, nu, na, cen, coff, box, nbr_off, nbr, inv, fb, fo, fh, f
                 continue
             n += 1
             x = grid[k]
-            if fb.shape[0] > 0:
-                d = _bone_query(x, inv, fb, fo, fh, fd, foff, fv, g)
+            if fl_off[i + 1] > fl_off[i]:
+                d = _bone_query(x, inv, fb, fo, fh, fd, foff, fv, fl, fl_off[i], fl_off[i + 1], g)
                 if d < 0.0:
                     n_in_b += 1
                     if -d > deep:
@@ -726,14 +760,15 @@ def vertices_to_grid(v: np.ndarray, U: int, A: int) -> np.ndarray:
 
 
 def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np.ndarray,
-                  iterations: int = tol.CONTACT_ITERATIONS):
+                  iterations: int = tol.CONTACT_ITERATIONS, measure_before: bool = True):
     """Contact for one frame.
 
     vertices : [(V_m, 3) float64] every muscle's no-contact mesh; world_inv : (B, 4, 4) world
     to bone-local transforms. Returns (vertices [(V_m, 3)] (the input arrays themselves where
     nothing touched), normals [(V_m, 3) or None where unchanged], changed (M,) bool,
     before (M, 3), after (M, 3)): inside-muscle share, inside-bone share and deepest
-    penetration before and after contact."""
+    penetration before and after contact. ``measure_before`` False (the stage, to halve the
+    measuring): before's inside-bone share is that of the first pass's samples, the rest NaN."""
     shapes = model.shapes
     M = len(vertices)
     if M == 0:
@@ -746,36 +781,40 @@ def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np
     cen = np.empty((int(coff[-1]), 3))
     box = np.empty((M, 6))
     f = model.fields
-    args_b = (world_inv, f.bones, f.origin, f.h, f.dims, f.offset, f.values)
     _centres(grid, off, nu, na, cen, coff)
     _boxes(grid, off, box)
-    before = np.zeros((M, 3))
-    _measure(grid, off, nu, na, cen, coff, box, *_neighbours(box, model.allow, 0.0), *args_b, before)
+    reach = tol.CONTACT_BONE_MARGIN + iterations * tol.CONTACT_MAX_STEP
+    args_b = (world_inv, f.bones, f.origin, f.h, f.dims, f.offset, f.values, *_field_lists(box, f, world_inv, reach))
+    before = np.full((M, 3), np.nan)
+    if measure_before or iterations == 0:
+        _measure(grid, off, nu, na, cen, coff, box, *_neighbours(box, model.allow, 0.0), *args_b, before)
     rad = grid - np.repeat(cen, np.repeat(na, nu), axis=0)  # radial offsets of the no-contact shape
     target = np.array([_grid_volume(grid[off[m]:off[m + 1]], nu[m], na[m]) for m in range(M)])
-    hold = np.zeros(len(grid))
-    push = np.zeros_like(grid)
-    tmp = np.zeros_like(grid)
+    umax, amax = int(nu.max()), int(na.max())
+    coef = np.zeros((int(coff[-1]), NMODES, 3))
+    tmp = np.empty((umax, NMODES, 3))
     sigma = np.zeros(M)
     touched = np.zeros(M, dtype=np.bool_)
-    umax, amax = int(nu.max()), int(na.max())
+    buried = np.zeros(M)
     ga = np.empty((umax, amax, 3))
-    gw = np.empty((umax, amax, 3))
     for it in range(iterations):
         nbr_off, nbr = _neighbours(box, model.allow, tol.CONTACT_MARGIN)
-        _pushes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, model.share, *args_b,
-                tol.CONTACT_MARGIN, tol.CONTACT_BONE_MARGIN, tol.CONTACT_RADIAL_BLEND, tol.CONTACT_MEAN_POWER, push)
-        for m in range(M):
-            touched[m] |= bool(np.any(push[off[m]:off[m + 1]] != 0.0))
-        _smooth(push, off, nu, na, tol.CONTACT_SMOOTH_PASSES, tmp)
-        _apply_and_solve(grid, rad, hold, push, off, nu, na, touched, target, tol.CONTACT_RELAX,
-                         tol.CONTACT_HOLD_LENGTH, tol.CONTACT_MAX_STEP, ga, gw, sigma)
+        _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, model.share, *args_b,
+                    tol.CONTACT_MARGIN, tol.CONTACT_BONE_MARGIN, tol.CONTACT_DEEP_FADE[0], tol.CONTACT_DEEP_FADE[1],
+                    tol.CONTACT_RADIAL_BLEND, tol.CONTACT_SAMPLE_COLUMNS, tol.CONTACT_SAMPLE_RINGS, coef, touched,
+                    buried)
+        if it == 0 and not measure_before:
+            before[:, 1] = buried
+        _smooth_rings(coef, nu, coff, tol.CONTACT_SMOOTH_PASSES, tmp)
+        _apply_and_solve(grid, rad, coef, off, nu, na, coff, touched, target, tol.CONTACT_MAX_STEP, ga, sigma)
         _centres(grid, off, nu, na, cen, coff)
         _boxes(grid, off, box)
-    if not touched.any():  # nothing moved (or no pass): the measures are the first ones
+    if not touched.any() and not np.isnan(before).any():  # nothing moved (or no pass): the first measures
         return list(vertices), [None] * M, touched, before, before.copy()
     after = np.zeros((M, 3))
     _measure(grid, off, nu, na, cen, coff, box, *_neighbours(box, model.allow, 0.0), *args_b, after)
+    if not touched.any():
+        return list(vertices), [None] * M, touched, before, after
     out_v, out_n = [], []
     for m in range(M):
         if not touched[m]:
@@ -789,6 +828,26 @@ def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np
         out_v.append(v[0])
         out_n.append(n[0])
     return out_v, out_n, touched, before, after
+
+
+def _field_lists(box: np.ndarray, fields: "BoneFields", world_inv: np.ndarray, reach: float):
+    """Which bone fields each muscle can meet: those whose grid's world box meets the muscle's
+    box (M, 6) grown by ``reach`` (m), as CSR rows (offsets (M + 1,), field indices)."""
+    K = len(fields.bones)
+    if K == 0:
+        return np.zeros(len(box) + 1, np.int64), np.zeros(0, np.int64)
+    world = np.linalg.inv(world_inv[fields.bones])  # (K, 4, 4) bone-local to world
+    corner = np.array(np.meshgrid([0, 1], [0, 1], [0, 1], indexing="ij")).reshape(3, 8).T  # (8, 3)
+    ext = fields.h[:, None] * (fields.dims - 1)  # (K, 3)
+    local = fields.origin[:, None, :] + corner[None] * ext[:, None, :]  # (K, 8, 3)
+    # w[k,p,c] = sum_d R[k,c,d] local[k,p,d] + t[k,c]
+    w = np.einsum("kcd,kpd->kpc", world[:, :3, :3], local) + world[:, None, :3, 3]
+    fbox = np.concatenate([w.min(axis=1), w.max(axis=1)], axis=1)  # (K, 6)
+    meet = np.all(box[:, None, :3] - reach <= fbox[None, :, 3:], axis=-1) & np.all(
+        fbox[None, :, :3] <= box[:, None, 3:] + reach, axis=-1)
+    idx = np.nonzero(meet)
+    return np.concatenate([[0], np.cumsum(np.bincount(idx[0], minlength=len(box)))]).astype(np.int64), \
+        idx[1].astype(np.int64)
 
 
 def _neighbours(box: np.ndarray, allow: np.ndarray, margin: float):
@@ -837,7 +896,7 @@ def auto_yield(model, fields: BoneFields, rest_world: np.ndarray) -> float:
     c = ring.mean(axis=0)
     g = np.zeros(6)
     d = _bone_query(c, np.linalg.inv(rest_world), fields.bones, fields.origin, fields.h, fields.dims,
-                    fields.offset, fields.values, g)
+                    fields.offset, fields.values, np.arange(len(fields.bones)), 0, len(fields.bones), g)
     if d >= 1e29:
         return 0.0
     return round(-max(d, 0.0) / tol.CONTACT_LAYER, 6)
@@ -859,7 +918,7 @@ def apply(model: "ContactModel", results: dict, world: np.ndarray) -> None:
         if not all(np.isfinite(v).all() for v in verts):
             continue  # a frame that cannot be evaluated is written as the rest shape
         v, n, touched, before, after = resolve_frame(model, verts, inv[fi],
-                                                     tol.CONTACT_ITERATIONS if model.enabled else 0)
+                                                     tol.CONTACT_ITERATIONS if model.enabled else 0, False)
         for k, j in enumerate(order):
             r = results[j]
             r.contact[fi] = after[k]
