@@ -19,23 +19,29 @@ collapse to the poles):
   direction (the ray from c cut with the two neighbouring rings, projected into the plane
   perpendicular to the polyline, linear between them). Inside when rho < R.
 
-Response (a fixed number of Jacobi passes, every muscle against every other's previous pass):
+Response (tol.CONTACT_ITERATIONS Jacobi passes, every muscle against every other's previous pass):
 
-1. each grid point x of muscle i that lies within the margin of a neighbour j is pushed out
-   along the direction from j's axis to the centre of x's own ring (the whole ring moves:
-   the section's centre leaves the line of action, and its near side flattens), by the
-   distance to leave j's section along that direction (a circle of radius R + margin), times
-   i's share of the pair (:func:`pair_shares`: a deeper muscle gives way more); a point
-   within the margin of a bone is pushed along the field's gradient;
-2. the pushes are smoothed over the grid (so the surface stays smooth), applied, and every
-   pushed point is *held* (weight 0..1, a smooth function of the push);
-3. the volume is solved exactly again: the free points move along their rest radial offsets
-   by sigma, the root of the mesh volume's cubic V(sigma) = V (the no-contact volume), as
-   in :func:`axdf_cli.model.kernels.surface_stage`.
+1. at 8 evenly spaced points of every second ring (:func:`_ring_modes`), the push the point asks
+   for (:func:`_point_push`): out of a neighbour j it lies within the margin of, along the line
+   from j's axis to the centre of its own ring, by its share of the distance to leave j's
+   section (a circle of radius R + margin; :func:`pair_shares`: a deeper muscle gives way
+   more), faded out for points near j's axis (two muscles on one line of action have no side
+   to push to: pushing them piles them up); out of a bone along the field's gradient;
+2. per ring, the pushes' low-pass around the ring: the ring's shift, tilt of one side and
+   flattening (the first two Fourier modes, the least-squares fit of those modes to the
+   evenly spaced pushes), linear between sampled rings and smoothed along the muscle, the
+   poles (attachments) fixed; each point moves by its ring's modes, soft-capped at
+   tol.CONTACT_MAX_STEP a pass. So the surface stays as smooth as the muscle (no point is
+   moved alone: no dents, no wrapping under a bone), with 5 x 3 unknowns per ring;
+3. the volume is solved exactly again: every point moves along its no-contact radial offset
+   by sigma, the root of the mesh volume's cubic V(sigma) = V (the no-contact volume), as in
+   :func:`axdf_cli.model.kernels.surface_stage`.
 
-Every step is a continuous function of the frame's meshes (soft projections, no switching),
-so surfaces do not pop from frame to frame. A muscle nothing touches is returned unchanged,
-bit for bit.
+Every step is a continuous function of the frame's meshes (soft fades and caps, no switching,
+a fixed number of passes), so surfaces do not pop from frame to frame. A muscle nothing
+touches is returned unchanged, bit for bit. Keeping the volume exactly, the overlap a pass
+clears is partly pressed into the next layer; on the walk three passes keep the deepest
+penetration nearest its no-contact value (README, Contact).
 """
 from __future__ import annotations
 
