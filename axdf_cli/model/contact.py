@@ -26,7 +26,8 @@ Response (tol.CONTACT_ITERATIONS Jacobi passes, every muscle against every other
    from j's axis to the centre of its own ring, by its share of the distance to leave j's
    section (a circle of radius R + margin; :func:`pair_shares`: a deeper muscle gives way
    more), faded out for points near j's axis (two muscles on one line of action have no side
-   to push to: pushing them piles them up); out of a bone along the field's gradient;
+   to push to: pushing them piles them up); out of a bone by (margin - d) times the field's gradient (not normalized: it
+   shortens deep inside where the field's sides meet and its direction turns);
 2. per ring, the pushes' low-pass around the ring: the ring's shift, tilt of one side and
    flattening (the first two Fourier modes, the least-squares fit of those modes to the
    evenly spaced pushes), linear between sampled rings and smoothed along the muscle, the
@@ -474,10 +475,11 @@ def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, share
         d = _bone_query(x, inv, fb, fo, fh, fd, foff, fv, fl, fl_off[i], fl_off[i + 1], g)
         p[3] = d
         if d < margin_b:
-            gl = np.sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2])
-            if gl > 1e-9:
-                for c in range(3):
-                    p[c] += (margin_b - d) * g[c] / gl
+            # along the gradient as it is, not normalized: length 1 near the surface, shorter
+            # where the field's sides meet deep inside, so the push fades where its direction
+            # turns (normalized, it flipped there between frames: pops)
+            for c in range(3):
+                p[c] += (margin_b - d) * g[c]
     nm = 0
     for jj in range(nbr_off[i], nbr_off[i + 1]):
         j = nbr[jj]
