@@ -229,11 +229,11 @@ def _field_at(values, off, dims, origin, h, x0, x1, x2):
 
 
 @njit(cache=True)
-def _bone_query(x, inv, fb, fo, fh, fd, foff, fv, fsel, f0, f1, g_out):
+def _bone_query(x, inv, fb, fo, fh, fd, foff, fv, fsel, f0, f1, grad_below, g_out):
     """Smallest signed distance of world point x over the bone fields fsel[f0:f1] (inv: (B, 4,
-    4) world to bone-local) and, in g_out[:3], its world gradient by central differences of the
-    trilinear field over one grid step (continuous, unlike the trilinear's own gradient);
-    1e30 where no field covers x."""
+    4) world to bone-local) and, where it is below ``grad_below``, in g_out[:3] its world
+    gradient by central differences of the trilinear field over one grid step (continuous,
+    unlike the trilinear's own gradient); 1e30 where no field covers x."""
     best = 1e30
     kb = -1
     l0 = 0.0
@@ -252,7 +252,7 @@ def _bone_query(x, inv, fb, fo, fh, fd, foff, fv, fsel, f0, f1, g_out):
             l0 = y0
             l1 = y1
             l2 = y2
-    if kb < 0:
+    if kb < 0 or not best < grad_below:
         return best
     h = fh[kb]
     for c in range(3):
@@ -278,7 +278,9 @@ def _bone_query(x, inv, fb, fo, fh, fd, foff, fv, fsel, f0, f1, g_out):
 
 @njit(cache=True)
 def _centres(grid, off, nu, na, cen, coff):
-    """Ring centroids of every muscle (pole rows: the pole)."""
+    """Ring centroids of every muscle (pole rows: the pole) in cen[:, :3], in cen[:, 3] each
+    ring's largest distance from its centroid, and in cen[:, 4:8] of every SEG_GROUP-th ring
+    the bounding sphere (centre, radius) of the centres from it to SEG_GROUP rings on."""
     for m in range(nu.shape[0]):
         U = nu[m]
         A = na[m]
@@ -288,6 +290,26 @@ def _centres(grid, off, nu, na, cen, coff):
                 for a in range(A):
                     s += grid[off[m] + u * A + a, c]
                 cen[coff[m] + u, c] = s / A
+            r = 0.0
+            for a in range(A):
+                k = off[m] + u * A + a
+                q = ((grid[k, 0] - cen[coff[m] + u, 0]) ** 2 + (grid[k, 1] - cen[coff[m] + u, 1]) ** 2
+                     + (grid[k, 2] - cen[coff[m] + u, 2]) ** 2)
+                if q > r:
+                    r = q
+            cen[coff[m] + u, 3] = np.sqrt(r)
+        # bounding spheres of the centre segments in groups of SEG_GROUP (cen[first, 4:8])
+        for g in range((U - 2) // SEG_GROUP + 1):
+            r0 = coff[m] + g * SEG_GROUP
+            r1 = coff[m] + min(g * SEG_GROUP + SEG_GROUP, U - 1)
+            for c in range(3):
+                cen[r0, 4 + c] = 0.5 * (cen[r0, c] + cen[r1, c])
+            r = 0.0
+            for k in range(r0, r1 + 1):
+                q = (cen[k, 0] - cen[r0, 4]) ** 2 + (cen[k, 1] - cen[r0, 5]) ** 2 + (cen[k, 2] - cen[r0, 6]) ** 2
+                if q > r:
+                    r = q
+            cen[r0, 7] = np.sqrt(r)
 
 
 @njit(cache=True)
@@ -329,15 +351,15 @@ def _centre_tangent(cen, coff_j, U, u):
     return d0 / dl, d1 / dl, d2 / dl
 
 
+#: Centre segments per bounding sphere in :func:`_muscle_query`'s search.
+SEG_GROUP = 8
+
+
 @njit(cache=True)
-def _muscle_query(x, grid, off_j, U, A, cen, coff_j, out):
-    """Axis-space query of point x against muscle j. out = [rho, R, cx, cy, cz, rx, ry, rz]:
-    radial distance, surface radius, axis point, unit radial direction. Returns False when x
-    lies beyond j's ends."""
-    best = 1e300
-    bu = -1
-    bl = 0.0
-    for u in range(U - 1):
+def _scan_segments(x, cen, coff_j, U, u0, u1, best, bu, bl):
+    """The nearest of centre segments u0..u1-1 to x if nearer than ``best`` (squared distance):
+    (best, segment, parameter). Points beyond the first or last segment's end are skipped."""
+    for u in range(u0, u1):
         a0 = cen[coff_j + u, 0]
         a1 = cen[coff_j + u, 1]
         a2 = cen[coff_j + u, 2]
@@ -359,6 +381,38 @@ def _muscle_query(x, grid, off_j, U, A, cen, coff_j, out):
             best = q
             bu = u
             bl = lam
+    return best, bu, bl
+
+
+@njit(cache=True)
+def _muscle_query(x, grid, off_j, U, A, cen, coff_j, reach, out):
+    """Axis-space query of point x against muscle j. out = [rho, R, cx, cy, cz, rx, ry, rz]:
+    radial distance, surface radius, axis point, unit radial direction. Returns False when x
+    lies beyond j's ends, or when rho exceeds the two rings' largest radius (cen[:, 3]) plus
+    ``reach`` (then rho > R + reach: the rings' radii are not read).
+    The nearest centre segment: the groups of :data:`SEG_GROUP` segments are scanned nearest
+    bounding sphere first (cen[:, 4:8]), the others only where their sphere may hold a nearer
+    point (the same segment as a scan of all, in fewer steps)."""
+    ng = (U - 2) // SEG_GROUP + 1
+    gb = 0
+    lb_best = 1e300
+    for g in range(ng):
+        r = coff_j + g * SEG_GROUP
+        e = np.sqrt((x[0] - cen[r, 4]) ** 2 + (x[1] - cen[r, 5]) ** 2 + (x[2] - cen[r, 6]) ** 2) - cen[r, 7]
+        if e < lb_best:
+            lb_best = e
+            gb = g
+    best, bu, bl = _scan_segments(x, cen, coff_j, U, gb * SEG_GROUP, min(gb * SEG_GROUP + SEG_GROUP, U - 1),
+                                  1e300, -1, 0.0)
+    for g in range(ng):
+        if g == gb:
+            continue
+        r = coff_j + g * SEG_GROUP
+        e = np.sqrt((x[0] - cen[r, 4]) ** 2 + (x[1] - cen[r, 5]) ** 2 + (x[2] - cen[r, 6]) ** 2) - cen[r, 7]
+        if e > 0.0 and e * e >= best:
+            continue
+        best, bu, bl = _scan_segments(x, cen, coff_j, U, g * SEG_GROUP, min(g * SEG_GROUP + SEG_GROUP, U - 1),
+                                      best, bu, bl)
     if bu < 0:
         return False
     p0 = coff_j + bu
@@ -384,6 +438,8 @@ def _muscle_query(x, grid, off_j, U, A, cen, coff_j, out):
     r1 = x[1] - cx1 - dt * t1
     r2 = x[2] - cx2 - dt * t2
     rho = np.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+    if rho > max(cen[p0, 3], cen[p1, 3]) + reach:
+        return False  # R <= the rings' largest radius (projected across the axis, no longer)
     if rho < 1e-12:
         # on the axis: any perpendicular
         r0 = t1 - t2
@@ -418,6 +474,7 @@ def _muscle_query(x, grid, off_j, U, A, cen, coff_j, out):
 
 @njit(cache=True)
 def _boxes(grid, off, box):
+    """Every muscle's bounding box (M, 6): lo, hi."""
     for m in range(off.shape[0] - 1):
         for c in range(3):
             box[m, c] = 1e300
@@ -429,6 +486,13 @@ def _boxes(grid, off, box):
                     box[m, c] = v
                 if v > box[m, 3 + c]:
                     box[m, 3 + c] = v
+
+
+@njit(cache=True)
+def _may_meet(x, j, box, margin):
+    """Whether point x lies in muscle j's box grown by ``margin`` (before :func:`_muscle_query`)."""
+    return not (x[0] < box[j, 0] - margin or x[1] < box[j, 1] - margin or x[2] < box[j, 2] - margin
+                or x[0] > box[j, 3] + margin or x[1] > box[j, 4] + margin or x[2] > box[j, 5] + margin)
 
 
 @njit(cache=True)
@@ -472,7 +536,7 @@ def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, share
     p[2] = 0.0
     p[3] = 1e30
     if fl_off[i + 1] > fl_off[i]:
-        d = _bone_query(x, inv, fb, fo, fh, fd, foff, fv, fl, fl_off[i], fl_off[i + 1], g)
+        d = _bone_query(x, inv, fb, fo, fh, fd, foff, fv, fl, fl_off[i], fl_off[i + 1], margin_b, g)
         p[3] = d
         if d < margin_b:
             # along the gradient as it is, not normalized: length 1 near the surface, shorter
@@ -483,10 +547,9 @@ def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, share
     nm = 0
     for jj in range(nbr_off[i], nbr_off[i + 1]):
         j = nbr[jj]
-        if (x[0] < box[j, 0] - margin_m or x[1] < box[j, 1] - margin_m or x[2] < box[j, 2] - margin_m
-                or x[0] > box[j, 3] + margin_m or x[1] > box[j, 4] + margin_m or x[2] > box[j, 5] + margin_m):
+        if not _may_meet(x, j, box, margin_m):
             continue
-        if not _muscle_query(x, grid, off[j], nu[j], na[j], cen, coff[j], q):
+        if not _muscle_query(x, grid, off[j], nu[j], na[j], cen, coff[j], margin_m, q):
             continue
         rho = q[0]
         rr = q[1] + margin_m
@@ -697,7 +760,7 @@ def _measure(grid, off, nu, na, cen, coff, box, nbr_off, nbr, inv, fb, fo, fh, f
             n += 1
             x = grid[k]
             if fl_off[i + 1] > fl_off[i]:
-                d = _bone_query(x, inv, fb, fo, fh, fd, foff, fv, fl, fl_off[i], fl_off[i + 1], g)
+                d = _bone_query(x, inv, fb, fo, fh, fd, foff, fv, fl, fl_off[i], fl_off[i + 1], -1e300, g)
                 if d < 0.0:
                     n_in_b += 1
                     if -d > deep:
@@ -705,10 +768,9 @@ def _measure(grid, off, nu, na, cen, coff, box, nbr_off, nbr, inv, fb, fo, fh, f
             inside = False
             for jj in range(nbr_off[i], nbr_off[i + 1]):
                 j = nbr[jj]
-                if (x[0] < box[j, 0] or x[1] < box[j, 1] or x[2] < box[j, 2]
-                        or x[0] > box[j, 3] or x[1] > box[j, 4] or x[2] > box[j, 5]):
+                if not _may_meet(x, j, box, 0.0):
                     continue
-                if not _muscle_query(x, grid, off[j], nu[j], na[j], cen, coff[j], q):
+                if not _muscle_query(x, grid, off[j], nu[j], na[j], cen, coff[j], 0.0, q):
                     continue
                 if q[0] < q[1]:
                     inside = True
@@ -786,7 +848,7 @@ def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np
     off = np.concatenate([[0], np.cumsum(nu * na)]).astype(np.int64)
     coff = np.concatenate([[0], np.cumsum(nu)]).astype(np.int64)
     grid = np.concatenate([vertices_to_grid(v, *s) for v, s in zip(vertices, shapes)])
-    cen = np.empty((int(coff[-1]), 3))
+    cen = np.zeros((int(coff[-1]), 8))
     box = np.empty((M, 6))
     f = model.fields
     _centres(grid, off, nu, na, cen, coff)
@@ -796,7 +858,7 @@ def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np
     before = np.full((M, 3), np.nan)
     if measure_before or iterations == 0:
         _measure(grid, off, nu, na, cen, coff, box, *_neighbours(box, model.allow, 0.0), *args_b, before)
-    rad = grid - np.repeat(cen, np.repeat(na, nu), axis=0)  # radial offsets of the no-contact shape
+    rad = grid - np.repeat(cen[:, :3], np.repeat(na, nu), axis=0)  # radial offsets of the no-contact shape
     target = np.array([_grid_volume(grid[off[m]:off[m + 1]], nu[m], na[m]) for m in range(M)])
     umax, amax = int(nu.max()), int(na.max())
     coef = np.zeros((int(coff[-1]), NMODES, 3))
@@ -904,7 +966,7 @@ def auto_yield(model, fields: BoneFields, rest_world: np.ndarray) -> float:
     c = ring.mean(axis=0)
     g = np.zeros(6)
     d = _bone_query(c, np.linalg.inv(rest_world), fields.bones, fields.origin, fields.h, fields.dims,
-                    fields.offset, fields.values, np.arange(len(fields.bones)), 0, len(fields.bones), g)
+                    fields.offset, fields.values, np.arange(len(fields.bones)), 0, len(fields.bones), -1e300, g)
     if d >= 1e29:
         return 0.0
     return round(-max(d, 0.0) / tol.CONTACT_LAYER, 6)
