@@ -172,6 +172,37 @@ def test_jobs_and_frames_give_the_same_bytes(tmp_path):
         "jiggle", "contact", "penetration"]
 
 
+def test_rest_pose_writes_the_rest_muscle_after_contact(tmp_path):
+    """With contact on, the rest muscle is the rest shape after contact at the rest pose (README,
+    Contact): frame 0 of the demo pose (the rest pose, zero tension) is written as
+    :func:`contact.resolve_frame` makes the models' rest meshes at the rest transforms, to
+    float32 rounding; with --no-contact, as the rest meshes themselves."""
+    from axdf_cli.formats import read_triangles
+    from axdf_cli.model.skeleton import forward_kinematics
+
+    for on in (True, False):
+        out = tmp_path / ("on" if on else "off")
+        assert run_cli(REPO_ROOT, "run", str(DEMO_JOB), "--frames", "0", "--no-render", "--out", str(out), "--quiet",
+                       *(() if on else ("--no-contact",))) == 0
+        plan = plan_run(load_job(DEMO_JOB), frames_arg="0", stages={"contact": False, "penetration": False})
+        skel = plan.pose.skeleton
+        rest = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
+        (_, results), = list(evaluate_plan(plan))  # the rest meshes in float64 (the model's identity)
+        verts = [r.vertices[0] for _, r in results]
+        for m, x in zip(plan.models, verts):
+            np.testing.assert_allclose(x, m.rest_vertices, rtol=0, atol=2e-7)
+        v, n, touched, _, _ = contact.resolve_frame(ContactStage().start(plan), verts, np.linalg.inv(rest),
+                                                    measure_before=False)
+        assert touched.any()  # the demo muscles lie partly in their bones at rest
+        for j, m in enumerate(plan.models):
+            name = plan.names[j]
+            pos, nrm, _ = read_triangles((out / "meshes" / name / f"{name}_0000.ply").read_bytes(), ".ply")
+            want_v = v[j] if on else verts[j]
+            want_n = (n[j] if n[j] is not None else m.rest_normals) if on else m.rest_normals
+            np.testing.assert_allclose(pos, want_v, rtol=0, atol=2e-7, err_msg=name)
+            np.testing.assert_allclose(nrm, want_n, rtol=0, atol=1e-6, err_msg=name)
+
+
 BURIED = """\
 muscle: buried
 axis:
