@@ -192,6 +192,9 @@ CONTACT_MAX_STEP = 0.004
 # not at all nearer than CONTACT_DEEP_FADE[0] (smoothstep between): muscles on one line of
 # action have no side to push each other to, and pushing them anyway piles them up.
 CONTACT_DEEP_FADE = (0.15, 0.5)
+# Likewise for the distance between the point's own ring centre and the neighbour's axis, in
+# the neighbour's radii: where the axes (nearly) meet, the push's direction turns fast.
+CONTACT_AXES_FADE = (0.1, 0.4)
 # The pushes are sampled at A / CONTACT_SAMPLE_COLUMNS evenly spaced points (8 of 24) of every
 # CONTACT_SAMPLE_RINGS-th ring; each sampled ring's displacement modes are fitted to them.
 CONTACT_SAMPLE_COLUMNS = 3

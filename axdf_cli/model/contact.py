@@ -522,7 +522,7 @@ def _modes(theta, b):
 
 @njit(cache=True)
 def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb, fo, fh, fd, foff, fv,
-                fl_off, fl, margin_m, margin_b, deep0, deep1, radial_blend, q, g, p):
+                fl_off, fl, margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, q, g, p):
     """The push p[:3] that point x of muscle i (its ring's centre ci) asks for: out of every
     bone field by (margin_b - d) along the field's gradient where d < margin_b, and out of
     every neighbour j it lies within the margin of, by i's share of the distance to leave j's
@@ -559,9 +559,18 @@ def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, share
         if fade <= 0.0:
             continue
         bl = radial_blend * q[1]
-        e0 = ci[0] - q[2] + bl * q[5]
-        e1 = ci[1] - q[3] + bl * q[6]
-        e2 = ci[2] - q[4] + bl * q[7]
+        e0 = ci[0] - q[2]
+        e1 = ci[1] - q[3]
+        e2 = ci[2] - q[4]
+        # the two axes' separation against j's radius: where they (nearly) meet, the direction
+        # from one to the other turns fast as they move, so the push fades out there too
+        sep = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2) / q[1]
+        fade *= _smoothstep((sep - sep0) / (sep1 - sep0))
+        if fade <= 0.0:
+            continue
+        e0 += bl * q[5]
+        e1 += bl * q[6]
+        e2 += bl * q[7]
         el = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
         if el < 1e-12:
             e0 = q[5]
@@ -584,7 +593,7 @@ def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, share
 
 @njit(cache=True)
 def _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb, fo, fh, fd, foff, fv, fl_off, fl,
-                margin_m, margin_b, deep0, deep1, radial_blend, cstep, rstep, coef, touched, buried):
+                margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, cstep, rstep, coef, touched, buried):
     """One Jacobi pass (module doc, steps 1-2), every muscle from the same state: the pushes at
     ``ns`` = A / ``cstep`` evenly spaced points of every ``rstep``-th ring (and the last inner
     ring), and per such ring their low-pass around the ring, the least-squares fit of the
@@ -614,7 +623,8 @@ def _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb,
                 a = si * A // ns
                 k = off[i] + u * A + a
                 _point_push(grid[k], ci, i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb, fo, fh,
-                            fd, foff, fv, fl_off, fl, margin_m, margin_b, deep0, deep1, radial_blend, q, g, p)
+                            fd, foff, fv, fl_off, fl, margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend,
+                            q, g, p)
                 nsamp += 1
                 if p[3] < 0.0:
                     nb += 1
@@ -871,7 +881,7 @@ def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np
         nbr_off, nbr = _neighbours(box, model.allow, tol.CONTACT_MARGIN)
         _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, model.share, *args_b,
                     tol.CONTACT_MARGIN, tol.CONTACT_BONE_MARGIN, tol.CONTACT_DEEP_FADE[0], tol.CONTACT_DEEP_FADE[1],
-                    tol.CONTACT_RADIAL_BLEND, tol.CONTACT_SAMPLE_COLUMNS, tol.CONTACT_SAMPLE_RINGS, coef, touched,
+                    tol.CONTACT_AXES_FADE[0], tol.CONTACT_AXES_FADE[1], tol.CONTACT_RADIAL_BLEND, tol.CONTACT_SAMPLE_COLUMNS, tol.CONTACT_SAMPLE_RINGS, coef, touched,
                     buried)
         if it == 0 and not measure_before:
             before[:, 1] = buried
