@@ -157,9 +157,11 @@ CONTACT_MARGIN = 0.001
 CONTACT_BONE_MARGIN = 0.001
 # Jacobi passes (push, fit the rings' modes, re-solve the volume); a fixed number, so the result
 # is a continuous function of the frame. More passes clear more overlap but, the volume being
-# kept, press it into the next layer: on the walk 3 passes kept the deepest penetration nearest
-# its no-contact value with the fewest pops (README, Contact).
-CONTACT_ITERATIONS = 3
+# kept, press it into the next layer and follow the neighbours' motion more: on the walk
+# (Rajagopal2016's run) 1 pass: worst step 1.3x (2.1x) the no-contact one, deepest +2.8 mm
+# (-0.3 mm); 2: 1.5x (3.2x), +5.5 mm (+5.1 mm); 3: 2.0x (4.3x), +8.7 mm (+7.6 mm). No pops and no
+# deeper pile-ups come first (README, Contact).
+CONTACT_ITERATIONS = 1
 # [1 2 1]/4 smoothing rounds of the rings' modes along the muscle (no creases).
 CONTACT_SMOOTH_PASSES = 4
 # Bones' signed distance fields: grid step and padding around the mesh (m). Trilinear on a

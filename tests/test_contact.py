@@ -19,6 +19,7 @@ from cli_in_folder import run_cli
 from conftest import DEMO_JOB, REPO_ROOT
 from winding import inside_shares
 
+from axdf_cli import tolerances as tol
 from axdf_cli.model import contact
 from axdf_cli.pipeline.evaluate import evaluate_plan
 from axdf_cli.pipeline.plan import plan_run
@@ -78,16 +79,47 @@ def test_contact_lowers_penetration_and_keeps_volume(demo):
     for fi in range(len(frames)):
         v, n, touched, before, after = contact.resolve_frame(plan.contact, frames[fi], np.linalg.inv(world[fi]))
         assert touched.any()
-        # three passes of low-order ring modes clear part of the twins' overlap (a third on
-        # this frame), never deepening it (README, Contact: what the passes trade)
-        assert after[:, 0].mean() < 0.75 * before[:, 0].mean()
-        assert after[:, 2].max() <= before[:, 2].max()  # (a tendon end inside a bone stays: attachments do not move)
+        # the default single pass clears part of the twins' overlap and of the bones'; more
+        # passes clear more (README, Contact: what the passes trade). The deepest point may
+        # deepen, by less than a pass's step and a half (no pile-up): the deepest points lie
+        # near the other twin's axis, where pushes fade out, while their rings follow their
+        # pushed points and the volume's re-solve inflates the other twin
+        assert after[:, 0].mean() < 0.95 * before[:, 0].mean() and after[:, 1].mean() < before[:, 1].mean()
+        assert after[:, 2].max() <= before[:, 2].max() + 1.5 * tol.CONTACT_MAX_STEP
+        more = contact.resolve_frame(plan.contact, frames[fi], np.linalg.inv(world[fi]), iterations=3)[4]
+        assert more[:, 0].mean() < 0.75 * before[:, 0].mean()
+        assert more[:, 2].max() <= before[:, 2].max() + 1.5 * tol.CONTACT_MAX_STEP
         for k, m in enumerate(plan.models):
             U, A = m.spec.resolution
             v0 = contact._grid_volume(contact.vertices_to_grid(frames[fi][k], U, A), U, A)
             v1 = contact._grid_volume(contact.vertices_to_grid(v[k], U, A), U, A)
             assert abs(v1 / v0 - 1.0) < 1e-9
             assert np.isfinite(v[k]).all() and (n[k] is None or np.allclose(np.linalg.norm(n[k], axis=1), 1.0))
+
+
+WALK_JOB = REPO_ROOT / "poses" / "jobs" / "gait2392_walk.yaml"
+POP_RATIO = 1.5  # the issue's rule: no vertex steps more than this times its no-contact step
+
+
+def _steps(plan):
+    """Every muscle's largest vertex step between consecutive frames of the plan: (F - 1, M)."""
+    per: dict = {}
+    for _, results in evaluate_plan(plan):
+        for j, r in results:
+            per.setdefault(j, []).append(r.vertices)
+    return np.stack([np.linalg.norm(np.diff(np.concatenate(per[j]), axis=0), axis=-1).max(axis=-1)
+                     for j in sorted(per)], axis=1)
+
+
+@pytest.mark.skipif(not WALK_JOB.is_file(), reason="the shipped gait2392 library (make import)")
+def test_no_pops_on_the_walk():
+    """The issue's no-pops rule on the shipped walk (67 frames x 92 muscles): with contact, no
+    muscle's largest vertex step from one frame to the next exceeds 1.5x its step without."""
+    with_c = _steps(plan_run(load_job(WALK_JOB), stages={"penetration": False}))
+    without = _steps(plan_run(load_job(WALK_JOB), stages={"contact": False, "penetration": False}))
+    ratio = with_c / np.maximum(without, 1e-12)
+    assert ratio.max() <= POP_RATIO, (ratio.max(), np.unravel_index(ratio.argmax(), ratio.shape))
+    assert (with_c != without).any()  # contact moved something
 
 
 def test_far_muscle_unchanged_bit_for_bit(demo):
