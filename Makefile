@@ -129,7 +129,8 @@ import: $(STAMP)
 	$(MAKE) --no-print-directory import-mjcf
 
 # The MyoSuite library (myo-sim, Apache-2.0): muscles/{myoarm,myobody}, poses/skeletons/{myoarm,myobody}.yaml
-# (+ meshes/), poses/myoarm_elbow.yaml (arm26's elbow flexion), poses/myobody_gait.yaml (MyoSuite's gait cycle).
+# (+ meshes/), poses/myoarm_elbow.yaml (arm26's elbow flexion), poses/myobody_gait.yaml (MyoSuite's gait cycle),
+# and the CMU walk fitted onto myobody (poses/maps/cmu_to_myobody.yaml): poses/retargeted/cmu_131_01_walk_myobody/.
 import-mjcf: $(STAMP)
 	$(BIN)/python tools/myo_sim_xml.py myoarm $(MYO)/myoarm.xml
 	$(BIN)/python tools/myo_sim_xml.py myofullbody $(MYO)/myofullbody.xml
@@ -137,10 +138,12 @@ import-mjcf: $(STAMP)
 	$(BIN)/python tools/myo_motion.py gait $(MYO)/myofullbody.xml $(MYO)/myobody_gait.npz
 	$(BIN)/axdf import mjcf $(MYO)/myoarm.xml --name myoarm --motion $(MYO)/myoarm_elbow.npz $(MJCF_MESHES) \
 	  --out muscles/myoarm --muscles-out muscles/myoarm --skeleton-out poses/skeletons/myoarm.yaml \
-	  --pose-out poses/myoarm_elbow.yaml
+	  --pose-out poses/myoarm_elbow.yaml --overwrite
 	$(BIN)/axdf import mjcf $(MYO)/myofullbody.xml --name myobody --motion $(MYO)/myobody_gait.npz $(MJCF_MESHES) \
 	  --out muscles/myobody --muscles-out muscles/myobody --skeleton-out poses/skeletons/myobody.yaml \
-	  --pose-out poses/myobody_gait.yaml
+	  --pose-out poses/myobody_gait.yaml --overwrite
+	$(BIN)/axdf retarget $(BVH) --onto poses/skeletons/myobody.yaml --map poses/maps/cmu_to_myobody.yaml --step 4 \
+	  --name cmu_131_01_walk_myobody --out poses/retargeted/cmu_131_01_walk_myobody --overwrite
 
 clean:
 	rm -rf out .pytest_cache

@@ -36,18 +36,6 @@ VOLUME_EXACT_PROMISE = 5e-3
 VOLUME_SOLVE_RTOL = 1e-10
 VOLUME_SOLVE_ITERS = 30
 
-# Imported MuJoCo muscles (axdf import mjcf): the axis is a quadratic B-spline fitted to the
-# wrapped path, and it cuts the path's corners (finger flexors fold by up to 140 degrees over
-# a few millimetres). Each muscle gets the fewest axis control points (AXIS_POINT_STEPS, up
-# to AXIS_POINTS_MAX) whose axis length stays within AXIS_LENGTH_TARGET of the path length
-# at the rest pose and at AXIS_PROBE_POSES poses drawn in the joints' ranges (seed
-# AXIS_PROBE_SEED): half the 1% the MuJoCo judge allows, so motions outside the probe keep a margin.
-AXIS_LENGTH_TARGET = 5e-3
-AXIS_POINT_STEPS = (32, 40, 48, 64, 80, 96, 128)
-AXIS_POINTS_MAX = 128
-AXIS_PROBE_POSES = 64
-AXIS_PROBE_SEED = 20
-
 # Degenerate geometry: an axis shorter than this (metres) or a section scale outside
 # [SCALE_MIN, SCALE_MAX] is reported as a per-muscle, per-frame warning.
 MIN_AXIS_LENGTH = 1e-6
@@ -129,19 +117,35 @@ ROOT_RIGID = 1e-6
 # both and far below anything visible.
 COUPLED_COLUMN_ATOL = 1e-5
 
-# `axdf import osim --motion`: the axis (a smooth fit to the wrapped path) may fall this much
-# short of the path, as a fraction of its length, in any frame of the imported motion before
-# the importer raises the muscle's `axis_points` (by 4, up to AXIS_POINTS_RAISE_MAX). Half of the
-# 1% within which every imported muscle must match OpenSim's own length: the rest is room for
-# the wrapping's own tolerances. The shipped gait2392 walk and arm26 flexion reach 0.47% and
-# 0.31% at the default counts (they keep them); Rajagopal2016's running trial bends the knee
-# to 111°, where the hamstrings' 1.2 cm insertion hook cut by the default 12 points leaves
-# the axis 1.25% short.
+# Axis control points of imported path muscles (axdf import osim|mjcf; importers/emit.py
+# axis_points_for). The axis is a quadratic B-spline fitted to the wrapped path, and it cuts
+# the path's corners: a hamstring's 1.2 cm insertion hook at 111 degrees of knee flexion
+# (Rajagopal2016's run: 1.25% short at the default 12 points), finger flexors that fold by up to
+# 140 degrees over a few millimetres (MyoSuite's hands). Each muscle keeps the default count
+# (8 + 4 per interior point and surface, at most 48) unless its axis length differs from the
+# wrapped path's by more than AXIS_SHORTFALL_MAX in some measured pose; then it gets the first
+# count that stays within: steps of AXIS_POINTS_STEP up to AXIS_POINTS_FINE_MAX (a bend needs
+# a few more points near it, and every point costs evaluation time in every frame), then of
+# AXIS_POINTS_COARSE_STEP up to AXIS_POINTS_MAX (the muscle spec's limit: 128 points put a knot
+# every 0.8% of the path, ~2 mm of a finger flexor), or the best of them.
+# AXIS_SHORTFALL_MAX is half of the 1% within which every imported muscle must match its
+# simulator's own length (OpenSim's getLength, MuJoCo's ten_length): the rest is room for the
+# wrapping's own tolerances and for poses the importer did not measure. The shipped gait2392
+# walk and arm26 flexion reach 0.47% and 0.31% at the default counts (they keep them).
 AXIS_SHORTFALL_MAX = 5e-3
-AXIS_POINTS_RAISE_MAX = 48
-# The shortfall is measured on at most this many frames of the motion, evenly spread (the
-# path moves smoothly: a 2000-frame sample of a long take misses no bend of it).
+AXIS_POINTS_STEP = 4
+AXIS_POINTS_FINE_MAX = 48
+AXIS_POINTS_COARSE_STEP = 16
+AXIS_POINTS_MAX = 128
+# The poses measured are the importer's choice. axdf import osim: the rest pose and the
+# imported motion's frames, at most AXIS_FIT_FRAMES of them, evenly spread (the path moves
+# smoothly: a 2000-frame sample of a long take misses no bend of it). axdf import mjcf (whose
+# models come without a motion of their own): the same, and AXIS_PROBE_POSES poses with every
+# ranged coordinate uniform in its range (seed AXIS_PROBE_SEED: the same poses every import),
+# so that the whole range of every joint is covered.
 AXIS_FIT_FRAMES = 2000
+AXIS_PROBE_POSES = 64
+AXIS_PROBE_SEED = 20
 
 # Data-set keypoints (axdf_cli/model/keypoints.py): two keypoints closer than this (metres) at
 # the rest pose are one point. Coincident by construction are BVH helper joints at offset 0

@@ -107,3 +107,17 @@ def test_the_amodal_pass_is_listed_and_checked(built, tmp_path):
     finally:
         os.chdir(cwd)
     assert not (tmp_path / "o").exists()
+
+
+def test_index_names_each_samples_amodal_file(built, tmp_path):
+    """index.parquet's `amodal` column: the sequence's amodal.json with the pass (the file is
+    there), null without it."""
+    import pandas as pd
+
+    root = built["true"]
+    idx = pd.read_parquet(root / "index.parquet")
+    assert list(idx["amodal"]) == [f"{s}/amodal.json" for s in idx["sequence"]]
+    assert all((root / p).is_file() for p in set(idx["amodal"]))
+    write_tiny(tmp_path, AMODAL_YAML.replace("BONES", "false").replace("passes: [png, exr, amodal]", "passes: [png]"))
+    plain = pd.read_parquet(build_in(tmp_path, "plain") / "index.parquet")
+    assert plain["amodal"].isna().all() and not plain["png"].isna().any()

@@ -276,7 +276,7 @@ def test_bone_mesh_is_placed_as_mujoco_places_it(judged, toy):
 def test_npz_motion_round_trips_quaternions(judged):
     """The pose's ball and free coordinates give back the npz's quaternions (up to sign), hinges
     its radians, the fps its own."""
-    from axdf_cli.importers.mjcf_import import euler_to_quat
+    from axdf_cli.importers.qpos import euler_to_quat
     from axdf_cli.specs import load_pose
 
     m, qpos, out, skel, q, _ = judged
@@ -294,7 +294,7 @@ def test_npz_motion_round_trips_quaternions(judged):
 
 
 def test_euler_unwrap_keeps_frames_continuous():
-    from axdf_cli.importers.mjcf_import import euler_to_quat, quat_to_euler, unwrap_degrees
+    from axdf_cli.importers.qpos import euler_to_quat, quat_to_euler, unwrap_degrees
 
     ang = np.linspace(0, 4 * np.pi, 200)  # two full turns about X
     quat = np.stack([np.cos(ang / 2), np.sin(ang / 2), 0 * ang, 0 * ang], axis=1)
@@ -433,3 +433,102 @@ def test_angles_in_degrees_and_orientation_forms_match_mujoco(tmp_path):
         name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, b)
         np.testing.assert_allclose(world[skel.bone_index[name], :3, 3], d.xpos[b], atol=1e-7)
         np.testing.assert_allclose(world[skel.bone_index[name], :3, :3], d.xmat[b].reshape(3, 3), atol=1e-7)
+
+
+# ----------------------------------------------------------------------------- qpos motions in data sets
+
+
+def test_imported_skeleton_gives_mujocos_qpos_layout(judged):
+    """A data set's qpos motion is read against the skeleton alone: the qpos index of every
+    joint that is a coordinate, read back from the imported skeleton's bones and coordinates
+    (free, ball, a hinge with a ref, anchors, a chain of couplings), is MuJoCo's own."""
+    from axdf_cli.importers.qpos import skeleton_qpos
+
+    m, _, _, skel, _, _ = judged
+    joints, nq = skeleton_qpos(skel)
+    assert nq == m.nq
+    kinds = {int(mujoco.mjtJoint.mjJNT_FREE): "free", int(mujoco.mjtJoint.mjJNT_BALL): "ball",
+             int(mujoco.mjtJoint.mjJNT_SLIDE): "slide", int(mujoco.mjtJoint.mjJNT_HINGE): "hinge"}
+    want = {mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, k): (kinds[int(m.jnt_type[k])], int(m.jnt_qposadr[k]))
+            for k in range(m.njnt)}
+    for coupled in ("slide1", "twist"):  # no coordinates: their qpos values are not read
+        del want[coupled]
+    assert {j.joint: (j.kind, j.address) for j in joints} == want
+
+
+def _qpos_dataset(d: Path, out: Path, npz: str, extra: str = "") -> Path:
+    """A data set on the imported toy (its skeleton and muscles) with one qpos motion."""
+    (d / "ds.yaml").write_text(f"""dataset: toy_qpos
+seed: 3
+skeleton: {out / 'skeletons' / 'toy.yaml'}
+muscles: {out / 'muscles'}
+motions:
+  q: {{motion: {npz}{extra}}}
+sequences:
+  - {{motion: q}}
+cameras:
+  sphere: {{views: 1, distance: [1.5, 1.6]}}
+render: {{size: [32, 32], supersample: 1}}
+""")
+    return d / "ds.yaml"
+
+
+def test_a_data_set_reads_a_qpos_motion_as_import_mjcf_does(judged, tmp_path, capsys):
+    """`motions: {q: {motion: FILE.npz}}` on a skeleton imported by axdf import mjcf: the same
+    coordinates as the import's own pose (to the pose file's 9 digits), every frame, the
+    archive's fps or the entry's; the data set's labels carry them."""
+    from axdf_cli.dataset.spec import load_dataset, load_motion
+    from axdf_cli.model.pose import sample_coordinates
+    from axdf_cli.specs import RefPolicy
+
+    m, qpos, out, skel, q, _ = judged
+    npz = out.parent / f"{out.name}_motion.npz"  # the import's motion (fps 25)
+    spec = load_dataset(_qpos_dataset(tmp_path, out, str(npz)), policy=RefPolicy(allow_outside=True))
+    pose = load_motion(spec, "q")
+    assert pose.fps == 25 and (pose.first, pose.last) == (0, len(qpos) - 1)
+    np.testing.assert_allclose(sample_coordinates(pose, pose.frames), q, atol=1e-6)
+    spec = load_dataset(_qpos_dataset(tmp_path, out, str(npz), ", fps: 50"), policy=RefPolicy(allow_outside=True))
+    assert load_motion(spec, "q").fps == 50
+    rc = main(["dataset", "build", str(_qpos_dataset(tmp_path, out, str(npz), ", frames: '0:24:12'")), "--out",
+               str(tmp_path / "d"), "-q", "--allow-outside"])
+    assert rc == 0, capsys.readouterr().err
+    labels = np.load(tmp_path / "d" / "seq_00000" / "labels.npz")
+    names = list(labels["coord_names"])
+    np.testing.assert_allclose(labels["coords"], q[[0, 12, 24]][:, [skel.coord_index[c] for c in names]], atol=1e-6)
+
+
+@pytest.mark.parametrize("arrays, words", [
+    (lambda q: {"qpos": np.where(np.arange(q.shape[1]) == 2, np.nan, q)}, "q.npz: qpos[0, 2] = nan"),
+    (lambda q: {"qpos": q[:, :-1]}, "q.npz: qpos has shape (25, 14); (frames, 15): the model's nq"),
+    (lambda q: {"qpos": q, "fps": np.array([-1.0])}, "q.npz: fps = "),
+    (lambda q: {"jpos": q}, "q.npz: no array qpos (arrays: jpos)"),
+    (lambda q: {"qpos": np.where(np.arange(q.shape[1])[None] < 7, 0.0, q)}, "q.npz: qpos[0, 3:7] is a zero quaternion"),
+])
+def test_a_data_sets_bad_qpos_is_exit_2_naming_the_array_and_index(judged, tmp_path, capsys, arrays, words):
+    m, qpos, out, _, _, _ = judged
+    np.savez(tmp_path / "q.npz", **arrays(qpos))
+    rc = main(["dataset", "build", str(_qpos_dataset(tmp_path, out, "q.npz")), "--out", str(tmp_path / "d"),
+               "--allow-outside"])
+    err = capsys.readouterr().err
+    assert rc == 2 and words in err and "Traceback" not in err, err
+    assert not (tmp_path / "d").exists()
+
+
+def test_a_qpos_motion_needs_a_skeleton_from_import_mjcf(tmp_path, capsys):
+    """gait2392's coordinates are no MuJoCo joints in qpos order: refused at the motion."""
+    repo = Path(__file__).resolve().parents[1]
+    np.savez(tmp_path / "q.npz", qpos=np.zeros((2, 23)))
+    (tmp_path / "ds.yaml").write_text(f"""dataset: g
+skeleton: {repo / 'poses' / 'skeletons' / 'gait2392.yaml'}
+muscles: {repo / 'muscles' / 'gait2392' / 'soleus_r.yaml'}
+motions:
+  q: {{motion: q.npz}}
+sequences:
+  - {{motion: q}}
+cameras:
+  sphere: {{views: 1, distance: [3, 3.5]}}
+""")
+    rc = main(["dataset", "build", str(tmp_path / "ds.yaml"), "--out", str(tmp_path / "d"), "--allow-outside"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "ds.yaml:5:" in err and "is not a MuJoCo joint in qpos order" in err, err
+    assert not (tmp_path / "d").exists()

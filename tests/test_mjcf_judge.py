@@ -85,3 +85,38 @@ def test_shipped_library_against_mujoco(xmls, lib, source, motion, pose, count, 
     names, ours = axdf_lengths(REPO / "muscles" / lib, p, frames, model.names)
     assert names == model.names
     _check(names, ours, ref, count)
+
+
+@pytest.mark.parametrize("lib, source", [("myoarm", "myoarm"), ("myobody", "myofullbody")])
+def test_shipped_skeleton_gives_mujocos_qpos_layout(xmls, lib, source):
+    """Data sets read a qpos motion against the skeleton alone: the shipped skeleton gives
+    MuJoCo's nq and the qpos index of every joint that is a coordinate (myobody: its free root,
+    the lumbar and knee couplings, 51 coupled joints in all, whose values are not read)."""
+    from axdf_cli.importers.qpos import skeleton_qpos
+    from axdf_cli.specs import load_skeleton
+
+    joints, nq = skeleton_qpos(load_skeleton(REPO / "poses" / "skeletons" / f"{lib}.yaml"))
+    m = mujoco.MjModel.from_xml_path(str(xmls[source]))
+    assert nq == m.nq
+    for j in joints:
+        k = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, j.joint)
+        assert k >= 0 and m.jnt_qposadr[k] == j.address and len(j.coords) == {0: 6, 1: 3}.get(int(m.jnt_type[k]), 1), j
+    assert m.njnt - len(joints) == m.neq  # the rest are the coupled joints
+
+
+def test_a_data_set_reads_myobodys_gait_as_the_import_did(tmp_path):
+    """MyoSuite's gait cycle as qpos, read by a data set on the shipped myobody skeleton, gives
+    the shipped pose (make import wrote it from the same qpos with axdf import mjcf)."""
+    from axdf_cli.dataset.door import qpos_pose
+    from axdf_cli.model.pose import sample_coordinates
+    from axdf_cli.specs import load_pose
+
+    shipped = load_pose(REPO / "poses" / "myobody_gait.yaml")
+    xml = tmp_path / "myofullbody.xml"
+    xml.write_text(myo_sim_xml.export("myofullbody"))
+    q, fps = myo_motion.motion_qpos("gait", mujoco.MjModel.from_xml_path(str(xml)))
+    np.savez(tmp_path / "gait.npz", qpos=q, fps=np.float64(fps))
+    pose = qpos_pose(tmp_path / "gait.npz", shipped.skeleton, "gait")
+    assert pose.fps == shipped.fps and pose.last == shipped.last
+    np.testing.assert_allclose(sample_coordinates(pose, pose.frames), sample_coordinates(shipped, shipped.frames),
+                               atol=1e-6)

@@ -10,6 +10,7 @@ every link's target) before and after (test_safety.snapshot).
 from __future__ import annotations
 
 import fcntl
+import hashlib
 import json
 import os
 import shutil
@@ -54,13 +55,42 @@ Frame Time: 0.033333
 """
 
 
+# A small MuJoCo model: an include (its mesh asset), a PLY bone mesh, a hinge, one muscle.
+ARM_XML = """<mujoco model="arm">
+  <compiler angle="degree" meshdir="assets"/>
+  <include file="parts.xml"/>
+  <worldbody>
+    <body name="upper" pos="0 0 1">
+      <geom type="mesh" mesh="upper_mesh"/>
+      <site name="s0" pos="0.02 0 -0.05"/>
+      <body name="lower" pos="0 0 -0.3">
+        <joint name="elbow" axis="0 1 0" range="0 120"/>
+        <site name="s1" pos="0.02 0 -0.1"/>
+      </body>
+    </body>
+  </worldbody>
+  <tendon><spatial name="t"><site site="s0"/><site site="s1"/></spatial></tendon>
+  <actuator><muscle name="flexor" tendon="t" force="300" lengthrange="0.2 0.4"/></actuator>
+</mujoco>
+"""
+PARTS_XML = '<mujocoinclude><asset><mesh name="upper_mesh" file="upper.ply"/></asset></mujocoinclude>\n'
+
+
 @pytest.fixture
 def proj(tmp_path, monkeypatch):
-    """A project folder holding the demo library (poses/, muscles/demo) and a small BVH."""
+    """A project folder holding the demo library (poses/, muscles/demo), a small BVH and a
+    small MuJoCo model (arm.xml, its include, its bone mesh, a qpos motion)."""
+    import trimesh
+
     root = tmp_path / "project"
     shutil.copytree(REPO_ROOT / "poses", root / "poses")
     shutil.copytree(REPO_ROOT / "muscles" / "demo", root / "muscles" / "demo")
     (root / "walk.bvh").write_text(SMALL_BVH)
+    (root / "arm.xml").write_text(ARM_XML)
+    (root / "parts.xml").write_text(PARTS_XML)
+    (root / "assets").mkdir()
+    (root / "assets" / "upper.ply").write_bytes(trimesh.creation.box(extents=(0.04, 0.04, 0.3)).export(file_type="ply"))
+    np.savez(root / "arm_q.npz", qpos=np.radians([[0.0], [30.0], [60.0]]), fps=np.float64(30))
     monkeypatch.chdir(root)
     return root
 
@@ -69,95 +99,149 @@ def bvh(*args):
     return ["import", "bvh", "walk.bvh", "--scale", "0.01", *args]
 
 
-# ----------------------------------------------------------------------------- A1, B: import bvh
+class Importer:
+    """One import command as the output tests drive it: ``args(...)`` its command line (with a
+    motion, so that it writes a pose), ``source`` its model file, ``inputs`` every file it
+    reads and lists in its manifest (a MuJoCo model's mesh files are guarded, not listed),
+    ``files(name)`` what it writes into --out with skeleton ``name``."""
+
+    def __init__(self, kind: str):
+        self.kind = kind
+        self.source = {"bvh": "walk.bvh", "mjcf": "arm.xml"}[kind]
+        self.inputs = {"bvh": ["walk.bvh"], "mjcf": ["arm.xml", "arm_q.npz", "parts.xml"]}[kind]
+
+    def args(self, *extra, source=None):
+        if self.kind == "bvh":
+            return ["import", "bvh", source or self.source, "--scale", "0.01", *extra]
+        return ["import", "mjcf", source or self.source, "--motion", "arm_q.npz", *extra]
+
+    def files(self, name: str) -> set:
+        if self.kind == "bvh":
+            return {f"skeletons/{name}.yaml"}
+        return {f"skeletons/{name}.yaml", f"skeletons/meshes/{name}/upper.ply", "muscles/flexor.yaml",
+                "import_report.json", "IMPORT.md"}
 
 
-def test_import_refuses_a_folder_it_does_not_own(proj, capsys):
+@pytest.fixture(params=["bvh", "mjcf"])
+def imp(request, proj):
+    return Importer(request.param)
+
+
+# ----------------------------------------------------------------------------- A1, B: imports (bvh, mjcf)
+
+
+def test_import_refuses_a_folder_it_does_not_own(imp, proj, capsys):
     """`--out poses` once replaced the tracked poses/demo.yaml by a BVH named demo.bvh."""
     shutil.copy(proj / "walk.bvh", proj / "demo.bvh")
     before = snapshot(proj)
-    rc, _, err = run_main(["import", "bvh", "demo.bvh", "--out", "poses", "--scale", "0.01"], capsys)
-    assert rc == 2 and "holds no axdf output" in err, err
-    rc, _, err = run_main(["import", "bvh", "demo.bvh", "--out", "poses", "--scale", "0.01", "--overwrite"], capsys)
-    assert rc == 2 and "holds no axdf output" in err, err
+    for extra in ([], ["--overwrite"]):
+        rc, _, err = run_main(imp.args("--out", "poses", "--pose-name", "demo", *extra), capsys)
+        assert rc == 2 and "holds no axdf output" in err, err
+    if imp.kind == "bvh":
+        rc, _, err = run_main(["import", "bvh", "demo.bvh", "--out", "poses", "--scale", "0.01"], capsys)
+        assert rc == 2 and "holds no axdf output" in err, err
     assert snapshot(proj) == before
 
 
-def test_import_never_takes_its_input_for_an_output(proj, capsys):
+def test_import_never_takes_its_input_for_an_output(imp, proj, capsys):
     """`--pose-out copy.bvh` once replaced its own input with YAML."""
     before = snapshot(proj)
-    rc, _, err = run_main(bvh("--out", "imp", "--pose-out", "walk.bvh", "--overwrite"), capsys)
-    assert rc == 2 and "walk.bvh: this input is also an output: --pose-out walk.bvh" in err, err
-    (proj / "alias.bvh").symlink_to("walk.bvh")  # the same file by another name
+    rc, _, err = run_main(imp.args("--out", "imp", "--pose-out", imp.source, "--overwrite"), capsys)
+    assert rc == 2 and f"{imp.source}: this input is also an output: --pose-out {imp.source}" in err, err
+    (proj / "alias.model").symlink_to(imp.source)  # the same file by another name
     before = snapshot(proj)
-    rc, _, err = run_main(bvh("--out", "imp", "--skeleton-out", "alias.bvh"), capsys)
+    rc, _, err = run_main(imp.args("--out", "imp", "--skeleton-out", "alias.model"), capsys)
     assert rc == 2 and "this input is also an output" in err, err
     assert snapshot(proj) == before
 
 
-def test_import_refuses_one_path_for_two_outputs(proj, capsys):
+def test_import_mjcf_never_writes_over_what_the_model_reads(proj, capsys):
+    """A MuJoCo model reads more than its XML: its includes and its mesh assets (PLY among
+    them), and the motion. None of them is ever an output: `--meshes-out assets` would write
+    the body upper's mesh onto the asset assets/upper.ply it was made from."""
+    imp = Importer("mjcf")
+    before = snapshot(proj)
+    for extra, words in ((["--meshes-out", "assets"], "assets/upper.ply: this input is also an output: "
+                                                      "--meshes-out file assets/upper.ply"),
+                         (["--pose-out", "parts.xml"], "parts.xml: this input is also an output"),
+                         (["--skeleton-out", "arm_q.npz"], "arm_q.npz: this input is also an output")):
+        for ow in ([], ["--overwrite"]):
+            rc, _, err = run_main(imp.args("--out", "imp", *extra, *ow), capsys)
+            assert rc == 2 and words in err, (extra, err)
+    assert snapshot(proj) == before
+
+
+def test_import_refuses_one_path_for_two_outputs(imp, proj, capsys):
     """The same path for --skeleton-out and --pose-out once wrote one file (the skeleton lost)."""
     before = snapshot(proj)
-    rc, _, err = run_main(bvh("--out", "imp", "--skeleton-out", "a.yaml", "--pose-out", "./a.yaml"), capsys)
+    rc, _, err = run_main(imp.args("--out", "imp", "--skeleton-out", "a.yaml", "--pose-out", "./a.yaml"), capsys)
     assert rc == 2 and "the same file" in err, err
     assert snapshot(proj) == before
 
 
-def test_import_never_replaces_a_link_nor_writes_through_one(proj, capsys, tmp_path):
+def test_import_never_replaces_a_link_nor_writes_through_one(imp, proj, capsys, tmp_path):
     """A user's symlink was swapped for a plain file; OUT/skeletons -> elsewhere was followed."""
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
     (elsewhere / "mine.yaml").write_text("mine\n")
     (proj / "pose_link.yaml").symlink_to(elsewhere / "mine.yaml")
     before = snapshot(tmp_path)
-    rc, _, err = run_main(bvh("--out", "imp", "--pose-out", "pose_link.yaml", "--overwrite"), capsys)
+    rc, _, err = run_main(imp.args("--out", "imp", "--pose-out", "pose_link.yaml", "--overwrite"), capsys)
     assert rc == 2 and "is a symbolic link" in err, err
     (proj / "imp").mkdir()
     (proj / "imp" / "skeletons").symlink_to(elsewhere)
     before = snapshot(tmp_path)
     for extra in ([], ["--overwrite"]):
-        rc, _, err = run_main(bvh("--out", "imp", *extra), capsys)
+        rc, _, err = run_main(imp.args("--out", "imp", *extra), capsys)
         assert rc == 2, err
     assert snapshot(tmp_path) == before
 
 
-def test_import_overwrite_replaces_only_what_it_wrote(proj, capsys):
-    """OUT is the command's own (manifest.json, command: import bvh); --overwrite replaces
+def test_import_overwrite_replaces_only_what_it_wrote(imp, proj, capsys):
+    """OUT is the command's own (manifest.json, command: import bvh|mjcf); --overwrite replaces
     its files there and, outside it, only files its manifest lists with the same bytes."""
-    rc, _, err = run_main(bvh("--out", "imp", "--pose-out", "walk_pose.yaml", "-q"), capsys)
+    rc, _, err = run_main(imp.args("--out", "imp", "--pose-out", "walk_pose.yaml", "--name", "walk", "-q"), capsys)
     assert rc == 0, err
     manifest = json.loads((proj / "imp" / "manifest.json").read_text())
-    assert manifest["tool"] == "axdf" and manifest["command"] == "import bvh" and manifest["complete"]
-    assert set(manifest["files"]) == {"skeletons/walk.yaml"}
+    assert manifest["tool"] == "axdf" and manifest["command"] == f"import {imp.kind}" and manifest["complete"]
+    assert set(manifest["files"]) == imp.files("walk")
     assert set(manifest["outside"]) == {"../walk_pose.yaml"}
-    assert manifest["inputs"] == [{"file": "walk.bvh", "sha256": manifest["inputs"][0]["sha256"]}]
-    rc, _, err = run_main(bvh("--out", "imp", "--pose-out", "walk_pose.yaml"), capsys)
+    assert [i["file"] for i in manifest["inputs"]] == imp.inputs
+    for i in manifest["inputs"]:
+        assert i["sha256"] == hashlib.sha256((proj / i["file"]).read_bytes()).hexdigest()
+    rc, _, err = run_main(imp.args("--out", "imp", "--pose-out", "walk_pose.yaml", "--name", "walk"), capsys)
     assert rc == 2 and "--overwrite" in err  # without it: refused
     (proj / "imp" / "notes.txt").write_text("mine")
-    rc, _, err = run_main(bvh("--out", "imp", "--pose-out", "walk_pose.yaml", "--overwrite", "-q"), capsys)
+    rc, _, err = run_main(imp.args("--out", "imp", "--pose-out", "walk_pose.yaml", "--name", "walk", "--overwrite",
+                                   "-q"), capsys)
     assert rc == 0, err
     assert (proj / "imp" / "notes.txt").read_text() == "mine"
     assert own_leftovers(proj / "imp") == []
     # a file axdf wrote and you changed since is yours: refused, kept
     (proj / "walk_pose.yaml").write_text((proj / "walk_pose.yaml").read_text() + "# my edit\n")
     before = snapshot(proj)
-    rc, _, err = run_main(bvh("--out", "imp", "--pose-out", "walk_pose.yaml", "--overwrite"), capsys)
+    rc, _, err = run_main(imp.args("--out", "imp", "--pose-out", "walk_pose.yaml", "--name", "walk", "--overwrite"),
+                          capsys)
     assert rc == 2 and "was changed since axdf wrote it" in err, err
     assert snapshot(proj) == before
     # a file axdf did not write there (another --out's manifest does not count) is refused
-    rc, _, err = run_main(bvh("--out", "imp2", "--skeleton-out", "imp/skeletons/walk.yaml", "--overwrite"), capsys)
+    rc, _, err = run_main(imp.args("--out", "imp2", "--skeleton-out", "imp/skeletons/walk.yaml", "--overwrite"), capsys)
     assert rc == 2 and "was not written by this command" in err, err
     # another command's output folder is not this one's
     rc, _, err = run_main(["transfer", "muscles/demo", "--from", "poses/skeletons/human_r.yaml", "--to",
                            "poses/skeletons/human_r.yaml", "--map", "map.yaml", "--out", "imp", "--overwrite"],
                           capsys)
     assert rc == 2
+    other = Importer("bvh" if imp.kind == "mjcf" else "mjcf")
+    rc, _, err = run_main(other.args("--out", "imp", "--overwrite"), capsys)
+    assert rc == 2 and f"holds the output of axdf import {imp.kind}" in err, err
+    assert snapshot(proj) == before
 
 
-def test_import_overwrite_deletes_what_the_old_output_listed_only_when_complete(proj, capsys, monkeypatch):
+def test_import_overwrite_deletes_what_the_old_output_listed_only_when_complete(imp, proj, capsys, monkeypatch):
     from axdf_cli.fileio import atomic
 
-    assert run_main(bvh("--out", "imp", "--name", "a", "-q"), capsys)[0] == 0
+    assert run_main(imp.args("--out", "imp", "--name", "a", "-q"), capsys)[0] == 0
     assert (proj / "imp" / "skeletons" / "a.yaml").is_file()
     before = snapshot(proj)
     real = atomic.write_bytes
@@ -171,22 +255,28 @@ def test_import_overwrite_deletes_what_the_old_output_listed_only_when_complete(
         return real(path, data)
 
     monkeypatch.setattr(atomic, "write_bytes", full_disk)
-    rc, _, err = run_main(bvh("--out", "imp", "--name", "b", "--overwrite"), capsys)
+    rc, _, err = run_main(imp.args("--out", "imp", "--name", "b", "--overwrite"), capsys)
     assert rc == 3, err
     assert snapshot(proj) == before  # the old output as it was, no staging left
     monkeypatch.setattr(atomic, "write_bytes", real)
-    assert run_main(bvh("--out", "imp", "--name", "b", "--overwrite", "-q"), capsys)[0] == 0
-    assert not (proj / "imp" / "skeletons" / "a.yaml").exists() and not (proj / "imp" / "a.yaml").exists()
-    assert (proj / "imp" / "skeletons" / "b.yaml").is_file() and (proj / "imp" / "b.yaml").is_file()
+    assert run_main(imp.args("--out", "imp", "--name", "b", "--overwrite", "-q"), capsys)[0] == 0
+    listed = set(json.loads((proj / "imp" / "manifest.json").read_text())["files"])
+    assert imp.files("b") <= listed and not (imp.files("a") - imp.files("b")) & listed
+    assert all((proj / "imp" / f).is_file() for f in imp.files("b"))
+    assert not any((proj / "imp" / f).exists() for f in imp.files("a") - imp.files("b"))
+    if imp.kind == "bvh":  # the pose is named after the skeleton
+        assert not (proj / "imp" / "a.yaml").exists() and (proj / "imp" / "b.yaml").is_file()
+    else:
+        assert not (proj / "imp" / "skeletons" / "meshes" / "a").exists()
 
 
-def test_import_checks_before_the_first_byte_and_holds_the_lock(proj, capsys):
-    assert run_main(bvh("--out", "imp", "-q"), capsys)[0] == 0
+def test_import_checks_before_the_first_byte_and_holds_the_lock(imp, proj, capsys):
+    assert run_main(imp.args("--out", "imp", "-q"), capsys)[0] == 0
     fd = os.open(proj / "imp" / ".axdf-lock", os.O_RDWR | os.O_CREAT)
     fcntl.flock(fd, fcntl.LOCK_EX)
     try:
         before = snapshot(proj, skip=proj / "imp" / ".axdf-lock")
-        rc, _, err = run_main(bvh("--out", "imp", "--overwrite"), capsys)
+        rc, _, err = run_main(imp.args("--out", "imp", "--overwrite"), capsys)
         assert rc == 3 and "another axdf process" in err, err
         assert snapshot(proj, skip=proj / "imp" / ".axdf-lock") == before
     finally:
@@ -617,6 +707,17 @@ def test_import_refuses_what_validate_would_refuse(proj, capsys, change, where, 
     assert snapshot(proj) == before
 
 
+def test_import_mjcf_refuses_what_validate_would_refuse_at_its_line(proj, capsys):
+    """A hinge's range of 1e8 rad passes the XML's own limits (numbers within ±1e9) but is
+    5.7e9 degrees in the skeleton, beyond what any axdf file holds: refused at the joint."""
+    (proj / "arm.xml").write_text(ARM_XML.replace('angle="degree"', 'angle="radian"').replace('range="0 120"',
+                                                                                            'range="0 1e8"'))
+    before = snapshot(proj)
+    rc, _, err = run_main(["import", "mjcf", "arm.xml", "--out", "imp"], capsys)
+    assert rc == 2 and err.startswith("arm.xml:9:9:") and "range" in err, err
+    assert snapshot(proj) == before
+
+
 def test_the_yaml_writer_never_parses_what_it_writes(monkeypatch):
     """An import of a 100k-joint BVH took 813 s: every string was parsed as a YAML document and
     every list item copied the lines so far. The writer now only matches PyYAML's resolvers."""
@@ -693,13 +794,13 @@ def test_overwrite_never_replaces_a_file_its_manifest_does_not_list(tproj, capsy
     assert snapshot(tmp_path) == before
 
 
-def test_an_output_on_the_output_folder_itself_and_render_of_a_non_run(proj, capsys):
+def test_an_output_on_the_output_folder_itself_and_render_of_a_non_run(imp, proj, capsys):
     before = snapshot(proj)
     for out in ("imp", "imp/sub"):
-        rc, _, err = run_main(bvh("--out", out, "--pose-out", "imp"), capsys)
+        rc, _, err = run_main(imp.args("--out", out, "--pose-out", "imp"), capsys)
         assert rc == 2 and "is the output folder" in err, err
     assert snapshot(proj) == before
-    assert run_main(bvh("--out", "imp", "-q"), capsys)[0] == 0
+    assert run_main(imp.args("--out", "imp", "-q"), capsys)[0] == 0
     rc, _, err = run_main(["render", "imp", "--out", "r"], capsys)
-    assert rc == 2 and "holds the output of axdf import bvh, not a run" in err, err
+    assert rc == 2 and f"holds the output of axdf import {imp.kind}, not a run" in err, err
     assert not (proj / "r").exists()

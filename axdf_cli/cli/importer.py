@@ -49,61 +49,28 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     sub.required = True
     p = sub.add_parser("osim", help="OpenSim 4 model (.osim) with optional motion (.mot/.sto) and controls (.sto)",
                        description="Import an OpenSim model: skeleton, muscles, bone meshes, and a pose from a motion.")
-    g = p.add_mutually_exclusive_group()  # also accepted after the source (`axdf import osim -q ...`)
-    g.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS, help="print only errors")
-    g.add_argument("-v", "--verbose", action="store_true", default=argparse.SUPPRESS, help="print more detail")
-    p.add_argument("model", metavar="MODEL.osim", type=Path)
+    _add_source(p, "MODEL.osim")
     p.add_argument("--motion", type=Path, metavar="FILE", help="coordinates over time (.mot/.sto) → a pose")
     p.add_argument("--controls", type=Path, metavar="FILE", help="muscle excitations (.sto) → the pose's activation")
-    p.add_argument("--out", type=Path, required=True, metavar="DIR",
-                   help="output folder (report; default place of every other file)")
-    p.add_argument("--name", help="skeleton name (default: the model's name)")
-    p.add_argument("--skeleton-out", type=Path, metavar="FILE", help="skeleton YAML (default DIR/skeletons/NAME.yaml)")
-    p.add_argument("--meshes-out", type=Path, metavar="DIR",
-                   help="bone meshes folder (default: meshes/NAME beside the skeleton)")
-    p.add_argument("--muscles-out", type=Path, metavar="DIR", help="muscle YAML folder (default DIR/muscles)")
-    p.add_argument("--pose-out", type=Path, metavar="FILE", help="pose YAML (default DIR/MOTION.yaml)")
-    p.add_argument("--pose-name", help="pose name (default: the motion file's name)")
+    _add_model_outputs(p)
     p.add_argument("--fps", type=float, help="resample the motion at this frame rate (default: its own)")
-    p.add_argument("--no-meshes", action="store_true", help="do not convert bone geometry")
-    p.add_argument("--palette", choices=("anatomical", "hashed"), default="anatomical",
-                   help="muscle colours: muscle reds varied per muscle (default), or any hue from the name's hash")
+    _add_model_options(p)
     add_overwrite_arg(p)
 
     j = sub.add_parser("mjcf", help="MuJoCo model (MJCF .xml) with an optional qpos motion (.npz)",
                        description="Import a MuJoCo model: skeleton (bodies, joints, couplings), muscles on spatial "
                                    "tendons, bone meshes, and a pose from a qpos motion.")
-    g = j.add_mutually_exclusive_group()
-    g.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS, help="print only errors")
-    g.add_argument("-v", "--verbose", action="store_true", default=argparse.SUPPRESS, help="print more detail")
-    j.add_argument("model", metavar="MODEL.xml", type=Path)
+    _add_source(j, "MODEL.xml")
     j.add_argument("--motion", type=Path, metavar="QPOS.npz",
                    help="npz with qpos (frames x nq, the model's order) and optional fps → a pose")
-    j.add_argument("--out", type=Path, required=True, metavar="DIR",
-                   help="output folder (report; default place of every other file)")
-    j.add_argument("--name", help="skeleton name (default: the model's name)")
-    j.add_argument("--skeleton-out", type=Path, metavar="FILE", help="skeleton YAML (default DIR/skeletons/NAME.yaml)")
-    j.add_argument("--meshes-out", type=Path, metavar="DIR",
-                   help="bone meshes folder (default: meshes/NAME beside the skeleton)")
-    j.add_argument("--muscles-out", type=Path, metavar="DIR", help="muscle YAML folder (default DIR/muscles)")
-    j.add_argument("--pose-out", type=Path, metavar="FILE", help="pose YAML (default DIR/MOTION.yaml)")
-    j.add_argument("--pose-name", help="pose name (default: the motion file's name)")
+    _add_model_outputs(j)
     j.add_argument("--fps", type=float, help="frame rate of the motion (default: its fps, else 30)")
-    j.add_argument("--no-meshes", action="store_true", help="do not convert bone geometry")
-    j.add_argument("--max-faces", type=int, default=0, metavar="N",
-                   help="decimate each bone mesh to at most N triangles (default 0: keep all)")
-    j.add_argument("--mesh-edge", type=float, default=0.0, metavar="M",
-                   help="decimate each bone mesh to triangles of about this edge length in metres (default 0: off)")
-    j.add_argument("--palette", choices=("anatomical", "hashed"), default="anatomical",
-                   help="muscle colours: muscle reds varied per muscle (default), or any hue from the name's hash")
+    _add_model_options(j, decimate=True)
     add_overwrite_arg(j)
 
     b = sub.add_parser("bvh", help="Biovision motion capture (.bvh) → skeleton and pose",
                        description="Import a BVH file: a skeleton (Z-up, metres) and a pose of its motion.")
-    g = b.add_mutually_exclusive_group()
-    g.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS, help="print only errors")
-    g.add_argument("-v", "--verbose", action="store_true", default=argparse.SUPPRESS, help="print more detail")
-    b.add_argument("model", metavar="FILE.bvh", type=Path)
+    _add_source(b, "FILE.bvh")
     b.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder (default place of both files)")
     b.add_argument("--scale", metavar="S",
                    help="metres per file unit: a number, or m, cm, mm, in (default: guessed from the height)")
@@ -115,12 +82,65 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     add_overwrite_arg(b)
 
 
-def write_imported(files: OutputSet, inputs, overwrite: bool, source, tick=lambda step: None) -> dict:
+def _add_source(p, metavar: str) -> None:
+    """``-q``/``-v`` (also accepted after the source: ``axdf import osim -q ...``) and the source file."""
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS, help="print only errors")
+    g.add_argument("-v", "--verbose", action="store_true", default=argparse.SUPPRESS, help="print more detail")
+    p.add_argument("model", metavar=metavar, type=Path)
+
+
+def _add_model_outputs(p) -> None:
+    """Where a muscle model's import writes (``osim``, ``mjcf``)."""
+    p.add_argument("--out", type=Path, required=True, metavar="DIR",
+                   help="output folder (report; default place of every other file)")
+    p.add_argument("--name", help="skeleton name (default: the model's name)")
+    p.add_argument("--skeleton-out", type=Path, metavar="FILE", help="skeleton YAML (default DIR/skeletons/NAME.yaml)")
+    p.add_argument("--meshes-out", type=Path, metavar="DIR",
+                   help="bone meshes folder (default: meshes/NAME beside the skeleton)")
+    p.add_argument("--muscles-out", type=Path, metavar="DIR", help="muscle YAML folder (default DIR/muscles)")
+    p.add_argument("--pose-out", type=Path, metavar="FILE", help="pose YAML (default DIR/MOTION.yaml)")
+    p.add_argument("--pose-name", help="pose name (default: the motion file's name)")
+
+
+def _add_model_options(p, decimate: bool = False) -> None:
+    """Bone meshes and colours of a muscle model's import (``osim``, ``mjcf``)."""
+    p.add_argument("--no-meshes", action="store_true", help="do not convert bone geometry")
+    if decimate:
+        p.add_argument("--max-faces", type=int, default=0, metavar="N",
+                       help="decimate each bone mesh to at most N triangles (default 0: keep all)")
+        p.add_argument("--mesh-edge", type=float, default=0.0, metavar="M",
+                       help="decimate each bone mesh to triangles of about this edge length in metres (default 0: off)")
+    p.add_argument("--palette", choices=("anatomical", "hashed"), default="anatomical",
+                   help="muscle colours: muscle reds varied per muscle (default), or any hue from the name's hash")
+
+
+def parse_scale_step(args):
+    """``--scale`` (metres per unit, a number or a unit name; None: guessed) and ``--step`` of
+    ``import bvh`` and ``retarget``, checked: the scale, or a usage error (exit 2)."""
+    from axdf_cli.errors import UsageError
+    from axdf_cli.importers.bvh import UNITS
+
+    scale = None
+    if args.scale is not None:
+        try:
+            scale = UNITS[args.scale] if args.scale in UNITS else float(args.scale)
+        except ValueError:
+            scale = float("nan")
+        if not (0 < scale < 1e6):
+            raise UsageError(f"--scale {args.scale}", f"a positive number of metres per unit, or one of {', '.join(UNITS)}")
+    if not 1 <= args.step <= 10000:
+        raise UsageError(f"--step {args.step}", "a whole number in 1..10000")
+    return scale
+
+
+def write_imported(files: OutputSet, inputs, overwrite: bool, source, tick=lambda step: None, assets=()) -> dict:
     """What every importer does with its files (``import osim|bvh|mjcf``, ``retarget``): the
     output rule's checks (axdf_cli/fileio/outputs.py), then every YAML file read back by the
     file specs (what ``axdf validate`` accepts; errors name ``source``), then the write.
-    Nothing is written unless all of it passes. ``tick(step)``: the progress bar."""
-    checked = check_outputs(files, inputs=inputs, overwrite=overwrite)
+    Nothing is written unless all of it passes. ``inputs`` (listed in the manifest) and
+    ``assets`` (not listed) are never outputs. ``tick(step)``: the progress bar."""
+    checked = check_outputs(files, inputs=inputs, overwrite=overwrite, assets=assets)
     check_documents(files, Mark(str(source)))
     tick("check")
     manifest = write_checked(checked)
@@ -173,7 +193,7 @@ def run(args) -> int:
             files.add(path, data, output_role(path, args))
         files.settings = {"name": args.name, "fps": args.fps, "pose_name": args.pose_name,
                           "meshes": not args.no_meshes, "palette": args.palette}
-        write_imported(files, [args.model, args.motion, args.controls], args.overwrite, args.model, tick)
+        write_imported(files, res.inputs, args.overwrite, args.model, tick)
     finally:
         close()
     for w in res.warnings:
@@ -182,11 +202,7 @@ def run(args) -> int:
         c = res.report["counts"]
         print(f"imported {args.model.name}: {c['bodies']} bodies, {c['coordinates']} coordinates, "
               f"{c['muscles']} muscles, {c['meshes']} bone meshes")
-        kinds: dict[str, int] = {}
-        for i in res.report["ignored"]:
-            kinds[i["kind"]] = kinds.get(i["kind"], 0) + 1
-        if kinds:
-            print("not imported: " + ", ".join(f"{n} {k}{'s' if n != 1 else ''}" for k, n in sorted(kinds.items())))
+        _print_ignored(res.report["ignored"])
         skipped = res.report.get("missing_meshes", [])
         if skipped:
             print(f"meshes skipped: {len(skipped)}")
@@ -195,6 +211,15 @@ def run(args) -> int:
                 print(path)
         print(f"report: {Path(args.out) / 'IMPORT.md'}")
     return 0
+
+
+def _print_ignored(ignored: list) -> None:
+    """One line counting what an import left out, by kind (``not imported: 2 markers, ...``)."""
+    kinds: dict[str, int] = {}
+    for i in ignored:
+        kinds[i["kind"]] = kinds.get(i["kind"], 0) + 1
+    if kinds:
+        print("not imported: " + ", ".join(f"{n} {k}{'s' if n != 1 else ''}" for k, n in sorted(kinds.items())))
 
 
 def run_mjcf(args) -> int:
@@ -220,7 +245,7 @@ def run_mjcf(args) -> int:
         files.settings = {"name": args.name, "fps": args.fps, "pose_name": args.pose_name,
                           "meshes": not args.no_meshes, "max_faces": args.max_faces, "mesh_edge": args.mesh_edge,
                           "palette": args.palette}
-        write_imported(files, [args.model, args.motion], args.overwrite, args.model, tick)
+        write_imported(files, res.inputs, args.overwrite, args.model, tick, assets=res.assets)
     finally:
         close()
     for w in res.warnings:
@@ -229,11 +254,7 @@ def run_mjcf(args) -> int:
         c = res.report["counts"]
         print(f"imported {args.model.name}: {c['bodies']} bodies, {c['coordinates']} coordinates "
               f"({c['couplings']} coupled joints), {c['muscles']} muscles, {c['meshes']} bone meshes")
-        if res.report["ignored"]:
-            kinds: dict[str, int] = {}
-            for i in res.report["ignored"]:
-                kinds[i["kind"]] = kinds.get(i["kind"], 0) + 1
-            print("not imported: " + ", ".join(f"{n} {k}{'s' if n != 1 else ''}" for k, n in sorted(kinds.items())))
+        _print_ignored(res.report["ignored"])
         if args.verbose:
             for path in sorted(res.files):
                 print(path)
@@ -242,20 +263,9 @@ def run_mjcf(args) -> int:
 
 
 def run_bvh(args) -> int:
-    from axdf_cli.errors import UsageError
-    from axdf_cli.importers.bvh import UNITS, build_import
+    from axdf_cli.importers.bvh import STEPS, build_import
 
-    scale = None
-    if args.scale is not None:
-        try:
-            scale = UNITS[args.scale] if args.scale in UNITS else float(args.scale)
-        except ValueError:
-            scale = float("nan")
-        if not (0 < scale < 1e6):
-            raise UsageError(f"--scale {args.scale}", f"a positive number of metres per unit, or one of {', '.join(UNITS)}")
-    if not 1 <= args.step <= 10000:
-        raise UsageError(f"--step {args.step}", "a whole number in 1..10000")
-    from axdf_cli.importers.bvh import STEPS
+    scale = parse_scale_step(args)
 
     tick, close = progress_bar(STEPS + ("check", "write"), args.quiet, f"import {args.model.name}")
     try:

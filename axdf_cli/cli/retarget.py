@@ -17,7 +17,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from axdf_cli.cli.importer import add_overwrite_arg, write_imported
+from axdf_cli.cli.importer import add_overwrite_arg, parse_scale_step, write_imported
 from axdf_cli.fileio.outputs import OutputSet
 
 
@@ -39,21 +39,10 @@ def add_args(p) -> None:
 
 
 def run(args) -> int:
-    from axdf_cli.errors import UsageError
-    from axdf_cli.importers.bvh import UNITS
     from axdf_cli.importers.retarget import build_retarget
     from axdf_cli.specs import RefPolicy, load_skeleton
 
-    scale = None
-    if args.scale is not None:
-        try:
-            scale = UNITS[args.scale] if args.scale in UNITS else float(args.scale)
-        except ValueError:
-            scale = float("nan")
-        if not (0 < scale < 1e6):
-            raise UsageError(f"--scale {args.scale}", f"a positive number of metres per unit, or one of {', '.join(UNITS)}")
-    if not 1 <= args.step <= 10000:
-        raise UsageError(f"--step {args.step}", "a whole number in 1..10000")
+    scale = parse_scale_step(args)
     policy = RefPolicy.for_command([args.map, args.onto, args.motion], args.allow_outside)
     skel = load_skeleton(Path(args.onto), policy) if args.onto else None
     bar = _Bar() if not args.quiet and sys.stderr.isatty() else None

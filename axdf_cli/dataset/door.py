@@ -87,6 +87,22 @@ def motion_pose(path: Path, skeleton, name: str, fps: float | None = None) -> Po
                 str(path), skeleton.source)
 
 
+def qpos_pose(path: Path, skeleton, name: str, fps: float | None = None, where=None) -> Pose:
+    """A MuJoCo ``qpos`` motion (an npz: ``qpos`` frames × nq, optional ``fps``) as a Pose of a
+    skeleton that ``axdf import mjcf`` wrote, read as ``axdf import mjcf --motion`` reads it
+    (importers/qpos.py: the qpos layout from the skeleton's bones and coordinates, hinges in
+    degrees, quaternions as X-Y-Z Euler angles; coupled joints follow their polynomials).
+    ``fps`` overrides the archive's (as ``--fps``); ``where``: the data set's entry, for errors."""
+    from axdf_cli.importers.qpos import qpos_coordinates, read_motion, skeleton_qpos
+
+    joints, nq = skeleton_qpos(skeleton, where)
+    q, own_fps = read_motion(path, nq)
+    frames = tuple(range(len(q)))
+    keys = {c: (frames, tuple(float(x) for x in v)) for c, v in qpos_coordinates(joints, q, str(path)).items()}
+    return Pose(name, skeleton, float(fps or own_fps), 0, len(q) - 1, "linear", keys, {}, {}, str(path),
+                skeleton.source)
+
+
 def retarget_pose(path: Path, map_path: Path, skeleton, name: str, step: int = 1, scale: float | None = None,
                   policy=None) -> Pose:
     """Motion capture (a BVH take, an npz of joints) as a Pose of ``skeleton``, fitted through

@@ -17,7 +17,7 @@ from axdf_cli.fileio import atomic
 from axdf_cli.errors import EnvironmentProblem
 
 COLUMNS = ("sample", "sequence", "sequence_index", "source", "frame", "frame_index", "view", "view_index",
-           "seed", "shard", "png", "exr", "labels", "meshes")
+           "seed", "shard", "png", "exr", "labels", "amodal", "meshes")
 
 
 def _pyarrow():
@@ -51,6 +51,7 @@ def index_rows(records: list[dict], seed: int, shards: int, passes) -> dict:
                 for ext in ("png", "exr"):
                     cols[ext].append(f"{name}/views/{view}/{frame:04d}.{ext}" if ext in passes else None)
                 cols["labels"].append(f"{name}/labels.npz")
+                cols["amodal"].append(f"{name}/amodal.json" if "amodal" in passes else None)
                 cols["meshes"].append(f"{name}/meshes")
                 n += 1
     return cols

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from axdf_cli.dataset.door import (FRAME_WRITERS, RenderSettings, load_muscle_specs, motion_pose, parse_camera,
-                                   parse_render_settings, retarget_pose)
+                                   parse_render_settings, qpos_pose, retarget_pose)
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.tolerances import MAX_ABS_NUMBER, MAX_FPS, MAX_SEED
 from axdf_cli.formats import WRITERS
@@ -44,14 +44,15 @@ class CoordinateRule:
 
 @dataclass(frozen=True)
 class Motion:
-    """A named motion: a pose file, an OpenSim motion (.mot/.sto), or motion capture (BVH, npz
-    joints) retargeted onto the data set's skeleton through a map; optionally a frame subset."""
+    """A named motion: a pose file, an OpenSim motion (.mot/.sto), a MuJoCo qpos motion (.npz,
+    on a skeleton from ``axdf import mjcf``), or motion capture (BVH, npz joints) retargeted onto
+    the data set's skeleton through a map; optionally a frame subset."""
 
     name: str
     kind: str  # "pose" | "motion" | "retarget"
     path: str
     frames: object  # raw frames spec (parse_frames) or None
-    fps: float | None  # OpenSim motions: resample to this rate (None: the file's rows)
+    fps: float | None  # OpenSim motions: resample to this rate; qpos: its rows' rate (None: the file's own)
     mark: Mark = field(default=Mark(""), compare=False)
     map: str | None = None  # retarget: the map file
     step: int = 1  # retarget: every step-th frame of the take
@@ -246,7 +247,7 @@ def _parse_motions(value, where: Mark, path: Path, policy: RefPolicy) -> dict:
         kinds = [k for k in MOTION_KINDS if mf.has(k)]
         if len(kinds) != 1:
             raise InputError(value.value_mark(mname), f"motion {mname} needs one of pose, motion or retarget",
-                             "{pose: FILE.yaml}, {motion: FILE.mot|.sto} or {retarget: FILE.bvh|.npz, map: MAP.yaml}")
+                             "{pose: FILE.yaml}, {motion: FILE.mot|.sto|.npz} or {retarget: FILE.bvh|.npz, map: MAP.yaml}")
         key = kinds[0]
         ref = mf.string(key, required=True)
         p = policy.resolve(path, ref, mf.vmark(key), f"{key} file")
@@ -255,7 +256,7 @@ def _parse_motions(value, where: Mark, path: Path, policy: RefPolicy) -> dict:
         frames = mf.raw("frames")
         fps = mf.number("fps", default=None, lo=0.0, hi=100000.0, lo_open=True)
         if fps is not None and key != "motion":
-            raise InputError(mf.kmark("fps"), "fps is for OpenSim motions",
+            raise InputError(mf.kmark("fps"), "fps is for OpenSim and MuJoCo motions",
                              "a pose file has its own fps; a retargeted take's is its own / step")
         map_path, step, scale = None, 1, None
         for k in ("map", "step", "scale"):
@@ -480,8 +481,9 @@ _MOTION_CACHE: dict = {}  # motions by file, content and skeleton (a worker load
 
 def load_motion(spec: DatasetSpec, name: str) -> Pose:
     """The named motion as a Pose of the data set's skeleton (pose files are loaded with
-    :func:`loaders.load_pose`; OpenSim motions go through the importer's reader and unit rules;
-    motion capture is retargeted onto the skeleton through its map, as ``axdf retarget`` does)."""
+    :func:`loaders.load_pose`; OpenSim motions go through the importer's reader and unit rules,
+    MuJoCo qpos motions through ``axdf import mjcf``'s; motion capture is retargeted onto the
+    skeleton through its map, as ``axdf retarget`` does)."""
     from axdf_cli.fileio.atomic import sha256_file
 
     m = spec.motions[name]
@@ -497,6 +499,8 @@ def load_motion(spec: DatasetSpec, name: str) -> Pose:
                              f"the data set's skeleton {spec.skeleton_path}")
     elif m.kind == "retarget":
         pose = retarget_pose(Path(m.path), Path(m.map), skel, name, m.step, m.scale, spec.policy)
+    elif Path(m.path).suffix.lower() == ".npz":
+        pose = qpos_pose(Path(m.path), skel, name, m.fps, m.mark)
     else:
         pose = motion_pose(Path(m.path), skel, name, m.fps)
     _MOTION_CACHE[key] = pose

@@ -146,9 +146,11 @@ def _recorded(previous: Manifest | None, key: str, rel: str) -> set:
     return {sha} if isinstance(sha, str) else set()
 
 
-def check_outputs(outputs: OutputSet, *, inputs=(), overwrite: bool = False) -> Checked:
+def check_outputs(outputs: OutputSet, *, inputs=(), overwrite: bool = False, assets=()) -> Checked:
     """Every check of the output rule (module docstring); reads only. ``inputs``: the files
-    the command read (never an output)."""
+    the command read (never an output; listed in the manifest with their sha256); ``assets``:
+    more files it read that are never an output either but are not listed (a MuJoCo model's
+    mesh files: many, and named by wherever a package installed them)."""
     out = outputs.out
     inside: dict = {}
     outside_files: list = []
@@ -176,14 +178,15 @@ def check_outputs(outputs: OutputSet, *, inputs=(), overwrite: bool = False) -> 
                              "two outputs of one command need different paths")
         reals[r] = str(o)
     recorded_inputs: list = []
-    for i in inputs:
+    for i in [*inputs, *assets]:
         if i is None:
             continue
         clash = reals.get(_real(Path(i)))
         if clash:
             raise InputError(Mark(str(i)), f"this input is also an output: {clash}",
                              "an input is never overwritten; choose another output path")
-        if os.path.isfile(i):
+    for i in inputs:
+        if i is not None and os.path.isfile(i):
             recorded_inputs.append({"file": _shown(Path(i)), "sha256": _sha_of(Path(i))})
     dirs = sorted({str(Path(rel).parent.as_posix()) for rel in inside} - {"."})
     target = prepare(out, overwrite=overwrite, dirs=dirs, command=outputs.command, resumable=False)
@@ -212,7 +215,7 @@ def check_outputs(outputs: OutputSet, *, inputs=(), overwrite: bool = False) -> 
 
     deleted = {_real(out / rel): f"{rel} (listed in {out / MANIFEST}, deleted by --overwrite)"
                for rel in old_files if rel not in inside} if overwrite else {}
-    for i in inputs:
+    for i in [*inputs, *assets]:
         if i is not None and _real(Path(i)) in deleted:
             raise InputError(Mark(str(i)), f"this input would be deleted: {deleted[_real(Path(i))]}",
                              "an input is never overwritten or deleted; choose another output folder")

@@ -45,7 +45,8 @@ import numpy as np
 from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.importers import emit
-from axdf_cli.importers.osim_import import _rel, _sha, safe_name
+from axdf_cli.importers.result import relative_ref, safe_name
+from axdf_cli.fileio.atomic import sha256_file
 from axdf_cli.fileio.yamlio import NAME_ALLOWED, is_name, read_text, unique_names
 
 #: channel name (lower case) → (DOF type, axis index). BVH writes them capitalised.
@@ -529,12 +530,12 @@ def build_import(bvh_path: Path | str, out_dir: Path | str, *, name: str | None 
     files.add(skel_path, emit.dump_yaml(skeleton_doc(bvh, name, scale), header).encode(),
               "--skeleton-out" if skeleton_out else "the skeleton")
     tick("skeleton")
-    pdoc, fps = pose_doc(bvh, pname, _rel(skel_path, pose_path.parent), scale, step)
+    pdoc, fps = pose_doc(bvh, pname, relative_ref(skel_path, pose_path.parent), scale, step)
     files.add(pose_path, emit.dump_yaml(pdoc, f"Imported from {bvh_path.name} by `axdf import bvh` "
                                               f"(every {step} of {len(bvh.data)} rows).").encode(),
               "--pose-out" if pose_out else "the pose")
     tick("pose")
-    report = {"source": {"file": bvh_path.name, "sha256": _sha(bvh_path)}, "tool": "axdf import bvh",
+    report = {"source": {"file": bvh_path.name, "sha256": sha256_file(bvh_path)}, "tool": "axdf import bvh",
               "skeleton": name, "pose": pname, "scale": scale, "guessed_unit": unit, "rest_height_units": height,
               "joints": sum(not j.end_site for j in bvh.joints), "end_sites": sum(j.end_site for j in bvh.joints),
               "channels": int(bvh.data.shape[1]), "rows": int(len(bvh.data)), "step": step,

@@ -35,6 +35,7 @@ import functools
 import hashlib
 import math
 import re
+from dataclasses import dataclass
 
 import numpy as np
 import yaml
@@ -318,14 +319,43 @@ def path_docs(model: Model, m: Muscle) -> tuple[list, list]:
     return path, wraps
 
 
-def axis_points_for(name: str, path: list, wraps: list, skel: Skeleton, world: np.ndarray,
-                    motion_q: np.ndarray | None) -> tuple[int, int, float, float]:
-    """The axis control points a path muscle needs over the imported motion: ``(n, default
-    n, shortfall at n, shortfall at the default)``. The default count (``PathModel``) is kept
-    unless the axis falls more than ``AXIS_SHORTFALL_MAX`` short of the wrapped path in some
-    frame of ``motion_q`` (F, C) (at most ``AXIS_FIT_FRAMES`` of them, evenly spread); then
-    the smallest count in steps of 4 up to ``AXIS_POINTS_RAISE_MAX`` that keeps it within, or the
-    best of them. Without a motion: the default, measured at the rest pose."""
+@dataclass(frozen=True)
+class AxisPoints:
+    """How many axis control points an imported path muscle gets (:func:`axis_points_for`)."""
+
+    n: int  # the count to write (the default when it is within the target)
+    default: int  # the path's default count (``default_control_points``)
+    error: float  # the largest |shortfall| over the measured poses at ``n``
+    error_default: float  # ... at the default count
+
+    @property
+    def raised(self) -> bool:
+        return self.n != self.default
+
+    def row(self) -> dict:
+        """The import report's ``axis_points_raised`` entry."""
+        return {"from": self.default, "to": self.n, "shortfall_at_default": self.error_default, "shortfall": self.error}
+
+
+def axis_point_counts(n_default: int) -> list[int]:
+    """The counts tried after the default, fewest first: steps of AXIS_POINTS_STEP up to
+    AXIS_POINTS_FINE_MAX, then of AXIS_POINTS_COARSE_STEP up to AXIS_POINTS_MAX."""
+    from axdf_cli import tolerances as tol
+
+    fine = range(n_default + tol.AXIS_POINTS_STEP, tol.AXIS_POINTS_FINE_MAX + 1, tol.AXIS_POINTS_STEP)
+    start = max(n_default, tol.AXIS_POINTS_FINE_MAX) + tol.AXIS_POINTS_COARSE_STEP
+    return [*fine, *range(start, tol.AXIS_POINTS_MAX + 1, tol.AXIS_POINTS_COARSE_STEP)]
+
+
+def axis_points_for(name: str, path: list, wraps: list, skel: Skeleton, q: np.ndarray) -> AxisPoints:
+    """The axis control points a path muscle needs over the poses ``q`` (P, C) (the importer's
+    choice: the imported motion's frames, poses drawn in the joints' ranges; the rest pose
+    among them). The axis is a smooth fit to the wrapped path and cuts its corners, so it
+    falls short of it; the measure is :meth:`PathModel.shortfall` (``1 − axis length / path
+    length``, the axis's arc length by Gauss-Legendre) and the error its largest magnitude
+    over the poses. The default count is kept when its error is within AXIS_SHORTFALL_MAX;
+    otherwise the first of :func:`axis_point_counts` that is, or the one with the least
+    error when none is (one rule for ``import osim`` and ``import mjcf``)."""
     import dataclasses
 
     from axdf_cli import tolerances as tol
@@ -334,49 +364,53 @@ def axis_points_for(name: str, path: list, wraps: list, skel: Skeleton, world: n
     from axdf_cli.specs import parse_muscle_path
 
     spec = parse_muscle_path(Fields({"path": path, "wrap": wraps}, Mark(f"<{name}>"), "muscle"))
+    world = forward_kinematics(skel, q)
+    n0 = PathModel(spec, skel.bone_index, skel.coord_index).n
+
+    def error(n: int) -> float:
+        pm = PathModel(dataclasses.replace(spec, control_points=n), skel.bone_index, skel.coord_index)
+        return float(np.max(np.abs(pm.shortfall(world, q))))
+
+    e0 = error(n0)
+    best = (e0, n0)
+    if e0 > tol.AXIS_SHORTFALL_MAX:
+        for n in axis_point_counts(n0):
+            best = min(best, (error(n), n))
+            if best[0] <= tol.AXIS_SHORTFALL_MAX:
+                break
+    return AxisPoints(best[1], n0, best[0], e0)
+
+
+def motion_poses(skel: Skeleton, motion_q: np.ndarray | None) -> np.ndarray:
+    """The poses (P, C) an OpenSim import measures its axes on: the rest pose and the imported
+    motion's frames (at most AXIS_FIT_FRAMES of them, evenly spread)."""
+    from axdf_cli import tolerances as tol
+
     q = skel.rest_coordinates()[None]
     if motion_q is not None and len(motion_q):
         pick = np.unique(np.linspace(0, len(motion_q) - 1, min(len(motion_q), tol.AXIS_FIT_FRAMES)).astype(np.int64))
         q = np.concatenate([q, motion_q[pick]])
-    frames_world = forward_kinematics(skel, q)
-    n0 = PathModel(spec, skel.bone_index, skel.coord_index).n
-
-    def worst(n: int) -> float:
-        pm = PathModel(dataclasses.replace(spec, control_points=n), skel.bone_index, skel.coord_index)
-        return float(np.max(pm.shortfall(frames_world, q)))
-
-    best = (n0, worst(n0))
-    s0 = best[1]
-    if motion_q is None or s0 <= tol.AXIS_SHORTFALL_MAX:
-        return n0, n0, s0, s0
-    for n in range(n0 + 4, tol.AXIS_POINTS_RAISE_MAX + 1, 4):
-        sn = worst(n)
-        if sn < best[1]:
-            best = (n, sn)
-        if sn <= tol.AXIS_SHORTFALL_MAX:
-            break
-    return best[0], n0, best[1], s0
+    return q
 
 
 def muscle_doc(m: Muscle, skel: Skeleton, world: np.ndarray, model: Model | None = None,
                palette: str = "anatomical", motion_q: np.ndarray | None = None) -> tuple[dict, dict]:
     """One OpenSim muscle's YAML document and summary row for the import report: its path
     (:func:`path_docs`) sized by :func:`belly_doc` from its Hill-type parameters, with the
-    calf's and thigh's jiggle (``JIGGLE``). ``axis_points`` is written when the imported
-    motion ``motion_q`` (F, C) needs more than the default (:func:`axis_points_for`)."""
+    calf's and thigh's jiggle (``JIGGLE``). ``axis_points`` is written when the rest pose
+    and the imported motion ``motion_q`` (F, C) need more than the default
+    (:func:`axis_points_for` over :func:`motion_poses`)."""
     path, wraps = path_docs(model, m)
-    n_axis, n_default, shortfall, shortfall_default = axis_points_for(m.name, path, wraps, skel, world, motion_q)
-    raised = n_axis != n_default
+    axis = axis_points_for(m.name, path, wraps, skel, motion_poses(skel, motion_q))
     doc, row = belly_doc(m.name, path, wraps, m.max_isometric_force, m.optimal_fiber_length, m.tendon_slack_length,
-                         m.pennation_angle, skel, world, palette, n_axis if raised else 0,
+                         m.pennation_angle, skel, world, palette, axis.n if axis.raised else 0,
                          jiggle=JIGGLE.get(SIDE_SUFFIX.sub("", m.name)))
     row.update({"type": m.type, "path_points": len(m.points),
                 "conditional": [p.name for p in m.points if p.kind == "conditional"],
                 "conditional_inactive_at_rest": [p.name for p in m.points if not p.active_at_rest],
                 "moving": [p.name for p in m.points if p.kind == "moving"], "wraps": [w.wrap for w in m.wraps]})
-    if raised:  # the worst shortfall over the motion at the default count and at the count written
-        row["axis_points_raised"] = {"from": n_default, "to": n_axis, "shortfall_at_default": shortfall_default,
-                                     "shortfall": shortfall}
+    if axis.raised:  # the worst shortfall over the motion at the default count and at the count written
+        row["axis_points_raised"] = axis.row()
     return doc, rounded(row)
 
 
@@ -411,8 +445,6 @@ def belly_doc(name: str, path: list, wraps: list, max_force: float, fibre_length
     Positions are fractions of the rest arc length written as curve parameters t (mapped
     through the rest axis); sections are circular; ``volume: exact`` keeps the rest volume.
     The row also carries the belly's slenderness (:mod:`axdf_cli.model.measure`) at rest.
-    ``axis_points`` is written when the imported motion ``motion_q`` (F, C) needs more than
-    the default (:func:`axis_points_for`).
     """
     from axdf_cli.model.measure import belly_slenderness
 

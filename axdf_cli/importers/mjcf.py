@@ -157,6 +157,7 @@ class MjcfModel:
     couplings: list[Coupling]
     muscles: list[Muscle]
     ignored: list[dict] = field(default_factory=list)  # {kind, name, where, why}
+    includes: list[Path] = field(default_factory=list)  # the files <include> read, in reading order
 
 
 # ----------------------------------------------------------------------------- numbers
@@ -230,6 +231,7 @@ class Reader:
         self.assetdir: Path | None = None
         self.defaults: dict[str, dict[str, dict]] = {}  # class -> tag -> attributes (inherited)
         self.ignored: list[dict] = []
+        self.includes: list[Path] = []
 
     # ------------------------------------------------------------------ documents
     def load(self) -> Node:
@@ -258,6 +260,7 @@ class Reader:
             if target.resolve() in stack:
                 raise InputError(c.mark, f"{fname!r} includes itself", "includes without a cycle")
             sub = parse_xml(target)
+            self.includes.append(target)
             self._expand(sub, stack + [target.resolve()])
             out.extend(sub.children)
         node.children = out
@@ -410,7 +413,7 @@ class Reader:
                     if mu is not None:
                         muscles.append(mu)
         return MjcfModel(root.attrib.get("model", self.path.stem), str(self.path), self.bodies, self.joints,
-                         self.sites, self.geoms, meshes, tendons, couplings, muscles, self.ignored)
+                         self.sites, self.geoms, meshes, tendons, couplings, muscles, self.ignored, self.includes)
 
     def _ignore(self, kind: str, node: Node, why: str) -> None:
         self.ignored.append({"kind": kind, "name": node.attrib.get("name", ""), "where": str(node.mark), "why": why})

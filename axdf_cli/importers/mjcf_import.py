@@ -1,7 +1,7 @@
 """``axdf import mjcf``: a MuJoCo model (+ a ``qpos`` motion) → axdf files, in memory.
 
 :func:`build_import` reads and checks every input first and returns an
-:class:`~axdf_cli.importers.osim_import.ImportResult` holding the bytes of every output file;
+:class:`~axdf_cli.importers.result.ImportResult` holding the bytes of every output file;
 the CLI writes them (atomically) only when all inputs were good.
 
 How MuJoCo maps to axdf (docs/FORMATS.md, "Imported MuJoCo models")
@@ -23,7 +23,7 @@ How MuJoCo maps to axdf (docs/FORMATS.md, "Imported MuJoCo models")
   coordinate: its DOF follows the polynomial of the joint it depends on (composed through
   chains), rewritten in axdf units (:func:`coupling_polynomial`).
 - Quaternions (ball and free joints in a motion) become intrinsic X-Y-Z Euler angles in
-  degrees, the middle angle within ±90° (:func:`quat_to_euler`), each unwrapped over the
+  degrees, the middle angle within ±90° (:func:`~axdf_cli.importers.qpos.quat_to_euler`), each unwrapped over the
   frames (no jump of 360°); X-Y-Z rotations of those angles give back the same rotation, so
   ``euler_to_quat(quat_to_euler(q)) = ±q`` (tested).
 - Muscles: every muscle actuator on a spatial tendon becomes a path muscle of the same name:
@@ -46,18 +46,18 @@ import numpy as np
 
 from axdf_cli import tolerances as tol
 from axdf_cli.errors import EnvironmentProblem, InputError, Mark
+from axdf_cli.fileio.atomic import sha256_file
+from axdf_cli.fileio.outputs import UniqueFiles
 from axdf_cli.fileio.yamlio import NAME_ALLOWED, is_name
 from axdf_cli.formats.ply import PlyWriter
 from axdf_cli.importers import emit
 from axdf_cli.importers.mjcf import Body, Coupling, Joint, MjcfModel, Muscle, load_mjcf, quat_matrix
-from axdf_cli.importers.osim_import import ImportResult, _num, _rel, _sha, _strip_dirs, belly_markdown, safe_name
+from axdf_cli.importers.qpos import WIDTH, QposJoint, qpos_coordinates, quat_to_euler, read_motion
+from axdf_cli.importers.result import (ImportResult, axis_markdown, belly_markdown, relative_ref, safe_name,
+                                      strip_dirs, yaml_number)
 from axdf_cli.specs import RefPolicy, parse_skeleton_text
 
 DEG = 180.0 / math.pi
-#: Frame rate of a motion whose npz has no ``fps``.
-DEFAULT_FPS = 30.0
-#: At most this many motion frames (as ``axdf import osim``).
-MAX_MOTION_FRAMES = 100_000
 #: Without a ``lengthrange`` (MuJoCo computes one when it compiles the model), the optimal
 #: fibre length is this share of the rest path and the tendon slack length the rest of it.
 FALLBACK_FIBRE_SHARE = 0.5
@@ -69,38 +69,6 @@ MJ_SHAPES = {"sphere": "mujoco_sphere", "cylinder": "mujoco_cylinder"}
 #: forces on short paths (pronator quadratus, anconeus, the multifidi's short slips), and a
 #: belly squats further as its muscle shortens in motion; the library's floor is 1.2.
 MIN_REST_SLENDERNESS = 1.5
-
-
-# ----------------------------------------------------------------------------- rotations
-
-
-def quat_to_euler(q: np.ndarray) -> np.ndarray:
-    """Unit quaternions (..., 4) w x y z → intrinsic X-Y-Z Euler angles (..., 3) in degrees
-    (R = Rx(a) Ry(b) Rz(c), b in [-90, 90])."""
-    from scipy.spatial.transform import Rotation
-
-    import warnings
-
-    q = np.asarray(q, dtype=np.float64)
-    flat = q.reshape(-1, 4)
-    with warnings.catch_warnings():  # at b = ±90° (gimbal lock) c is set to 0: the rotation is still exact
-        warnings.simplefilter("ignore", UserWarning)
-        e = Rotation.from_quat(flat[:, [1, 2, 3, 0]]).as_euler("XYZ", degrees=True)
-    return e.reshape(q.shape[:-1] + (3,))
-
-
-def euler_to_quat(e: np.ndarray) -> np.ndarray:
-    """Intrinsic X-Y-Z Euler angles (..., 3) in degrees → unit quaternions (..., 4) w x y z."""
-    from scipy.spatial.transform import Rotation
-
-    e = np.asarray(e, dtype=np.float64)
-    x = Rotation.from_euler("XYZ", e.reshape(-1, 3), degrees=True).as_quat()
-    return x[:, [3, 0, 1, 2]].reshape(e.shape[:-1] + (4,))
-
-
-def unwrap_degrees(a: np.ndarray) -> np.ndarray:
-    """Angles (F, ...) in degrees with jumps of ±360° between frames removed."""
-    return np.degrees(np.unwrap(np.radians(a), axis=0))
 
 
 # ----------------------------------------------------------------------------- names
@@ -190,16 +158,18 @@ def dof_function(model: MjcfModel, j: Joint, by: dict[str, Coupling]) -> tuple[s
     return root, _poly_function(f)
 
 
-def skeleton_doc(model: MjcfModel, name: str, names: Names, meshes: dict[str, str]) -> tuple[dict, list[dict]]:
-    """The skeleton YAML document and the coordinates as (name, joint, kind) rows (the order of
-    the pose's values). ``meshes``: body → mesh path relative to the skeleton file."""
+def skeleton_doc(model: MjcfModel, name: str, names: Names, meshes: dict[str, str]) -> tuple[dict, list[QposJoint]]:
+    """The skeleton YAML document and the joints that are its coordinates, with their qpos
+    indices (qpos order: the order of the coordinates and of the pose's values). ``meshes``:
+    body → mesh path relative to the skeleton file."""
     by = {}
     for c in model.couplings:
         if c.joint1 in by:
             raise InputError(c.mark, f"joint {c.joint1!r} is coupled twice", "one joint equality per dependent joint")
         by[c.joint1] = c
     coords: dict[str, dict] = {}
-    rows: list[dict] = []
+    rows: list[QposJoint] = []
+    nq = 0  # the next joint's qpos index
     bones: list[dict] = [{"name": "world"}]
     if "world" in meshes:
         bones[0]["mesh"] = meshes["world"]
@@ -220,8 +190,8 @@ def skeleton_doc(model: MjcfModel, name: str, names: Names, meshes: dict[str, st
                 c = f"{jn}_r{ax}"
                 coords[c] = {"type": "rotation", "default": float(euler[k])}
                 dofs.append({"coord": c, "type": "rotation", "axis": _clean(np.eye(3)[k])})
-            rows.append({"joint": j.name, "kind": "free", "coords": [f"{jn}_{s}" for s in
-                                                                    ("tx", "ty", "tz", "rx", "ry", "rz")]})
+            rows.append(QposJoint(j.name, "free", nq, tuple(f"{jn}_{s}" for s in ("tx", "ty", "tz", "rx", "ry", "rz"))))
+            nq += WIDTH["free"]
         else:
             b["offset"] = _clean(body.pos)
             b["orient"] = _clean(quat_to_euler(body.quat))
@@ -236,7 +206,8 @@ def skeleton_doc(model: MjcfModel, name: str, names: Names, meshes: dict[str, st
                         c = f"{jn}_r{ax}"
                         coords[c] = {"type": "rotation", "default": 0.0}
                         dofs.append({"coord": c, "type": "rotation", "axis": _clean(np.eye(3)[k])})
-                    rows.append({"joint": j.name, "kind": "ball", "coords": [f"{jn}_r{s}" for s in "xyz"]})
+                    rows.append(QposJoint(j.name, "ball", nq, tuple(f"{jn}_r{s}" for s in "xyz")))
+                    nq += WIDTH["ball"]
                     continue
                 dtype = "rotation" if j.type == "hinge" else "translation"
                 coord, fn = dof_function(model, j, by)
@@ -253,8 +224,16 @@ def skeleton_doc(model: MjcfModel, name: str, names: Names, meshes: dict[str, st
                     cd = {"type": dtype, "default": j.ref * k}
                     if j.range is not None:
                         cd["range"] = [j.range[0] * k, j.range[1] * k]
+                    for key in ("default", "range"):
+                        far = [v for v in np.atleast_1d(cd.get(key, [])) if abs(v) > tol.MAX_ABS_NUMBER]
+                        if far:
+                            unit = "degrees" if dtype == "rotation" else "m"
+                            raise InputError(j.mark, f"joint {j.name!r}: its {'ref' if key == 'default' else key} "
+                                             f"is {far[0]:g} {unit}", f"within ±{tol.MAX_ABS_NUMBER:g} {unit} "
+                                             "(what every axdf file holds)")
                     coords[jn] = cd
-                    rows.append({"joint": j.name, "kind": j.type, "coords": [jn]})
+                    rows.append(QposJoint(j.name, j.type, nq, (jn,)))
+                nq += WIDTH[j.type]
             if np.any(anchor != 0):
                 b["post_offset"] = _clean(anchor)
         if dofs:
@@ -263,7 +242,7 @@ def skeleton_doc(model: MjcfModel, name: str, names: Names, meshes: dict[str, st
             b["mesh"] = meshes[body.name]
         bones.append(b)
     # coordinates in qpos order
-    doc = {"skeleton": name, "coordinates": {c: coords[c] for r in rows for c in r["coords"]}, "bones": bones}
+    doc = {"skeleton": name, "coordinates": {c: coords[c] for r in rows for c in r.coords}, "bones": bones}
     if not doc["coordinates"]:
         del doc["coordinates"]
     return doc, rows
@@ -415,54 +394,6 @@ def tendon_paths(model: MjcfModel, names: Names, m: Muscle) -> tuple[list, list]
 # ----------------------------------------------------------------------------- motion
 
 
-def read_motion(path: Path, nq: int) -> tuple[np.ndarray, float]:
-    """``qpos`` (F, nq) float64 and fps of a motion npz; InputErrors name the array and index."""
-    import io
-    import zipfile
-
-    from axdf_cli.fileio.yamlio import read_input
-
-    shown = str(path)
-    data = read_input(path, shown, "an existing .npz file")
-    try:
-        z = np.load(io.BytesIO(data), allow_pickle=False)
-    except (ValueError, OSError, zipfile.BadZipFile, EOFError) as e:
-        raise InputError(Mark(shown), f"not a numpy .npz archive ({e})", "np.savez(FILE, qpos=..., fps=...)") from None
-    if not hasattr(z, "files"):
-        raise InputError(Mark(shown), "a single .npy array, not an .npz archive", "np.savez(FILE, qpos=..., fps=...)")
-    if "qpos" not in z.files:
-        raise InputError(Mark(shown), "no array qpos (arrays: " + (", ".join(z.files) or "none") + ")",
-                         "qpos (frames × nq) and an optional fps")
-    try:
-        q = z["qpos"]
-    except ValueError as e:
-        raise InputError(Mark(shown), f"qpos cannot be read ({e})", "a numeric array (no pickled objects)") from None
-    if q.dtype.kind not in "fiu":
-        raise InputError(Mark(shown), f"qpos has dtype {q.dtype}", "a float or integer array")
-    if q.ndim == 1 and nq == len(q):
-        q = q[None]
-    if q.ndim != 2 or q.shape[1] != nq:
-        raise InputError(Mark(shown), f"qpos has shape {q.shape}", f"(frames, {nq}): the model's nq")
-    if len(q) == 0 or len(q) > MAX_MOTION_FRAMES:
-        raise InputError(Mark(shown), f"qpos has {len(q)} frames", f"1..{MAX_MOTION_FRAMES}")
-    q = q.astype(np.float64)
-    bad = np.argwhere(~np.isfinite(q) | (np.abs(q) > tol.MAX_ABS_NUMBER))
-    if len(bad):
-        f, k = (int(x) for x in bad[0])
-        raise InputError(Mark(shown), f"qpos[{f}, {k}] = {float(q[f, k]):g}",
-                         f"finite numbers within ±{tol.MAX_ABS_NUMBER:g}")
-    fps = DEFAULT_FPS
-    if "fps" in z.files:
-        try:
-            v = z["fps"]
-        except ValueError as e:
-            raise InputError(Mark(shown), f"fps cannot be read ({e})", "a number") from None
-        if v.dtype.kind not in "fiu" or v.size != 1 or not (0 < float(v.reshape(-1)[0]) <= 10000):
-            raise InputError(Mark(shown), f"fps = {v!r}", "one number in (0, 10000]")
-        fps = float(v.reshape(-1)[0])
-    return q, fps
-
-
 def qpos_layout(model: MjcfModel) -> dict[str, int]:
     """Joint → its first qpos index (MuJoCo's order: joints as the bodies list them)."""
     out, k = {}, 0
@@ -471,36 +402,6 @@ def qpos_layout(model: MjcfModel) -> dict[str, int]:
             out[j.name] = k
             k += {"free": 7, "ball": 4}.get(j.type, 1)
     out["__nq__"] = k
-    return out
-
-
-def motion_coordinates(model: MjcfModel, rows: list[dict], q: np.ndarray, source: str) -> dict[str, np.ndarray]:
-    """Coordinate name → values (F,) in axdf units from qpos (F, nq) (coupled joints' qpos
-    values are not used: they follow their polynomials)."""
-    adr = qpos_layout(model)
-    out: dict[str, np.ndarray] = {}
-    for r in rows:
-        j = model.joints[r["joint"]]
-        a = adr[j.name]
-        if r["kind"] in ("hinge", "slide"):
-            out[r["coords"][0]] = q[:, a] * _unit(j)
-            continue
-        qa = a + (3 if r["kind"] == "free" else 0)
-        quat = q[:, qa:qa + 4]
-        n = np.linalg.norm(quat, axis=1)
-        if np.any(n < 1e-9):
-            f = int(np.argmax(n < 1e-9))
-            raise InputError(Mark(source), f"qpos[{f}, {qa}:{qa + 4}] is a zero quaternion (joint {j.name!r})",
-                             "unit quaternions w x y z for ball and free joints")
-        euler = unwrap_degrees(quat_to_euler(quat / n[:, None]))
-        if r["kind"] == "free":
-            for k in range(3):
-                out[r["coords"][k]] = q[:, a + k]
-            for k in range(3):
-                out[r["coords"][3 + k]] = euler[:, k]
-        else:
-            for k in range(3):
-                out[r["coords"][k]] = euler[:, k]
     return out
 
 
@@ -517,13 +418,13 @@ def coupled_deviation(model: MjcfModel, q: np.ndarray) -> dict[str, float]:
     return out
 
 
-def pose_doc(model: MjcfModel, rows: list[dict], q: np.ndarray, fps: float, pose_name: str, skeleton_ref: str,
+def pose_doc(rows: list[QposJoint], q: np.ndarray, fps: float, pose_name: str, skeleton_ref: str,
              source: str) -> dict:
-    values = motion_coordinates(model, rows, q, source)
+    values = qpos_coordinates(rows, q, source)
     names = list(values)
     arr = np.stack([values[c] for c in names], axis=1) if names else np.zeros((len(q), 0))
     keys = {f: {c: float(arr[f, i]) for i, c in enumerate(names)} for f in range(len(q))}
-    return {"pose": pose_name, "skeleton": skeleton_ref, "fps": _num(fps), "frames": [0, len(q) - 1],
+    return {"pose": pose_name, "skeleton": skeleton_ref, "fps": yaml_number(fps), "frames": [0, len(q) - 1],
             "interpolation": "linear", "keys": keys}
 
 
@@ -564,25 +465,35 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
     pose_path = (Path(pose_out) if pose_out else out_dir / f"{pname}.yaml") if motion is not None else None
 
     warnings: list[str] = []
-    report: dict = {"source": {"model": model_path.name, "sha256": _sha(model_path), "model_name": model.name},
+    report: dict = {"source": {"model": model_path.name, "sha256": sha256_file(model_path), "model_name": model.name},
                     "tool": "axdf import mjcf", "skeleton": name}
-    files: dict[str, bytes] = {}
+    files: dict[str, bytes] = UniqueFiles()  # a path twice: exit 2, never one file lost
     mesh_bytes = body_meshes(model, max_faces, report, mesh_edge) if meshes else {}
     mesh_refs = {}
     for body, data in sorted(mesh_bytes.items()):
         p = mesh_dir / f"{names('body', body)}.ply"
         files[str(p)] = data
-        mesh_refs[body] = _rel(p, skel_path.parent)
+        mesh_refs[body] = relative_ref(p, skel_path.parent)
     sdoc, rows = skeleton_doc(model, name, names, mesh_refs)
     header = (f"Imported from {model_path.name} (MuJoCo model {model.name!r}) by `axdf import mjcf`.\n"
               "Regenerate with the importer rather than editing by hand.")
     text = emit.dump_yaml(sdoc, header)
     files[str(skel_path)] = text.encode()
-    skel = parse_skeleton_text(text, skel_path, RefPolicy(allow_outside=True))
+    try:  # the skeleton as axdf will read it back (its meshes are files this import writes)
+        skel = parse_skeleton_text(text, skel_path, RefPolicy(allow_outside=True))
+    except InputError as e:  # a limit of the file format that the model's numbers exceed
+        raise InputError(Mark(str(model_path)), f"the skeleton {skel_path.name} would not pass axdf validate ({e})",
+                         "numbers and names within what axdf files hold") from None
     world = emit.rest_world(skel)
 
     mrows, skipped = [], []
-    probe = probe_poses(skel)
+    motion_q = None
+    if q is not None:  # the motion's coordinates (F, C), as the pose will give them
+        motion_q = np.tile(skel.rest_coordinates(), (len(q), 1))
+        for c, v in qpos_coordinates(rows, q, str(motion)).items():
+            motion_q[:, skel.coord_index[c]] = v
+        motion_q = skel.couple(motion_q)
+    probe = probe_poses(skel, motion_q)
     for m in model.muscles:
         mname = names("muscle", m.name or m.tendon)
         docs = tendon_paths(model, names, m)
@@ -595,88 +506,62 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
         force, l0, lt, notes = hill_numbers(m, rest)
         for n in notes:
             warnings.append(f"{m.mark}: muscle {m.name!r}: {n}")
-        n_axis, axis_err = axis_points_for(mname, path, wraps, skel, probe)
-        doc, row = emit.belly_doc(mname, path, wraps, force, l0, lt, 0.0, skel, world, palette, n_axis,
-                                  MIN_REST_SLENDERNESS)
-        row.update({"axis_points": n_axis, "axis_length_error": axis_err, "type": m.kind, "tendon": m.tendon, "path_points": len(path), "wraps": [w["name"] for w in wraps],
+        axis = emit.axis_points_for(mname, path, wraps, skel, probe)
+        doc, row = emit.belly_doc(mname, path, wraps, force, l0, lt, 0.0, skel, world, palette,
+                                  axis.n if axis.raised else 0, MIN_REST_SLENDERNESS)
+        row.update({"type": m.kind, "tendon": m.tendon, "path_points": len(path), "wraps": [w["name"] for w in wraps],
                     "sidesites": sum("side" in w for w in wraps), "force": force, "lengthrange": m.lengthrange,
-                    "notes": notes})
+                    "notes": notes, "axis_shortfall": axis.error})
+        if axis.raised:
+            row["axis_points_raised"] = axis.row()
         mrows.append(emit.rounded(row))
         files[str(mus_dir / f"{mname}.yaml")] = emit.dump_yaml(
             doc, f"{mname}: imported from {model_path.name} (MuJoCo {m.kind} on tendon {m.tendon}) "
                  "by `axdf import mjcf`.").encode()
     report["muscles"] = mrows
     if q is not None:
-        pdoc = pose_doc(model, rows, q, fps, pname, _rel(skel_path, pose_path.parent), str(motion))
+        pdoc = pose_doc(rows, q, fps, pname, relative_ref(skel_path, pose_path.parent), str(motion))
         text = emit.dump_yaml(pdoc, f"Imported from {Path(motion).name} by `axdf import mjcf`.").encode()
         if len(text) > tol.YAML_MAX_BYTES:
             raise InputError(Mark(str(motion)), f"the pose would be {len(text)} bytes ({len(q)} frames)",
                              f"axdf reads YAML files up to {tol.YAML_MAX_BYTES} bytes; a shorter motion")
         files[str(pose_path)] = text
         dev = coupled_deviation(model, q)
-        report["motion"] = {"file": Path(motion).name, "sha256": _sha(Path(motion)), "frames": int(len(q)),
-                            "fps": _num(fps), "coupled_joints_ignored": emit.rounded(dev)}
+        report["motion"] = {"file": Path(motion).name, "sha256": sha256_file(Path(motion)), "frames": int(len(q)),
+                            "fps": yaml_number(fps), "coupled_joints_ignored": emit.rounded(dev)}
     report["counts"] = {"bodies": len(model.bodies), "joints": len(model.joints),
-                        "coordinates": sum(len(r["coords"]) for r in rows), "couplings": len(model.couplings),
+                        "coordinates": sum(len(r.coords) for r in rows), "couplings": len(model.couplings),
                         "muscles": len(mrows), "meshes": len(mesh_bytes),
                         "path_points": sum(r["path_points"] for r in mrows),
                         "wrap_surfaces": sum(len(r["wraps"]) for r in mrows),
                         "sidesites": sum(r["sidesites"] for r in mrows)}
     inputs = [Path(x) for x in (model_path, motion) if x is not None]
-    report["ignored"] = [dict(i, where=_strip_dirs(i["where"], inputs)) for i in model.ignored + skipped]
-    report["warnings"] = [_strip_dirs(w, inputs) for w in warnings]
+    read = [model_path, *model.includes, *([Path(motion)] if motion is not None else [])]
+    assets = sorted({model.meshes[m["mesh"]].file for m in report.get("meshes", [])})
+    report["ignored"] = [dict(i, where=strip_dirs(i["where"], inputs)) for i in model.ignored + skipped]
+    report["warnings"] = [strip_dirs(w, inputs) for w in warnings]
     report["renamed"] = names.renamed
     report["settings"] = {"specific_tension_Pa": emit.SPECIFIC_TENSION, "tendon_stress_Pa": emit.TENDON_STRESS,
                           "free_tendon_share": emit.FREE_TENDON_SHARE, "palette": palette, "max_faces": max_faces,
                           "mesh_edge_m": mesh_edge}
-    report["files"] = sorted(_rel(Path(p), out_dir) for p in files)
+    report["files"] = sorted(relative_ref(Path(p), out_dir) for p in files)
     files[str(out_dir / "import_report.json")] = (json.dumps(report, indent=1, sort_keys=True) + "\n").encode()
     files[str(out_dir / "IMPORT.md")] = import_markdown(report).encode()
-    return ImportResult(files, report, warnings, None)
+    return ImportResult(files, report, warnings, None, read, assets)
 
 
-def probe_poses(skel) -> tuple[np.ndarray, np.ndarray]:
-    """Coordinates (P, C) and bone transforms (P, B, 4, 4) of the poses the axis is fitted on:
-    the rest pose and AXIS_PROBE_POSES poses with every ranged coordinate uniform in its range
-    (seeded: the same poses every import)."""
-    from axdf_cli.model.skeleton import forward_kinematics
-
+def probe_poses(skel, motion_q: np.ndarray | None = None) -> np.ndarray:
+    """Coordinates (P, C) of the poses the axes are measured on (:func:`emit.axis_points_for`):
+    the rest pose, AXIS_PROBE_POSES poses with every ranged coordinate uniform in its range
+    (seeded: the same poses every import), and the imported motion's frames ``motion_q``
+    (F, C) as an OpenSim import measures them (:func:`emit.motion_poses`)."""
     rng = np.random.default_rng(tol.AXIS_PROBE_SEED)
     q = np.tile(skel.rest_coordinates(), (tol.AXIS_PROBE_POSES + 1, 1))
     for i, c in enumerate(skel.coordinates):
         if c.range is not None:
             q[1:, i] = rng.uniform(c.range[0], c.range[1], size=tol.AXIS_PROBE_POSES)
-    return q, forward_kinematics(skel, q)
-
-
-def axis_points_for(name: str, path: list, wraps: list, skel, probe) -> tuple[int, float]:
-    """The fewest axis control points (0: the default, else one of AXIS_POINT_STEPS) whose axis
-    length is within AXIS_LENGTH_TARGET of the wrapped path's over the probe poses, and that
-    error (the largest count's when none reaches the target)."""
-    import dataclasses
-
-    from axdf_cli.fileio.yamlio import Fields
-    from axdf_cli.model import bspline
-    from axdf_cli.model.paths.path import PathModel
-    from axdf_cli.specs import parse_muscle_path
-
-    q, world = probe
-    spec = parse_muscle_path(Fields({"path": path, "wrap": wraps}, Mark(f"<{name}>"), "muscle"))
-    default = PathModel(spec, skel.bone_index, skel.coord_index).n
-    err = math.inf
-    for n in (0,) + tuple(k for k in tol.AXIS_POINT_STEPS if k > default):
-        pm = PathModel(dataclasses.replace(spec, control_points=n), skel.bone_index, skel.coord_index)
-        samples, length, _ = pm.wrapped(world, q)
-        ctrl = np.einsum("nk,fkc->fnc", pm.fit, samples)
-        ts = np.linspace(0.0, 1.0, 64 * pm.n + 1)
-        basis = bspline.basis_matrix(bspline.clamped_knots(pm.n, 2), 2, ts)
-        # c[f,s,c] = sum_n basis[s,n] ctrl[f,n,c]
-        c = np.einsum("sn,fnc->fsc", basis, ctrl)
-        axis = np.linalg.norm(np.diff(c, axis=1), axis=2).sum(axis=1)
-        err = float(np.max(np.abs(axis - length) / length))
-        if err <= tol.AXIS_LENGTH_TARGET:
-            return n, err
-    return tol.AXIS_POINT_STEPS[-1] if default < tol.AXIS_POINT_STEPS[-1] else 0, err
+    q = skel.couple(q)
+    return q if motion_q is None else np.concatenate([q, emit.motion_poses(skel, motion_q)[1:]])
 
 
 def _rest_length(name: str, path: list, wraps: list, skel, world) -> float:
@@ -710,6 +595,8 @@ def import_markdown(r: dict) -> str:
     if r["renamed"]:
         lines += ["Renamed (axdf names use letters, digits, '_', '.', '-'): "
                   + ", ".join(f"{x['kind']} `{x['mjcf']}` → `{x['axdf']}`" for x in r["renamed"]) + ".", ""]
+    lines += axis_markdown(r, f"the rest pose, {tol.AXIS_PROBE_POSES} seeded poses in the joints' ranges"
+                              + (" and the motion's frames" if "motion" in r else ""))
     lines += ["## Warnings", ""] + ([f"- {w}" for w in r["warnings"]] or ["- none"]) + [""]
     lines += ["## Not imported", "", "| kind | name | where | why |", "|---|---|---|---|"]
     lines += [f"| {i['kind']} | {i['name']} | {i['where']} | {i['why']} |" for i in r["ignored"]] or \

@@ -38,12 +38,8 @@ holds the nearest key, as every axdf pose does) and clipped to 0..1 (warning whe
 """
 from __future__ import annotations
 
-import hashlib
 import json
 import math
-import os
-import re
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -53,10 +49,13 @@ from axdf_cli.errors import InputError, Mark
 from axdf_cli.formats.ply import PlyWriter
 from axdf_cli.importers import emit
 from axdf_cli.specs import RefPolicy, parse_skeleton_text
+from axdf_cli.fileio.atomic import sha256_file
 from axdf_cli.fileio.outputs import UniqueFiles
 from axdf_cli.fileio.yamlio import NAME_ALLOWED, check_name, is_name
 from axdf_cli.importers.osim import Coordinate as OsimCoordinate
 from axdf_cli.importers.osim import Model, load_osim
+from axdf_cli.importers.result import (ImportResult, axis_markdown, belly_markdown, relative_ref, safe_name,
+                                      strip_dirs, yaml_number)
 from axdf_cli.importers.storage import Table, read_storage
 from axdf_cli.importers.vtp import read_vtp
 
@@ -70,27 +69,6 @@ GAP_FACTOR = 20.0
 #: At most this many pose frames per import: 100,000 frames are 28 minutes at 60 fps (the
 #: pose file's size limit, YAML_MAX_BYTES, usually binds first: ~25 values per frame).
 MAX_MOTION_FRAMES = 100_000
-
-
-@dataclass
-class ImportResult:
-    files: dict[str, bytes]  # output path (as given by the layout) -> bytes
-    report: dict
-    warnings: list[str] = field(default_factory=list)
-    model: Model | None = None
-
-
-def _sha(path: Path) -> str:
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
-
-
-def _rel(target: Path, start_dir: Path) -> str:
-    return Path(os.path.relpath(Path(target).resolve(), Path(start_dir).resolve())).as_posix()
-
-
-def safe_name(s: str) -> str:
-    s = re.sub(r"[^A-Za-z0-9_.-]+", "_", s).strip("_")
-    return s if s and s not in (".", "..") else "model"
 
 
 # ----------------------------------------------------------------------------- motion
@@ -181,11 +159,6 @@ def _interp(time: np.ndarray, values: np.ndarray, t: np.ndarray) -> np.ndarray:
     return np.stack([np.interp(t, time, values[:, c]) for c in range(values.shape[1])], axis=1)
 
 
-def _num(x: float) -> float | int:
-    x = float(x)
-    return int(x) if x.is_integer() and abs(x) < 2**53 else x
-
-
 def _coupled(model: Model, c: str) -> bool:
     """Whether OpenSim writes coordinate ``c``'s motion column in radians whatever the
     header says: a rotation whose motion type is Coupled (``osim.motion_type``)."""
@@ -252,10 +225,10 @@ def pose_doc(model: Model, motion: Table, controls: Table | None, pose_name: str
                 v = math.degrees(v)
             row[c] = v
         keys[f] = row
-    doc = {"pose": pose_name, "skeleton": skeleton_ref, "fps": _num(fps), "frames": [0, len(times) - 1],
+    doc = {"pose": pose_name, "skeleton": skeleton_ref, "fps": yaml_number(fps), "frames": [0, len(times) - 1],
            "interpolation": "linear", "keys": keys}
-    report["motion"] = {"file": Path(motion.source).name, "sha256": _sha(Path(motion.source)),
-                        "rows": int(len(motion.time)), "frames": int(len(times)), "fps": _num(fps),
+    report["motion"] = {"file": Path(motion.source).name, "sha256": sha256_file(Path(motion.source)),
+                        "rows": int(len(motion.time)), "frames": int(len(times)), "fps": yaml_number(fps),
                         "resampled": not direct, "rotations_read_as": "degrees" if degrees else "radians",
                         "header_inDegrees": motion.header.get("indegrees"), "coordinates": [c for _, c in pairs],
                         "skipped_columns": skipped}
@@ -293,7 +266,7 @@ def pose_doc(model: Model, motion: Table, controls: Table | None, pose_name: str
                             f"[{controls.time[0]}, {controls.time[-1]}] misses every pose frame")
         if act:
             doc["activation"] = {n: act[n] for n in muscle_names if n in act}
-        report["controls"] = {"file": Path(controls.source).name, "sha256": _sha(Path(controls.source)),
+        report["controls"] = {"file": Path(controls.source).name, "sha256": sha256_file(Path(controls.source)),
                               "muscles": [n for _, n in cols], "ignored_columns": ignored, "clipped_values": clipped,
                               "keyed_frames": [int(frames[0]), int(frames[-1])] if len(frames) else []}
     return doc
@@ -397,7 +370,7 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
 
     warnings: list[str] = [f"{i['where']}: muscle {i['name']} skipped: {i['why']}" for i in model.ignored
                            if i["kind"] == "muscle"]
-    report: dict = {"source": {"model": model_path.name, "sha256": _sha(model_path), "model_name": model.name},
+    report: dict = {"source": {"model": model_path.name, "sha256": sha256_file(model_path), "model_name": model.name},
                     "tool": "axdf import osim", "skeleton": name}
     files: dict[str, bytes] = UniqueFiles()  # a path twice: exit 2, never one file lost
     mesh_bytes = body_meshes(model, model_path, warnings, report) if meshes else {}
@@ -405,7 +378,7 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
     for body, data in sorted(mesh_bytes.items()):
         p = mesh_dir / f"{body}.ply"
         files[str(p)] = data
-        mesh_refs[body] = _rel(p, skel_path.parent)
+        mesh_refs[body] = relative_ref(p, skel_path.parent)
 
     sdoc = emit.skeleton_doc(model, name, mesh_refs)
     header = (f"Imported from {model_path.name} (OpenSim model {model.name!r}) by `axdf import osim`.\n"
@@ -418,7 +391,7 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
 
     motion_q = None
     if motion_t is not None:
-        pdoc = pose_doc(model, motion_t, controls_t, pname, _rel(skel_path, pose_path.parent), fps,
+        pdoc = pose_doc(model, motion_t, controls_t, pname, relative_ref(skel_path, pose_path.parent), fps,
                         [m.name for m in model.muscles], report, warnings)
         text = emit.dump_yaml(pdoc, f"Imported from {Path(motion).name} by `axdf import osim`.").encode()
         if len(text) > tol.YAML_MAX_BYTES:
@@ -446,27 +419,20 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
                         "moving_path_points": sum(len(r["moving"]) for r in rows),
                         "wrap_surfaces": sum(len(r["wraps"]) for r in rows)}
     inputs = [Path(x) for x in (model_path, motion, controls) if x is not None]
-    report["ignored"] = [dict(i, where=_strip_dirs(i["where"], inputs)) for i in model.ignored]
-    report["warnings"] = [_strip_dirs(w, inputs) for w in warnings]
+    report["ignored"] = [dict(i, where=strip_dirs(i["where"], inputs)) for i in model.ignored]
+    report["warnings"] = [strip_dirs(w, inputs) for w in warnings]
     for mm in report.get("missing_meshes", []):
-        mm["where"] = _strip_dirs(mm["where"], inputs)
+        mm["where"] = strip_dirs(mm["where"], inputs)
     report["settings"] = {"specific_tension_Pa": emit.SPECIFIC_TENSION, "tendon_stress_Pa": emit.TENDON_STRESS,
                           "free_tendon_share": emit.FREE_TENDON_SHARE,
                           "belly_profile": [list(x) for x in emit.BELLY_PROFILE],
                           "tendon_sections": list(emit.TENDON_SECTIONS),
                           "origin_tendon_share": emit.ORIGIN_TENDON_SHARE,
                           "max_tendon_fraction": emit.MAX_TENDON_FRACTION, "palette": palette}
-    report["files"] = sorted(_rel(Path(p), out_dir) for p in files)
+    report["files"] = sorted(relative_ref(Path(p), out_dir) for p in files)
     files[str(out_dir / "import_report.json")] = (json.dumps(report, indent=1, sort_keys=True) + "\n").encode()
     files[str(out_dir / "IMPORT.md")] = import_markdown(report).encode()
-    return ImportResult(files, report, warnings, model)
-
-
-def _strip_dirs(text: str, inputs: list[Path]) -> str:
-    """No absolute paths in output files: input paths become their file names."""
-    for p in inputs:
-        text = text.replace(str(p), p.name)
-    return text
+    return ImportResult(files, report, warnings, model, inputs)
 
 
 def import_markdown(r: dict) -> str:
@@ -492,12 +458,7 @@ def import_markdown(r: dict) -> str:
                   "follows, as OpenSim's constraint does; a motion's column of one is checked, not read):", ""]
         lines += [f"- `{c['coordinate']}` follows `{c['follows']}` (CoordinateCouplerConstraint `{c['constraint']}`)"
                   for c in r["coupled_coordinates"]] + [""]
-    raised = [m for m in r["muscles"] if "axis_points_raised" in m]
-    if raised:
-        lines += ["Axis control points raised where the motion bends the path more sharply than the default count "
-                  f"follows (the axis falls short of the path by more than {tol.AXIS_SHORTFALL_MAX:.1%} in some frame):", ""]
-        lines += [f"- {m['muscle']}: {a['from']} → {a['to']} (shortfall {a['shortfall_at_default']:.2%} → "
-                  f"{a['shortfall']:.2%})" for m in raised for a in [m["axis_points_raised"]]] + [""]
+    lines += axis_markdown(r, "the rest pose and the motion's frames")
     lines += ["## Warnings", ""] + ([f"- {w}" for w in r["warnings"]] or ["- none"]) + [""]
     lines += ["## Not imported", "", "| kind | name | where | why |", "|---|---|---|---|"]
     lines += [f"| {i['kind']} | {i['name']} | {i['where']} "
@@ -512,92 +473,3 @@ def import_markdown(r: dict) -> str:
                      f"{m['belly_length'] * 100:.1f} | {m['belly_radius'] * 2e3:.1f} | {m['tendon_radius'] * 2e3:.1f} | "
                      f"{m['slenderness']:.2f} |")
     return "\n".join(lines) + "\n"
-
-
-#: Bellies whose slenderness (axdf_cli/model/measure.py) is below this are listed in IMPORT.md, each
-#: with its numbers and why it is short or squat.
-SHORT_BELLY = 2.0
-#: Squat: the issue's aim is none below 1.2 and at most 5% of a library below 1.5.
-SQUAT_BELLY = 1.5
-
-#: Why a muscle of the OpenSim leg and arm models has a short or squat belly, by name without
-#: its side suffix (a prefix matches a family). Anatomy from the models' sources (Delp 1990,
-#: Holzbaur 2005) and standard texts; the numbers in IMPORT.md come from the model itself.
-BELLY_NOTES = {
-    "vas_": "the path starts at the model's effective origin on the femoral shaft, but the vasti arise along most of "
-            "the femur: the anatomical belly is longer and slimmer than the path allows. Not lengthened beyond the path",
-    "glut_med": "one of three lines standing for a fan from the iliac crest to the greater trochanter: each line "
-                "carries a third of the fan's volume over the fan's short radius",
-    "glut_min": "one of three lines standing for a fan under gluteus medius: a short, thick share of the fan",
-    "glut_max": "one of three lines standing for a broad sheet from ilium, sacrum and coccyx to the femur",
-    "quad_fem": "quadratus femoris is short and thick in anatomy too (a quadrilateral block from the ischial "
-                "tuberosity to the intertrochanteric crest)",
-    "gem": "the gemelli are short muscles in anatomy too (ischium to the greater trochanter)",
-    "ercspn": "one actuator standing for the whole column of spinal extensors (2500 N) over the 15 cm from pelvis "
-              "to torso: the volume of many muscles on one short line",
-    "TRImed": "the medial head arises along the back of the humeral shaft: the model's effective origin leaves a "
-              "short path, as for the vasti. Not lengthened beyond the path",
-    "TRIlat": "the lateral head arises along the back of the humeral shaft: the model's effective origin leaves a "
-              "short path. Not lengthened beyond the path",
-    "BRA": "brachialis arises along the lower half of the humerus: a short, thick muscle over the elbow",
-    # MuJoCo's MyoSuite models (myo-sim): names as there
-    "glmed": "one of three lines standing for the gluteus medius fan from the iliac crest to the greater trochanter",
-    "glmin": "one of three lines standing for the gluteus minimus fan under gluteus medius",
-    "SUBSC": "subscapularis fills the subscapular fossa: a broad flat sheet drawn as one short line to the humerus",
-    "INFSP": "infraspinatus fills the infraspinous fossa: a broad sheet drawn as one short line to the humerus",
-    "PQ": "pronator quadratus is a flat square across the distal forearm, shorter than it is wide in anatomy too",
-    "ANC": "anconeus is a small triangle behind the elbow, short and thick in anatomy too",
-    "OP": "opponens pollicis is a short thick thenar muscle over the first metacarpal",
-    "MF_": "a multifidus slip: short fascicles spanning two to four vertebrae, with a large force on a short path",
-}
-
-
-def belly_note(muscle: str) -> str | None:
-    """The anatomical reason a muscle's belly is short or squat, or None if none is recorded."""
-    base = emit.SIDE_SUFFIX.sub("", muscle)
-    for key, note in BELLY_NOTES.items():
-        if base == key or (key.endswith("_") and base.startswith(key)) or base.startswith(key):
-            return note
-    return None
-
-
-def belly_markdown(r: dict) -> list[str]:
-    """IMPORT.md's "Bellies" section: the law, the library's slenderness, and every short or
-    squat belly with its numbers and reason."""
-    ms = r["muscles"]
-    sl = [m["slenderness"] for m in ms]
-    st = r["settings"]
-    lines = ["", "## Bellies", "",
-             f"Law (README, \"The muscle model\", Imported bellies): PCSA = max isometric force / {st['specific_tension_Pa'] / 1e6:g} MPa; "
-             "belly volume = PCSA × optimal fibre length; free tendon = "
-             f"{st['free_tendon_share']:g} × tendon slack length (the rest of it is aponeurosis, inside the belly), "
-             "shortened where the belly would not hold its fibres (optimal fibre length × cos pennation); "
-             "belly length = rest path − free tendon; tendon Ø from max force at "
-             f"{st['tendon_stress_Pa'] / 1e6:g} MPa. Colours: {st['palette']} palette.", "",
-             f"Slenderness at rest (length where the cross-section is at least half its widest, over the widest "
-             f"diameter; `axdf_cli/model/measure.py`): min {min(sl):.2f}, median {float(np.median(sl)):.2f}, "
-             f"below 1.2: {sum(x < 1.2 for x in sl)}, below {SQUAT_BELLY:g}: {sum(x < SQUAT_BELLY for x in sl)} "
-             f"of {len(sl)}.", ""]
-    short = [m for m in ms if m["slenderness"] < SHORT_BELLY or m["belly_length"] < m["fibre_projection"] * (1 - 1e-6)]
-    if not short:
-        return lines + ["Every belly is at least twice as long as it is wide."]
-    lines += [f"Short or squat bellies (slenderness below {SHORT_BELLY:g}, or a path shorter than the fibres):", ""]
-    for m in short:
-        d_mean = 2.0 * math.sqrt(m["volume_m3"] / (math.pi * m["belly_length"]))
-        why = [f"belly {m['belly_length'] * 100:.1f} cm of a {m['rest_path_length'] * 100:.1f} cm path "
-               f"(free tendon {m['free_tendon'] * 100:.1f} cm) holds {m['volume_m3'] * 1e6:.0f} cm³ "
-               f"(PCSA {m['pcsa_m2'] * 1e4:.1f} cm² × fibres {m['optimal_fiber_length'] * 100:.1f} cm): "
-               f"mean Ø {d_mean * 100:.1f} cm"]
-        if m["belly_length"] < m["fibre_projection"]:
-            why.append(f"the path is shorter than the fibres ({m['fibre_projection'] * 100:.1f} cm along it): "
-                       "the model's origin-to-insertion line is shorter than the muscle; not lengthened")
-        if "thinned_from_radius" in m:
-            why.append(f"thinned from Ø {m['thinned_from_radius'] * 2e3:.1f} mm (the law's volume on this path) to "
-                       f"Ø {m['belly_radius'] * 2e3:.1f} mm, slenderness {m['slenderness']:.2f}: "
-                       f"{m['rest_volume_m3'] * 1e6:.0f} cm³ instead of {m['volume_m3'] * 1e6:.0f} cm³")
-        note = belly_note(m["muscle"])
-        if note:
-            why.append(note)
-        lines.append(f"- **{m['muscle']}** (slenderness {m['slenderness']:.2f}"
-                     f"{', squat' if m['slenderness'] < SQUAT_BELLY else ''}): " + "; ".join(why) + ".")
-    return lines

@@ -34,7 +34,6 @@ onto the muscle model's own skeleton, where every muscle keeps its path:
 """
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 from dataclasses import dataclass, field
@@ -44,13 +43,14 @@ import numpy as np
 
 from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError, Mark
+from axdf_cli.fileio.atomic import sha256_file
 from axdf_cli.fileio.yamlio import Fields, YMap, check_name, check_number, did_you_mean, load_yaml, mark_of
 from axdf_cli.importers.mocap import Mocap
 from axdf_cli.model.ik import FitResult, fit_frames, pose_points
 from axdf_cli.model.skeleton import Skeleton, forward_kinematics
 from axdf_cli.specs import RefPolicy, load_skeleton
 
-MAP_KEYS = ("retarget", "onto", "scale", "align", "smooth", "hold", "ranges", "joints")
+MAP_KEYS = ("retarget", "onto", "scale", "align", "smooth", "max_speed", "hold", "ranges", "joints")
 POINT_KEYS = ("bone", "at", "from", "weight")
 ALIGN = ("centre", "none")
 #: Rotational coordinates without a range are sampled this far (degrees) either side of their
@@ -84,6 +84,7 @@ class RetargetMap:
     scale: object  # "fit" | "none" | float (model -> subject)
     align: str
     smooth: float  # pull towards the previous frame: residual metres per degree
+    max_speed: float  # the fastest a rotation may turn, degrees per second (inf: no limit)
     marks: dict = field(default_factory=dict)  # key -> Mark (scale, align, joints)
     model: Skeleton | None = None  # the model's skeleton as loaded (poses are written for it)
 
@@ -107,6 +108,8 @@ def load_map(path: Path | str, skeleton: Skeleton | None = None, policy: RefPoli
     scale = _scale(f.raw("scale", default="fit"), f.vmark("scale"))
     align = f.choice("align", ALIGN, default="centre")
     smooth = float(f.number("smooth", default=tol.IK_SMOOTH_ROTATION, lo=0.0, hi=1.0))
+    max_speed = f.number("max_speed", default=None, lo=1.0, hi=1e6)
+    max_speed = np.inf if max_speed is None else float(max_speed)
     hold = _hold(f.mapping("hold", default=None), skeleton)
     ranges = _ranges(f.mapping("ranges", default=None), skeleton, hold)
     joints = f.mapping("joints", required=True)
@@ -117,7 +120,7 @@ def load_map(path: Path | str, skeleton: Skeleton | None = None, policy: RefPoli
                          "at least 2 (3 or more not on one line to place a body)")
     marks = {k: f.vmark(k) for k in ("scale", "align", "joints", "hold", "ranges")}
     return RetargetMap(name, str(path), _narrowed(skeleton, ranges), points, hold, ranges, scale, align, smooth,
-                       marks, skeleton)
+                       max_speed, marks, skeleton)
 
 
 def _scale(v, where: Mark):
@@ -427,7 +430,8 @@ def retarget(rmap: RetargetMap, mocap: Mocap, progress=None) -> Retargeted:
         s, source = (1.0, "none") if rmap.scale == "none" else (float(rmap.scale), "map")
     world = align_world(mp, rmap, targets, s)
     fitted = fit_frames(rmap.skeleton, mp.bones, mp.local, mp.weights, world.apply(targets), mp.free, mp.q_start,
-                        root=mp.root, root_points=mp.root_points, smooth=rmap.smooth, progress=progress)
+                        root=mp.root, root_points=mp.root_points, smooth=rmap.smooth,
+                        max_step=rmap.max_speed / mocap.fps, progress=progress)
     return Retargeted(rmap, mocap, mp, world, segs, fitted, source)
 
 
@@ -457,10 +461,6 @@ def jumps(q: np.ndarray, fps: float) -> tuple[np.ndarray, np.ndarray, int]:
 
 
 # ----------------------------------------------------------------------------- files
-
-
-def _sha(path) -> str:
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
 def pose_document(res: Retargeted, name: str, skeleton_ref: str) -> dict:
@@ -512,9 +512,9 @@ def report(res: Retargeted, name: str, files: dict) -> dict:
     s = res.world.scale
     return {
         "tool": "axdf retarget", "pose": name, "skeleton": skel.name,
-        "motion": {"file": Path(res.mocap.source).name, "sha256": _sha(res.mocap.source), "kind": res.mocap.kind,
+        "motion": {"file": Path(res.mocap.source).name, "sha256": sha256_file(res.mocap.source), "kind": res.mocap.kind,
                    "joints": len(res.mocap.names), "frames": int(res.mocap.positions.shape[0]), "fps": res.mocap.fps},
-        "map": {"file": Path(res.rmap.source).name, "sha256": _sha(res.rmap.source), "name": res.rmap.name},
+        "map": {"file": Path(res.rmap.source).name, "sha256": sha256_file(res.rmap.source), "name": res.rmap.name},
         "similarity": {"scale": s, "scale_from": res.scale_source, "yaw_deg": res.world.yaw_deg,
                        "shift_m": list(res.world.shift),
                        "meaning": "model = (R_z(-yaw) motion - shift) / scale; errors are in the motion's metres"},
@@ -554,7 +554,7 @@ def build_retarget(motion: Path | str, map_path: Path | str, out_dir: Path | str
     from axdf_cli.fileio.yamlio import NAME_ALLOWED, is_name, real_path
     from axdf_cli.importers import emit
     from axdf_cli.importers.mocap import read_motion
-    from axdf_cli.importers.osim_import import _rel
+    from axdf_cli.importers.result import relative_ref
 
     out_dir = Path(out_dir)
     rmap = load_map(map_path, skeleton, policy)
@@ -567,7 +567,7 @@ def build_retarget(motion: Path | str, map_path: Path | str, out_dir: Path | str
     pose_path = out_dir / f"{name}.yaml"
     header = (f"Retargeted from {Path(motion).name} onto {rmap.skeleton.name} by `axdf retarget` "
               f"(map {Path(map_path).name}).\nRegenerate with the command rather than editing by hand.")
-    text = emit.dump_yaml(pose_document(res, name, _rel(skel_file, out_dir)), header).encode()
+    text = emit.dump_yaml(pose_document(res, name, relative_ref(skel_file, out_dir)), header).encode()
     if len(text) > tol.YAML_MAX_BYTES:
         raise InputError(Mark(str(motion)), f"the pose would be {len(text)} bytes ({len(res.fit.q)} frames)",
                          f"axdf reads YAML files up to {tol.YAML_MAX_BYTES} bytes; a larger --step or a shorter take")

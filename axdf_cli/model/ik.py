@@ -15,6 +15,11 @@ barely decide (a hip's rotation about a nearly straight leg: its column of the J
 nearly vanishes; a toe on a 5 cm lever) and costs the well-seen ones little (a 0.4 m lever
 moves its end 7 mm per degree: a lag of ~2% of a frame's change).
 
+A speed limit (``max_step``, degrees per frame) narrows each rotation's bounds on every frame
+after the first to the previous frame's value ± the step: the fit then lags a source that
+turns faster (a kick, a marker that jumps) and catches up as it slows, and the residual
+shows what that costs.
+
 The first frame starts from ``q_start`` and fits the ``root`` coordinates alone to the
 ``root_points`` first (the pelvis placed and turned before the legs move), then everything.
 """
@@ -102,12 +107,14 @@ class _Problem:
 
 
 def fit_frames(skel: Skeleton, bones, local, weights, targets: np.ndarray, free, q_start: np.ndarray,
-               root=(), root_points=(), smooth: float = tol.IK_SMOOTH_ROTATION, progress=None) -> FitResult:
+               root=(), root_points=(), smooth: float = tol.IK_SMOOTH_ROTATION, max_step: float = np.inf,
+               progress=None) -> FitResult:
     """Fit the coordinates ``free`` (K,) indices of ``skel``'s to ``targets`` (F, P, 3), frame
     by frame (see the module doc). Coordinates not free keep their ``q_start`` (C,) values.
     ``root``: coordinates fitted alone first on frame 0, to the points ``root_points``;
     ``smooth``: the pull towards the previous frame, residual metres per degree of a rotation
-    (translations: ``tolerances.IK_SMOOTH_TRANSLATION`` per metre)."""
+    (translations: ``tolerances.IK_SMOOTH_TRANSLATION`` per metre); ``max_step``: the most a
+    rotation may change from one frame to the next, degrees (translations are not limited)."""
     from scipy.optimize import least_squares
 
     bones_full = np.asarray(bones, int)
@@ -122,6 +129,7 @@ def fit_frames(skel: Skeleton, bones, local, weights, targets: np.ndarray, free,
     lo = np.array([coords[c].range[0] if coords[c].range else -np.inf for c in free])
     hi = np.array([coords[c].range[1] if coords[c].range else np.inf for c in free])
     pull = np.array([smooth if coords[c].type == "rotation" else tol.IK_SMOOTH_TRANSLATION for c in free])
+    step = np.array([max_step if coords[c].type == "rotation" else np.inf for c in free])
     prob = _Problem(sub, bones, local, np.sqrt(np.asarray(weights, float)), free, pull)
     prob.q = np.asarray(q_start, float).copy()
     opts = dict(method="trf", ftol=tol.IK_FTOL, xtol=tol.IK_XTOL, gtol=tol.IK_GTOL, max_nfev=tol.IK_MAX_EVALUATIONS)
@@ -150,7 +158,8 @@ def fit_frames(skel: Skeleton, bones, local, weights, targets: np.ndarray, free,
             prob.count += stage.count
             prob.active = np.ones(len(bones), bool)
         prob.prev = x.copy()
-        res = least_squares(prob.residual, x, jac=prob.jacobian, bounds=(lo, hi), **opts)
+        lo_f, hi_f = (lo, hi) if f == 0 else (np.maximum(lo, x - step), np.minimum(hi, x + step))
+        res = least_squares(prob.residual, x, jac=prob.jacobian, bounds=(lo_f, hi_f), **opts)
         x = res.x
         q = prob.q.copy()
         q[free] = x
