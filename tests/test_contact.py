@@ -31,13 +31,13 @@ FRAMES = "20,70"  # knee flexed with plantarflexion; shoulder abducted
 
 @pytest.fixture(scope="module", autouse=True)
 def contact_on_by_default():
-    """Contact is off by default (pipeline.stages.OFF_BY_DEFAULT; `--contact` turns it on):
-    here every run and plan has it on unless a test switches it off, as with `--contact`
-    (tests/test_stages.py checks the flag itself)."""
+    """Contact and its measures are off by default (pipeline.stages.OFF_BY_DEFAULT; `--contact`
+    and `--penetration` turn them on): here every run and plan has both on unless a test
+    switches them off (tests/test_stages.py checks the flags themselves)."""
     from axdf_cli.pipeline import stages
 
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(stages, "OFF_BY_DEFAULT", frozenset({"penetration"}))
+        mp.setattr(stages, "OFF_BY_DEFAULT", frozenset())  # (the penetration stage measures where contact is off)
         yield
 
 
