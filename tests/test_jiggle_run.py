@@ -195,6 +195,13 @@ def test_a_job_switches_jiggle_off_and_resume_refuses_the_change(hinge, hinge_ru
     assert rc == 0, err
     still = outputs(hinge_runs[1])
     assert all(still[k] == v for k, v in outputs(hinge / "jobout").items() if k.startswith("meshes/"))
+    # the command line has the last word: --jiggle over the job's `jiggle: false`
+    rc, _, err = run_main(["run", job, "--no-render", "-q", "--jiggle", "--out", hinge / "jobon"], capsys)
+    assert rc == 0, err
+    full = outputs(hinge_runs[0])
+    on = outputs(hinge / "jobon")
+    assert on and all(full[k] == v for k, v in on.items() if k.startswith("meshes/"))
+    assert any(still[k] != v for k, v in on.items() if k.startswith("meshes/"))
     # --resume refuses to switch it (here on again, over a --no-jiggle run)
     run(hinge, "off", capsys, "--frames", "30:40", "--no-jiggle")
     rc, _, err = run_main(["run", "--muscles", hinge / "muscles", "--pose", hinge / "bend.yaml", "--frames", "30:40",

@@ -37,19 +37,23 @@ def add_args(p) -> None:
 
 
 def add_stage_args(p) -> None:
-    """``--no-<stage>`` for every stage of the table (:data:`axdf_cli.pipeline.stages.STAGES`)."""
-    from axdf_cli.pipeline.stages import STAGES
+    """``--<stage>`` / ``--no-<stage>`` for every stage of the table
+    (:data:`axdf_cli.pipeline.stages.STAGES`); neither: the job's word, else the stage's default."""
+    import argparse
+
+    from axdf_cli.pipeline.stages import STAGES, stage_default
 
     for name in STAGES:
-        p.add_argument(f"--no-{name}", dest=f"stage_{name}", action="store_false", default=None,
-                       help=f"leave out the {name} stage (default: on)")
+        p.add_argument(f"--{name}", dest=f"stage_{name}", action=argparse.BooleanOptionalAction, default=None,
+                       help=f"run the {name} stage, or leave it out (default: the job's {name}: key, else "
+                            f"{'on' if stage_default(name) else 'off'})")
 
 
 def stage_switches(args) -> dict:
-    """The stages switched off on the command line: name -> False."""
+    """The stages switched on or off on the command line: name -> bool."""
     from axdf_cli.pipeline.stages import STAGES
 
-    return {name: False for name in STAGES if getattr(args, f"stage_{name}", None) is False}
+    return {name: v for name in STAGES if (v := getattr(args, f"stage_{name}", None)) is not None}
 
 
 def _positive(text: str) -> int:
@@ -133,10 +137,8 @@ def plan_from_args(args):
 
 
 def job_switches(job) -> dict:
-    """The stages a job switches off (``jiggle: false``, ``contact: false``): name -> False."""
-    if job is None:
-        return {}
-    return {name: False for name, on in (("jiggle", job.jiggle), ("contact", job.contact)) if not on}
+    """The stages a job switches on or off (``jiggle: false``): name -> bool."""
+    return {} if job is None else dict(job.stages)
 
 
 def refuse_warnings(plan) -> None:

@@ -142,24 +142,32 @@ class PenetrationStage:
 
 
 #: The stages a run may use: name -> factory (no arguments), in the order they run within
-#: their scope. Each is on unless switched off (``--no-<name>``, a job's ``<name>: false``).
+#: their scope. Each is on unless switched off (``--no-<name>``, a job's ``<name>: false``),
+#: or, if named in :data:`OFF_BY_DEFAULT`, off unless switched on (``--<name>``, ``<name>: true``).
 STAGES: dict[str, Callable[[], Stage]] = {
     "jiggle": JiggleStage,  # TIME: secondary motion of the axis (muscles' `jiggle:`)
     "contact": ContactStage,  # FRAME: muscles push each other, bones push muscles
     "penetration": PenetrationStage,  # FRAME: the contact measures where contact is off
 }
+#: Stages a run leaves out unless asked for.
+OFF_BY_DEFAULT: frozenset[str] = frozenset()
+
+
+def stage_default(name: str) -> bool:
+    """Whether stage ``name`` runs when neither the command line nor the job says."""
+    return name not in OFF_BY_DEFAULT
 
 
 def build_stages(switches: Mapping[str, bool] | None = None, muscles=None) -> tuple[Stage, ...]:
-    """The run's stages: every registered stage that ``switches`` (name -> on) does not turn
-    off and, given the run's ``muscles`` (specs), that acts on one of them: a stage may say
+    """The run's stages: every registered stage that ``switches`` (name -> on) turns on, or
+    leaves at its default (:func:`stage_default`), and, given the run's ``muscles`` (specs), that acts on one of them: a stage may say
     so with ``needed(muscles) -> bool`` (jiggle: a muscle has ``jiggle``), so a run it would
     not change neither pays for it nor records it."""
     switches = switches or {}
     unknown = sorted(set(switches) - set(STAGES))
     if unknown:
         raise ValueError(f"unknown stage(s) {', '.join(unknown)}; known: {', '.join(STAGES) or 'none'}")
-    out = (make() for name, make in STAGES.items() if switches.get(name, True))
+    out = (make() for name, make in STAGES.items() if switches.get(name, stage_default(name)))
     return tuple(s for s in out if muscles is None or getattr(s, "needed", None) is None or s.needed(muscles))
 
 

@@ -12,7 +12,11 @@ from axdf_cli.specs.refs import RefPolicy
 from axdf_cli.fileio.yamlio import Fields, item_marks, load_yaml
 
 
-JOB_KEYS = ("muscles", "pose", "out", "format", "frames", "render", "jiggle", "contact")
+#: Job keys that switch a stage of the pipeline on or off (axdf_cli.pipeline.stages.STAGES; a
+#: test checks the two agree): `jiggle: false`, as --no-jiggle; `contact: false`, as
+#: --no-contact (stats.csv still measures); `penetration: false`, as --no-penetration.
+STAGE_KEYS = ("jiggle", "contact", "penetration")
+JOB_KEYS = ("muscles", "pose", "out", "format", "frames", "render") + STAGE_KEYS
 
 
 @dataclass(frozen=True)
@@ -26,8 +30,7 @@ class Job:
     frames_mark: Mark | None
     render: object  # RenderSettings (disabled when the job has no `render:`)
     policy: RefPolicy = RefPolicy()  # the policy the job was read with (its muscles are read with it)
-    jiggle: bool = True  # `jiggle: false` switches the muscles' secondary motion off (as --no-jiggle)
-    contact: bool = True  # muscles and bones collide (`contact: false` turns it off)
+    stages: tuple = ()  # ((stage, True | False), ...): what the job's STAGE_KEYS say, in that order; unsaid: absent
 
 
 def load_job(path: Path | str, policy: RefPolicy | None = None) -> Job:
@@ -55,7 +58,6 @@ def load_job(path: Path | str, policy: RefPolicy | None = None) -> Job:
     frames = f.raw("frames")
     frames_mark = f.vmark("frames") if frames is not None else None
     render = parse_render_settings(f.raw("render"), f.vmark("render") if f.has("render") else top)
-    jiggle = f.boolean("jiggle", default=True)
-    contact = f.boolean("contact", default=True)
+    stages = tuple((k, f.boolean(k)) for k in STAGE_KEYS if f.has(k))
     f.done()
-    return Job(str(path), tuple(muscles), pose, out, fmt, frames, frames_mark, render, policy, jiggle, contact)
+    return Job(str(path), tuple(muscles), pose, out, fmt, frames, frames_mark, render, policy, stages)
