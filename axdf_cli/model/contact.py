@@ -523,10 +523,11 @@ def _modes(theta, b):
 
 
 @njit(cache=True)
-def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb, fo, fh, fd, foff, fv,
-                fl_off, fl, margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, q, g, p):
-    """The push p[:3] that point x of muscle i (its ring's centre ci) asks for: out of every
-    bone field by (margin_b - d) along the field's gradient where d < margin_b, and out of
+def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, actm, nmm, share, inv, fb, fo, fh, fd, foff, fv,
+                actb, nbb, margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, q, g, p):
+    """The push p[:3] that point x of muscle i (its ring's centre ci) asks for, against the bone
+    fields actb[:nbb] and the neighbours actm[:nmm] (:func:`_ring_lists`): out of every bone
+    field by (margin_b - d) along the field's gradient where d < margin_b, and out of
     every neighbour j it lies within the margin of, by i's share of the distance to leave j's
     section (a circle of j's radius + margin about j's axis point) along the line from j's axis
     to ci (plus a little of x's radial direction from j's axis), faded out smoothly for points
@@ -537,8 +538,8 @@ def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, share
     p[1] = 0.0
     p[2] = 0.0
     p[3] = 1e30
-    if fl_off[i + 1] > fl_off[i]:
-        d = _bone_query(x, inv, fb, fo, fh, fd, foff, fv, fl, fl_off[i], fl_off[i + 1], margin_b, g)
+    if nbb > 0:
+        d = _bone_query(x, inv, fb, fo, fh, fd, foff, fv, actb, 0, nbb, margin_b, g)
         p[3] = d
         if d < margin_b:
             # along the gradient as it is, not normalized: length 1 near the surface, shorter
@@ -547,8 +548,8 @@ def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, share
             for c in range(3):
                 p[c] += (margin_b - d) * g[c]
     nm = 0
-    for jj in range(nbr_off[i], nbr_off[i + 1]):
-        j = nbr[jj]
+    for jj in range(nmm):
+        j = actm[jj]
         if not _may_meet(x, j, box, margin_m):
             continue
         if not _muscle_query(x, grid, off[j], nu[j], na[j], cen, coff[j], margin_m, q):
@@ -607,6 +608,8 @@ def _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb,
     g = np.empty(6)
     p = np.empty(4)
     b = np.empty(NMODES)
+    actb = np.empty(max(fb.shape[0], 1), np.int64)
+    actm = np.empty(max(nu.shape[0], 1), np.int64)
     for i in range(nu.shape[0]):
         U = nu[i]
         A = na[i]
@@ -618,14 +621,16 @@ def _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb,
         while u <= U - 2:
             ci = cen[coff[i] + u]
             r0 = coff[i] + u
+            nbb, nmm = _ring_lists(ci, i, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, nbr_off, nbr, box, margin_b,
+                                   margin_m, actb, actm)
             for r in range(NMODES):
                 for c in range(3):
                     coef[r0, r, c] = 0.0
             for si in range(ns):
                 a = si * A // ns
                 k = off[i] + u * A + a
-                _point_push(grid[k], ci, i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb, fo, fh,
-                            fd, foff, fv, fl_off, fl, margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend,
+                _point_push(grid[k], ci, i, grid, off, nu, na, cen, coff, box, actm, nmm, share, inv, fb, fo, fh,
+                            fd, foff, fv, actb, nbb, margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend,
                             q, g, p)
                 nsamp += 1
                 if p[3] < 0.0:
@@ -752,13 +757,56 @@ def _solve_offset(c0, c1, c2, c3, v0):
 
 
 @njit(cache=True)
+def _ring_lists(ci, i, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, nbr_off, nbr, box, reach_b, reach_m, actb, actm):
+    """What a ring of muscle i (centre ci[:3], every point within ri = ci[3] of it) may meet:
+    into actb the bone fields of fl[fl_off[i]:fl_off[i + 1]] but those whose grid it misses or
+    whose value at the centre exceeds sqrt(3) ri + reach_b (the trilinear field changes by at
+    most sqrt(3) per metre: its grid values are exact distances, so each axis' difference
+    quotient is at most 1), into actm the neighbours nbr[nbr_off[i]:nbr_off[i + 1]] whose box,
+    grown by reach_m, its sphere meets. Returns (how many fields, how many neighbours): testing
+    only those gives the same answers as testing all."""
+    ri = ci[3]
+    nb = 0
+    for kk in range(fl_off[i], fl_off[i + 1]):
+        k = fl[kk]
+        m = inv[fb[k]]
+        y0 = m[0, 0] * ci[0] + m[0, 1] * ci[1] + m[0, 2] * ci[2] + m[0, 3]
+        y1 = m[1, 0] * ci[0] + m[1, 1] * ci[1] + m[1, 2] * ci[2] + m[1, 3]
+        y2 = m[2, 0] * ci[0] + m[2, 1] * ci[1] + m[2, 2] * ci[2] + m[2, 3]
+        d, ok = _field_at(fv, foff[k], fd[k], fo[k], fh[k], y0, y1, y2)
+        if ok:
+            if d > SQRT3 * ri + reach_b:
+                continue
+        else:
+            # outside the grid: skip when the ring's sphere misses the grid's box (no point
+            # outside a field's grid is inside or near its bone)
+            e = 0.0
+            yy = (y0, y1, y2)
+            for c in range(3):
+                lo = fo[k, c]
+                hi = fo[k, c] + fh[k] * (fd[k, c] - 1)
+                if yy[c] < lo:
+                    e += (lo - yy[c]) ** 2
+                elif yy[c] > hi:
+                    e += (yy[c] - hi) ** 2
+            if e > ri * ri:
+                continue
+        actb[nb] = k
+        nb += 1
+    nmm = 0
+    for jj in range(nbr_off[i], nbr_off[i + 1]):
+        j = nbr[jj]
+        if _may_meet(ci, j, box, ri + reach_m):
+            actm[nmm] = j
+            nmm += 1
+    return nb, nmm
+
+
+@njit(cache=True)
 def _measure(grid, off, nu, na, cen, coff, box, nbr_off, nbr, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, out):
     """Per muscle: [share of points inside another muscle, share inside a bone, deepest
-    penetration (m)] over its vertices (pole rows counted once). Ring by ring: a ring (every
-    point within its largest radius ri of its centre ci) skips a neighbour whose box it misses,
-    and a bone field whose grid it misses or whose value at ci exceeds sqrt(3) ri (the trilinear
-    field changes by at most sqrt(3) per metre: its grid values are exact distances, so each
-    axis' difference quotient is at most 1): the same answers as testing every point."""
+    penetration (m)] over its vertices (pole rows counted once); ring by ring, each against
+    what it may meet (:func:`_ring_lists`)."""
     M = nu.shape[0]
     q = np.empty(8)
     g = np.empty(6)
@@ -773,39 +821,8 @@ def _measure(grid, off, nu, na, cen, coff, box, nbr_off, nbr, inv, fb, fo, fh, f
         n = 0
         for u in range(U):
             ci = cen[coff[i] + u]
-            ri = ci[3]
-            nb = 0
-            for kk in range(fl_off[i], fl_off[i + 1]):
-                k = fl[kk]
-                m = inv[fb[k]]
-                y0 = m[0, 0] * ci[0] + m[0, 1] * ci[1] + m[0, 2] * ci[2] + m[0, 3]
-                y1 = m[1, 0] * ci[0] + m[1, 1] * ci[1] + m[1, 2] * ci[2] + m[1, 3]
-                y2 = m[2, 0] * ci[0] + m[2, 1] * ci[1] + m[2, 2] * ci[2] + m[2, 3]
-                d, ok = _field_at(fv, foff[k], fd[k], fo[k], fh[k], y0, y1, y2)
-                if ok:
-                    if d > SQRT3 * ri:
-                        continue
-                else:
-                    # outside the grid: skip when the ring's sphere misses the grid's box
-                    e = 0.0
-                    yy = (y0, y1, y2)
-                    for c in range(3):
-                        lo = fo[k, c]
-                        hi = fo[k, c] + fh[k] * (fd[k, c] - 1)
-                        if yy[c] < lo:
-                            e += (lo - yy[c]) ** 2
-                        elif yy[c] > hi:
-                            e += (yy[c] - hi) ** 2
-                    if e > ri * ri:
-                        continue
-                actb[nb] = k
-                nb += 1
-            nmm = 0
-            for jj in range(nbr_off[i], nbr_off[i + 1]):
-                j = nbr[jj]
-                if _may_meet(ci, j, box, ri):
-                    actm[nmm] = j
-                    nmm += 1
+            nb, nmm = _ring_lists(ci, i, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, nbr_off, nbr, box, 0.0, 0.0,
+                                  actb, actm)
             for a in range(A if 0 < u < U - 1 else 1):
                 k = off[i] + u * A + a
                 n += 1
