@@ -156,3 +156,55 @@ AXIS_PROBE_SEED = 20
 # radius's head 2 cm beside the humero-ulnar joint (human_r); distinct anatomical keypoints of
 # the shipped skeletons are 2.8 cm apart or more (CMU's fingers' base to their end site).
 KEYPOINT_MERGE = 0.025
+
+# Contact (axdf_cli/model/contact.py). Muscles keep CONTACT_MARGIN apart and CONTACT_BONE_MARGIN
+# off bones: the axis-space query reads the tessellated rings linearly, a little inside the
+# curved surface between them, so a small gap keeps the written meshes apart.
+CONTACT_MARGIN = 0.001
+CONTACT_BONE_MARGIN = 0.001
+# Jacobi passes (push, fit the rings' modes, re-solve the volume); a fixed number, so the result
+# is a continuous function of the frame. More passes clear more overlap but, the volume being
+# kept, press it into the next layer and follow the neighbours' motion more: on the walk
+# (Rajagopal2016's run) 1 pass: worst step 1.3x (2.1x) the no-contact one, deepest +2.8 mm
+# (-0.3 mm); 2: 1.5x (3.2x), +5.5 mm (+5.1 mm); 3: 2.0x (4.3x), +8.7 mm (+7.6 mm). No pops and no
+# deeper pile-ups come first (README, Contact).
+CONTACT_ITERATIONS = 1
+# [1 2 1]/4 smoothing rounds of the rings' modes along the muscle (no creases).
+CONTACT_SMOOTH_PASSES = 4
+# Bones' signed distance fields: grid step and padding around the mesh (m). Trilinear on a
+# 3 mm grid is within ~0.3 mm of the mesh's distance near its surface on the shipped bones.
+CONTACT_SDF_STEP = 0.003
+CONTACT_SDF_PAD = 0.02
+# Shares of an overlap: 0.5 each for equal yields, +CONTACT_SHARE_PER_LAYER per layer of
+# yield difference for the deeper muscle, at most CONTACT_SHARE_MAX.
+CONTACT_SHARE_PER_LAYER = 0.3
+CONTACT_SHARE_MAX = 0.8
+# A bone's field covers the muscles' rest meshes (in that bone's frame) grown by this (m):
+# far enough for a pose to bring a muscle near its neighbour bones (a muscle that moves further
+# from a bone than this between rest and pose is not measured against it), small enough not to
+# sample a whole floor or torso.
+CONTACT_REACH = 0.1
+# One yield layer (m of distance from the bone surface): a muscle whose middle lies
+# 1 cm nearer a bone gives way 0.3 more of an overlap (tol.CONTACT_SHARE_PER_LAYER).
+CONTACT_LAYER = 0.01
+# The box a bone's field covers is rounded out to whole steps of this (m), so that editing a
+# muscle a little keeps the same field (and its cache entry).
+CONTACT_CLIP_STEP = 0.05
+# A point is pushed out of a neighbour along the line from the neighbour's axis to the point's
+# own section centre, plus this many neighbour radii of the point's radial direction: the
+# direction stays defined (and continuous) where the two axes meet.
+CONTACT_RADIAL_BLEND = 0.25
+# A point moves at most this far (m) in one contact pass: a deep overlap is cleared over
+# several passes instead of in one jump that overshoots into a third muscle.
+CONTACT_MAX_STEP = 0.004
+# A point nearer a neighbour's axis than CONTACT_DEEP_FADE[1] of its radius is pushed less,
+# not at all nearer than CONTACT_DEEP_FADE[0] (smoothstep between): muscles on one line of
+# action have no side to push each other to, and pushing them anyway piles them up.
+CONTACT_DEEP_FADE = (0.15, 0.5)
+# Likewise for the distance between the point's own ring centre and the neighbour's axis, in
+# the neighbour's radii: where the axes (nearly) meet, the push's direction turns fast.
+CONTACT_AXES_FADE = (0.1, 0.4)
+# The pushes are sampled at A / CONTACT_SAMPLE_COLUMNS evenly spaced points (8 of 24) of every
+# CONTACT_SAMPLE_RINGS-th ring; each sampled ring's displacement modes are fitted to them.
+CONTACT_SAMPLE_COLUMNS = 3
+CONTACT_SAMPLE_RINGS = 2

@@ -24,7 +24,12 @@ so figures are noisy and only ratios taken in the same run are compared with tar
    them against ``ndarray.tofile`` of the same bytes in one file, and ``axdf run`` of the job
    (pose stretched to the bench's frames) per format against the same run writing no meshes,
    with peak memory.
-9. rendering split over processes: ``make demo``'s first job (poses/jobs/demo.yaml, meshes and
+9. contact: the gait2392 walk and Rajagopal2016's running stride (muscles only) evaluated with
+   and without the contact stage (µs per muscle-frame, the ratio), and the shares of vertices
+   inside another muscle or a bone and the deepest penetration before and after (the
+   product's own measures, stats.csv's), the volume, and the muscle-frames that pop (a
+   vertex step over 1.5x the no-contact one);
+10. rendering split over processes: ``make demo``'s first job (poses/jobs/demo.yaml, meshes and
    512x512 frames; every 2nd frame with ``--quick``) as a subprocess at ``--jobs 1`` and
    ``--jobs 2``, and their ratio.
 10. retargeting: ``axdf retarget``'s fit of the CMU walk onto gait2392 (frames per second at 30
@@ -36,6 +41,7 @@ so figures are noisy and only ratios taken in the same run are compared with tar
    the stage alone; and a ``--frames`` subset's extra cost (frames not selected are advanced too).
 
 ``--only retarget`` prints just the retargeting rows, ``--only jiggle`` the jiggle rows,
+``--only contact`` the contact rows,
 ``--only compiled`` the compiled pass's (a whole run of the walk stretched to 1051 frames
 at 48x24 into npz against tofile of the same bytes; 92 muscles x 1 frame; a chunk's outputs
 into fresh memory against steady state; numba's first-run compile cost).
@@ -1066,6 +1072,113 @@ def compiled_rows(table: "Table", tmp: Path, quick: bool, top: int = 0) -> list[
 # ----------------------------------------------------------------------------- the table
 
 
+#: Contact may at most double evaluation (issue 18), and its targets on the walk.
+TARGET_CONTACT_COST = 2.0
+TARGET_INSIDE_MUSCLE = 0.02
+TARGET_INSIDE_BONE = 0.005
+TARGET_DEPTH = 0.003
+
+
+#: A muscle-frame pops when a vertex steps more than this times its largest no-contact step.
+POP_RATIO = 1.5
+
+
+def contact_pass(plan) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+    """Evaluate every frame of ``plan`` (with its stages): wall time (s), the contact measures
+    (F, M, 3) (zeros where no stage measured), each muscle's largest vertex step from the
+    previous frame of the plan (F, M; row 0 zero) and its volume (F, M)."""
+    from axdf_cli.pipeline.evaluate import evaluate_plan
+
+    nf, nm = len(plan.frames), len(plan.models)
+    out = np.zeros((nf, nm, 3))
+    step = np.zeros((nf, nm))
+    vol = np.zeros((nf, nm))
+    prev: dict = {}
+    t0 = time.perf_counter()
+    for chunk, results in evaluate_plan(plan):
+        for j, r in results:
+            rows = np.arange(nf)[chunk.rows]
+            if r.contact is not None:
+                out[rows, j] = r.contact
+            vol[rows, j] = r.volume
+            v = np.concatenate([prev[j][None], r.vertices]) if j in prev else r.vertices
+            d = np.linalg.norm(np.diff(v, axis=0), axis=-1).max(axis=-1)
+            step[rows[1:] if j not in prev else rows, j] = d
+            prev[j] = r.vertices[-1].copy()
+    return time.perf_counter() - t0, out, step, vol
+
+
+def rajagopal_plan(tmp: Path, stages=None):
+    """Rajagopal2016 over its running stride (tests/data/rajagopal2016, imported without bone
+    meshes into ``tmp``: the contact is muscle against muscle only)."""
+    from axdf_cli.cli.main import main as axdf_main
+    from axdf_cli.pipeline.plan import plan_run
+    from axdf_cli.specs import RefPolicy
+
+    data = ROOT / "tests" / "data" / "rajagopal2016"
+    imp = tmp / "rajagopal2016"
+    if not imp.is_dir():
+        rc = axdf_main(["import", "osim", str(data / "Rajagopal2016.osim"), "--motion", str(data / "run_stride_ik.mot"),
+                        "--name", "rajagopal2016", "--no-meshes", "--out", str(imp), "-q"])
+        if rc != 0:
+            raise RuntimeError(f"axdf import osim Rajagopal2016 failed ({rc})")
+    return plan_run(None, muscle_args=[str(imp / "muscles")], pose_arg=str(imp / "run_stride_ik.yaml"),
+                    policy=RefPolicy(allow_outside=True), stages=stages)
+
+
+def contact_rows(table: "Table", quick: bool, tmp: Path | None = None) -> None:
+    """The shipped gait2392 walk (every frame; every 6th with --quick) and Rajagopal2016's
+    running stride (muscles only: imported without bone meshes): evaluation without any
+    stage, with the penetration stage alone (--penetration: measures only), and with contact;
+    the shares of vertices inside another muscle and inside a bone (mean over muscle-frames),
+    the deepest penetration, the volume, and the muscle-frames whose largest vertex step from
+    the previous frame exceeds POP_RATIO times the no-contact one (pops)."""
+    from axdf_cli.pipeline.plan import plan_run
+    from axdf_cli.pipeline.stages import ContactStage
+    from axdf_cli.specs import load_job
+
+    frames = "18:84:6" if quick else None
+    cases = [("gait2392 walk", lambda sw: plan_run(load_job(GAIT_JOB), frames_arg=frames, stages=sw))]
+    if tmp is not None:
+        cases.append(("Rajagopal2016 run, no bones", lambda sw: rajagopal_plan(tmp, sw)))
+    for label, make in cases:
+        plans = {k: make(sw) for k, sw in
+                 (("none", {"contact": False, "penetration": False}),
+                  ("measure", {"contact": False, "penetration": True}),
+                  ("contact", {"contact": True, "penetration": True}))}
+        t0 = time.perf_counter()
+        ContactStage().start(plans["contact"])  # the bone fields (from the disk cache after the first run)
+        t_fields = time.perf_counter() - t0
+        plan = plans["contact"]
+        mf = len(plan.frames) * len(plan.models)
+        contact_pass(plans["none"])  # compiled code loaded, caches warm
+        t_none, _, step0, vol0 = contact_pass(plans["none"])
+        t_meas, before, _, _ = contact_pass(plans["measure"])
+        t_con, after, step1, vol1 = contact_pass(plan)
+        table.section(f"contact ({label}, {len(plan.frames)} frames x {len(plan.models)} muscles; bone fields "
+                      f"{t_fields:.1f} s)")
+        us = lambda t: t / mf * 1e6  # noqa: E731
+        table.add("evaluate with contact", f"{us(t_con):.0f} µs/mf", f"without {us(t_none):.0f} µs/mf",
+                  f"{t_con / t_none:.2f}x", f"<= {TARGET_CONTACT_COST:g}x {_mark(t_con / t_none <= TARGET_CONTACT_COST)}")
+        table.add("evaluate, measures only (--penetration)", f"{us(t_meas):.0f} µs/mf",
+                  f"without {us(t_none):.0f} µs/mf", f"{t_meas / t_none:.2f}x")
+        for k, (what, target) in enumerate((("vertices inside another muscle", TARGET_INSIDE_MUSCLE),
+                                            ("vertices inside a bone", TARGET_INSIDE_BONE))):
+            a, b = after[..., k].mean(), before[..., k].mean()
+            table.add(what, f"{a * 100:.2f}%", f"before {b * 100:.2f}%", f"{a / max(b, 1e-12):.3f}x",
+                      f"<= {target * 100:g}% {_mark(a <= target)}")
+        a, b = after[..., 2].max(), before[..., 2].max()
+        table.add("deepest penetration", f"{a * 1000:.1f} mm", f"before {b * 1000:.1f} mm",
+                  f"{a / max(b, 1e-12):.2f}x", f"<= {TARGET_DEPTH * 1000:g} mm {_mark(a <= TARGET_DEPTH)}")
+        dv = np.abs(vol1 / vol0 - 1.0).max()
+        table.add("volume against no contact", f"{dv * 100:.2g}% off", "", "", f"<= 0.5% {_mark(dv <= 0.005)}")
+        ratio = step1[1:] / np.maximum(step0[1:], 1e-12)
+        pops = (ratio > POP_RATIO).mean()
+        table.add(f"muscle-frames stepping > {POP_RATIO:g}x their no-contact step", f"{pops * 100:.2f}%",
+                  f"worst {ratio.max():.2f}x", f"> {POP_RATIO:g}x + 0.5 mm: "
+                  f"{(step1[1:] > POP_RATIO * step0[1:] + 5e-4).mean() * 100:.2f}%", f"none {_mark(pops == 0)}")
+
+
 def _mark(ok: bool) -> str:
     return "✓" if ok else "✗"
 
@@ -1102,9 +1215,10 @@ def main(argv=None) -> int:
     ap.add_argument("--long", action="store_true", help=f"also {LONG_FRAMES} frames x all muscles: peak memory")
     ap.add_argument("--profile", action="store_true", help="print the top functions of the slow rows")
     ap.add_argument("--tmp", default=None, help="folder for the written files (default: a new temporary folder)")
-    ap.add_argument("--only", choices=("retarget", "jiggle", "compiled"), default=None,
+    ap.add_argument("--only", choices=("retarget", "jiggle", "compiled", "contact"), default=None,
                     help="print only these rows (retarget: the retargeting fit; jiggle: the jiggle stage; "
-                         "compiled: the compiled pass, a whole run)")
+                         "compiled: the compiled pass, a whole run; contact: the walk and Rajagopal2016 with "
+                         "and without contact)")
     ap.add_argument("--dataset-samples", type=int, default=None, metavar="N",
                     help=f"samples of the data-set rows (default {DATASET_SAMPLES}, 100 with --quick; 0: skip them)")
     args = ap.parse_args(argv)
@@ -1128,6 +1242,16 @@ def main(argv=None) -> int:
         for t in texts:
             print()
             print(t)
+        return 0
+    if args.only == "contact":
+        table = Table()
+        tmp = Path(tempfile.mkdtemp(prefix="axdf-bench-", dir=args.tmp))
+        try:
+            contact_rows(table, args.quick, tmp)
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)
+        print(table.text())
+        print(f"(µs/mf: microseconds per muscle-frame; total bench time {time.perf_counter() - t_start:.0f} s)")
         return 0
     if args.only == "jiggle":
         table = Table()
@@ -1183,6 +1307,10 @@ def main(argv=None) -> int:
             n_us = time_evaluation(nc.models(6, RESOLUTIONS[0]), nc.world, nc.tension, reps, coords=nc.coords)
             table.add("evaluate with wrapping", f"{w_us:.1f} µs/mf", f"without {n_us:.1f} µs/mf", f"{w_us / n_us:.2f}x",
                       f"<= {TARGET_WRAP:g}x {_mark(w_us / n_us <= TARGET_WRAP)}")
+
+        # 2c. contact
+        if GAIT_JOB.is_file():
+            contact_rows(table, args.quick, tmp)
 
         # 3. geomdl
         table.section("peer: geomdl (NURBS-Python) tessellating the same surface, per muscle-frame")

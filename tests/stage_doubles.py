@@ -79,7 +79,10 @@ DOUBLES = {s.name: s for s in (SmoothAxis, PushByOthers, WarnFirst)}
 
 
 def register(table: dict, names) -> None:
-    """Put the named doubles into ``table`` (the STAGES registry), in the order given."""
+    """Put the named doubles into ``table`` (the STAGES registry), in the order given; the
+    product's FRAME stages (contact, penetration) are left out, the real jiggle stays."""
+    for k in ("contact", "penetration"):
+        table.pop(k, None)
     for n in names:
         table[n] = DOUBLES[n]
 

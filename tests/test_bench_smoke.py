@@ -110,3 +110,22 @@ def test_compiled_pass_rows(tmp_path):
     assert bench.tofile_seconds(r["bytes"], tmp_path) > 0
     cold, warm, nf = bench.first_touch(bench.DEMO_JOB, repeats=1)
     assert cold > 0 and warm > 0 and nf >= 1
+
+
+def test_contact_pass(repo_root):
+    """The contact rows' helper on a few demo frames: measures, steps and volumes per frame and
+    muscle; contact keeps every volume and pops nowhere (each muscle's largest step is its
+    attachment's here, which contact does not move)."""
+    from axdf_cli.pipeline.plan import plan_run
+    from axdf_cli.specs import load_job
+
+    job = load_job(repo_root / "poses" / "jobs" / "demo.yaml")
+    t0, m0, s0, v0 = bench.contact_pass(plan_run(job, frames_arg="68:71", stages={"contact": False, "penetration": False}))
+    t1, m1, s1, v1 = bench.contact_pass(plan_run(job, frames_arg="68:71", stages={"contact": True}))
+    assert t0 > 0 and t1 > 0
+    nf, nm = v1.shape
+    assert nf >= 3 and m1.shape == (nf, nm, 3) and s1.shape == (nf, nm)
+    assert not m0.any() and (m1[..., 1] > 0).any()  # no stage measured, then contact's measures
+    assert (s0[0] == 0).all() and (s0[1:] > 0).all()
+    np.testing.assert_allclose(v1, v0, rtol=1e-9)
+    assert (s1[1:] <= bench.POP_RATIO * s0[1:]).all()

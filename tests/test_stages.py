@@ -31,10 +31,16 @@ SETS = [("smooth",), ("push",), ("smooth", "push")]
 SMALL_BLOCK = 32  # the timeline block in these tests, so that 150 frames span several
 
 
+PRODUCT_FRAME_STAGES = ("contact", "penetration")
+
+
 def use_stages(monkeypatch, names, block: int | None = SMALL_BLOCK) -> None:
-    """Register the test stages ``names`` in the package's table (forked workers inherit it)."""
+    """Register the test stages ``names`` in the package's table (the product's FRAME stages,
+    contact and penetration, are left out; the real jiggle stays; forked workers inherit the
+    table)."""
     from axdf_cli.pipeline import evaluate, stages
 
+    monkeypatch.setattr(stages, "STAGES", {k: v for k, v in stages.STAGES.items() if k not in PRODUCT_FRAME_STAGES})
     for n in names:
         monkeypatch.setitem(stages.STAGES, n, stage_doubles.DOUBLES[n])
     if block is not None:
@@ -85,7 +91,12 @@ def test_the_split_follows_the_declared_scopes(project, monkeypatch):
     def plan():
         return plan_run(load_job("poses/jobs/demo.yaml"), frames_arg="0:3")
 
-    # the demo's gastrocnemius jiggles: the real TIME stage is there before any test stage
+    # the demo's gastrocnemius jiggles (TIME); contact and its measures are FRAME stages
+    assert [s.name for s in plan().stages] == ["jiggle"]  # contact and its measures are off by default
+    assert [s.name for s in plan_run(load_job("poses/jobs/demo.yaml"), frames_arg="0:3",
+                                     stages={"contact": True}).stages] == ["jiggle", "contact"]
+    assert split_of(plan_run(load_job("poses/jobs/demo.yaml"), frames_arg="0:3", stages={"contact": True})) == "frames"
+    use_stages(monkeypatch, [])
     assert [s.name for s in plan().stages] == ["jiggle"] and split_of(plan()) == "muscles"
     use_stages(monkeypatch, ["smooth"])
     assert [s.name for s in plan().stages] == ["jiggle", "smooth"] and split_of(plan()) == "muscles"
@@ -99,6 +110,7 @@ def test_the_split_follows_the_declared_scopes(project, monkeypatch):
 
 @pytest.mark.parametrize("names", SETS, ids="+".join)
 def test_the_stages_change_the_meshes(project, capsys, monkeypatch, names):
+    use_stages(monkeypatch, [])
     run(capsys, "plain", "--frames", "100:101")
     use_stages(monkeypatch, names)
     run(capsys, "staged", "--frames", "100:101")
@@ -237,6 +249,7 @@ def test_strict_and_stats_see_a_stage_s_warnings(project, capsys, monkeypatch):
 
 
 def test_the_manifest_records_the_stages_and_resume_refuses_a_change(project, capsys, monkeypatch):
+    use_stages(monkeypatch, [])
     run(capsys, "none", "--frames", "0:2", "--no-jiggle")  # (the demo's gastrocnemius jiggles)
     use_stages(monkeypatch, ["smooth", "push"])
     run(capsys, "both", "--frames", "0:2", "--no-jiggle")
@@ -259,6 +272,7 @@ def test_a_data_set_goes_through_the_stages(tmp_path, monkeypatch):
     from dataset_helpers import build_in, write_tiny
 
     write_tiny(tmp_path)
+    use_stages(monkeypatch, [])
     ref = build_in(tmp_path, "ref")
     use_stages(monkeypatch, ["smooth"])
     staged = build_in(tmp_path, "staged")
@@ -282,3 +296,26 @@ def test_the_job_keys_that_switch_stages_are_the_stages(capsys):
     for name in STAGES:
         assert f"--{name}, --no-{name}" in out
         assert ("else on" if stage_default(name) else "else off") in out
+
+
+def test_contact_is_off_by_default_and_on_with_the_flag_or_the_job(project, capsys):
+    """`axdf run` leaves contact out (stats.csv without its measures, the manifest without the
+    stage); `--contact` or a job's `contact: true` runs it and writes the measures."""
+    import csv as _csv
+
+    from axdf_cli.pipeline.stages import stage_default
+
+    assert not stage_default("contact") and not stage_default("penetration")
+    run(capsys, "plain", "--frames", "20", "--no-jiggle")
+    run(capsys, "touch", "--frames", "20", "--no-jiggle", "--contact")
+    head = {n: next(_csv.reader(open(f"{n}/stats.csv"))) for n in ("plain", "touch")}
+    assert "inside_muscle" not in head["plain"] and head["touch"][-4:] == ["inside_muscle", "inside_bone", "depth",
+                                                                          "warning"]
+    stages = {n: json.loads(Path(n, "manifest.json").read_text())["settings"].get("stages") for n in head}
+    assert stages["plain"] is None and [s["name"] for s in stages["touch"]] == ["contact"]
+    job = Path("poses/jobs/demo.yaml").read_text() + "\ncontact: true\n"
+    Path("poses/jobs/touch_job.yaml").write_text(job.replace("out:", "# out:"))
+    rc, _, err = run_main(["run", "poses/jobs/touch_job.yaml", "--frames", "20", "--no-jiggle", "--no-render", "--out", "touch2",
+                           "-q"], capsys)
+    assert rc == 0, err
+    assert all_files(Path("touch2")).keys() == all_files(Path("touch")).keys()

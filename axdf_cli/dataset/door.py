@@ -25,13 +25,14 @@ from axdf_cli.model.skeleton import forward_kinematics
 
 
 def sequence_plan(pose: Pose, frames: np.ndarray, muscles, models, fmt: str, out: Path, inputs: dict,
-                  stages: tuple = ()) -> RunPlan:
+                  stages: tuple = (), bone_meshes: dict | None = None) -> RunPlan:
     """A run plan for one sequence: the data set's muscles and models (built once per worker)
     over an in-memory pose, with the data set's stages (``build_stages``, made with its
-    context). Bone meshes are stored once for the whole data set, not per run."""
+    context). Bone meshes are stored once for the whole data set, not per run: ``bone_meshes``
+    reach the contact stage only (``collision_meshes``), so a sequence collides as ``axdf run``."""
     return RunPlan(pose=pose, muscles=list(muscles), models=list(models), frames=np.asarray(frames),
                    formats=(fmt,), out=Path(out), inputs=dict(inputs), render=None, bone_meshes={},
-                   stages=tuple(stages))
+                   stages=tuple(stages), collision_meshes=bone_meshes)
 
 
 def run_sequence(plan: RunPlan, resume: bool) -> dict:

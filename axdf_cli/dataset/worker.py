@@ -249,7 +249,8 @@ def _make_sequence(ctx: Context, seq: Sequence, folder: Path, resume: bool, timi
     inputs = dict(ctx.inputs)
     if entry.motion is not None:
         inputs.update(ctx.motion_inputs[entry.motion])
-    plan = door.sequence_plan(pose, frames, ctx.muscles, ctx.models, spec.format, folder, inputs, ctx.stages)
+    plan = door.sequence_plan(pose, frames, ctx.muscles, ctx.models, spec.format, folder, inputs, ctx.stages,
+                              ctx.bone_meshes)
     summary = door.run_sequence(plan, resume)
     t1 = time.perf_counter()
     timing["run"] = t1 - t0

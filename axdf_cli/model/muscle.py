@@ -92,6 +92,18 @@ class Section:
 
 
 @dataclass(frozen=True)
+class ContactSpec:
+    """A muscle file's ``contact:`` mapping. ``group``: muscles of one group do not collide
+    with each other ('' = no group); ``ignore``: names this muscle does not collide with;
+    ``yield_``: how deep the muscle lies, in layers (None: from its depth at the rest pose,
+    :func:`auto_yield`); of two touching muscles the one with the larger yield gives way more."""
+
+    group: str = ""
+    ignore: tuple[str, ...] = ()
+    yield_: float | None = None
+
+
+@dataclass(frozen=True)
 class MuscleSpec:
     name: str
     color: tuple[float, float, float]
@@ -108,6 +120,7 @@ class MuscleSpec:
     group: str = ""  # the multi-head muscle this head belongs to ('' for single muscles)
     path: PathSpec | None = None  # a path (points, wrap surfaces) instead of fixed axis points
     jiggle: JiggleSpec | None = None  # secondary motion of the axis (model/jiggle.py); None: none
+    contact: ContactSpec = ContactSpec()  # the muscle file's ``contact:`` (axdf_cli/model/contact.py)
 
 
 def ellipse_outline(a: float, b: float, angle_deg: float) -> np.ndarray:
@@ -172,6 +185,7 @@ class FrameResult:
     twist: np.ndarray  # (F,) insertion roll spread along the axis (degrees, unwrapped)
     tension: np.ndarray  # (F,) effective tension
     warnings: list  # [(frame index in block, message)]
+    contact: np.ndarray | None = None  # (F, 3) inside another muscle, inside a bone (shares), deepest (m)
     # what the sinks write of it, made after every stage (axdf_cli.pipeline.evaluate.finite_or_rest):
     # positions, normals (F, V, 3) float32, the frames replaced by the rest shape, bounds (F, 2, 3)
     written: tuple | None = None

@@ -57,6 +57,16 @@ def previous_subset(previous: dict, out: Path) -> dict:
     return {k: v for k, v in previous.items() if (out / k).is_file()}
 
 
+#: stats.csv's numeric columns. The last three (inside_muscle, inside_bone: shares of the
+#: muscle's vertices inside another muscle it collides with, inside a bone; depth: its deepest
+#: penetration, m) are written when a stage measures them (the contact or penetration stage:
+#: ``measures = True``); without, stats.csv has the first six.
+STATS_COLUMNS = ("length", "volume", "volume_ratio", "tension", "twist", "scale", "inside_muscle", "inside_bone",
+                 "depth")
+NSTATS = len(STATS_COLUMNS)
+MEASURED_COLUMNS = 3
+
+
 def manifest_dict(plan: RunPlan, files: dict, warnings: list, complete: bool, extra: dict | None = None) -> dict:
     m = {
         "tool": "axdf",
@@ -99,7 +109,7 @@ class MeshPassResult:
     muscles: list  # muscle indices, in order
     rows: slice  # the frames covered (positions in plan.frames)
     files: dict  # relpath -> sha256
-    stats: np.ndarray  # (R, len(muscles), 6) length, volume, ratio, tension, twist, scale
+    stats: np.ndarray  # (R, len(muscles), NSTATS): STATS_COLUMNS
     warnings: list  # [(frame index, muscle index, message)]
     lo: np.ndarray  # (3,) bounds of every written vertex
     hi: np.ndarray
@@ -158,7 +168,7 @@ def mesh_pass(plan: RunPlan, prep: Prepass, writer: OutputWriter, muscles: list[
     frame_formats = [f for f in plan.formats if f in WRITERS]
     writers = {(j, f): WRITERS[f](plan.models[j].faces, plan.muscles[j].name) for j in muscles for f in frame_formats}
     col = {j: k for k, j in enumerate(muscles)}
-    stats = np.zeros((n_rows, len(muscles), 6))
+    stats = np.zeros((n_rows, len(muscles), NSTATS))
     bone_rows = np.zeros((n_rows, len(plan.pose.skeleton.bones), 7)) if bones else None
     warns: list = []
     lo = np.full(3, np.inf)
@@ -191,8 +201,9 @@ def mesh_pass(plan: RunPlan, prep: Prepass, writer: OutputWriter, muscles: list[
                     raw.put(j, here, pos, nrm)
                 lo = np.minimum(lo, box[:, 0].min(axis=0))
                 hi = np.maximum(hi, box[:, 1].max(axis=0))
-                st = np.stack([res.length, res.volume, res.volume / plan.models[j].v0, res.tension,
-                               res.twist, res.scale], axis=1)
+                cm = res.contact if res.contact is not None else np.zeros((len(res.length), 3))
+                st = np.concatenate([np.stack([res.length, res.volume, res.volume / plan.models[j].v0, res.tension,
+                                               res.twist, res.scale], axis=1), cm], axis=1)
                 stats[here, col[j]] = np.where(np.isfinite(st), st, 0.0)
                 warns += [(sl.start + i, j, msg) for i, msg in res.warnings]
                 if progress:
@@ -317,9 +328,12 @@ def rendered_frames(plan: RunPlan, previous: dict, root: Path) -> set[int]:
 def stats_csv(plan: RunPlan, stats: np.ndarray, warn_text: list) -> bytes:
     """stats.csv: a row per frame and muscle; numbers to 9 significant digits (-0 written 0).
     One ``%`` per row over plain floats (a tenth of the time of formatting each number alone)."""
+    columns = STATS_COLUMNS if any(getattr(st, "measures", False) for st in plan.stages) else \
+        STATS_COLUMNS[:-MEASURED_COLUMNS]
+    stats = stats[..., :len(columns)]
     fmt = "%d,%s" + ",%.9g" * stats.shape[-1] + ",%s\n"
     rows = (stats + 0.0).tolist()  # (+ 0.0: -0 is written 0)
-    out = ["frame,muscle,length,volume,volume_ratio,tension,twist,scale,warning\n"]
+    out = [",".join(("frame", "muscle", *columns, "warning")) + "\n"]
     names = plan.names
     for i, frame in enumerate(plan.frames.tolist()):
         row, warn = rows[i], warn_text[i]
@@ -414,7 +428,7 @@ def _write_run(plan: RunPlan, session, prep: Prepass, progress, render_progress,
         else:
             checkpoint = Checkpoint(lambda: write_manifest(root, manifest_dict(plan, writer.files, [], complete=False)))
             parts = [mesh_pass(plan, prep, writer, progress=progress, on_chunk=checkpoint, bones=True)]
-        stats = np.zeros((nf, nm, 6))
+        stats = np.zeros((nf, nm, NSTATS))
         warn_text = [[""] * nm for _ in range(nf)]
         lo = np.min([p.lo for p in parts], axis=0)
         hi = np.max([p.hi for p in parts], axis=0)

@@ -35,6 +35,7 @@ class RunPlan:
     bone_meshes: dict = field(default_factory=dict)  # bone index -> (vertices (V,3) f4, faces (T,3) i4, file bytes)
     frame_warnings: list = field(default_factory=list)  # [(frame index, muscle index, message)] known before evaluation
     stages: tuple = ()  # the run's stages (axdf_cli.pipeline.stages: build_stages), in order within each scope
+    collision_meshes: dict | None = None  # bone meshes contact uses where the run stores none (a data set's sequences)
 
     @property
     def names(self) -> list[str]:

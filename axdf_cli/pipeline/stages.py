@@ -47,7 +47,10 @@ from typing import Callable, Mapping, Protocol
 
 import numpy as np
 
+from axdf_cli import tolerances as tol
+from axdf_cli.model import contact
 from axdf_cli.model.muscle import FrameResult
+from axdf_cli.model.skeleton import forward_kinematics
 from axdf_cli.pipeline.jiggle_stage import JiggleStage
 
 
@@ -95,14 +98,61 @@ class Stage(Protocol):
     def __call__(self, state, chunk: Chunk) -> tuple[object, Chunk]: ...
 
 
+def _contact_model(plan, enabled: bool):
+    rest = forward_kinematics(plan.pose.skeleton, plan.pose.skeleton.rest_coordinates()[None])[0]
+    meshes = plan.bone_meshes or getattr(plan, "collision_meshes", None) or {}
+    return contact.build(plan.muscles, plan.models, rest, meshes, enabled=enabled)
+
+
+class ContactStage:
+    """Muscles push each other out of the way, bones push muscles (:mod:`axdf_cli.model.contact`).
+    Its state is the run's :class:`~axdf_cli.model.contact.ContactModel` (the bones' distance
+    fields, the pairs and their shares), built once by :meth:`start`; each frame of a chunk is
+    resolved alone. Leaves the measures after contact in ``FrameResult.contact``."""
+
+    name = "contact"
+    scope = Scope.FRAME
+    measures = True  # stats.csv's inside_muscle, inside_bone, depth
+
+    @property
+    def settings(self) -> dict:
+        return {"iterations": tol.CONTACT_ITERATIONS}
+
+    def start(self, plan):
+        return _contact_model(plan, True)
+
+    def __call__(self, state, chunk: Chunk):
+        contact.apply(state, chunk.results, chunk.world)
+        return state, chunk
+
+
+class PenetrationStage:
+    """The contact measures (stats.csv's inside_muscle, inside_bone, depth) of the meshes as
+    they are, where the contact stage did not run (``--no-contact``): changes no vertex."""
+
+    name = "penetration"
+    scope = Scope.FRAME
+    measures = True
+
+    def start(self, plan):
+        return _contact_model(plan, False)
+
+    def __call__(self, state, chunk: Chunk):
+        if any(r.contact is None for r in chunk.results.values()):
+            contact.apply(state, chunk.results, chunk.world)
+        return state, chunk
+
+
 #: The stages a run may use: name -> factory (no arguments), in the order they run within
 #: their scope. Each is on unless switched off (``--no-<name>``, a job's ``<name>: false``),
 #: or, if named in :data:`OFF_BY_DEFAULT`, off unless switched on (``--<name>``, ``<name>: true``).
 STAGES: dict[str, Callable[[], Stage]] = {
     "jiggle": JiggleStage,  # TIME: secondary motion of the axis (muscles' `jiggle:`)
+    "contact": ContactStage,  # FRAME: muscles push each other, bones push muscles
+    "penetration": PenetrationStage,  # FRAME: the contact measures where contact is off
 }
 #: Stages a run leaves out unless asked for.
-OFF_BY_DEFAULT: frozenset[str] = frozenset()
+OFF_BY_DEFAULT: frozenset[str] = frozenset({"contact", "penetration"})
 
 
 def stage_default(name: str) -> bool:

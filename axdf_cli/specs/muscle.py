@@ -10,10 +10,10 @@ import numpy as np
 from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.model.jiggle import JiggleSpec
-from axdf_cli.model.muscle import OCT, VOLUME_MODES, AxisPoint, MuscleSpec, Section, outline_area
+from axdf_cli.model.muscle import OCT, VOLUME_MODES, AxisPoint, ContactSpec, MuscleSpec, Section, outline_area
 from axdf_cli.specs.kinds import kind_error
 from axdf_cli.specs.skeleton import parse_function
-from axdf_cli.fileio.yamlio import Fields, check_vector, item_marks, load_yaml
+from axdf_cli.fileio.yamlio import Fields, check_name, check_vector, item_marks, load_yaml
 
 
 
@@ -42,7 +42,8 @@ def default_color(name: str) -> tuple[float, float, float]:
 
 
 MUSCLE_KEYS = ("muscle", "color", "strength", "tension", "volume", "axis", "path", "wrap", "axis_points",
-               "sections", "tendons", "twist", "resolution", "weights", "jiggle")
+               "sections", "tendons", "twist", "resolution", "weights", "jiggle", "contact")
+CONTACT_KEYS = ("group", "ignore", "yield")
 
 
 def _parse_muscle(value, where: Mark, file: str, group: str = "") -> MuscleSpec:
@@ -128,9 +129,21 @@ def _parse_muscle(value, where: Mark, file: str, group: str = "") -> MuscleSpec:
         raise InputError(f.vmark("weights"), f"{len(weights)} weights for {len(sections)} sections",
                          "one weight per section")
     jiggle = parse_jiggle(f) if f.has("jiggle") else None
+    contact = parse_contact(f) if f.has("contact") else ContactSpec()
     f.done()
     return MuscleSpec(name, color, tuple(axis), tuple(sections), strength, tension, volume,
-                      tendons, twist, resolution, weights, file, group, path, jiggle)
+                      tendons, twist, resolution, weights, file, group, path, jiggle, contact)
+
+
+def parse_contact(f: Fields) -> ContactSpec:
+    """A muscle's ``contact: {group: NAME, ignore: [NAMES], yield: LAYERS}`` (docs/FORMATS.md)."""
+    cf = Fields(f.mapping("contact"), f.vmark("contact"), "contact", keys=CONTACT_KEYS)
+    group = cf.name("group", default="")
+    seq = cf.seq("ignore", default=[])
+    ignore = tuple(check_name(v, m, "ignore") for v, m in zip(seq, item_marks(seq, cf.vmark("ignore"))))
+    yld = cf.number("yield", default=None, lo=-100.0, hi=100.0)
+    cf.done()
+    return ContactSpec(group, ignore, None if yld is None else float(yld))
 
 
 #: Bounds of ``jiggle:`` (docs/FORMATS.md): an exact step is stable at any frequency; these

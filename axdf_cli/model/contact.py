@@ -1,0 +1,1069 @@
+"""Contact: muscles push each other out of the way, bones push muscles (issue 18, parts 3-4).
+
+Pure, batch-first functions over all muscles of one frame (the pipeline's FRAME-scope stage
+calls :func:`resolve_frame` for every frame of a chunk). Nothing is carried from one frame to
+the next: the result is a function of the frame's no-contact meshes and bone poses only, so
+``--jobs``, ``--resume`` and any ``--frames`` subset give the same bytes.
+
+Geometry (every muscle is a tessellated tube: a (U, A) grid whose first and last rows
+collapse to the poles):
+
+- **Bones** collide through a signed distance field per bone, sampled once per run on a
+  bone-local grid (:func:`bone_field`; libigl's ``signed_distance`` with the fast winding
+  number sign of Barill et al. 2018, so a bone mesh that is not closed still has an inside:
+  the points whose generalized winding number (Jacobson et al. 2013) exceeds 1/2),
+  trilinear between grid points. Bones never give way.
+- **Muscles** are queried in axis space: a point x is compared with muscle j at the closest
+  point c of j's centre polyline (the rings' centroids between the two poles): its radial
+  distance rho from c, perpendicular to the polyline, against j's surface radius R in that
+  direction (the ray from c cut with the two neighbouring rings, projected into the plane
+  perpendicular to the polyline, linear between them). Inside when rho < R.
+
+Response (tol.CONTACT_ITERATIONS Jacobi passes, every muscle against every other's previous pass):
+
+1. at 8 evenly spaced points of every second ring (:func:`_ring_modes`), the push the point asks
+   for (:func:`_point_push`): out of a neighbour j it lies within the margin of, along the line
+   from j's axis to the centre of its own ring, by its share of the distance to leave j's
+   section (a circle of radius R + margin; :func:`pair_shares`: a deeper muscle gives way
+   more), faded out for points near j's axis (two muscles on one line of action have no side
+   to push to: pushing them piles them up); out of a bone by (margin - d) times the field's gradient (not normalized: it
+   shortens deep inside where the field's sides meet and its direction turns);
+2. per ring, the pushes' low-pass around the ring: the ring's shift, tilt of one side and
+   flattening (the first two Fourier modes, the least-squares fit of those modes to the
+   evenly spaced pushes), linear between sampled rings and smoothed along the muscle, the
+   poles (attachments) fixed; each point moves by its ring's modes, soft-capped at
+   tol.CONTACT_MAX_STEP a pass. So the surface stays as smooth as the muscle (no point is
+   moved alone: no dents, no wrapping under a bone), with 5 x 3 unknowns per ring;
+3. the volume is solved exactly again: every point moves along its no-contact radial offset
+   by sigma, the root of the mesh volume's cubic V(sigma) = V (the no-contact volume), as in
+   :func:`axdf_cli.model.kernels.surface_stage`.
+
+Every step is a continuous function of the frame's meshes (soft fades and caps, no switching,
+a fixed number of passes), so surfaces do not pop from frame to frame. A muscle nothing
+touches is returned unchanged, bit for bit. Keeping the volume exactly, the overlap a pass
+clears is partly pressed into the next layer; on the walk three passes keep the deepest
+penetration nearest its no-contact value (README, Contact).
+"""
+from __future__ import annotations
+
+import functools
+import hashlib
+import io
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from axdf_cli import tolerances as tol
+from axdf_cli.errors import AxdfError
+from axdf_cli.fileio import atomic
+from axdf_cli.model import kernels
+from axdf_cli.model.muscle import ContactSpec
+
+try:
+    from numba import njit
+except ImportError as e:  # a dependency: make setup installs it
+    raise ImportError(f"axdf needs numba ({e}); run `make setup` or `pip install numba`") from None
+
+
+# ----------------------------------------------------------------------------- settings
+
+
+def pair_shares(yields: np.ndarray) -> np.ndarray:
+    """Share of an overlap that muscle i takes against j: (M, M), share[i, j] + share[j, i] = 1.
+
+    0.5 for equal yields, growing by tol.CONTACT_SHARE_PER_LAYER per layer of difference up
+    to tol.CONTACT_SHARE_MAX (a deep muscle gives way to a superficial one)."""
+    d = yields[:, None] - yields[None, :]
+    return np.clip(0.5 + tol.CONTACT_SHARE_PER_LAYER * d, 1.0 - tol.CONTACT_SHARE_MAX, tol.CONTACT_SHARE_MAX)
+
+
+def pair_mask(names: list[str], specs: list[ContactSpec]) -> np.ndarray:
+    """Which pairs collide: (M, M) bool, symmetric, False on the diagonal, within a group and
+    where either muscle ignores the other."""
+    m = len(names)
+    ok = ~np.eye(m, dtype=bool)
+    for i, s in enumerate(specs):
+        for j in range(m):
+            if i != j and ((s.group and s.group == specs[j].group) or names[j] in s.ignore
+                           or names[i] in specs[j].ignore):
+                ok[i, j] = ok[j, i] = False
+    return ok
+
+
+# ----------------------------------------------------------------------------- bones
+
+
+@dataclass(frozen=True)
+class BoneField:
+    """A bone's signed distance field on a regular bone-local grid (negative inside).
+
+    origin (3,) the grid's first point, h the spacing (m), values (nx, ny, nz) float64."""
+
+    bone: int
+    origin: np.ndarray
+    h: float
+    values: np.ndarray
+
+
+def bone_field(bone: int, vertices: np.ndarray, faces: np.ndarray, clip: np.ndarray | None = None,
+               h: float = tol.CONTACT_SDF_STEP, pad: float = tol.CONTACT_SDF_PAD) -> BoneField | None:
+    """The signed distance field of a bone mesh (bone-local vertices (V, 3), faces (T, 3)) on a
+    grid of spacing ``h`` over its bounds grown by ``pad``, cut to the box ``clip`` (2, 3)
+    where muscles can reach (None where that leaves nothing). Computed once per mesh, box and
+    process (cached by their bytes)."""
+    v = np.ascontiguousarray(vertices, dtype=np.float64)
+    f = np.ascontiguousarray(faces, dtype=np.int64)
+    lo = v.min(axis=0) - pad
+    hi = v.max(axis=0) + pad
+    if clip is not None:
+        # the box in whole tol.CONTACT_CLIP_STEP: small edits to the muscles keep the same field (cache)
+        q = tol.CONTACT_CLIP_STEP
+        lo = np.maximum(lo, np.floor(clip[0] / q) * q)
+        hi = np.minimum(hi, np.ceil(clip[1] / q) * q)
+        if np.any(hi <= lo):
+            return None
+    lo = np.floor(lo / h) * h  # on a grid fixed in the bone: the same field for any box
+    box = np.concatenate([lo, hi])
+    key = hashlib.sha256(v.tobytes() + f.tobytes() + np.array([h, *box]).tobytes()).hexdigest()
+    origin, values = _field_cached(key, v.tobytes(), f.tobytes(), v.shape[0], f.shape[0], h, box.tobytes())
+    return BoneField(bone, origin, h, values)
+
+
+CACHE_VERSION = 1  # part of the cache key: bump when the field's computation changes
+
+
+def cache_dir() -> Path:
+    """Where computed bone fields are kept between runs: $XDG_CACHE_HOME/axdf/sdf (default
+    ~/.cache/axdf/sdf). Only ever a speed-up: a missing or unwritable cache computes again."""
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "axdf" / "sdf"
+
+
+@functools.lru_cache(maxsize=64)
+def _field_cached(key, vb, fb, nv, nt, h, boxb):
+    path = cache_dir() / f"{key}-v{CACHE_VERSION}.npz"
+    try:
+        with np.load(path) as z:
+            return z["origin"], np.ascontiguousarray(z["values"])
+    except (OSError, KeyError, ValueError):
+        pass
+    origin, values = _compute_field(vb, fb, nv, nt, h, boxb)
+    try:
+        buf = io.BytesIO()
+        np.savez(buf, origin=origin, values=values)
+        atomic.ensure_dir(path.parent)
+        atomic.write_bytes(path, buf.getvalue())
+    except (OSError, AxdfError):
+        pass  # the cache is only a speed-up
+    return origin, values
+
+
+def _compute_field(vb, fb, nv, nt, h, boxb):
+    try:
+        import igl
+    except ImportError as e:
+        from axdf_cli.errors import EnvironmentProblem
+
+        raise EnvironmentProblem(f"contact needs libigl for the bones' distance fields ({e})",
+                                 "pip install libigl (make setup installs it), or run with --no-contact") from None
+    v = np.frombuffer(vb, dtype=np.float64).reshape(nv, 3)
+    f = np.frombuffer(fb, dtype=np.int64).reshape(nt, 3)
+    box = np.frombuffer(boxb, dtype=np.float64)
+    lo = box[:3]
+    n = np.ceil((box[3:] - lo) / h).astype(np.int64) + 1
+    axes = [lo[i] + h * np.arange(n[i]) for i in range(3)]
+    pts = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    sd = igl.signed_distance(pts, v, f, sign_type=igl.SIGNED_DISTANCE_TYPE_FAST_WINDING_NUMBER)[0]
+    return lo, np.ascontiguousarray(np.asarray(sd, dtype=np.float64).reshape(tuple(n)))
+
+
+@dataclass(frozen=True)
+class BoneFields:
+    """Every bone field of a skeleton, packed for the compiled kernels."""
+
+    bones: np.ndarray  # (K,) bone index of each field
+    origin: np.ndarray  # (K, 3)
+    h: np.ndarray  # (K,)
+    dims: np.ndarray  # (K, 3) int64
+    offset: np.ndarray  # (K + 1,) start of each field in ``values``
+    values: np.ndarray  # (sum of grid sizes,) float64
+
+    @staticmethod
+    def pack(fields: list[BoneField]) -> "BoneFields":
+        dims = np.array([f.values.shape for f in fields], dtype=np.int64).reshape(-1, 3)
+        sizes = np.prod(dims, axis=1) if len(fields) else np.zeros(0, np.int64)
+        return BoneFields(np.array([f.bone for f in fields], dtype=np.int64),
+                          np.array([f.origin for f in fields], dtype=np.float64).reshape(-1, 3),
+                          np.array([f.h for f in fields], dtype=np.float64), dims,
+                          np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64),
+                          np.concatenate([f.values.ravel() for f in fields]) if fields else np.zeros(0))
+
+
+@njit(cache=True)
+def _field_at(values, off, dims, origin, h, x0, x1, x2):
+    """Trilinear signed distance at a bone-local point; (distance, inside the grid)."""
+    nx, ny, nz = dims[0], dims[1], dims[2]
+    fx = (x0 - origin[0]) / h
+    fy = (x1 - origin[1]) / h
+    fz = (x2 - origin[2]) / h
+    if not (fx >= 0.0 and fy >= 0.0 and fz >= 0.0 and fx <= nx - 1 and fy <= ny - 1 and fz <= nz - 1):
+        return 1e30, False
+    ix = min(int(fx), nx - 2)
+    iy = min(int(fy), ny - 2)
+    iz = min(int(fz), nz - 2)
+    tx = fx - ix
+    ty = fy - iy
+    tz = fz - iz
+    b = off + (ix * ny + iy) * nz + iz
+    sy = nz
+    sx = ny * nz
+    c00 = values[b] * (1 - tz) + values[b + 1] * tz
+    c01 = values[b + sy] * (1 - tz) + values[b + sy + 1] * tz
+    c10 = values[b + sx] * (1 - tz) + values[b + sx + 1] * tz
+    c11 = values[b + sx + sy] * (1 - tz) + values[b + sx + sy + 1] * tz
+    c0 = c00 * (1 - ty) + c01 * ty
+    c1 = c10 * (1 - ty) + c11 * ty
+    return c0 * (1 - tx) + c1 * tx, True
+
+
+@njit(cache=True)
+def _bone_query(x, inv, fb, fo, fh, fd, foff, fv, fsel, f0, f1, grad_below, g_out):
+    """Smallest signed distance of world point x over the bone fields fsel[f0:f1] (inv: (B, 4,
+    4) world to bone-local) and, where it is below ``grad_below``, in g_out[:3] its world
+    gradient by central differences of the trilinear field over one grid step (continuous,
+    unlike the trilinear's own gradient); 1e30 where no field covers x."""
+    best = 1e30
+    kb = -1
+    l0 = 0.0
+    l1 = 0.0
+    l2 = 0.0
+    for kk in range(f0, f1):
+        k = fsel[kk]
+        m = inv[fb[k]]
+        y0 = m[0, 0] * x[0] + m[0, 1] * x[1] + m[0, 2] * x[2] + m[0, 3]
+        y1 = m[1, 0] * x[0] + m[1, 1] * x[1] + m[1, 2] * x[2] + m[1, 3]
+        y2 = m[2, 0] * x[0] + m[2, 1] * x[1] + m[2, 2] * x[2] + m[2, 3]
+        d, ok = _field_at(fv, foff[k], fd[k], fo[k], fh[k], y0, y1, y2)
+        if ok and d < best:
+            best = d
+            kb = k
+            l0 = y0
+            l1 = y1
+            l2 = y2
+    if kb < 0 or not best < grad_below:
+        return best
+    h = fh[kb]
+    for c in range(3):
+        e0 = h if c == 0 else 0.0
+        e1 = h if c == 1 else 0.0
+        e2 = h if c == 2 else 0.0
+        dp, okp = _field_at(fv, foff[kb], fd[kb], fo[kb], h, l0 + e0, l1 + e1, l2 + e2)
+        dm, okm = _field_at(fv, foff[kb], fd[kb], fo[kb], h, l0 - e0, l1 - e1, l2 - e2)
+        if not okp:
+            dp = best
+        if not okm:
+            dm = best
+        g_out[3 + c] = (dp - dm) / (2.0 * h)
+    m = inv[fb[kb]]
+    # world gradient = R g, R = the transpose of inv's rotation
+    for c in range(3):
+        g_out[c] = m[0, c] * g_out[3] + m[1, c] * g_out[4] + m[2, c] * g_out[5]
+    return best
+
+
+# ----------------------------------------------------------------------------- muscles
+
+
+@njit(cache=True)
+def _centres(grid, off, nu, na, cen, coff):
+    """Ring centroids of every muscle (pole rows: the pole) in cen[:, :3], in cen[:, 3] each
+    ring's largest distance from its centroid, and in cen[:, 4:8] of every SEG_GROUP-th ring
+    the bounding sphere (centre, radius) of the centres from it to SEG_GROUP rings on."""
+    for m in range(nu.shape[0]):
+        U = nu[m]
+        A = na[m]
+        for u in range(U):
+            for c in range(3):
+                s = 0.0
+                for a in range(A):
+                    s += grid[off[m] + u * A + a, c]
+                cen[coff[m] + u, c] = s / A
+            r = 0.0
+            for a in range(A):
+                k = off[m] + u * A + a
+                q = ((grid[k, 0] - cen[coff[m] + u, 0]) ** 2 + (grid[k, 1] - cen[coff[m] + u, 1]) ** 2
+                     + (grid[k, 2] - cen[coff[m] + u, 2]) ** 2)
+                if q > r:
+                    r = q
+            cen[coff[m] + u, 3] = np.sqrt(r)
+        # bounding spheres of the centre segments in groups of SEG_GROUP (cen[first, 4:8])
+        for g in range((U - 2) // SEG_GROUP + 1):
+            r0 = coff[m] + g * SEG_GROUP
+            r1 = coff[m] + min(g * SEG_GROUP + SEG_GROUP, U - 1)
+            for c in range(3):
+                cen[r0, 4 + c] = 0.5 * (cen[r0, c] + cen[r1, c])
+            r = 0.0
+            for k in range(r0, r1 + 1):
+                q = (cen[k, 0] - cen[r0, 4]) ** 2 + (cen[k, 1] - cen[r0, 5]) ** 2 + (cen[k, 2] - cen[r0, 6]) ** 2
+                if q > r:
+                    r = q
+            cen[r0, 7] = np.sqrt(r)
+
+
+@njit(cache=True)
+def _ring_radius(grid, base, A, cx0, cx1, cx2, a0, a1, a2, b0, b1, b2):
+    """Radius of a ring (A points from ``base``) along (a0, a1, a2) from the centre (cx0, cx1,
+    cx2), in the plane of that direction and (b0, b1, b2): the ray cut with the ring's polygon
+    projected into that plane (0 when it misses)."""
+    best = 0.0
+    px0 = 0.0
+    py0 = 0.0
+    for k in range(A + 1):
+        i = base + (k % A)
+        dx = grid[i, 0] - cx0
+        dy = grid[i, 1] - cx1
+        dz = grid[i, 2] - cx2
+        px = dx * a0 + dy * a1 + dz * a2
+        py = dx * b0 + dy * b1 + dz * b2
+        if k > 0 and ((py0 <= 0.0 < py) or (py <= 0.0 < py0)):
+            xh = px0 + (px - px0) * py0 / (py0 - py)
+            if xh > best:
+                best = xh
+        px0 = px
+        py0 = py
+    return best
+
+
+@njit(cache=True)
+def _centre_tangent(cen, coff_j, U, u):
+    """Unit tangent of a muscle's centre polyline at centre u (central difference; one-sided at
+    the poles)."""
+    a = coff_j + max(u - 1, 0)
+    b = coff_j + min(u + 1, U - 1)
+    d0 = cen[b, 0] - cen[a, 0]
+    d1 = cen[b, 1] - cen[a, 1]
+    d2 = cen[b, 2] - cen[a, 2]
+    dl = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    if dl == 0.0:
+        return 0.0, 0.0, 0.0
+    return d0 / dl, d1 / dl, d2 / dl
+
+
+#: Centre segments per bounding sphere in :func:`_muscle_query`'s search.
+SEG_GROUP = 8
+#: The trilinear field's largest slope (:func:`_measure`).
+SQRT3 = float(np.sqrt(3.0))
+
+
+@njit(cache=True)
+def _scan_segments(x, cen, coff_j, U, u0, u1, best, bu, bl):
+    """The nearest of centre segments u0..u1-1 to x if nearer than ``best`` (squared distance):
+    (best, segment, parameter). Points beyond the first or last segment's end are skipped."""
+    for u in range(u0, u1):
+        a0 = cen[coff_j + u, 0]
+        a1 = cen[coff_j + u, 1]
+        a2 = cen[coff_j + u, 2]
+        d0 = cen[coff_j + u + 1, 0] - a0
+        d1 = cen[coff_j + u + 1, 1] - a1
+        d2 = cen[coff_j + u + 1, 2] - a2
+        ll = d0 * d0 + d1 * d1 + d2 * d2
+        lam = 0.0
+        if ll > 0.0:
+            lam = ((x[0] - a0) * d0 + (x[1] - a1) * d1 + (x[2] - a2) * d2) / ll
+        if (u == 0 and lam < 0.0) or (u == U - 2 and lam > 1.0):
+            continue  # beyond an end: not inside
+        lam = min(max(lam, 0.0), 1.0)
+        e0 = x[0] - (a0 + lam * d0)
+        e1 = x[1] - (a1 + lam * d1)
+        e2 = x[2] - (a2 + lam * d2)
+        q = e0 * e0 + e1 * e1 + e2 * e2
+        if q < best:
+            best = q
+            bu = u
+            bl = lam
+    return best, bu, bl
+
+
+@njit(cache=True)
+def _muscle_query(x, grid, off_j, U, A, cen, coff_j, reach, out):
+    """Axis-space query of point x against muscle j. out = [rho, R, cx, cy, cz, rx, ry, rz]:
+    radial distance, surface radius, axis point, unit radial direction. Returns False when x
+    lies beyond j's ends, or when rho exceeds the two rings' largest radius (cen[:, 3]) plus
+    ``reach`` (then rho > R + reach: the rings' radii are not read).
+    The nearest centre segment: the groups of :data:`SEG_GROUP` segments are scanned nearest
+    bounding sphere first (cen[:, 4:8]), the others only where their sphere may hold a nearer
+    point (the same segment as a scan of all, in fewer steps)."""
+    ng = (U - 2) // SEG_GROUP + 1
+    gb = 0
+    lb_best = 1e300
+    for g in range(ng):
+        r = coff_j + g * SEG_GROUP
+        e = np.sqrt((x[0] - cen[r, 4]) ** 2 + (x[1] - cen[r, 5]) ** 2 + (x[2] - cen[r, 6]) ** 2) - cen[r, 7]
+        if e < lb_best:
+            lb_best = e
+            gb = g
+    best, bu, bl = _scan_segments(x, cen, coff_j, U, gb * SEG_GROUP, min(gb * SEG_GROUP + SEG_GROUP, U - 1),
+                                  1e300, -1, 0.0)
+    for g in range(ng):
+        if g == gb:
+            continue
+        r = coff_j + g * SEG_GROUP
+        e = np.sqrt((x[0] - cen[r, 4]) ** 2 + (x[1] - cen[r, 5]) ** 2 + (x[2] - cen[r, 6]) ** 2) - cen[r, 7]
+        if e > 0.0 and e * e >= best:
+            continue
+        best, bu, bl = _scan_segments(x, cen, coff_j, U, g * SEG_GROUP, min(g * SEG_GROUP + SEG_GROUP, U - 1),
+                                      best, bu, bl)
+    if bu < 0:
+        return False
+    p0 = coff_j + bu
+    p1 = p0 + 1
+    cx0 = (1.0 - bl) * cen[p0, 0] + bl * cen[p1, 0]
+    cx1 = (1.0 - bl) * cen[p0, 1] + bl * cen[p1, 1]
+    cx2 = (1.0 - bl) * cen[p0, 2] + bl * cen[p1, 2]
+    # the axis direction blends the centres' tangents along the segment: the same at a shared
+    # centre from either segment, so the query is continuous where the nearest segment changes
+    ta0, ta1, ta2 = _centre_tangent(cen, coff_j, U, bu)
+    tb0, tb1, tb2 = _centre_tangent(cen, coff_j, U, bu + 1)
+    t0 = (1.0 - bl) * ta0 + bl * tb0
+    t1 = (1.0 - bl) * ta1 + bl * tb1
+    t2 = (1.0 - bl) * ta2 + bl * tb2
+    tl = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+    if tl == 0.0:
+        return False
+    t0 /= tl
+    t1 /= tl
+    t2 /= tl
+    dt = (x[0] - cx0) * t0 + (x[1] - cx1) * t1 + (x[2] - cx2) * t2
+    r0 = x[0] - cx0 - dt * t0
+    r1 = x[1] - cx1 - dt * t1
+    r2 = x[2] - cx2 - dt * t2
+    rho = np.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+    if rho > max(cen[p0, 3], cen[p1, 3]) + reach:
+        return False  # R <= the rings' largest radius (projected across the axis, no longer)
+    if rho < 1e-12:
+        # on the axis: any perpendicular
+        r0 = t1 - t2
+        r1 = t2 - t0
+        r2 = t0 - t1
+        rl = np.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+        if rl < 1e-12:
+            r0 = -t1
+            r1 = t0
+            r2 = 0.0
+            rl = np.sqrt(r0 * r0 + r1 * r1)
+    else:
+        rl = rho
+    r0 /= rl
+    r1 /= rl
+    r2 /= rl
+    b0 = t1 * r2 - t2 * r1
+    b1 = t2 * r0 - t0 * r2
+    b2 = t0 * r1 - t1 * r0
+    ra = _ring_radius(grid, off_j + bu * A, A, cen[p0, 0], cen[p0, 1], cen[p0, 2], r0, r1, r2, b0, b1, b2)
+    rb = _ring_radius(grid, off_j + (bu + 1) * A, A, cen[p1, 0], cen[p1, 1], cen[p1, 2], r0, r1, r2, b0, b1, b2)
+    out[0] = rho
+    out[1] = (1.0 - bl) * ra + bl * rb
+    out[2] = cx0
+    out[3] = cx1
+    out[4] = cx2
+    out[5] = r0
+    out[6] = r1
+    out[7] = r2
+    return True
+
+
+@njit(cache=True)
+def _boxes(grid, off, box):
+    """Every muscle's bounding box (M, 6): lo, hi."""
+    for m in range(off.shape[0] - 1):
+        for c in range(3):
+            box[m, c] = 1e300
+            box[m, 3 + c] = -1e300
+        for k in range(off[m], off[m + 1]):
+            for c in range(3):
+                v = grid[k, c]
+                if v < box[m, c]:
+                    box[m, c] = v
+                if v > box[m, 3 + c]:
+                    box[m, 3 + c] = v
+
+
+@njit(cache=True)
+def _may_meet(x, j, box, margin):
+    """Whether point x lies in muscle j's box grown by ``margin`` (before :func:`_muscle_query`)."""
+    return not (x[0] < box[j, 0] - margin or x[1] < box[j, 1] - margin or x[2] < box[j, 2] - margin
+                or x[0] > box[j, 3] + margin or x[1] > box[j, 4] + margin or x[2] > box[j, 5] + margin)
+
+
+@njit(cache=True)
+def _smoothstep(x):
+    """0 below 0, 1 above 1, 3x^2 - 2x^3 between: a continuous switch with continuous slope."""
+    if x <= 0.0:
+        return 0.0
+    if x >= 1.0:
+        return 1.0
+    return x * x * (3.0 - 2.0 * x)
+
+
+#: The modes of a ring's displacement around its angle theta (module doc, step 2): the
+#: section's shift (1), its shift and tilt of one side (cos, sin theta), its flattening (cos,
+#: sin 2 theta).
+NMODES = 5
+
+
+@njit(cache=True)
+def _modes(theta, b):
+    b[0] = 1.0
+    b[1] = np.cos(theta)
+    b[2] = np.sin(theta)
+    b[3] = np.cos(2.0 * theta)
+    b[4] = np.sin(2.0 * theta)
+
+
+@njit(cache=True)
+def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, actm, nmm, share, inv, fb, fo, fh, fd, foff, fv,
+                actb, nbb, margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, q, g, p):
+    """The push p[:3] that point x of muscle i (its ring's centre ci) asks for, against the bone
+    fields actb[:nbb] and the neighbours actm[:nmm] (:func:`_ring_lists`): out of every bone
+    field by (margin_b - d) along the field's gradient where d < margin_b, and out of
+    every neighbour j it lies within the margin of, by i's share of the distance to leave j's
+    section (a circle of j's radius + margin about j's axis point) along the line from j's axis
+    to ci (plus a little of x's radial direction from j's axis), faded out smoothly for points
+    nearer j's axis than deep1 of j's radius (none below deep0: two muscles on one line of
+    action have no side to push to, and pushing them anyway piles them up); p[3]: the signed
+    distance to the nearest bone (1e30: none near). Returns how many neighbours pushed."""
+    p[0] = 0.0
+    p[1] = 0.0
+    p[2] = 0.0
+    p[3] = 1e30
+    if nbb > 0:
+        d = _bone_query(x, inv, fb, fo, fh, fd, foff, fv, actb, 0, nbb, margin_b, g)
+        p[3] = d
+        if d < margin_b:
+            # along the gradient as it is, not normalized: length 1 near the surface, shorter
+            # where the field's sides meet deep inside, so the push fades where its direction
+            # turns (normalized, it flipped there between frames: pops)
+            for c in range(3):
+                p[c] += (margin_b - d) * g[c]
+    nm = 0
+    for jj in range(nmm):
+        j = actm[jj]
+        if not _may_meet(x, j, box, margin_m):
+            continue
+        if not _muscle_query(x, grid, off[j], nu[j], na[j], cen, coff[j], margin_m, q):
+            continue
+        rho = q[0]
+        rr = q[1] + margin_m
+        if rho >= rr or q[1] <= 0.0:
+            continue
+        fade = _smoothstep((rho / q[1] - deep0) / (deep1 - deep0))
+        if fade <= 0.0:
+            continue
+        bl = radial_blend * q[1]
+        e0 = ci[0] - q[2]
+        e1 = ci[1] - q[3]
+        e2 = ci[2] - q[4]
+        # the two axes' separation against j's radius: where they (nearly) meet, the direction
+        # from one to the other turns fast as they move, so the push fades out there too
+        sep = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2) / q[1]
+        fade *= _smoothstep((sep - sep0) / (sep1 - sep0))
+        if fade <= 0.0:
+            continue
+        e0 += bl * q[5]
+        e1 += bl * q[6]
+        e2 += bl * q[7]
+        el = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+        if el < 1e-12:
+            e0 = q[5]
+            e1 = q[6]
+            e2 = q[7]
+        else:
+            e0 /= el
+            e1 /= el
+            e2 /= el
+        # leave the circle of radius rr about the axis point along e: x + s e
+        b = rho * (q[5] * e0 + q[6] * e1 + q[7] * e2)
+        s = -b + np.sqrt(max(b * b + rr * rr - rho * rho, 0.0))
+        w = fade * share[i, j] * s
+        p[0] += w * e0
+        p[1] += w * e1
+        p[2] += w * e2
+        nm += 1
+    return nm
+
+
+@njit(cache=True)
+def _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb, fo, fh, fd, foff, fv, fl_off, fl,
+                margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, cstep, rstep, coef, touched, buried):
+    """One Jacobi pass (module doc, steps 1-2), every muscle from the same state: the pushes at
+    ``ns`` = A / ``cstep`` evenly spaced points of every ``rstep``-th ring (and the last inner
+    ring), and per such ring their low-pass around the ring, the least-squares fit of the
+    :data:`NMODES` modes, which for evenly spaced samples are the discrete Fourier coefficients
+    (the modes are orthogonal there): C_0 = mean p, C_k = (2 / ns) sum p b_k. coef (rings,
+    NMODES, 3); rings between sampled ones: linear between theirs; poles: 0. touched (M,):
+    set where a sample was pushed; buried (M,): the share of samples inside a bone."""
+    q = np.empty(8)
+    g = np.empty(6)
+    p = np.empty(4)
+    b = np.empty(NMODES)
+    actb = np.empty(max(fb.shape[0], 1), np.int64)
+    actm = np.empty(max(nu.shape[0], 1), np.int64)
+    for i in range(nu.shape[0]):
+        U = nu[i]
+        A = na[i]
+        ns = A // cstep
+        last = -1
+        nb = 0
+        nsamp = 0
+        u = 1
+        while u <= U - 2:
+            ci = cen[coff[i] + u]
+            r0 = coff[i] + u
+            nbb, nmm = _ring_lists(ci, i, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, nbr_off, nbr, box, margin_b,
+                                   margin_m, actb, actm)
+            for r in range(NMODES):
+                for c in range(3):
+                    coef[r0, r, c] = 0.0
+            for si in range(ns):
+                a = si * A // ns
+                k = off[i] + u * A + a
+                _point_push(grid[k], ci, i, grid, off, nu, na, cen, coff, box, actm, nmm, share, inv, fb, fo, fh,
+                            fd, foff, fv, actb, nbb, margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend,
+                            q, g, p)
+                nsamp += 1
+                if p[3] < 0.0:
+                    nb += 1
+                if p[0] != 0.0 or p[1] != 0.0 or p[2] != 0.0:
+                    touched[i] = True
+                _modes(2.0 * np.pi * a / A, b)
+                for r in range(NMODES):
+                    w = (1.0 if r == 0 else 2.0) / ns
+                    for c in range(3):
+                        coef[r0, r, c] += w * b[r] * p[c]
+            # rings between the previous sampled ring and this one: linear
+            if last > 0:
+                for v in range(last + 1, u):
+                    t = (v - last) / (u - last)
+                    for r in range(NMODES):
+                        for c in range(3):
+                            coef[coff[i] + v, r, c] = (1.0 - t) * coef[coff[i] + last, r, c] + t * coef[r0, r, c]
+            last = u
+            if u == U - 2:
+                break
+            u = min(u + rstep, U - 2)
+        for v in (0, U - 1):
+            for r in range(NMODES):
+                for c in range(3):
+                    coef[coff[i] + v, r, c] = 0.0
+        buried[i] = nb / max(nsamp, 1)
+
+
+@njit(cache=True)
+def _smooth_rings(coef, nu, coff, passes, tmp):
+    """``passes`` rounds of [1 2 1]/4 smoothing of the modes along each muscle (the poles stay
+    at 0: the attachments do not move)."""
+    for i in range(nu.shape[0]):
+        U = nu[i]
+        o = coff[i]
+        for _ in range(passes):
+            for u in range(1, U - 1):
+                for r in range(NMODES):
+                    for c in range(3):
+                        tmp[u, r, c] = 0.25 * coef[o + u - 1, r, c] + 0.5 * coef[o + u, r, c] + 0.25 * coef[o + u + 1, r, c]
+            for u in range(1, U - 1):
+                for r in range(NMODES):
+                    for c in range(3):
+                        coef[o + u, r, c] = tmp[u, r, c]
+
+
+@njit(cache=True)
+def _apply_and_solve(grid, rad, coef, off, nu, na, coff, active, target, max_step, ga, sigma):
+    """Move every ring of an active muscle by its modes (the displacement's length soft-capped
+    at max_step: max_step tanh(|D| / max_step)), then solve the volume exactly again (module
+    doc, step 3): grid <- grid + D + sigma rad with V = target (rad: the no-contact shape's
+    offsets from its ring centres, so the section grows about its centre)."""
+    b = np.empty(NMODES)
+    for m in range(nu.shape[0]):
+        if not active[m]:
+            continue
+        U = nu[m]
+        A = na[m]
+        o = off[m]
+        for a in range(A):
+            _modes(2.0 * np.pi * a / A, b)
+            for u in range(U):
+                k = o + u * A + a
+                d0 = 0.0
+                d1 = 0.0
+                d2 = 0.0
+                for r in range(NMODES):
+                    d0 += b[r] * coef[coff[m] + u, r, 0]
+                    d1 += b[r] * coef[coff[m] + u, r, 1]
+                    d2 += b[r] * coef[coff[m] + u, r, 2]
+                dl = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+                f = 1.0 if dl < 1e-12 else max_step * np.tanh(dl / max_step) / dl
+                grid[k, 0] += f * d0
+                grid[k, 1] += f * d1
+                grid[k, 2] += f * d2
+                for c in range(3):
+                    ga[u, a, c] = grid[k, c]
+        c0, c1, c2, c3 = kernels._volume_cubic(ga[:U, :A], rad[o:o + U * A].reshape(U, A, 3))
+        s = _solve_offset(c0, c1, c2, c3, target[m])
+        sigma[m] += s
+        for k in range(o, o + U * A):
+            for c in range(3):
+                grid[k, c] += s * rad[k, c]
+
+
+@njit(cache=True)
+def _solve_offset(c0, c1, c2, c3, v0):
+    """The root sigma nearest 0 of the cubic c0 + c1 s + c2 s^2 + c3 s^3 = v0 (the volume along
+    the free points' radial offsets, increasing near 0): Newton from 0, safeguarded by
+    bisection on a bracket grown from 0. 0 when there is none (the volume is then kept as is)."""
+    f0 = c0 - v0
+    if f0 == 0.0:
+        return 0.0
+    step = 0.05 if f0 < 0.0 else -0.05
+    lo = 0.0
+    hi = step
+    fhi = ((c3 * hi + c2) * hi + c1) * hi + c0 - v0
+    n = 0
+    while fhi * f0 > 0.0 and n < 60:
+        lo = hi
+        hi *= 2.0
+        fhi = ((c3 * hi + c2) * hi + c1) * hi + c0 - v0
+        n += 1
+    if fhi * f0 > 0.0:
+        return 0.0
+    a = min(lo, hi)
+    b = max(lo, hi)
+    fa = ((c3 * a + c2) * a + c1) * a + c0 - v0
+    s = 0.5 * (a + b)
+    for _ in range(100):
+        fs = ((c3 * s + c2) * s + c1) * s + c0 - v0
+        if abs(fs) <= tol.VOLUME_SOLVE_RTOL * abs(v0):
+            break
+        if (fs < 0.0) == (fa < 0.0):
+            a = s
+            fa = fs
+        else:
+            b = s
+        df = (3.0 * c3 * s + 2.0 * c2) * s + c1
+        sn = s - fs / df if df != 0.0 else 0.5 * (a + b)
+        s = sn if a < sn < b else 0.5 * (a + b)
+    return s
+
+
+@njit(cache=True)
+def _ring_lists(ci, i, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, nbr_off, nbr, box, reach_b, reach_m, actb, actm):
+    """What a ring of muscle i (centre ci[:3], every point within ri = ci[3] of it) may meet:
+    into actb the bone fields of fl[fl_off[i]:fl_off[i + 1]] but those whose grid it misses or
+    whose value at the centre exceeds sqrt(3) ri + reach_b (the trilinear field changes by at
+    most sqrt(3) per metre: its grid values are exact distances, so each axis' difference
+    quotient is at most 1), into actm the neighbours nbr[nbr_off[i]:nbr_off[i + 1]] whose box,
+    grown by reach_m, its sphere meets. Returns (how many fields, how many neighbours): testing
+    only those gives the same answers as testing all."""
+    ri = ci[3]
+    nb = 0
+    for kk in range(fl_off[i], fl_off[i + 1]):
+        k = fl[kk]
+        m = inv[fb[k]]
+        y0 = m[0, 0] * ci[0] + m[0, 1] * ci[1] + m[0, 2] * ci[2] + m[0, 3]
+        y1 = m[1, 0] * ci[0] + m[1, 1] * ci[1] + m[1, 2] * ci[2] + m[1, 3]
+        y2 = m[2, 0] * ci[0] + m[2, 1] * ci[1] + m[2, 2] * ci[2] + m[2, 3]
+        d, ok = _field_at(fv, foff[k], fd[k], fo[k], fh[k], y0, y1, y2)
+        if ok:
+            if d > SQRT3 * ri + reach_b:
+                continue
+        else:
+            # outside the grid: skip when the ring's sphere misses the grid's box (no point
+            # outside a field's grid is inside or near its bone)
+            e = 0.0
+            yy = (y0, y1, y2)
+            for c in range(3):
+                lo = fo[k, c]
+                hi = fo[k, c] + fh[k] * (fd[k, c] - 1)
+                if yy[c] < lo:
+                    e += (lo - yy[c]) ** 2
+                elif yy[c] > hi:
+                    e += (yy[c] - hi) ** 2
+            if e > ri * ri:
+                continue
+        actb[nb] = k
+        nb += 1
+    nmm = 0
+    for jj in range(nbr_off[i], nbr_off[i + 1]):
+        j = nbr[jj]
+        if _may_meet(ci, j, box, ri + reach_m):
+            actm[nmm] = j
+            nmm += 1
+    return nb, nmm
+
+
+@njit(cache=True)
+def _measure(grid, off, nu, na, cen, coff, box, nbr_off, nbr, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, out):
+    """Per muscle: [share of points inside another muscle, share inside a bone, deepest
+    penetration (m)] over its vertices (pole rows counted once); ring by ring, each against
+    what it may meet (:func:`_ring_lists`)."""
+    M = nu.shape[0]
+    q = np.empty(8)
+    g = np.empty(6)
+    actb = np.empty(max(fb.shape[0], 1), np.int64)
+    actm = np.empty(max(M, 1), np.int64)
+    for i in range(M):
+        U = nu[i]
+        A = na[i]
+        n_in_m = 0
+        n_in_b = 0
+        deep = 0.0
+        n = 0
+        for u in range(U):
+            ci = cen[coff[i] + u]
+            nb, nmm = _ring_lists(ci, i, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, nbr_off, nbr, box, 0.0, 0.0,
+                                  actb, actm)
+            for a in range(A if 0 < u < U - 1 else 1):
+                k = off[i] + u * A + a
+                n += 1
+                x = grid[k]
+                if nb > 0:
+                    d = _bone_query(x, inv, fb, fo, fh, fd, foff, fv, actb, 0, nb, -1e300, g)
+                    if d < 0.0:
+                        n_in_b += 1
+                        if -d > deep:
+                            deep = -d
+                inside = False
+                for jj in range(nmm):
+                    j = actm[jj]
+                    if not _may_meet(x, j, box, 0.0):
+                        continue
+                    if not _muscle_query(x, grid, off[j], nu[j], na[j], cen, coff[j], 0.0, q):
+                        continue
+                    if q[0] < q[1]:
+                        inside = True
+                        if q[1] - q[0] > deep:
+                            deep = q[1] - q[0]
+                if inside:
+                    n_in_m += 1
+        out[i, 0] = n_in_m / n
+        out[i, 1] = n_in_b / n
+        out[i, 2] = deep
+
+
+@njit(cache=True)
+def _normals(grid, off, nu, na, m, out_v, out_n):
+    """Vertices and normals of muscle m's grid, as the surface stage writes them."""
+    U = nu[m]
+    A = na[m]
+    o = off[m]
+    ga = np.empty((U, A, 3))
+    for u in range(U):
+        for a in range(A):
+            for c in range(3):
+                ga[u, a, c] = grid[o + u * A + a, c]
+    e0 = np.empty((1, 3))
+    e1 = np.empty((1, 3))
+    for c in range(3):
+        s0 = 0.0
+        s1 = 0.0
+        for a in range(A):
+            s0 += ga[1, a, c]
+            s1 += ga[U - 2, a, c]
+        e0[0, c] = ga[0, 0, c] - s0 / A
+        e1[0, c] = ga[U - 1, 0, c] - s1 / A
+    kernels._ring_vertices(ga, out_v, out_n, 0)
+    kernels._pole_normals(ga, e0, e1, out_n, 0)
+
+
+# ----------------------------------------------------------------------------- the frame
+
+
+@dataclass(frozen=True)
+class ContactModel:
+    """What contact needs for a run: the pairs, their shares, the bone fields."""
+
+    allow: np.ndarray  # (M, M) bool
+    share: np.ndarray  # (M, M) float64
+    fields: BoneFields
+    shapes: tuple  # ((U, A) per muscle)
+    yields: np.ndarray  # (M,) layers
+    enabled: bool = True  # False: measure only (--no-contact)
+
+
+def vertices_to_grid(v: np.ndarray, U: int, A: int) -> np.ndarray:
+    """(V, 3) vertices with collapsed poles → (U * A, 3) grid rows (poles repeated)."""
+    rings = v[1:-1].reshape(U - 2, A, 3)
+    return np.concatenate([np.repeat(v[:1], A, axis=0), rings.reshape(-1, 3), np.repeat(v[-1:], A, axis=0)])
+
+
+def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np.ndarray,
+                  iterations: int = tol.CONTACT_ITERATIONS, measure_before: bool = True):
+    """Contact for one frame.
+
+    vertices : [(V_m, 3) float64] every muscle's no-contact mesh; world_inv : (B, 4, 4) world
+    to bone-local transforms. Returns (vertices [(V_m, 3)] (the input arrays themselves where
+    nothing touched), normals [(V_m, 3) or None where unchanged], changed (M,) bool,
+    before (M, 3), after (M, 3)): inside-muscle share, inside-bone share and deepest
+    penetration before and after contact. ``measure_before`` False (the stage, to halve the
+    measuring): before's inside-bone share is that of the first pass's samples, the rest NaN."""
+    shapes = model.shapes
+    M = len(vertices)
+    if M == 0:
+        return [], [], np.zeros(0, bool), np.zeros((0, 3)), np.zeros((0, 3))
+    nu = np.array([s[0] for s in shapes], dtype=np.int64)
+    na = np.array([s[1] for s in shapes], dtype=np.int64)
+    off = np.concatenate([[0], np.cumsum(nu * na)]).astype(np.int64)
+    coff = np.concatenate([[0], np.cumsum(nu)]).astype(np.int64)
+    grid = np.concatenate([vertices_to_grid(v, *s) for v, s in zip(vertices, shapes)])
+    cen = np.zeros((int(coff[-1]), 8))
+    box = np.empty((M, 6))
+    f = model.fields
+    _centres(grid, off, nu, na, cen, coff)
+    _boxes(grid, off, box)
+    reach = tol.CONTACT_BONE_MARGIN + iterations * tol.CONTACT_MAX_STEP
+    args_b = (world_inv, f.bones, f.origin, f.h, f.dims, f.offset, f.values, *_field_lists(box, f, world_inv, reach))
+    before = np.full((M, 3), np.nan)
+    if measure_before or iterations == 0:
+        _measure(grid, off, nu, na, cen, coff, box, *_neighbours(box, model.allow, 0.0), *args_b, before)
+    rad = grid - np.repeat(cen[:, :3], np.repeat(na, nu), axis=0)  # radial offsets of the no-contact shape
+    target = np.array([_grid_volume(grid[off[m]:off[m + 1]], nu[m], na[m]) for m in range(M)])
+    umax, amax = int(nu.max()), int(na.max())
+    coef = np.zeros((int(coff[-1]), NMODES, 3))
+    tmp = np.empty((umax, NMODES, 3))
+    sigma = np.zeros(M)
+    touched = np.zeros(M, dtype=np.bool_)
+    buried = np.zeros(M)
+    ga = np.empty((umax, amax, 3))
+    for it in range(iterations):
+        nbr_off, nbr = _neighbours(box, model.allow, tol.CONTACT_MARGIN)
+        _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, model.share, *args_b,
+                    tol.CONTACT_MARGIN, tol.CONTACT_BONE_MARGIN, tol.CONTACT_DEEP_FADE[0], tol.CONTACT_DEEP_FADE[1],
+                    tol.CONTACT_AXES_FADE[0], tol.CONTACT_AXES_FADE[1], tol.CONTACT_RADIAL_BLEND, tol.CONTACT_SAMPLE_COLUMNS, tol.CONTACT_SAMPLE_RINGS, coef, touched,
+                    buried)
+        if it == 0 and not measure_before:
+            before[:, 1] = buried
+        _smooth_rings(coef, nu, coff, tol.CONTACT_SMOOTH_PASSES, tmp)
+        _apply_and_solve(grid, rad, coef, off, nu, na, coff, touched, target, tol.CONTACT_MAX_STEP, ga, sigma)
+        _centres(grid, off, nu, na, cen, coff)
+        _boxes(grid, off, box)
+    if not touched.any() and not np.isnan(before).any():  # nothing moved (or no pass): the first measures
+        return list(vertices), [None] * M, touched, before, before.copy()
+    after = np.zeros((M, 3))
+    _measure(grid, off, nu, na, cen, coff, box, *_neighbours(box, model.allow, 0.0), *args_b, after)
+    if not touched.any():
+        return list(vertices), [None] * M, touched, before, after
+    out_v, out_n = [], []
+    for m in range(M):
+        if not touched[m]:
+            out_v.append(vertices[m])
+            out_n.append(None)
+            continue
+        nv = len(vertices[m])
+        v = np.empty((1, nv, 3))
+        n = np.empty((1, nv, 3))
+        _normals(grid, off, nu, na, m, v, n)
+        out_v.append(v[0])
+        out_n.append(n[0])
+    return out_v, out_n, touched, before, after
+
+
+def _field_lists(box: np.ndarray, fields: "BoneFields", world_inv: np.ndarray, reach: float):
+    """Which bone fields each muscle can meet: those whose grid's world box meets the muscle's
+    box (M, 6) grown by ``reach`` (m), as CSR rows (offsets (M + 1,), field indices)."""
+    K = len(fields.bones)
+    if K == 0:
+        return np.zeros(len(box) + 1, np.int64), np.zeros(0, np.int64)
+    world = np.linalg.inv(world_inv[fields.bones])  # (K, 4, 4) bone-local to world
+    corner = np.array(np.meshgrid([0, 1], [0, 1], [0, 1], indexing="ij")).reshape(3, 8).T  # (8, 3)
+    ext = fields.h[:, None] * (fields.dims - 1)  # (K, 3)
+    local = fields.origin[:, None, :] + corner[None] * ext[:, None, :]  # (K, 8, 3)
+    # w[k,p,c] = sum_d R[k,c,d] local[k,p,d] + t[k,c]
+    w = np.einsum("kcd,kpd->kpc", world[:, :3, :3], local) + world[:, None, :3, 3]
+    fbox = np.concatenate([w.min(axis=1), w.max(axis=1)], axis=1)  # (K, 6)
+    meet = np.all(box[:, None, :3] - reach <= fbox[None, :, 3:], axis=-1) & np.all(
+        fbox[None, :, :3] <= box[:, None, 3:] + reach, axis=-1)
+    idx = np.nonzero(meet)
+    return np.concatenate([[0], np.cumsum(np.bincount(idx[0], minlength=len(box)))]).astype(np.int64), \
+        idx[1].astype(np.int64)
+
+
+def _neighbours(box: np.ndarray, allow: np.ndarray, margin: float):
+    """Allowed pairs whose boxes (M, 6) meet within ``margin``, as CSR rows (offsets, indices)."""
+    meet = np.all(box[:, None, :3] <= box[None, :, 3:] + margin, axis=-1) & np.all(
+        box[None, :, :3] <= box[:, None, 3:] + margin, axis=-1) & allow
+    idx = np.nonzero(meet)
+    return np.concatenate([[0], np.cumsum(np.bincount(idx[0], minlength=len(box)))]).astype(np.int64), \
+        idx[1].astype(np.int64)
+
+
+def _grid_volume(g: np.ndarray, U: int, A: int) -> float:
+    ga = np.ascontiguousarray(g.reshape(U, A, 3))
+    c0, _, _, _ = kernels._volume_cubic(ga, np.zeros_like(ga))
+    return float(c0)
+
+
+def build(specs, models, rest_world: np.ndarray, bone_meshes: dict, enabled: bool = True) -> "ContactModel":
+    """The run's contact: pairs (groups, ignore lists), shares from the yields (explicit, or
+    :func:`auto_yield`), and the bone fields, each cut to where the muscles' rest meshes,
+    grown by tol.CONTACT_REACH, lie in that bone. ``enabled`` False: measure only."""
+    names = [s.name for s in specs]
+    rest = np.concatenate([m.rest_vertices.astype(np.float64) for m in models])
+    fields = []
+    for b, (v, f, _) in sorted(bone_meshes.items()):
+        inv = np.linalg.inv(rest_world[b])
+        # L[p,c] = sum_k inv[c,k] X[p,k] + inv[c,3]
+        local = rest @ inv[:3, :3].T + inv[:3, 3]
+        clip = np.array([local.min(axis=0) - tol.CONTACT_REACH, local.max(axis=0) + tol.CONTACT_REACH])
+        fld = bone_field(b, v, f, clip)
+        if fld is not None:
+            fields.append(fld)
+    packed = BoneFields.pack(fields)
+    yields = np.array([s.contact.yield_ if s.contact.yield_ is not None else auto_yield(m, packed, rest_world)
+                       for s, m in zip(specs, models)])
+    return ContactModel(pair_mask(names, [s.contact for s in specs]), pair_shares(yields), packed,
+                        tuple(s.resolution for s in specs), yields, enabled)
+
+
+def auto_yield(model, fields: BoneFields, rest_world: np.ndarray) -> float:
+    """A muscle's depth in layers when its file gives none: minus the distance (in units of
+    tol.CONTACT_LAYER) from the bone surface of the centre of its rest mesh's middle ring, so
+    that a muscle lying on a bone gives way to one lying over it (0 where no bone is near)."""
+    U, A = model.spec.resolution
+    ring = model.rest_vertices[1 + ((U - 2) // 2) * A: 1 + ((U - 2) // 2 + 1) * A].astype(np.float64)
+    c = ring.mean(axis=0)
+    g = np.zeros(6)
+    d = _bone_query(c, np.linalg.inv(rest_world), fields.bones, fields.origin, fields.h, fields.dims,
+                    fields.offset, fields.values, np.arange(len(fields.bones)), 0, len(fields.bones), -1e300, g)
+    if d >= 1e29:
+        return 0.0
+    return round(-max(d, 0.0) / tol.CONTACT_LAYER, 6)
+
+
+def apply(model: "ContactModel", results: dict, world: np.ndarray) -> None:
+    """The FRAME-scope stage over a chunk: ``results`` maps every muscle index to its
+    FrameResult (F frames); each frame's meshes are resolved together (:func:`resolve_frame`)
+    and the results updated in place: vertices, normals and volume where contact moved a
+    muscle, ``contact`` (F, 3) the measures after contact, warnings for muscles that start a
+    frame wholly inside a bone. world : (F, B, 4, 4)."""
+    order = sorted(results)
+    nf = world.shape[0]
+    inv = np.linalg.inv(world)
+    for r in results.values():
+        r.contact = np.zeros((nf, 3))
+    for fi in range(nf):
+        verts = [results[j].vertices[fi] for j in order]
+        if not all(np.isfinite(v).all() for v in verts):
+            continue  # a frame that cannot be evaluated is written as the rest shape
+        v, n, touched, before, after = resolve_frame(model, verts, inv[fi],
+                                                     tol.CONTACT_ITERATIONS if model.enabled else 0, False)
+        for k, j in enumerate(order):
+            r = results[j]
+            r.contact[fi] = after[k]
+            if before[k, 1] >= 1.0:
+                r.warnings.append((fi, "wholly inside a bone at the start of the frame: contact cannot place it"))
+            if touched[k]:
+                r.vertices[fi] = v[k]
+                r.normals[fi] = n[k]
+                U, A = model.shapes[j]
+                r.volume[fi] = _grid_volume(vertices_to_grid(v[k], U, A), U, A)
