@@ -2,11 +2,12 @@
 
 Invariants on the demo library (the deltoid's three parts overlap at the shoulder, the
 gastrocnemius' heads in the calf): the product's measures agree with an independent
-generalized winding number computation (tests/winding.py); contact lowers them; the volume
-is kept exactly; a muscle far from everything is returned bit for bit; a rigid motion of the
-whole skeleton moves the result rigidly; --no-contact writes the meshes of the evaluation
-alone; --jobs and --frames subsets give the same bytes; a muscle wholly inside a bone is
-warned and refused under --strict; the contact keys are read and checked."""
+generalized winding number computation (tests/winding.py), also past a neighbour's end;
+contact lowers them; the volume is kept exactly; a muscle far from everything is returned bit
+for bit; a rigid motion of the whole skeleton moves the result rigidly; --no-contact writes
+the meshes of the evaluation alone; --jobs and --frames subsets give the same bytes; a muscle
+wholly inside a bone is warned and refused under --strict; the contact keys are read and
+checked."""
 from __future__ import annotations
 
 import hashlib

@@ -17,7 +17,8 @@ collapse to the poles):
   point c of j's centre polyline (the rings' centroids between the two poles): its radial
   distance rho from c, perpendicular to the polyline, against j's surface radius R in that
   direction (the ray from c cut with the two neighbouring rings, projected into the plane
-  perpendicular to the polyline, linear between them). Inside when rho < R.
+  perpendicular to the polyline, linear between them). Inside when rho < R. Where c is a
+  pole, x lies past j's end cap (the cone closing the mesh): outside.
 
 Response (tol.CONTACT_ITERATIONS Jacobi passes, every muscle against every other's previous pass):
 
