@@ -53,6 +53,9 @@ YAML_MAX_BYTES = 16 * 1024 * 1024
 INPUT_MAX_BYTES = 256 * 1024 * 1024
 YAML_MAX_NODES = 2_000_000
 YAML_MAX_DEPTH = 64
+# XML models (.osim, MJCF): elements nested deeper than this are refused (the readers walk the
+# tree recursively; a real model nests bodies a few dozen levels, as BVH joints, at most 256)
+XML_MAX_DEPTH = 256
 # BVH motion capture is text too, but long takes are large (100 channels x 100k frames is
 # ~100 MB): read up to this many bytes.
 BVH_MAX_BYTES = 512 * 1024 * 1024

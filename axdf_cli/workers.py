@@ -21,12 +21,14 @@ lives as long as any of its workers does) watches this process with a thread tha
 a pidfd (``os.pidfd_open``; polling where there is none) and sends itself SIGTERM when this
 process is gone. A worker stopped by SIGTERM (the parent stopping the pool, or the
 parent's death) finishes the file it is writing, then exits quietly, also when its task
-catches the interrupt; Ctrl-C goes to the parent only, which stops the pool. No worker
+catches the interrupt; Ctrl-C goes to the parent only, which stops the pool (workers and the
+fork server start with SIGINT blocked: :func:`_sigint_held`). No worker
 prints a traceback for being stopped. A worker that dies (killed, out of memory) stops the
 pool with :class:`WorkerDied` (exit 3).
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import threading
@@ -137,6 +139,22 @@ def _stop(pool) -> None:
     pool.shutdown(wait=True, cancel_futures=True)
 
 
+@contextlib.contextmanager
+def _sigint_held():
+    """SIGINT blocked in this thread while the pool starts its processes. A child inherits
+    the mask (through fork, and through the fork server's exec and forks), so a Ctrl-C to
+    the whole process group while a worker starts, or while the fork server imports its
+    preload, is never a KeyboardInterrupt traceback there (it was: the fork server ignores
+    SIGINT only once its imports are done, a worker once :func:`_init_worker` runs); this
+    process gets the signal when it is unblocked: held, not lost (as multiprocessing's own
+    resource tracker is started)."""
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
 def process_map(fn, items: list, shared, *, jobs: int | None = None, on_result=None, fresh: bool = False,
                 preload: tuple[str, ...] = ()) -> list:
     """``[fn(shared, item) for item in items]`` over ``jobs`` worker processes (default one
@@ -160,7 +178,8 @@ def process_map(fn, items: list, shared, *, jobs: int | None = None, on_result=N
         initargs = (os.getpid(), shared, None)
     pool = ProcessPoolExecutor(max_workers=n, mp_context=ctx, initializer=_init_worker, initargs=initargs)
     try:
-        pending = {pool.submit(_call, fn, item): k for k, item in enumerate(items)}
+        with _sigint_held():  # workers (and a fork server) start with SIGINT blocked, for good
+            pending = {pool.submit(_call, fn, item): k for k, item in enumerate(items)}
         results: list = [None] * len(items)
         while pending:
             finished, _ = wait(pending, return_when=FIRST_COMPLETED)

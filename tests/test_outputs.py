@@ -514,7 +514,8 @@ def test_a_camera_at_no_distance_is_refused_at_its_line(ds, capsys):
 
 
 @pytest.mark.parametrize("address, code, words", [("bogus", 2, "HOST:PORT"), ("ray://127.0.0.1:1", 3, "Ray"),
-                                                  ("127.0.0.1:1", 3, "cannot reach"), ("auto", 3, "no running Ray")])
+                                                  ("127.0.0.1:1", 3, "cannot reach"), ("auto", 3, "no running Ray"),
+                                                  ("http://127.0.0.1:8265", 2, "HOST:PORT")])
 def test_a_bad_ray_address_is_refused_before_anything_is_written(ds, capsys, monkeypatch, address, code, words):
     pytest.importorskip("ray")
     monkeypatch.delenv("RAY_ADDRESS", raising=False)

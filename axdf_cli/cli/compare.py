@@ -75,12 +75,19 @@ def _flag_changes(args) -> dict:
     return ch
 
 
-def _output_path(text: str | None, flag: str) -> Path | None:
+JSON_HEAD = b'{\n "tool": "axdf compare"'  # how to_json's output starts
+JUNIT_HEAD = b'<testsuites name="axdf compare"'  # to_junit's root element, after the XML declaration
+
+
+def _output_path(text: str | None, flag: str, head: bytes) -> Path | None:
+    """--report / --junit: a new file or an earlier one of ours (never a golden file, a run's
+    manifest or anything else; the output rule, axdf_cli/fileio/outputs.py)."""
+    from axdf_cli.fileio.outputs import check_file_output
+
     if text is None:
         return None
     p = Path(text)
-    if p.is_dir():
-        raise UsageError(f"{flag} {p} is a folder", f"{flag} takes a file name")
+    check_file_output(p, flag, lambda data: head in data)
     return p
 
 
@@ -95,8 +102,10 @@ def run(args) -> int:
     tol = load_tolerances(args.tolerances) if args.tolerances else Tolerances()
     tol = replace(tol.with_flags(_flag_changes(args)), ignore=tol.ignore + tuple(args.ignore))
     actual, golden = Path(args.actual), Path(args.golden)
-    report_path = _output_path(args.report, "--report")
-    junit_path = _output_path(args.junit, "--junit")
+    if args.report and args.junit and os.path.realpath(args.report) == os.path.realpath(args.junit):
+        raise UsageError(f"--report and --junit are the same file {args.junit}", "give them different paths")
+    report_path = _output_path(args.report, "--report", JSON_HEAD)
+    junit_path = _output_path(args.junit, "--junit", JUNIT_HEAD)
     first_bless = args.update and actual.exists() and not os.path.lexists(golden)  # a new golden
     if first_bless:
         check_path("ACTUAL", actual)
@@ -108,6 +117,9 @@ def run(args) -> int:
         diff_dir = beside.with_name(beside.stem + "-diffs")
     if diff_dir is not None and diff_dir.exists() and not diff_dir.is_dir():
         raise UsageError(f"--diff-dir {diff_dir} is a file", "--diff-dir takes a folder")
+    if diff_dir is not None and diff_dir.is_symlink():
+        raise UsageError(f"--diff-dir {diff_dir} is a symbolic link",
+                         "axdf never writes through a link; give the folder's own path")
     exclude = [p for p in (report_path, junit_path, diff_dir) if p is not None]
     steps = None
     if args.update:
@@ -153,12 +165,16 @@ def _print_changes(changes, golden: Path, args) -> None:
 
 
 def _clear_old_pictures(diff_dir: Path) -> None:
-    """Pictures of an earlier comparison would mislead: remove our own *.diff.png files."""
+    """Pictures of an earlier comparison would mislead: remove our own *.diff.png files (those
+    axdf compare made, by the mark in them; a file of yours of that name stays)."""
+    from axdf_cli.compare import is_own_picture
+
     for p in diff_dir.rglob("*.diff.png"):
-        try:
-            p.unlink()
-        except OSError:
-            pass
+        if is_own_picture(p):
+            try:
+                p.unlink()
+            except OSError:
+                pass
 
 
 class _Bar:

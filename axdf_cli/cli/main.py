@@ -13,7 +13,7 @@ import signal
 import sys
 
 from axdf_cli import __version__
-from axdf_cli.errors import AxdfError, EnvironmentProblem, InputError, Interrupted
+from axdf_cli.errors import AxdfError, EnvironmentProblem, InputError, Interrupted, UsageError
 
 # name -> (module, help). The order is the order of `axdf --help`.
 COMMANDS = {
@@ -53,11 +53,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    try:
-        args = parser.parse_args(argv)
-    except SystemExit as e:
-        return int(e.code or 0) if not isinstance(e.code, str) else 2
     from axdf_cli.fileio import atomic
 
     old = {}
@@ -66,15 +61,25 @@ def main(argv: list[str] | None = None) -> int:
             old[sig] = signal.signal(sig, atomic.on_signal)
         except ValueError:  # not the main thread (tests calling main in a thread)
             pass
+    args = None
     try:
+        for a in sys.argv[1:] if argv is None else argv:
+            if isinstance(a, str) and any("\udc80" <= c <= "\udcff" for c in a):  # bytes that are not UTF-8
+                raise UsageError(f"argument {a.encode('utf-8', 'surrogateescape')!r} is not UTF-8 text",
+                                 "file and folder names in UTF-8 (axdf writes names into its text files)")
+        parser = build_parser()  # (imports every subcommand: a Ctrl-C here is "interrupted" too)
+        try:
+            args = parser.parse_args(argv)
+        except SystemExit as e:
+            return int(e.code or 0) if not isinstance(e.code, str) else 2
         return int(args._module.run(args) or 0)
     except InputError as e:
-        if args.traceback:
+        if args is not None and args.traceback:
             raise
         print(f"axdf: {e}" if e.where is None else str(e), file=sys.stderr)
         return 2
     except EnvironmentProblem as e:
-        if args.traceback:
+        if args is not None and args.traceback:
             raise
         print(f"axdf: {e.problem}", file=sys.stderr)
         if e.hint:
@@ -84,7 +89,7 @@ def main(argv: list[str] | None = None) -> int:
         print("axdf: interrupted", file=sys.stderr)
         return 130
     except AxdfError as e:
-        if args.traceback:
+        if args is not None and args.traceback:
             raise
         print(f"axdf: {e}", file=sys.stderr)
         return e.exit_code
@@ -92,7 +97,7 @@ def main(argv: list[str] | None = None) -> int:
         print("axdf: out of memory; use fewer frames per run or a lower resolution", file=sys.stderr)
         return 3
     except Exception as e:  # a bug: say so plainly, without a traceback unless asked
-        if args.traceback:
+        if args is not None and args.traceback:
             raise
         print(f"axdf: internal error: {type(e).__name__}: {e}\n"
               "rerun with --traceback and report it", file=sys.stderr)

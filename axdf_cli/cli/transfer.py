@@ -46,7 +46,8 @@ def run(args) -> int:
     out = OutputSet(args.out, "transfer")
     for path, data in res.files.items():
         out.add(path, data, "output")
-    write_outputs(out, inputs=res.inputs, overwrite=args.overwrite)
+    write_outputs(out, inputs=res.inputs, overwrite=args.overwrite,
+                  input_dirs=[m for m in args.muscles if Path(m).is_dir()])
     for s in res.skipped:
         print(f"axdf: warning: {s['file']}: muscle {s['muscle']} skipped: {s['why']}", file=sys.stderr)
     if not args.quiet:

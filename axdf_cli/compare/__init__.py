@@ -12,7 +12,7 @@ from __future__ import annotations
 import io
 import os
 import time
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 from typing import Callable, Iterable
 
 from axdf_cli.fileio.atomic import write_bytes
@@ -160,6 +160,9 @@ def compare_pair(rel: str, a: Path | None, g: Path | None, tolerances: Tolerance
         out = _compare_kind(kind, a, g, ab, gb, t)
         picture = None
         if out.picture is not None and diff_dir is not None:
+            from axdf_cli.fileio.runfolder import check_dirs
+
+            check_dirs(Path(diff_dir), [PurePosixPath(rel).parent.as_posix()])  # never through a link
             picture = str(Path(diff_dir) / f"{rel}.diff.png")
             write_bytes(picture, _png_bytes(out.picture))
     except MeshReadError as e:  # Unreadable included
@@ -177,12 +180,34 @@ def compare_pair(rel: str, a: Path | None, g: Path | None, tolerances: Tolerance
                       picture, time.perf_counter() - t0)
 
 
+PICTURE_MARK = b"axdf compare"  # a tEXt chunk "Software" in every picture: only those are ever removed
+
+
 def _png_bytes(rgb) -> bytes:
     from PIL import Image
+    from PIL.PngImagePlugin import PngInfo
 
+    info = PngInfo()
+    info.add_text("Software", PICTURE_MARK.decode())
     buf = io.BytesIO()
-    Image.fromarray(rgb, "RGB").save(buf, format="PNG")
+    Image.fromarray(rgb, "RGB").save(buf, format="PNG", pnginfo=info)
     return buf.getvalue()
+
+
+def is_own_picture(path: Path) -> bool:
+    """Whether ``path`` is a regular file (not a link) holding a picture :func:`_png_bytes` made
+    (its Software text, which Pillow writes before the image data)."""
+    import os
+    import stat
+
+    try:
+        if not stat.S_ISREG(os.lstat(path).st_mode):
+            return False
+        with open(path, "rb") as f:
+            head = f.read(256)
+    except OSError:
+        return False
+    return head.startswith(b"\x89PNG") and b"tEXtSoftware\x00" + PICTURE_MARK in head
 
 
 __all__ = ["compare_paths", "compare_pair", "check_path", "check_paths", "list_files", "kind_of", "nested", "KINDS",

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from axdf_cli.fileio import atomic
-from axdf_cli.fileio.runfolder import Root
+from axdf_cli.fileio.runfolder import Root, remove_stale_staging
 from axdf_cli.dataset import folder as dsfolder
 from axdf_cli.dataset import worker as wk
 from axdf_cli.dataset.index import write_index
@@ -80,6 +80,7 @@ def claim(target: dsfolder.Target, ctx: wk.Context, mine: list[int], resume: boo
                 now is None or hashlib.sha256(now).hexdigest() != target.old.sha):
             raise InputError(None, f"output folder {out} changed while axdf was checking it",
                              "another process wrote there; run again")
+        remove_stale_staging(out)  # a killed --overwrite's new data set (no other writer: we hold OUT)
         root = target.root
         if target.mode == "replace":
             shutil.rmtree(root, ignore_errors=True)

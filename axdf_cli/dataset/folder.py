@@ -33,9 +33,10 @@ from pathlib import Path, PurePosixPath
 
 from axdf_cli.errors import EnvironmentProblem, InputError, Mark
 from axdf_cli.fileio import atomic
-from axdf_cli.fileio.runfolder import (LOCK, MANIFEST, STAGING_PREFIX, Manifest, check_dirs, own_entry,
+from axdf_cli.fileio.runfolder import (LOCK, MANIFEST, STAGING_PREFIX, Manifest, check_dirs, check_way, own_entry, prepare,
                                        plain_relpath, swap_in)
 from axdf_cli.fileio.yamlio import is_name
+from axdf_cli.tolerances import MAX_SEED
 
 DATASET_JSON = "dataset.json"
 INDEX = "index.parquet"
@@ -60,8 +61,10 @@ def read_dataset_json(path: Path, required: bool = True) -> Manifest | None:
     try:
         if m.data.get("tool") != "axdf" or "dataset" not in m.data:
             raise m.error(("tool",), "not a data set written by axdf", "a dataset.json with tool 'axdf' and dataset: NAME")
-        m.get(("seed",), int, "a whole number")
-        m.get(("shards",), int, "a whole number")
+        if not 0 <= m.get(("seed",), int, "a whole number") <= MAX_SEED:
+            raise m.error(("seed",), f"{m.data['seed']} is out of range", f"a seed in 0..{MAX_SEED}")
+        if m.get(("shards",), int, "a whole number") < 1:
+            raise m.error(("shards",), f"{m.data['shards']} shards", "a data set is built in 1 or more shards")
         passes = m.get(("image", "passes"), list, "a list of image passes")
         for i, p in enumerate(passes):
             m.get(("image", "passes", i), str, "a pass name")
@@ -153,7 +156,10 @@ def check(out: Path, dataset_json: bytes, names: list[str], dirs: list[str], *, 
     out = Path(out)
     try:
         st = os.stat(out)
-    except FileNotFoundError:
+    except (FileNotFoundError, NotADirectoryError):
+        if os.path.lexists(out):  # a dangling link: nothing is made at its far end
+            raise InputError(None, f"--out {out} is a symbolic link to nothing", "give a folder") from None
+        check_way(out, "--out")
         return Target(out, "new")
     except OSError as e:
         raise atomic.environment_problem(out, e) from None
@@ -185,6 +191,9 @@ def check(out: Path, dataset_json: bytes, names: list[str], dirs: list[str], *, 
             raise InputError(None, f"{len(present)} sequence folder(s) of this run exist in {out} "
                              f"(first: {present[0]})",
                              "pass --resume to finish them, --overwrite to make them again, or another --out")
+        for n in present:  # each is an axdf run folder, finished or made again by the run's rule: its
+            # refusals (a damaged manifest, files but no run) come now, not after other sequences were made
+            prepare(out / n, resume=resume, overwrite=not resume)
         return Target(out, "same", old)
     if not overwrite:
         raise InputError(old.mark(("seed",)), f"output folder {out} holds another data set (its dataset.json differs: "
@@ -207,6 +216,8 @@ def check_dry(out: Path, *, resume: bool, overwrite: bool) -> None:
     out = Path(out)
     if os.path.lexists(out) and not out.is_dir():
         raise InputError(None, f"--out {out} exists and is not a folder", "give a folder")
+    if not os.path.lexists(out):
+        check_way(out, "--out")
     if not out.is_dir() or not [n for n in os.listdir(out) if not own_entry(n)]:
         return
     dj = out / DATASET_JSON

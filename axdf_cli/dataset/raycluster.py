@@ -44,7 +44,8 @@ def import_ray():
 def _host_port(text: str, shown: str) -> tuple[str, int]:
     host, sep, port = text.rpartition(":")
     host = host.strip("[]")
-    if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536 or any(c.isspace() for c in host):
+    if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536 or \
+            any(c.isspace() or c in "/@?#" for c in host):  # a URL (http://...) is not a host
         raise UsageError(f"--address {shown!r}", ADDRESS_ALLOWED)
     return host, int(port)
 

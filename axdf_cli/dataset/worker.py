@@ -19,7 +19,9 @@ from pathlib import Path
 import numpy as np
 
 from axdf_cli import __version__
+from axdf_cli import tolerances as tol
 from axdf_cli.fileio import atomic, runfolder
+from axdf_cli.fileio.yamlio import FileRefused, read_regular
 from axdf_cli.dataset import amodal as coco
 from axdf_cli.dataset import folder as dsfolder
 from axdf_cli.dataset.folder import DATASET_JSON, INDEX, RECORD  # noqa: F401  (RECORD: written last)
@@ -151,9 +153,11 @@ def read_record(folder: Path, digest: str) -> dict | None:
 def record_state(folder: Path, digest: str) -> tuple[dict | None, str]:
     """(the record, "") when the sequence is complete; else (None, why not)."""
     try:
-        rec = json.loads((folder / RECORD).read_text())
+        rec = json.loads(read_regular(folder / RECORD, tol.INPUT_MAX_BYTES))  # (a FIFO there: refused, no hang)
     except FileNotFoundError:
         return None, "not made yet (no sequence.json)"
+    except FileRefused as e:
+        return None, f"its sequence.json is refused ({e.problem})"
     except (OSError, ValueError, RecursionError) as e:
         return None, f"its sequence.json is unreadable ({type(e).__name__})"
     if not isinstance(rec, dict):
@@ -335,6 +339,6 @@ def _check_finite(name: str, **arrays) -> None:
 
 def _json_file(path: Path):
     try:
-        return json.loads(Path(path).read_text()) if not os.path.islink(path) else None
-    except (OSError, ValueError, RecursionError):
+        return json.loads(read_regular(path, tol.INPUT_MAX_BYTES)) if not os.path.islink(path) else None
+    except (OSError, ValueError, RecursionError, FileRefused):
         return None

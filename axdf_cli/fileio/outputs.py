@@ -41,6 +41,7 @@ recognises.
 """
 from __future__ import annotations
 
+import errno
 import hashlib
 import os
 import stat
@@ -48,10 +49,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from axdf_cli import __version__
-from axdf_cli.errors import InputError, Mark
+from axdf_cli.errors import EnvironmentProblem, InputError, Mark
 from axdf_cli.fileio import atomic
-from axdf_cli.fileio.runfolder import (LOCK, MANIFEST, STAGING_PREFIX, Manifest, Root, Session, plain_relpath,
-                                       prepare)
+from axdf_cli.fileio.runfolder import (LOCK, MANIFEST, STAGING_PREFIX, Manifest, Root, Session, check_way,
+                                       is_file_with, plain_relpath, prepare)
 
 
 @dataclass(frozen=True)
@@ -146,11 +147,13 @@ def _recorded(previous: Manifest | None, key: str, rel: str) -> set:
     return {sha} if isinstance(sha, str) else set()
 
 
-def check_outputs(outputs: OutputSet, *, inputs=(), overwrite: bool = False, assets=()) -> Checked:
+def check_outputs(outputs: OutputSet, *, inputs=(), overwrite: bool = False, assets=(), input_dirs=()) -> Checked:
     """Every check of the output rule (module docstring); reads only. ``inputs``: the files
     the command read (never an output; listed in the manifest with their sha256); ``assets``:
     more files it read that are never an output either but are not listed (a MuJoCo model's
-    mesh files: many, and named by wherever a package installed them)."""
+    mesh files: many, and named by wherever a package installed them); ``input_dirs``: folders
+    the command read whole (every YAML file below ``transfer``'s MUSCLES folder): no output
+    lies below one, or the same command run again would read its own output."""
     out = outputs.out
     inside: dict = {}
     outside_files: list = []
@@ -185,6 +188,13 @@ def check_outputs(outputs: OutputSet, *, inputs=(), overwrite: bool = False, ass
         if clash:
             raise InputError(Mark(str(i)), f"this input is also an output: {clash}",
                              "an input is never overwritten; choose another output path")
+    for d in input_dirs:
+        real_d = _real(Path(d))
+        for o in [Output(top_out, b"", "output folder", str(out)), *outputs]:
+            if _real(o.path) == real_d or _real(o.path).startswith(real_d.rstrip(os.sep) + os.sep):
+                raise InputError(Mark(str(d)), f"{o} lies in this input folder, which is read whole",
+                                 "an output outside the input folders (the same command run again would "
+                                 "read its own output)")
     for i in inputs:
         if i is not None and os.path.isfile(i):
             recorded_inputs.append({"file": _shown(Path(i)), "sha256": _sha_of(Path(i))})
@@ -225,8 +235,12 @@ def check_outputs(outputs: OutputSet, *, inputs=(), overwrite: bool = False, ass
         try:
             st = os.lstat(o.path)
         except FileNotFoundError:
+            check_way(o.path, o.what)
             outside[rel] = (o, None)
             continue
+        except NotADirectoryError:
+            check_way(o.path, o.what)
+            raise
         except OSError as e:
             raise atomic.environment_problem(o.path, e) from None
         if stat.S_ISLNK(st.st_mode):
@@ -239,7 +253,8 @@ def check_outputs(outputs: OutputSet, *, inputs=(), overwrite: bool = False, ass
                              f"pass --overwrite to replace a file axdf wrote (listed in {out / MANIFEST}), "
                              "or choose another path")
         sha = _sha_of(o.path)
-        if sha not in _recorded(previous, "outside", rel) | _recorded(previous, "outside_previous", rel):
+        if sha not in _recorded(previous, "outside", rel) | _recorded(previous, "outside_previous", rel) | \
+                _recorded(previous, "outside_earlier", rel):
             listed = bool(_recorded(previous, "outside", rel))
             raise InputError(None, f"{o} " + ("was changed since axdf wrote it" if listed else
                              f"was not written by this command into {out} (its manifest does not list it)"),
@@ -247,7 +262,22 @@ def check_outputs(outputs: OutputSet, *, inputs=(), overwrite: bool = False, ass
                              "move it away or choose another path")
         outside[rel] = (o, sha)
 
+    _writable(top_out, f"output folder {out}")
+    for o, _ in outside.values():
+        _writable(o.path.parent, str(o))
     return Checked(outputs, target, inside, outside, sorted(recorded_inputs, key=lambda d: (d["file"], d["sha256"])))
+
+
+def _writable(folder: Path, what: str) -> None:
+    """The folder (or, where it is still to be made, its nearest existing parent) takes new
+    files: a read-only file system or folder is exit 3 here, before OUT's manifest is written
+    (a file outside OUT is written after it)."""
+    p = Path(folder)
+    while not os.path.lexists(p) and p != p.parent:
+        p = p.parent
+    if os.path.isdir(p) and not os.access(p, os.W_OK):
+        raise EnvironmentProblem(f"{what}: cannot write in {p} (a read-only file system or folder)",
+                                 "choose a writable output path")
 
 
 def write_checked(checked: Checked) -> dict:
@@ -263,6 +293,9 @@ def write_checked(checked: Checked) -> dict:
         old_outside = {rel: sha for rel, (_, sha) in sorted(checked.outside.items()) if sha is not None}
         manifest = {"tool": "axdf", "version": __version__, "command": o.command, "complete": True,
                     "inputs": checked.inputs, "settings": o.settings, "files": files, "outside": new_outside}
+        earlier = _earlier_outside(checked, new_outside)
+        if earlier:
+            manifest["outside_earlier"] = earlier
 
         def write_outside() -> None:
             for rel, (x, sha) in sorted(checked.outside.items()):
@@ -272,6 +305,23 @@ def write_checked(checked: Checked) -> dict:
         session.commit(manifest, interim={"outside": new_outside, "outside_previous": old_outside},
                        during=write_outside)
     return manifest
+
+
+def _earlier_outside(checked: Checked, new_outside: dict) -> dict:
+    """Files outside OUT that an earlier output wrote and this one does not (never deleted:
+    they stay where they are): still recognised as axdf's while their bytes are unchanged, so
+    that a later ``--overwrite`` writing them again may replace them (an import with another
+    ``--name`` and then the first one again was refused on its own earlier files)."""
+    previous = checked.target.previous
+    out = os.path.abspath(checked.outputs.out)
+    earlier: dict = {}
+    for key in ("outside", "outside_earlier"):
+        got = previous.data.get(key) if previous is not None else None
+        for rel, sha in (got.items() if isinstance(got, dict) else ()):
+            if isinstance(rel, str) and rel not in new_outside and isinstance(sha, str) and rel not in earlier \
+                    and "\x00" not in rel and is_file_with(Path(os.path.normpath(os.path.join(out, rel))), sha):
+                earlier[rel] = sha
+    return dict(sorted(earlier.items()))
 
 
 def _still(o: Output, sha: str | None) -> None:
@@ -286,7 +336,44 @@ def _still(o: Output, sha: str | None) -> None:
         raise InputError(None, f"{o} changed while axdf was writing", "run again")
 
 
-def write_outputs(outputs: OutputSet, *, inputs=(), overwrite: bool = False) -> dict:
+def write_outputs(outputs: OutputSet, *, inputs=(), overwrite: bool = False, input_dirs=()) -> dict:
     """The one call: :func:`check_outputs` (every check, nothing written), then
     :func:`write_checked`. Returns the manifest written into OUT."""
-    return write_checked(check_outputs(outputs, inputs=inputs, overwrite=overwrite))
+    return write_checked(check_outputs(outputs, inputs=inputs, overwrite=overwrite, input_dirs=input_dirs))
+
+
+def check_file_output(path: Path | str, what: str, recognise) -> None:
+    """A single file a command writes afresh on each call, without a manifest (``compare
+    --report``, ``--junit``): absent, or a regular file that ``recognise(head)`` (its first
+    :data:`HEAD_BYTES` bytes) says this command wrote; then it is replaced. A link (even to
+    a report), a FIFO, a folder, or any other file (a golden file, a run's manifest, your
+    YAML) is refused (exit 2) before anything is written: it is never replaced."""
+    path = Path(path)
+    try:
+        st = os.lstat(path)
+    except (FileNotFoundError, NotADirectoryError):
+        check_way(path, what)
+        return
+    except OSError as e:
+        if e.errno == errno.ELOOP:
+            check_way(path, what)
+        raise atomic.environment_problem(path, e) from None
+    if stat.S_ISLNK(st.st_mode):
+        raise InputError(None, f"{what} {path} is a symbolic link",
+                         "axdf never replaces a link or writes through one; give the file's own path")
+    if stat.S_ISDIR(st.st_mode):
+        raise InputError(None, f"{what} {path} is a folder", f"{what} takes a file name")
+    if not stat.S_ISREG(st.st_mode):
+        raise InputError(None, f"{what} {path} exists and is not a regular file", "a new file, or one axdf wrote")
+    try:
+        with open(path, "rb") as f:
+            head = f.read(HEAD_BYTES)
+    except OSError as e:
+        raise atomic.environment_problem(path, e) from None
+    if not recognise(head):
+        raise InputError(None, f"{what} {path} exists and was not written by axdf",
+                         "a new path, or an earlier output of the same option (axdf replaces only those); "
+                         "move the file away")
+
+
+HEAD_BYTES = 512  # what check_file_output reads of an existing file to recognise it

@@ -44,8 +44,10 @@ import stat
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 
+from axdf_cli import tolerances as tol
 from axdf_cli.fileio import atomic
 from axdf_cli.errors import EnvironmentProblem, InputError, Mark
+from axdf_cli.fileio.yamlio import FileRefused, read_regular
 
 MANIFEST = "manifest.json"
 STATS = "stats.csv"
@@ -60,7 +62,7 @@ LAYOUT_DIRS = ("meshes", "bones", "frames")
 
 # the manifest's keys, in the one order every writer uses (unknown keys follow, sorted)
 MANIFEST_KEYS = ("tool", "version", "command", "complete", "inputs", "settings", "frames", "muscles", "bones",
-                 "warnings", "files", "outside", "outside_previous", "bounds", "gl")
+                 "warnings", "files", "outside", "outside_previous", "outside_earlier", "bounds", "gl")
 #: The command that wrote a folder (``command`` in its manifest; a run's manifest has none).
 RUN_COMMAND = "run"
 
@@ -149,6 +151,35 @@ def check_dirs(root: Path, rel_dirs) -> bool:
             if not stat.S_ISDIR(st.st_mode):
                 raise InputError(None, f"{p} is not a folder", "the run folder's layout needs a folder there")
     return whole
+
+
+def check_way(path: Path, what: str) -> None:
+    """A path still to be made (``path`` absent): the nearest of its parents that exists is a
+    folder. A file there (``--out walk.bvh/x``) or a link loop is bad input (exit 2), not a
+    machine that cannot write (it was exit 3, "Not a directory"; or 70)."""
+    p = Path(os.path.abspath(path)).parent
+    while True:
+        try:
+            st = os.stat(p)
+        except (FileNotFoundError, NotADirectoryError):
+            if p == p.parent:
+                return
+            p = p.parent
+            continue
+        except OSError as e:
+            if e.errno == errno.ELOOP:
+                raise InputError(None, f"{what} {path}: {_shown_path(p)} is a symbolic link loop",
+                                 "a path to a folder") from None
+            return  # (permissions and the like: the write reports them, exit 3)
+        if not stat.S_ISDIR(st.st_mode):
+            raise InputError(None, f"{what} {path}: {_shown_path(p)} is not a folder", "a path whose parents are folders")
+        return
+
+
+def _shown_path(p: Path) -> str:
+    """``p`` relative to the current folder when below it (messages name what the user typed)."""
+    rel = os.path.relpath(p)
+    return rel if not rel.startswith(os.pardir) else str(p)
 
 
 class Root:
@@ -251,9 +282,11 @@ class Manifest:
     def read(cls, path: Path) -> "Manifest":
         where = Mark(str(path))
         try:
-            raw = Path(path).read_bytes()
+            raw = read_regular(path, tol.INPUT_MAX_BYTES)  # a FIFO there blocked every reader
         except FileNotFoundError:
             raise InputError(where, "no manifest.json", "a folder written by axdf run") from None
+        except FileRefused as e:
+            raise InputError(where, e.problem, f"a {Path(path).name} written by axdf") from None
         except OSError as e:
             raise InputError(where, f"cannot read ({e.strerror})", "a readable manifest.json") from None
         try:
@@ -467,11 +500,13 @@ def prepare(out: Path, *, resume: bool = False, overwrite: bool = False, dirs=()
         is_dir = out.is_dir()
         entries = [n for n in os.listdir(out) if not own_entry(n)] if is_dir else None
     except FileNotFoundError:
+        check_way(out, "output folder")
         return Target(out, None, False, tuple(dirs))
     except OSError as e:
         raise atomic.environment_problem(out, e) from None
     if entries is None:
         if not os.path.lexists(out):
+            check_way(out, "output folder")
             return Target(out, None, False, tuple(dirs))
         raise InputError(None, f"output folder {out} exists and is not a folder", "give a folder")
     if not entries:
@@ -498,7 +533,10 @@ def prepare(out: Path, *, resume: bool = False, overwrite: bool = False, dirs=()
         raise InputError(None, f"output folder {out} is not empty (it holds an earlier {what})",
                          ("pass --resume to finish an interrupted run, --overwrite to replace it, or another --out"
                           if resumable else "pass --overwrite to replace it, or another --out"))
-    check_dirs(out, dirs)
+    # --overwrite deletes the old output's listed files that the new one lacks: the way to each
+    # must be made of real folders now, not found to be a link in the middle of the swap
+    old_dirs = sorted({PurePosixPath(rel).parent.as_posix() for rel in previous.files()} - {"."}) if overwrite else []
+    check_dirs(out, [*dirs, *old_dirs])
     return Target(out, previous, overwrite, tuple(dirs))
 
 
@@ -512,6 +550,12 @@ def remove_stale(out: Path, dirs=()) -> None:
     except OSError:
         pass
     atomic.remove_stale_temporaries(folders)
+    remove_stale_staging(out)
+
+
+def remove_stale_staging(out: Path) -> None:
+    """Staging folders (``OUT/.axdf-new-<pid>``) whose process is gone (a killed
+    ``--overwrite``): removed; a live process's stays."""
     for e in os.scandir(out):
         if e.name.startswith(STAGING_PREFIX) and e.is_dir(follow_symlinks=False):
             pid = atomic.temp_owner(e.name)
@@ -544,8 +588,12 @@ def lock_file(path: Path, folder: Path) -> int:
         except FileNotFoundError:
             same = False
         if same:
-            os.ftruncate(fd, 0)
-            os.write(fd, f"{os.getpid()}\n".encode())
+            try:
+                os.ftruncate(fd, 0)
+                os.write(fd, f"{os.getpid()}\n".encode())
+            except OSError as e:  # a full disk takes the lock's inode, not its pid's block
+                unlock_file(path, fd)
+                raise atomic.environment_problem(path, e) from None
             return fd
         os.close(fd)  # its holder removed it as we opened it: lock the file there now
     raise EnvironmentProblem(f"cannot lock {path}", "try again")
@@ -577,11 +625,14 @@ class Session:
         self.root = self.out / f"{STAGING_PREFIX}{os.getpid()}" if self.staged else self.out
         self.previous_files = target.previous.files() if target.previous is not None and not target.replace else {}
         self._fd = None
+        self._made = False  # OUT made by this session: removed again when it fails and leaves it empty
+        self._committed = False
 
     def __enter__(self) -> "Session":
+        self._made = not os.path.lexists(self.out)
         atomic.ensure_dir(self.out)
-        self._fd = lock_file(self.out / LOCK, self.out)
         try:
+            self._fd = lock_file(self.out / LOCK, self.out)
             self._verify()
             remove_stale(self.out, self.target.dirs)
             if self.staged:
@@ -589,6 +640,7 @@ class Session:
                 atomic.ensure_dir(self.root)
         except BaseException:
             self._unlock()
+            self._remove_made()
             raise
         return self
 
@@ -598,6 +650,15 @@ class Session:
                 shutil.rmtree(self.root, ignore_errors=True)
         finally:
             self._unlock()
+            if not self._committed:
+                self._remove_made()
+
+    def _remove_made(self) -> None:
+        if self._made:
+            try:
+                os.rmdir(self.out)  # only when empty: a failed command leaves no folder it made
+            except OSError:
+                pass
 
     def _unlock(self) -> None:
         if self._fd is not None:
@@ -610,8 +671,8 @@ class Session:
             changed = any(not own_entry(n) for n in os.listdir(self.out))
         else:
             try:
-                changed = hashlib.sha256((self.out / MANIFEST).read_bytes()).hexdigest() != prev.sha
-            except OSError:
+                changed = hashlib.sha256(read_regular(self.out / MANIFEST, tol.INPUT_MAX_BYTES)).hexdigest() != prev.sha
+            except (OSError, FileRefused):
                 changed = True
         if changed:
             raise InputError(None, f"output folder {self.out} changed while axdf was checking it",
@@ -625,6 +686,7 @@ class Session:
         ``interim``: keys added to the manifest OUT holds while swapping; ``during()``: work
         done in that window, before the files move (a command's files outside OUT)."""
         write_manifest(self.root, manifest)
+        self._committed = True
         if not self.staged:
             return
         old = self.target.previous if self.target.replace else None

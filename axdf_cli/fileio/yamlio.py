@@ -322,6 +322,9 @@ class _Converter:
                 value = self.loader.construct_object(node, deep=True)
             except yaml.YAMLError as e:
                 raise InputError(where, f"bad value: {getattr(e, 'problem', e)}") from None
+            except ValueError:  # an integer of more digits than Python converts (4300)
+                raise InputError(where, f"number {node.value[:20]}... of {len(node.value)} characters",
+                                 f"numbers within ±{tol.MAX_ABS_NUMBER:g}") from None
             if isinstance(value, float) and not math.isfinite(value):
                 raise InputError(where, f"number {node.value!r} is not finite", "finite numbers only")
             return value

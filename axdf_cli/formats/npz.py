@@ -201,13 +201,17 @@ VERIFY_BLOCK = 64 << 20  # bytes hashed at a time: bounded memory on any file
 
 
 def verify_npz(path: Path | str) -> None:
-    """The archive's own checks: the CRC-32 of every member (``np.load`` checks them only for
-    the entries it reads, memory-mapped ones never) and frame numbers finite and strictly
+    """The archive's own checks: its members those axdf writes, no more; the CRC-32 of every
+    member (``np.load`` checks them only for the entries it reads, memory-mapped ones never) and frame numbers finite and strictly
     increasing; MeshReadError naming the first problem."""
     import zipfile
 
     try:
         with zipfile.ZipFile(path) as z, open(path, "rb") as f:
+            extra = sorted(set(z.namelist()) - {k + ".npy" for k in ENTRIES})
+            if extra:  # an axdf NPZ holds its entries only: more is another writer's file, or a changed one
+                raise MeshReadError(f"NPZ member {extra[0]} is not one axdf writes (an axdf NPZ holds "
+                                    f"{', '.join(k + '.npy' for k in ENTRIES)})")
             for info in z.infolist():
                 if info.compress_type != 0:  # deflated: zipfile checks the CRC as it reads to the end
                     with z.open(info) as m:

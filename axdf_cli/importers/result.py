@@ -33,7 +33,8 @@ class ImportResult:
 def relative_ref(target: Path | str, start_dir: Path | str) -> str:
     """``target`` as a file written in ``start_dir`` refers to it: relative, '/'-separated
     (real paths: a reference that survives the import's own folders being links)."""
-    return Path(os.path.relpath(Path(target).resolve(), Path(start_dir).resolve())).as_posix()
+    # (os.path.realpath never raises; Path.resolve raises RuntimeError on a link loop in 3.11)
+    return Path(os.path.relpath(os.path.realpath(target), os.path.realpath(start_dir))).as_posix()
 
 
 def strip_dirs(text: str, inputs: list[Path]) -> str:

@@ -13,6 +13,7 @@ from xml.parsers import expat
 
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.fileio.yamlio import read_input
+from axdf_cli.tolerances import XML_MAX_DEPTH
 
 
 @dataclass(eq=False)
@@ -63,6 +64,8 @@ def parse_xml(path: Path | str, display: str | None = None) -> Node:
 
     def start(tag, attrib):
         node = Node(tag, dict(attrib), Mark(shown, parser.CurrentLineNumber, parser.CurrentColumnNumber + 1))
+        if len(stack) >= XML_MAX_DEPTH:
+            raise InputError(node.mark, f"<{tag}> nested too deeply", f"at most {XML_MAX_DEPTH} levels of elements")
         if stack:
             stack[-1].children.append(node)
         else:

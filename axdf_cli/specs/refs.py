@@ -106,6 +106,9 @@ def expand_muscle_paths(entries, policy: RefPolicy | None = None, base: Path | N
         else:
             raise InputError(mark, f"muscle path {s!r} not found", "an existing file, folder or glob")
         for h in hits:
+            if any("\udc80" <= c <= "\udcff" for c in str(h)):  # bytes that are not UTF-8 (see cli/main)
+                raise InputError(mark, f"file name {os.fsencode(h)!r} is not UTF-8 text",
+                                 "file and folder names in UTF-8 (axdf writes names into its text files)")
             policy.check(h, mark, base, "muscle file")
         out.extend((h, mark) for h in hits)
     seen, uniq = set(), []
