@@ -2,11 +2,12 @@
 
 Invariants on the demo library (the deltoid's three parts overlap at the shoulder, the
 gastrocnemius' heads in the calf): the product's measures agree with an independent
-generalized winding number computation (tests/winding.py); contact lowers them; the volume
-is kept exactly; a muscle far from everything is returned bit for bit; a rigid motion of the
-whole skeleton moves the result rigidly; --no-contact writes the meshes of the evaluation
-alone; --jobs and --frames subsets give the same bytes; a muscle wholly inside a bone is
-warned and refused under --strict; the contact keys are read and checked."""
+generalized winding number computation (tests/winding.py), also past a neighbour's end;
+contact lowers them; the volume is kept exactly; a muscle far from everything is returned bit
+for bit; a rigid motion of the whole skeleton moves the result rigidly; --no-contact writes
+the meshes of the evaluation alone; --jobs and --frames subsets give the same bytes; a muscle
+wholly inside a bone is warned and refused under --strict; the contact keys are read and
+checked."""
 from __future__ import annotations
 
 import hashlib
@@ -21,6 +22,7 @@ from winding import inside_shares
 
 from axdf_cli import tolerances as tol
 from axdf_cli.model import contact
+from axdf_cli.model.muscle import grid_faces
 from axdf_cli.pipeline.evaluate import evaluate_plan
 from axdf_cli.pipeline.plan import plan_run
 from axdf_cli.pipeline.stages import ContactStage
@@ -290,3 +292,52 @@ def test_contact_keys_are_checked(tmp_path, capsys):
     job.write_text(f"muscles: [{f}]\npose: {REPO_ROOT / 'poses' / 'demo.yaml'}\ncontact: maybe\n")
     assert run_cli(tmp_path, "validate", str(job), "--allow-outside") == 2
     assert "contact must be true or false" in capsys.readouterr().err
+
+
+# ----------------------------------------------------------------------------- past an end
+
+
+def _tube(p0, p1, radius, cap, offset=(0.0, 0.0, 0.0), U=12, A=16):
+    """A closed tube mesh from pole p0 to pole p1 (vertices (2 + (U - 2) A, 3) as the surface
+    stage writes them): rings of ``radius`` from ``cap`` (m) after p0 to ``cap`` before p1, all
+    moved by ``offset``."""
+    p0, p1 = np.asarray(p0, float), np.asarray(p1, float)
+    L = np.linalg.norm(p1 - p0)
+    t = (p1 - p0) / L
+    e1 = np.cross(t, [0.0, 0.0, 1.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(t, e1)
+    s = np.linspace(cap, L - cap, U - 2)
+    th = 2.0 * np.pi * np.arange(A) / A
+    # rings[u,a,:] = p0 + s[u] t + radius (cos th[a] e1 + sin th[a] e2)
+    rings = p0 + s[:, None, None] * t + radius * (np.cos(th)[None, :, None] * e1 + np.sin(th)[None, :, None] * e2)
+    return np.concatenate([p0[None], rings.reshape(-1, 3), p1[None]]) + np.asarray(offset)
+
+
+def test_a_point_past_a_neighbours_end_is_outside_it():
+    """A muscle whose end is blunt (ring 1 5 mm from the pole, 20 mm wide) and lies across the
+    axes has a box reaching past its poles; two small muscles just past its two ends, beside
+    its axis line and inside its box, lie outside its end caps (the generalized winding
+    number), so the product measures them outside and does not push them: the nearest point of
+    its centre line is then a pole, not ring 1's centre (read as an endless tube of ring 1's
+    radius they were wholly inside). A third small muscle inside its middle is measured inside."""
+    d = np.array([1.0, 1.0, 0.0]) / np.sqrt(2.0)
+    L = 0.1
+    side = (0.0, 0.0, 0.01)  # beside the axis line: the push's deep fade does not hide it
+    meshes = [_tube(np.zeros(3), L * d, 0.02, 0.005),
+              _tube(-0.01 * d, -0.003 * d, 0.002, 0.001, side),  # past the origin pole
+              _tube((L + 0.003) * d, (L + 0.01) * d, 0.002, 0.001, side),  # past the insertion pole
+              _tube(0.04 * d, 0.06 * d, 0.002, 0.001, side)]  # inside the middle
+    faces = grid_faces(12, 16)
+    big_box = meshes[0].min(axis=0), meshes[0].max(axis=0)
+    for m in meshes[1:3]:
+        assert np.all((m >= big_box[0]) & (m <= big_box[1]))  # inside its box: the query is asked
+    M = len(meshes)
+    model = contact.ContactModel(~np.eye(M, dtype=bool), contact.pair_shares(np.zeros(M)),
+                                 contact.BoneFields.pack([]), ((12, 16),) * M, np.zeros(M))
+    ref = inside_shares([(v, faces) for v in meshes], [], model.allow)[:, 0]
+    assert ref.tolist() == [0.0, 0.0, 0.0, 1.0]
+    _, _, touched, before, _ = contact.resolve_frame(model, meshes, np.eye(4)[None])
+    np.testing.assert_array_equal(before[:, 0], ref)
+    assert before[1:3, 2].tolist() == [0.0, 0.0]  # no depth
+    assert not touched[1] and not touched[2] and touched[3]

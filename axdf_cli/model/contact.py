@@ -17,7 +17,8 @@ collapse to the poles):
   point c of j's centre polyline (the rings' centroids between the two poles): its radial
   distance rho from c, perpendicular to the polyline, against j's surface radius R in that
   direction (the ray from c cut with the two neighbouring rings, projected into the plane
-  perpendicular to the polyline, linear between them). Inside when rho < R.
+  perpendicular to the polyline, linear between them). Inside when rho < R. Where c is a
+  pole, x lies past j's end cap (the cone closing the mesh): outside.
 
 Response (tol.CONTACT_ITERATIONS Jacobi passes, every muscle against every other's previous pass):
 
@@ -360,7 +361,8 @@ SQRT3 = float(np.sqrt(3.0))
 @njit(cache=True)
 def _scan_segments(x, cen, coff_j, U, u0, u1, best, bu, bl):
     """The nearest of centre segments u0..u1-1 to x if nearer than ``best`` (squared distance):
-    (best, segment, parameter). Points beyond the first or last segment's end are skipped."""
+    (best, segment, parameter), the parameter clamped to [0, 1]: beyond the first or last
+    segment's end, the nearest point is the pole (the end cap's apex, :func:`_muscle_query`)."""
     for u in range(u0, u1):
         a0 = cen[coff_j + u, 0]
         a1 = cen[coff_j + u, 1]
@@ -372,8 +374,6 @@ def _scan_segments(x, cen, coff_j, U, u0, u1, best, bu, bl):
         lam = 0.0
         if ll > 0.0:
             lam = ((x[0] - a0) * d0 + (x[1] - a1) * d1 + (x[2] - a2) * d2) / ll
-        if (u == 0 and lam < 0.0) or (u == U - 2 and lam > 1.0):
-            continue  # beyond an end: not inside
         lam = min(max(lam, 0.0), 1.0)
         e0 = x[0] - (a0 + lam * d0)
         e1 = x[1] - (a1 + lam * d1)
@@ -392,6 +392,12 @@ def _muscle_query(x, grid, off_j, U, A, cen, coff_j, reach, out):
     radial distance, surface radius, axis point, unit radial direction. Returns False when x
     lies beyond j's ends, or when rho exceeds the two rings' largest radius (cen[:, 3]) plus
     ``reach`` (then rho > R + reach: the rings' radii are not read).
+    Beyond an end: where the nearest point of the whole centre polyline (poles included) is a
+    pole, x lies past the plane through the pole across the end segment, outside the end cap
+    (the cone from the pole to ring 1 or U - 2 that closes the mesh), whose radius is 0 at the
+    pole: False. (Scanned without the end segments' clamped ends, the nearest point was ring
+    1's centre, and x read against an endless continuation of ring 1: inside wherever it lay
+    within ring 1's radius of the axis line.)
     The nearest centre segment: the groups of :data:`SEG_GROUP` segments are scanned nearest
     bounding sphere first (cen[:, 4:8]), the others only where their sphere may hold a nearer
     point (the same segment as a scan of all, in fewer steps)."""
@@ -417,6 +423,8 @@ def _muscle_query(x, grid, off_j, U, A, cen, coff_j, reach, out):
                                       best, bu, bl)
     if bu < 0:
         return False
+    if (bu == 0 and bl <= 0.0) or (bu == U - 2 and bl >= 1.0):
+        return False  # beyond an end: outside the end cap
     p0 = coff_j + bu
     p1 = p0 + 1
     cx0 = (1.0 - bl) * cen[p0, 0] + bl * cen[p1, 0]
