@@ -165,13 +165,16 @@ def test_full_disk_while_streaming_a_packed_format_exits_3(tmp_path, monkeypatch
     assert not list(out.rglob("*." + fmt))
 
 
-def test_output_under_a_file_exits_3(tmp_path, monkeypatch, capsys):
+def test_output_under_a_file_exits_2(tmp_path, monkeypatch, capsys):
+    """A path mistake (a file where a folder must be) is bad input, found before anything is
+    written (docs/OUTPUTS.md, rule 6); it was exit 3 ("cannot write (Not a directory)")."""
     monkeypatch.chdir(ROOT)
     blocker = tmp_path / "file"
     blocker.write_text("x")
     rc = main(["run", "poses/jobs/demo.yaml", "--no-render", "--frames", "0:1", "--out", str(blocker / "sub")])
-    assert rc == 3
-    assert "cannot write" in capsys.readouterr().err
+    assert rc == 2
+    assert "file is not a folder" in capsys.readouterr().err
+    assert blocker.read_text() == "x"
 
 
 # ----------------------------------------------------------------------------- hostile input
