@@ -319,3 +319,24 @@ def test_contact_is_off_by_default_and_on_with_the_flag_or_the_job(project, caps
                            "-q"], capsys)
     assert rc == 0, err
     assert all_files(Path("touch2")).keys() == all_files(Path("touch")).keys()
+
+
+def test_a_data_set_file_switches_contact_on(tmp_path, capsys, monkeypatch):
+    """A data-set file takes a job's stage keys: `contact: true` makes every sequence collide
+    (dataset.json names the stage; the chain's muscle runs through its joint balls, so contact
+    moves it), `contact: 3` is exit 2 at its line."""
+    from dataset_helpers import DATASET_YAML, build_in, write_tiny
+
+    write_tiny(tmp_path / "plain")
+    write_tiny(tmp_path / "touch", DATASET_YAML + "contact: true\n")
+    plain, touch = build_in(tmp_path / "plain", "out"), build_in(tmp_path / "touch", "out")
+    assert "stages" not in json.loads((plain / "dataset.json").read_text())
+    assert [s["name"] for s in json.loads((touch / "dataset.json").read_text())["stages"]] == ["contact"]
+    mesh = "seq_00005/meshes/chainm/chainm_0008.ply"
+    assert (plain / mesh).read_bytes() != (touch / mesh).read_bytes()
+    write_tiny(tmp_path / "bad", DATASET_YAML + "contact: 3\n")
+    monkeypatch.chdir(tmp_path / "bad")
+    rc, _, err = run_main(["dataset", "build", "tiny.yaml", "--out", "out"], capsys)
+    line = DATASET_YAML.count("\n") + 1
+    assert rc == 2 and f"tiny.yaml:{line}:10: contact" in err and "true or false" in err, err
+    assert not (tmp_path / "bad" / "out").exists()

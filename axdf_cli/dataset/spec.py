@@ -15,6 +15,7 @@ from axdf_cli.errors import InputError, Mark
 from axdf_cli.tolerances import MAX_ABS_NUMBER, MAX_FPS, MAX_SEED
 from axdf_cli.formats import WRITERS
 from axdf_cli.specs import Pose, RefPolicy, expand_muscle_paths, load_pose, load_skeleton
+from axdf_cli.specs.job import STAGE_KEYS
 from axdf_cli.fileio.yamlio import Fields, check_name, check_number, check_vector, item_marks, load_yaml, mark_of
 
 SAMPLE_MODES = ("uniform", "perturb")
@@ -30,7 +31,7 @@ MIN_CAMERA_DISTANCE = 1e-3
 DEFAULT_VISIBILITY_TOLERANCE = 0.1  # metres; see labels.visibility
 RENDER_KEYS_ELSEWHERE = ("enabled", "view", "camera", "orbit", "fov")
 DATASET_KEYS = ("dataset", "seed", "skeleton", "muscles", "fps", "coordinates", "motions", "sequences", "activation",
-                "cameras", "render", "format", "shards", "labels")
+                "cameras", "render", "format", "shards", "labels") + STAGE_KEYS
 
 
 @dataclass(frozen=True)
@@ -123,6 +124,7 @@ class DatasetSpec:
     visibility_tolerance: float
     fps: float
     policy: RefPolicy = field(default=RefPolicy(), compare=False)  # where referenced files may lie
+    stages: tuple = ()  # ((stage, True | False), ...): the file's stage keys (`contact: true`), as a job's
 
     @property
     def views(self) -> tuple[str, ...]:
@@ -189,13 +191,14 @@ def load_dataset(path: Path | str, seed: int | None = None, policy: RefPolicy | 
         lf = Fields(lab, f.vmark("labels"), "labels")
         tol = float(lf.number("visibility_tolerance", default=tol, lo=0.0, hi=100.0))
         lf.done()
+    stages = tuple((k, f.boolean(k)) for k in STAGE_KEYS if f.has(k))
     f.done()
     total = sum(e.count for e in entries)
     if total > MAX_SEQUENCES:
         raise InputError(f.vmark("sequences"), f"{total} sequences", f"at most {MAX_SEQUENCES}")
     spec = DatasetSpec(name, str(path), file_seed if seed is None else int(seed), str(skel_path),
                        tuple(str(p) for p in files), motions, entries, coords, activation, rig, sphere, render,
-                       passes, fmt, shards, tol, fps, policy)
+                       passes, fmt, shards, tol, fps, policy, stages)
     # every motion must load (and match the skeleton) before anything is written
     for m in motions.values():
         load_motion(spec, m.name)

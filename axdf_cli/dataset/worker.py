@@ -87,7 +87,8 @@ def build_context(path: Path | str, seed: int | None = None, policy=None, listed
     sequences = expand_sequences(spec) if listed else []
     keypoints = skeleton_keypoints(skel, {i: m[0] for i, m in bone_meshes.items()})
     ctx = Context(spec, sequences, skel, door.without_meshes(skel), muscles, models, bone_meshes, keypoints,
-                  inputs, motion_inputs, scene, scene_bones, b"", "", stages=door.build_stages(muscles=muscles))
+                  inputs, motion_inputs, scene, scene_bones, b"", "",
+                  stages=door.build_stages(dict(spec.stages), muscles=muscles))
     if not listed:
         return ctx
     ctx.dataset_json = (json.dumps(dataset_dict(ctx), indent=1) + "\n").encode()
