@@ -45,7 +45,7 @@ from llvmlite import ir
 from numba import njit, types
 from numba.extending import intrinsic
 
-from axdf_cli.model.kernels import _solve_scale
+from axdf_cli.model.kernels import _solve_scale, quad_volume_terms
 from axdf_cli.model.paths import wrap as W
 
 _EPS = 1e-30  # as axdf_cli.model.rmf._EPS
@@ -612,19 +612,12 @@ def _volume_terms(ga, gw, terms):
         wd0 = w_[0, i] - w_[0, i3]
         wd1 = w_[1, i] - w_[1, i3]
         wd2 = w_[2, i] - w_[2, i3]
-        p0 = ay1 * ad2 - ay2 * ad1
-        p1 = ay2 * ad0 - ay0 * ad2
-        p2 = ay0 * ad1 - ay1 * ad0
-        q0 = wy1 * wd2 - wy2 * wd1
-        q1 = wy2 * wd0 - wy0 * wd2
-        q2 = wy0 * wd1 - wy1 * wd0
-        r0 = (wy1 * ad2 - wy2 * ad1) + (ay1 * wd2 - ay2 * wd1)
-        r1 = (wy2 * ad0 - wy0 * ad2) + (ay2 * wd0 - ay0 * wd2)
-        r2 = (wy0 * ad1 - wy1 * ad0) + (ay0 * wd1 - ay1 * wd0)
-        terms[0, i] = ax0 * p0 + ax1 * p1 + ax2 * p2
-        terms[1, i] = (wx0 * p0 + wx1 * p1 + wx2 * p2) + (ax0 * r0 + ax1 * r1 + ax2 * r2)
-        terms[2, i] = (ax0 * q0 + ax1 * q1 + ax2 * q2) + (wx0 * r0 + wx1 * r1 + wx2 * r2)
-        terms[3, i] = wx0 * q0 + wx1 * q1 + wx2 * q2
+        t0, t1, t2, t3 = quad_volume_terms(ax0, ax1, ax2, wx0, wx1, wx2, ay0, ay1, ay2, wy0, wy1, wy2,
+                                           ad0, ad1, ad2, wd0, wd1, wd2)
+        terms[0, i] = t0
+        terms[1, i] = t1
+        terms[2, i] = t2
+        terms[3, i] = t3
 
 
 @njit(cache=True, error_model="numpy")

@@ -90,6 +90,27 @@ def _tessellate(net_a, net_w, u_idx, u_w, v_idx, v_w, ta, tw, ga, gw):
                 gw[u, a, c] = sw
 
 
+@njit(cache=True, inline="always")
+def quad_volume_terms(ax0, ax1, ax2, wx0, wx1, wx2, ay0, ay1, ay2, wy0, wy1, wy2, ad0, ad1, ad2, wd0, wd1, wd2):
+    """One quad's four contributions (times 6) to the volume cubic of the grid a + s w: the
+    triple product x . (y x d) with x = ax + s wx, y = ay + s wy, d = ad + s wd, by powers of s
+    (P = ay x ad, Q = wy x wd, R = wy x ad + ay x wd). Shared by :func:`_volume_cubic` and the
+    batch pass (:mod:`axdf_cli.model.batch_kernels`), so both add the same terms in the same order."""
+    p0 = ay1 * ad2 - ay2 * ad1
+    p1 = ay2 * ad0 - ay0 * ad2
+    p2 = ay0 * ad1 - ay1 * ad0
+    q0 = wy1 * wd2 - wy2 * wd1
+    q1 = wy2 * wd0 - wy0 * wd2
+    q2 = wy0 * wd1 - wy1 * wd0
+    r0 = (wy1 * ad2 - wy2 * ad1) + (ay1 * wd2 - ay2 * wd1)
+    r1 = (wy2 * ad0 - wy0 * ad2) + (ay2 * wd0 - ay0 * wd2)
+    r2 = (wy0 * ad1 - wy1 * ad0) + (ay0 * wd1 - ay1 * wd0)
+    return (ax0 * p0 + ax1 * p1 + ax2 * p2,
+            (wx0 * p0 + wx1 * p1 + wx2 * p2) + (ax0 * r0 + ax1 * r1 + ax2 * r2),
+            (ax0 * q0 + ax1 * q1 + ax2 * q2) + (wx0 * r0 + wx1 * r1 + wx2 * r2),
+            wx0 * q0 + wx1 * q1 + wx2 * q2)
+
+
 @njit(cache=True)
 def _volume_cubic(ga, gw):
     """Stage 3: coefficients (c0, c1, c2, c3) of the mesh volume V(s) of the grid ga + s gw.
@@ -122,20 +143,12 @@ def _volume_cubic(ga, gw):
             wd0 = gw[u, a, 0] - gw[u + 1, a1, 0]
             wd1 = gw[u, a, 1] - gw[u + 1, a1, 1]
             wd2 = gw[u, a, 2] - gw[u + 1, a1, 2]
-            # P = ay x ad, Q = wy x wd, R = wy x ad + ay x wd
-            p0 = ay1 * ad2 - ay2 * ad1
-            p1 = ay2 * ad0 - ay0 * ad2
-            p2 = ay0 * ad1 - ay1 * ad0
-            q0 = wy1 * wd2 - wy2 * wd1
-            q1 = wy2 * wd0 - wy0 * wd2
-            q2 = wy0 * wd1 - wy1 * wd0
-            r0 = (wy1 * ad2 - wy2 * ad1) + (ay1 * wd2 - ay2 * wd1)
-            r1 = (wy2 * ad0 - wy0 * ad2) + (ay2 * wd0 - ay0 * wd2)
-            r2 = (wy0 * ad1 - wy1 * ad0) + (ay0 * wd1 - ay1 * wd0)
-            c0 += ax0 * p0 + ax1 * p1 + ax2 * p2
-            c1 += (wx0 * p0 + wx1 * p1 + wx2 * p2) + (ax0 * r0 + ax1 * r1 + ax2 * r2)
-            c2 += (ax0 * q0 + ax1 * q1 + ax2 * q2) + (wx0 * r0 + wx1 * r1 + wx2 * r2)
-            c3 += wx0 * q0 + wx1 * q1 + wx2 * q2
+            t0, t1, t2, t3 = quad_volume_terms(ax0, ax1, ax2, wx0, wx1, wx2, ay0, ay1, ay2, wy0, wy1, wy2,
+                                               ad0, ad1, ad2, wd0, wd1, wd2)
+            c0 += t0
+            c1 += t1
+            c2 += t2
+            c3 += t3
     return c0 / 6.0, c1 / 6.0, c2 / 6.0, c3 / 6.0
 
 
