@@ -189,6 +189,37 @@ def test_update_makes_golden_equal_to_actual(runs, tmp_path, capsys):
     assert main(["compare", str(actual), str(golden)]) == 0
 
 
+@pytest.mark.parametrize("stop", [KeyboardInterrupt, OSError])
+def test_an_interrupted_update_leaves_golden_as_it_was(runs, tmp_path, capsys, monkeypatch, stop):
+    """Ctrl-C (or a read error) while --update writes its new files: GOLDEN keeps every old
+    byte, gains no file, loses none, and no temporary is left; the update then completes."""
+    from axdf_cli.compare import bless
+
+    actual, golden = runs
+    v, n, f = tube(1, 2)
+    write_ply(actual / "meshes/m2/m2_0001.ply", v + 0.01, n, f)
+    (actual / "frames/0003.png").unlink()
+    (actual / "new/deep.txt").parent.mkdir()
+    (actual / "new/deep.txt").write_text("new\n")
+    before = tree_bytes(golden)
+    real = bless.read_compared
+
+    def breaks(path, root):
+        if Path(path).name == "deep.txt":  # the last file: meshes/m2/m2_0001.ply is written by now
+            raise stop("stopped")
+        return real(path, root)
+
+    monkeypatch.setattr(bless, "read_compared", breaks)
+    with pytest.raises(stop):
+        bless.bless(actual, golden, T.Tolerances())
+    assert tree_bytes(golden) == before
+    assert not [p for p in golden.rglob("*") if p.name.startswith(".axdf-tmp-")]
+    assert not (golden / "new").exists()
+    monkeypatch.setattr(bless, "read_compared", real)
+    assert main(["compare", str(actual), str(golden), "--update"]) == 0
+    assert tree_bytes(golden) == tree_bytes(actual)
+
+
 def test_update_creates_a_new_golden_folder(runs, tmp_path, capsys):
     actual, _ = runs
     fresh = tmp_path / "fresh-golden"

@@ -1,7 +1,8 @@
 """``--update``: make golden equal to actual, saying what changed.
 
-Every file of actual that golden lacks is added, every file whose bytes differ is replaced
-(atomically), and every golden file that actual lacks is removed (empty folders with it).
+Every file of actual that golden lacks is added, every file whose bytes differ is replaced,
+and every golden file that actual lacks is removed (empty folders with it), all or nothing:
+the new files are written first, then put in place at once (:func:`apply_bless`).
 Ignored files and this comparison's own outputs are left alone.
 
 Nothing is written before everything is checked (:func:`plan_bless`, exit 2 on refusal):
@@ -21,7 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable
 
-from axdf_cli.fileio.atomic import write_parts
+from axdf_cli.fileio.atomic import deferred_signals, temp_path, write_parts
 from axdf_cli.compare.files import check_compared, list_files, nested, read_compared
 from axdf_cli.compare.result import Report, Unreadable
 from axdf_cli.compare.thresholds import Tolerances
@@ -104,31 +105,57 @@ def plan_bless(actual: Path, golden: Path, tolerances: Tolerances, exclude: Iter
 
 
 def apply_bless(steps: list[Step], actual: Path, golden: Path, report: Report | None = None) -> list[Change]:
-    """Carry out :func:`plan_bless`'s steps; return what changed, in path order."""
+    """Carry out :func:`plan_bless`'s steps; return what changed, in path order.
+
+    Whole or not at all: every new or changed file is first written beside its place as a
+    temporary (``.axdf-tmp-<pid>-NAME``, which compare ignores and a later command removes
+    once this process is gone); only when all are written are they renamed into place and
+    the removed files deleted, with Ctrl-C and SIGTERM held until that is done. An
+    interruption or error before then leaves GOLDEN as it was."""
     verdicts = {f.path: f.verdict for f in report.files} if report is not None else {}
     root_a = None if actual.is_file() else actual
     changes: list[Change] = []
-    for s in steps:
-        try:
+    staged: list[tuple[Path, Path]] = []  # (temporary, golden file)
+    try:
+        for s in steps:
             if s.action == "remove":
+                continue
+            try:
+                data = read_compared(s.src, root_a)
+                if s.action == "update" and s.dst.stat().st_size == len(data) and read_compared(s.dst, None) == data:
+                    continue
+            except Unreadable as e:  # changed since plan_bless checked it
+                raise EnvironmentProblem(f"{s.src}: {e}") from None
+            tmp = temp_path(s.dst)
+            write_parts(tmp, (data,))
+            staged.append((tmp, s.dst))
+            changes.append(Change("added" if s.action == "add" else "replaced", s.rel,
+                                  _note(verdicts.get(s.rel)) if s.action == "update" else ""))
+    except BaseException:
+        for tmp, _ in staged:
+            try:
+                tmp.unlink()
+            except OSError:
+                pass
+            if golden.exists() and not golden.is_file():
+                _prune(tmp.parent, real_path(golden))  # folders made for new files
+        raise
+    with deferred_signals():
+        for tmp, dst in staged:
+            try:
+                os.replace(tmp, dst)
+            except OSError as e:
+                raise EnvironmentProblem(f"{dst}: cannot write ({e.strerror})") from None
+        for s in steps:
+            if s.action != "remove":
+                continue
+            try:
                 s.dst.unlink()
-                changes.append(Change("removed", s.rel))
-                _prune(s.dst.parent, real_path(golden))
-                continue
-            data = read_compared(s.src, root_a)
-            if s.action == "update" and s.dst.stat().st_size == len(data) and read_compared(s.dst, None) == data:
-                continue
-            write_parts(s.dst, (data,))
-        except Unreadable as e:  # changed since plan_bless checked it
-            raise EnvironmentProblem(f"{s.src}: {e}") from None
-        except OSError as e:
-            raise EnvironmentProblem(f"{s.dst}: cannot {'remove' if s.action == 'remove' else 'write'} "
-                                     f"({e.strerror})") from None
-        changes.append(Change("added" if s.action == "add" else "replaced", s.rel,
-                              _note(verdicts.get(s.rel)) if s.action == "update" else ""))
-    return changes
-
-
+            except OSError as e:
+                raise EnvironmentProblem(f"{s.dst}: cannot remove ({e.strerror})") from None
+            changes.append(Change("removed", s.rel))
+            _prune(s.dst.parent, real_path(golden))
+    return sorted(changes, key=lambda c: c.path)
 def bless(actual: Path, golden: Path, tolerances: Tolerances, report: Report | None = None,
           exclude: Iterable[Path] = ()) -> list[Change]:
     """Copy ``actual`` over ``golden`` (files or folders); return what changed, in path order.
