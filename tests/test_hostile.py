@@ -137,6 +137,21 @@ def test_a_full_disk_at_the_lock_is_exit_3_and_leaves_nothing(imp, proj, capsys,
     assert snapshot(proj) == before and not (proj / "new").exists()  # no lock, and no folder it made
 
 
+def test_a_folder_where_the_lock_goes_is_exit_2(proj, capsys):
+    """OUT/.axdf-lock a folder (not axdf's): exit 2 naming it, nothing written (was exit 3)."""
+    (proj / "held" / ".axdf-lock").mkdir(parents=True)
+    before = snapshot(proj)
+    rc, _, err = run_main(["run", "poses/jobs/demo.yaml", "--no-render", "--frames", "0:1", "--out", "held"], capsys)
+    assert rc == 2 and ".axdf-lock is a folder" in err and "Traceback" not in err, err
+    assert snapshot(proj) == before
+
+
+@pytest.mark.parametrize("shard", ["1/99999999999999999999", "0/1000001"])
+def test_a_shard_count_beyond_the_limit_is_exit_2(capsys, shard):
+    rc, _, err = run_main(["dataset", "build", "nothing.yaml", "--out", "x", "--shard", shard], capsys)
+    assert rc == 2 and "--shard" in err and "1000000" in err, err
+
+
 # ----------------------------------------------------------------------------- hostile inputs
 
 

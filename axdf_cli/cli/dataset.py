@@ -45,9 +45,11 @@ def add_args(p) -> None:
 
 
 def parse_shard(text: str) -> tuple[int, int]:
+    from axdf_cli.dataset.spec import MAX_SHARDS
+
     m = _SHARD_RE.match(text or "")
-    if not m or not (int(m.group(2)) >= 1 and 0 <= int(m.group(1)) < int(m.group(2))):
-        raise UsageError(f"--shard {text!r}", "K/N with 0 <= K < N, e.g. --shard 3/16")
+    if not m or not (1 <= int(m.group(2)) <= MAX_SHARDS and 0 <= int(m.group(1)) < int(m.group(2))):
+        raise UsageError(f"--shard {text!r}", f"K/N with 0 <= K < N <= {MAX_SHARDS}, e.g. --shard 3/16")
     return int(m.group(1)), int(m.group(2))
 
 

@@ -28,6 +28,9 @@ MAX_VIEWS = 64
 #: A sphere camera's nearest distance to its target (m): closer, the view matrix loses its
 #: precision (1e-300 gave NaN cameras and labels); 1 mm is far below any useful view.
 MIN_CAMERA_DISTANCE = 1e-3
+#: At most this many shards (a data-set file's `shards:`, `--shard K/N`): more than any cluster
+#: runs, far fewer than the sequences a file may hold.
+MAX_SHARDS = 1_000_000
 DEFAULT_VISIBILITY_TOLERANCE = 0.1  # metres; see labels.visibility
 RENDER_KEYS_ELSEWHERE = ("enabled", "view", "camera", "orbit", "fov")
 DATASET_KEYS = ("dataset", "seed", "skeleton", "muscles", "fps", "coordinates", "motions", "sequences", "activation",
@@ -184,7 +187,7 @@ def load_dataset(path: Path | str, seed: int | None = None, policy: RefPolicy | 
     rig, sphere = _parse_cameras(f.mapping("cameras", required=True), f.vmark("cameras"), skel)
     render, passes = _parse_render(f.mapping("render", default=None), f.vmark("render"))
     fmt = f.choice("format", tuple(WRITERS), default="ply")
-    shards = int(f.number("shards", default=1, lo=1, hi=1_000_000, integer=True))
+    shards = int(f.number("shards", default=1, lo=1, hi=MAX_SHARDS, integer=True))
     lab = f.mapping("labels", default=None)
     tol = DEFAULT_VISIBILITY_TOLERANCE
     if lab is not None:

@@ -46,7 +46,7 @@ from pathlib import Path, PurePosixPath
 
 from axdf_cli import tolerances as tol
 from axdf_cli.fileio import atomic
-from axdf_cli.errors import EnvironmentProblem, InputError, Mark
+from axdf_cli.errors import EnvironmentProblem, InputError, Mark, UsageError
 from axdf_cli.fileio.yamlio import FileRefused, read_regular
 
 MANIFEST = "manifest.json"
@@ -574,6 +574,9 @@ def lock_file(path: Path, folder: Path) -> int:
         except OSError as e:
             if e.errno == errno.ELOOP:
                 raise _refuse_link(path) from None
+            if e.errno == errno.EISDIR:  # not ours: a folder where the lock goes
+                raise UsageError(f"{path} is a folder", f"axdf keeps its lock file there ({LOCK}); "
+                                 "move the folder away") from None
             raise atomic.environment_problem(path, e) from None
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
