@@ -196,30 +196,33 @@ def run(args) -> int:
         write_imported(files, res.inputs, args.overwrite, args.model, tick)
     finally:
         close()
-    for w in res.warnings:
-        print(f"axdf: warning: {w}", file=sys.stderr)
-    if not args.quiet:
-        c = res.report["counts"]
-        print(f"imported {args.model.name}: {c['bodies']} bodies, {c['coordinates']} coordinates, "
-              f"{c['muscles']} muscles, {c['meshes']} bone meshes")
-        _print_ignored(res.report["ignored"])
-        skipped = res.report.get("missing_meshes", [])
-        if skipped:
-            print(f"meshes skipped: {len(skipped)}")
-        if args.verbose:
-            for path in sorted(res.files):
-                print(path)
-        print(f"report: {Path(args.out) / 'IMPORT.md'}")
+    c = res.report["counts"]
+    _print_summary(args, res, f"{c['bodies']} bodies, {c['coordinates']} coordinates, {c['muscles']} muscles, "
+                              f"{c['meshes']} bone meshes")
     return 0
 
 
-def _print_ignored(ignored: list) -> None:
-    """One line counting what an import left out, by kind (``not imported: 2 markers, ...``)."""
+def _print_summary(args, res, counts: str) -> None:
+    """What a muscle model's import (``osim``, ``mjcf``) says when done: its warnings (stderr),
+    then unless ``-q`` what it imported, what it left out by kind (``not imported: 2 markers,
+    ...``), the meshes it could not find, with ``-v`` every file, and where its report is."""
+    for w in res.warnings:
+        print(f"axdf: warning: {w}", file=sys.stderr)
+    if args.quiet:
+        return
+    print(f"imported {args.model.name}: {counts}")
     kinds: dict[str, int] = {}
-    for i in ignored:
+    for i in res.report["ignored"]:
         kinds[i["kind"]] = kinds.get(i["kind"], 0) + 1
     if kinds:
         print("not imported: " + ", ".join(f"{n} {k}{'s' if n != 1 else ''}" for k, n in sorted(kinds.items())))
+    skipped = res.report.get("missing_meshes", [])
+    if skipped:
+        print(f"meshes skipped: {len(skipped)}")
+    if args.verbose:
+        for path in sorted(res.files):
+            print(path)
+    print(f"report: {Path(args.out) / 'IMPORT.md'}")
 
 
 def run_mjcf(args) -> int:
@@ -248,17 +251,9 @@ def run_mjcf(args) -> int:
         write_imported(files, res.inputs, args.overwrite, args.model, tick, assets=res.assets)
     finally:
         close()
-    for w in res.warnings:
-        print(f"axdf: warning: {w}", file=sys.stderr)
-    if not args.quiet:
-        c = res.report["counts"]
-        print(f"imported {args.model.name}: {c['bodies']} bodies, {c['coordinates']} coordinates "
-              f"({c['couplings']} coupled joints), {c['muscles']} muscles, {c['meshes']} bone meshes")
-        _print_ignored(res.report["ignored"])
-        if args.verbose:
-            for path in sorted(res.files):
-                print(path)
-        print(f"report: {Path(args.out) / 'IMPORT.md'}")
+    c = res.report["counts"]
+    _print_summary(args, res, f"{c['bodies']} bodies, {c['coordinates']} coordinates ({c['couplings']} coupled "
+                              f"joints), {c['muscles']} muscles, {c['meshes']} bone meshes")
     return 0
 
 
