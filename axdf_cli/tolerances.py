@@ -208,3 +208,20 @@ CONTACT_AXES_FADE = (0.1, 0.4)
 # CONTACT_SAMPLE_RINGS-th ring; each sampled ring's displacement modes are fitted to them.
 CONTACT_SAMPLE_COLUMNS = 3
 CONTACT_SAMPLE_RINGS = 2
+
+# Packing (axdf_cli/model/pack.py): rounds of territory and fit, pixels across a ring's
+# square, the square's half side over the ring's radius, the gap left inside a territory's
+# boundary (m), the fit's pull towards the current outline, the largest envelope scale.
+PACK_ITERATIONS = 20
+PACK_PIXELS = 40
+PACK_GROW = 1.6
+PACK_MARGIN = 0.001
+PACK_PULL = 0.02
+PACK_SCALE_MAX = 5.0
+# sections of a packed muscle (evenly between its first and last), the volume step's gain
+PACK_SECTIONS = 16
+PACK_GAIN = 0.5
+PACK_STEP = 1.06
+# rounds of drawing in the targets of fitted vertices outside their territory, by this factor
+PACK_FIT_ROUNDS = 12
+PACK_DRAW_IN = 0.8

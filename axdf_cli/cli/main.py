@@ -23,6 +23,7 @@ COMMANDS = {
     "compare": ("axdf_cli.cli.compare", "compare a run (or one file) with a golden one; exit 1 when different"),
     "import": ("axdf_cli.cli.importer", "import OpenSim models and motions, or BVH motion capture, as axdf files"),
     "transfer": ("axdf_cli.cli.transfer", "move muscles onto another skeleton through a bone map"),
+    "pack": ("axdf_cli.cli.pack", "make a body's muscles share space at the rest pose (section outlines)"),
     "retarget": ("axdf_cli.cli.retarget", "fit a muscle model's skeleton to motion capture (BVH, 3D joints)"),
     "dataset": ("axdf_cli.cli.dataset", "build data sets: sampled poses, several views, labels, one index"),
 }

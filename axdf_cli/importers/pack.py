@@ -1,0 +1,123 @@
+"""``axdf pack``: a body's muscles made to share space at the rest pose (axdf_cli/model/pack.py).
+
+Reads muscle files and the skeleton they are defined on (with its bone meshes), packs their
+rest shapes and returns the bytes of the packed muscle files (same names, every section an
+``outline:``), ``pack_report.json`` and ``PACK.md``. Nothing is written here.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from axdf_cli.errors import InputError, Mark
+from axdf_cli.fileio.atomic import sha256_file
+from axdf_cli.importers import emit
+from axdf_cli.importers.transfer import UniqueFiles, file_doc, muscle_mark
+from axdf_cli.model import contact, pack
+from axdf_cli.model.muscle import MuscleModel
+from axdf_cli.model.skeleton import forward_kinematics
+from axdf_cli.pipeline.plan import display_path, load_bone_mesh
+from axdf_cli.specs import RefPolicy, load_muscle_file, load_skeleton
+
+REPORT = "pack_report.json"
+SUMMARY = "PACK.md"
+
+
+@dataclass
+class PackOutputs:
+    files: dict  # output name -> bytes
+    report: dict
+    inputs: list = field(default_factory=list)  # every file read
+
+
+def build_pack(muscle_files: list[Path], skeleton_path: Path | str, policy: RefPolicy | None = None,
+               rounds: int | None = None, progress=None) -> PackOutputs:
+    """Pack every muscle of ``muscle_files`` (defined on the skeleton at ``skeleton_path``)."""
+    skeleton_path = Path(skeleton_path)
+    skel = load_skeleton(skeleton_path, policy)
+    by_file, specs, names, defined = [], [], {}, {}
+    for path in muscle_files:
+        if path.name in names:
+            raise InputError(Mark(str(path)), f"two muscle files named {path.name} ({names[path.name]} and {path})",
+                             "muscle files with distinct names (they share the output folder)")
+        names[path.name] = path
+        file_specs = load_muscle_file(path)
+        for s in file_specs:
+            if s.name in defined:
+                raise InputError(muscle_mark(path, s.name), f"muscle {s.name!r} is also defined in {defined[s.name]}",
+                                 "muscle names are unique among the packed files")
+            defined[s.name] = path
+        by_file.append((path, len(file_specs)))
+        specs += file_specs
+    if not specs:
+        raise InputError(None, "no muscles found", "give muscle YAML files")
+    rest = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
+    models = [MuscleModel(s, skel.bone_index, rest, skel) for s in specs]
+    meshes = {i: load_bone_mesh(b.mesh, str(skeleton_path)) for i, b in enumerate(skel.bones) if b.mesh}
+    cm = contact.build(specs, models, rest, meshes)
+    kw = {} if rounds is None else {"iterations": rounds}
+    res = pack.pack(specs, models, skel, rest, cm, progress=progress, **kw)
+
+    files: dict[str, bytes] = UniqueFiles()
+    k = 0
+    for path, n in by_file:
+        packed = res.specs[k:k + n]
+        k += n
+        header = (f"{', '.join(s.name for s in packed)}: packed by `axdf pack` from {path.name} on "
+                  f"{skeleton_path.name} (axdf_cli/model/pack.py; report: {REPORT}).")
+        files[path.name] = emit.dump_yaml(emit.rounded(file_doc(packed)), header=header).encode()
+    report = _report(specs, res, skeleton_path)
+    files[REPORT] = (json.dumps(report, indent=1, sort_keys=True) + "\n").encode()
+    files[SUMMARY] = _summary(report).encode()
+    inputs = [skeleton_path] + [Path(b.mesh) for b in skel.bones if b.mesh] + list(muscle_files)
+    return PackOutputs(dict(files), report, [str(p) for p in inputs])
+
+
+def _report(specs, res: "pack.PackResult", skeleton_path: Path) -> dict:
+    ratio = res.volume / res.volume0
+    rows = []
+    for i, s in enumerate(specs):
+        rows.append({"muscle": s.name, "inside_muscle": [round(float(res.before[i, 0]), 6), round(float(res.after[i, 0]), 6)],
+                     "inside_bone": [round(float(res.before[i, 1]), 6), round(float(res.after[i, 1]), 6)],
+                     "depth": [round(float(res.before[i, 2]), 6), round(float(res.after[i, 2]), 6)],
+                     "volume": [round(float(res.volume0[i]), 9), round(float(res.volume[i]), 9)],
+                     "volume_ratio": round(float(ratio[i]), 6), "scale": round(float(res.scale[i]), 6)})
+    return {
+        "skeleton": skeleton_path.name,
+        "muscles": rows,
+        "rounds": [[round(float(x), 6) for x in h] for h in res.history],
+        "rounds_columns": ["inside_muscle", "inside_bone", "depth_max", "volume_ratio_min", "volume_ratio_max"],
+        "before": _totals(res.before, res.volume0, res.volume0),
+        "after": _totals(res.after, res.volume0, res.volume),
+    }
+
+
+def _totals(meas: np.ndarray, v0: np.ndarray, v: np.ndarray) -> dict:
+    r = v / v0
+    return {"inside_muscle": round(float(meas[:, 0].mean()), 6), "inside_bone": round(float(meas[:, 1].mean()), 6),
+            "depth_max": round(float(meas[:, 2].max()), 6), "volume_total": round(float(v.sum()), 9),
+            "volume_ratio_min": round(float(r.min()), 6), "volume_ratio_median": round(float(np.median(r)), 6)}
+
+
+def _summary(report: dict) -> str:
+    b, a = report["before"], report["after"]
+    lines = [f"# Packed muscles on {report['skeleton']}", "",
+             "The rest shapes made to share space (`axdf pack`; docs/METHOD.md, Packing). Shares are of",
+             "each muscle's rest vertices, averaged over the muscles; depth is the deepest penetration.", "",
+             "| at the rest pose | before | after |", "|---|---|---|",
+             f"| inside another muscle | {100 * b['inside_muscle']:.1f}% | {100 * a['inside_muscle']:.1f}% |",
+             f"| inside a bone | {100 * b['inside_bone']:.1f}% | {100 * a['inside_bone']:.1f}% |",
+             f"| deepest penetration | {1000 * b['depth_max']:.1f} mm | {1000 * a['depth_max']:.1f} mm |",
+             f"| total volume | {1000 * b['volume_total']:.3f} L | {1000 * a['volume_total']:.3f} L |",
+             f"| smallest / median volume kept | | {a['volume_ratio_min']:.3f} / {a['volume_ratio_median']:.3f} |", "",
+             "Muscles that kept less than 95% of their volume (boxed in by bone and neighbours):", ""]
+    short = [m for m in report["muscles"] if m["volume_ratio"] < 0.95]
+    lines += [f"- {m['muscle']}: {m['volume_ratio']:.3f}" for m in short] or ["- none"]
+    return "\n".join(lines) + "\n"
+
+
+def input_hashes(paths) -> dict:
+    return {display_path(Path(p)): sha256_file(p) for p in paths if Path(p).is_file()}

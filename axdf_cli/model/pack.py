@@ -1,0 +1,547 @@
+"""Packing: the rest shapes of a body's muscles made to share space (issue 18, contact).
+
+Imported muscles overlap in bulk, not at their skins: OpenSim's lines of action with volumes
+from the force a muscle makes put several muscles on nearly one line (on the gait2392 walk
+37% of the muscles' volume lies inside another muscle, the vasti 63%). No push made frame by
+frame separates that without popping. So the overlap is resolved once, at the rest pose, and
+written into the muscle files as section outlines (``outline:``, 8 control points each, which
+may leave the line of action and take any shape); the frame's contact stage then only meets
+what motion adds.
+
+The method: a weighted partition of space, then a fit.
+
+1. **Territories.** Every muscle i has an envelope, its rest shape scaled by s_i about its
+   axis: the points whose axis-space radial fraction q_i(x) = rho_i / R_i (the distance from
+   i's centre line over i's surface radius in that direction, :func:`contact._muscle_query`)
+   is below s_i. A point belongs to the muscle of least q_i / s_i whose envelope holds it,
+   and to none inside a bone (its signed distance field, :mod:`axdf_cli.model.contact`). The
+   territories never overlap, by construction; where two envelopes overlap the boundary lies
+   where their fractions agree (halfway between two equal muscles on parallel lines).
+2. **Rings.** Each ring of a muscle's rest mesh is cut with its territory on a 2-D grid in the
+   ring's plane (the largest connected piece, so the territory may leave the line of action),
+   and every vertex of the ring is given a target: the territory's boundary, seen from the
+   piece's centroid in the vertex's own direction, less the margin.
+3. **Fit.** The sections' control points (2 unknowns each, in their rest planes) are fitted to
+   the targets by least squares through the surface's own basis (the rest surface is linear in
+   them), a little pulled towards where they were.
+4. **Volume.** s_i is grown until the packed rest mesh has the muscle's volume again (it
+   loses what it shared), and steps 1-3 repeat. A muscle boxed in by bone and neighbours may
+   not reach it within tol.PACK_SCALE_MAX; its volume is then what it could take (reported).
+
+Everything is deterministic: the same muscles give the same outlines, bytes included.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from axdf_cli import tolerances as tol
+from axdf_cli.model import bspline, contact
+from axdf_cli.model.muscle import OCT, MuscleModel, MuscleSpec, Section, outline_area
+
+try:
+    from numba import njit, prange
+except ImportError as e:  # a dependency: make setup installs it
+    raise ImportError(f"axdf needs numba ({e}); run `make setup` or `pip install numba`") from None
+
+
+# ----------------------------------------------------------------------------- territories
+
+
+@njit(cache=True)
+def _frac(x, j, grid, off, nu, na, cen, coff, box, reach, q):
+    """q_j(x) = rho / R of point x against muscle j's rest shape, 1e30 where it cannot hold x."""
+    if not contact._may_meet(x, j, box, reach):
+        return 1e30
+    if not contact._muscle_query(x, grid, off[j], nu[j], na[j], cen, coff[j], reach, q):
+        return 1e30
+    if q[1] <= 1e-9:
+        return 1e30
+    return q[0] / q[1]
+
+
+@njit(cache=True)
+def _owned(x, i, s, grid, off, nu, na, cen, coff, box, reach, actm, nmm, inv, fb, fo, fh, fd, foff, fv, actb, nb,
+           bone_margin, q, g):
+    """Whether point x lies in muscle i's territory (module doc, step 1)."""
+    qi = _frac(x, i, grid, off, nu, na, cen, coff, box, reach[i], q) / s[i]
+    if not qi < 1.0:
+        return False
+    if nb > 0:
+        d = contact._bone_query(x, inv, fb, fo, fh, fd, foff, fv, actb, 0, nb, -1e300, g)
+        if d < bone_margin:
+            return False
+    for jj in range(nmm):
+        j = actm[jj]
+        qj = _frac(x, j, grid, off, nu, na, cen, coff, box, reach[j], q) / s[j]
+        if qj < qi or (qj == qi and j < i):
+            return False
+    return True
+
+
+@njit(cache=True)
+def _largest_piece(mask, K, lab, stack):
+    """Keep in ``mask`` (K*K) only its largest 4-connected piece; returns its size."""
+    for k in range(K * K):
+        lab[k] = 0
+    best = 0
+    best_lab = 0
+    n_lab = 0
+    for k0 in range(K * K):
+        if not mask[k0] or lab[k0] != 0:
+            continue
+        n_lab += 1
+        lab[k0] = n_lab
+        top = 0
+        stack[top] = k0
+        top += 1
+        size = 0
+        while top > 0:
+            top -= 1
+            k = stack[top]
+            size += 1
+            ix = k // K
+            iy = k % K
+            for d in range(4):
+                jx = ix + (1 if d == 0 else (-1 if d == 1 else 0))
+                jy = iy + (1 if d == 2 else (-1 if d == 3 else 0))
+                if jx < 0 or jy < 0 or jx >= K or jy >= K:
+                    continue
+                kk = jx * K + jy
+                if mask[kk] and lab[kk] == 0:
+                    lab[kk] = n_lab
+                    stack[top] = kk
+                    top += 1
+        if size > best:
+            best = size
+            best_lab = n_lab
+    for k in range(K * K):
+        mask[k] = best > 0 and lab[k] == best_lab
+    return best
+
+
+@njit(cache=True, parallel=True)
+def _ring_targets(s, grid, off, nu, na, cen, coff, box, reach, nbr_off, nbr, inv, fb, fo, fh, fd, foff, fv,
+                  fl_off, fl, K, grow, bone_margin, margin, rows, targets, origins, areas, full):
+    """Targets of every ring vertex (module doc, step 2). rows (R, 2): (muscle, ring) pairs of
+    the rings to cut (the pole rows are not); targets: like grid; areas (R,) each ring's
+    territory area (m^2)."""
+    M = nu.shape[0]
+    for r in prange(rows.shape[0]):
+        i = rows[r, 0]
+        u = rows[r, 1]
+        U = nu[i]
+        A = na[i]
+        q = np.empty(8)
+        g = np.empty(6)
+        actb = np.empty(max(fb.shape[0], 1), np.int64)
+        actm = np.empty(max(M, 1), np.int64)
+        mask = np.zeros(K * K, np.bool_)
+        lab = np.zeros(K * K, np.int64)
+        stack = np.zeros(K * K, np.int64)
+        dist = np.zeros(K * K, np.int64)
+        ci = cen[coff[i] + u].copy()
+        t0, t1, t2 = contact._centre_tangent(cen, coff[i], U, u)
+        # e1: towards the ring's first vertex, across the tangent; e2 = t x e1
+        base = off[i] + u * A
+        d0 = grid[base, 0] - ci[0]
+        d1 = grid[base, 1] - ci[1]
+        d2 = grid[base, 2] - ci[2]
+        dt = d0 * t0 + d1 * t1 + d2 * t2
+        d0 -= dt * t0
+        d1 -= dt * t1
+        d2 -= dt * t2
+        dl = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        if dl < 1e-12 or (t0 == 0.0 and t1 == 0.0 and t2 == 0.0):
+            for a in range(A):
+                for c in range(3):
+                    targets[base + a, c] = grid[base + a, c]
+                    origins[base + a, c] = ci[c]
+            areas[r] = 0.0
+            full[r] = False
+            continue
+        e10 = d0 / dl
+        e11 = d1 / dl
+        e12 = d2 / dl
+        e20 = t1 * e12 - t2 * e11
+        e21 = t2 * e10 - t0 * e12
+        e22 = t0 * e11 - t1 * e10
+        L = grow * s[i] * ci[3] + 0.002
+        h = 2.0 * L / K
+        ci[3] = L * 1.4143
+        nb, nmm = contact._ring_lists(ci, i, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, nbr_off, nbr, box,
+                                      0.0, reach.max(), actb, actm)
+        x = np.empty(3)
+        n_env = 0
+        for ix in range(K):
+            for iy in range(K):
+                a_ = -L + (ix + 0.5) * h
+                b_ = -L + (iy + 0.5) * h
+                x[0] = ci[0] + a_ * e10 + b_ * e20
+                x[1] = ci[1] + a_ * e11 + b_ * e21
+                x[2] = ci[2] + a_ * e12 + b_ * e22
+                if _frac(x, i, grid, off, nu, na, cen, coff, box, reach[i], q) < s[i]:
+                    n_env += 1
+                mask[ix * K + iy] = _owned(x, i, s, grid, off, nu, na, cen, coff, box, reach, actm, nmm, inv, fb,
+                                           fo, fh, fd, foff, fv, actb, nb, bone_margin, q, g)
+        n = _largest_piece(mask, K, lab, stack)
+        areas[r] = n * h * h
+        full[r] = n == n_env
+        if n == 0:
+            for a in range(A):
+                for c in range(3):
+                    targets[base + a, c] = ci[c]
+                    origins[base + a, c] = ci[c]
+            continue
+        # the rays' origin: the piece's deepest point (its largest distance from outside)
+        kd = _deepest(mask, K, dist)
+        ca = -L + (kd // K + 0.5) * h
+        cb = -L + (kd % K + 0.5) * h
+        for a in range(A):
+            k = base + a
+            v0 = grid[k, 0] - ci[0]
+            v1 = grid[k, 1] - ci[1]
+            v2 = grid[k, 2] - ci[2]
+            pa = v0 * e10 + v1 * e11 + v2 * e12
+            pb = v0 * e20 + v1 * e21 + v2 * e22
+            pt = v0 * t0 + v1 * t1 + v2 * t2
+            th = np.arctan2(pb, pa)
+            ct = np.cos(th)
+            st = np.sin(th)
+            # march from the origin to the piece's edge (a star-shaped part of the piece)
+            step = 0.25 * h
+            rr = 0.0
+            rho = 0.0
+            while rho < 3.0 * L:
+                jx = int(np.floor((ca + rho * ct + L) / h))
+                jy = int(np.floor((cb + rho * st + L) / h))
+                if not (0 <= jx < K and 0 <= jy < K and mask[jx * K + jy]):
+                    break
+                rr = rho
+                rho += step
+            rr = max(rr + 0.5 * step - margin, 0.0)
+            for c in range(3):
+                e1c = e10 if c == 0 else (e11 if c == 1 else e12)
+                e2c = e20 if c == 0 else (e21 if c == 1 else e22)
+                tc = t0 if c == 0 else (t1 if c == 1 else t2)
+                origins[k, c] = ci[c] + ca * e1c + cb * e2c + pt * tc
+                targets[k, c] = origins[k, c] + rr * (ct * e1c + st * e2c)
+
+
+@njit(cache=True)
+def _deepest(mask, K, dist):
+    """The pixel of ``mask`` (K*K) farthest from any pixel outside it (3-4 chamfer distance,
+    the grid's edge counted as outside); the first of equals."""
+    big = 1 << 40
+    for k in range(K * K):
+        dist[k] = big if mask[k] else 0
+    for ix in range(K):
+        for iy in range(K):
+            k = ix * K + iy
+            if dist[k] == 0:
+                continue
+            best = dist[k]
+            if ix == 0 or iy == 0 or iy == K - 1:
+                best = 3
+            else:
+                best = min(best, dist[k - K] + 3, dist[k - 1] + 3, dist[k - K - 1] + 4, dist[k - K + 1] + 4)
+            dist[k] = best
+    for ix in range(K - 1, -1, -1):
+        for iy in range(K - 1, -1, -1):
+            k = ix * K + iy
+            if dist[k] == 0:
+                continue
+            best = dist[k]
+            if ix == K - 1 or iy == 0 or iy == K - 1:
+                best = 3
+            else:
+                best = min(best, dist[k + K] + 3, dist[k + 1] + 3, dist[k + K + 1] + 4, dist[k + K - 1] + 4)
+            dist[k] = best
+    kb = 0
+    for k in range(K * K):
+        if dist[k] > dist[kb]:
+            kb = k
+    return kb
+
+
+@njit(cache=True, parallel=True)
+def _owned_all(pts, owner, s, grid, off, nu, na, cen, coff, box, reach, nbr_off, nbr, inv, fb, fo, fh, fd, foff, fv,
+               fl_off, fl, bone_margin, out):
+    """Whether each point pts[p] lies in the territory of muscle owner[p] (module doc, step 1)."""
+    M = nu.shape[0]
+    for p in prange(pts.shape[0]):
+        i = owner[p]
+        q = np.empty(8)
+        g = np.empty(6)
+        actb = np.empty(max(fb.shape[0], 1), np.int64)
+        actm = np.empty(max(M, 1), np.int64)
+        ci = np.empty(8)
+        for c in range(3):
+            ci[c] = pts[p, c]
+        ci[3] = 0.0
+        nb, nmm = contact._ring_lists(ci, i, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, nbr_off, nbr, box,
+                                      0.0, reach.max(), actb, actm)
+        out[p] = _owned(pts[p], i, s, grid, off, nu, na, cen, coff, box, reach, actm, nmm, inv, fb, fo, fh, fd, foff,
+                        fv, actb, nb, bone_margin, q, g)
+
+
+@njit(cache=True, parallel=True)
+def _inside_of(grid, off, nu, na, cen, coff, box, nbr_off, nbr, out):
+    """For every vertex of every muscle (grid rows), the first neighbour whose mesh holds it
+    (axis-space query), or -1."""
+    M = nu.shape[0]
+    for i in prange(M):
+        q = np.empty(8)
+        for k in range(off[i], off[i + 1]):
+            out[k] = -1
+            x = grid[k]
+            for jj in range(nbr_off[i], nbr_off[i + 1]):
+                j = nbr[jj]
+                if not contact._may_meet(x, j, box, 0.0):
+                    continue
+                if contact._muscle_query(x, grid, off[j], nu[j], na[j], cen, coff[j], 0.0, q) and q[0] < q[1]:
+                    out[k] = j
+                    break
+
+
+# ----------------------------------------------------------------------------- the fit
+
+
+@dataclass
+class _Frames:
+    """A muscle's rest section frames: per control point (8N) the axis point, the two plane
+    axes, and its twist angle; the surface bases."""
+
+    c: np.ndarray  # (8N, 3)
+    r: np.ndarray  # (8N, 3)
+    s: np.ndarray  # (8N, 3)
+    tw: np.ndarray  # (8N,)
+    strength: float
+    Bu: np.ndarray  # (U, m)
+    Bv: np.ndarray  # (A, 8)
+
+
+def _frames(model: MuscleModel, rest_world: np.ndarray, sec_t: np.ndarray) -> _Frames:
+    """The rest frames of sections at ``sec_t`` on ``model``'s axis, and the surface basis
+    along for that many sections (the model's own where they are its sections)."""
+    from axdf_cli.model import rmf
+
+    rest_p = model._axis_points(rest_world[None], model.rest_q)
+    x, t = model._samples(rest_p, "Bs", "dBs")
+    r_org = rest_world[model.origin_bone, :3, :3]
+    r0 = rmf.perpendicular_unit(r_org @ model.r0_local, t[:, 0])
+    r = rmf.propagate(x, t, r0)
+    cp_t = np.repeat(sec_t, OCT)
+    c, _, rr, ss = model._frames_at(rest_p, x, t, r, cp_t, model._sample_index(cp_t))
+    lam = np.interp(cp_t, model.ts, model.arc)
+    tw = math.radians(model.spec.twist) * lam
+    m = len(sec_t) + 2
+    if len(sec_t) == len(model.spec.sections):
+        Bu = model.Bu
+    else:
+        Bu = bspline.basis_matrix(bspline.clamped_knots(m, 2), 2, np.linspace(0.0, 1.0, model.U))
+    return _Frames(c[0], rr[0], ss[0], tw, float(model.spec.strength), Bu, model.Bv)
+
+
+def section_layout(spec: MuscleSpec, n: int) -> np.ndarray:
+    """The packed muscle's section parameters: ``n`` evenly between its first and last
+    section's (its own where it has rational weights, or already as many)."""
+    t = np.array([s.t for s in spec.sections])
+    if spec.weights is not None or len(t) >= n:
+        return t
+    return np.linspace(t[0], t[-1], n)
+
+
+class Fit:
+    """The least-squares fit of a muscle's section control points (frames ``fr``, 2 unknowns
+    each in their planes) to targets for its rest mesh's rings between the poles, pulled
+    towards ``x0`` (8N, 2) with weight ``pull`` relative to the data's (None: no pull). The
+    rest surface is linear in them; the normal equations are factored once."""
+
+    def __init__(self, model: MuscleModel, fr: _Frames, x0: np.ndarray | None, pull: float):
+        from scipy.linalg import cho_factor
+
+        A = model.A
+        Q = fr.c.shape[0]
+        N = Q // OCT
+        self.Q, self.shape = Q, (model.U - 2, A, 3)
+        Bu = fr.Bu[1:-1]  # (U-2, m): net rows pole0, sections 1..N, pole1; the poles are fixed
+        pole0 = model.rest_vertices[0].astype(np.float64)
+        pole1 = model.rest_vertices[-1].astype(np.float64)
+        fixed = (Bu[:, 0, None, None] * pole0 + Bu[:, -1, None, None] * pole1) * np.ones((1, A, 1))
+        self.fixed = fixed + np.einsum("uk,al,klc->uac", Bu[:, 1:-1], fr.Bv, fr.c.reshape(N, OCT, 3))
+        w = np.einsum("uk,al->ualk", Bu[:, 1:-1], fr.Bv)  # (U-2, A, 8, N)
+        cols_r = np.einsum("ualk,klc->uackl", w, fr.r.reshape(N, OCT, 3)).reshape(-1, Q)
+        cols_s = np.einsum("ualk,klc->uackl", w, fr.s.reshape(N, OCT, 3)).reshape(-1, Q)
+        self.A = np.concatenate([cols_r, cols_s], axis=1)  # unknowns: r of every (k, l), then s
+        ata = self.A.T @ self.A
+        self.prior = np.zeros(2 * Q)
+        if x0 is not None and pull > 0:
+            lam2 = (pull * float(np.linalg.norm(self.A, axis=0).mean())) ** 2
+            ata = ata + lam2 * np.eye(2 * Q)
+            self.prior = lam2 * np.concatenate([x0[:, 0], x0[:, 1]])
+        else:
+            ata = ata + 1e-12 * np.trace(ata) / len(ata) * np.eye(2 * Q)
+        self.factor = cho_factor(ata)
+
+    def __call__(self, targets: np.ndarray):
+        """targets (U, A, 3) → (in-plane coordinates (8N, 2), the fitted rings (U-2, A, 3))."""
+        from scipy.linalg import cho_solve
+
+        rhs = (targets[1:-1] - self.fixed).reshape(-1)
+        sol = cho_solve(self.factor, self.A.T @ rhs + self.prior)
+        fitted = (self.A @ sol).reshape(self.shape) + self.fixed
+        return np.stack([sol[:self.Q], sol[self.Q:]], axis=1), fitted
+
+
+def to_file_outlines(coords: np.ndarray, fr: _Frames) -> np.ndarray:
+    """In-plane coordinates (8N, 2) → the file's outlines (N, 8, 2): the muscle's own twist
+    turned back and its strength divided out."""
+    cw, sw = np.cos(fr.tw), np.sin(fr.tw)
+    v, w = coords[:, 0], coords[:, 1]
+    ov, ow = v * cw + w * sw, -v * sw + w * cw
+    k = 1.0 / math.sqrt(fr.strength)
+    return (np.stack([ov, ow], axis=1) * k).reshape(-1, OCT, 2)
+
+
+def with_outlines(spec: MuscleSpec, sec_t: np.ndarray, outlines: np.ndarray) -> MuscleSpec:
+    secs = tuple(Section(float(t), None, 0.0, tuple((float(a), float(b)) for a, b in o))
+                 for t, o in zip(sec_t, outlines))
+    return replace(spec, sections=secs)
+
+
+# ----------------------------------------------------------------------------- the loop
+
+
+@dataclass
+class PackResult:
+    specs: list  # MuscleSpec with outlines
+    models: list  # their MuscleModels
+    before: np.ndarray  # (M, 3) rest measures before: inside-muscle share, inside-bone share, deepest (m)
+    after: np.ndarray  # (M, 3) after
+    volume0: np.ndarray  # (M,) rest volumes before
+    volume: np.ndarray  # (M,) after
+    scale: np.ndarray  # (M,) the envelopes' scales s_i
+    history: list  # per iteration: (mean inside-muscle, mean inside-bone, worst volume ratio)
+
+
+def _grids(models):
+    shapes = [(m.U, m.A) for m in models]
+    nu = np.array([s[0] for s in shapes], dtype=np.int64)
+    na = np.array([s[1] for s in shapes], dtype=np.int64)
+    off = np.concatenate([[0], np.cumsum(nu * na)]).astype(np.int64)
+    coff = np.concatenate([[0], np.cumsum(nu)]).astype(np.int64)
+    grid = np.concatenate([contact.vertices_to_grid(m.rest_vertices.astype(np.float64), m.U, m.A) for m in models])
+    cen = np.zeros((int(coff[-1]), 8))
+    box = np.empty((len(models), 6))
+    contact._centres(grid, off, nu, na, cen, coff)
+    contact._boxes(grid, off, box)
+    return grid, off, nu, na, cen, coff, box
+
+
+def measure_rest(models, cm: "contact.ContactModel", rest_inv: np.ndarray) -> np.ndarray:
+    """(M, 3) the rest meshes' inside-muscle share, inside-bone share and deepest penetration."""
+    grid, off, nu, na, cen, coff, box = _grids(models)
+    f = cm.fields
+    out = np.zeros((len(models), 3))
+    contact._measure(grid, off, nu, na, cen, coff, box, *contact._neighbours(box, cm.allow, 0.0), rest_inv, f.bones,
+                     f.origin, f.h, f.dims, f.offset, f.values, *contact._field_lists(box, f, rest_inv, 0.0), out)
+    return out
+
+
+def pack(specs, models, skeleton, rest_world: np.ndarray, cm: "contact.ContactModel", *,
+         iterations: int = tol.PACK_ITERATIONS, pixels: int = tol.PACK_PIXELS,
+         sections: int = tol.PACK_SECTIONS, progress=None) -> PackResult:
+    """Pack the rest shapes (module doc). ``cm``: the muscles' contact model (pairs, bone fields)."""
+    M = len(models)
+    inv = np.linalg.inv(rest_world)
+    f = cm.fields
+    grid, off, nu, na, cen, coff, box = _grids(models)  # the envelopes: the original rest shapes
+    rmax = np.array([cen[coff[m]:coff[m + 1], 3].max() for m in range(M)])
+    layouts = [section_layout(sp, sections) for sp in specs]
+    frames = [_frames(m, rest_world, t) for m, t in zip(models, layouts)]
+    # the original rest meshes in the new layouts: where the fit is pulled to
+    x0 = [Fit(m, fr, None, 0.0)(contact.vertices_to_grid(m.rest_vertices.astype(np.float64), m.U, m.A)
+                                 .reshape(m.U, m.A, 3))[0] for m, fr in zip(models, frames)]
+    fitters = [Fit(m, fr, x, tol.PACK_PULL) for m, fr, x in zip(models, frames, x0)]
+    v0 = np.array([m.v0 for m in models])
+    before = measure_rest(models, cm, inv)
+    s = np.ones(M)
+    rows = np.array([(i, u) for i in range(M) for u in range(1, nu[i] - 1)], dtype=np.int64)
+    cur_specs, cur_models = list(specs), list(models)
+    history = []
+    for it in range(iterations):
+        reach = (s - 1.0) * rmax + 1e-3
+        growb = box.copy()
+        growb[:, :3] -= reach[:, None]
+        growb[:, 3:] += reach[:, None]
+        nbr_off, nbr = contact._neighbours(growb, cm.allow, 0.0)
+        fl_off, fl = contact._field_lists(growb, f, inv, 0.0)
+        targets = grid.copy()
+        origins = grid.copy()
+        areas = np.zeros(len(rows))
+        args = (grid, off, nu, na, cen, coff, box, reach, nbr_off, nbr, inv, f.bones, f.origin, f.h, f.dims,
+                f.offset, f.values, fl_off, fl)
+        full = np.zeros(len(rows), np.bool_)
+        _ring_targets(s, *args, pixels, tol.PACK_GROW * max(1.0, float(s.max())), tol.CONTACT_BONE_MARGIN,
+                      tol.PACK_MARGIN, rows, targets, origins, areas, full)
+        # a muscle whose territory is its whole rest shape (nothing claims any of it) is kept as it is
+        clear = (np.bincount(rows[:, 0], weights=(~full).astype(np.float64), minlength=M) == 0) & (s == 1.0)
+        # fit; where a fitted vertex leaves its territory, its target is drawn in and fitted again
+        owner = np.repeat(np.arange(M), [(nu[i] - 2) * na[i] for i in range(M)])
+        ring_rows = np.concatenate([np.arange(off[i] + na[i], off[i + 1] - na[i]) for i in range(M)])
+        for fr_round in range(tol.PACK_FIT_ROUNDS + 1):
+            fits = [(None, grid[off[i]:off[i + 1]].reshape(nu[i], na[i], 3)[1:-1]) if clear[i] else
+                    fitters[i](targets[off[i]:off[i + 1]].reshape(nu[i], na[i], 3)) for i in range(M)]
+            if fr_round == tol.PACK_FIT_ROUNDS:
+                break
+            pts = np.concatenate([ft[1].reshape(-1, 3) for ft in fits])
+            ok = np.zeros(len(pts), np.bool_)
+            _owned_all(pts, owner, s, *args, tol.CONTACT_BONE_MARGIN, ok)
+            draw = np.zeros(len(grid), np.bool_)
+            draw[ring_rows[~ok]] = True
+            # a muscle whose fitted mesh holds another's fitted vertex (one its rays missed,
+            # a thin tendon): drawn in around the nearest of its own vertices
+            fg = grid.copy()
+            fg[ring_rows] = pts
+            fcen = np.zeros_like(cen)
+            fbox = np.empty_like(box)
+            contact._centres(fg, off, nu, na, fcen, coff)
+            contact._boxes(fg, off, fbox)
+            held = np.empty(len(fg), np.int64)
+            _inside_of(fg, off, nu, na, fcen, coff, fbox, *contact._neighbours(fbox, cm.allow, 0.0), held)
+            for k in np.nonzero(held >= 0)[0]:
+                j = int(held[k])
+                vj = fg[off[j]:off[j + 1]]
+                n = int(np.argmin(((vj - fg[k]) ** 2).sum(axis=1)))
+                u, a_ = divmod(n, int(na[j]))
+                for du in (-1, 0, 1):
+                    if 1 <= u + du <= nu[j] - 2:
+                        for da in (-1, 0, 1):
+                            draw[off[j] + (u + du) * na[j] + (a_ + da) % na[j]] = True
+            if not draw.any():
+                break
+            targets[draw] = origins[draw] + tol.PACK_DRAW_IN * (targets[draw] - origins[draw])
+        new_specs, new_models = [], []
+        for i in range(M):
+            if clear[i]:
+                new_specs.append(specs[i])
+                new_models.append(models[i])
+                continue
+            spec = with_outlines(specs[i], layouts[i], to_file_outlines(fits[i][0], frames[i]))
+            new_specs.append(spec)
+            new_models.append(MuscleModel(spec, skeleton.bone_index, rest_world, skeleton))
+        vol = np.array([m.v0 for m in new_models])
+        ratio = vol / v0
+        cur_specs, cur_models = new_specs, new_models
+        meas = measure_rest(cur_models, cm, inv)
+        history.append((float(meas[:, 0].mean()), float(meas[:, 1].mean()), float(meas[:, 2].max()),
+                        float(ratio.min()), float(ratio.max())))
+        if progress is not None:
+            progress(it, history[-1])
+        # grow the envelope of each muscle short of its volume (area ~ s^2 where free)
+        s = np.clip(s * np.clip(ratio ** -tol.PACK_GAIN, 1.0 / tol.PACK_STEP, tol.PACK_STEP), 1.0, tol.PACK_SCALE_MAX)
+    after = measure_rest(cur_models, cm, inv)
+    return PackResult(cur_specs, cur_models, before, after, v0, np.array([m.v0 for m in cur_models]), s, history)

@@ -1,0 +1,172 @@
+"""Packing (axdf_cli/model/pack.py, `axdf pack`): the rest shapes made to share space.
+
+On the demo library with a twin of the biceps 1.2-1.4 cm beside it (they overlap in bulk):
+the fit through the surface basis is exact on the muscle's own rest mesh (rest identity);
+territories never overlap; after packing, an independent generalized winding number count
+(tests/winding.py) finds almost no vertex inside another muscle, and the volumes are kept;
+the packed files are valid muscle files, the same inputs give the same bytes, and the
+command follows the output rule."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from cli_in_folder import run_cli
+from conftest import DEMO_JOB, REPO_ROOT
+from test_contact import TWIN
+from winding import inside_shares
+
+from axdf_cli import tolerances as tol
+from axdf_cli.model import contact, pack
+from axdf_cli.model.muscle import MuscleModel
+from axdf_cli.model.skeleton import forward_kinematics
+from axdf_cli.pipeline.plan import plan_run
+from axdf_cli.specs import RefPolicy, load_job, load_muscle_file
+
+SKELETON = REPO_ROOT / "poses" / "skeletons" / "human_r.yaml"
+
+
+@pytest.fixture(scope="module")
+def demo(tmp_path_factory):
+    """The demo muscles and the biceps' twin: (folder of muscle files, plan, rest world, contact model)."""
+    d = tmp_path_factory.mktemp("pack_in")
+    for p in (REPO_ROOT / "muscles" / "demo").glob("*.yaml"):
+        (d / p.name).write_text(p.read_text())
+    (d / "biceps_twin.yaml").write_text(TWIN)
+    plan = plan_run(load_job(DEMO_JOB), muscle_args=[str(d)], policy=RefPolicy(allow_outside=True),
+                    stages={"contact": False, "penetration": False})
+    skel = plan.pose.skeleton
+    rest = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
+    cm = contact.build(plan.muscles, plan.models, rest, plan.bone_meshes)
+    return d, plan, rest, cm
+
+
+@pytest.fixture(scope="module")
+def packed(demo):
+    d, plan, rest, cm = demo
+    return pack.pack(plan.muscles, plan.models, plan.pose.skeleton, rest, cm, iterations=12)
+
+
+def _gwn_shares(plan, models, rest, cm):
+    meshes = [(m.rest_vertices.astype(np.float64), m.faces) for m in models]
+    bones = [(v.astype(np.float64) @ rest[b, :3, :3].T + rest[b, :3, 3], f) for b, (v, f, _) in sorted(plan.bone_meshes.items())]
+    return inside_shares(meshes, bones, cm.allow)
+
+
+def test_the_fit_is_exact_on_the_rest_mesh(demo):
+    """Rest identity: fitted to its own rest mesh in its own sections, a muscle's control points
+    are its own (the rest surface is linear in them), and so is its mesh."""
+    d, plan, rest, cm = demo
+    for m in plan.models:
+        t = np.array([s.t for s in m.spec.sections])
+        fr = pack._frames(m, rest, t)
+        grid = contact.vertices_to_grid(m.rest_vertices.astype(np.float64), m.U, m.A).reshape(m.U, m.A, 3)
+        coords, fitted = pack.Fit(m, fr, None, 0.0)(grid)
+        own = m.rest_control_points - fr.c
+        assert np.abs(coords - np.stack([(own * fr.r).sum(1), (own * fr.s).sum(1)], axis=1)).max() < 1e-6
+        assert np.abs(fitted - grid[1:-1]).max() < 1e-6
+        spec = pack.with_outlines(m.spec, t, pack.to_file_outlines(coords, fr))
+        again = MuscleModel(spec, plan.pose.skeleton.bone_index, rest, plan.pose.skeleton)
+        assert np.abs(again.rest_vertices - m.rest_vertices).max() < 1e-6
+        assert abs(again.v0 / m.v0 - 1.0) < 1e-6
+
+
+def test_territories_never_overlap(demo):
+    """Every point lies in at most one muscle's territory, however the envelopes are grown."""
+    d, plan, rest, cm = demo
+    grid, off, nu, na, cen, coff, box = pack._grids(plan.models)
+    f = cm.fields
+    inv = np.linalg.inv(rest)
+    M = len(plan.models)
+    rng = np.random.default_rng(7)
+    pts = grid[rng.integers(0, len(grid), 6000)] + rng.normal(0.0, 0.01, (6000, 3))  # around the muscles
+    for s in (np.ones(M), 1.0 + rng.random(M)):
+        reach = (s - 1.0) * 0.05 + 1e-3
+        nbr_off, nbr = contact._neighbours(box + np.concatenate([-reach[:, None] * np.ones((1, 3)),
+                                                                 reach[:, None] * np.ones((1, 3))], axis=1), cm.allow, 0.0)
+        fl_off, fl = contact._field_lists(box, f, inv, 0.05)
+        owners = np.zeros(len(pts), int)
+        enveloped = np.zeros(len(pts), int)
+        held_any = 0
+        q = np.empty(8)
+        for i in range(M):
+            enveloped += [pack._frac(x, i, grid, off, nu, na, cen, coff, box, reach[i], q) < s[i] for x in pts]
+            ok = np.zeros(len(pts), np.bool_)
+            pack._owned_all(pts, np.full(len(pts), i), s, grid, off, nu, na, cen, coff, box, reach, nbr_off, nbr, inv,
+                            f.bones, f.origin, f.h, f.dims, f.offset, f.values, fl_off, fl, 0.0, ok)
+            owners += ok
+            held_any += ok.sum()
+        assert owners.max() <= 1
+        assert (enveloped >= 2).sum() > 100  # (the test means something: the envelopes overlap)
+        assert held_any > 1000
+
+
+def test_packing_clears_the_overlap_and_keeps_the_volume(demo, packed):
+    d, plan, rest, cm = demo
+    names = [s.name for s in plan.muscles]
+    before = _gwn_shares(plan, plan.models, rest, cm)
+    after = _gwn_shares(plan, packed.models, rest, cm)
+    i, j = names.index("biceps_brachii"), names.index("biceps_twin")
+    assert before[i, 0] > 0.3 and before[j, 0] > 0.3  # the twins overlap in bulk
+    assert after[:, 0].max() < 0.02, after[:, 0]
+    assert after[:, 1].mean() <= before[:, 1].mean() + 1e-9
+    ratio = packed.volume / packed.volume0
+    assert np.all(np.abs(ratio - 1.0) < 0.1), dict(zip(names, ratio.round(3)))
+    # the product's own measure agrees
+    assert packed.after[:, 0].max() < 0.02
+    # and a muscle nothing touches keeps its shape (the brachioradialis lies clear of the others)
+    k = names.index("brachioradialis")
+    assert packed.before[k, 0] == 0.0
+    assert np.abs(packed.models[k].rest_vertices - plan.models[k].rest_vertices).max() < 2e-3
+
+
+def test_pack_command_writes_valid_files_and_the_same_bytes(demo, tmp_path):
+    d, plan, rest, cm = demo
+    outs = []
+    for k in range(2):
+        out = tmp_path / f"packed{k}"
+        assert run_cli(REPO_ROOT, "pack", str(d), "--skeleton", str(SKELETON), "--out", str(out), "--rounds", "4",
+                       "--allow-outside", "-q") == 0
+        outs.append(out)
+    names = sorted(p.name for p in outs[0].iterdir())
+    assert names == sorted([p.name for p in d.glob("*.yaml")] + ["pack_report.json", "PACK.md", "manifest.json"])
+    for p in outs[0].iterdir():
+        if p.name != "manifest.json":
+            assert p.read_bytes() == (outs[1] / p.name).read_bytes(), p.name
+    man = json.loads((outs[0] / "manifest.json").read_text())
+    assert man["command"] == "pack"
+    rep = json.loads((outs[0] / "pack_report.json").read_text())
+    assert rep["after"]["inside_muscle"] < rep["before"]["inside_muscle"]
+    originals = {s.name: s for p in d.glob("*.yaml") for s in load_muscle_file(p)}
+    reshaped = set()
+    for p in outs[0].glob("*.yaml"):
+        for spec in load_muscle_file(p):
+            if spec.sections == originals[spec.name].sections:
+                continue  # nothing touched it: kept as it was
+            assert all(s.outline is not None for s in spec.sections)
+            assert len(spec.sections) == max(tol.PACK_SECTIONS, len(originals[spec.name].sections))
+            reshaped.add(spec.name)
+    assert {"biceps_brachii", "biceps_twin"} <= reshaped and "brachioradialis" not in reshaped
+    # a run on the packed muscles works
+    assert run_cli(REPO_ROOT, "run", str(DEMO_JOB), "--muscles", str(outs[0]), "--frames", "0", "--out",
+                   str(tmp_path / "run"), "--allow-outside", "--format", "npz", "--no-render", "-q") == 0
+
+
+def test_pack_command_follows_the_output_rule(demo, tmp_path, capsys):
+    d, plan, rest, cm = demo
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "notes.txt").write_text("mine")
+    common = ("--skeleton", str(SKELETON), "--rounds", "1", "--allow-outside", "-q")
+    assert run_cli(REPO_ROOT, "pack", str(d), "--out", str(mine), *common) == 2  # not its folder
+    assert sorted(p.name for p in mine.iterdir()) == ["notes.txt"]
+    before = {p.name: p.read_bytes() for p in d.iterdir()}
+    assert run_cli(REPO_ROOT, "pack", str(d), "--out", str(d), *common) == 2  # its input is never its output
+    assert {p.name: p.read_bytes() for p in d.iterdir()} == before
+    capsys.readouterr()
+    assert run_cli(REPO_ROOT, "pack", str(d), "--out", str(tmp_path / "x"), "--skeleton", str(SKELETON),
+                   "--rounds", "0") == 2
+    assert "--rounds" in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()
