@@ -24,7 +24,7 @@ BVH    := $(DATA)/bvh/cmu_131_01_walk_scaled.bvh
 MYO    := out/myo-sim
 MJCF_MESHES := --max-faces 2000 --mesh-edge 0.004
 
-.PHONY: all setup sysdeps demo dataset test bench golden clean import import-mjcf blender
+.PHONY: all setup sysdeps demo dataset test bench golden clean import import-mjcf pack blender
 
 all: demo
 
@@ -119,6 +119,7 @@ import: $(STAMP)
 	  --motion $(OSIM)/gait2392/subject01_walk1_ik.mot --controls $(OSIM)/gait2392/subject01_walk1_controls.sto \
 	  --pose-name gait2392_walk --palette anatomical --out muscles/gait2392 --muscles-out muscles/gait2392 \
 	  --skeleton-out poses/skeletons/gait2392.yaml --pose-out poses/gait2392_walk.yaml --overwrite
+	$(MAKE) --no-print-directory pack
 	$(BIN)/axdf import bvh $(BVH) --name cmu_131_01 --pose-name cmu_131_01_walk --step 4 \
 	  --out poses/imports/cmu_131_01 --skeleton-out poses/skeletons/cmu_131_01.yaml \
 	  --pose-out poses/cmu_131_01_walk.yaml --overwrite
@@ -127,6 +128,12 @@ import: $(STAMP)
 	$(BIN)/axdf retarget $(BVH) --onto poses/skeletons/gait2392.yaml --map poses/maps/cmu_to_gait2392.yaml --step 4 \
 	  --name cmu_131_01_walk_gait2392 --out poses/retargeted/cmu_131_01_walk_gait2392 --overwrite
 	$(MAKE) --no-print-directory import-mjcf
+
+# gait2392's muscles packed at the rest pose (axdf pack: no overlap, volumes kept, section
+# outlines): muscles/gait2392_packed/ (PACK.md), the muscles of poses/jobs/gait2392_walk.yaml.
+# From the shipped muscles/gait2392 alone (no DATA needed); about two minutes.
+pack: $(STAMP)
+	$(BIN)/axdf pack muscles/gait2392 --skeleton poses/skeletons/gait2392.yaml --out muscles/gait2392_packed --overwrite
 
 # The MyoSuite library (myo-sim, Apache-2.0): muscles/{myoarm,myobody}, poses/skeletons/{myoarm,myobody}.yaml
 # (+ meshes/), poses/myoarm_elbow.yaml (arm26's elbow flexion), poses/myobody_gait.yaml (MyoSuite's gait cycle),

@@ -217,7 +217,7 @@ PACK_PIXELS = 40
 PACK_GROW = 1.6
 PACK_MARGIN = 0.001
 PACK_PULL = 0.02
-PACK_SCALE_MAX = 5.0
+PACK_SCALE_MAX = 3.0
 # sections of a packed muscle (evenly between its first and last), the volume step's gain
 PACK_SECTIONS = 16
 PACK_GAIN = 0.5

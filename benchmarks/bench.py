@@ -56,6 +56,7 @@ import argparse
 import cProfile
 import dataclasses
 import io
+import json
 import os
 import pstats
 import shutil
@@ -1108,9 +1109,10 @@ def contact_pass(plan) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
     return time.perf_counter() - t0, out, step, vol
 
 
-def rajagopal_plan(tmp: Path, stages=None):
+def rajagopal_plan(tmp: Path, stages=None, packed: bool = False):
     """Rajagopal2016 over its running stride (tests/data/rajagopal2016, imported without bone
-    meshes into ``tmp``: the contact is muscle against muscle only)."""
+    meshes into ``tmp``: the contact is muscle against muscle only); ``packed``: its muscles
+    packed by ``axdf pack`` (timed: the row "axdf pack")."""
     from axdf_cli.cli.main import main as axdf_main
     from axdf_cli.pipeline.plan import plan_run
     from axdf_cli.specs import RefPolicy
@@ -1122,8 +1124,43 @@ def rajagopal_plan(tmp: Path, stages=None):
                         "--name", "rajagopal2016", "--no-meshes", "--out", str(imp), "-q"])
         if rc != 0:
             raise RuntimeError(f"axdf import osim Rajagopal2016 failed ({rc})")
-    return plan_run(None, muscle_args=[str(imp / "muscles")], pose_arg=str(imp / "run_stride_ik.yaml"),
+    muscles = imp / "muscles"
+    if packed:
+        muscles = tmp / "rajagopal2016_packed"
+        if not muscles.is_dir():
+            skel = imp / "skeletons" / "rajagopal2016.yaml"
+            t0 = time.perf_counter()
+            rc = axdf_main(["pack", str(imp / "muscles"), "--skeleton", str(skel), "--out", str(muscles),
+                            "--allow-outside", "-q"])
+            PACK_TIMES["Rajagopal2016"] = time.perf_counter() - t0
+            if rc != 0:
+                raise RuntimeError(f"axdf pack Rajagopal2016 failed ({rc})")
+    return plan_run(None, muscle_args=[str(muscles)], pose_arg=str(imp / "run_stride_ik.yaml"),
                     policy=RefPolicy(allow_outside=True), stages=stages)
+
+
+#: How long ``axdf pack`` took, by model (seconds; filled by :func:`rajagopal_plan`).
+PACK_TIMES: dict = {}
+
+
+def pack_rows(table: "Table") -> None:
+    """The shipped packed gait2392 library's report (muscles/gait2392_packed/pack_report.json,
+    made by ``make pack``): the rest pose's overlap and volumes before and after packing, and
+    the packing times measured here."""
+    rep = ROOT / "muscles" / "gait2392_packed" / "pack_report.json"
+    if not rep.is_file():
+        return
+    r = json.loads(rep.read_text())
+    b, a = r["before"], r["after"]
+    table.section("axdf pack (rest pose; gait2392: muscles/gait2392_packed/pack_report.json)")
+    table.add("gait2392 rest: vertices inside another muscle", f"{a['inside_muscle'] * 100:.2f}%",
+              f"as imported {b['inside_muscle'] * 100:.2f}%")
+    table.add("gait2392 rest: vertices inside a bone", f"{a['inside_bone'] * 100:.2f}%",
+              f"as imported {b['inside_bone'] * 100:.2f}%")
+    table.add("gait2392 rest: volume kept", f"median {a['volume_ratio_median']:.3f}",
+              f"least {a['volume_ratio_min']:.3f}", f"total {a['volume_total'] * 1000:.2f} / {b['volume_total'] * 1000:.2f} L")
+    for k, t in PACK_TIMES.items():
+        table.add(f"axdf pack {k}", f"{t:.0f} s")
 
 
 def contact_rows(table: "Table", quick: bool, tmp: Path | None = None) -> None:
@@ -1138,9 +1175,13 @@ def contact_rows(table: "Table", quick: bool, tmp: Path | None = None) -> None:
     from axdf_cli.specs import load_job
 
     frames = "18:84:6" if quick else None
-    cases = [("gait2392 walk", lambda sw: plan_run(load_job(GAIT_JOB), frames_arg=frames, stages=sw))]
+    cases = [("gait2392 walk, muscles as imported", lambda sw: plan_run(load_job(GAIT_JOB), frames_arg=frames,
+                                                                         muscle_args=[str(GAIT_MUSCLES)], stages=sw)),
+             ("gait2392 walk, packed (axdf pack: the job's muscles)",
+              lambda sw: plan_run(load_job(GAIT_JOB), frames_arg=frames, stages=sw))]
     if tmp is not None:
         cases.append(("Rajagopal2016 run, no bones", lambda sw: rajagopal_plan(tmp, sw)))
+        cases.append(("Rajagopal2016 run, no bones, packed", lambda sw: rajagopal_plan(tmp, sw, packed=True)))
     for label, make in cases:
         plans = {k: make(sw) for k, sw in
                  (("none", {"contact": False, "penetration": False}),
@@ -1248,6 +1289,7 @@ def main(argv=None) -> int:
         tmp = Path(tempfile.mkdtemp(prefix="axdf-bench-", dir=args.tmp))
         try:
             contact_rows(table, args.quick, tmp)
+            pack_rows(table)
         finally:
             shutil.rmtree(tmp, ignore_errors=True)
         print(table.text())
@@ -1311,6 +1353,7 @@ def main(argv=None) -> int:
         # 2c. contact
         if GAIT_JOB.is_file():
             contact_rows(table, args.quick, tmp)
+            pack_rows(table)
 
         # 3. geomdl
         table.section("peer: geomdl (NURBS-Python) tessellating the same surface, per muscle-frame")

@@ -170,3 +170,18 @@ def test_pack_command_follows_the_output_rule(demo, tmp_path, capsys):
                    "--rounds", "0") == 2
     assert "--rounds" in capsys.readouterr().err
     assert not (tmp_path / "x").exists()
+
+
+def test_a_muscle_document_keeps_its_contact_keys(tmp_path):
+    """transfer and pack write muscles through one document writer: `contact:` survives it."""
+    from axdf_cli.importers import emit
+    from axdf_cli.importers.transfer import file_doc
+
+    src = (REPO_ROOT / "muscles" / "demo" / "biceps_brachii.yaml").read_text()
+    p = tmp_path / "b.yaml"
+    p.write_text(src + "contact: {group: arm, ignore: [brachioradialis], yield: 1.5}\n")
+    spec, = load_muscle_file(p)
+    q = tmp_path / "c.yaml"
+    q.write_text(emit.dump_yaml(emit.rounded(file_doc([spec]))))
+    again, = load_muscle_file(q)
+    assert again.contact == spec.contact and spec.contact.ignore == ("brachioradialis",)

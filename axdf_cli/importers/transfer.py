@@ -406,6 +406,10 @@ def muscle_doc(spec: MuscleSpec) -> dict:
         d["weights"] = list(spec.weights)
     if spec.jiggle is not None:
         d["jiggle"] = emit.jiggle_doc(spec.jiggle)
+    c = spec.contact
+    doc = {k: v for k, v in (("group", c.group), ("ignore", list(c.ignore)), ("yield", c.yield_)) if v not in ("", [], None)}
+    if doc:
+        d["contact"] = doc
     return d
 
 

@@ -424,7 +424,8 @@ class PackResult:
     volume0: np.ndarray  # (M,) rest volumes before
     volume: np.ndarray  # (M,) after
     scale: np.ndarray  # (M,) the envelopes' scales s_i
-    history: list  # per iteration: (mean inside-muscle, mean inside-bone, worst volume ratio)
+    history: list  # per round: (mean inside-muscle share, mean inside-bone share, deepest, least and largest volume ratio)
+    kept: int = 0  # the round whose shapes these are (the least overlap plus volume change)
 
 
 def _grids(models):
@@ -470,8 +471,8 @@ def pack(specs, models, skeleton, rest_world: np.ndarray, cm: "contact.ContactMo
     before = measure_rest(models, cm, inv)
     s = np.ones(M)
     rows = np.array([(i, u) for i in range(M) for u in range(1, nu[i] - 1)], dtype=np.int64)
-    cur_specs, cur_models = list(specs), list(models)
     history = []
+    best = None
     for it in range(iterations):
         reach = (s - 1.0) * rmax + 1e-3
         growb = box.copy()
@@ -499,9 +500,18 @@ def pack(specs, models, skeleton, rest_world: np.ndarray, cm: "contact.ContactMo
                 break
             pts = np.concatenate([ft[1].reshape(-1, 3) for ft in fits])
             ok = np.zeros(len(pts), np.bool_)
-            _owned_all(pts, owner, s, *args, tol.CONTACT_BONE_MARGIN, ok)
+            _owned_all(pts, owner, s, *args, 0.0, ok)
             draw = np.zeros(len(grid), np.bool_)
             draw[ring_rows[~ok]] = True
+            # where the fit overshot its target outwards, the target is set back by the overshoot
+            fitted = np.zeros_like(grid)
+            fitted[ring_rows] = pts
+            d = targets - origins
+            rt = np.linalg.norm(d, axis=1)
+            rf = np.einsum("kc,kc->k", fitted - origins, d) / np.maximum(rt, 1e-12)
+            over = draw & (rf > rt)
+            targets[over] = origins[over] + (np.maximum(2.0 * rt[over] - rf[over], 0.0) / np.maximum(rt[over], 1e-12))[:, None] * d[over]
+            draw &= ~over
             # a muscle whose fitted mesh holds another's fitted vertex (one its rays missed,
             # a thin tendon): drawn in around the nearest of its own vertices
             fg = grid.copy()
@@ -521,7 +531,7 @@ def pack(specs, models, skeleton, rest_world: np.ndarray, cm: "contact.ContactMo
                     if 1 <= u + du <= nu[j] - 2:
                         for da in (-1, 0, 1):
                             draw[off[j] + (u + du) * na[j] + (a_ + da) % na[j]] = True
-            if not draw.any():
+            if not draw.any() and not over.any():
                 break
             targets[draw] = origins[draw] + tol.PACK_DRAW_IN * (targets[draw] - origins[draw])
         new_specs, new_models = [], []
@@ -535,13 +545,17 @@ def pack(specs, models, skeleton, rest_world: np.ndarray, cm: "contact.ContactMo
             new_models.append(MuscleModel(spec, skeleton.bone_index, rest_world, skeleton))
         vol = np.array([m.v0 for m in new_models])
         ratio = vol / v0
-        cur_specs, cur_models = new_specs, new_models
-        meas = measure_rest(cur_models, cm, inv)
+        meas = measure_rest(new_models, cm, inv)
         history.append((float(meas[:, 0].mean()), float(meas[:, 1].mean()), float(meas[:, 2].max()),
                         float(ratio.min()), float(ratio.max())))
+        # the round kept: the least overlap plus volume change (all shares)
+        score = float(meas[:, 0].mean() + meas[:, 1].mean() + np.abs(ratio - 1.0).mean())
+        if best is None or score < best[0]:
+            best = (score, it, new_specs, new_models, s.copy())
         if progress is not None:
             progress(it, history[-1])
         # grow the envelope of each muscle short of its volume (area ~ s^2 where free)
         s = np.clip(s * np.clip(ratio ** -tol.PACK_GAIN, 1.0 / tol.PACK_STEP, tol.PACK_STEP), 1.0, tol.PACK_SCALE_MAX)
+    _, kept, cur_specs, cur_models, s = best
     after = measure_rest(cur_models, cm, inv)
-    return PackResult(cur_specs, cur_models, before, after, v0, np.array([m.v0 for m in cur_models]), s, history)
+    return PackResult(cur_specs, cur_models, before, after, v0, np.array([m.v0 for m in cur_models]), s, history, kept)
