@@ -217,6 +217,8 @@ PACK_PIXELS = 40
 PACK_GROW = 1.6
 PACK_MARGIN = 0.001
 PACK_PULL = 0.02
+# the fit's smoothness along the muscle (second differences over sections, relative to the data)
+PACK_SMOOTH = 0.2
 PACK_SCALE_MAX = 3.0
 # sections of a packed muscle (evenly between its first and last), the volume step's gain
 PACK_SECTIONS = 16

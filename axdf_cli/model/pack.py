@@ -360,7 +360,7 @@ class Fit:
     towards ``x0`` (8N, 2) with weight ``pull`` relative to the data's (None: no pull). The
     rest surface is linear in them; the normal equations are factored once."""
 
-    def __init__(self, model: MuscleModel, fr: _Frames, x0: np.ndarray | None, pull: float):
+    def __init__(self, model: MuscleModel, fr: _Frames, x0: np.ndarray | None, pull: float, smooth: float = 0.0):
         from scipy.linalg import cho_factor
 
         A = model.A
@@ -377,9 +377,19 @@ class Fit:
         cols_s = np.einsum("ualk,klc->uackl", w, fr.s.reshape(N, OCT, 3)).reshape(-1, Q)
         self.A = np.concatenate([cols_r, cols_s], axis=1)  # unknowns: r of every (k, l), then s
         ata = self.A.T @ self.A
+        scale2 = float(np.linalg.norm(self.A, axis=0).mean()) ** 2
+        if smooth > 0 and N >= 3:
+            # smooth along the muscle: second differences of each control point's in-plane
+            # coordinates over consecutive sections (the frames turn little between them)
+            D = np.zeros((N - 2, N))
+            for k in range(N - 2):
+                D[k, k:k + 3] = (1.0, -2.0, 1.0)
+            DtD = D.T @ D  # (N, N) over sections; unknowns ordered (k, l) within r, then s
+            L = np.kron(DtD, np.eye(OCT))
+            ata = ata + smooth * scale2 * np.kron(np.eye(2), L)
         self.prior = np.zeros(2 * Q)
         if x0 is not None and pull > 0:
-            lam2 = (pull * float(np.linalg.norm(self.A, axis=0).mean())) ** 2
+            lam2 = pull ** 2 * scale2
             ata = ata + lam2 * np.eye(2 * Q)
             self.prior = lam2 * np.concatenate([x0[:, 0], x0[:, 1]])
         else:
@@ -466,7 +476,7 @@ def pack(specs, models, skeleton, rest_world: np.ndarray, cm: "contact.ContactMo
     # the original rest meshes in the new layouts: where the fit is pulled to
     x0 = [Fit(m, fr, None, 0.0)(contact.vertices_to_grid(m.rest_vertices.astype(np.float64), m.U, m.A)
                                  .reshape(m.U, m.A, 3))[0] for m, fr in zip(models, frames)]
-    fitters = [Fit(m, fr, x, tol.PACK_PULL) for m, fr, x in zip(models, frames, x0)]
+    fitters = [Fit(m, fr, x, tol.PACK_PULL, tol.PACK_SMOOTH) for m, fr, x in zip(models, frames, x0)]
     v0 = np.array([m.v0 for m in models])
     before = measure_rest(models, cm, inv)
     s = np.ones(M)
