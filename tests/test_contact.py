@@ -126,18 +126,17 @@ def _steps(plan):
 
 
 @pytest.mark.skipif(not WALK_JOB.is_file(), reason="the shipped gait2392 library (make import)")
-@pytest.mark.parametrize("library, pops, worst", [("gait2392", 0, POP_RATIO), ("gait2392_packed", 2, 2.3)])
-def test_no_pops_on_the_walk(library, pops, worst):
+@pytest.mark.parametrize("library", ["gait2392", "gait2392_packed"])
+def test_no_pops_on_the_walk(library):
     """The issue's no-pops rule on the shipped walk (67 frames x 92 muscles): with contact, no
-    muscle's largest vertex step from one frame to the next exceeds 1.5x its step without. So
-    it is with the muscles as imported; with the walk's packed muscles (axdf pack), which lie
-    against each other, add_mag1_r steps 5.9 mm against 3.5 and 2.6 mm without contact at two
-    frames (23, 25: 1.7x, 2.25x), the two of 6072 muscle-frames over 1.5x (README, Contact)."""
+    muscle's largest vertex step from one frame to the next exceeds 1.5x its step without;
+    with the muscles as imported and with the walk's own, packed by `axdf pack` (worst 1.29x
+    and 1.43x)."""
     muscles = [str(REPO_ROOT / "muscles" / library)]
     with_c = _steps(plan_run(load_job(WALK_JOB), muscle_args=muscles, stages={"penetration": False}))
     without = _steps(plan_run(load_job(WALK_JOB), muscle_args=muscles, stages={"contact": False, "penetration": False}))
     ratio = with_c / np.maximum(without, 1e-12)
-    assert (ratio > POP_RATIO).sum() <= pops and ratio.max() <= worst, (ratio.max(), np.argwhere(ratio > POP_RATIO))
+    assert ratio.max() <= POP_RATIO, (ratio.max(), np.argwhere(ratio > POP_RATIO))
     assert (with_c != without).any()  # contact moved something
 
 
