@@ -630,7 +630,7 @@ def _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb,
             ci = cen[coff[i] + u]
             r0 = coff[i] + u
             nbb, nmm = _ring_lists(ci, i, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, nbr_off, nbr, box, margin_b,
-                                   margin_m, actb, actm)
+                                   margin_m, actb, actm, cen, coff, nu)
             for r in range(NMODES):
                 for c in range(3):
                     coef[r0, r, c] = 0.0
@@ -765,14 +765,16 @@ def _solve_offset(c0, c1, c2, c3, v0):
 
 
 @njit(cache=True)
-def _ring_lists(ci, i, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, nbr_off, nbr, box, reach_b, reach_m, actb, actm):
+def _ring_lists(ci, i, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, nbr_off, nbr, box, reach_b, reach_m, actb, actm,
+                cen, coff, nu):
     """What a ring of muscle i (centre ci[:3], every point within ri = ci[3] of it) may meet:
     into actb the bone fields of fl[fl_off[i]:fl_off[i + 1]] but those whose grid it misses or
     whose value at the centre exceeds sqrt(3) ri + reach_b (the trilinear field changes by at
     most sqrt(3) per metre: its grid values are exact distances, so each axis' difference
     quotient is at most 1), into actm the neighbours nbr[nbr_off[i]:nbr_off[i + 1]] whose box,
-    grown by reach_m, its sphere meets. Returns (how many fields, how many neighbours): testing
-    only those gives the same answers as testing all."""
+    grown by reach_m, its sphere meets, and, of those, whose centre line it may come within
+    their radius of (:func:`_near_centres`). Returns (how many fields, how many neighbours):
+    testing only those gives the same answers as testing all."""
     ri = ci[3]
     nb = 0
     for kk in range(fl_off[i], fl_off[i + 1]):
@@ -804,10 +806,31 @@ def _ring_lists(ci, i, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, nbr_off, nbr, 
     nmm = 0
     for jj in range(nbr_off[i], nbr_off[i + 1]):
         j = nbr[jj]
-        if _may_meet(ci, j, box, ri + reach_m):
+        if _may_meet(ci, j, box, ri + reach_m) and _near_centres(ci, ri + reach_m, cen, coff[j], nu[j]):
             actm[nmm] = j
             nmm += 1
     return nb, nmm
+
+
+@njit(cache=True)
+def _near_centres(ci, r, cen, coff_j, U):
+    """Whether a sphere (centre ci[:3], radius r) may hold a point inside muscle j or within
+    r of it: some group of SEG_GROUP centre segments (bounding sphere cen[first, 4:8]) lies
+    within r plus that group's largest ring radius (cen[:, 3]) of the sphere. A point inside j
+    lies within the radius of j's rings at its nearest centre segment (:func:`_muscle_query`:
+    R is at most the larger of the segment's two rings'), so where no group is that near, no
+    point of the sphere is inside j."""
+    for g in range((U - 2) // SEG_GROUP + 1):
+        r0 = coff_j + g * SEG_GROUP
+        r1 = coff_j + min(g * SEG_GROUP + SEG_GROUP, U - 1)
+        big = 0.0
+        for k in range(r0, r1 + 1):
+            if cen[k, 3] > big:
+                big = cen[k, 3]
+        d = np.sqrt((ci[0] - cen[r0, 4]) ** 2 + (ci[1] - cen[r0, 5]) ** 2 + (ci[2] - cen[r0, 6]) ** 2)
+        if d <= r + cen[r0, 7] + big:
+            return True
+    return False
 
 
 @njit(cache=True)
@@ -830,7 +853,7 @@ def _measure(grid, off, nu, na, cen, coff, box, nbr_off, nbr, inv, fb, fo, fh, f
         for u in range(U):
             ci = cen[coff[i] + u]
             nb, nmm = _ring_lists(ci, i, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, nbr_off, nbr, box, 0.0, 0.0,
-                                  actb, actm)
+                                  actb, actm, cen, coff, nu)
             for a in range(A if 0 < u < U - 1 else 1):
                 k = off[i] + u * A + a
                 n += 1

@@ -172,7 +172,7 @@ def _ring_targets(s, grid, off, nu, na, cen, coff, box, reach, nbr_off, nbr, inv
         h = 2.0 * L / K
         ci[3] = L * 1.4143
         nb, nmm = contact._ring_lists(ci, i, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, nbr_off, nbr, box,
-                                      0.0, reach.max(), actb, actm)
+                                      0.0, reach.max(), actb, actm, cen, coff, nu)
         x = np.empty(3)
         n_env = 0
         for ix in range(K):
@@ -282,7 +282,7 @@ def _owned_all(pts, owner, s, grid, off, nu, na, cen, coff, box, reach, nbr_off,
             ci[c] = pts[p, c]
         ci[3] = 0.0
         nb, nmm = contact._ring_lists(ci, i, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, nbr_off, nbr, box,
-                                      0.0, reach.max(), actb, actm)
+                                      0.0, reach.max(), actb, actm, cen, coff, nu)
         out[p] = _owned(pts[p], i, s, grid, off, nu, na, cen, coff, box, reach, actm, nmm, inv, fb, fo, fh, fd, foff,
                         fv, actb, nb, bone_margin, q, g)
 
