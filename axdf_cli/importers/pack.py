@@ -12,15 +12,15 @@ from pathlib import Path
 
 import numpy as np
 
-from axdf_cli.errors import InputError, Mark
+from axdf_cli.errors import InputError
 from axdf_cli.fileio.atomic import sha256_file
 from axdf_cli.importers import emit
-from axdf_cli.importers.transfer import UniqueFiles, file_doc, muscle_mark
+from axdf_cli.importers.transfer import UniqueFiles, file_doc, load_muscle_files
 from axdf_cli.model import contact, pack
 from axdf_cli.model.muscle import MuscleModel
 from axdf_cli.model.skeleton import forward_kinematics
 from axdf_cli.pipeline.plan import display_path, load_bone_mesh
-from axdf_cli.specs import RefPolicy, load_muscle_file, load_skeleton
+from axdf_cli.specs import RefPolicy, load_skeleton
 
 REPORT = "pack_report.json"
 SUMMARY = "PACK.md"
@@ -38,18 +38,8 @@ def build_pack(muscle_files: list[Path], skeleton_path: Path | str, policy: RefP
     """Pack every muscle of ``muscle_files`` (defined on the skeleton at ``skeleton_path``)."""
     skeleton_path = Path(skeleton_path)
     skel = load_skeleton(skeleton_path, policy)
-    by_file, specs, names, defined = [], [], {}, {}
-    for path in muscle_files:
-        if path.name in names:
-            raise InputError(Mark(str(path)), f"two muscle files named {path.name} ({names[path.name]} and {path})",
-                             "muscle files with distinct names (they share the output folder)")
-        names[path.name] = path
-        file_specs = load_muscle_file(path)
-        for s in file_specs:
-            if s.name in defined:
-                raise InputError(muscle_mark(path, s.name), f"muscle {s.name!r} is also defined in {defined[s.name]}",
-                                 "muscle names are unique among the packed files")
-            defined[s.name] = path
+    by_file, specs = [], []
+    for path, file_specs in load_muscle_files(muscle_files, "packed"):
         by_file.append((path, len(file_specs)))
         specs += file_specs
     if not specs:

@@ -431,6 +431,28 @@ class TransferResult:
     inputs: list = field(default_factory=list)  # every file read (the map, both skeletons, the muscles)
 
 
+def load_muscle_files(muscle_files: list[Path], what: str) -> list[tuple[Path, list[MuscleSpec]]]:
+    """Every file's muscles, in order, for a command that writes one file per muscle file into
+    one folder (transfer, pack): the files' names distinct, the muscles' names unique
+    (``what``: "transferred", "packed"). Reads everything before anything is made."""
+    out: list[tuple[Path, list[MuscleSpec]]] = []
+    names: dict[str, Path] = {}
+    defined: dict[str, Path] = {}
+    for path in muscle_files:
+        if path.name in names:
+            raise InputError(Mark(str(path)), f"two muscle files named {path.name} ({names[path.name]} and {path})",
+                             "muscle files with distinct names (they share the output folder)")
+        names[path.name] = path
+        specs = load_muscle_file(path)
+        for spec in specs:
+            if spec.name in defined:
+                raise InputError(muscle_mark(path, spec.name), f"muscle {spec.name!r} is also defined in "
+                                 f"{defined[spec.name]}", f"muscle names are unique among the {what} files")
+            defined[spec.name] = path
+        out.append((path, specs))
+    return out
+
+
 def build_transfer(muscle_files: list[Path], skel_a: Skeleton | None, skel_b: Skeleton | None,
                    map_path: Path | str, out_dir: Path | str, policy: RefPolicy | None = None) -> TransferResult:
     """Transfer every muscle of ``muscle_files``; the output files' bytes (nothing is written here).
@@ -442,20 +464,9 @@ def build_transfer(muscle_files: list[Path], skel_a: Skeleton | None, skel_b: Sk
     wa, wb = emit.rest_world(skel_a), emit.rest_world(skel_b)
     files: dict[str, bytes] = UniqueFiles()
     rows, skipped = [], []
-    names: dict[str, Path] = {}
-    defined: dict[str, Path] = {}
-    for path in muscle_files:
-        if path.name in names:
-            raise InputError(Mark(str(path)), f"two muscle files named {path.name} ({names[path.name]} and {path})",
-                             "muscle files with distinct names (they share the output folder)")
-        names[path.name] = path
-        specs = load_muscle_file(path)
+    for path, specs in load_muscle_files(muscle_files, "transferred"):
         kept = []
         for spec in specs:
-            if spec.name in defined:
-                raise InputError(muscle_mark(path, spec.name), f"muscle {spec.name!r} is also defined in "
-                                 f"{defined[spec.name]}", "muscle names are unique among the transferred files")
-            defined[spec.name] = path
             try:
                 new, missing, k = transfer_spec(spec, tf, skel_b.coord_index)
             except NotCarried as e:

@@ -39,7 +39,7 @@ import numpy as np
 
 from axdf_cli import tolerances as tol
 from axdf_cli.model import bspline, contact
-from axdf_cli.model.muscle import OCT, MuscleModel, MuscleSpec, Section, outline_area
+from axdf_cli.model.muscle import OCT, MuscleModel, MuscleSpec, Section
 
 try:
     from numba import njit, prange
