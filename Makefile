@@ -130,13 +130,10 @@ import: $(STAMP)
 	$(MAKE) --no-print-directory import-mjcf
 
 # gait2392's muscles packed at the rest pose (axdf pack: no overlap, volumes kept, section
-# outlines): muscles/gait2392_packed/ (PACK.md), the muscles of poses/jobs/gait2392_walk.yaml;
-# and the paper's deltoid on arm26 (out of the humerus): muscles/paper_deltoid_arm26_packed/.
+# outlines): muscles/gait2392_packed/ (PACK.md), the muscles of poses/jobs/gait2392_walk.yaml.
 # From the shipped muscles/gait2392 alone (no DATA needed); about two minutes.
 pack: $(STAMP)
 	$(BIN)/axdf pack muscles/gait2392 --skeleton poses/skeletons/gait2392.yaml --out muscles/gait2392_packed --overwrite
-	$(BIN)/axdf pack muscles/paper/deltoid_arm26.yaml --skeleton poses/skeletons/arm26.yaml \
-	  --out muscles/paper_deltoid_arm26_packed --overwrite
 
 # The MyoSuite library (myo-sim, Apache-2.0): muscles/{myoarm,myobody}, poses/skeletons/{myoarm,myobody}.yaml
 # (+ meshes/), poses/myoarm_elbow.yaml (arm26's elbow flexion), poses/myobody_gait.yaml (MyoSuite's gait cycle),
