@@ -229,6 +229,17 @@ def _field_at(values, off, dims, origin, h, x0, x1, x2):
     return c0 * (1 - tx) + c1 * tx, True
 
 
+@njit(cache=True, inline="always")
+def _local_field(x, m, fv, off, dims, origin, h):
+    """World point x taken into a bone's frame by m (4, 4; world to bone-local) and the
+    field's trilinear value there: (distance, inside the grid, the bone-local point)."""
+    y0 = m[0, 0] * x[0] + m[0, 1] * x[1] + m[0, 2] * x[2] + m[0, 3]
+    y1 = m[1, 0] * x[0] + m[1, 1] * x[1] + m[1, 2] * x[2] + m[1, 3]
+    y2 = m[2, 0] * x[0] + m[2, 1] * x[1] + m[2, 2] * x[2] + m[2, 3]
+    d, ok = _field_at(fv, off, dims, origin, h, y0, y1, y2)
+    return d, ok, y0, y1, y2
+
+
 @njit(cache=True)
 def _bone_query(x, inv, fb, fo, fh, fd, foff, fv, fsel, f0, f1, grad_below, g_out):
     """Smallest signed distance of world point x over the bone fields fsel[f0:f1] (inv: (B, 4,
@@ -242,11 +253,7 @@ def _bone_query(x, inv, fb, fo, fh, fd, foff, fv, fsel, f0, f1, grad_below, g_ou
     l2 = 0.0
     for kk in range(f0, f1):
         k = fsel[kk]
-        m = inv[fb[k]]
-        y0 = m[0, 0] * x[0] + m[0, 1] * x[1] + m[0, 2] * x[2] + m[0, 3]
-        y1 = m[1, 0] * x[0] + m[1, 1] * x[1] + m[1, 2] * x[2] + m[1, 3]
-        y2 = m[2, 0] * x[0] + m[2, 1] * x[1] + m[2, 2] * x[2] + m[2, 3]
-        d, ok = _field_at(fv, foff[k], fd[k], fo[k], fh[k], y0, y1, y2)
+        d, ok, y0, y1, y2 = _local_field(x, inv[fb[k]], fv, foff[k], fd[k], fo[k], fh[k])
         if ok and d < best:
             best = d
             kb = k
@@ -779,11 +786,7 @@ def _ring_lists(ci, i, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, nbr_off, nbr, 
     nb = 0
     for kk in range(fl_off[i], fl_off[i + 1]):
         k = fl[kk]
-        m = inv[fb[k]]
-        y0 = m[0, 0] * ci[0] + m[0, 1] * ci[1] + m[0, 2] * ci[2] + m[0, 3]
-        y1 = m[1, 0] * ci[0] + m[1, 1] * ci[1] + m[1, 2] * ci[2] + m[1, 3]
-        y2 = m[2, 0] * ci[0] + m[2, 1] * ci[1] + m[2, 2] * ci[2] + m[2, 3]
-        d, ok = _field_at(fv, foff[k], fd[k], fo[k], fh[k], y0, y1, y2)
+        d, ok, y0, y1, y2 = _local_field(ci, inv[fb[k]], fv, foff[k], fd[k], fo[k], fh[k])
         if ok:
             if d > SQRT3 * ri + reach_b:
                 continue
