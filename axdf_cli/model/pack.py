@@ -124,10 +124,11 @@ def _largest_piece(mask, K, lab, stack):
 
 @njit(cache=True, parallel=True)
 def _ring_targets(s, grid, off, nu, na, cen, coff, box, reach, nbr_off, nbr, inv, fb, fo, fh, fd, foff, fv,
-                  fl_off, fl, K, grow, bone_margin, margin, rows, targets, origins, areas, full):
+                  fl_off, fl, K, grow, bone_margin, margin, rows, targets, origins, full):
     """Targets of every ring vertex (module doc, step 2). rows (R, 2): (muscle, ring) pairs of
-    the rings to cut (the pole rows are not); targets: like grid; areas (R,) each ring's
-    territory area (m^2)."""
+    the rings to cut (the pole rows are not); targets, origins: like grid (each vertex's target
+    and the ray origin it was found from); full (R,): whether the ring's territory is its whole
+    envelope (nothing claims any of it)."""
     M = nu.shape[0]
     for r in prange(rows.shape[0]):
         i = rows[r, 0]
@@ -159,7 +160,6 @@ def _ring_targets(s, grid, off, nu, na, cen, coff, box, reach, nbr_off, nbr, inv
                 for c in range(3):
                     targets[base + a, c] = grid[base + a, c]
                     origins[base + a, c] = ci[c]
-            areas[r] = 0.0
             full[r] = False
             continue
         e10 = d0 / dl
@@ -187,7 +187,6 @@ def _ring_targets(s, grid, off, nu, na, cen, coff, box, reach, nbr_off, nbr, inv
                 mask[ix * K + iy] = _owned(x, i, s, grid, off, nu, na, cen, coff, box, reach, actm, nmm, inv, fb,
                                            fo, fh, fd, foff, fv, actb, nb, bone_margin, q, g)
         n = _largest_piece(mask, K, lab, stack)
-        areas[r] = n * h * h
         full[r] = n == n_env
         if n == 0:
             for a in range(A):
@@ -492,12 +491,11 @@ def pack(specs, models, skeleton, rest_world: np.ndarray, cm: "contact.ContactMo
         fl_off, fl = contact._field_lists(growb, f, inv, 0.0)
         targets = grid.copy()
         origins = grid.copy()
-        areas = np.zeros(len(rows))
         args = (grid, off, nu, na, cen, coff, box, reach, nbr_off, nbr, inv, f.bones, f.origin, f.h, f.dims,
                 f.offset, f.values, fl_off, fl)
         full = np.zeros(len(rows), np.bool_)
         _ring_targets(s, *args, pixels, tol.PACK_GROW * max(1.0, float(s.max())), tol.CONTACT_BONE_MARGIN,
-                      tol.PACK_MARGIN, rows, targets, origins, areas, full)
+                      tol.PACK_MARGIN, rows, targets, origins, full)
         # a muscle whose territory is its whole rest shape (nothing claims any of it) is kept as it is
         clear = (np.bincount(rows[:, 0], weights=(~full).astype(np.float64), minlength=M) == 0) & (s == 1.0)
         # fit; where a fitted vertex leaves its territory, its target is drawn in and fitted again
