@@ -13,13 +13,12 @@ from pathlib import Path
 import numpy as np
 
 from axdf_cli.errors import InputError
-from axdf_cli.fileio.atomic import sha256_file
 from axdf_cli.importers import emit
 from axdf_cli.importers.transfer import UniqueFiles, file_doc, load_muscle_files
 from axdf_cli.model import contact, pack
 from axdf_cli.model.muscle import MuscleModel
 from axdf_cli.model.skeleton import forward_kinematics
-from axdf_cli.pipeline.plan import display_path, load_bone_mesh
+from axdf_cli.pipeline.plan import load_bone_mesh
 from axdf_cli.specs import RefPolicy, load_skeleton
 
 REPORT = "pack_report.json"
@@ -108,6 +107,3 @@ def _summary(report: dict) -> str:
     lines += [f"- {m['muscle']}: {m['volume_ratio']:.3f}" for m in short] or ["- none"]
     return "\n".join(lines) + "\n"
 
-
-def input_hashes(paths) -> dict:
-    return {display_path(Path(p)): sha256_file(p) for p in paths if Path(p).is_file()}

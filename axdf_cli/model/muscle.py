@@ -300,13 +300,26 @@ class MuscleModel:
         sec_t = np.array([s.t for s in spec.sections])
         cp_t = np.repeat(sec_t, OCT)
         c_rest, tt, rr, ss = self._frames_at(rest_p, x, t, r, cp_t, self._sample_index(cp_t))
-        lam = np.interp(cp_t, self.ts, self.arc)
-        tw = math.radians(spec.twist) * lam  # the muscle's own twist (rest shape)
+        tw = self._rest_twist(cp_t)
         ov, ow = outlines[..., 0].ravel(), outlines[..., 1].ravel()
         cw, sw = np.cos(tw), np.sin(tw)
         v_rot, w_rot = ov * cw - ow * sw, ov * sw + ow * cw
         p_rest = c_rest[0] + v_rot[:, None] * rr[0] + w_rot[:, None] * ss[0]  # (8N, 3)
         return p_rest, cp_t
+
+    def _rest_twist(self, cp_t: np.ndarray) -> np.ndarray:
+        """The muscle's own twist (radians) at axis parameters cp_t (the rest shape's)."""
+        return math.radians(self.spec.twist) * np.interp(cp_t, self.ts, self.arc)
+
+    def rest_frames(self, rest_world: np.ndarray, cp_t: np.ndarray):
+        """The rest axis' frame at parameters cp_t (Q,), as sections are placed in it: axis
+        points, R and S axes (Q, 3) each, and the muscle's own twist there (Q,) (``axdf pack``
+        refits the sections in these frames)."""
+        rest_p = self._axis_points(rest_world[None], self.rest_q)
+        x, t = self._samples(rest_p, "Bs", "dBs")
+        r0 = rmf.perpendicular_unit(rest_world[self.origin_bone, :3, :3] @ self.r0_local, t[:, 0])
+        c, _, rr, ss = self._frames_at(rest_p, x, t, rmf.propagate(x, t, r0), cp_t, self._sample_index(cp_t))
+        return c[0], rr[0], ss[0], self._rest_twist(cp_t)
 
     def _stage_binding(self, rest_p, x, t, r, p_rest, cp_t) -> None:
         """Bind every control point once: closest rest-axis parameter t and offset (u, v, w)

@@ -325,23 +325,14 @@ class _Frames:
 def _frames(model: MuscleModel, rest_world: np.ndarray, sec_t: np.ndarray) -> _Frames:
     """The rest frames of sections at ``sec_t`` on ``model``'s axis, and the surface basis
     along for that many sections (the model's own where they are its sections)."""
-    from axdf_cli.model import rmf
-
-    rest_p = model._axis_points(rest_world[None], model.rest_q)
-    x, t = model._samples(rest_p, "Bs", "dBs")
-    r_org = rest_world[model.origin_bone, :3, :3]
-    r0 = rmf.perpendicular_unit(r_org @ model.r0_local, t[:, 0])
-    r = rmf.propagate(x, t, r0)
     cp_t = np.repeat(sec_t, OCT)
-    c, _, rr, ss = model._frames_at(rest_p, x, t, r, cp_t, model._sample_index(cp_t))
-    lam = np.interp(cp_t, model.ts, model.arc)
-    tw = math.radians(model.spec.twist) * lam
+    c, rr, ss, tw = model.rest_frames(rest_world, cp_t)
     m = len(sec_t) + 2
     if len(sec_t) == len(model.spec.sections):
         Bu = model.Bu
     else:
         Bu = bspline.basis_matrix(bspline.clamped_knots(m, 2), 2, np.linspace(0.0, 1.0, model.U))
-    return _Frames(c[0], rr[0], ss[0], tw, float(model.spec.strength), Bu, model.Bv)
+    return _Frames(c, rr, ss, tw, float(model.spec.strength), Bu, model.Bv)
 
 
 def section_layout(spec: MuscleSpec, n: int) -> np.ndarray:
