@@ -164,12 +164,17 @@ CONTACT_MARGIN = 0.001
 CONTACT_BONE_MARGIN = 0.001
 # Jacobi passes (push, fit the rings' modes, re-solve the volume); a fixed number, so the result
 # is a continuous function of the frame. More passes clear more overlap but, the volume being
-# kept, press it into the next layer and follow the neighbours' motion more: on the walk
-# (Rajagopal2016's run) 1 pass: worst step 1.3x (2.1x) the no-contact one, deepest +2.8 mm
-# (-0.3 mm); 2: 1.5x (3.2x), +5.5 mm (+5.1 mm); 3: 2.0x (4.3x), +8.7 mm (+7.6 mm). No pops and no
-# deeper pile-ups come first (README, Contact).
-CONTACT_ITERATIONS = 1
-# [1 2 1]/4 smoothing rounds of the rings' modes along the muscle (no creases).
+# kept, press it into the next layer and follow the neighbours' motion more. On the packed walk
+# (every ring sampled at 12 points, the bone's push free at the ends, below): 1 pass leaves
+# 2.2% of vertices inside another muscle and 0.94% inside a bone, 2 passes 1.68% and 0.46%
+# with every step within 1.42x the no-contact one (no pops); 3 passes popped (2.1x) with the
+# sparser sampling. Measured by `make bench --only contact` (README, Contact).
+CONTACT_ITERATIONS = 2
+# [1 2 1]/4 smoothing rounds of the rings' modes along the muscle (no creases). The modes of the
+# muscles' pushes are pinned at the poles (the attachments, where muscles meet at a shared
+# origin, do not move); those of the bones' pushes are smoothed with free ends, so the rings
+# next to an attachment keep their own push out of the bone (the pole itself stays): the end
+# rings' share of vertices inside a bone on the walk went from 0.23% to 0.02%.
 CONTACT_SMOOTH_PASSES = 4
 # Bones' signed distance fields: grid step and padding around the mesh (m). Trilinear on a
 # 3 mm grid is within ~0.3 mm of the mesh's distance near its surface on the shipped bones.
@@ -204,10 +209,14 @@ CONTACT_DEEP_FADE = (0.15, 0.5)
 # Likewise for the distance between the point's own ring centre and the neighbour's axis, in
 # the neighbour's radii: where the axes (nearly) meet, the push's direction turns fast.
 CONTACT_AXES_FADE = (0.1, 0.4)
-# The pushes are sampled at A / CONTACT_SAMPLE_COLUMNS evenly spaced points (8 of 24) of every
+# The pushes are sampled at A / CONTACT_SAMPLE_COLUMNS evenly spaced points (12 of 24) of every
 # CONTACT_SAMPLE_RINGS-th ring; each sampled ring's displacement modes are fitted to them.
-CONTACT_SAMPLE_COLUMNS = 3
-CONTACT_SAMPLE_RINGS = 2
+# Sparser (8 points of every second ring) aliases: with 2 passes the packed walk's pushes
+# turned between frames near shared attachments (4 pops, worst 1.87x); every ring at 12 points
+# has none (worst 1.42x); every ring at all 24 points gains nothing (1.67%, 1.44x) for 1.5x
+# the cost.
+CONTACT_SAMPLE_COLUMNS = 2
+CONTACT_SAMPLE_RINGS = 1
 
 # Packing (axdf_cli/model/pack.py): rounds of territory and fit, pixels across a ring's
 # square, the square's half side over the ring's radius, the gap left inside a territory's

@@ -22,7 +22,7 @@ collapse to the poles):
 
 Response (tol.CONTACT_ITERATIONS Jacobi passes, every muscle against every other's previous pass):
 
-1. at 8 evenly spaced points of every second ring (:func:`_ring_modes`), the push the point asks
+1. at 12 evenly spaced points of every ring (:func:`_ring_modes`), the push the point asks
    for (:func:`_point_push`): out of a neighbour j it lies within the margin of, along the line
    from j's axis to the centre of its own ring, by its share of the distance to leave j's
    section (a circle of radius R + margin; :func:`pair_shares`: a deeper muscle gives way
@@ -31,8 +31,10 @@ Response (tol.CONTACT_ITERATIONS Jacobi passes, every muscle against every other
    shortens deep inside where the field's sides meet and its direction turns);
 2. per ring, the pushes' low-pass around the ring: the ring's shift, tilt of one side and
    flattening (the first two Fourier modes, the least-squares fit of those modes to the
-   evenly spaced pushes), linear between sampled rings and smoothed along the muscle, the
-   poles (attachments) fixed; each point moves by its ring's modes, soft-capped at
+   evenly spaced pushes), linear between sampled rings and smoothed along the muscle: the
+   muscles' pushes with the poles (attachments) fixed, the bones' pushes with free ends (the
+   rings next to an attachment keep their own push out of the bone; the pole itself never
+   moves); each point moves by its ring's modes, soft-capped at
    tol.CONTACT_MAX_STEP a pass. So the surface stays as smooth as the muscle (no point is
    moved alone: no dents, no wrapping under a bone), with 5 x 3 unknowns per ring;
 3. the volume is solved exactly again: every point moves along its no-contact radial offset
@@ -42,8 +44,8 @@ Response (tol.CONTACT_ITERATIONS Jacobi passes, every muscle against every other
 Every step is a continuous function of the frame's meshes (soft fades and caps, no switching,
 a fixed number of passes), so surfaces do not pop from frame to frame. A muscle nothing
 touches is returned unchanged, bit for bit. Keeping the volume exactly, the overlap a pass
-clears is partly pressed into the next layer; on the walk three passes keep the deepest
-penetration nearest its no-contact value (README, Contact).
+clears is partly pressed into the next layer: a fixed few passes (tol.CONTACT_ITERATIONS; two
+on the packed walk clear it to 1.7% without pops, README, Contact), not a solve to convergence.
 """
 from __future__ import annotations
 
@@ -548,11 +550,15 @@ def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, actm, nmm, share, i
     to ci (plus a little of x's radial direction from j's axis), faded out smoothly for points
     nearer j's axis than deep1 of j's radius (none below deep0: two muscles on one line of
     action have no side to push to, and pushing them anyway piles them up); p[3]: the signed
-    distance to the nearest bone (1e30: none near). Returns how many neighbours pushed."""
+    distance to the nearest bone (1e30: none near); p[4:7]: the bone's part of p[:3]. Returns
+    how many neighbours pushed."""
     p[0] = 0.0
     p[1] = 0.0
     p[2] = 0.0
     p[3] = 1e30
+    p[4] = 0.0
+    p[5] = 0.0
+    p[6] = 0.0
     if nbb > 0:
         d = _bone_query(x, inv, fb, fo, fh, fd, foff, fv, actb, 0, nbb, margin_b, g)
         p[3] = d
@@ -562,6 +568,7 @@ def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, actm, nmm, share, i
             # turns (normalized, it flipped there between frames: pops)
             for c in range(3):
                 p[c] += (margin_b - d) * g[c]
+                p[4 + c] = (margin_b - d) * g[c]
     nm = 0
     for jj in range(nmm):
         j = actm[jj]
@@ -611,17 +618,18 @@ def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, actm, nmm, share, i
 
 @njit(cache=True)
 def _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb, fo, fh, fd, foff, fv, fl_off, fl,
-                margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, cstep, rstep, coef, touched, buried):
+                margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, cstep, rstep, coef, coefb, touched, buried):
     """One Jacobi pass (module doc, steps 1-2), every muscle from the same state: the pushes at
     ``ns`` = A / ``cstep`` evenly spaced points of every ``rstep``-th ring (and the last inner
     ring), and per such ring their low-pass around the ring, the least-squares fit of the
     :data:`NMODES` modes, which for evenly spaced samples are the discrete Fourier coefficients
-    (the modes are orthogonal there): C_0 = mean p, C_k = (2 / ns) sum p b_k. coef (rings,
+    (the modes are orthogonal there): C_0 = mean p, C_k = (2 / ns) sum p b_k, the muscles'
+    pushes into coef and the bones' into coefb (smoothed with different ends). coef (rings,
     NMODES, 3); rings between sampled ones: linear between theirs; poles: 0. touched (M,):
     set where a sample was pushed; buried (M,): the share of samples inside a bone."""
     q = np.empty(8)
     g = np.empty(6)
-    p = np.empty(4)
+    p = np.empty(7)
     b = np.empty(NMODES)
     actb = np.empty(max(fb.shape[0], 1), np.int64)
     actm = np.empty(max(nu.shape[0], 1), np.int64)
@@ -641,6 +649,7 @@ def _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb,
             for r in range(NMODES):
                 for c in range(3):
                     coef[r0, r, c] = 0.0
+                    coefb[r0, r, c] = 0.0
             for si in range(ns):
                 a = si * A // ns
                 k = off[i] + u * A + a
@@ -656,7 +665,8 @@ def _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb,
                 for r in range(NMODES):
                     w = (1.0 if r == 0 else 2.0) / ns
                     for c in range(3):
-                        coef[r0, r, c] += w * b[r] * p[c]
+                        coef[r0, r, c] += w * b[r] * (p[c] - p[4 + c])
+                        coefb[r0, r, c] += w * b[r] * p[4 + c]
             # rings between the previous sampled ring and this one: linear
             if last > 0:
                 for v in range(last + 1, u):
@@ -664,6 +674,7 @@ def _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb,
                     for r in range(NMODES):
                         for c in range(3):
                             coef[coff[i] + v, r, c] = (1.0 - t) * coef[coff[i] + last, r, c] + t * coef[r0, r, c]
+                            coefb[coff[i] + v, r, c] = (1.0 - t) * coefb[coff[i] + last, r, c] + t * coefb[r0, r, c]
             last = u
             if u == U - 2:
                 break
@@ -672,21 +683,28 @@ def _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb,
             for r in range(NMODES):
                 for c in range(3):
                     coef[coff[i] + v, r, c] = 0.0
+                    coefb[coff[i] + v, r, c] = 0.0
         buried[i] = nb / max(nsamp, 1)
 
 
 @njit(cache=True)
-def _smooth_rings(coef, nu, coff, passes, tmp):
+def _smooth_rings(coef, nu, coff, passes, free_ends, tmp):
     """``passes`` rounds of [1 2 1]/4 smoothing of the modes along each muscle (the poles stay
-    at 0: the attachments do not move)."""
+    at 0: the attachments do not move; ``free_ends``: the end rings are smoothed as if the
+    pole moved with them, so they keep their own push)."""
     for i in range(nu.shape[0]):
         U = nu[i]
         o = coff[i]
         for _ in range(passes):
             for u in range(1, U - 1):
+                lo = o + u - 1
+                hi = o + u + 1
+                if free_ends:
+                    lo = max(lo, o + 1)
+                    hi = min(hi, o + U - 2)
                 for r in range(NMODES):
                     for c in range(3):
-                        tmp[u, r, c] = 0.25 * coef[o + u - 1, r, c] + 0.5 * coef[o + u, r, c] + 0.25 * coef[o + u + 1, r, c]
+                        tmp[u, r, c] = 0.25 * coef[lo, r, c] + 0.5 * coef[o + u, r, c] + 0.25 * coef[hi, r, c]
             for u in range(1, U - 1):
                 for r in range(NMODES):
                     for c in range(3):
@@ -964,6 +982,7 @@ def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np
     target = np.array([_grid_volume(grid[off[m]:off[m + 1]], nu[m], na[m]) for m in range(M)])
     umax, amax = int(nu.max()), int(na.max())
     coef = np.zeros((int(coff[-1]), NMODES, 3))
+    coefb = np.zeros_like(coef)
     tmp = np.empty((umax, NMODES, 3))
     sigma = np.zeros(M)
     touched = np.zeros(M, dtype=np.bool_)
@@ -973,11 +992,13 @@ def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np
         nbr_off, nbr = _neighbours(box, model.allow, tol.CONTACT_MARGIN)
         _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, model.share, *args_b,
                     tol.CONTACT_MARGIN, tol.CONTACT_BONE_MARGIN, tol.CONTACT_DEEP_FADE[0], tol.CONTACT_DEEP_FADE[1],
-                    tol.CONTACT_AXES_FADE[0], tol.CONTACT_AXES_FADE[1], tol.CONTACT_RADIAL_BLEND, tol.CONTACT_SAMPLE_COLUMNS, tol.CONTACT_SAMPLE_RINGS, coef, touched,
+                    tol.CONTACT_AXES_FADE[0], tol.CONTACT_AXES_FADE[1], tol.CONTACT_RADIAL_BLEND, tol.CONTACT_SAMPLE_COLUMNS, tol.CONTACT_SAMPLE_RINGS, coef, coefb, touched,
                     buried)
         if it == 0 and not measure_before:
             before[:, 1] = buried
-        _smooth_rings(coef, nu, coff, tol.CONTACT_SMOOTH_PASSES, tmp)
+        _smooth_rings(coef, nu, coff, tol.CONTACT_SMOOTH_PASSES, False, tmp)
+        _smooth_rings(coefb, nu, coff, tol.CONTACT_SMOOTH_PASSES, True, tmp)
+        coef += coefb
         _apply_and_solve(grid, rad, coef, off, nu, na, coff, touched, target, tol.CONTACT_MAX_STEP, ga, sigma)
         _centres(grid, off, nu, na, cen, coff)
         _boxes(grid, off, box)
