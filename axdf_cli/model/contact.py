@@ -542,16 +542,16 @@ def _modes(theta, b):
 @njit(cache=True)
 def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, actm, nmm, share, inv, fb, fo, fh, fd, foff, fv,
                 actb, nbb, margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, q, g, p):
-    """The push p[:3] that point x of muscle i (its ring's centre ci) asks for, against the bone
-    fields actb[:nbb] and the neighbours actm[:nmm] (:func:`_ring_lists`): out of every bone
-    field by (margin_b - d) along the field's gradient where d < margin_b, and out of
-    every neighbour j it lies within the margin of, by i's share of the distance to leave j's
+    """The pushes that point x of muscle i (its ring's centre ci) asks for, against the bone
+    fields actb[:nbb] and the neighbours actm[:nmm] (:func:`_ring_lists`): in p[4:7], out of
+    every bone field by (margin_b - d) along the field's gradient where d < margin_b; in
+    p[:3], out of every neighbour j it lies within the margin of, by i's share of the distance to leave j's
     section (a circle of j's radius + margin about j's axis point) along the line from j's axis
     to ci (plus a little of x's radial direction from j's axis), faded out smoothly for points
     nearer j's axis than deep1 of j's radius (none below deep0: two muscles on one line of
     action have no side to push to, and pushing them anyway piles them up); p[3]: the signed
-    distance to the nearest bone (1e30: none near); p[4:7]: the bone's part of p[:3]. Returns
-    how many neighbours pushed."""
+    distance to the nearest bone (1e30: none near). Kept apart, the two are smoothed along the
+    muscle with different ends (:func:`_ring_modes`). Returns how many neighbours pushed."""
     p[0] = 0.0
     p[1] = 0.0
     p[2] = 0.0
@@ -567,7 +567,6 @@ def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, actm, nmm, share, i
             # where the field's sides meet deep inside, so the push fades where its direction
             # turns (normalized, it flipped there between frames: pops)
             for c in range(3):
-                p[c] += (margin_b - d) * g[c]
                 p[4 + c] = (margin_b - d) * g[c]
     nm = 0
     for jj in range(nmm):
@@ -659,13 +658,13 @@ def _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb,
                 nsamp += 1
                 if p[3] < 0.0:
                     nb += 1
-                if p[0] != 0.0 or p[1] != 0.0 or p[2] != 0.0:
+                if p[0] != 0.0 or p[1] != 0.0 or p[2] != 0.0 or p[4] != 0.0 or p[5] != 0.0 or p[6] != 0.0:
                     touched[i] = True
                 _modes(2.0 * np.pi * a / A, b)
                 for r in range(NMODES):
                     w = (1.0 if r == 0 else 2.0) / ns
                     for c in range(3):
-                        coef[r0, r, c] += w * b[r] * (p[c] - p[4 + c])
+                        coef[r0, r, c] += w * b[r] * p[c]
                         coefb[r0, r, c] += w * b[r] * p[4 + c]
             # rings between the previous sampled ring and this one: linear
             if last > 0:
