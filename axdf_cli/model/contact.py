@@ -204,7 +204,7 @@ class BoneFields:
                           np.concatenate([f.values.ravel() for f in fields]) if fields else np.zeros(0))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _field_at(values, off, dims, origin, h, x0, x1, x2):
     """Trilinear signed distance at a bone-local point; (distance, inside the grid)."""
     nx, ny, nz = dims[0], dims[1], dims[2]
@@ -242,7 +242,7 @@ def _local_field(x, m, fv, off, dims, origin, h):
     return d, ok, y0, y1, y2
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _bone_query(x, inv, fb, fo, fh, fd, foff, fv, fsel, f0, f1, grad_below, g_out):
     """Smallest signed distance of world point x over the bone fields fsel[f0:f1] (inv: (B, 4,
     4) world to bone-local) and, where it is below ``grad_below``, in g_out[:3] its world
@@ -290,7 +290,8 @@ def _bone_query(x, inv, fb, fo, fh, fd, foff, fv, fsel, f0, f1, grad_below, g_ou
 def _centres(grid, off, nu, na, cen, coff):
     """Ring centroids of every muscle (pole rows: the pole) in cen[:, :3], in cen[:, 3] each
     ring's largest distance from its centroid, and in cen[:, 4:8] of every SEG_GROUP-th ring
-    the bounding sphere (centre, radius) of the centres from it to SEG_GROUP rings on."""
+    the bounding sphere (centre, radius) of the centres from it to SEG_GROUP rings on, and in
+    cen[:, 8] the largest of those rings' radii (cen: (rings, :data:`CEN_COLUMNS`))."""
     for m in range(nu.shape[0]):
         U = nu[m]
         A = na[m]
@@ -320,9 +321,14 @@ def _centres(grid, off, nu, na, cen, coff):
                 if q > r:
                     r = q
             cen[r0, 7] = np.sqrt(r)
+            big = 0.0
+            for k in range(r0, r1 + 1):
+                if cen[k, 3] > big:
+                    big = cen[k, 3]
+            cen[r0, 8] = big
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _ring_radius(grid, base, A, cx0, cx1, cx2, a0, a1, a2, b0, b1, b2):
     """Radius of a ring (A points from ``base``) along (a0, a1, a2) from the centre (cx0, cx1,
     cx2), in the plane of that direction and (b0, b1, b2): the ray cut with the ring's polygon
@@ -346,7 +352,7 @@ def _ring_radius(grid, base, A, cx0, cx1, cx2, a0, a1, a2, b0, b1, b2):
     return best
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _centre_tangent(cen, coff_j, U, u):
     """Unit tangent of a muscle's centre polyline at centre u (central difference; one-sided at
     the poles)."""
@@ -361,13 +367,15 @@ def _centre_tangent(cen, coff_j, U, u):
     return d0 / dl, d1 / dl, d2 / dl
 
 
+#: Columns of the ring table :func:`_centres` fills.
+CEN_COLUMNS = 9
 #: Centre segments per bounding sphere in :func:`_muscle_query`'s search.
-SEG_GROUP = 8
+SEG_GROUP = 4
 #: The trilinear field's largest slope (:func:`_measure`).
 SQRT3 = float(np.sqrt(3.0))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _scan_segments(x, cen, coff_j, U, u0, u1, best, bu, bl):
     """The nearest of centre segments u0..u1-1 to x if nearer than ``best`` (squared distance):
     (best, segment, parameter), the parameter clamped to [0, 1]: beyond the first or last
@@ -395,8 +403,18 @@ def _scan_segments(x, cen, coff_j, U, u0, u1, best, bu, bl):
     return best, bu, bl
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _muscle_query(x, grid, off_j, U, A, cen, coff_j, reach, out):
+    """:func:`_query_in` over all of muscle j's segment groups."""
+    return _query_in(x, grid, off_j, U, A, cen, coff_j, reach, out, _ALL_GROUPS, 0, -1)
+
+
+#: No group list: :func:`_query_in` scans every group.
+_ALL_GROUPS = np.zeros((1, 1), np.int64)
+
+
+@njit(cache=True, inline="always")
+def _query_in(x, grid, off_j, U, A, cen, coff_j, reach, out, gl, row, cnt):
     """Axis-space query of point x against muscle j. out = [rho, R, cx, cy, cz, rx, ry, rz]:
     radial distance, surface radius, axis point, unit radial direction. Returns False when x
     lies beyond j's ends, or when rho exceeds the two rings' largest radius (cen[:, 3]) plus
@@ -409,11 +427,26 @@ def _muscle_query(x, grid, off_j, U, A, cen, coff_j, reach, out):
     within ring 1's radius of the axis line.)
     The nearest centre segment: the groups of :data:`SEG_GROUP` segments are scanned nearest
     bounding sphere first (cen[:, 4:8]), the others only where their sphere may hold a nearer
-    point (the same segment as a scan of all, in fewer steps)."""
-    ng = (U - 2) // SEG_GROUP + 1
+    point (the same segment as a scan of all, in fewer steps).
+    Farther than the two rings' largest radius plus ``reach`` from the nearest centre point:
+    False (every point of the tube lies within the larger of its two rings' radii of the
+    segment between their centres). So where no group's bounding sphere comes within its
+    largest ring radius (cen[first, 8]) plus ``reach`` of x, no segment is scanned.
+    Only the groups gl[row, :cnt] are scanned (all where cnt < 0): those that may hold the
+    nearest segment of any point near x (:func:`_ring_groups`), so the answer is the same."""
+    ng = (U - 2) // SEG_GROUP + 1 if cnt < 0 else cnt
+    for k in range(ng):
+        g = k if cnt < 0 else gl[row, k]
+        r = coff_j + g * SEG_GROUP
+        lim = cen[r, 7] + cen[r, 8] + reach
+        if (x[0] - cen[r, 4]) ** 2 + (x[1] - cen[r, 5]) ** 2 + (x[2] - cen[r, 6]) ** 2 <= lim * lim:
+            break
+    else:
+        return False  # no centre segment within its rings' radius plus reach
     gb = 0
     lb_best = 1e300
-    for g in range(ng):
+    for k in range(ng):
+        g = k if cnt < 0 else gl[row, k]
         r = coff_j + g * SEG_GROUP
         e = np.sqrt((x[0] - cen[r, 4]) ** 2 + (x[1] - cen[r, 5]) ** 2 + (x[2] - cen[r, 6]) ** 2) - cen[r, 7]
         if e < lb_best:
@@ -421,7 +454,8 @@ def _muscle_query(x, grid, off_j, U, A, cen, coff_j, reach, out):
             gb = g
     best, bu, bl = _scan_segments(x, cen, coff_j, U, gb * SEG_GROUP, min(gb * SEG_GROUP + SEG_GROUP, U - 1),
                                   1e300, -1, 0.0)
-    for g in range(ng):
+    for k in range(ng):
+        g = k if cnt < 0 else gl[row, k]
         if g == gb:
             continue
         r = coff_j + g * SEG_GROUP
@@ -432,6 +466,8 @@ def _muscle_query(x, grid, off_j, U, A, cen, coff_j, reach, out):
                                       best, bu, bl)
     if bu < 0:
         return False
+    if best > (max(cen[coff_j + bu, 3], cen[coff_j + bu + 1, 3]) + reach) ** 2:
+        return False  # farther from the centre line than its rings' largest radius: outside
     if (bu == 0 and bl <= 0.0) or (bu == U - 2 and bl >= 1.0):
         return False  # beyond an end: outside the end cap
     p0 = coff_j + bu
@@ -507,14 +543,14 @@ def _boxes(grid, off, box):
                     box[m, 3 + c] = v
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _may_meet(x, j, box, margin):
     """Whether point x lies in muscle j's box grown by ``margin`` (before :func:`_muscle_query`)."""
     return not (x[0] < box[j, 0] - margin or x[1] < box[j, 1] - margin or x[2] < box[j, 2] - margin
                 or x[0] > box[j, 3] + margin or x[1] > box[j, 4] + margin or x[2] > box[j, 5] + margin)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _smoothstep(x):
     """0 below 0, 1 above 1, 3x^2 - 2x^3 between: a continuous switch with continuous slope."""
     if x <= 0.0:
@@ -539,9 +575,9 @@ def _modes(theta, b):
     b[4] = np.sin(2.0 * theta)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, actm, nmm, share, inv, fb, fo, fh, fd, foff, fv,
-                actb, nbb, margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, q, g, p):
+                actb, nbb, gl, gn, prm, q, g, p):
     """The pushes that point x of muscle i (its ring's centre ci) asks for, against the bone
     fields actb[:nbb] and the neighbours actm[:nmm] (:func:`_ring_lists`): in p[4:7], out of
     every bone field by (margin_b - d) along the field's gradient where d < margin_b; in
@@ -551,7 +587,11 @@ def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, actm, nmm, share, i
     nearer j's axis than deep1 of j's radius (none below deep0: two muscles on one line of
     action have no side to push to, and pushing them anyway piles them up); p[3]: the signed
     distance to the nearest bone (1e30: none near). Kept apart, the two are smoothed along the
-    muscle with different ends (:func:`_ring_modes`). Returns how many neighbours pushed."""
+    muscle with different ends (:func:`_ring_modes`). Returns how many neighbours pushed.
+    prm: (margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend), a tuple: the call stays
+    under 30 arguments, which Python would otherwise pass as *args, and numba then packs a
+    tuple of every array on each call (several times the query's own cost)."""
+    margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend = prm
     p[0] = 0.0
     p[1] = 0.0
     p[2] = 0.0
@@ -573,7 +613,7 @@ def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, actm, nmm, share, i
         j = actm[jj]
         if not _may_meet(x, j, box, margin_m):
             continue
-        if not _muscle_query(x, grid, off[j], nu[j], na[j], cen, coff[j], margin_m, q):
+        if not _query_in(x, grid, off[j], nu[j], na[j], cen, coff[j], margin_m, q, gl, jj, gn[jj]):
             continue
         rho = q[0]
         rr = q[1] + margin_m
@@ -630,8 +670,11 @@ def _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb,
     g = np.empty(6)
     p = np.empty(7)
     b = np.empty(NMODES)
+    prm = (margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend)
     actb = np.empty(max(fb.shape[0], 1), np.int64)
     actm = np.empty(max(nu.shape[0], 1), np.int64)
+    gl = np.empty((max(nu.shape[0], 1), (nu.max() - 2) // SEG_GROUP + 1), np.int64)
+    gn = np.empty(max(nu.shape[0], 1), np.int64)
     for i in range(nu.shape[0]):
         U = nu[i]
         A = na[i]
@@ -645,6 +688,7 @@ def _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb,
             r0 = coff[i] + u
             nbb, nmm = _ring_lists(ci, i, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, nbr_off, nbr, box, margin_b,
                                    margin_m, actb, actm, cen, coff, nu)
+            nmm = _ring_groups(ci, margin_m, cen, coff, nu, actm, nmm, gl, gn)
             for r in range(NMODES):
                 for c in range(3):
                     coef[r0, r, c] = 0.0
@@ -653,8 +697,7 @@ def _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb,
                 a = si * A // ns
                 k = off[i] + u * A + a
                 _point_push(grid[k], ci, i, grid, off, nu, na, cen, coff, box, actm, nmm, share, inv, fb, fo, fh,
-                            fd, foff, fv, actb, nbb, margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend,
-                            q, g, p)
+                            fd, foff, fv, actb, nbb, gl, gn, prm, q, g, p)
                 nsamp += 1
                 if p[3] < 0.0:
                     nb += 1
@@ -833,6 +876,45 @@ def _ring_lists(ci, i, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, nbr_off, nbr, 
 
 
 @njit(cache=True)
+def _ring_groups(ci, reach, cen, coff, nu, actm, nmm, gl, gn):
+    """For a ring (every point within ci[3] of ci[:3]) and each of its neighbours actm[:nmm],
+    into gl[jj, :gn[jj]] the groups of :data:`SEG_GROUP` centre segments (bounding spheres
+    cen[first, 4:8]) that may hold the nearest centre segment of one of the ring's points:
+    those whose least distance from the ring's sphere is at most the largest distance from it
+    of the nearest group. Any other group is farther from every point of the ring than that
+    group is, so :func:`_query_in` over these finds the same nearest segment as over all. A
+    neighbour none of whose candidate groups comes within its largest ring radius (cen[first,
+    8]) plus ``reach`` of the sphere is dropped (no point of the ring can be within its
+    radius of it); actm and gl are compacted. Returns how many neighbours remain."""
+    ri = ci[3]
+    n = 0
+    for jj in range(nmm):
+        j = actm[jj]
+        ng = (nu[j] - 2) // SEG_GROUP + 1
+        ub = 1e300
+        for g in range(ng):
+            r = coff[j] + g * SEG_GROUP
+            d = np.sqrt((ci[0] - cen[r, 4]) ** 2 + (ci[1] - cen[r, 5]) ** 2 + (ci[2] - cen[r, 6]) ** 2)
+            if d + cen[r, 7] + ri < ub:
+                ub = d + cen[r, 7] + ri
+        k = 0
+        near = False
+        for g in range(ng):
+            r = coff[j] + g * SEG_GROUP
+            d = np.sqrt((ci[0] - cen[r, 4]) ** 2 + (ci[1] - cen[r, 5]) ** 2 + (ci[2] - cen[r, 6]) ** 2)
+            if d - cen[r, 7] - ri <= ub:
+                gl[n, k] = g
+                k += 1
+                if d <= ri + reach + cen[r, 7] + cen[r, 8]:
+                    near = True
+        if near:
+            actm[n] = j
+            gn[n] = k
+            n += 1
+    return n
+
+
+@njit(cache=True)
 def _near_centres(ci, r, cen, coff_j, U):
     """Whether a sphere (centre ci[:3], radius r) may hold a point inside muscle j or within
     r of it: some group of SEG_GROUP centre segments (bounding sphere cen[first, 4:8]) lies
@@ -842,11 +924,7 @@ def _near_centres(ci, r, cen, coff_j, U):
     point of the sphere is inside j."""
     for g in range((U - 2) // SEG_GROUP + 1):
         r0 = coff_j + g * SEG_GROUP
-        r1 = coff_j + min(g * SEG_GROUP + SEG_GROUP, U - 1)
-        big = 0.0
-        for k in range(r0, r1 + 1):
-            if cen[k, 3] > big:
-                big = cen[k, 3]
+        big = cen[r0, 8]
         d = np.sqrt((ci[0] - cen[r0, 4]) ** 2 + (ci[1] - cen[r0, 5]) ** 2 + (ci[2] - cen[r0, 6]) ** 2)
         if d <= r + cen[r0, 7] + big:
             return True
@@ -863,6 +941,8 @@ def _measure(grid, off, nu, na, cen, coff, box, nbr_off, nbr, inv, fb, fo, fh, f
     g = np.empty(6)
     actb = np.empty(max(fb.shape[0], 1), np.int64)
     actm = np.empty(max(M, 1), np.int64)
+    gl = np.empty((max(M, 1), (nu.max() - 2) // SEG_GROUP + 1), np.int64)
+    gn = np.empty(max(M, 1), np.int64)
     for i in range(M):
         U = nu[i]
         A = na[i]
@@ -874,6 +954,7 @@ def _measure(grid, off, nu, na, cen, coff, box, nbr_off, nbr, inv, fb, fo, fh, f
             ci = cen[coff[i] + u]
             nb, nmm = _ring_lists(ci, i, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, nbr_off, nbr, box, 0.0, 0.0,
                                   actb, actm, cen, coff, nu)
+            nmm = _ring_groups(ci, 0.0, cen, coff, nu, actm, nmm, gl, gn)
             for a in range(A if 0 < u < U - 1 else 1):
                 k = off[i] + u * A + a
                 n += 1
@@ -889,7 +970,7 @@ def _measure(grid, off, nu, na, cen, coff, box, nbr_off, nbr, inv, fb, fo, fh, f
                     j = actm[jj]
                     if not _may_meet(x, j, box, 0.0):
                         continue
-                    if not _muscle_query(x, grid, off[j], nu[j], na[j], cen, coff[j], 0.0, q):
+                    if not _query_in(x, grid, off[j], nu[j], na[j], cen, coff[j], 0.0, q, gl, jj, gn[jj]):
                         continue
                     if q[0] < q[1]:
                         inside = True
@@ -967,7 +1048,7 @@ def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np
     off = np.concatenate([[0], np.cumsum(nu * na)]).astype(np.int64)
     coff = np.concatenate([[0], np.cumsum(nu)]).astype(np.int64)
     grid = np.concatenate([vertices_to_grid(v, *s) for v, s in zip(vertices, shapes)])
-    cen = np.zeros((int(coff[-1]), 8))
+    cen = np.zeros((int(coff[-1]), CEN_COLUMNS))
     box = np.empty((M, 6))
     f = model.fields
     _centres(grid, off, nu, na, cen, coff)

@@ -435,7 +435,7 @@ def _grids(models):
     off = np.concatenate([[0], np.cumsum(nu * na)]).astype(np.int64)
     coff = np.concatenate([[0], np.cumsum(nu)]).astype(np.int64)
     grid = np.concatenate([contact.vertices_to_grid(m.rest_vertices.astype(np.float64), m.U, m.A) for m in models])
-    cen = np.zeros((int(coff[-1]), 8))
+    cen = np.zeros((int(coff[-1]), contact.CEN_COLUMNS))
     box = np.empty((len(models), 6))
     contact._centres(grid, off, nu, na, cen, coff)
     contact._boxes(grid, off, box)
