@@ -79,6 +79,9 @@ ROOT = Path(__file__).resolve().parent.parent
 GAIT_MUSCLES = ROOT / "muscles" / "gait2392"
 GAIT_POSE = ROOT / "poses" / "gait2392_walk.yaml"
 GAIT_JOB = ROOT / "poses" / "jobs" / "gait2392_walk.yaml"
+#: The evaluation rows time the paper's model alone: contact (on by default in axdf run) has
+#: its own section (contact_rows) and one end-to-end row.
+NO_CONTACT = {"contact": False}
 ARM_MUSCLES = ROOT / "muscles" / "arm26"
 ARM_POSE = ROOT / "poses" / "arm26_flex.yaml"
 #: Wrapping may add at most this to evaluation (issue 14).
@@ -410,12 +413,14 @@ def run_subprocess(args: list[str], cwd: Path = ROOT) -> dict:
     return {"wall": wall, "rc": p.returncode, "maxrss": maxrss, "stderr": err.decode(errors="replace")}
 
 
-def end_to_end(job: Path, out: Path, fmt: str = "ply") -> dict:
-    """``axdf run JOB --no-render`` in a subprocess: wall time, frames, peak memory."""
+def end_to_end(job: Path, out: Path, fmt: str = "ply", contact: bool = False) -> dict:
+    """``axdf run JOB --no-render`` in a subprocess: wall time, frames, peak memory; without
+    contact unless ``contact`` (the default of axdf run)."""
     from axdf_cli.specs import load_job
     from axdf_cli.pipeline import plan_run
 
-    r = run_subprocess(["run", str(job), "--out", str(out), "--format", fmt, "--no-render", "--quiet"])
+    r = run_subprocess(["run", str(job), "--out", str(out), "--format", fmt, "--no-render", "--quiet"]
+                       + ([] if contact else ["--no-contact"]))
     if r["rc"] != 0:
         raise RuntimeError(f"axdf run {job} failed ({r['rc']}): {r['stderr'][-400:]}")
     plan = plan_run(load_job(job), out_arg=str(out))
@@ -435,7 +440,7 @@ def profile_run(job: Path, out: Path, fmt: str = "ply", top: int = 0) -> dict:
     from axdf_cli.pipeline import execute, plan_run
 
     t0 = time.perf_counter()
-    plan = plan_run(load_job(job), out_arg=str(out), fmt_arg=fmt)
+    plan = plan_run(load_job(job), out_arg=str(out), fmt_arg=fmt, stages=NO_CONTACT)
     t_plan = time.perf_counter() - t0
     prof = cProfile.Profile()
     t0 = time.perf_counter()
@@ -534,7 +539,7 @@ from benchmarks.bench import stretched_pose
 from axdf_cli.specs import load_job
 from axdf_cli.pipeline import plan_run, execute
 job, n, fmt, out = sys.argv[1], int(sys.argv[2]), sys.argv[3], Path(sys.argv[4])
-plan = plan_run(load_job(job), out_arg=str(out), fmt_arg=None if fmt == "none" else fmt)
+plan = plan_run(load_job(job), out_arg=str(out), fmt_arg=None if fmt == "none" else fmt, stages={"contact": False})
 plan.pose = stretched_pose(plan.pose, n)
 plan.frames = plan.pose.frames
 plan.render = dataclasses.replace(plan.render, enabled=False)
@@ -687,7 +692,7 @@ def run_jobs(job: Path, out: Path, jobs: int, frames: str | None = None) -> dict
     """``axdf run JOB --jobs N`` (meshes and frames, as the job says) in a subprocess: wall
     seconds, with the load average of the minute before it started (the machine may be shared)."""
     load = os.getloadavg()[0]
-    args = ["run", str(job), "--out", str(out), "--overwrite", "--jobs", str(jobs), "--quiet"]
+    args = ["run", str(job), "--out", str(out), "--overwrite", "--jobs", str(jobs), "--quiet", "--no-contact"]
     r = run_subprocess(args + (["--frames", frames] if frames else []))
     if r["rc"] != 0:
         raise RuntimeError(f"axdf run {job} --jobs {jobs} failed ({r['rc']}): {r['stderr'][-400:]}")
@@ -783,7 +788,7 @@ from benchmarks.bench import stretched_pose
 from axdf_cli.specs import load_job
 from axdf_cli.pipeline import plan_run, evaluate_chunks, chunk_frames
 job, n = sys.argv[1], int(sys.argv[2])
-plan = plan_run(load_job(job))
+plan = plan_run(load_job(job), stages={"contact": False})
 plan.pose = stretched_pose(plan.pose, n)
 plan.frames = plan.pose.frames
 nm = len(plan.models)
@@ -855,7 +860,7 @@ def jiggle_rows(table: "Table", reps: int) -> None:
     from axdf_cli.specs import load_job
 
     job = load_job(GAIT_JOB if GAIT_JOB.is_file() else DEMO_JOB)
-    base = plan_run(job)
+    base = plan_run(job, stages=NO_CONTACT)
     plan = dataclasses.replace(base, frames=base.pose.frames)  # the whole trial
     off = dataclasses.replace(plan, stages=())
     nm, nf = len(plan.models), len(plan.frames)
@@ -906,7 +911,7 @@ from axdf_cli.pipeline import plan_run, execute
 from axdf_cli.model.muscle import MuscleModel
 from axdf_cli.model.skeleton import forward_kinematics
 job, n, fmt, out, res, profile = sys.argv[1], int(sys.argv[2]), sys.argv[3], Path(sys.argv[4]), sys.argv[5], sys.argv[6]
-plan = plan_run(load_job(job), out_arg=str(out), fmt_arg=None if fmt == "none" else fmt)
+plan = plan_run(load_job(job), out_arg=str(out), fmt_arg=None if fmt == "none" else fmt, stages={"contact": False})
 if res != "library":
     skel = plan.pose.skeleton
     rest = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
@@ -978,7 +983,7 @@ from pathlib import Path
 from axdf_cli.specs import load_job
 from axdf_cli.pipeline import plan_run, evaluate_plan
 t1 = time.perf_counter()
-plan = plan_run(load_job(sys.argv[1]), out_arg="unused", frames_arg="0:1")
+plan = plan_run(load_job(sys.argv[1]), out_arg="unused", frames_arg="0:1", stages={"contact": False})
 t2 = time.perf_counter()
 for chunk, results in evaluate_plan(plan):
     for _ in results:
@@ -1010,7 +1015,7 @@ def first_touch(job: Path, repeats: int) -> tuple[float, float, int]:
     from axdf_cli.pipeline import chunk_frames, plan_run
     from axdf_cli.specs import load_job
 
-    plan = plan_run(load_job(job), out_arg="unused")
+    plan = plan_run(load_job(job), out_arg="unused", stages=NO_CONTACT)
     batch = __import__("axdf_cli.pipeline.evaluate", fromlist=["batch_of"]).batch_of(plan)
     nf = chunk_frames(plan)
     frames = plan.pose.frames[:nf]
@@ -1395,11 +1400,14 @@ def main(argv=None) -> int:
                       f"{rf['gl_renderer'][:40]}, supersample {rf['supersample']}")
 
         # 6. end to end
-        table.section(f"end to end: axdf run {job.relative_to(ROOT)} --no-render (subprocess; PLY)")
+        table.section(f"end to end: axdf run {job.relative_to(ROOT)} --no-render --no-contact (subprocess; PLY)")
         e2e = end_to_end(job, tmp / "e2e")
         mf = e2e["frames"] * e2e["muscles"]
         table.add(f"axdf run ({e2e['muscles']} muscles x {e2e['frames']} frames)", f"{e2e['frames'] / e2e['wall']:.1f} fps",
                   f"{mf / e2e['wall']:.0f} muscle-frames/s, {e2e['wall']:.1f} s")
+        e2c = end_to_end(job, tmp / "e2e-contact", contact=True)
+        table.add("axdf run with contact (the default)", f"{e2c['frames'] / e2c['wall']:.1f} fps",
+                  f"{mf / e2c['wall']:.0f} muscle-frames/s, {e2c['wall']:.1f} s", f"{e2c['wall'] / e2e['wall']:.2f}x")
         table.add("axdf run peak memory", f"{e2e['maxrss'] / 2**20:.0f} MiB")
         pr = profile_run(job, tmp / "e2e-profile", top=15 if args.profile else 0)
         ev, wt = pr["evaluation"], pr["writing"]

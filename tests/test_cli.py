@@ -24,7 +24,8 @@ from conftest import REPO_ROOT, all_files, run_main
 DEMO_MUSCLES = ["biceps_brachii", "brachioradialis", "deltoid_anterior", "deltoid_middle", "deltoid_posterior",
                 "gastrocnemius_medial", "gastrocnemius_lateral"]  # file order, then order in the file
 DEMO_BONES = ["pelvis", "femur_r", "tibia_r", "foot_r", "thorax", "scapula_r", "humerus_r", "ulna_r", "radius_r"]
-STATS_COLUMNS = ["frame", "muscle", "length", "volume", "volume_ratio", "tension", "twist", "scale", "warning"]
+STATS_COLUMNS = ["frame", "muscle", "length", "volume", "volume_ratio", "tension", "twist", "scale",
+                 "inside_muscle", "inside_bone", "depth", "warning"]  # (contact's measures: on by default)
 BONES_COLUMNS = ["frame", "bone", "x", "y", "z", "qw", "qx", "qy", "qz"]
 POSITION = re.compile(r"^(?P<file>[^\s:]+\.yaml):(?P<line>\d+):(?P<col>\d+): ", re.M)
 
@@ -118,7 +119,9 @@ def test_stats_csv(demo_runs, demo):
         assert abs(ratio - 1) < 5e-3
         assert 0.0 <= tension <= 1.0
         assert np.isfinite(twist)
-        assert r[8] == ""
+        inside_muscle, inside_bone, depth = map(float, r[8:11])
+        assert 0.0 <= inside_muscle <= 1.0 and 0.0 <= inside_bone <= 1.0 and 0.0 <= depth < 0.1
+        assert r[11] == ""
     frame0 = [r for r in body if r[0] == "0"]
     for r in frame0:  # frame 0 is the rest pose
         assert float(r[4]) == pytest.approx(1.0, abs=1e-9)
@@ -380,7 +383,7 @@ def test_run_on_extreme_poses_is_finite(project, capsys):
         assert np.all(np.isfinite(pos)) and np.all(np.isfinite(nrm)), p
     rows = read_csv(project / "out" / "stats.csv")[1:]
     assert len(rows) == 3 * len(DEMO_MUSCLES)
-    assert all("non-finite" not in r[8] for r in rows)
+    assert all("non-finite" not in r[-1] for r in rows)  # (the warning column)
 
 
 def test_obj_bone_mesh_is_copied_into_the_run_as_a_ply(project, capsys):

@@ -33,8 +33,8 @@ FRAMES = "20,70"  # knee flexed with plantarflexion; shoulder abducted
 
 @pytest.fixture(scope="module", autouse=True)
 def contact_on_by_default():
-    """Contact and its measures are off by default (pipeline.stages.OFF_BY_DEFAULT; `--contact`
-    and `--penetration` turn them on): here every run and plan has both on unless a test
+    """Contact is on by default, its measures alone (`--penetration`) off
+    (pipeline.stages.OFF_BY_DEFAULT): here every run and plan has both on unless a test
     switches them off (tests/test_stages.py checks the flags themselves)."""
     from axdf_cli.pipeline import stages
 

@@ -166,8 +166,9 @@ def test_no_jiggle_equals_muscles_without_the_key(tmp_path, hinge_runs, capsys):
     # the manifest: the stage is recorded when it runs; off, the run is that of muscles without
     # jiggle but for the inputs' sha256 (the muscle files differ)
     on, off, plain_m = (json.loads((d / "manifest.json").read_text()) for d in (*hinge_runs, out))
-    assert on["settings"]["stages"] == [{"name": "jiggle", "scope": "time"}]
-    assert "stages" not in off["settings"]
+    assert on["settings"]["stages"][0] == {"name": "jiggle", "scope": "time"}
+    assert [s["name"] for s in on["settings"]["stages"]] == ["jiggle", "contact"]  # (contact: on by default)
+    assert [s["name"] for s in off["settings"]["stages"]] == ["contact"]
     for m in (off, plain_m):
         del m["inputs"]
         for muscle in m["muscles"]:

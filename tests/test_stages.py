@@ -92,10 +92,10 @@ def test_the_split_follows_the_declared_scopes(project, monkeypatch):
         return plan_run(load_job("poses/jobs/demo.yaml"), frames_arg="0:3")
 
     # the demo's gastrocnemius jiggles (TIME); contact and its measures are FRAME stages
-    assert [s.name for s in plan().stages] == ["jiggle"]  # contact and its measures are off by default
-    assert [s.name for s in plan_run(load_job("poses/jobs/demo.yaml"), frames_arg="0:3",
-                                     stages={"contact": True}).stages] == ["jiggle", "contact"]
-    assert split_of(plan_run(load_job("poses/jobs/demo.yaml"), frames_arg="0:3", stages={"contact": True})) == "frames"
+    assert [s.name for s in plan().stages] == ["jiggle", "contact"]  # contact is on by default
+    assert split_of(plan()) == "frames"  # (a FRAME stage needs every muscle of a frame)
+    off = plan_run(load_job("poses/jobs/demo.yaml"), frames_arg="0:3", stages={"contact": False})
+    assert [s.name for s in off.stages] == ["jiggle"] and split_of(off) == "muscles"
     use_stages(monkeypatch, [])
     assert [s.name for s in plan().stages] == ["jiggle"] and split_of(plan()) == "muscles"
     use_stages(monkeypatch, ["smooth"])
@@ -298,42 +298,48 @@ def test_the_job_keys_that_switch_stages_are_the_stages(capsys):
         assert ("else on" if stage_default(name) else "else off") in out
 
 
-def test_contact_is_off_by_default_and_on_with_the_flag_or_the_job(project, capsys):
-    """`axdf run` leaves contact out (stats.csv without its measures, the manifest without the
-    stage); `--contact` or a job's `contact: true` runs it and writes the measures."""
+def test_contact_is_on_by_default_and_off_with_the_flag_or_the_job(project, capsys):
+    """`axdf run` runs contact (stats.csv with its measures, the manifest naming the stage);
+    `--no-contact` or a job's `contact: false` leaves it out, and the measures with it."""
     import csv as _csv
 
     from axdf_cli.pipeline.stages import stage_default
 
-    assert not stage_default("contact") and not stage_default("penetration")
-    run(capsys, "plain", "--frames", "20", "--no-jiggle")
-    run(capsys, "touch", "--frames", "20", "--no-jiggle", "--contact")
+    assert stage_default("contact") and not stage_default("penetration")
+    run(capsys, "plain", "--frames", "20", "--no-jiggle", "--no-contact")
+    run(capsys, "touch", "--frames", "20", "--no-jiggle")
     head = {n: next(_csv.reader(open(f"{n}/stats.csv"))) for n in ("plain", "touch")}
     assert "inside_muscle" not in head["plain"] and head["touch"][-4:] == ["inside_muscle", "inside_bone", "depth",
                                                                           "warning"]
     stages = {n: json.loads(Path(n, "manifest.json").read_text())["settings"].get("stages") for n in head}
     assert stages["plain"] is None and [s["name"] for s in stages["touch"]] == ["contact"]
-    job = Path("poses/jobs/demo.yaml").read_text() + "\ncontact: true\n"
-    Path("poses/jobs/touch_job.yaml").write_text(job.replace("out:", "# out:"))
-    rc, _, err = run_main(["run", "poses/jobs/touch_job.yaml", "--frames", "20", "--no-jiggle", "--no-render", "--out", "touch2",
+    job = Path("poses/jobs/demo.yaml").read_text() + "\ncontact: false\n"
+    Path("poses/jobs/plain_job.yaml").write_text(job.replace("out:", "# out:"))
+    rc, _, err = run_main(["run", "poses/jobs/plain_job.yaml", "--frames", "20", "--no-jiggle", "--no-render", "--out", "plain2",
                            "-q"], capsys)
     assert rc == 0, err
-    assert all_files(Path("touch2")).keys() == all_files(Path("touch")).keys()
+    assert all_files(Path("plain2")).keys() == all_files(Path("plain")).keys()
+    assert next(_csv.reader(open("plain2/stats.csv"))) == head["plain"]
 
 
-def test_a_data_set_file_switches_contact_on(tmp_path, capsys, monkeypatch):
-    """A data-set file takes a job's stage keys: `contact: true` makes every sequence collide
-    (dataset.json names the stage; the chain's muscle runs through its joint balls, so contact
-    moves it), `contact: 3` is exit 2 at its line."""
+def test_a_data_set_file_switches_contact_off(tmp_path, capsys, monkeypatch):
+    """A data-set file takes a job's stage keys: every sequence collides by default, as with
+    `contact: true` (dataset.json names the stage; the chain's muscle runs through its joint
+    balls, so contact moves it); `contact: false` leaves it out; `contact: 3` is exit 2 at its
+    line."""
     from dataset_helpers import DATASET_YAML, build_in, write_tiny
 
-    write_tiny(tmp_path / "plain")
+    write_tiny(tmp_path / "plain", DATASET_YAML + "contact: false\n")
     write_tiny(tmp_path / "touch", DATASET_YAML + "contact: true\n")
+    write_tiny(tmp_path / "default")
     plain, touch = build_in(tmp_path / "plain", "out"), build_in(tmp_path / "touch", "out")
+    default = build_in(tmp_path / "default", "out")
+    assert json.loads((default / "dataset.json").read_text())["stages"] == json.loads(
+        (touch / "dataset.json").read_text())["stages"]
     assert "stages" not in json.loads((plain / "dataset.json").read_text())
     assert [s["name"] for s in json.loads((touch / "dataset.json").read_text())["stages"]] == ["contact"]
     mesh = "seq_00005/meshes/chainm/chainm_0008.ply"
-    assert (plain / mesh).read_bytes() != (touch / mesh).read_bytes()
+    assert (plain / mesh).read_bytes() != (touch / mesh).read_bytes() == (default / mesh).read_bytes()
     write_tiny(tmp_path / "bad", DATASET_YAML + "contact: 3\n")
     monkeypatch.chdir(tmp_path / "bad")
     rc, _, err = run_main(["dataset", "build", "tiny.yaml", "--out", "out"], capsys)

@@ -13,7 +13,7 @@ from axdf_cli.fileio.yamlio import Fields, item_marks, load_yaml
 
 
 #: Job keys that switch a stage of the pipeline on or off (axdf_cli.pipeline.stages.STAGES; a
-#: test checks the two agree): `jiggle: false`, as --no-jiggle; `contact: true`, as --contact.
+#: test checks the two agree): `jiggle: false`, as --no-jiggle; `contact: false`, as --no-contact.
 STAGE_KEYS = ("jiggle", "contact", "penetration")
 JOB_KEYS = ("muscles", "pose", "out", "format", "frames", "render") + STAGE_KEYS
 
