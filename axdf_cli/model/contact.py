@@ -655,9 +655,10 @@ def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, actm, nmm, share, i
     return nm
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb, fo, fh, fd, foff, fv, fl_off, fl,
-                margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, cstep, rstep, coef, coefb, touched, buried):
+                margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, cstep, rstep, coef, coefb, touched, buried,
+                work):
     """One Jacobi pass (module doc, steps 1-2), every muscle from the same state: the pushes at
     ``ns`` = A / ``cstep`` evenly spaced points of every ``rstep``-th ring (and the last inner
     ring), and per such ring their low-pass around the ring, the least-squares fit of the
@@ -665,16 +666,12 @@ def _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb,
     (the modes are orthogonal there): C_0 = mean p, C_k = (2 / ns) sum p b_k, the muscles'
     pushes into coef and the bones' into coefb (smoothed with different ends). coef (rings,
     NMODES, 3); rings between sampled ones: linear between theirs; poles: 0. touched (M,):
-    set where a sample was pushed; buried (M,): the share of samples inside a bone."""
-    q = np.empty(8)
-    g = np.empty(6)
-    p = np.empty(7)
-    b = np.empty(NMODES)
+    set where a sample was pushed; buried (M,): the share of samples inside a bone. work:
+    scratch arrays (:func:`_work`). Compiled without numba's reference counting (it allocates
+    nothing): the helpers inlined into its loops otherwise count references to each array they
+    are handed, twice per call (measured: more than the queries' own arithmetic)."""
+    q, g, p, b, actb, actm, gl, gn = work
     prm = (margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend)
-    actb = np.empty(max(fb.shape[0], 1), np.int64)
-    actm = np.empty(max(nu.shape[0], 1), np.int64)
-    gl = np.empty((max(nu.shape[0], 1), (nu.max() - 2) // SEG_GROUP + 1), np.int64)
-    gn = np.empty(max(nu.shape[0], 1), np.int64)
     for i in range(nu.shape[0]):
         U = nu[i]
         A = na[i]
@@ -875,6 +872,18 @@ def _ring_lists(ci, i, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, nbr_off, nbr, 
     return nb, nmm
 
 
+@njit(cache=True, inline="always")
+def _near_segment(ci, reach, cen, coff_j, U, g):
+    """Whether a segment of group g of muscle j comes within its two rings' larger radius plus
+    ``reach`` of point ci[:3]."""
+    for u in range(g * SEG_GROUP, min(g * SEG_GROUP + SEG_GROUP, U - 1)):
+        q, _, _ = _scan_segments(ci, cen, coff_j, U, u, u + 1, 1e300, -1, 0.0)
+        lim = reach + max(cen[coff_j + u, 3], cen[coff_j + u + 1, 3])
+        if q <= lim * lim:
+            return True
+    return False
+
+
 @njit(cache=True)
 def _ring_groups(ci, reach, cen, coff, nu, actm, nmm, gl, gn):
     """For a ring (every point within ci[3] of ci[:3]) and each of its neighbours actm[:nmm],
@@ -883,9 +892,10 @@ def _ring_groups(ci, reach, cen, coff, nu, actm, nmm, gl, gn):
     those whose least distance from the ring's sphere is at most the largest distance from it
     of the nearest group. Any other group is farther from every point of the ring than that
     group is, so :func:`_query_in` over these finds the same nearest segment as over all. A
-    neighbour none of whose candidate groups comes within its largest ring radius (cen[first,
-    8]) plus ``reach`` of the sphere is dropped (no point of the ring can be within its
-    radius of it); actm and gl are compacted. Returns how many neighbours remain."""
+    neighbour none of whose candidate groups has a segment within its two rings' larger radius
+    plus ``reach`` of the sphere is dropped (for every point of the ring, its nearest segment
+    is then farther than that from it: :func:`_query_in` is False); actm and gl are
+    compacted. Returns how many neighbours remain."""
     ri = ci[3]
     n = 0
     for jj in range(nmm):
@@ -905,8 +915,8 @@ def _ring_groups(ci, reach, cen, coff, nu, actm, nmm, gl, gn):
             if d - cen[r, 7] - ri <= ub:
                 gl[n, k] = g
                 k += 1
-                if d <= ri + reach + cen[r, 7] + cen[r, 8]:
-                    near = True
+                if not near and d <= ri + reach + cen[r, 7] + cen[r, 8]:
+                    near = _near_segment(ci, ri + reach, cen, coff[j], nu[j], g)
         if near:
             actm[n] = j
             gn[n] = k
@@ -931,18 +941,13 @@ def _near_centres(ci, r, cen, coff_j, U):
     return False
 
 
-@njit(cache=True)
-def _measure(grid, off, nu, na, cen, coff, box, nbr_off, nbr, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, out):
+@njit(cache=True, _nrt=False)
+def _measure(grid, off, nu, na, cen, coff, box, nbr_off, nbr, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, out, work):
     """Per muscle: [share of points inside another muscle, share inside a bone, deepest
     penetration (m)] over its vertices (pole rows counted once); ring by ring, each against
     what it may meet (:func:`_ring_lists`)."""
     M = nu.shape[0]
-    q = np.empty(8)
-    g = np.empty(6)
-    actb = np.empty(max(fb.shape[0], 1), np.int64)
-    actm = np.empty(max(M, 1), np.int64)
-    gl = np.empty((max(M, 1), (nu.max() - 2) // SEG_GROUP + 1), np.int64)
-    gn = np.empty(max(M, 1), np.int64)
+    q, g, _, _, actb, actm, gl, gn = work
     for i in range(M):
         U = nu[i]
         A = na[i]
@@ -1023,6 +1028,15 @@ class ContactModel:
     enabled: bool = True  # False: measure only (--no-contact)
 
 
+def _work(nu: np.ndarray, fields: "BoneFields") -> tuple:
+    """Scratch arrays for :func:`_ring_modes` and :func:`_measure` (allocated here: they are
+    compiled without reference counting): q, g, p, b, actb, actm, gl, gn."""
+    M = max(len(nu), 1)
+    return (np.empty(8), np.empty(6), np.empty(7), np.empty(NMODES), np.empty(max(len(fields.bones), 1), np.int64),
+            np.empty(M, np.int64), np.empty((M, (int(nu.max()) - 2) // SEG_GROUP + 1), np.int64),
+            np.empty(M, np.int64))
+
+
 def vertices_to_grid(v: np.ndarray, U: int, A: int) -> np.ndarray:
     """(V, 3) vertices with collapsed poles → (U * A, 3) grid rows (poles repeated)."""
     rings = v[1:-1].reshape(U - 2, A, 3)
@@ -1056,8 +1070,9 @@ def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np
     reach = tol.CONTACT_BONE_MARGIN + iterations * tol.CONTACT_MAX_STEP
     args_b = (world_inv, f.bones, f.origin, f.h, f.dims, f.offset, f.values, *_field_lists(box, f, world_inv, reach))
     before = np.full((M, 3), np.nan)
+    work = _work(nu, f)
     if measure_before or iterations == 0:
-        _measure(grid, off, nu, na, cen, coff, box, *_neighbours(box, model.allow, 0.0), *args_b, before)
+        _measure(grid, off, nu, na, cen, coff, box, *_neighbours(box, model.allow, 0.0), *args_b, before, work)
     rad = grid - np.repeat(cen[:, :3], np.repeat(na, nu), axis=0)  # radial offsets of the no-contact shape
     target = np.array([_grid_volume(grid[off[m]:off[m + 1]], nu[m], na[m]) for m in range(M)])
     umax, amax = int(nu.max()), int(na.max())
@@ -1073,7 +1088,7 @@ def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np
         _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, model.share, *args_b,
                     tol.CONTACT_MARGIN, tol.CONTACT_BONE_MARGIN, tol.CONTACT_DEEP_FADE[0], tol.CONTACT_DEEP_FADE[1],
                     tol.CONTACT_AXES_FADE[0], tol.CONTACT_AXES_FADE[1], tol.CONTACT_RADIAL_BLEND, tol.CONTACT_SAMPLE_COLUMNS, tol.CONTACT_SAMPLE_RINGS, coef, coefb, touched,
-                    buried)
+                    buried, work)
         if it == 0 and not measure_before:
             before[:, 1] = buried
         _smooth_rings(coef, nu, coff, tol.CONTACT_SMOOTH_PASSES, False, tmp)
@@ -1085,7 +1100,7 @@ def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np
     if not touched.any() and not np.isnan(before).any():  # nothing moved (or no pass): the first measures
         return list(vertices), [None] * M, touched, before, before.copy()
     after = np.zeros((M, 3))
-    _measure(grid, off, nu, na, cen, coff, box, *_neighbours(box, model.allow, 0.0), *args_b, after)
+    _measure(grid, off, nu, na, cen, coff, box, *_neighbours(box, model.allow, 0.0), *args_b, after, work)
     if not touched.any():
         return list(vertices), [None] * M, touched, before, after
     out_v, out_n = [], []

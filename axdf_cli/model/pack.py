@@ -448,7 +448,8 @@ def measure_rest(models, cm: "contact.ContactModel", rest_inv: np.ndarray) -> np
     f = cm.fields
     out = np.zeros((len(models), 3))
     contact._measure(grid, off, nu, na, cen, coff, box, *contact._neighbours(box, cm.allow, 0.0), rest_inv, f.bones,
-                     f.origin, f.h, f.dims, f.offset, f.values, *contact._field_lists(box, f, rest_inv, 0.0), out)
+                     f.origin, f.h, f.dims, f.offset, f.values, *contact._field_lists(box, f, rest_inv, 0.0), out,
+                     contact._work(nu, f))
     return out
 
 
