@@ -209,6 +209,10 @@ CONTACT_DEEP_FADE = (0.15, 0.5)
 # Likewise for the distance between the point's own ring centre and the neighbour's axis, in
 # the neighbour's radii: where the axes (nearly) meet, the push's direction turns fast.
 CONTACT_AXES_FADE = (0.1, 0.4)
+# A thin muscle inside a thick one (its ring's radius below CONTACT_THIN[1] of the neighbour's
+# radius, fully from CONTACT_THIN[0], smoothstep between) also makes the thick one give way:
+# none of the thick one's points is inside the thin one, so its own samples never ask it to.
+CONTACT_THIN = (0.25, 0.5)
 # The pushes are sampled at A / CONTACT_SAMPLE_COLUMNS evenly spaced points (12 of 24) of every
 # CONTACT_SAMPLE_RINGS-th ring; each sampled ring's displacement modes are fitted to them.
 # Sparser (8 points of every second ring) aliases: with 2 passes the packed walk's pushes

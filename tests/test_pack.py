@@ -90,7 +90,7 @@ def test_territories_never_overlap(demo):
         owners = np.zeros(len(pts), int)
         enveloped = np.zeros(len(pts), int)
         held_any = 0
-        q = np.empty(8)
+        q = np.empty(contact.QUERY_SIZE)
         for i in range(M):
             enveloped += [pack._frac(x, i, grid, off, nu, na, cen, coff, box, reach[i], q) < s[i] for x in pts]
             ok = np.zeros(len(pts), np.bool_)

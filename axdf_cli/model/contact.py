@@ -28,7 +28,11 @@ Response (tol.CONTACT_ITERATIONS Jacobi passes, every muscle against every other
    section (a circle of radius R + margin; :func:`pair_shares`: a deeper muscle gives way
    more), faded out for points near j's axis (two muscles on one line of action have no side
    to push to: pushing them piles them up); out of a bone by (margin - d) times the field's gradient (not normalized: it
-   shortens deep inside where the field's sides meet and its direction turns);
+   shortens deep inside where the field's sides meet and its direction turns); and, where the
+   point's ring is thin against j (tol.CONTACT_THIN; not near i's ends, :data:`END_FADE`), j's
+   section at the point's angle pulled in past it by j's share (a thin muscle inside a thick
+   one: none of the thick one's points is inside the thin one, so its own samples never ask it
+   to give way; the gracilis' origin in the adductor brevis, a tendon in a belly);
 2. per ring, the pushes' low-pass around the ring: the ring's shift, tilt of one side and
    flattening (the first two Fourier modes, the least-squares fit of those modes to the
    evenly spaced pushes), linear between sampled rings and smoothed along the muscle: the
@@ -309,6 +313,7 @@ def _centres(grid, off, nu, na, cen, coff):
                 if q > r:
                     r = q
             cen[coff[m] + u, 3] = np.sqrt(r)
+            cen[coff[m] + u, 9] = _smoothstep(min(u, U - 1 - u) / (END_FADE * (U - 1)))
         # bounding spheres of the centre segments in groups of SEG_GROUP (cen[first, 4:8])
         for g in range((U - 2) // SEG_GROUP + 1):
             r0 = coff[m] + g * SEG_GROUP
@@ -367,8 +372,11 @@ def _centre_tangent(cen, coff_j, U, u):
     return d0 / dl, d1 / dl, d2 / dl
 
 
+#: Rings within this share of a muscle's length from an end make a thick neighbour give way less
+#: (none at the poles): an attachment ring holds its place (:func:`_point_push`).
+END_FADE = 0.1
 #: Columns of the ring table :func:`_centres` fills.
-CEN_COLUMNS = 9
+CEN_COLUMNS = 10
 #: Centre segments per bounding sphere in :func:`_muscle_query`'s search.
 SEG_GROUP = 4
 #: The trilinear field's largest slope (:func:`_measure`).
@@ -409,6 +417,8 @@ def _muscle_query(x, grid, off_j, U, A, cen, coff_j, reach, out):
     return _query_in(x, grid, off_j, U, A, cen, coff_j, reach, out, _ALL_GROUPS, 0, -1)
 
 
+#: Length of :func:`_query_in`'s output (rho, R, axis point, radial direction, segment, parameter).
+QUERY_SIZE = 10
 #: No group list: :func:`_query_in` scans every group.
 _ALL_GROUPS = np.zeros((1, 1), np.int64)
 
@@ -524,6 +534,8 @@ def _query_in(x, grid, off_j, U, A, cen, coff_j, reach, out, gl, row, cnt):
     out[5] = r0
     out[6] = r1
     out[7] = r2
+    out[8] = bu
+    out[9] = bl
     return True
 
 
@@ -576,8 +588,42 @@ def _modes(theta, b):
 
 
 @njit(cache=True, inline="always")
+def _section_angle(grid, off_j, A, cen, coff_j, U, bu, bl, r0, r1, r2):
+    """The angle, in muscle j's column angle (2 pi a / A for column a), of the unit direction
+    (r0, r1, r2) perpendicular to j's centre line at parameter bl of segment bu: measured from
+    the direction to column 0 towards column A / 4, both blended between the segment's two
+    rings. NaN where those are degenerate (both rings at a pole)."""
+    ka = off_j + bu * A
+    kb = off_j + (bu + 1) * A
+    ca = coff_j + bu
+    cb = ca + 1
+    qa = A // 4
+    x0 = (1.0 - bl) * (grid[ka, 0] - cen[ca, 0]) + bl * (grid[kb, 0] - cen[cb, 0])
+    x1 = (1.0 - bl) * (grid[ka, 1] - cen[ca, 1]) + bl * (grid[kb, 1] - cen[cb, 1])
+    x2 = (1.0 - bl) * (grid[ka, 2] - cen[ca, 2]) + bl * (grid[kb, 2] - cen[cb, 2])
+    y0 = (1.0 - bl) * (grid[ka + qa, 0] - cen[ca, 0]) + bl * (grid[kb + qa, 0] - cen[cb, 0])
+    y1 = (1.0 - bl) * (grid[ka + qa, 1] - cen[ca, 1]) + bl * (grid[kb + qa, 1] - cen[cb, 1])
+    y2 = (1.0 - bl) * (grid[ka + qa, 2] - cen[ca, 2]) + bl * (grid[kb + qa, 2] - cen[cb, 2])
+    # e1 along column 0, e2: column A / 4 made perpendicular to it
+    xl = np.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
+    if xl < 1e-9:
+        return np.nan
+    x0 /= xl
+    x1 /= xl
+    x2 /= xl
+    d = y0 * x0 + y1 * x1 + y2 * x2
+    y0 -= d * x0
+    y1 -= d * x1
+    y2 -= d * x2
+    yl = np.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
+    if yl < 1e-9:
+        return np.nan
+    return np.arctan2((r0 * y0 + r1 * y1 + r2 * y2) / yl, r0 * x0 + r1 * x1 + r2 * x2)
+
+
+@njit(cache=True, inline="always")
 def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, actm, nmm, share, inv, fb, fo, fh, fd, foff, fv,
-                actb, nbb, gl, gn, prm, q, g, p):
+                actb, nbb, gl, gn, prm, q, g, p, react):
     """The pushes that point x of muscle i (its ring's centre ci) asks for, against the bone
     fields actb[:nbb] and the neighbours actm[:nmm] (:func:`_ring_lists`): in p[4:7], out of
     every bone field by (margin_b - d) along the field's gradient where d < margin_b; in
@@ -587,11 +633,17 @@ def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, actm, nmm, share, i
     nearer j's axis than deep1 of j's radius (none below deep0: two muscles on one line of
     action have no side to push to, and pushing them anyway piles them up); p[3]: the signed
     distance to the nearest bone (1e30: none near). Kept apart, the two are smoothed along the
-    muscle with different ends (:func:`_ring_modes`). Returns how many neighbours pushed.
-    prm: (margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend), a tuple: the call stays
+    muscle with different ends (:func:`_ring_modes`). Where x's ring is thin against j (its
+    radius under thin1 of j's, fully under thin0, times the ring's end fade ci[9]), j gives way
+    too: into react[rows of j's two rings at x, :3 NMODES] the modes of a push of j's section
+    at x's angle inwards past x by j's share (the Fourier sums of one sample, weighted by the
+    push's length and the ring's share of the segment), into react[..., 3 NMODES] those
+    weights (:func:`_add_reactions` takes their weighted mean). Returns how many neighbours
+    pushed.
+    prm: (margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, thin0, thin1), a tuple: the call stays
     under 30 arguments, which Python would otherwise pass as *args, and numba then packs a
     tuple of every array on each call (several times the query's own cost)."""
-    margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend = prm
+    margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, thin0, thin1 = prm
     p[0] = 0.0
     p[1] = 0.0
     p[2] = 0.0
@@ -622,6 +674,35 @@ def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, actm, nmm, share, i
         fade = _smoothstep((rho / q[1] - deep0) / (deep1 - deep0))
         if fade <= 0.0:
             continue
+        # a thin muscle inside a thick one: the thick one gives way too, its section at x's
+        # angle pulled in past x by its share (react: per ring of j, the modes' sums weighted
+        # by the push's length, and those lengths: a weighted mean, continuous as samples come
+        # and go)
+        thin = (1.0 - _smoothstep((ci[3] / q[1] - thin0) / (thin1 - thin0))) * ci[9]
+        if thin > 0.0:
+            amt = thin * fade * share[j, i] * (rr - rho)
+            th = _section_angle(grid, off[j], na[j], cen, coff[j], nu[j], int(q[8]), q[9], q[5], q[6], q[7])
+            if amt > 0.0 and th == th:
+                bu = int(q[8])
+                for e in range(2):
+                    wr = amt * ((1.0 - q[9]) if e == 0 else q[9])
+                    if wr <= 0.0:
+                        continue
+                    row = coff[j] + bu + e
+                    for r in range(NMODES):
+                        if r == 0:
+                            br = 1.0
+                        elif r == 1:
+                            br = 2.0 * np.cos(th)
+                        elif r == 2:
+                            br = 2.0 * np.sin(th)
+                        elif r == 3:
+                            br = 2.0 * np.cos(2.0 * th)
+                        else:
+                            br = 2.0 * np.sin(2.0 * th)
+                        for c in range(3):
+                            react[row, r * 3 + c] -= wr * br * amt * q[5 + c]
+                    react[row, 3 * NMODES] += wr
         bl = radial_blend * q[1]
         e0 = ci[0] - q[2]
         e1 = ci[1] - q[3]
@@ -657,8 +738,8 @@ def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, actm, nmm, share, i
 
 @njit(cache=True, _nrt=False)
 def _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb, fo, fh, fd, foff, fv, fl_off, fl,
-                margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, cstep, rstep, coef, coefb, touched, buried,
-                work):
+                margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, thin0, thin1, cstep, rstep, coef, coefb,
+                touched, buried, work):
     """One Jacobi pass (module doc, steps 1-2), every muscle from the same state: the pushes at
     ``ns`` = A / ``cstep`` evenly spaced points of every ``rstep``-th ring (and the last inner
     ring), and per such ring their low-pass around the ring, the least-squares fit of the
@@ -670,8 +751,8 @@ def _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb,
     scratch arrays (:func:`_work`). Compiled without numba's reference counting (it allocates
     nothing): the helpers inlined into its loops otherwise count references to each array they
     are handed, twice per call (measured: more than the queries' own arithmetic)."""
-    q, g, p, b, actb, actm, gl, gn = work
-    prm = (margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend)
+    q, g, p, b, actb, actm, gl, gn, react = work
+    prm = (margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, thin0, thin1)
     for i in range(nu.shape[0]):
         U = nu[i]
         A = na[i]
@@ -694,7 +775,7 @@ def _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb,
                 a = si * A // ns
                 k = off[i] + u * A + a
                 _point_push(grid[k], ci, i, grid, off, nu, na, cen, coff, box, actm, nmm, share, inv, fb, fo, fh,
-                            fd, foff, fv, actb, nbb, gl, gn, prm, q, g, p)
+                            fd, foff, fv, actb, nbb, gl, gn, prm, q, g, p, react)
                 nsamp += 1
                 if p[3] < 0.0:
                     nb += 1
@@ -724,6 +805,27 @@ def _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb,
                     coef[coff[i] + v, r, c] = 0.0
                     coefb[coff[i] + v, r, c] = 0.0
         buried[i] = nb / max(nsamp, 1)
+
+
+@njit(cache=True)
+def _add_reactions(react, coef, nu, coff, touched, floor):
+    """The thick muscles' giving way (:func:`_point_push`'s react) into their rings' modes
+    (the poles stay), then cleared for the next pass."""
+    for m in range(nu.shape[0]):
+        for u in range(1, nu[m] - 1):
+            row = coff[m] + u
+            w = react[row, 3 * NMODES]
+            if w <= 0.0:
+                continue
+            touched[m] = True
+            # the pushes' mean weighted by their lengths (times the share of each that falls
+            # on this ring), all of it once that weight reaches `floor`: continuous as
+            # samples come and go, and as one passes from this ring's segment to the next
+            w = max(w, floor)
+            for r in range(NMODES):
+                for c in range(3):
+                    coef[row, r, c] += react[row, r * 3 + c] / (w * NMODES)
+    react[:, :] = 0.0
 
 
 @njit(cache=True)
@@ -947,7 +1049,7 @@ def _measure(grid, off, nu, na, cen, coff, box, nbr_off, nbr, inv, fb, fo, fh, f
     penetration (m)] over its vertices (pole rows counted once); ring by ring, each against
     what it may meet (:func:`_ring_lists`)."""
     M = nu.shape[0]
-    q, g, _, _, actb, actm, gl, gn = work
+    q, g, _, _, actb, actm, gl, gn, _ = work
     for i in range(M):
         U = nu[i]
         A = na[i]
@@ -1032,9 +1134,9 @@ def _work(nu: np.ndarray, fields: "BoneFields") -> tuple:
     """Scratch arrays for :func:`_ring_modes` and :func:`_measure` (allocated here: they are
     compiled without reference counting): q, g, p, b, actb, actm, gl, gn."""
     M = max(len(nu), 1)
-    return (np.empty(8), np.empty(6), np.empty(7), np.empty(NMODES), np.empty(max(len(fields.bones), 1), np.int64),
+    return (np.empty(QUERY_SIZE), np.empty(6), np.empty(7), np.empty(NMODES), np.empty(max(len(fields.bones), 1), np.int64),
             np.empty(M, np.int64), np.empty((M, (int(nu.max()) - 2) // SEG_GROUP + 1), np.int64),
-            np.empty(M, np.int64))
+            np.empty(M, np.int64), np.zeros((int(nu.sum()), 3 * NMODES + 1)))
 
 
 def vertices_to_grid(v: np.ndarray, U: int, A: int) -> np.ndarray:
@@ -1087,8 +1189,10 @@ def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np
         nbr_off, nbr = _neighbours(box, model.allow, tol.CONTACT_MARGIN)
         _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, model.share, *args_b,
                     tol.CONTACT_MARGIN, tol.CONTACT_BONE_MARGIN, tol.CONTACT_DEEP_FADE[0], tol.CONTACT_DEEP_FADE[1],
-                    tol.CONTACT_AXES_FADE[0], tol.CONTACT_AXES_FADE[1], tol.CONTACT_RADIAL_BLEND, tol.CONTACT_SAMPLE_COLUMNS, tol.CONTACT_SAMPLE_RINGS, coef, coefb, touched,
+                    tol.CONTACT_AXES_FADE[0], tol.CONTACT_AXES_FADE[1], tol.CONTACT_RADIAL_BLEND, tol.CONTACT_THIN[0],
+                    tol.CONTACT_THIN[1], tol.CONTACT_SAMPLE_COLUMNS, tol.CONTACT_SAMPLE_RINGS, coef, coefb, touched,
                     buried, work)
+        _add_reactions(work[8], coef, nu, coff, touched, tol.CONTACT_MARGIN)
         if it == 0 and not measure_before:
             before[:, 1] = buried
         _smooth_rings(coef, nu, coff, tol.CONTACT_SMOOTH_PASSES, False, tmp)

@@ -135,7 +135,7 @@ def _ring_targets(s, grid, off, nu, na, cen, coff, box, reach, nbr_off, nbr, inv
         u = rows[r, 1]
         U = nu[i]
         A = na[i]
-        q = np.empty(8)
+        q = np.empty(contact.QUERY_SIZE)
         g = np.empty(6)
         actb = np.empty(max(fb.shape[0], 1), np.int64)
         actm = np.empty(max(M, 1), np.int64)
@@ -272,7 +272,7 @@ def _owned_all(pts, owner, s, grid, off, nu, na, cen, coff, box, reach, nbr_off,
     M = nu.shape[0]
     for p in prange(pts.shape[0]):
         i = owner[p]
-        q = np.empty(8)
+        q = np.empty(contact.QUERY_SIZE)
         g = np.empty(6)
         actb = np.empty(max(fb.shape[0], 1), np.int64)
         actm = np.empty(max(M, 1), np.int64)
@@ -292,7 +292,7 @@ def _inside_of(grid, off, nu, na, cen, coff, box, nbr_off, nbr, out):
     (axis-space query), or -1."""
     M = nu.shape[0]
     for i in prange(M):
-        q = np.empty(8)
+        q = np.empty(contact.QUERY_SIZE)
         for k in range(off[i], off[i + 1]):
             out[k] = -1
             x = grid[k]
