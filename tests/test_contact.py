@@ -345,3 +345,46 @@ def test_a_point_past_a_neighbours_end_is_outside_it():
     np.testing.assert_array_equal(before[:, 0], ref)
     assert before[1:3, 2].tolist() == [0.0, 0.0]  # no depth
     assert not touched[1] and not touched[2] and touched[3]
+
+
+def _thin_in_thick(off_y: float, U: int = 24, A: int = 24):
+    """A 40 mm wide muscle along x and a 6 mm wide one inside it, ``off_y`` (m) beside its axis
+    (both 20 cm long; ring radii 0.15 of the thick one's: a tendon in a belly)."""
+    thick = _tube((0, 0, 0), (0.2, 0, 0), 0.02, 0.01, U=U, A=A)
+    thin = _tube((0.01, 0, 0), (0.19, 0, 0), 0.003, 0.01, offset=(0, off_y, 0), U=U, A=A)
+    model = contact.ContactModel(~np.eye(2, dtype=bool), contact.pair_shares(np.zeros(2)), contact.BoneFields.pack([]),
+                                 ((U, A), (U, A)), np.zeros(2))
+    return model, [thick, thin]
+
+
+def test_a_thick_muscle_gives_way_to_a_thin_one_inside_it(monkeypatch):
+    """None of the thick muscle's points is inside the thin one, so only the thin one's samples
+    can ask for room: they pull the thick one's section in at their angle (tol.CONTACT_THIN).
+    With that, the thin one ends 32% inside (its own 2 passes alone: still wholly inside), the
+    thick one's side facing it gives way (-4.7 mm) and the section shifts from it (its far
+    side -2.6 mm), its volume exact; moved across in 0.5 mm steps, the thick one's vertices
+    change smoothly (no step over 1.5 mm)."""
+    U, A = 24, 24
+    model, (thick, thin) = _thin_in_thick(0.012)
+    v, _, touched, before, after = contact.resolve_frame(model, [thick, thin], np.eye(4)[None])
+    assert touched.tolist() == [True, True]
+    assert before[1, 0] == 1.0 and after[1, 0] < 0.5
+    mid = 1 + (U // 2 - 1) * A  # the thick one's middle ring
+    ring = thick[mid:mid + A]
+    near, far = mid + ring[:, 1].argmax(), mid + ring[:, 1].argmin()
+    d = v[0] - thick
+    assert d[near, 1] < -0.003 and d[far, 1] < -0.001  # gives way, and shifts away
+    vol = [contact._grid_volume(contact.vertices_to_grid(x, U, A), U, A) for x in (thick, v[0])]
+    assert vol[1] == pytest.approx(vol[0], rel=1e-8)
+    # without it (no ring counts as thin) the thick one stays, and the thin one stays inside it
+    monkeypatch.setattr(tol, "CONTACT_THIN", (-2.0, -1.0))
+    v_off, _, touched_off, _, after_off = contact.resolve_frame(model, [thick, thin], np.eye(4)[None])
+    monkeypatch.undo()
+    assert not touched_off[0] and np.array_equal(v_off[0], thick) and after_off[1, 0] == 1.0
+    prev = None
+    for oy in np.arange(0.008, 0.0171, 0.0005):
+        model, meshes = _thin_in_thick(oy)
+        out = contact.resolve_frame(model, meshes, np.eye(4)[None])[0][0]
+        if prev is not None:
+            assert np.abs(out - prev).max() < 0.0015, oy
+        prev = out
