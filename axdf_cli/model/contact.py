@@ -294,8 +294,9 @@ def _bone_query(x, inv, fb, fo, fh, fd, foff, fv, fsel, f0, f1, grad_below, g_ou
 def _centres(grid, off, nu, na, cen, coff):
     """Ring centroids of every muscle (pole rows: the pole) in cen[:, :3], in cen[:, 3] each
     ring's largest distance from its centroid, and in cen[:, 4:8] of every SEG_GROUP-th ring
-    the bounding sphere (centre, radius) of the centres from it to SEG_GROUP rings on, and in
-    cen[:, 8] the largest of those rings' radii (cen: (rings, :data:`CEN_COLUMNS`))."""
+    the bounding sphere (centre, radius) of the centres from it to SEG_GROUP rings on, in
+    cen[:, 8] the largest of those rings' radii, and in cen[:, 9] each ring's end fade (0 at
+    the poles, 1 from :data:`END_FADE` of the rings on; cen: (rings, :data:`CEN_COLUMNS`))."""
     for m in range(nu.shape[0]):
         U = nu[m]
         A = na[m]
@@ -684,22 +685,14 @@ def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, actm, nmm, share, i
             th = _section_angle(grid, off[j], na[j], cen, coff[j], nu[j], int(q[8]), q[9], q[5], q[6], q[7])
             if amt > 0.0 and th == th:
                 bu = int(q[8])
+                _modes(th, g)  # (g: free again once the bones' push is taken)
                 for e in range(2):
                     wr = amt * ((1.0 - q[9]) if e == 0 else q[9])
                     if wr <= 0.0:
                         continue
                     row = coff[j] + bu + e
                     for r in range(NMODES):
-                        if r == 0:
-                            br = 1.0
-                        elif r == 1:
-                            br = 2.0 * np.cos(th)
-                        elif r == 2:
-                            br = 2.0 * np.sin(th)
-                        elif r == 3:
-                            br = 2.0 * np.cos(2.0 * th)
-                        else:
-                            br = 2.0 * np.sin(2.0 * th)
+                        br = (1.0 if r == 0 else 2.0) * g[r]
                         for c in range(3):
                             react[row, r * 3 + c] -= wr * br * amt * q[5 + c]
                     react[row, 3 * NMODES] += wr
@@ -1132,7 +1125,8 @@ class ContactModel:
 
 def _work(nu: np.ndarray, fields: "BoneFields") -> tuple:
     """Scratch arrays for :func:`_ring_modes` and :func:`_measure` (allocated here: they are
-    compiled without reference counting): q, g, p, b, actb, actm, gl, gn."""
+    compiled without reference counting): q, g, p, b, actb, actm, gl, gn, and react
+    (:func:`_point_push`'s pulls on thick neighbours; zeros: it accumulates)."""
     M = max(len(nu), 1)
     return (np.empty(QUERY_SIZE), np.empty(6), np.empty(7), np.empty(NMODES), np.empty(max(len(fields.bones), 1), np.int64),
             np.empty(M, np.int64), np.empty((M, (int(nu.max()) - 2) // SEG_GROUP + 1), np.int64),
@@ -1192,7 +1186,7 @@ def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np
                     tol.CONTACT_AXES_FADE[0], tol.CONTACT_AXES_FADE[1], tol.CONTACT_RADIAL_BLEND, tol.CONTACT_THIN[0],
                     tol.CONTACT_THIN[1], tol.CONTACT_SAMPLE_COLUMNS, tol.CONTACT_SAMPLE_RINGS, coef, coefb, touched,
                     buried, work)
-        _add_reactions(work[8], coef, nu, coff, touched, tol.CONTACT_MARGIN)
+        _add_reactions(work[-1], coef, nu, coff, touched, tol.CONTACT_MARGIN)  # (work's last: react)
         if it == 0 and not measure_before:
             before[:, 1] = buried
         _smooth_rings(coef, nu, coff, tol.CONTACT_SMOOTH_PASSES, False, tmp)
