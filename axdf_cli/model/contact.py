@@ -426,8 +426,9 @@ _ALL_GROUPS = np.zeros((1, 1), np.int64)
 
 @njit(cache=True, inline="always")
 def _query_in(x, grid, off_j, U, A, cen, coff_j, reach, out, gl, row, cnt):
-    """Axis-space query of point x against muscle j. out = [rho, R, cx, cy, cz, rx, ry, rz]:
-    radial distance, surface radius, axis point, unit radial direction. Returns False when x
+    """Axis-space query of point x against muscle j. out (:data:`QUERY_SIZE`) = [rho, R, cx,
+    cy, cz, rx, ry, rz, segment, parameter]: radial distance, surface radius, axis point, unit
+    radial direction, and the axis point's centre segment and its parameter there. Returns False when x
     lies beyond j's ends, or when rho exceeds the two rings' largest radius (cen[:, 3]) plus
     ``reach`` (then rho > R + reach: the rings' radii are not read).
     Beyond an end: where the nearest point of the whole centre polyline (poles included) is a
@@ -758,8 +759,7 @@ def _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb,
             ci = cen[coff[i] + u]
             r0 = coff[i] + u
             nbb, nmm = _ring_lists(ci, i, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, nbr_off, nbr, box, margin_b,
-                                   margin_m, actb, actm, cen, coff, nu)
-            nmm = _ring_groups(ci, margin_m, cen, coff, nu, actm, nmm, gl, gn)
+                                   margin_m, actb, actm, cen, coff, nu, gl, gn)
             for r in range(NMODES):
                 for c in range(3):
                     coef[r0, r, c] = 0.0
@@ -925,15 +925,16 @@ def _solve_offset(c0, c1, c2, c3, v0):
 
 @njit(cache=True)
 def _ring_lists(ci, i, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, nbr_off, nbr, box, reach_b, reach_m, actb, actm,
-                cen, coff, nu):
+                cen, coff, nu, gl, gn):
     """What a ring of muscle i (centre ci[:3], every point within ri = ci[3] of it) may meet:
     into actb the bone fields of fl[fl_off[i]:fl_off[i + 1]] but those whose grid it misses or
     whose value at the centre exceeds sqrt(3) ri + reach_b (the trilinear field changes by at
     most sqrt(3) per metre: its grid values are exact distances, so each axis' difference
     quotient is at most 1), into actm the neighbours nbr[nbr_off[i]:nbr_off[i + 1]] whose box,
     grown by reach_m, its sphere meets, and, of those, whose centre line it may come within
-    their radius of (:func:`_near_centres`). Returns (how many fields, how many neighbours):
-    testing only those gives the same answers as testing all."""
+    their radius of, with into gl, gn the segment groups to scan for each
+    (:func:`_ring_groups`). Returns (how many fields, how many neighbours): testing only those
+    gives the same answers as testing all."""
     ri = ci[3]
     nb = 0
     for kk in range(fl_off[i], fl_off[i + 1]):
@@ -961,10 +962,10 @@ def _ring_lists(ci, i, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, nbr_off, nbr, 
     nmm = 0
     for jj in range(nbr_off[i], nbr_off[i + 1]):
         j = nbr[jj]
-        if _may_meet(ci, j, box, ri + reach_m) and _near_centres(ci, ri + reach_m, cen, coff[j], nu[j]):
+        if _may_meet(ci, j, box, ri + reach_m):
             actm[nmm] = j
             nmm += 1
-    return nb, nmm
+    return nb, _ring_groups(ci, reach_m, cen, coff, nu, actm, nmm, gl, gn)
 
 
 @njit(cache=True, inline="always")
@@ -1019,23 +1020,6 @@ def _ring_groups(ci, reach, cen, coff, nu, actm, nmm, gl, gn):
     return n
 
 
-@njit(cache=True)
-def _near_centres(ci, r, cen, coff_j, U):
-    """Whether a sphere (centre ci[:3], radius r) may hold a point inside muscle j or within
-    r of it: some group of SEG_GROUP centre segments (bounding sphere cen[first, 4:8]) lies
-    within r plus that group's largest ring radius (cen[:, 3]) of the sphere. A point inside j
-    lies within the radius of j's rings at its nearest centre segment (:func:`_muscle_query`:
-    R is at most the larger of the segment's two rings'), so where no group is that near, no
-    point of the sphere is inside j."""
-    for g in range((U - 2) // SEG_GROUP + 1):
-        r0 = coff_j + g * SEG_GROUP
-        big = cen[r0, 8]
-        d = np.sqrt((ci[0] - cen[r0, 4]) ** 2 + (ci[1] - cen[r0, 5]) ** 2 + (ci[2] - cen[r0, 6]) ** 2)
-        if d <= r + cen[r0, 7] + big:
-            return True
-    return False
-
-
 @njit(cache=True, _nrt=False)
 def _measure(grid, off, nu, na, cen, coff, box, nbr_off, nbr, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, out, work):
     """Per muscle: [share of points inside another muscle, share inside a bone, deepest
@@ -1053,8 +1037,7 @@ def _measure(grid, off, nu, na, cen, coff, box, nbr_off, nbr, inv, fb, fo, fh, f
         for u in range(U):
             ci = cen[coff[i] + u]
             nb, nmm = _ring_lists(ci, i, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, nbr_off, nbr, box, 0.0, 0.0,
-                                  actb, actm, cen, coff, nu)
-            nmm = _ring_groups(ci, 0.0, cen, coff, nu, actm, nmm, gl, gn)
+                                  actb, actm, cen, coff, nu, gl, gn)
             for a in range(A if 0 < u < U - 1 else 1):
                 k = off[i] + u * A + a
                 n += 1

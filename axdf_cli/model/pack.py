@@ -130,6 +130,7 @@ def _ring_targets(s, grid, off, nu, na, cen, coff, box, reach, nbr_off, nbr, inv
     and the ray origin it was found from); full (R,): whether the ring's territory is its whole
     envelope (nothing claims any of it)."""
     M = nu.shape[0]
+    ngmax = (nu.max() - 2) // contact.SEG_GROUP + 1
     for r in prange(rows.shape[0]):
         i = rows[r, 0]
         u = rows[r, 1]
@@ -139,6 +140,8 @@ def _ring_targets(s, grid, off, nu, na, cen, coff, box, reach, nbr_off, nbr, inv
         g = np.empty(6)
         actb = np.empty(max(fb.shape[0], 1), np.int64)
         actm = np.empty(max(M, 1), np.int64)
+        gl = np.empty((max(M, 1), ngmax), np.int64)
+        gn = np.empty(max(M, 1), np.int64)
         mask = np.zeros(K * K, np.bool_)
         lab = np.zeros(K * K, np.int64)
         stack = np.zeros(K * K, np.int64)
@@ -172,7 +175,7 @@ def _ring_targets(s, grid, off, nu, na, cen, coff, box, reach, nbr_off, nbr, inv
         h = 2.0 * L / K
         ci[3] = L * 1.4143
         nb, nmm = contact._ring_lists(ci, i, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, nbr_off, nbr, box,
-                                      0.0, reach.max(), actb, actm, cen, coff, nu)
+                                      0.0, reach.max(), actb, actm, cen, coff, nu, gl, gn)
         x = np.empty(3)
         n_env = 0
         for ix in range(K):
@@ -270,18 +273,21 @@ def _owned_all(pts, owner, s, grid, off, nu, na, cen, coff, box, reach, nbr_off,
                fl_off, fl, bone_margin, out):
     """Whether each point pts[p] lies in the territory of muscle owner[p] (module doc, step 1)."""
     M = nu.shape[0]
+    ngmax = (nu.max() - 2) // contact.SEG_GROUP + 1
     for p in prange(pts.shape[0]):
         i = owner[p]
         q = np.empty(contact.QUERY_SIZE)
         g = np.empty(6)
         actb = np.empty(max(fb.shape[0], 1), np.int64)
         actm = np.empty(max(M, 1), np.int64)
+        gl = np.empty((max(M, 1), ngmax), np.int64)
+        gn = np.empty(max(M, 1), np.int64)
         ci = np.empty(8)
         for c in range(3):
             ci[c] = pts[p, c]
         ci[3] = 0.0
         nb, nmm = contact._ring_lists(ci, i, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, nbr_off, nbr, box,
-                                      0.0, reach.max(), actb, actm, cen, coff, nu)
+                                      0.0, reach.max(), actb, actm, cen, coff, nu, gl, gn)
         out[p] = _owned(pts[p], i, s, grid, off, nu, na, cen, coff, box, reach, actm, nmm, inv, fb, fo, fh, fd, foff,
                         fv, actb, nb, bone_margin, q, g)
 
