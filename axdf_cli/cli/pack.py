@@ -24,13 +24,15 @@ def add_args(p) -> None:
                    help="skeleton YAML the muscles are defined on (its bone meshes are the bones)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.add_argument("--rounds", type=int, default=None, metavar="N",
-                   help="rounds of territory, fit and growth (default 20)")
+                   help="rounds of territory, fit and growth (default 20; then 3 rounds of polish "
+                        "by contact at the rest pose)")
     p.add_argument("--allow-outside", action="store_true",
                    help="allow paths inside YAML files to leave the project folder tree")
     add_overwrite_arg(p)
 
 
 def run(args) -> int:
+    from axdf_cli import tolerances as tol
     from axdf_cli.errors import Mark, UsageError
     from axdf_cli.importers.pack import SUMMARY, build_pack
     from axdf_cli.specs import RefPolicy, expand_muscle_paths
@@ -46,9 +48,12 @@ def run(args) -> int:
     check_outputs(out, inputs=[args.skeleton, *map(str, files)], overwrite=args.overwrite,
                   input_dirs=[m for m in args.muscles if Path(m).is_dir()])
 
+    rounds = args.rounds if args.rounds is not None else tol.PACK_ITERATIONS
+
     def progress(it, h):
         if args.verbose:
-            print(f"  round {it + 1}: inside another muscle {100 * h[0]:.2f}%, inside a bone {100 * h[1]:.2f}%, "
+            what = "round" if it < rounds else "polish"
+            print(f"  {what} {it + 1}: inside another muscle {100 * h[0]:.2f}%, inside a bone {100 * h[1]:.2f}%, "
                   f"deepest {1000 * h[2]:.1f} mm, volume kept {h[3]:.3f}..{h[4]:.3f}", file=sys.stderr)
 
     res = build_pack(files, Path(args.skeleton), policy, args.rounds, progress)

@@ -78,6 +78,7 @@ def _report(specs, res: "pack.PackResult", skeleton_path: Path) -> dict:
         "skeleton": skeleton_path.name,
         "muscles": rows,
         "rounds": [[round(float(x), 6) for x in h] for h in res.history], "round_kept": res.kept + 1,
+        "territory_rounds": res.territory_rounds,
         "rounds_columns": ["inside_muscle", "inside_bone", "depth_max", "volume_ratio_min", "volume_ratio_max"],
         "before": _totals(res.before, res.volume0, res.volume0),
         "after": _totals(res.after, res.volume0, res.volume),
