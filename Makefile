@@ -129,11 +129,13 @@ import: $(STAMP)
 	  --name cmu_131_01_walk_gait2392 --out poses/retargeted/cmu_131_01_walk_gait2392 --overwrite
 	$(MAKE) --no-print-directory import-mjcf
 
-# gait2392's muscles packed at the rest pose (axdf pack: no overlap, volumes kept, section
-# outlines): muscles/gait2392_packed/ (PACK.md), the muscles of poses/jobs/gait2392_walk.yaml.
-# From the shipped muscles/gait2392 alone (no DATA needed); about two minutes.
+# gait2392's muscles packed at the rest pose and polished over 16 frames of the walk (axdf pack
+# --pose: no overlap, volumes kept, section outlines): muscles/gait2392_packed/ (PACK.md), the
+# muscles of poses/jobs/gait2392_{walk,hop,cmu_walk}.yaml. From the shipped muscles/gait2392 and
+# poses/gait2392_walk.yaml alone (no DATA needed); about two and a half minutes.
 pack: $(STAMP)
-	$(BIN)/axdf pack muscles/gait2392 --skeleton poses/skeletons/gait2392.yaml --out muscles/gait2392_packed --overwrite
+	$(BIN)/axdf pack muscles/gait2392 --skeleton poses/skeletons/gait2392.yaml --pose poses/gait2392_walk.yaml \
+	  --out muscles/gait2392_packed --overwrite
 
 # The MyoSuite library (myo-sim, Apache-2.0): muscles/{myoarm,myobody}, poses/skeletons/{myoarm,myobody}.yaml
 # (+ meshes/), poses/myoarm_elbow.yaml (arm26's elbow flexion), poses/myobody_gait.yaml (MyoSuite's gait cycle),

@@ -246,3 +246,6 @@ PACK_DRAW_IN = 0.8
 # 0.69%, 0.27%, 0.02% after 1, 2, 3 rounds (24 passes; 16 passes left 2.11% after one).
 PACK_POLISH_ROUNDS = 3
 PACK_POLISH_PASSES = 24
+# `axdf pack --pose`: the polish also runs at this many of the pose's frames (evenly spaced;
+# every frame of a shorter pose), and fits the mean of its displacements there and at rest.
+PACK_POSE_FRAMES = 16

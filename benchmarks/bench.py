@@ -79,6 +79,7 @@ ROOT = Path(__file__).resolve().parent.parent
 GAIT_MUSCLES = ROOT / "muscles" / "gait2392"
 GAIT_POSE = ROOT / "poses" / "gait2392_walk.yaml"
 GAIT_JOB = ROOT / "poses" / "jobs" / "gait2392_walk.yaml"
+CMU_GAIT_JOB = ROOT / "poses" / "jobs" / "gait2392_cmu_walk.yaml"
 #: The evaluation rows time the paper's model alone: contact (on by default in axdf run) has
 #: its own section (contact_rows) and one end-to-end row.
 NO_CONTACT = {"contact": False}
@@ -1117,7 +1118,7 @@ def contact_pass(plan) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
 def rajagopal_plan(tmp: Path, stages=None, packed: bool = False):
     """Rajagopal2016 over its running stride (tests/data/rajagopal2016, imported without bone
     meshes into ``tmp``: the contact is muscle against muscle only); ``packed``: its muscles
-    packed by ``axdf pack`` (timed: the row "axdf pack")."""
+    packed by ``axdf pack --pose`` over the stride (timed: the row "axdf pack")."""
     from axdf_cli.cli.main import main as axdf_main
     from axdf_cli.pipeline.plan import plan_run
     from axdf_cli.specs import RefPolicy
@@ -1135,8 +1136,8 @@ def rajagopal_plan(tmp: Path, stages=None, packed: bool = False):
         if not muscles.is_dir():
             skel = imp / "skeletons" / "rajagopal2016.yaml"
             t0 = time.perf_counter()
-            rc = axdf_main(["pack", str(imp / "muscles"), "--skeleton", str(skel), "--out", str(muscles),
-                            "--allow-outside", "-q"])
+            rc = axdf_main(["pack", str(imp / "muscles"), "--skeleton", str(skel), "--pose",
+                            str(imp / "run_stride_ik.yaml"), "--out", str(muscles), "--allow-outside", "-q"])
             PACK_TIMES["Rajagopal2016"] = time.perf_counter() - t0
             if rc != 0:
                 raise RuntimeError(f"axdf pack Rajagopal2016 failed ({rc})")
@@ -1182,8 +1183,10 @@ def contact_rows(table: "Table", quick: bool, tmp: Path | None = None) -> None:
     frames = "18:84:6" if quick else None
     cases = [("gait2392 walk, muscles as imported", lambda sw: plan_run(load_job(GAIT_JOB), frames_arg=frames,
                                                                          muscle_args=[str(GAIT_MUSCLES)], stages=sw)),
-             ("gait2392 walk, packed (axdf pack: the job's muscles)",
-              lambda sw: plan_run(load_job(GAIT_JOB), frames_arg=frames, stages=sw))]
+             ("gait2392 walk, packed (axdf pack --pose: the job's muscles)",
+              lambda sw: plan_run(load_job(GAIT_JOB), frames_arg=frames, stages=sw)),
+             ("CMU walk retargeted onto gait2392, packed (not the motion packed over)",
+              lambda sw: plan_run(load_job(CMU_GAIT_JOB), frames_arg="0:248:24" if quick else None, stages=sw))]
     if tmp is not None:
         cases.append(("Rajagopal2016 run, no bones", lambda sw: rajagopal_plan(tmp, sw)))
         cases.append(("Rajagopal2016 run, no bones, packed", lambda sw: rajagopal_plan(tmp, sw, packed=True)))

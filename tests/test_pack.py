@@ -24,6 +24,7 @@ from axdf_cli.model.muscle import MuscleModel
 from axdf_cli.model.skeleton import forward_kinematics
 from axdf_cli.pipeline.plan import plan_run
 from axdf_cli.specs import RefPolicy, load_job, load_muscle_file
+from axdf_cli.specs.muscle import parse_muscle_text
 
 SKELETON = REPO_ROOT / "poses" / "skeletons" / "human_r.yaml"
 
@@ -185,3 +186,58 @@ def test_a_muscle_document_keeps_its_contact_keys(tmp_path):
     q.write_text(emit.dump_yaml(emit.rounded(file_doc([spec]))))
     again, = load_muscle_file(q)
     assert again.contact == spec.contact and spec.contact.ignore == ("brachioradialis",)
+
+
+def _posed_overlap(plan, specs, frames: str) -> np.ndarray:
+    """(F, M) the share of every muscle's vertices inside another at ``frames`` of the demo pose
+    (no contact: the shapes as packed), by the product's measure."""
+    from dataclasses import replace
+
+    from axdf_cli.pipeline.evaluate import evaluate_plan
+
+    skel = plan.pose.skeleton
+    rest = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
+    models = [MuscleModel(s, skel.bone_index, rest, skel) for s in specs]
+    p = plan_run(load_job(DEMO_JOB), frames_arg=frames, stages={"contact": False, "penetration": True})
+    p = replace(p, muscles=list(specs), models=models)
+    share: dict = {}
+    for _, results in evaluate_plan(p):
+        for j, r in results:
+            share.setdefault(j, []).append(r.contact[:, 0])
+    return np.stack([np.concatenate(share[j]) for j in range(len(specs))], axis=1)
+
+
+def test_polishing_over_a_pose_shares_space_at_its_frames(demo):
+    """``pose``: the polish also resolves contact at the pose's frames and fits the mean of its
+    displacements carried back to rest, so the packed shapes overlap less at those frames and
+    between them (no contact stage: the shapes alone), and still little at rest."""
+    from axdf_cli.importers.pack import build_pack
+
+    d, plan, rest, cm = demo
+    files = sorted(d.glob("*.yaml"))
+    pol = RefPolicy(allow_outside=True)
+    outs = {}
+    for key, pose in (("rest", None), ("pose", REPO_ROOT / "poses" / "demo.yaml")):
+        res = build_pack(files, SKELETON, pol, rounds=6, pose_path=pose, frames=None if pose is None else "40:120:20")
+        specs = [s for p in files for s in parse_muscle_text(res.files[p.name].decode(), d / p.name)]
+        outs[key] = (res, specs)
+    at = {k: _posed_overlap(plan, specs, "40:120:5").mean() for k, (_, specs) in outs.items()}
+    assert at["pose"] < 0.8 * at["rest"], at
+    rep = outs["pose"][0].report
+    assert rep["pose"] == {"file": "demo.yaml", "frames": [40, 60, 80, 100, 120]}
+    assert rep["after"]["inside_muscle"] < 0.02 and "pose" not in outs["rest"][0].report
+
+
+def test_pack_pose_errors_write_nothing(demo, tmp_path, capsys):
+    d, plan, rest, cm = demo
+    common = ("--skeleton", str(SKELETON), "--rounds", "1", "--allow-outside")
+    out = tmp_path / "x"
+    assert run_cli(REPO_ROOT, "pack", str(d), "--out", str(out), "--frames", "0:10", *common) == 2
+    assert "--frames needs --pose" in capsys.readouterr().err
+    other = REPO_ROOT / "poses" / "gait2392_walk.yaml"  # a pose of another skeleton
+    assert run_cli(REPO_ROOT, "pack", str(d), "--out", str(out), "--pose", str(other), *common) == 2
+    err = capsys.readouterr().err
+    assert "gait2392_walk.yaml" in err and "is not human_r.yaml" in err and "Traceback" not in err
+    assert run_cli(REPO_ROOT, "pack", str(d), "--out", str(out), "--pose", str(tmp_path / "none.yaml"), *common) == 2
+    assert "not found" in capsys.readouterr().err
+    assert not out.exists()

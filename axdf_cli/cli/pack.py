@@ -26,6 +26,12 @@ def add_args(p) -> None:
     p.add_argument("--rounds", type=int, default=None, metavar="N",
                    help="rounds of territory, fit and growth (default 20; then 3 rounds of polish "
                         "by contact at the rest pose)")
+    p.add_argument("--pose", metavar="POSE", default=None,
+                   help="a pose of the same skeleton (a motion): the packed shapes are also polished so "
+                        "that they share space at its frames, not only at rest")
+    p.add_argument("--frames", metavar="SPEC", default=None,
+                   help="the pose's frames to polish over (as axdf run --frames; default: 16 of them, "
+                        "evenly spaced)")
     p.add_argument("--allow-outside", action="store_true",
                    help="allow paths inside YAML files to leave the project folder tree")
     add_overwrite_arg(p)
@@ -39,13 +45,17 @@ def run(args) -> int:
 
     if args.rounds is not None and not 1 <= args.rounds <= 200:
         raise UsageError(f"--rounds {args.rounds}: give 1..200")
-    policy = RefPolicy.for_command([args.skeleton] + list(args.muscles), args.allow_outside)
+    if args.frames is not None and args.pose is None:
+        raise UsageError("--frames needs --pose (the frames are the pose's)")
+    policy = RefPolicy.for_command([args.skeleton] + ([args.pose] if args.pose else []) + list(args.muscles),
+                                   args.allow_outside)
     files = expand_muscle_paths([(Path(m), Mark(m)) for m in args.muscles], policy)
     out = OutputSet(args.out, "pack")
     # every check of the output folder before the work (it takes a while)
     from axdf_cli.fileio.outputs import check_outputs
 
-    check_outputs(out, inputs=[args.skeleton, *map(str, files)], overwrite=args.overwrite,
+    check_outputs(out, inputs=[args.skeleton, *([args.pose] if args.pose else []), *map(str, files)],
+                  overwrite=args.overwrite,
                   input_dirs=[m for m in args.muscles if Path(m).is_dir()])
 
     rounds = args.rounds if args.rounds is not None else tol.PACK_ITERATIONS
@@ -56,7 +66,7 @@ def run(args) -> int:
             print(f"  {what} {it + 1}: inside another muscle {100 * h[0]:.2f}%, inside a bone {100 * h[1]:.2f}%, "
                   f"deepest {1000 * h[2]:.1f} mm, volume kept {h[3]:.3f}..{h[4]:.3f}", file=sys.stderr)
 
-    res = build_pack(files, Path(args.skeleton), policy, args.rounds, progress)
+    res = build_pack(files, Path(args.skeleton), policy, args.rounds, progress, args.pose, args.frames)
     for name, data in res.files.items():
         out.add(Path(args.out) / name, data, "output")
     write_outputs(out, inputs=res.inputs, overwrite=args.overwrite,
@@ -64,8 +74,8 @@ def run(args) -> int:
     if not args.quiet:
         b, a = res.report["before"], res.report["after"]
         print(f"packed {len(res.report['muscles'])} muscles into {args.out}: inside another muscle "
-              f"{100 * b['inside_muscle']:.1f}% -> {100 * a['inside_muscle']:.1f}%, inside a bone "
-              f"{100 * b['inside_bone']:.1f}% -> {100 * a['inside_bone']:.1f}% at the rest pose; volume kept "
+              f"{100 * b['inside_muscle']:.1f}% -> {100 * a['inside_muscle']:.2f}%, inside a bone "
+              f"{100 * b['inside_bone']:.1f}% -> {100 * a['inside_bone']:.2f}% at the rest pose; volume kept "
               f"{a['volume_ratio_min']:.3f} (least), {a['volume_ratio_median']:.3f} (median)")
         print(f"report: {Path(args.out) / SUMMARY}")
     return 0

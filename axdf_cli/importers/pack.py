@@ -12,14 +12,15 @@ from pathlib import Path
 
 import numpy as np
 
+from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError
 from axdf_cli.importers import emit
 from axdf_cli.importers.transfer import UniqueFiles, file_doc, load_muscle_files
 from axdf_cli.model import contact, pack
 from axdf_cli.model.muscle import MuscleModel
 from axdf_cli.model.skeleton import forward_kinematics
-from axdf_cli.pipeline.plan import load_bone_mesh
-from axdf_cli.specs import RefPolicy, load_skeleton
+from axdf_cli.pipeline.plan import load_bone_mesh, plan_run
+from axdf_cli.specs import RefPolicy, load_pose, load_skeleton
 
 REPORT = "pack_report.json"
 SUMMARY = "PACK.md"
@@ -33,8 +34,11 @@ class PackOutputs:
 
 
 def build_pack(muscle_files: list[Path], skeleton_path: Path | str, policy: RefPolicy | None = None,
-               rounds: int | None = None, progress=None) -> PackOutputs:
-    """Pack every muscle of ``muscle_files`` (defined on the skeleton at ``skeleton_path``)."""
+               rounds: int | None = None, progress=None, pose_path: Path | str | None = None,
+               frames: str | None = None) -> PackOutputs:
+    """Pack every muscle of ``muscle_files`` (defined on the skeleton at ``skeleton_path``);
+    with ``pose_path``, polished over that pose's ``frames`` as well (default: at most
+    tol.PACK_POSE_FRAMES of its frames, evenly spaced)."""
     skeleton_path = Path(skeleton_path)
     skel = load_skeleton(skeleton_path, policy)
     by_file, specs = [], []
@@ -48,7 +52,9 @@ def build_pack(muscle_files: list[Path], skeleton_path: Path | str, policy: RefP
     meshes = {i: load_bone_mesh(b.mesh, str(skeleton_path)) for i, b in enumerate(skel.bones) if b.mesh}
     cm = contact.build(specs, models, rest, meshes)
     kw = {} if rounds is None else {"iterations": rounds}
-    res = pack.pack(specs, models, skel, rest, cm, progress=progress, **kw)
+    poses, pose_record, pose_inputs = (None, None, []) if pose_path is None else \
+        _pose_frames(muscle_files, skel, Path(pose_path), frames, policy, [sp.name for sp in specs])
+    res = pack.pack(specs, models, skel, rest, cm, progress=progress, poses=poses, **kw)
 
     files: dict[str, bytes] = UniqueFiles()
     k = 0
@@ -59,10 +65,51 @@ def build_pack(muscle_files: list[Path], skeleton_path: Path | str, policy: RefP
                   f"{skeleton_path.name} (axdf_cli/model/pack.py; report: {REPORT}).")
         files[path.name] = emit.dump_yaml(emit.rounded(file_doc(packed)), header=header).encode()
     report = _report(specs, res, skeleton_path)
+    if pose_record is not None:
+        report["pose"] = pose_record
     files[REPORT] = (json.dumps(report, indent=1, sort_keys=True) + "\n").encode()
     files[SUMMARY] = _summary(report).encode()
-    inputs = [skeleton_path] + [Path(b.mesh) for b in skel.bones if b.mesh] + list(muscle_files)
+    inputs = [skeleton_path] + [Path(b.mesh) for b in skel.bones if b.mesh] + list(muscle_files) + pose_inputs
     return PackOutputs(dict(files), report, [str(p) for p in inputs])
+
+
+def _pose_frames(muscle_files, skel, pose_path: Path, frames: str | None, policy, names):
+    """The frames of a pose to polish over: (``poses(specs, models)`` for
+    :func:`axdf_cli.model.pack.pack`, the report's record, the files read). The muscles are
+    evaluated as ``axdf run`` would, without any stage (contact is what the polish runs)."""
+    from dataclasses import replace
+
+    from axdf_cli.errors import Mark
+    from axdf_cli.pipeline.evaluate import evaluate_plan
+    from axdf_cli.pipeline.stages import STAGES
+
+    if not pose_path.is_file():
+        raise InputError(Mark("--pose"), f"pose file {str(pose_path)!r} not found", "an existing pose YAML file")
+    pose = load_pose(pose_path, policy or RefPolicy())
+    if [(b.name, b.parent) for b in pose.skeleton.bones] != [(b.name, b.parent) for b in skel.bones]:
+        raise InputError(Mark(str(pose_path)), f"the pose's skeleton {Path(pose.skeleton_path).name} is not "
+                         f"{Path(skel.source).name}, the one the muscles are packed on",
+                         "a pose of the --skeleton's bones")
+    plan = plan_run(None, muscle_args=[str(f) for f in muscle_files], pose_arg=str(pose_path), frames_arg=frames,
+                    policy=policy or RefPolicy(), stages={name: False for name in STAGES})
+    if plan.names != names:  # (the same files, read the same way)
+        raise InputError(Mark(str(pose_path)), "the pose's run reads other muscles than the pack", "the same muscle files")
+    if frames is None and len(plan.frames) > tol.PACK_POSE_FRAMES:
+        pick = np.unique(np.round(np.linspace(0, len(plan.frames) - 1, tol.PACK_POSE_FRAMES)).astype(np.int64))
+        plan = replace(plan, frames=plan.frames[pick])
+
+    def poses(specs, models):
+        p = replace(plan, muscles=list(specs), models=list(models))
+        verts: dict = {}
+        world = []
+        for chunk, results in evaluate_plan(p):
+            world.append(chunk.world)
+            for j, r in results:
+                verts.setdefault(j, []).append(r.vertices)
+        return np.linalg.inv(np.concatenate(world)), [np.concatenate(verts[j]) for j in range(len(models))]
+
+    record = {"file": Path(pose_path).name, "frames": [int(f) for f in plan.frames]}
+    return poses, record, [Path(plan.pose.source), Path(plan.pose.skeleton_path)]
 
 
 def _report(specs, res: "pack.PackResult", skeleton_path: Path) -> dict:
@@ -96,14 +143,18 @@ def _summary(report: dict) -> str:
     b, a = report["before"], report["after"]
     lines = [f"# Packed muscles on {report['skeleton']}", "",
              "The rest shapes made to share space (`axdf pack`; docs/METHOD.md, Packing). Shares are of",
-             "each muscle's rest vertices, averaged over the muscles; depth is the deepest penetration.", "",
-             "| at the rest pose | before | after |", "|---|---|---|",
-             f"| inside another muscle | {100 * b['inside_muscle']:.1f}% | {100 * a['inside_muscle']:.1f}% |",
-             f"| inside a bone | {100 * b['inside_bone']:.1f}% | {100 * a['inside_bone']:.1f}% |",
-             f"| deepest penetration | {1000 * b['depth_max']:.1f} mm | {1000 * a['depth_max']:.1f} mm |",
-             f"| total volume | {1000 * b['volume_total']:.3f} L | {1000 * a['volume_total']:.3f} L |",
-             f"| smallest / median volume kept | | {a['volume_ratio_min']:.3f} / {a['volume_ratio_median']:.3f} |", "",
-             "Muscles that kept less than 95% of their volume (boxed in by bone and neighbours):", ""]
+             "each muscle's rest vertices, averaged over the muscles; depth is the deepest penetration.", ""]
+    if "pose" in report:
+        fr = report["pose"]["frames"]
+        lines += [f"Polished over {len(fr)} frames of `{report['pose']['file']}` ({fr[0]} to {fr[-1]}; `--pose`) "
+                  "as well as the rest pose.", ""]
+    lines += ["| at the rest pose | before | after |", "|---|---|---|",
+              f"| inside another muscle | {100 * b['inside_muscle']:.2f}% | {100 * a['inside_muscle']:.2f}% |",
+              f"| inside a bone | {100 * b['inside_bone']:.2f}% | {100 * a['inside_bone']:.2f}% |",
+              f"| deepest penetration | {1000 * b['depth_max']:.1f} mm | {1000 * a['depth_max']:.1f} mm |",
+              f"| total volume | {1000 * b['volume_total']:.3f} L | {1000 * a['volume_total']:.3f} L |",
+              f"| smallest / median volume kept | | {a['volume_ratio_min']:.3f} / {a['volume_ratio_median']:.3f} |",
+              "", "Muscles that kept less than 95% of their volume (boxed in by bone and neighbours):", ""]
     short = [m for m in report["muscles"] if m["volume_ratio"] < 0.95]
     lines += [f"- {m['muscle']}: {m['volume_ratio']:.3f}" for m in short] or ["- none"]
     return "\n".join(lines) + "\n"

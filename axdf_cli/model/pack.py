@@ -469,9 +469,11 @@ def measure_rest(models, cm: "contact.ContactModel", rest_inv: np.ndarray) -> np
 
 def pack(specs, models, skeleton, rest_world: np.ndarray, cm: "contact.ContactModel", *,
          iterations: int = tol.PACK_ITERATIONS, pixels: int = tol.PACK_PIXELS,
-         sections: int = tol.PACK_SECTIONS, polish: int = tol.PACK_POLISH_ROUNDS, progress=None) -> PackResult:
+         sections: int = tol.PACK_SECTIONS, polish: int = tol.PACK_POLISH_ROUNDS, poses=None,
+         progress=None) -> PackResult:
     """Pack the rest shapes (module doc): ``iterations`` rounds of steps 1-4, then ``polish``
-    rounds of step 5. ``cm``: the muscles' contact model (pairs, bone fields)."""
+    rounds of step 5 (over the rest pose and the frames of ``poses``: :func:`_polish`).
+    ``cm``: the muscles' contact model (pairs, bone fields)."""
     M = len(models)
     inv = np.linalg.inv(rest_world)
     f = cm.fields
@@ -568,7 +570,8 @@ def pack(specs, models, skeleton, rest_world: np.ndarray, cm: "contact.ContactMo
             progress(it, history[-1])
         # grow the envelope of each muscle short of its volume (area ~ s^2 where free)
         s = np.clip(s * np.clip(ratio ** -tol.PACK_GAIN, 1.0 / tol.PACK_STEP, tol.PACK_STEP), 1.0, tol.PACK_SCALE_MAX)
-    best = _polish(best, specs, models, skeleton, rest_world, cm, layouts, frames, v0, history, polish, progress)
+    best = _polish(best, specs, models, skeleton, rest_world, cm, layouts, frames, v0, history, polish, progress,
+                   poses)
     _, kept, cur_specs, cur_models, s = best
     after = measure_rest(cur_models, cm, inv)
     return PackResult(cur_specs, cur_models, before, after, v0, np.array([m.v0 for m in cur_models]), s, history, kept,
@@ -586,16 +589,32 @@ def _score(models, cm, inv, v0):
     return float(meas[:, 0].mean() + meas[:, 1].mean() + np.abs(ratio - 1.0).mean()), row
 
 
-def _polish(best, specs, models, skeleton, rest_world, cm, layouts, frames, v0, history, rounds, progress):
-    """Step 5 (module doc): the frame's own contact, resolved at the rest pose with
-    tol.PACK_POLISH_PASSES passes, and the sections fitted to where it put the rings; ``rounds``
-    times, from the best round so far. Returns the best (score, round, specs, models, scales)."""
+def _polish(best, specs, models, skeleton, rest_world, cm, layouts, frames, v0, history, rounds, progress,
+            poses=None):
+    """Step 5 (module doc): the frame's own contact, resolved at the rest pose (and at every
+    frame ``poses`` gives) with tol.PACK_POLISH_PASSES passes, and the sections fitted to the
+    mean of where it put the rings, mapped back to the rest pose; ``rounds`` times, from the
+    best round so far. ``poses(specs, models)`` → (world to bone-local (F, B, 4, 4), [(F, V, 3)
+    every muscle's no-contact vertices]). Returns the best (score, round, specs, models, scales)."""
     inv = np.linalg.inv(rest_world)
-    score0, kept0, cur_specs, cur_models, s = best
+    _, _, cur_specs, cur_models, s = best
     fits = {}
     for r in range(rounds):
         verts = [m.rest_vertices.astype(np.float64) for m in cur_models]
         moved, _, touched, _, _ = contact.resolve_frame(cm, verts, inv, tol.PACK_POLISH_PASSES, False)
+        shift = [mv - v for mv, v in zip(moved, verts)]
+        n = 1
+        if poses is not None:
+            pinv, pverts = poses(cur_specs, cur_models)
+            for fi in range(len(pinv)):
+                vs = [pv[fi].astype(np.float64) for pv in pverts]
+                if not all(np.isfinite(v).all() for v in vs):
+                    continue
+                pm, _, pt, _, _ = contact.resolve_frame(cm, vs, pinv[fi], tol.PACK_POLISH_PASSES, False)
+                n += 1
+                for i in np.nonzero(pt)[0]:
+                    shift[i] = shift[i] + to_rest(pm[i] - vs[i], verts[i], vs[i], models[i].U, models[i].A)
+                touched |= pt
         if not touched.any():
             break
         cur_specs, cur_models = list(cur_specs), list(cur_models)
@@ -603,7 +622,8 @@ def _polish(best, specs, models, skeleton, rest_world, cm, layouts, frames, v0, 
             m = models[i]
             if i not in fits:  # the sections' own least squares: contact's rings are smooth already
                 fits[i] = Fit(m, frames[i], None, 0.0)
-            coords, _ = fits[i](contact.vertices_to_grid(moved[i], m.U, m.A).reshape(m.U, m.A, 3))
+            target = verts[i] + shift[i] / n
+            coords, _ = fits[i](contact.vertices_to_grid(target, m.U, m.A).reshape(m.U, m.A, 3))
             cur_specs[i] = with_outlines(specs[i], layouts[i], to_file_outlines(coords, frames[i]))
             cur_models[i] = MuscleModel(cur_specs[i], skeleton.bone_index, rest_world, skeleton)
         score, row = _score(cur_models, cm, inv, v0)
@@ -613,3 +633,30 @@ def _polish(best, specs, models, skeleton, rest_world, cm, layouts, frames, v0, 
         if progress is not None:
             progress(len(history) - 1, row)
     return best
+
+
+def to_rest(d: np.ndarray, rest: np.ndarray, posed: np.ndarray, U: int, A: int) -> np.ndarray:
+    """Displacements ``d`` (V, 3) of a posed mesh's vertices, carried back to its rest mesh:
+    ring by ring, through the linear map that takes the rest ring's offsets from its centre
+    (and its centre line's direction) to the posed ring's (least squares; the axial model moves
+    a ring as a turned, scaled section). The poles' displacements are dropped (they are the
+    attachments)."""
+    R = rest[1:-1].reshape(U - 2, A, 3)
+    P = posed[1:-1].reshape(U - 2, A, 3)
+    cr, cp = R.mean(axis=1), P.mean(axis=1)
+    x, y = R - cr[:, None], P - cp[:, None]
+    line_r = np.concatenate([rest[:1], cr, rest[-1:]])
+    line_p = np.concatenate([posed[:1], cp, posed[-1:]])
+    tr, tp = line_r[2:] - line_r[:-2], line_p[2:] - line_p[:-2]
+    tr *= (np.linalg.norm(x, axis=2).mean(axis=1) / np.maximum(np.linalg.norm(tr, axis=1), 1e-12))[:, None]
+    tp *= (np.linalg.norm(y, axis=2).mean(axis=1) / np.maximum(np.linalg.norm(tp, axis=1), 1e-12))[:, None]
+    x = np.concatenate([x, tr[:, None]], axis=1)  # (U-2, A+1, 3)
+    y = np.concatenate([y, tp[:, None]], axis=1)
+    # y ~= x @ Mk per ring; a displacement e of the posed ring is e @ inv(Mk) at rest
+    xtx = np.einsum("uac,uad->ucd", x, x)
+    xty = np.einsum("uac,uad->ucd", x, y)
+    mk = np.linalg.solve(xtx, xty)
+    out = np.zeros_like(d)
+    dr = d[1:-1].reshape(U - 2, A, 3)
+    out[1:-1] = np.einsum("uac,ucd->uad", dr, np.linalg.inv(mk)).reshape(-1, 3)
+    return out
