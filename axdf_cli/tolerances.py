@@ -249,3 +249,6 @@ PACK_POLISH_PASSES = 24
 # `axdf pack --pose`: the polish also runs at this many of the pose's frames (evenly spaced;
 # every frame of a shorter pose), and fits the mean of its displacements there and at rest.
 PACK_POSE_FRAMES = 16
+# A packed section's control points keep to their rays from its centre (star-shaped sections,
+# pack.Fit), each at least this share of the section's original mean radius from it.
+PACK_RAY_MIN = 0.15

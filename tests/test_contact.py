@@ -388,3 +388,25 @@ def test_a_thick_muscle_gives_way_to_a_thin_one_inside_it(monkeypatch):
         if prev is not None:
             assert np.abs(out - prev).max() < 0.0015, oy
         prev = out
+
+
+def test_the_depth_is_the_distance_to_the_surface_of_a_flat_section():
+    """A packed section may be wide and flat. A thin muscle lying along the middle of one (80 x
+    20 mm) is 10 mm from its nearest side, though 40 mm from its edges along the wide axis:
+    the product's depth (stats.csv's ``depth``) is the distance to the surface, checked against
+    libigl's point-to-mesh distance, not the radial ray's length (which read it 4x deeper)."""
+    import igl
+
+    U, A = 24, 24
+    flat = _tube((0, 0, 0), (0.2, 0, 0), 0.01, 0.01, U=U, A=A)
+    flat[:, 1] *= 4.0  # 40 mm along y, 10 mm along z
+    thin = _tube((0.03, 0, 0), (0.17, 0, 0), 0.002, 0.01, offset=(0, 0.004, 0), U=U, A=A)
+    model = contact.ContactModel(~np.eye(2, dtype=bool), contact.pair_shares(np.zeros(2)), contact.BoneFields.pack([]),
+                                 ((U, A), (U, A)), np.zeros(2))
+    _, _, _, before, _ = contact.resolve_frame(model, [flat, thin], np.eye(4)[None], 0)
+    assert before[1, 0] == 1.0  # wholly inside
+    faces = np.asarray(grid_faces(U, A), np.int64)
+    d2, _, _ = igl.point_mesh_squared_distance(thin, flat, faces)
+    true = float(np.sqrt(d2).max())
+    assert 0.007 < true < 0.0105
+    assert before[1, 2] == pytest.approx(true, abs=1e-3)

@@ -1020,11 +1020,61 @@ def _ring_groups(ci, reach, cen, coff, nu, actm, nmm, gl, gn):
     return n
 
 
+@njit(cache=True, inline="always")
+def _polygon_distance2(x, grid, a0, b0, A, bl):
+    """Squared distance from x to the closed polygon of rings a0 and b0 (first grid rows)
+    blended at bl."""
+    best = 1e300
+    q0 = (1.0 - bl) * grid[a0 + A - 1, 0] + bl * grid[b0 + A - 1, 0]
+    q1 = (1.0 - bl) * grid[a0 + A - 1, 1] + bl * grid[b0 + A - 1, 1]
+    q2 = (1.0 - bl) * grid[a0 + A - 1, 2] + bl * grid[b0 + A - 1, 2]
+    for k in range(A):
+        p0 = (1.0 - bl) * grid[a0 + k, 0] + bl * grid[b0 + k, 0]
+        p1 = (1.0 - bl) * grid[a0 + k, 1] + bl * grid[b0 + k, 1]
+        p2 = (1.0 - bl) * grid[a0 + k, 2] + bl * grid[b0 + k, 2]
+        e0 = p0 - q0
+        e1 = p1 - q1
+        e2 = p2 - q2
+        ee = e0 * e0 + e1 * e1 + e2 * e2
+        t = 0.0
+        if ee > 0.0:
+            t = ((x[0] - q0) * e0 + (x[1] - q1) * e1 + (x[2] - q2) * e2) / ee
+            t = min(max(t, 0.0), 1.0)
+        d0 = q0 + t * e0 - x[0]
+        d1 = q1 + t * e1 - x[1]
+        d2 = q2 + t * e2 - x[2]
+        dd = d0 * d0 + d1 * d1 + d2 * d2
+        if dd < best:
+            best = dd
+        q0 = p0
+        q1 = p1
+        q2 = p2
+    return best
+
+
+@njit(cache=True, inline="always")
+def _section_distance(x, grid, off_j, U, A, bu, bl):
+    """Distance from x to the nearest of some of muscle j's surface curves around x: its
+    section there (rings bu and bu + 1 blended at bl) and rings bu - 1 to bu + 2 (mesh edges;
+    a pole row is its pole). For a point in the middle of a wide, flat section this is how
+    deep it lies (to the nearest side), where the radial ray reads it as deep as the section
+    is wide; near an attachment, the pole may be nearer than the section."""
+    best = _polygon_distance2(x, grid, off_j + bu * A, off_j + (bu + 1) * A, A, bl)
+    for u in range(max(bu - 1, 0), min(bu + 3, U)):
+        d = _polygon_distance2(x, grid, off_j + u * A, off_j + u * A, A, 0.0)
+        if d < best:
+            best = d
+    return np.sqrt(best)
+
+
 @njit(cache=True, _nrt=False)
 def _measure(grid, off, nu, na, cen, coff, box, nbr_off, nbr, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, out, work):
     """Per muscle: [share of points inside another muscle, share inside a bone, deepest
     penetration (m)] over its vertices (pole rows counted once); ring by ring, each against
-    what it may meet (:func:`_ring_lists`)."""
+    what it may meet (:func:`_ring_lists`). A point's penetration in a muscle: the nearer of
+    two points of that muscle's surface, where the radial ray leaves it (R - rho) and the
+    nearest point of its section there (:func:`_section_distance`); in a bone, the depth of
+    the bone's field."""
     M = nu.shape[0]
     q, g, _, _, actb, actm, gl, gn, _ = work
     for i in range(M):
@@ -1057,8 +1107,9 @@ def _measure(grid, off, nu, na, cen, coff, box, nbr_off, nbr, inv, fb, fo, fh, f
                         continue
                     if q[0] < q[1]:
                         inside = True
-                        if q[1] - q[0] > deep:
-                            deep = q[1] - q[0]
+                        dj = min(q[1] - q[0], _section_distance(x, grid, off[j], nu[j], na[j], int(q[8]), q[9]))
+                        if dj > deep:
+                            deep = dj
                 if inside:
                     n_in_m += 1
         out[i, 0] = n_in_m / n
