@@ -1107,9 +1107,10 @@ def _measure(grid, off, nu, na, cen, coff, box, nbr_off, nbr, inv, fb, fo, fh, f
                         continue
                     if q[0] < q[1]:
                         inside = True
-                        dj = min(q[1] - q[0], _section_distance(x, grid, off[j], nu[j], na[j], int(q[8]), q[9]))
-                        if dj > deep:
-                            deep = dj
+                        if q[1] - q[0] > deep:  # (the depth is at most the radial one)
+                            dj = min(q[1] - q[0], _section_distance(x, grid, off[j], nu[j], na[j], int(q[8]), q[9]))
+                            if dj > deep:
+                                deep = dj
                 if inside:
                     n_in_m += 1
         out[i, 0] = n_in_m / n
