@@ -70,6 +70,7 @@ def build_pack(muscle_files: list[Path], skeleton_path: Path | str, policy: RefP
     files[REPORT] = (json.dumps(report, indent=1, sort_keys=True) + "\n").encode()
     files[SUMMARY] = _summary(report).encode()
     inputs = [skeleton_path] + [Path(b.mesh) for b in skel.bones if b.mesh] + list(muscle_files) + pose_inputs
+    inputs = list({str(Path(p).resolve()): p for p in inputs}.values())  # each file once (the pose's skeleton)
     return PackOutputs(dict(files), report, [str(p) for p in inputs])
 
 
