@@ -315,6 +315,31 @@ def _centres(grid, off, nu, na, cen, coff):
                     r = q
             cen[coff[m] + u, 3] = np.sqrt(r)
             cen[coff[m] + u, 9] = _smoothstep(min(u, U - 1 - u) / (END_FADE * (U - 1)))
+        # each ring's plane normal (Newell's, over its polygon), along the centre line
+        for u in range(U):
+            r = coff[m] + u
+            n0 = 0.0
+            n1 = 0.0
+            n2 = 0.0
+            for a in range(A):
+                p = off[m] + u * A + a
+                q = off[m] + u * A + (a + 1) % A
+                n0 += (grid[p, 1] - grid[q, 1]) * (grid[p, 2] + grid[q, 2])
+                n1 += (grid[p, 2] - grid[q, 2]) * (grid[p, 0] + grid[q, 0])
+                n2 += (grid[p, 0] - grid[q, 0]) * (grid[p, 1] + grid[q, 1])
+            nl = np.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+            ra = coff[m] + max(u - 1, 0)
+            rb = coff[m] + min(u + 1, U - 1)
+            d0 = cen[rb, 0] - cen[ra, 0]
+            d1 = cen[rb, 1] - cen[ra, 1]
+            d2 = cen[rb, 2] - cen[ra, 2]
+            if nl <= 1e-12 * cen[r, 3] * cen[r, 3] or nl == 0.0:
+                n0, n1, n2, nl = 0.0, 0.0, 0.0, 1.0  # a pole, or no area: the centre line's own
+            elif n0 * d0 + n1 * d1 + n2 * d2 < 0.0:
+                nl = -nl
+            cen[r, 10] = n0 / nl
+            cen[r, 11] = n1 / nl
+            cen[r, 12] = n2 / nl
         # bounding spheres of the centre segments in groups of SEG_GROUP (cen[first, 4:8])
         for g in range((U - 2) // SEG_GROUP + 1):
             r0 = coff[m] + g * SEG_GROUP
@@ -360,8 +385,12 @@ def _ring_radius(grid, base, A, cx0, cx1, cx2, a0, a1, a2, b0, b1, b2):
 
 @njit(cache=True, inline="always")
 def _centre_tangent(cen, coff_j, U, u):
-    """Unit tangent of a muscle's centre polyline at centre u (central difference; one-sided at
-    the poles)."""
+    """Unit axis direction of a muscle at ring u: the ring's plane normal (cen[:, 10:13]); at
+    the poles and rings with no area, the centre polyline's tangent (central difference;
+    one-sided at the poles)."""
+    r = coff_j + u
+    if cen[r, 10] != 0.0 or cen[r, 11] != 0.0 or cen[r, 12] != 0.0:
+        return cen[r, 10], cen[r, 11], cen[r, 12]
     a = coff_j + max(u - 1, 0)
     b = coff_j + min(u + 1, U - 1)
     d0 = cen[b, 0] - cen[a, 0]
@@ -377,7 +406,7 @@ def _centre_tangent(cen, coff_j, U, u):
 #: (none at the poles): an attachment ring holds its place (:func:`_point_push`).
 END_FADE = 0.1
 #: Columns of the ring table :func:`_centres` fills.
-CEN_COLUMNS = 10
+CEN_COLUMNS = 13
 #: Centre segments per bounding sphere in :func:`_muscle_query`'s search.
 SEG_GROUP = 4
 #: The trilinear field's largest slope (:func:`_measure`).
@@ -480,6 +509,29 @@ def _query_in(x, grid, off_j, U, A, cen, coff_j, reach, out, gl, row, cnt):
         return False
     if best > (max(cen[coff_j + bu, 3], cen[coff_j + bu + 1, 3]) + reach) ** 2:
         return False  # farther from the centre line than its rings' largest radius: outside
+    # the segment whose ring planes hold x between them, from the nearest one, and x's place
+    # between them: a packed section whose centre leaves the line of action stands oblique to
+    # the line of the centres, and the nearest centre is not in x's section
+    sa = 0.0
+    sb = 0.0
+    for _ in range(U):
+        ta0, ta1, ta2 = _centre_tangent(cen, coff_j, U, bu)
+        tb0, tb1, tb2 = _centre_tangent(cen, coff_j, U, bu + 1)
+        p0 = coff_j + bu
+        sa = (x[0] - cen[p0, 0]) * ta0 + (x[1] - cen[p0, 1]) * ta1 + (x[2] - cen[p0, 2]) * ta2
+        sb = (x[0] - cen[p0 + 1, 0]) * tb0 + (x[1] - cen[p0 + 1, 1]) * tb1 + (x[2] - cen[p0 + 1, 2]) * tb2
+        if sa < 0.0 and bu > 0:
+            bu -= 1
+        elif sb > 0.0 and bu < U - 2:
+            bu += 1
+        else:
+            break
+    if sa < 0.0:
+        bl = 0.0
+    elif sb > 0.0:
+        bl = 1.0
+    else:
+        bl = sa / (sa - sb) if sa - sb > 0.0 else 0.5
     if (bu == 0 and bl <= 0.0) or (bu == U - 2 and bl >= 1.0):
         return False  # beyond an end: outside the end cap
     p0 = coff_j + bu
