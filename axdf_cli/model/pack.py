@@ -617,8 +617,7 @@ def pack(specs, models, skeleton, rest_world: np.ndarray, cm: "contact.ContactMo
             spec = with_outlines(specs[i], layouts[i], to_file_outlines(fits[i][0], frames[i]))
             new_specs.append(spec)
             new_models.append(MuscleModel(spec, skeleton.bone_index, rest_world, skeleton))
-        ratio = np.array([m.v0 for m in new_models]) / v0
-        score, row = _score(new_models, cm, inv, v0)
+        score, row, ratio = _score(new_models, cm, inv, v0)
         history.append(row)
         # the round kept: the least overlap plus volume change (all shares)
         if best is None or score < best[0]:
@@ -637,13 +636,13 @@ def pack(specs, models, skeleton, rest_world: np.ndarray, cm: "contact.ContactMo
 
 def _score(models, cm, inv, v0):
     """(the round's score: mean inside-muscle share + mean inside-bone share + mean |volume
-    ratio - 1|, its history row)."""
+    ratio - 1|, its history row, the volume ratios)."""
     vol = np.array([m.v0 for m in models])
     ratio = vol / v0
     meas = measure_rest(models, cm, inv)
     row = (float(meas[:, 0].mean()), float(meas[:, 1].mean()), float(meas[:, 2].max()), float(ratio.min()),
            float(ratio.max()))
-    return float(meas[:, 0].mean() + meas[:, 1].mean() + np.abs(ratio - 1.0).mean()), row
+    return float(meas[:, 0].mean() + meas[:, 1].mean() + np.abs(ratio - 1.0).mean()), row, ratio
 
 
 def _polish(best, specs, models, skeleton, rest_world, cm, layouts, frames, v0, history, rounds, progress,
@@ -683,7 +682,7 @@ def _polish(best, specs, models, skeleton, rest_world, cm, layouts, frames, v0, 
             coords, _ = fits[i](contact.vertices_to_grid(target, m.U, m.A).reshape(m.U, m.A, 3))
             cur_specs[i] = with_outlines(specs[i], layouts[i], to_file_outlines(coords, frames[i]))
             cur_models[i] = MuscleModel(cur_specs[i], skeleton.bone_index, rest_world, skeleton)
-        score, row = _score(cur_models, cm, inv, v0)
+        score, row, _ = _score(cur_models, cm, inv, v0)
         history.append(row)
         if score < best[0]:
             best = (score, len(history) - 1, cur_specs, cur_models, s)
