@@ -514,7 +514,8 @@ def _query_in(x, grid, off_j, U, A, cen, coff_j, reach, out, gl, row, cnt):
     # the line of the centres, and the nearest centre is not in x's section
     sa = 0.0
     sb = 0.0
-    for _ in range(U):
+    ta0 = ta1 = ta2 = tb0 = tb1 = tb2 = 0.0
+    for _ in range(U):  # (monotone: it ends on the segment it last read)
         ta0, ta1, ta2 = _centre_tangent(cen, coff_j, U, bu)
         tb0, tb1, tb2 = _centre_tangent(cen, coff_j, U, bu + 1)
         p0 = coff_j + bu
@@ -539,10 +540,8 @@ def _query_in(x, grid, off_j, U, A, cen, coff_j, reach, out, gl, row, cnt):
     cx0 = (1.0 - bl) * cen[p0, 0] + bl * cen[p1, 0]
     cx1 = (1.0 - bl) * cen[p0, 1] + bl * cen[p1, 1]
     cx2 = (1.0 - bl) * cen[p0, 2] + bl * cen[p1, 2]
-    # the axis direction blends the centres' tangents along the segment: the same at a shared
-    # centre from either segment, so the query is continuous where the nearest segment changes
-    ta0, ta1, ta2 = _centre_tangent(cen, coff_j, U, bu)
-    tb0, tb1, tb2 = _centre_tangent(cen, coff_j, U, bu + 1)
+    # the axis direction blends the two rings' directions (read above) along the segment: the
+    # same at a shared ring from either segment, so the query is continuous where it changes
     t0 = (1.0 - bl) * ta0 + bl * tb0
     t1 = (1.0 - bl) * ta1 + bl * tb1
     t2 = (1.0 - bl) * ta2 + bl * tb2
