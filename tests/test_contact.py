@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 
 import numpy as np
 import pytest
@@ -442,3 +443,89 @@ def test_a_section_oblique_to_the_line_of_its_centres_is_read_across_its_own_pla
     read = np.array([contact._muscle_query(x, grid, 0, U, A, cen, 0, 0.0, q) and q[0] < q[1] for x in pts])
     assert gwn[clear].sum() > 200 and (~gwn[clear]).sum() > 200
     assert (read != gwn)[clear].mean() < 0.02
+
+
+def _thin_beside_thick_frames():
+    """Three muscles where thin ones lie in a thick one (the thick one's pulls are recorded:
+    :func:`contact._point_push`), and their models."""
+    model, (thick, thin) = _thin_in_thick(0.012)
+    _, (_, thin2) = _thin_in_thick(-0.009)
+    U, A = 24, 24
+    m3 = contact.ContactModel(~np.eye(3, dtype=bool), contact.pair_shares(np.zeros(3)), contact.BoneFields.pack([]),
+                              ((U, A),) * 3, np.zeros(3))
+    return m3, [thick, thin, thin2]
+
+
+def test_the_bytes_do_not_depend_on_threads_or_the_room_for_records(demo, monkeypatch):
+    """Contact runs muscle by muscle on numba's threads; each muscle's pulls on thick
+    neighbours are recorded in its own rows and added up in muscle order. One thread or
+    all, and with no room for a record (every pass runs again with room for all), the result
+    is the same to the bit, the demo's frames and a thick muscle with two thin ones in it."""
+    import numba
+
+    plan, world, frames = demo
+    m3, meshes = _thin_beside_thick_frames()
+    cases = [(plan.contact, frames[fi], np.linalg.inv(world[fi])) for fi in range(len(frames))]
+    cases.append((m3, meshes, np.eye(4)[None]))
+
+    def all_out():
+        outs = []
+        for model, verts, inv in cases:
+            vol = np.zeros(len(verts))
+            v, n, touched, before, after = contact.resolve_frame(model, verts, inv, volumes=vol)
+            outs.append(([x.copy() for x in v], [None if x is None else x.copy() for x in n], touched.copy(), after,
+                         vol))
+        return outs
+
+    ref = all_out()
+    assert ref[-1][2].tolist() == [True, True, True]  # the thick one gave way: records were added up
+    before_threads = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        one = all_out()
+    finally:
+        numba.set_num_threads(before_threads)
+    monkeypatch.setattr(contact, "REACTION_RECORDS", 0)
+    no_room = all_out()
+    for other in (one, no_room):
+        for a, b in zip(ref, other):
+            for x, y in zip(a[0] + a[1], b[0] + b[1]):
+                assert (x is None and y is None) or np.array_equal(x, y)
+            assert np.array_equal(a[2], b[2]) and np.array_equal(a[3], b[3]) and np.array_equal(a[4], b[4])
+
+
+def test_contact_in_forked_workers_after_this_process_used_its_threads(demo):
+    """numba's threads survive fork (axdf_cli sets a fork-safe threading layer: GNU OpenMP's
+    stop a forked child that uses them): this process runs contact, then forked workers
+    (as `axdf run --jobs`) run it again, with their share of the cores, to the same bytes."""
+    from axdf_cli.workers import process_map
+
+    plan, world, frames = demo
+    inv = np.linalg.inv(world[0])
+    here = contact.resolve_frame(plan.contact, frames[0], inv)[0]
+    there = process_map(_contact_in_worker, [0, 1], (plan.contact, frames[0], inv), jobs=2)
+    for v in there:
+        assert all(np.array_equal(a, b) for a, b in zip(here, v))
+
+
+def _contact_in_worker(shared, _item):
+    model, verts, inv = shared
+    return contact.resolve_frame(model, verts, inv)[0]
+
+
+def test_worker_thread_shares():
+    """A worker's numba threads: the cores over the workers, at least one."""
+    import numba
+
+    from axdf_cli.workers import cpu_share, limit_threads
+
+    cores = len(os.sched_getaffinity(0))
+    assert cpu_share(1) == cores and cpu_share(cores * 4) == 1 and cpu_share(0) == cores
+    before = numba.get_num_threads()
+    try:
+        limit_threads(1)
+        assert numba.get_num_threads() == 1
+        limit_threads(10_000)  # never more than numba's pool
+        assert numba.get_num_threads() == numba.config.NUMBA_NUM_THREADS
+    finally:
+        numba.set_num_threads(before)

@@ -69,7 +69,7 @@ from axdf_cli.model import kernels
 from axdf_cli.model.muscle import ContactSpec
 
 try:
-    from numba import njit
+    from numba import njit, prange
 except ImportError as e:  # a dependency: make setup installs it
     raise ImportError(f"axdf needs numba ({e}); run `make setup` or `pip install numba`") from None
 
@@ -290,14 +290,15 @@ def _bone_query(x, inv, fb, fo, fh, fd, foff, fv, fsel, f0, f1, grad_below, g_ou
 # ----------------------------------------------------------------------------- muscles
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def _centres(grid, off, nu, na, cen, coff):
     """Ring centroids of every muscle (pole rows: the pole) in cen[:, :3], in cen[:, 3] each
     ring's largest distance from its centroid, and in cen[:, 4:8] of every SEG_GROUP-th ring
     the bounding sphere (centre, radius) of the centres from it to SEG_GROUP rings on, in
     cen[:, 8] the largest of those rings' radii, and in cen[:, 9] each ring's end fade (0 at
-    the poles, 1 from :data:`END_FADE` of the rings on; cen: (rings, :data:`CEN_COLUMNS`))."""
-    for m in range(nu.shape[0]):
+    the poles, 1 from :data:`END_FADE` of the rings on; cen: (rings, :data:`CEN_COLUMNS`)).
+    Muscle by muscle on numba's threads."""
+    for m in prange(nu.shape[0]):
         U = nu[m]
         A = na[m]
         for u in range(U):
@@ -592,10 +593,10 @@ def _query_in(x, grid, off_j, U, A, cen, coff_j, reach, out, gl, row, cnt):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def _boxes(grid, off, box):
-    """Every muscle's bounding box (M, 6): lo, hi."""
-    for m in range(off.shape[0] - 1):
+    """Every muscle's bounding box (M, 6): lo, hi (muscle by muscle on numba's threads)."""
+    for m in prange(off.shape[0] - 1):
         for c in range(3):
             box[m, c] = 1e300
             box[m, 3 + c] = -1e300
@@ -676,7 +677,7 @@ def _section_angle(grid, off_j, A, cen, coff_j, U, bu, bl, r0, r1, r2):
 
 @njit(cache=True, inline="always")
 def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, actm, nmm, share, inv, fb, fo, fh, fd, foff, fv,
-                actb, nbb, gl, gn, prm, q, g, p, react):
+                actb, nbb, gl, gn, prm, q, g, p, rec):
     """The pushes that point x of muscle i (its ring's centre ci) asks for, against the bone
     fields actb[:nbb] and the neighbours actm[:nmm] (:func:`_ring_lists`): in p[4:7], out of
     every bone field by (margin_b - d) along the field's gradient where d < margin_b; in
@@ -688,11 +689,11 @@ def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, actm, nmm, share, i
     distance to the nearest bone (1e30: none near). Kept apart, the two are smoothed along the
     muscle with different ends (:func:`_ring_modes`). Where x's ring is thin against j (its
     radius under thin1 of j's, fully under thin0, times the ring's end fade ci[9]), j gives way
-    too: into react[rows of j's two rings at x, :3 NMODES] the modes of a push of j's section
-    at x's angle inwards past x by j's share (the Fourier sums of one sample, weighted by the
-    push's length and the ring's share of the segment), into react[..., 3 NMODES] those
-    weights (:func:`_add_reactions` takes their weighted mean). Returns how many neighbours
-    pushed.
+    too: for each of j's two rings at x, a record in rec (:func:`_record_reaction`): the row,
+    the modes of a push of j's section at x's angle inwards past x by j's share (the Fourier
+    sums of one sample, weighted by the push's length and the ring's share of the segment),
+    and that weight (:func:`_add_reactions` takes their weighted mean). Returns how many
+    neighbours pushed.
     prm: (margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, thin0, thin1), a tuple: the call stays
     under 30 arguments, which Python would otherwise pass as *args, and numba then packs a
     tuple of every array on each call (several times the query's own cost)."""
@@ -742,12 +743,16 @@ def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, actm, nmm, share, i
                     wr = amt * ((1.0 - q[9]) if e == 0 else q[9])
                     if wr <= 0.0:
                         continue
-                    row = coff[j] + bu + e
+                    n = int(rec[0, 0])
+                    rec[0, 0] += 1.0
+                    if n + 1 >= rec.shape[0]:
+                        continue  # no room: counted, and the pass is run again with more
+                    rec[n + 1, 0] = coff[j] + bu + e
                     for r in range(NMODES):
                         br = (1.0 if r == 0 else 2.0) * g[r]
                         for c in range(3):
-                            react[row, r * 3 + c] -= wr * br * amt * q[5 + c]
-                    react[row, 3 * NMODES] += wr
+                            rec[n + 1, 1 + r * 3 + c] = wr * br * amt * q[5 + c]
+                    rec[n + 1, 1 + 3 * NMODES] = wr
         bl = radial_blend * q[1]
         e0 = ci[0] - q[2]
         e1 = ci[1] - q[3]
@@ -781,7 +786,7 @@ def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, actm, nmm, share, i
     return nm
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, parallel=True)
 def _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb, fo, fh, fd, foff, fv, fl_off, fl,
                 margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, thin0, thin1, cstep, rstep, coef, coefb,
                 touched, buried, work):
@@ -793,68 +798,104 @@ def _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb,
     pushes into coef and the bones' into coefb (smoothed with different ends). coef (rings,
     NMODES, 3); rings between sampled ones: linear between theirs; poles: 0. touched (M,):
     set where a sample was pushed; buried (M,): the share of samples inside a bone. work:
-    scratch arrays (:func:`_work`). Compiled without numba's reference counting (it allocates
-    nothing): the helpers inlined into its loops otherwise count references to each array they
-    are handed, twice per call (measured: more than the queries' own arithmetic)."""
-    q, g, p, b, actb, actm, gl, gn, react = work
+    scratch arrays (:func:`_work`), one set per muscle, and each muscle's thick neighbours'
+    giving way recorded in its own rows of them (:func:`_add_reactions` adds them up in
+    muscle order): the muscles are independent within a pass and run on numba's threads
+    (:func:`_ring_modes_one`), the same bytes for any number of threads."""
+    Q, G, P, Bm, ACTB, ACTM, GL, GN, REC, TAB, _ = work
     prm = (margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, thin0, thin1)
-    for i in range(nu.shape[0]):
-        U = nu[i]
-        A = na[i]
-        ns = A // cstep
-        last = -1
-        nb = 0
-        nsamp = 0
-        u = 1
-        while u <= U - 2:
-            ci = cen[coff[i] + u]
-            r0 = coff[i] + u
-            nbb, nmm = _ring_lists(ci, i, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, nbr_off, nbr, box, margin_b,
-                                   margin_m, actb, actm, cen, coff, nu, gl, gn)
-            for r in range(NMODES):
-                for c in range(3):
-                    coef[r0, r, c] = 0.0
-                    coefb[r0, r, c] = 0.0
-            for si in range(ns):
-                a = si * A // ns
-                k = off[i] + u * A + a
-                _point_push(grid[k], ci, i, grid, off, nu, na, cen, coff, box, actm, nmm, share, inv, fb, fo, fh,
-                            fd, foff, fv, actb, nbb, gl, gn, prm, q, g, p, react)
-                nsamp += 1
-                if p[3] < 0.0:
-                    nb += 1
-                if p[0] != 0.0 or p[1] != 0.0 or p[2] != 0.0 or p[4] != 0.0 or p[5] != 0.0 or p[6] != 0.0:
-                    touched[i] = True
+    for i in prange(nu.shape[0]):
+        REC[i, 0, 0] = 0.0
+        _ring_modes_one(i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb, fo, fh, fd, foff, fv,
+                        fl_off, fl, prm, cstep, rstep, coef, coefb, touched, buried,
+                        (Q[i], G[i], P[i], Bm[i], ACTB[i], ACTM[i], GL[i], GN[i], REC[i], TAB[i]))
+
+
+@njit(cache=True, _nrt=False)
+def _ring_modes_one(i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb, fo, fh, fd, foff, fv, fl_off,
+                    fl, prm, cstep, rstep, coef, coefb, touched, buried, ws):
+    """:func:`_ring_modes` for muscle i, with its own scratch arrays ws. Compiled without
+    numba's reference counting (it allocates nothing): the helpers inlined into its loops
+    otherwise count references to each array they are handed, twice per call (measured: more
+    than the queries' own arithmetic)."""
+    q, g, p, b, actb, actm, gl, gn, rec, tab = ws
+    tab_a = -1  # the resolution tab holds the modes of (its columns' angles)
+    margin_m = prm[0]
+    margin_b = prm[1]
+    U = nu[i]
+    A = na[i]
+    ns = A // cstep
+    last = -1
+    nb = 0
+    nsamp = 0
+    u = 1
+    while u <= U - 2:
+        ci = cen[coff[i] + u]
+        r0 = coff[i] + u
+        nbb, nmm = _ring_lists(ci, i, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, nbr_off, nbr, box, margin_b,
+                               margin_m, actb, actm, cen, coff, nu, gl, gn)
+        for r in range(NMODES):
+            for c in range(3):
+                coef[r0, r, c] = 0.0
+                coefb[r0, r, c] = 0.0
+        if nbb == 0 and nmm == 0:
+            nsamp += ns  # nothing near: no push (the sums below would add zeros)
+            ns_loop = 0
+        else:
+            ns_loop = ns
+        if ns_loop > 0 and tab_a != A:
+            for a in range(A):  # the modes at each column of this resolution
                 _modes(2.0 * np.pi * a / A, b)
                 for r in range(NMODES):
-                    w = (1.0 if r == 0 else 2.0) / ns
-                    for c in range(3):
-                        coef[r0, r, c] += w * b[r] * p[c]
-                        coefb[r0, r, c] += w * b[r] * p[4 + c]
-            # rings between the previous sampled ring and this one: linear
-            if last > 0:
-                for v in range(last + 1, u):
-                    t = (v - last) / (u - last)
-                    for r in range(NMODES):
-                        for c in range(3):
-                            coef[coff[i] + v, r, c] = (1.0 - t) * coef[coff[i] + last, r, c] + t * coef[r0, r, c]
-                            coefb[coff[i] + v, r, c] = (1.0 - t) * coefb[coff[i] + last, r, c] + t * coefb[r0, r, c]
-            last = u
-            if u == U - 2:
-                break
-            u = min(u + rstep, U - 2)
-        for v in (0, U - 1):
+                    tab[a, r] = b[r]
+            tab_a = A
+        for si in range(ns_loop):
+            a = si * A // ns
+            k = off[i] + u * A + a
+            _point_push(grid[k], ci, i, grid, off, nu, na, cen, coff, box, actm, nmm, share, inv, fb, fo, fh,
+                        fd, foff, fv, actb, nbb, gl, gn, prm, q, g, p, rec)
+            nsamp += 1
+            if p[3] < 0.0:
+                nb += 1
+            if p[0] != 0.0 or p[1] != 0.0 or p[2] != 0.0 or p[4] != 0.0 or p[5] != 0.0 or p[6] != 0.0:
+                touched[i] = True
             for r in range(NMODES):
+                w = (1.0 if r == 0 else 2.0) / ns
                 for c in range(3):
-                    coef[coff[i] + v, r, c] = 0.0
-                    coefb[coff[i] + v, r, c] = 0.0
-        buried[i] = nb / max(nsamp, 1)
+                    coef[r0, r, c] += w * tab[a, r] * p[c]
+                    coefb[r0, r, c] += w * tab[a, r] * p[4 + c]
+        # rings between the previous sampled ring and this one: linear
+        if last > 0:
+            for v in range(last + 1, u):
+                t = (v - last) / (u - last)
+                for r in range(NMODES):
+                    for c in range(3):
+                        coef[coff[i] + v, r, c] = (1.0 - t) * coef[coff[i] + last, r, c] + t * coef[r0, r, c]
+                        coefb[coff[i] + v, r, c] = (1.0 - t) * coefb[coff[i] + last, r, c] + t * coefb[r0, r, c]
+        last = u
+        if u == U - 2:
+            break
+        u = min(u + rstep, U - 2)
+    for v in (0, U - 1):
+        for r in range(NMODES):
+            for c in range(3):
+                coef[coff[i] + v, r, c] = 0.0
+                coefb[coff[i] + v, r, c] = 0.0
+    buried[i] = nb / max(nsamp, 1)
 
 
 @njit(cache=True)
-def _add_reactions(react, coef, nu, coff, touched, floor):
-    """The thick muscles' giving way (:func:`_point_push`'s react) into their rings' modes
-    (the poles stay), then cleared for the next pass."""
+def _add_reactions(rec, react, coef, nu, coff, touched, floor):
+    """The thick muscles' giving way (the records :func:`_point_push` left in each muscle's
+    rec: rec[i, 0, 0] of them, from row 1: the row, the modes' sums, the weight) added up
+    muscle by muscle, in order, into react, then into their rings' modes (the poles stay);
+    react is cleared for the next pass."""
+    for i in range(rec.shape[0]):
+        for n in range(int(rec[i, 0, 0])):
+            row = int(rec[i, n + 1, 0])
+            for k in range(3 * NMODES):
+                react[row, k] -= rec[i, n + 1, 1 + k]
+            react[row, 3 * NMODES] += rec[i, n + 1, 1 + 3 * NMODES]
     for m in range(nu.shape[0]):
         for u in range(1, nu[m] - 1):
             row = coff[m] + u
@@ -896,16 +937,17 @@ def _smooth_rings(coef, nu, coff, passes, free_ends, tmp):
                         coef[o + u, r, c] = tmp[u, r, c]
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def _apply_and_solve(grid, rad, coef, off, nu, na, coff, active, target, max_step, ga, sigma):
     """Move every ring of an active muscle by its modes (the displacement's length soft-capped
     at max_step: max_step tanh(|D| / max_step)), then solve the volume exactly again (module
     doc, step 3): grid <- grid + D + sigma rad with V = target (rad: the no-contact shape's
-    offsets from its ring centres, so the section grows about its centre)."""
-    b = np.empty(NMODES)
-    for m in range(nu.shape[0]):
+    offsets from its ring centres, so the section grows about its centre). Muscle by muscle
+    on numba's threads; ga: (M, U, A, 3) scratch."""
+    for m in prange(nu.shape[0]):
         if not active[m]:
             continue
+        b = np.empty(NMODES)
         U = nu[m]
         A = na[m]
         o = off[m]
@@ -926,8 +968,8 @@ def _apply_and_solve(grid, rad, coef, off, nu, na, coff, active, target, max_ste
                 grid[k, 1] += f * d1
                 grid[k, 2] += f * d2
                 for c in range(3):
-                    ga[u, a, c] = grid[k, c]
-        c0, c1, c2, c3 = kernels._volume_cubic(ga[:U, :A], rad[o:o + U * A].reshape(U, A, 3))
+                    ga[m, u, a, c] = grid[k, c]
+        c0, c1, c2, c3 = kernels._volume_cubic(ga[m, :U, :A], rad[o:o + U * A].reshape(U, A, 3))
         s = _solve_offset(c0, c1, c2, c3, target[m])
         sigma[m] += s
         for k in range(o, o + U * A):
@@ -1118,55 +1160,68 @@ def _section_distance(x, grid, off_j, U, A, bu, bl):
     return np.sqrt(best)
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, parallel=True)
 def _measure(grid, off, nu, na, cen, coff, box, nbr_off, nbr, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, out, work):
     """Per muscle: [share of points inside another muscle, share inside a bone, deepest
     penetration (m)] over its vertices (pole rows counted once); ring by ring, each against
     what it may meet (:func:`_ring_lists`). A point's penetration in a muscle: the nearer of
     two points of that muscle's surface, where the radial ray leaves it (R - rho) and the
     nearest point of its section there (:func:`_section_distance`); in a bone, the depth of
-    the bone's field."""
-    M = nu.shape[0]
-    q, g, _, _, actb, actm, gl, gn, _ = work
-    for i in range(M):
-        U = nu[i]
-        A = na[i]
-        n_in_m = 0
-        n_in_b = 0
-        deep = 0.0
-        n = 0
-        for u in range(U):
-            ci = cen[coff[i] + u]
-            nb, nmm = _ring_lists(ci, i, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, nbr_off, nbr, box, 0.0, 0.0,
-                                  actb, actm, cen, coff, nu, gl, gn)
-            for a in range(A if 0 < u < U - 1 else 1):
-                k = off[i] + u * A + a
-                n += 1
-                x = grid[k]
-                if nb > 0:
-                    d = _bone_query(x, inv, fb, fo, fh, fd, foff, fv, actb, 0, nb, -1e300, g)
-                    if d < 0.0:
-                        n_in_b += 1
-                        if -d > deep:
-                            deep = -d
-                inside = False
-                for jj in range(nmm):
-                    j = actm[jj]
-                    if not _may_meet(x, j, box, 0.0):
-                        continue
-                    if not _query_in(x, grid, off[j], nu[j], na[j], cen, coff[j], 0.0, q, gl, jj, gn[jj]):
-                        continue
-                    if q[0] < q[1]:
-                        inside = True
-                        if q[1] - q[0] > deep:  # (the depth is at most the radial one)
-                            dj = min(q[1] - q[0], _section_distance(x, grid, off[j], nu[j], na[j], int(q[8]), q[9]))
-                            if dj > deep:
-                                deep = dj
-                if inside:
-                    n_in_m += 1
-        out[i, 0] = n_in_m / n
-        out[i, 1] = n_in_b / n
-        out[i, 2] = deep
+    the bone's field. Muscle by muscle on numba's threads (:func:`_measure_one`), each with
+    its own scratch arrays of ``work`` (:func:`_work`)."""
+    Q, G, _, _, ACTB, ACTM, GL, GN, _, _, _ = work
+    for i in prange(nu.shape[0]):
+        _measure_one(i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, inv, fb, fo, fh, fd, foff, fv, fl_off, fl,
+                     out, (Q[i], G[i], ACTB[i], ACTM[i], GL[i], GN[i]))
+
+
+@njit(cache=True, _nrt=False)
+def _measure_one(i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, out,
+                 ws):
+    """:func:`_measure` for muscle i, with its own scratch arrays ws (compiled without
+    reference counting, as :func:`_ring_modes_one`)."""
+    q, g, actb, actm, gl, gn = ws
+    U = nu[i]
+    A = na[i]
+    n_in_m = 0
+    n_in_b = 0
+    deep = 0.0
+    n = 0
+    for u in range(U):
+        ci = cen[coff[i] + u]
+        nb, nmm = _ring_lists(ci, i, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, nbr_off, nbr, box, 0.0, 0.0,
+                              actb, actm, cen, coff, nu, gl, gn)
+        if nb == 0 and nmm == 0:
+            n += A if 0 < u < U - 1 else 1  # nothing near the ring: none of its points is inside
+            continue
+        for a in range(A if 0 < u < U - 1 else 1):
+            k = off[i] + u * A + a
+            n += 1
+            x = grid[k]
+            if nb > 0:
+                d = _bone_query(x, inv, fb, fo, fh, fd, foff, fv, actb, 0, nb, -1e300, g)
+                if d < 0.0:
+                    n_in_b += 1
+                    if -d > deep:
+                        deep = -d
+            inside = False
+            for jj in range(nmm):
+                j = actm[jj]
+                if not _may_meet(x, j, box, 0.0):
+                    continue
+                if not _query_in(x, grid, off[j], nu[j], na[j], cen, coff[j], 0.0, q, gl, jj, gn[jj]):
+                    continue
+                if q[0] < q[1]:
+                    inside = True
+                    if q[1] - q[0] > deep:  # (the depth is at most the radial one)
+                        dj = min(q[1] - q[0], _section_distance(x, grid, off[j], nu[j], na[j], int(q[8]), q[9]))
+                        if dj > deep:
+                            deep = dj
+            if inside:
+                n_in_m += 1
+    out[i, 0] = n_in_m / n
+    out[i, 1] = n_in_b / n
+    out[i, 2] = deep
 
 
 @njit(cache=True)
@@ -1209,14 +1264,25 @@ class ContactModel:
     enabled: bool = True  # False: measure only (--no-contact)
 
 
-def _work(nu: np.ndarray, fields: "BoneFields") -> tuple:
-    """Scratch arrays for :func:`_ring_modes` and :func:`_measure` (allocated here: they are
-    compiled without reference counting): q, g, p, b, actb, actm, gl, gn, and react
-    (:func:`_point_push`'s pulls on thick neighbours; zeros: it accumulates)."""
+#: Room for each muscle's records of a pass's pulls on thick neighbours (:func:`_work`); a
+#: pass that needs more runs again with room for all.
+REACTION_RECORDS = 1024
+
+
+def _work(nu: np.ndarray, na: np.ndarray, fields: "BoneFields", records: int | None = None) -> tuple:
+    """Scratch arrays for :func:`_ring_modes` and :func:`_measure`, one of each per muscle
+    (allocated here: the per-muscle kernels are compiled without reference counting): q, g,
+    p, b, actb, actm, gl, gn, rec (:func:`_point_push`'s pulls on thick neighbours: a count
+    in [0, 0], set by :func:`_ring_modes`, then up to ``records`` records; 1024 hold the
+    walk's most, 412), tab (the modes at every column of a ring),
+    and react (those pulls added up per ring; zeros: it accumulates)."""
     M = max(len(nu), 1)
-    return (np.empty(QUERY_SIZE), np.empty(6), np.empty(7), np.empty(NMODES), np.empty(max(len(fields.bones), 1), np.int64),
-            np.empty(M, np.int64), np.empty((M, (int(nu.max()) - 2) // SEG_GROUP + 1), np.int64),
-            np.empty(M, np.int64), np.zeros((int(nu.sum()), 3 * NMODES + 1)))
+    records = REACTION_RECORDS if records is None else records
+    ng = (int(nu.max()) - 2) // SEG_GROUP + 1
+    return (np.empty((M, QUERY_SIZE)), np.empty((M, 6)), np.empty((M, 7)), np.empty((M, NMODES)),
+            np.empty((M, max(len(fields.bones), 1)), np.int64), np.empty((M, M), np.int64),
+            np.empty((M, M, ng), np.int64), np.empty((M, M), np.int64), np.empty((M, records + 1, 3 * NMODES + 2)),
+            np.empty((M, int(na.max()), NMODES)), np.zeros((int(nu.sum()), 3 * NMODES + 1)))
 
 
 def vertices_to_grid(v: np.ndarray, U: int, A: int) -> np.ndarray:
@@ -1226,7 +1292,8 @@ def vertices_to_grid(v: np.ndarray, U: int, A: int) -> np.ndarray:
 
 
 def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np.ndarray,
-                  iterations: int = tol.CONTACT_ITERATIONS, measure_before: bool = True):
+                  iterations: int = tol.CONTACT_ITERATIONS, measure_before: bool = True,
+                  volumes: np.ndarray | None = None):
     """Contact for one frame.
 
     vertices : [(V_m, 3) float64] every muscle's no-contact mesh; world_inv : (B, 4, 4) world
@@ -1234,7 +1301,8 @@ def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np
     nothing touched), normals [(V_m, 3) or None where unchanged], changed (M,) bool,
     before (M, 3), after (M, 3)): inside-muscle share, inside-bone share and deepest
     penetration before and after contact. ``measure_before`` False (the stage, to halve the
-    measuring): before's inside-bone share is that of the first pass's samples, the rest NaN."""
+    measuring): before's inside-bone share is that of the first pass's samples, the rest NaN.
+    ``volumes`` (M,): filled with each muscle's mesh volume after contact where any moved."""
     shapes = model.shapes
     M = len(vertices)
     if M == 0:
@@ -1243,7 +1311,9 @@ def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np
     na = np.array([s[1] for s in shapes], dtype=np.int64)
     off = np.concatenate([[0], np.cumsum(nu * na)]).astype(np.int64)
     coff = np.concatenate([[0], np.cumsum(nu)]).astype(np.int64)
-    grid = np.concatenate([vertices_to_grid(v, *s) for v, s in zip(vertices, shapes)])
+    vo = np.concatenate([[0], np.cumsum([len(v) for v in vertices])]).astype(np.int64)
+    grid = np.empty((int(off[-1]), 3))
+    _to_grid(np.concatenate(vertices).astype(np.float64, copy=False), vo, off, nu, na, grid)
     cen = np.zeros((int(coff[-1]), CEN_COLUMNS))
     box = np.empty((M, 6))
     f = model.fields
@@ -1252,11 +1322,12 @@ def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np
     reach = tol.CONTACT_BONE_MARGIN + iterations * tol.CONTACT_MAX_STEP
     args_b = (world_inv, f.bones, f.origin, f.h, f.dims, f.offset, f.values, *_field_lists(box, f, world_inv, reach))
     before = np.full((M, 3), np.nan)
-    work = _work(nu, f)
+    work = _work(nu, na, f)
     if measure_before or iterations == 0:
         _measure(grid, off, nu, na, cen, coff, box, *_neighbours(box, model.allow, 0.0), *args_b, before, work)
     rad = grid - np.repeat(cen[:, :3], np.repeat(na, nu), axis=0)  # radial offsets of the no-contact shape
-    target = np.array([_grid_volume(grid[off[m]:off[m + 1]], nu[m], na[m]) for m in range(M)])
+    target = np.empty(M)
+    _grid_volumes(grid, off, nu, na, target)
     umax, amax = int(nu.max()), int(na.max())
     coef = np.zeros((int(coff[-1]), NMODES, 3))
     coefb = np.zeros_like(coef)
@@ -1264,15 +1335,20 @@ def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np
     sigma = np.zeros(M)
     touched = np.zeros(M, dtype=np.bool_)
     buried = np.zeros(M)
-    ga = np.empty((umax, amax, 3))
+    ga = np.empty((M, umax, amax, 3))
     for it in range(iterations):
         nbr_off, nbr = _neighbours(box, model.allow, tol.CONTACT_MARGIN)
-        _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, model.share, *args_b,
-                    tol.CONTACT_MARGIN, tol.CONTACT_BONE_MARGIN, tol.CONTACT_DEEP_FADE[0], tol.CONTACT_DEEP_FADE[1],
-                    tol.CONTACT_AXES_FADE[0], tol.CONTACT_AXES_FADE[1], tol.CONTACT_RADIAL_BLEND, tol.CONTACT_THIN[0],
-                    tol.CONTACT_THIN[1], tol.CONTACT_SAMPLE_COLUMNS, tol.CONTACT_SAMPLE_RINGS, coef, coefb, touched,
-                    buried, work)
-        _add_reactions(work[-1], coef, nu, coff, touched, tol.CONTACT_MARGIN)  # (work's last: react)
+        while True:
+            _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, model.share, *args_b,
+                        tol.CONTACT_MARGIN, tol.CONTACT_BONE_MARGIN, tol.CONTACT_DEEP_FADE[0],
+                        tol.CONTACT_DEEP_FADE[1], tol.CONTACT_AXES_FADE[0], tol.CONTACT_AXES_FADE[1],
+                        tol.CONTACT_RADIAL_BLEND, tol.CONTACT_THIN[0], tol.CONTACT_THIN[1],
+                        tol.CONTACT_SAMPLE_COLUMNS, tol.CONTACT_SAMPLE_RINGS, coef, coefb, touched, buried, work)
+            need = int(work[8][:, 0, 0].max())
+            if need < work[8].shape[1]:
+                break
+            work = work[:8] + (np.empty((M, need + 1, work[8].shape[2])),) + work[9:]  # room for all: again
+        _add_reactions(work[8], work[10], coef, nu, coff, touched, tol.CONTACT_MARGIN)
         if it == 0 and not measure_before:
             before[:, 1] = buried
         _smooth_rings(coef, nu, coff, tol.CONTACT_SMOOTH_PASSES, False, tmp)
@@ -1281,6 +1357,8 @@ def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np
         _apply_and_solve(grid, rad, coef, off, nu, na, coff, touched, target, tol.CONTACT_MAX_STEP, ga, sigma)
         _centres(grid, off, nu, na, cen, coff)
         _boxes(grid, off, box)
+    if volumes is not None and touched.any():
+        _grid_volumes(grid, off, nu, na, volumes)
     if not touched.any() and not np.isnan(before).any():  # nothing moved (or no pass): the first measures
         return list(vertices), [None] * M, touched, before, before.copy()
     after = np.zeros((M, 3))
@@ -1324,11 +1402,59 @@ def _field_lists(box: np.ndarray, fields: "BoneFields", world_inv: np.ndarray, r
 
 def _neighbours(box: np.ndarray, allow: np.ndarray, margin: float):
     """Allowed pairs whose boxes (M, 6) meet within ``margin``, as CSR rows (offsets, indices)."""
-    meet = np.all(box[:, None, :3] <= box[None, :, 3:] + margin, axis=-1) & np.all(
-        box[None, :, :3] <= box[:, None, 3:] + margin, axis=-1) & allow
-    idx = np.nonzero(meet)
-    return np.concatenate([[0], np.cumsum(np.bincount(idx[0], minlength=len(box)))]).astype(np.int64), \
-        idx[1].astype(np.int64)
+    M = len(box)
+    nbr_off = np.zeros(M + 1, np.int64)
+    nbr = np.empty(M * M, np.int64)
+    n = _box_pairs(box, allow, margin, nbr_off, nbr)
+    return nbr_off, nbr[:n]
+
+
+@njit(cache=True)
+def _box_pairs(box, allow, margin, nbr_off, nbr):
+    """:func:`_neighbours`' rows, in order; returns how many pairs."""
+    n = 0
+    for i in range(box.shape[0]):
+        for j in range(box.shape[0]):
+            if not allow[i, j]:
+                continue
+            meet = True
+            for c in range(3):
+                if not (box[i, c] <= box[j, 3 + c] + margin and box[j, c] <= box[i, 3 + c] + margin):
+                    meet = False
+                    break
+            if meet:
+                nbr[n] = j
+                n += 1
+        nbr_off[i + 1] = n
+    return n
+
+
+@njit(cache=True)
+def _to_grid(verts, vo, off, nu, na, grid):
+    """Every muscle's vertices (concatenated; muscle m's from vo[m], poles collapsed) into its
+    grid rows from off[m] (:func:`vertices_to_grid`)."""
+    for m in range(nu.shape[0]):
+        U = nu[m]
+        A = na[m]
+        v0 = vo[m]
+        for a in range(A):
+            for c in range(3):
+                grid[off[m] + a, c] = verts[v0, c]
+                grid[off[m] + (U - 1) * A + a, c] = verts[vo[m + 1] - 1, c]
+        for k in range((U - 2) * A):
+            for c in range(3):
+                grid[off[m] + A + k, c] = verts[v0 + 1 + k, c]
+
+
+@njit(cache=True, parallel=True)
+def _grid_volumes(grid, off, nu, na, out):
+    """out[m]: the mesh volume of muscle m's grid (:func:`_grid_volume`), muscle by muscle on
+    numba's threads."""
+    for m in prange(nu.shape[0]):
+        U = nu[m]
+        A = na[m]
+        ga = grid[off[m]:off[m + 1]].reshape(U, A, 3)
+        out[m] = kernels._volume_cubic(ga, np.zeros_like(ga))[0]
 
 
 def _grid_volume(g: np.ndarray, U: int, A: int) -> float:
@@ -1385,12 +1511,16 @@ def apply(model: "ContactModel", results: dict, world: np.ndarray) -> None:
     inv = np.linalg.inv(world)
     for r in results.values():
         r.contact = np.zeros((nf, 3))
+    vol = np.empty(len(order))
+    finite = np.ones(nf, dtype=bool)
+    for j in order:
+        finite &= np.isfinite(results[j].vertices.reshape(nf, -1)).all(axis=1)
     for fi in range(nf):
-        verts = [results[j].vertices[fi] for j in order]
-        if not all(np.isfinite(v).all() for v in verts):
+        if not finite[fi]:
             continue  # a frame that cannot be evaluated is written as the rest shape
+        verts = [results[j].vertices[fi] for j in order]
         v, n, touched, before, after = resolve_frame(model, verts, inv[fi],
-                                                     tol.CONTACT_ITERATIONS if model.enabled else 0, False)
+                                                     tol.CONTACT_ITERATIONS if model.enabled else 0, False, vol)
         for k, j in enumerate(order):
             r = results[j]
             r.contact[fi] = after[k]
@@ -1399,5 +1529,4 @@ def apply(model: "ContactModel", results: dict, world: np.ndarray) -> None:
             if touched[k]:
                 r.vertices[fi] = v[k]
                 r.normals[fi] = n[k]
-                U, A = model.shapes[j]
-                r.volume[fi] = _grid_volume(vertices_to_grid(v[k], U, A), U, A)
+                r.volume[fi] = vol[k]

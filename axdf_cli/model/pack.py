@@ -520,7 +520,7 @@ def measure_rest(models, cm: "contact.ContactModel", rest_inv: np.ndarray) -> np
     out = np.zeros((len(models), 3))
     contact._measure(grid, off, nu, na, cen, coff, box, *contact._neighbours(box, cm.allow, 0.0), rest_inv, f.bones,
                      f.origin, f.h, f.dims, f.offset, f.values, *contact._field_lists(box, f, rest_inv, 0.0), out,
-                     contact._work(nu, f))
+                     contact._work(nu, na, f))
     return out
 
 
