@@ -14,9 +14,10 @@ either
   default of one thread per core oversubscribes the cores they share; a value you set is
   kept).
 
-Each worker runs numba's parallel kernels (contact: :mod:`axdf_cli.model.contact`) on its
-share of the cores, the cores over the workers (:func:`limit_threads`): N workers with all
-of them each would oversubscribe the cores they share. The bytes do not depend on it.
+A worker runs the contact stage's kernels on its own thread (:func:`one_thread`), where a
+single process (``--jobs 1``) runs them on numba's threads: N workers with a thread per core
+each would oversubscribe the cores they share (and a worker that starts numba's threads
+leaves a semaphore behind when it is stopped). The bytes do not depend on it.
 
 Workers never outlive the parent: a forked worker asks the kernel for SIGTERM when its
 parent dies (``prctl(PR_SET_PDEATHSIG)`` on Linux) and checks its parent between chunks
@@ -96,38 +97,21 @@ def _watch(pid: int) -> None:
     threading.Thread(target=wait, name="axdf-parent-watch", daemon=True).start()
 
 
-def limit_threads(n: int) -> None:
-    """At most ``n`` (at least 1) threads for numba's parallel kernels in this process: set
-    now where numba is loaded, else when it loads (NUMBA_NUM_THREADS; a value you set is
-    kept, and never exceeded)."""
-    import sys
-
-    n = max(1, int(n))
-    numba = sys.modules.get("numba")
-    if numba is None:
-        os.environ["NUMBA_NUM_THREADS"] = str(min(n, int(os.environ.get("NUMBA_NUM_THREADS") or n)))
-        return
-    try:
-        numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))
-    except Exception:  # noqa: BLE001 (an odd numba build: its default stays; only speed is at stake)
-        pass
+#: Set to 1 in a worker process: the contact stage's kernels stay on its thread
+#: (:func:`axdf_cli.model.contact.use_threads`).
+THREADS_VAR = "AXDF_NUM_THREADS"
 
 
-def cpu_share(workers: int) -> int:
-    """The cores this process may use, over ``workers`` processes (at least 1 each)."""
-    try:
-        cores = len(os.sched_getaffinity(0))
-    except (AttributeError, OSError):
-        cores = os.cpu_count() or 1
-    return max(1, cores // max(1, workers))
+def one_thread() -> None:
+    """This process (a worker) runs the contact stage's kernels on its own thread."""
+    os.environ[THREADS_VAR] = "1"
 
 
-def _init_worker(owner: int, shared, cwd: str | None, threads: int = 1) -> None:
+def _init_worker(owner: int, shared, cwd: str | None) -> None:
     """Each worker's start (nothing here may raise: the executor would print a traceback).
-    ``cwd``: None for a forked worker, the owner's current folder for a fork server's;
-    ``threads``: its share of the cores (:func:`limit_threads`)."""
+    ``cwd``: None for a forked worker, the owner's current folder for a fork server's."""
     fresh = cwd is not None
-    limit_threads(threads)
+    one_thread()
     _STATE["parent"] = os.getppid() if fresh else owner
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, _on_sigterm)
@@ -204,10 +188,10 @@ def process_map(fn, items: list, shared, *, jobs: int | None = None, on_result=N
     if fresh:
         ctx = mp.get_context("forkserver")
         ctx.set_forkserver_preload(list(preload))  # (takes effect when the fork server starts)
-        initargs = (os.getpid(), shared, os.getcwd(), cpu_share(n))
+        initargs = (os.getpid(), shared, os.getcwd())
     else:
         ctx = mp.get_context("fork")
-        initargs = (os.getpid(), shared, None, cpu_share(n))
+        initargs = (os.getpid(), shared, None)
     pool = ProcessPoolExecutor(max_workers=n, mp_context=ctx, initializer=_init_worker, initargs=initargs)
     try:
         with _sigint_held():  # workers (and a fork server) start with SIGINT blocked, for good

@@ -459,9 +459,12 @@ def _thin_beside_thick_frames():
 def test_the_bytes_do_not_depend_on_threads_or_the_room_for_records(demo, monkeypatch):
     """Contact runs muscle by muscle on numba's threads; each muscle's pulls on thick
     neighbours are recorded in its own rows and added up in muscle order. One thread or
-    all, and with no room for a record (every pass runs again with room for all), the result
-    is the same to the bit, the demo's frames and a thick muscle with two thin ones in it."""
+    all, the kernels compiled without threads (a worker's), and with no room for a record
+    (every pass runs again with room for all), the result is the same to the bit, the demo's
+    frames and a thick muscle with two thin ones in it."""
     import numba
+
+    from axdf_cli.workers import THREADS_VAR
 
     plan, world, frames = demo
     m3, meshes = _thin_beside_thick_frames()
@@ -477,6 +480,7 @@ def test_the_bytes_do_not_depend_on_threads_or_the_room_for_records(demo, monkey
                          vol))
         return outs
 
+    monkeypatch.setenv(THREADS_VAR, "")
     ref = all_out()
     assert ref[-1][2].tolist() == [True, True, True]  # the thick one gave way: records were added up
     before_threads = numba.get_num_threads()
@@ -485,9 +489,13 @@ def test_the_bytes_do_not_depend_on_threads_or_the_room_for_records(demo, monkey
         one = all_out()
     finally:
         numba.set_num_threads(before_threads)
+    monkeypatch.setenv(THREADS_VAR, "1")
+    assert not contact.use_threads()
+    serial = all_out()
+    monkeypatch.setenv(THREADS_VAR, "")
     monkeypatch.setattr(contact, "REACTION_RECORDS", 0)
     no_room = all_out()
-    for other in (one, no_room):
+    for other in (one, serial, no_room):
         for a, b in zip(ref, other):
             for x, y in zip(a[0] + a[1], b[0] + b[1]):
                 assert (x is None and y is None) or np.array_equal(x, y)
@@ -495,9 +503,10 @@ def test_the_bytes_do_not_depend_on_threads_or_the_room_for_records(demo, monkey
 
 
 def test_contact_in_forked_workers_after_this_process_used_its_threads(demo):
-    """numba's threads survive fork (axdf_cli sets a fork-safe threading layer: GNU OpenMP's
-    stop a forked child that uses them): this process runs contact, then forked workers
-    (as `axdf run --jobs`) run it again, with their share of the cores, to the same bytes."""
+    """numba's threads survive fork (axdf_cli sets numba's work queue as its threading layer:
+    GNU OpenMP's stop a forked child that uses them): this process runs contact on them,
+    then forked workers (as `axdf run --jobs`) run it again, on their own threads, to the
+    same bytes."""
     from axdf_cli.workers import process_map
 
     plan, world, frames = demo
@@ -513,19 +522,14 @@ def _contact_in_worker(shared, _item):
     return contact.resolve_frame(model, verts, inv)[0]
 
 
-def test_worker_thread_shares():
-    """A worker's numba threads: the cores over the workers, at least one."""
+def test_a_worker_keeps_contact_on_its_thread(monkeypatch):
+    """A worker process (the workers are the parallelism) runs contact's kernels on its own
+    thread, a single process on numba's threads; the switch is AXDF_NUM_THREADS."""
     import numba
 
-    from axdf_cli.workers import cpu_share, limit_threads
+    from axdf_cli.workers import THREADS_VAR, one_thread
 
-    cores = len(os.sched_getaffinity(0))
-    assert cpu_share(1) == cores and cpu_share(cores * 4) == 1 and cpu_share(0) == cores
-    before = numba.get_num_threads()
-    try:
-        limit_threads(1)
-        assert numba.get_num_threads() == 1
-        limit_threads(10_000)  # never more than numba's pool
-        assert numba.get_num_threads() == numba.config.NUMBA_NUM_THREADS
-    finally:
-        numba.set_num_threads(before)
+    monkeypatch.setenv(THREADS_VAR, "")  # (restored after the test, as it was)
+    assert contact.use_threads() == (numba.config.NUMBA_NUM_THREADS > 1)
+    one_thread()
+    assert os.environ[THREADS_VAR] == "1" and not contact.use_threads()

@@ -19,7 +19,7 @@ from axdf_cli.specs.render import parse_camera  # noqa: F401  (a job's camera: m
 from axdf_cli.pipeline import RunPlan, build_stages, evaluate_chunks, execute, load_bone_mesh  # noqa: F401
 from axdf_cli.pipeline.stages import stages_record  # noqa: F401  (dataset.json names the stages)
 from axdf_cli.pipeline.plan import display_path, load_muscle_specs  # noqa: F401  (as a run's manifest shows paths)
-from axdf_cli.workers import WorkerDied, limit_threads, process_map  # noqa: F401  (worker processes, as axdf run's)
+from axdf_cli.workers import WorkerDied, one_thread, process_map  # noqa: F401  (worker processes, as axdf run's)
 from axdf_cli.fileio.runfolder import own_entry  # noqa: F401  (the lock and temporaries axdf leaves while writing)
 from axdf_cli.model.skeleton import forward_kinematics
 

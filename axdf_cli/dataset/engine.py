@@ -140,7 +140,7 @@ def worker_context(where: tuple) -> wk.Context:
     # the workers are the parallelism: each renders with one llvmpipe thread (Mesa's default is
     # one per core, which oversubscribes the cores N workers share); a value you set is kept
     os.environ.setdefault("LP_NUM_THREADS", "1")
-    door.limit_threads(1)  # numba's kernels (contact) likewise: one thread each
+    door.one_thread()  # contact's kernels likewise: one thread each
     os.chdir(cwd)
     ctx = _CONTEXTS.get(where)
     if ctx is None:

@@ -67,6 +67,7 @@ from axdf_cli.errors import AxdfError
 from axdf_cli.fileio import atomic
 from axdf_cli.model import kernels
 from axdf_cli.model.muscle import ContactSpec
+from axdf_cli.workers import THREADS_VAR
 
 try:
     from numba import njit, prange
@@ -290,15 +291,14 @@ def _bone_query(x, inv, fb, fo, fh, fd, foff, fv, fsel, f0, f1, grad_below, g_ou
 # ----------------------------------------------------------------------------- muscles
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def _centres(grid, off, nu, na, cen, coff):
     """Ring centroids of every muscle (pole rows: the pole) in cen[:, :3], in cen[:, 3] each
     ring's largest distance from its centroid, and in cen[:, 4:8] of every SEG_GROUP-th ring
     the bounding sphere (centre, radius) of the centres from it to SEG_GROUP rings on, in
     cen[:, 8] the largest of those rings' radii, and in cen[:, 9] each ring's end fade (0 at
-    the poles, 1 from :data:`END_FADE` of the rings on; cen: (rings, :data:`CEN_COLUMNS`)).
-    Muscle by muscle on numba's threads."""
-    for m in prange(nu.shape[0]):
+    the poles, 1 from :data:`END_FADE` of the rings on; cen: (rings, :data:`CEN_COLUMNS`))."""
+    for m in range(nu.shape[0]):
         U = nu[m]
         A = na[m]
         for u in range(U):
@@ -593,10 +593,10 @@ def _query_in(x, grid, off_j, U, A, cen, coff_j, reach, out, gl, row, cnt):
     return True
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def _boxes(grid, off, box):
-    """Every muscle's bounding box (M, 6): lo, hi (muscle by muscle on numba's threads)."""
-    for m in prange(off.shape[0] - 1):
+    """Every muscle's bounding box (M, 6): lo, hi."""
+    for m in range(off.shape[0] - 1):
         for c in range(3):
             box[m, c] = 1e300
             box[m, 3 + c] = -1e300
@@ -801,10 +801,25 @@ def _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb,
     scratch arrays (:func:`_work`), one set per muscle, and each muscle's thick neighbours'
     giving way recorded in its own rows of them (:func:`_add_reactions` adds them up in
     muscle order): the muscles are independent within a pass and run on numba's threads
-    (:func:`_ring_modes_one`), the same bytes for any number of threads."""
+    (:func:`_ring_modes_one`), the same bytes for any number of threads
+    (:func:`_ring_modes_serial`: the same on this thread alone)."""
     Q, G, P, Bm, ACTB, ACTM, GL, GN, REC, TAB, _ = work
     prm = (margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, thin0, thin1)
     for i in prange(nu.shape[0]):
+        REC[i, 0, 0] = 0.0
+        _ring_modes_one(i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb, fo, fh, fd, foff, fv,
+                        fl_off, fl, prm, cstep, rstep, coef, coefb, touched, buried,
+                        (Q[i], G[i], P[i], Bm[i], ACTB[i], ACTM[i], GL[i], GN[i], REC[i], TAB[i]))
+
+
+@njit(cache=True)
+def _ring_modes_serial(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb, fo, fh, fd, foff, fv, fl_off,
+                       fl, margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, thin0, thin1, cstep, rstep, coef,
+                       coefb, touched, buried, work):
+    """:func:`_ring_modes` on this thread alone (:func:`use_threads`)."""
+    Q, G, P, Bm, ACTB, ACTM, GL, GN, REC, TAB, _ = work
+    prm = (margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, thin0, thin1)
+    for i in range(nu.shape[0]):
         REC[i, 0, 0] = 0.0
         _ring_modes_one(i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb, fo, fh, fd, foff, fv,
                         fl_off, fl, prm, cstep, rstep, coef, coefb, touched, buried,
@@ -943,38 +958,52 @@ def _apply_and_solve(grid, rad, coef, off, nu, na, coff, active, target, max_ste
     at max_step: max_step tanh(|D| / max_step)), then solve the volume exactly again (module
     doc, step 3): grid <- grid + D + sigma rad with V = target (rad: the no-contact shape's
     offsets from its ring centres, so the section grows about its centre). Muscle by muscle
-    on numba's threads; ga: (M, U, A, 3) scratch."""
+    on numba's threads (:func:`_apply_one`; :func:`_apply_and_solve_serial` on this thread
+    alone); ga: (M, U, A, 3) scratch."""
     for m in prange(nu.shape[0]):
-        if not active[m]:
-            continue
-        b = np.empty(NMODES)
-        U = nu[m]
-        A = na[m]
-        o = off[m]
-        for a in range(A):
-            _modes(2.0 * np.pi * a / A, b)
-            for u in range(U):
-                k = o + u * A + a
-                d0 = 0.0
-                d1 = 0.0
-                d2 = 0.0
-                for r in range(NMODES):
-                    d0 += b[r] * coef[coff[m] + u, r, 0]
-                    d1 += b[r] * coef[coff[m] + u, r, 1]
-                    d2 += b[r] * coef[coff[m] + u, r, 2]
-                dl = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-                f = 1.0 if dl < 1e-12 else max_step * np.tanh(dl / max_step) / dl
-                grid[k, 0] += f * d0
-                grid[k, 1] += f * d1
-                grid[k, 2] += f * d2
-                for c in range(3):
-                    ga[m, u, a, c] = grid[k, c]
-        c0, c1, c2, c3 = kernels._volume_cubic(ga[m, :U, :A], rad[o:o + U * A].reshape(U, A, 3))
-        s = _solve_offset(c0, c1, c2, c3, target[m])
-        sigma[m] += s
-        for k in range(o, o + U * A):
+        if active[m]:
+            _apply_one(m, grid, rad, coef, off, nu, na, coff, target, max_step, ga[m], sigma)
+
+
+@njit(cache=True)
+def _apply_and_solve_serial(grid, rad, coef, off, nu, na, coff, active, target, max_step, ga, sigma):
+    """:func:`_apply_and_solve` on this thread alone (:func:`use_threads`)."""
+    for m in range(nu.shape[0]):
+        if active[m]:
+            _apply_one(m, grid, rad, coef, off, nu, na, coff, target, max_step, ga[m], sigma)
+
+
+@njit(cache=True)
+def _apply_one(m, grid, rad, coef, off, nu, na, coff, target, max_step, ga, sigma):
+    """:func:`_apply_and_solve` for muscle m (ga: its (U, A, 3) scratch)."""
+    b = np.empty(NMODES)
+    U = nu[m]
+    A = na[m]
+    o = off[m]
+    for a in range(A):
+        _modes(2.0 * np.pi * a / A, b)
+        for u in range(U):
+            k = o + u * A + a
+            d0 = 0.0
+            d1 = 0.0
+            d2 = 0.0
+            for r in range(NMODES):
+                d0 += b[r] * coef[coff[m] + u, r, 0]
+                d1 += b[r] * coef[coff[m] + u, r, 1]
+                d2 += b[r] * coef[coff[m] + u, r, 2]
+            dl = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            f = 1.0 if dl < 1e-12 else max_step * np.tanh(dl / max_step) / dl
+            grid[k, 0] += f * d0
+            grid[k, 1] += f * d1
+            grid[k, 2] += f * d2
             for c in range(3):
-                grid[k, c] += s * rad[k, c]
+                ga[u, a, c] = grid[k, c]
+    c0, c1, c2, c3 = kernels._volume_cubic(ga[:U, :A], rad[o:o + U * A].reshape(U, A, 3))
+    s = _solve_offset(c0, c1, c2, c3, target[m])
+    sigma[m] += s
+    for k in range(o, o + U * A):
+        for c in range(3):
+            grid[k, c] += s * rad[k, c]
 
 
 @njit(cache=True)
@@ -1175,6 +1204,16 @@ def _measure(grid, off, nu, na, cen, coff, box, nbr_off, nbr, inv, fb, fo, fh, f
                      out, (Q[i], G[i], ACTB[i], ACTM[i], GL[i], GN[i]))
 
 
+@njit(cache=True)
+def _measure_serial(grid, off, nu, na, cen, coff, box, nbr_off, nbr, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, out,
+                    work):
+    """:func:`_measure` on this thread alone (:func:`use_threads`)."""
+    Q, G, _, _, ACTB, ACTM, GL, GN, _, _, _ = work
+    for i in range(nu.shape[0]):
+        _measure_one(i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, inv, fb, fo, fh, fd, foff, fv, fl_off, fl,
+                     out, (Q[i], G[i], ACTB[i], ACTM[i], GL[i], GN[i]))
+
+
 @njit(cache=True, _nrt=False)
 def _measure_one(i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, out,
                  ws):
@@ -1285,6 +1324,16 @@ def _work(nu: np.ndarray, na: np.ndarray, fields: "BoneFields", records: int | N
             np.empty((M, int(na.max()), NMODES)), np.zeros((int(nu.sum()), 3 * NMODES + 1)))
 
 
+def use_threads() -> bool:
+    """Whether contact's kernels run muscle by muscle on numba's threads (the bytes are the
+    same either way): not where ``AXDF_NUM_THREADS`` is 1 (a worker process:
+    :func:`axdf_cli.workers.one_thread`), nor where numba
+    has one thread. Numba's work queue is its threading layer (axdf_cli/__init__.py)."""
+    import numba
+
+    return os.environ.get(THREADS_VAR, "") != "1" and numba.config.NUMBA_NUM_THREADS > 1
+
+
 def vertices_to_grid(v: np.ndarray, U: int, A: int) -> np.ndarray:
     """(V, 3) vertices with collapsed poles → (U * A, 3) grid rows (poles repeated)."""
     rings = v[1:-1].reshape(U - 2, A, 3)
@@ -1305,6 +1354,10 @@ def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np
     ``volumes`` (M,): filled with each muscle's mesh volume after contact where any moved."""
     shapes = model.shapes
     M = len(vertices)
+    threads = use_threads()
+    measure = _measure if threads else _measure_serial
+    ring_modes = _ring_modes if threads else _ring_modes_serial
+    apply_and_solve = _apply_and_solve if threads else _apply_and_solve_serial
     if M == 0:
         return [], [], np.zeros(0, bool), np.zeros((0, 3)), np.zeros((0, 3))
     nu = np.array([s[0] for s in shapes], dtype=np.int64)
@@ -1324,7 +1377,7 @@ def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np
     before = np.full((M, 3), np.nan)
     work = _work(nu, na, f)
     if measure_before or iterations == 0:
-        _measure(grid, off, nu, na, cen, coff, box, *_neighbours(box, model.allow, 0.0), *args_b, before, work)
+        measure(grid, off, nu, na, cen, coff, box, *_neighbours(box, model.allow, 0.0), *args_b, before, work)
     rad = grid - np.repeat(cen[:, :3], np.repeat(na, nu), axis=0)  # radial offsets of the no-contact shape
     target = np.empty(M)
     _grid_volumes(grid, off, nu, na, target)
@@ -1339,7 +1392,7 @@ def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np
     for it in range(iterations):
         nbr_off, nbr = _neighbours(box, model.allow, tol.CONTACT_MARGIN)
         while True:
-            _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, model.share, *args_b,
+            ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, model.share, *args_b,
                         tol.CONTACT_MARGIN, tol.CONTACT_BONE_MARGIN, tol.CONTACT_DEEP_FADE[0],
                         tol.CONTACT_DEEP_FADE[1], tol.CONTACT_AXES_FADE[0], tol.CONTACT_AXES_FADE[1],
                         tol.CONTACT_RADIAL_BLEND, tol.CONTACT_THIN[0], tol.CONTACT_THIN[1],
@@ -1354,7 +1407,7 @@ def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np
         _smooth_rings(coef, nu, coff, tol.CONTACT_SMOOTH_PASSES, False, tmp)
         _smooth_rings(coefb, nu, coff, tol.CONTACT_SMOOTH_PASSES, True, tmp)
         coef += coefb
-        _apply_and_solve(grid, rad, coef, off, nu, na, coff, touched, target, tol.CONTACT_MAX_STEP, ga, sigma)
+        apply_and_solve(grid, rad, coef, off, nu, na, coff, touched, target, tol.CONTACT_MAX_STEP, ga, sigma)
         _centres(grid, off, nu, na, cen, coff)
         _boxes(grid, off, box)
     if volumes is not None and touched.any():
@@ -1362,7 +1415,7 @@ def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np
     if not touched.any() and not np.isnan(before).any():  # nothing moved (or no pass): the first measures
         return list(vertices), [None] * M, touched, before, before.copy()
     after = np.zeros((M, 3))
-    _measure(grid, off, nu, na, cen, coff, box, *_neighbours(box, model.allow, 0.0), *args_b, after, work)
+    measure(grid, off, nu, na, cen, coff, box, *_neighbours(box, model.allow, 0.0), *args_b, after, work)
     if not touched.any():
         return list(vertices), [None] * M, touched, before, after
     out_v, out_n = [], []
@@ -1446,11 +1499,10 @@ def _to_grid(verts, vo, off, nu, na, grid):
                 grid[off[m] + A + k, c] = verts[v0 + 1 + k, c]
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def _grid_volumes(grid, off, nu, na, out):
-    """out[m]: the mesh volume of muscle m's grid (:func:`_grid_volume`), muscle by muscle on
-    numba's threads."""
-    for m in prange(nu.shape[0]):
+    """out[m]: the mesh volume of muscle m's grid (:func:`_grid_volume`)."""
+    for m in range(nu.shape[0]):
         U = nu[m]
         A = na[m]
         ga = grid[off[m]:off[m + 1]].reshape(U, A, 3)
