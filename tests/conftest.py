@@ -249,3 +249,37 @@ def demo_extreme_coordinates(skel, rng: np.random.Generator, n_random: int = 12)
     for _ in range(n_random):
         qs.append(np.array([rng.uniform(*c.range) for c in skel.coordinates]))
     return np.array(qs)
+
+
+@pytest.fixture(scope="session", autouse=True)
+def contact_kernels_compiled():
+    """Contact's kernels compiled (or loaded from numba's cache) before any test, both the
+    threaded ones (this process) and their serial twins (a worker's: AXDF_NUM_THREADS=1), as
+    a run's first use would: a test that stops a worker (SIGTERM) must find it working, not
+    compiling, where Python prints the interrupt it raises inside LLVM's callback as
+    "Exception ignored" (a worker compiling on a cold cache is stopped all the same)."""
+    import os
+
+    from axdf_cli.model import contact
+    from axdf_cli.workers import THREADS_VAR
+
+    U, A = 12, 16
+    th = 2.0 * np.pi * np.arange(A) / A
+    meshes = []
+    for dy, r in ((0.0, 0.02), (0.012, 0.004)):  # a thin one inside a thick one: every path runs
+        s = np.linspace(0.01, 0.19, U - 2)
+        rings = np.stack([np.repeat(s, A), np.tile(dy + r * np.cos(th), U - 2), np.tile(r * np.sin(th), U - 2)], 1)
+        meshes.append(np.concatenate([[[0.0, dy, 0.0]], rings, [[0.2, dy, 0.0]]]))
+    model = contact.ContactModel(~np.eye(2, dtype=bool), contact.pair_shares(np.zeros(2)), contact.BoneFields.pack([]),
+                                 ((U, A), (U, A)), np.zeros(2))
+    old = os.environ.get(THREADS_VAR)
+    try:
+        for value in ("", "1"):
+            os.environ[THREADS_VAR] = value
+            contact.resolve_frame(model, meshes, np.eye(4)[None], volumes=np.zeros(2))
+    finally:
+        if old is None:
+            os.environ.pop(THREADS_VAR, None)
+        else:
+            os.environ[THREADS_VAR] = old
+    yield
