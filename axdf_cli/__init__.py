@@ -20,6 +20,42 @@ _os.environ.setdefault("NUMBA_THREADING_LAYER", "workqueue")
 if "numba" in _sys.modules and _os.environ["NUMBA_THREADING_LAYER"] == "workqueue":
     # numba already loaded (an embedding program): its layer is chosen when its threads start
     _sys.modules["numba"].config.THREADING_LAYER = "workqueue"
+
+
+def _kernel_cache() -> str | None:
+    """numba's cache folder for axdf's kernels: $XDG_CACHE_HOME/axdf/numba/<hash> (default
+    ~/.cache), the hash of every source file under axdf_cli/model/ (where all the kernels
+    are). numba keys a cached kernel by its own file only, while a kernel holds the code of
+    the kernels it calls from other files (pack.py's hold contact.py's query): after an
+    edit or an upgrade of one file, the others' cached kernels ran the old code (a packed
+    library made so was not what its code makes). Folders unused for 30 days are removed."""
+    import hashlib
+    import shutil
+    import time
+    from pathlib import Path
+
+    model = Path(__file__).resolve().parent / "model"
+    h = hashlib.sha256()
+    for f in sorted(model.rglob("*.py")):
+        h.update(str(f.relative_to(model)).encode() + b"\0" + f.read_bytes() + b"\0")
+    base = Path(_os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "axdf" / "numba"
+    here = base / h.hexdigest()[:16]
+    try:
+        if base.is_dir():
+            for old in base.iterdir():
+                if old != here and time.time() - old.stat().st_mtime > 30 * 86400:
+                    shutil.rmtree(old, ignore_errors=True)
+        here.mkdir(parents=True, exist_ok=True)
+        _os.utime(here)  # (in use)
+    except OSError:  # unwritable: numba finds its own place (beside the sources, or none)
+        return None
+    return str(here) if _os.access(here, _os.W_OK) else None
+
+
+if "NUMBA_CACHE_DIR" not in _os.environ and "numba" not in _sys.modules:
+    _cache = _kernel_cache()
+    if _cache:
+        _os.environ["NUMBA_CACHE_DIR"] = _cache
 try:  # numpy may already be loaded (an embedding program): limit its BLAS pool directly
     from threadpoolctl import threadpool_limits as _limits
 

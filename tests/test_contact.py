@@ -533,3 +533,37 @@ def test_a_worker_keeps_contact_on_its_thread(monkeypatch):
     assert contact.use_threads() == (numba.config.NUMBA_NUM_THREADS > 1)
     one_thread()
     assert os.environ[THREADS_VAR] == "1" and not contact.use_threads()
+
+
+def test_the_kernel_cache_follows_every_model_source(tmp_path, monkeypatch):
+    """numba keys a cached kernel by its own file, while pack.py's kernels hold contact.py's
+    query: axdf keeps numba's cache in a folder keyed by every source under axdf_cli/model
+    (a packed library made with pack's kernels cached before a change of the query was not
+    what the code makes). The folder is this process's (NUMBA_CACHE_DIR); others unused for
+    30 days are removed, recent ones kept."""
+    import hashlib
+    import time
+
+    import axdf_cli
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    base = tmp_path / "axdf" / "numba"
+    old, recent = base / "0", base / "1"
+    for d in (old, recent):
+        d.mkdir(parents=True)
+    os.utime(old, (time.time() - 40 * 86400,) * 2)
+    here = axdf_cli._kernel_cache()
+    model = REPO_ROOT / "axdf_cli" / "model"
+    h = hashlib.sha256()
+    for f in sorted(model.rglob("*.py")):
+        h.update(str(f.relative_to(model)).encode() + b"\0" + f.read_bytes() + b"\0")
+    assert here == str(base / h.hexdigest()[:16])
+    assert not old.exists() and recent.is_dir() and os.path.isdir(here)
+    # what numba is told in a process that imports axdf
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    got = subprocess.run([sys.executable, "-c", "import os, axdf_cli; print(os.environ['NUMBA_CACHE_DIR'])"],
+                         env=env, capture_output=True, text=True, check=True, cwd=REPO_ROOT).stdout.strip()
+    assert got == here

@@ -516,7 +516,8 @@ def _query_in(x, grid, off_j, U, A, cen, coff_j, reach, out, gl, row, cnt):
     sa = 0.0
     sb = 0.0
     ta0 = ta1 = ta2 = tb0 = tb1 = tb2 = 0.0
-    for _ in range(U):  # (monotone: it ends on the segment it last read)
+    settled = False
+    for _ in range(U):
         ta0, ta1, ta2 = _centre_tangent(cen, coff_j, U, bu)
         tb0, tb1, tb2 = _centre_tangent(cen, coff_j, U, bu + 1)
         p0 = coff_j + bu
@@ -527,7 +528,13 @@ def _query_in(x, grid, off_j, U, A, cen, coff_j, reach, out, gl, row, cnt):
         elif sb > 0.0 and bu < U - 2:
             bu += 1
         else:
+            settled = True
             break
+    if not settled:
+        # where ring planes cross (a squeezed section), the walk may go back and forth and
+        # stop after U steps, one segment past the one it read: the directions of this one
+        ta0, ta1, ta2 = _centre_tangent(cen, coff_j, U, bu)
+        tb0, tb1, tb2 = _centre_tangent(cen, coff_j, U, bu + 1)
     if sa < 0.0:
         bl = 0.0
     elif sb > 0.0:
