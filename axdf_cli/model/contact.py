@@ -810,13 +810,10 @@ def _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb,
     muscle order): the muscles are independent within a pass and run on numba's threads
     (:func:`_ring_modes_one`), the same bytes for any number of threads
     (:func:`_ring_modes_serial`: the same on this thread alone)."""
-    Q, G, P, Bm, ACTB, ACTM, GL, GN, REC, TAB, _ = work
     prm = (margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, thin0, thin1)
     for i in prange(nu.shape[0]):
-        REC[i, 0, 0] = 0.0
         _ring_modes_one(i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb, fo, fh, fd, foff, fv,
-                        fl_off, fl, prm, cstep, rstep, coef, coefb, touched, buried,
-                        (Q[i], G[i], P[i], Bm[i], ACTB[i], ACTM[i], GL[i], GN[i], REC[i], TAB[i]))
+                        fl_off, fl, prm, cstep, rstep, coef, coefb, touched, buried, work)
 
 
 @njit(cache=True)
@@ -824,23 +821,22 @@ def _ring_modes_serial(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, i
                        fl, margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, thin0, thin1, cstep, rstep, coef,
                        coefb, touched, buried, work):
     """:func:`_ring_modes` on this thread alone (:func:`use_threads`)."""
-    Q, G, P, Bm, ACTB, ACTM, GL, GN, REC, TAB, _ = work
     prm = (margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, thin0, thin1)
     for i in range(nu.shape[0]):
-        REC[i, 0, 0] = 0.0
         _ring_modes_one(i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb, fo, fh, fd, foff, fv,
-                        fl_off, fl, prm, cstep, rstep, coef, coefb, touched, buried,
-                        (Q[i], G[i], P[i], Bm[i], ACTB[i], ACTM[i], GL[i], GN[i], REC[i], TAB[i]))
+                        fl_off, fl, prm, cstep, rstep, coef, coefb, touched, buried, work)
 
 
 @njit(cache=True, _nrt=False)
 def _ring_modes_one(i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb, fo, fh, fd, foff, fv, fl_off,
-                    fl, prm, cstep, rstep, coef, coefb, touched, buried, ws):
-    """:func:`_ring_modes` for muscle i, with its own scratch arrays ws. Compiled without
-    numba's reference counting (it allocates nothing): the helpers inlined into its loops
-    otherwise count references to each array they are handed, twice per call (measured: more
-    than the queries' own arithmetic)."""
-    q, g, p, b, actb, actm, gl, gn, rec, tab = ws
+                    fl, prm, cstep, rstep, coef, coefb, touched, buried, work):
+    """:func:`_ring_modes` for muscle i, with its own scratch arrays (row i of each of
+    work's). Compiled without numba's reference counting (it allocates nothing): the helpers
+    inlined into its loops otherwise count references to each array they are handed, twice
+    per call (measured: more than the queries' own arithmetic)."""
+    q, g, p, b, actb, actm, gl, gn, rec, tab = (work[0][i], work[1][i], work[2][i], work[3][i], work[4][i], work[5][i],
+                                                work[6][i], work[7][i], work[8][i], work[9][i])
+    rec[0, 0] = 0.0
     tab_a = -1  # the resolution tab holds the modes of (its columns' angles)
     margin_m = prm[0]
     margin_b = prm[1]
@@ -1205,28 +1201,26 @@ def _measure(grid, off, nu, na, cen, coff, box, nbr_off, nbr, inv, fb, fo, fh, f
     nearest point of its section there (:func:`_section_distance`); in a bone, the depth of
     the bone's field. Muscle by muscle on numba's threads (:func:`_measure_one`), each with
     its own scratch arrays of ``work`` (:func:`_work`)."""
-    Q, G, _, _, ACTB, ACTM, GL, GN, _, _, _ = work
     for i in prange(nu.shape[0]):
         _measure_one(i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, inv, fb, fo, fh, fd, foff, fv, fl_off, fl,
-                     out, (Q[i], G[i], ACTB[i], ACTM[i], GL[i], GN[i]))
+                     out, work)
 
 
 @njit(cache=True)
 def _measure_serial(grid, off, nu, na, cen, coff, box, nbr_off, nbr, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, out,
                     work):
     """:func:`_measure` on this thread alone (:func:`use_threads`)."""
-    Q, G, _, _, ACTB, ACTM, GL, GN, _, _, _ = work
     for i in range(nu.shape[0]):
         _measure_one(i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, inv, fb, fo, fh, fd, foff, fv, fl_off, fl,
-                     out, (Q[i], G[i], ACTB[i], ACTM[i], GL[i], GN[i]))
+                     out, work)
 
 
 @njit(cache=True, _nrt=False)
 def _measure_one(i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, out,
-                 ws):
-    """:func:`_measure` for muscle i, with its own scratch arrays ws (compiled without
-    reference counting, as :func:`_ring_modes_one`)."""
-    q, g, actb, actm, gl, gn = ws
+                 work):
+    """:func:`_measure` for muscle i, with its own scratch arrays (row i of work's; compiled
+    without reference counting, as :func:`_ring_modes_one`)."""
+    q, g, actb, actm, gl, gn = work[0][i], work[1][i], work[4][i], work[5][i], work[6][i], work[7][i]
     U = nu[i]
     A = na[i]
     n_in_m = 0
