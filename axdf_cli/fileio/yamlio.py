@@ -254,6 +254,8 @@ def parse_yaml(text: str, display: str) -> Any:
         m = e.problem_mark or e.context_mark
         where = _mark(display, m) if m is not None else Mark(display)
         problem = e.problem or e.context or "YAML syntax error"
+        if "nesting depth" in problem:  # libyaml's own limit (PyYAML 6.0.4's), met while scanning ahead
+            raise InputError(where, "document nested too deeply", f"at most {tol.YAML_MAX_DEPTH} levels") from None
         raise InputError(where, f"YAML syntax error: {problem}", "see https://yaml.org/spec/1.2.2/") from None
     except yaml.YAMLError as e:
         raise InputError(Mark(display), f"YAML error: {e}") from None
