@@ -696,7 +696,7 @@ def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, actm, nmm, share, i
     distance to the nearest bone (1e30: none near). Kept apart, the two are smoothed along the
     muscle with different ends (:func:`_ring_modes`). Where x's ring is thin against j (its
     radius under thin1 of j's, fully under thin0, times the ring's end fade ci[9]), j gives way
-    too: for each of j's two rings at x, a record in rec (:func:`_record_reaction`): the row,
+    too: for each of j's two rings at x, a record in rec (count in rec[0, 0]): the row,
     the modes of a push of j's section at x's angle inwards past x by j's share (the Fourier
     sums of one sample, weighted by the push's length and the ring's share of the segment),
     and that weight (:func:`_add_reactions` takes their weighted mean). Returns how many
@@ -1336,9 +1336,12 @@ def use_threads() -> bool:
 
 
 def vertices_to_grid(v: np.ndarray, U: int, A: int) -> np.ndarray:
-    """(V, 3) vertices with collapsed poles → (U * A, 3) grid rows (poles repeated)."""
-    rings = v[1:-1].reshape(U - 2, A, 3)
-    return np.concatenate([np.repeat(v[:1], A, axis=0), rings.reshape(-1, 3), np.repeat(v[-1:], A, axis=0)])
+    """(V, 3) vertices with collapsed poles → (U * A, 3) float64 grid rows (poles repeated;
+    :func:`_to_grid` for one muscle)."""
+    grid = np.empty((U * A, 3))
+    _to_grid(np.ascontiguousarray(v, dtype=np.float64), np.array([0, len(v)], np.int64), np.array([0, U * A], np.int64),
+             np.array([U], np.int64), np.array([A], np.int64), grid)
+    return grid
 
 
 def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np.ndarray,
@@ -1511,9 +1514,11 @@ def _grid_volumes(grid, off, nu, na, out):
 
 
 def _grid_volume(g: np.ndarray, U: int, A: int) -> float:
-    ga = np.ascontiguousarray(g.reshape(U, A, 3))
-    c0, _, _, _ = kernels._volume_cubic(ga, np.zeros_like(ga))
-    return float(c0)
+    """The mesh volume of one muscle's (U * A, 3) grid (:func:`_grid_volumes` for one)."""
+    out = np.empty(1)
+    _grid_volumes(np.ascontiguousarray(g, dtype=np.float64).reshape(U * A, 3), np.array([0, U * A], np.int64),
+                  np.array([U], np.int64), np.array([A], np.int64), out)
+    return float(out[0])
 
 
 def build(specs, models, rest_world: np.ndarray, bone_meshes: dict, enabled: bool = True) -> "ContactModel":
