@@ -503,10 +503,9 @@ def test_the_bytes_do_not_depend_on_threads_or_the_room_for_records(demo, monkey
 
 
 def test_contact_in_forked_workers_after_this_process_used_its_threads(demo):
-    """numba's threads survive fork (axdf_cli sets numba's work queue as its threading layer:
-    GNU OpenMP's stop a forked child that uses them): this process runs contact on them,
-    then forked workers (as `axdf run --jobs`) run it again, on their own threads, to the
-    same bytes."""
+    """This process runs contact on numba's threads, then forked workers (as `axdf run
+    --jobs`) run it again, each on its own thread (GNU OpenMP, numba's threading layer here,
+    stops a forked child that starts its threads), to the same bytes."""
     from axdf_cli.workers import process_map
 
     plan, world, frames = demo
@@ -515,6 +514,33 @@ def test_contact_in_forked_workers_after_this_process_used_its_threads(demo):
     there = process_map(_contact_in_worker, [0, 1], (plan.contact, frames[0], inv), jobs=2)
     for v in there:
         assert all(np.array_equal(a, b) for a, b in zip(here, v))
+
+
+def test_a_forked_process_keeps_contact_on_its_thread(demo, tmp_path):
+    """Any process forked from one that used numba's threads (not only axdf's workers, which
+    say so: AXDF_NUM_THREADS) runs contact on its own thread: GNU OpenMP would stop it
+    ("fork() called from a process already using GNU OpenMP"). The same bytes."""
+    import pickle
+
+    plan, world, frames = demo
+    inv = np.linalg.inv(world[0])
+    assert contact.use_threads() or os.environ.get("AXDF_NUM_THREADS") == "1"
+    here = contact.resolve_frame(plan.contact, frames[0], inv)[0]  # (on this process's threads)
+    out = tmp_path / "child.pkl"
+    pid = os.fork()
+    if pid == 0:  # the child: no AXDF_NUM_THREADS set for it
+        code = 1
+        try:
+            os.environ.pop("AXDF_NUM_THREADS", None)
+            assert not contact.use_threads()
+            out.write_bytes(pickle.dumps(contact.resolve_frame(plan.contact, frames[0], inv)[0]))
+            code = 0
+        finally:
+            os._exit(code)
+    _, status = os.waitpid(pid, 0)
+    assert os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0, status
+    there = pickle.loads(out.read_bytes())
+    assert all(np.array_equal(a, b) for a, b in zip(here, there))
 
 
 def _contact_in_worker(shared, _item):

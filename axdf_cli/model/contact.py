@@ -1325,14 +1325,21 @@ def _work(nu: np.ndarray, na: np.ndarray, fields: "BoneFields", records: int | N
             np.empty((M, int(na.max()), NMODES)), np.zeros((int(nu.sum()), 3 * NMODES + 1)))
 
 
+#: The process this module was loaded in: a forked child (another process id) keeps contact
+#: on its own thread (:func:`use_threads`).
+_HOME_PID = os.getpid()
+
+
 def use_threads() -> bool:
     """Whether contact's kernels run muscle by muscle on numba's threads (the bytes are the
     same either way): not where ``AXDF_NUM_THREADS`` is 1 (a worker process:
-    :func:`axdf_cli.workers.one_thread`), nor where numba
-    has one thread. Numba's work queue is its threading layer (axdf_cli/__init__.py)."""
+    :func:`axdf_cli.workers.one_thread`), nor in a process forked from the one that loaded
+    this module (GNU OpenMP, numba's threading layer here, stops a forked child that starts
+    its threads: axdf_cli/__init__.py), nor where numba has one thread."""
     import numba
 
-    return os.environ.get(THREADS_VAR, "") != "1" and numba.config.NUMBA_NUM_THREADS > 1
+    return (os.getpid() == _HOME_PID and os.environ.get(THREADS_VAR, "") != "1"
+            and numba.config.NUMBA_NUM_THREADS > 1)
 
 
 def vertices_to_grid(v: np.ndarray, U: int, A: int) -> np.ndarray:
