@@ -299,65 +299,79 @@ def _centres(grid, off, nu, na, cen, coff):
     cen[:, 8] the largest of those rings' radii, and in cen[:, 9] each ring's end fade (0 at
     the poles, 1 from :data:`END_FADE` of the rings on; cen: (rings, :data:`CEN_COLUMNS`))."""
     for m in range(nu.shape[0]):
-        U = nu[m]
-        A = na[m]
-        for u in range(U):
-            for c in range(3):
-                s = 0.0
-                for a in range(A):
-                    s += grid[off[m] + u * A + a, c]
-                cen[coff[m] + u, c] = s / A
-            r = 0.0
+        _centres_one(m, grid, off, nu, na, cen, coff)
+
+
+@njit(cache=True)
+def _centres_one(m, grid, off, nu, na, cen, coff):
+    """:func:`_centres` for muscle m."""
+    U = nu[m]
+    A = na[m]
+    for u in range(U):
+        for c in range(3):
+            s = 0.0
             for a in range(A):
-                k = off[m] + u * A + a
-                q = ((grid[k, 0] - cen[coff[m] + u, 0]) ** 2 + (grid[k, 1] - cen[coff[m] + u, 1]) ** 2
-                     + (grid[k, 2] - cen[coff[m] + u, 2]) ** 2)
-                if q > r:
-                    r = q
-            cen[coff[m] + u, 3] = np.sqrt(r)
-            cen[coff[m] + u, 9] = _smoothstep(min(u, U - 1 - u) / (END_FADE * (U - 1)))
-        # each ring's plane normal (Newell's, over its polygon), along the centre line
-        for u in range(U):
-            r = coff[m] + u
-            n0 = 0.0
-            n1 = 0.0
-            n2 = 0.0
-            for a in range(A):
-                p = off[m] + u * A + a
-                q = off[m] + u * A + (a + 1) % A
-                n0 += (grid[p, 1] - grid[q, 1]) * (grid[p, 2] + grid[q, 2])
-                n1 += (grid[p, 2] - grid[q, 2]) * (grid[p, 0] + grid[q, 0])
-                n2 += (grid[p, 0] - grid[q, 0]) * (grid[p, 1] + grid[q, 1])
-            nl = np.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
-            ra = coff[m] + max(u - 1, 0)
-            rb = coff[m] + min(u + 1, U - 1)
-            d0 = cen[rb, 0] - cen[ra, 0]
-            d1 = cen[rb, 1] - cen[ra, 1]
-            d2 = cen[rb, 2] - cen[ra, 2]
-            if nl <= 1e-12 * cen[r, 3] * cen[r, 3] or nl == 0.0:
-                n0, n1, n2, nl = 0.0, 0.0, 0.0, 1.0  # a pole, or no area: the centre line's own
-            elif n0 * d0 + n1 * d1 + n2 * d2 < 0.0:
-                nl = -nl
-            cen[r, 10] = n0 / nl
-            cen[r, 11] = n1 / nl
-            cen[r, 12] = n2 / nl
-        # bounding spheres of the centre segments in groups of SEG_GROUP (cen[first, 4:8])
-        for g in range((U - 2) // SEG_GROUP + 1):
-            r0 = coff[m] + g * SEG_GROUP
-            r1 = coff[m] + min(g * SEG_GROUP + SEG_GROUP, U - 1)
-            for c in range(3):
-                cen[r0, 4 + c] = 0.5 * (cen[r0, c] + cen[r1, c])
-            r = 0.0
-            for k in range(r0, r1 + 1):
-                q = (cen[k, 0] - cen[r0, 4]) ** 2 + (cen[k, 1] - cen[r0, 5]) ** 2 + (cen[k, 2] - cen[r0, 6]) ** 2
-                if q > r:
-                    r = q
-            cen[r0, 7] = np.sqrt(r)
-            big = 0.0
-            for k in range(r0, r1 + 1):
-                if cen[k, 3] > big:
-                    big = cen[k, 3]
-            cen[r0, 8] = big
+                s += grid[off[m] + u * A + a, c]
+            cen[coff[m] + u, c] = s / A
+        r = 0.0
+        for a in range(A):
+            k = off[m] + u * A + a
+            q = ((grid[k, 0] - cen[coff[m] + u, 0]) ** 2 + (grid[k, 1] - cen[coff[m] + u, 1]) ** 2
+                 + (grid[k, 2] - cen[coff[m] + u, 2]) ** 2)
+            if q > r:
+                r = q
+        cen[coff[m] + u, 3] = np.sqrt(r)
+        cen[coff[m] + u, 9] = _smoothstep(min(u, U - 1 - u) / (END_FADE * (U - 1)))
+    # each ring's plane normal (Newell's, over its polygon), along the centre line
+    for u in range(U):
+        r = coff[m] + u
+        n0 = 0.0
+        n1 = 0.0
+        n2 = 0.0
+        for a in range(A):
+            p = off[m] + u * A + a
+            q = off[m] + u * A + (a + 1) % A
+            n0 += (grid[p, 1] - grid[q, 1]) * (grid[p, 2] + grid[q, 2])
+            n1 += (grid[p, 2] - grid[q, 2]) * (grid[p, 0] + grid[q, 0])
+            n2 += (grid[p, 0] - grid[q, 0]) * (grid[p, 1] + grid[q, 1])
+        nl = np.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+        ra = coff[m] + max(u - 1, 0)
+        rb = coff[m] + min(u + 1, U - 1)
+        d0 = cen[rb, 0] - cen[ra, 0]
+        d1 = cen[rb, 1] - cen[ra, 1]
+        d2 = cen[rb, 2] - cen[ra, 2]
+        if nl <= 1e-12 * cen[r, 3] * cen[r, 3] or nl == 0.0:
+            n0, n1, n2, nl = 0.0, 0.0, 0.0, 1.0  # a pole, or no area: the centre line's own
+        elif n0 * d0 + n1 * d1 + n2 * d2 < 0.0:
+            nl = -nl
+        cen[r, 10] = n0 / nl
+        cen[r, 11] = n1 / nl
+        cen[r, 12] = n2 / nl
+    # bounding spheres of the centre segments in groups of SEG_GROUP (cen[first, 4:8])
+    for g in range((U - 2) // SEG_GROUP + 1):
+        r0 = coff[m] + g * SEG_GROUP
+        r1 = coff[m] + min(g * SEG_GROUP + SEG_GROUP, U - 1)
+        for c in range(3):
+            cen[r0, 4 + c] = 0.5 * (cen[r0, c] + cen[r1, c])
+        r = 0.0
+        for k in range(r0, r1 + 1):
+            q = (cen[k, 0] - cen[r0, 4]) ** 2 + (cen[k, 1] - cen[r0, 5]) ** 2 + (cen[k, 2] - cen[r0, 6]) ** 2
+            if q > r:
+                r = q
+        cen[r0, 7] = np.sqrt(r)
+        big = 0.0
+        for k in range(r0, r1 + 1):
+            if cen[k, 3] > big:
+                big = cen[k, 3]
+        cen[r0, 8] = big
+
+
+@njit(cache=True, parallel=True)
+def _centres_and_boxes(grid, off, nu, na, cen, coff, box):
+    """:func:`_centres` and :func:`_boxes`, muscle by muscle on numba's threads (the same values)."""
+    for m in prange(nu.shape[0]):
+        _centres_one(m, grid, off, nu, na, cen, coff)
+        _box_one(m, grid, off, box)
 
 
 @njit(cache=True, inline="always")
@@ -604,16 +618,22 @@ def _query_in(x, grid, off_j, U, A, cen, coff_j, reach, out, gl, row, cnt):
 def _boxes(grid, off, box):
     """Every muscle's bounding box (M, 6): lo, hi."""
     for m in range(off.shape[0] - 1):
+        _box_one(m, grid, off, box)
+
+
+@njit(cache=True)
+def _box_one(m, grid, off, box):
+    """:func:`_boxes` for muscle m."""
+    for c in range(3):
+        box[m, c] = 1e300
+        box[m, 3 + c] = -1e300
+    for k in range(off[m], off[m + 1]):
         for c in range(3):
-            box[m, c] = 1e300
-            box[m, 3 + c] = -1e300
-        for k in range(off[m], off[m + 1]):
-            for c in range(3):
-                v = grid[k, c]
-                if v < box[m, c]:
-                    box[m, c] = v
-                if v > box[m, 3 + c]:
-                    box[m, 3 + c] = v
+            v = grid[k, c]
+            if v < box[m, c]:
+                box[m, c] = v
+            if v > box[m, 3 + c]:
+                box[m, 3 + c] = v
 
 
 @njit(cache=True, inline="always")
@@ -1289,6 +1309,35 @@ def _normals(grid, off, nu, na, m, out_v, out_n):
     kernels._pole_normals(ga, e0, e1, out_n, 0)
 
 
+@njit(cache=True)
+def _normals_into(grid, off, nu, na, m, vo, out_v, out_n):
+    """:func:`_normals` of muscle m into rows vo[m]:vo[m + 1] of out_v, out_n (V, 3)."""
+    nv = vo[m + 1] - vo[m]
+    v = np.empty((1, nv, 3))
+    n = np.empty((1, nv, 3))
+    _normals(grid, off, nu, na, m, v, n)
+    for k in range(nv):
+        for c in range(3):
+            out_v[vo[m] + k, c] = v[0, k, c]
+            out_n[vo[m] + k, c] = n[0, k, c]
+
+
+@njit(cache=True, parallel=True)
+def _normals_all(grid, off, nu, na, touched, vo, out_v, out_n):
+    """:func:`_normals_into` for every touched muscle, muscle by muscle on numba's threads."""
+    for m in prange(nu.shape[0]):
+        if touched[m]:
+            _normals_into(grid, off, nu, na, m, vo, out_v, out_n)
+
+
+@njit(cache=True)
+def _normals_all_serial(grid, off, nu, na, touched, vo, out_v, out_n):
+    """:func:`_normals_all` on this thread alone (:func:`use_threads`)."""
+    for m in range(nu.shape[0]):
+        if touched[m]:
+            _normals_into(grid, off, nu, na, m, vo, out_v, out_n)
+
+
 # ----------------------------------------------------------------------------- the frame
 
 
@@ -1369,6 +1418,14 @@ def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np
     measure = _measure if threads else _measure_serial
     ring_modes = _ring_modes if threads else _ring_modes_serial
     apply_and_solve = _apply_and_solve if threads else _apply_and_solve_serial
+    normals_all = _normals_all if threads else _normals_all_serial
+
+    def centres_and_boxes():
+        if threads:
+            _centres_and_boxes(grid, off, nu, na, cen, coff, box)
+        else:
+            _centres(grid, off, nu, na, cen, coff)
+            _boxes(grid, off, box)
     if M == 0:
         return [], [], np.zeros(0, bool), np.zeros((0, 3)), np.zeros((0, 3))
     nu = np.array([s[0] for s in shapes], dtype=np.int64)
@@ -1381,8 +1438,7 @@ def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np
     cen = np.zeros((int(coff[-1]), CEN_COLUMNS))
     box = np.empty((M, 6))
     f = model.fields
-    _centres(grid, off, nu, na, cen, coff)
-    _boxes(grid, off, box)
+    centres_and_boxes()
     reach = tol.CONTACT_BONE_MARGIN + iterations * tol.CONTACT_MAX_STEP
     args_b = (world_inv, f.bones, f.origin, f.h, f.dims, f.offset, f.values, *_field_lists(box, f, world_inv, reach))
     before = np.full((M, 3), np.nan)
@@ -1419,8 +1475,7 @@ def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np
         _smooth_rings(coefb, nu, coff, tol.CONTACT_SMOOTH_PASSES, True, tmp)
         coef += coefb
         apply_and_solve(grid, rad, coef, off, nu, na, coff, touched, target, tol.CONTACT_MAX_STEP, ga, sigma)
-        _centres(grid, off, nu, na, cen, coff)
-        _boxes(grid, off, box)
+        centres_and_boxes()
     if volumes is not None and touched.any():
         _grid_volumes(grid, off, nu, na, volumes)
     if not touched.any() and not np.isnan(before).any():  # nothing moved (or no pass): the first measures
@@ -1429,18 +1484,11 @@ def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np
     measure(grid, off, nu, na, cen, coff, box, *_neighbours(box, model.allow, 0.0), *args_b, after, work)
     if not touched.any():
         return list(vertices), [None] * M, touched, before, after
-    out_v, out_n = [], []
-    for m in range(M):
-        if not touched[m]:
-            out_v.append(vertices[m])
-            out_n.append(None)
-            continue
-        nv = len(vertices[m])
-        v = np.empty((1, nv, 3))
-        n = np.empty((1, nv, 3))
-        _normals(grid, off, nu, na, m, v, n)
-        out_v.append(v[0])
-        out_n.append(n[0])
+    all_v = np.empty((int(vo[-1]), 3))
+    all_n = np.empty((int(vo[-1]), 3))
+    normals_all(grid, off, nu, na, touched, vo, all_v, all_n)
+    out_v = [all_v[vo[m]:vo[m + 1]] if touched[m] else vertices[m] for m in range(M)]
+    out_n = [all_n[vo[m]:vo[m + 1]] if touched[m] else None for m in range(M)]
     return out_v, out_n, touched, before, after
 
 
