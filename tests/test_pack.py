@@ -284,3 +284,31 @@ def test_packed_sections_stay_star_shaped(demo, packed):
             ang = np.arctan2(dd @ vt[1], dd @ vt[0])
             step = np.angle(np.exp(1j * np.diff(np.concatenate([ang, ang[:1]]))))
             assert np.all(step > 0) or np.all(step < 0), model.spec.name
+
+
+def test_a_forked_process_packs_on_its_thread_to_the_same_result(demo, packed, tmp_path):
+    """Packing in a process forked from one that used numba's threads (the `packed` fixture
+    packed on them) runs pack's kernels' twins on its own thread (GNU OpenMP, numba's
+    threading layer here, stops a forked child that starts its threads:
+    contact.use_threads); the same packed shapes and measures, bit for bit."""
+    import os
+    import pickle
+
+    d, plan, rest, cm = demo
+    out = tmp_path / "child.pkl"
+    pid = os.fork()
+    if pid == 0:
+        code = 1
+        try:
+            assert not contact.use_threads()
+            res = pack.pack(plan.muscles, plan.models, plan.pose.skeleton, rest, cm, iterations=12)
+            out.write_bytes(pickle.dumps(([m.rest_vertices for m in res.models], res.before, res.after, res.volume)))
+            code = 0
+        finally:
+            os._exit(code)
+    _, status = os.waitpid(pid, 0)
+    assert os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0, status
+    verts, before, after, volume = pickle.loads(out.read_bytes())
+    assert all(np.array_equal(a, m.rest_vertices) for a, m in zip(verts, packed.models))
+    assert np.array_equal(before, packed.before) and np.array_equal(after, packed.after)
+    assert np.array_equal(volume, packed.volume)

@@ -129,6 +129,16 @@ def _largest_piece(mask, K, lab, stack):
     return best
 
 
+@njit(cache=True)
+def _query_scratch(nu, nfields):
+    """Scratch arrays for contact's queries of one point or ring: q, g, actb, actm, gl, gn
+    (:func:`contact._ring_lists`, :func:`_owned`)."""
+    M = nu.shape[0]
+    ngmax = (nu.max() - 2) // contact.SEG_GROUP + 1
+    return (np.empty(contact.QUERY_SIZE), np.empty(6), np.empty(max(nfields, 1), np.int64),
+            np.empty(max(M, 1), np.int64), np.empty((max(M, 1), ngmax), np.int64), np.empty(max(M, 1), np.int64))
+
+
 @njit(cache=True, parallel=True)
 def _ring_targets(s, grid, off, nu, na, cen, coff, box, reach, nbr_off, nbr, inv, fb, fo, fh, fd, foff, fv,
                   fl_off, fl, K, grow, bone_margin, margin, rows, targets, origins, full):
@@ -136,107 +146,118 @@ def _ring_targets(s, grid, off, nu, na, cen, coff, box, reach, nbr_off, nbr, inv
     the rings to cut (the pole rows are not); targets, origins: like grid (each vertex's target
     and the ray origin it was found from); full (R,): whether the ring's territory is its whole
     envelope (nothing claims any of it)."""
-    M = nu.shape[0]
-    ngmax = (nu.max() - 2) // contact.SEG_GROUP + 1
     for r in prange(rows.shape[0]):
-        i = rows[r, 0]
-        u = rows[r, 1]
-        U = nu[i]
-        A = na[i]
-        q = np.empty(contact.QUERY_SIZE)
-        g = np.empty(6)
-        actb = np.empty(max(fb.shape[0], 1), np.int64)
-        actm = np.empty(max(M, 1), np.int64)
-        gl = np.empty((max(M, 1), ngmax), np.int64)
-        gn = np.empty(max(M, 1), np.int64)
-        mask = np.zeros(K * K, np.bool_)
-        lab = np.zeros(K * K, np.int64)
-        stack = np.zeros(K * K, np.int64)
-        dist = np.zeros(K * K, np.int64)
-        ci = cen[coff[i] + u].copy()
-        t0, t1, t2 = contact._centre_tangent(cen, coff[i], U, u)
-        # e1: towards the ring's first vertex, across the tangent; e2 = t x e1
-        base = off[i] + u * A
-        d0 = grid[base, 0] - ci[0]
-        d1 = grid[base, 1] - ci[1]
-        d2 = grid[base, 2] - ci[2]
-        dt = d0 * t0 + d1 * t1 + d2 * t2
-        d0 -= dt * t0
-        d1 -= dt * t1
-        d2 -= dt * t2
-        dl = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-        if dl < 1e-12 or (t0 == 0.0 and t1 == 0.0 and t2 == 0.0):
-            for a in range(A):
-                for c in range(3):
-                    targets[base + a, c] = grid[base + a, c]
-                    origins[base + a, c] = ci[c]
-            full[r] = False
-            continue
-        e10 = d0 / dl
-        e11 = d1 / dl
-        e12 = d2 / dl
-        e20 = t1 * e12 - t2 * e11
-        e21 = t2 * e10 - t0 * e12
-        e22 = t0 * e11 - t1 * e10
-        L = grow * s[i] * ci[3] + 0.002
-        h = 2.0 * L / K
-        ci[3] = L * 1.4143
-        nb, nmm = contact._ring_lists(ci, i, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, nbr_off, nbr, box,
-                                      0.0, reach.max(), actb, actm, cen, coff, nu, gl, gn)
-        x = np.empty(3)
-        n_env = 0
-        for ix in range(K):
-            for iy in range(K):
-                a_ = -L + (ix + 0.5) * h
-                b_ = -L + (iy + 0.5) * h
-                x[0] = ci[0] + a_ * e10 + b_ * e20
-                x[1] = ci[1] + a_ * e11 + b_ * e21
-                x[2] = ci[2] + a_ * e12 + b_ * e22
-                if _frac(x, i, grid, off, nu, na, cen, coff, box, reach[i], q) < s[i]:
-                    n_env += 1
-                mask[ix * K + iy] = _owned(x, i, s, grid, off, nu, na, cen, coff, box, reach, actm, nmm, inv, fb,
-                                           fo, fh, fd, foff, fv, actb, nb, bone_margin, q, g)
-        n = _largest_piece(mask, K, lab, stack)
-        full[r] = n == n_env
-        if n == 0:
-            for a in range(A):
-                for c in range(3):
-                    targets[base + a, c] = ci[c]
-                    origins[base + a, c] = ci[c]
-            continue
-        # the rays' origin: the piece's deepest point (its largest distance from outside)
-        kd = _deepest(mask, K, dist)
-        ca = -L + (kd // K + 0.5) * h
-        cb = -L + (kd % K + 0.5) * h
+        _ring_targets_one(r, s, grid, off, nu, na, cen, coff, box, reach, nbr_off, nbr, inv, fb, fo, fh, fd, foff, fv,
+                          fl_off, fl, K, grow, bone_margin, margin, rows, targets, origins, full)
+
+
+@njit(cache=True)
+def _ring_targets_serial(s, grid, off, nu, na, cen, coff, box, reach, nbr_off, nbr, inv, fb, fo, fh, fd, foff,
+                         fv, fl_off, fl, K, grow, bone_margin, margin, rows, targets, origins, full):
+    """:func:`_ring_targets` on this thread alone (:func:`contact.use_threads`)."""
+    for r in range(rows.shape[0]):
+        _ring_targets_one(r, s, grid, off, nu, na, cen, coff, box, reach, nbr_off, nbr, inv, fb, fo, fh, fd, foff, fv,
+                          fl_off, fl, K, grow, bone_margin, margin, rows, targets, origins, full)
+
+
+@njit(cache=True)
+def _ring_targets_one(r, s, grid, off, nu, na, cen, coff, box, reach, nbr_off, nbr, inv, fb, fo, fh, fd, foff, fv,
+                      fl_off, fl, K, grow, bone_margin, margin, rows, targets, origins, full):
+    """:func:`_ring_targets` for row r of ``rows``."""
+    i = rows[r, 0]
+    u = rows[r, 1]
+    U = nu[i]
+    A = na[i]
+    q, g, actb, actm, gl, gn = _query_scratch(nu, fb.shape[0])
+    mask = np.zeros(K * K, np.bool_)
+    lab = np.zeros(K * K, np.int64)
+    stack = np.zeros(K * K, np.int64)
+    dist = np.zeros(K * K, np.int64)
+    ci = cen[coff[i] + u].copy()
+    t0, t1, t2 = contact._centre_tangent(cen, coff[i], U, u)
+    # e1: towards the ring's first vertex, across the tangent; e2 = t x e1
+    base = off[i] + u * A
+    d0 = grid[base, 0] - ci[0]
+    d1 = grid[base, 1] - ci[1]
+    d2 = grid[base, 2] - ci[2]
+    dt = d0 * t0 + d1 * t1 + d2 * t2
+    d0 -= dt * t0
+    d1 -= dt * t1
+    d2 -= dt * t2
+    dl = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    if dl < 1e-12 or (t0 == 0.0 and t1 == 0.0 and t2 == 0.0):
         for a in range(A):
-            k = base + a
-            v0 = grid[k, 0] - ci[0]
-            v1 = grid[k, 1] - ci[1]
-            v2 = grid[k, 2] - ci[2]
-            pa = v0 * e10 + v1 * e11 + v2 * e12
-            pb = v0 * e20 + v1 * e21 + v2 * e22
-            pt = v0 * t0 + v1 * t1 + v2 * t2
-            th = np.arctan2(pb, pa)
-            ct = np.cos(th)
-            st = np.sin(th)
-            # march from the origin to the piece's edge (a star-shaped part of the piece)
-            step = 0.25 * h
-            rr = 0.0
-            rho = 0.0
-            while rho < 3.0 * L:
-                jx = int(np.floor((ca + rho * ct + L) / h))
-                jy = int(np.floor((cb + rho * st + L) / h))
-                if not (0 <= jx < K and 0 <= jy < K and mask[jx * K + jy]):
-                    break
-                rr = rho
-                rho += step
-            rr = max(rr + 0.5 * step - margin, 0.0)
             for c in range(3):
-                e1c = e10 if c == 0 else (e11 if c == 1 else e12)
-                e2c = e20 if c == 0 else (e21 if c == 1 else e22)
-                tc = t0 if c == 0 else (t1 if c == 1 else t2)
-                origins[k, c] = ci[c] + ca * e1c + cb * e2c + pt * tc
-                targets[k, c] = origins[k, c] + rr * (ct * e1c + st * e2c)
+                targets[base + a, c] = grid[base + a, c]
+                origins[base + a, c] = ci[c]
+        full[r] = False
+        return
+    e10 = d0 / dl
+    e11 = d1 / dl
+    e12 = d2 / dl
+    e20 = t1 * e12 - t2 * e11
+    e21 = t2 * e10 - t0 * e12
+    e22 = t0 * e11 - t1 * e10
+    L = grow * s[i] * ci[3] + 0.002
+    h = 2.0 * L / K
+    ci[3] = L * 1.4143
+    nb, nmm = contact._ring_lists(ci, i, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, nbr_off, nbr, box,
+                                  0.0, reach.max(), actb, actm, cen, coff, nu, gl, gn)
+    x = np.empty(3)
+    n_env = 0
+    for ix in range(K):
+        for iy in range(K):
+            a_ = -L + (ix + 0.5) * h
+            b_ = -L + (iy + 0.5) * h
+            x[0] = ci[0] + a_ * e10 + b_ * e20
+            x[1] = ci[1] + a_ * e11 + b_ * e21
+            x[2] = ci[2] + a_ * e12 + b_ * e22
+            if _frac(x, i, grid, off, nu, na, cen, coff, box, reach[i], q) < s[i]:
+                n_env += 1
+            mask[ix * K + iy] = _owned(x, i, s, grid, off, nu, na, cen, coff, box, reach, actm, nmm, inv, fb,
+                                       fo, fh, fd, foff, fv, actb, nb, bone_margin, q, g)
+    n = _largest_piece(mask, K, lab, stack)
+    full[r] = n == n_env
+    if n == 0:
+        for a in range(A):
+            for c in range(3):
+                targets[base + a, c] = ci[c]
+                origins[base + a, c] = ci[c]
+        return
+    # the rays' origin: the piece's deepest point (its largest distance from outside)
+    kd = _deepest(mask, K, dist)
+    ca = -L + (kd // K + 0.5) * h
+    cb = -L + (kd % K + 0.5) * h
+    for a in range(A):
+        k = base + a
+        v0 = grid[k, 0] - ci[0]
+        v1 = grid[k, 1] - ci[1]
+        v2 = grid[k, 2] - ci[2]
+        pa = v0 * e10 + v1 * e11 + v2 * e12
+        pb = v0 * e20 + v1 * e21 + v2 * e22
+        pt = v0 * t0 + v1 * t1 + v2 * t2
+        th = np.arctan2(pb, pa)
+        ct = np.cos(th)
+        st = np.sin(th)
+        # march from the origin to the piece's edge (a star-shaped part of the piece)
+        step = 0.25 * h
+        rr = 0.0
+        rho = 0.0
+        while rho < 3.0 * L:
+            jx = int(np.floor((ca + rho * ct + L) / h))
+            jy = int(np.floor((cb + rho * st + L) / h))
+            if not (0 <= jx < K and 0 <= jy < K and mask[jx * K + jy]):
+                break
+            rr = rho
+            rho += step
+        rr = max(rr + 0.5 * step - margin, 0.0)
+        for c in range(3):
+            e1c = e10 if c == 0 else (e11 if c == 1 else e12)
+            e2c = e20 if c == 0 else (e21 if c == 1 else e22)
+            tc = t0 if c == 0 else (t1 if c == 1 else t2)
+            origins[k, c] = ci[c] + ca * e1c + cb * e2c + pt * tc
+            targets[k, c] = origins[k, c] + rr * (ct * e1c + st * e2c)
+
 
 
 @njit(cache=True)
@@ -279,24 +300,34 @@ def _deepest(mask, K, dist):
 def _owned_all(pts, owner, s, grid, off, nu, na, cen, coff, box, reach, nbr_off, nbr, inv, fb, fo, fh, fd, foff, fv,
                fl_off, fl, bone_margin, out):
     """Whether each point pts[p] lies in the territory of muscle owner[p] (module doc, step 1)."""
-    M = nu.shape[0]
-    ngmax = (nu.max() - 2) // contact.SEG_GROUP + 1
     for p in prange(pts.shape[0]):
-        i = owner[p]
-        q = np.empty(contact.QUERY_SIZE)
-        g = np.empty(6)
-        actb = np.empty(max(fb.shape[0], 1), np.int64)
-        actm = np.empty(max(M, 1), np.int64)
-        gl = np.empty((max(M, 1), ngmax), np.int64)
-        gn = np.empty(max(M, 1), np.int64)
-        ci = np.empty(8)
-        for c in range(3):
-            ci[c] = pts[p, c]
-        ci[3] = 0.0
-        nb, nmm = contact._ring_lists(ci, i, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, nbr_off, nbr, box,
-                                      0.0, reach.max(), actb, actm, cen, coff, nu, gl, gn)
-        out[p] = _owned(pts[p], i, s, grid, off, nu, na, cen, coff, box, reach, actm, nmm, inv, fb, fo, fh, fd, foff,
-                        fv, actb, nb, bone_margin, q, g)
+        _owned_all_one(p, pts, owner, s, grid, off, nu, na, cen, coff, box, reach, nbr_off, nbr, inv, fb, fo, fh, fd,
+                       foff, fv, fl_off, fl, bone_margin, out)
+
+
+@njit(cache=True)
+def _owned_all_serial(pts, owner, s, grid, off, nu, na, cen, coff, box, reach, nbr_off, nbr, inv, fb, fo, fh, fd,
+                      foff, fv, fl_off, fl, bone_margin, out):
+    """:func:`_owned_all` on this thread alone (:func:`contact.use_threads`)."""
+    for p in range(pts.shape[0]):
+        _owned_all_one(p, pts, owner, s, grid, off, nu, na, cen, coff, box, reach, nbr_off, nbr, inv, fb, fo, fh, fd,
+                       foff, fv, fl_off, fl, bone_margin, out)
+
+
+@njit(cache=True)
+def _owned_all_one(p, pts, owner, s, grid, off, nu, na, cen, coff, box, reach, nbr_off, nbr, inv, fb, fo, fh, fd,
+                   foff, fv, fl_off, fl, bone_margin, out):
+    """:func:`_owned_all` for point p."""
+    i = owner[p]
+    q, g, actb, actm, gl, gn = _query_scratch(nu, fb.shape[0])
+    ci = np.empty(8)
+    for c in range(3):
+        ci[c] = pts[p, c]
+    ci[3] = 0.0
+    nb, nmm = contact._ring_lists(ci, i, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, nbr_off, nbr, box,
+                                  0.0, reach.max(), actb, actm, cen, coff, nu, gl, gn)
+    out[p] = _owned(pts[p], i, s, grid, off, nu, na, cen, coff, box, reach, actm, nmm, inv, fb, fo, fh, fd, foff,
+                    fv, actb, nb, bone_margin, q, g)
 
 
 @njit(cache=True, parallel=True)
@@ -305,17 +336,32 @@ def _inside_of(grid, off, nu, na, cen, coff, box, nbr_off, nbr, out):
     (axis-space query), or -1."""
     M = nu.shape[0]
     for i in prange(M):
-        q = np.empty(contact.QUERY_SIZE)
-        for k in range(off[i], off[i + 1]):
-            out[k] = -1
-            x = grid[k]
-            for jj in range(nbr_off[i], nbr_off[i + 1]):
-                j = nbr[jj]
-                if not contact._may_meet(x, j, box, 0.0):
-                    continue
-                if contact._muscle_query(x, grid, off[j], nu[j], na[j], cen, coff[j], 0.0, q) and q[0] < q[1]:
-                    out[k] = j
-                    break
+        _inside_of_one(i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, out)
+
+
+@njit(cache=True)
+def _inside_of_serial(grid, off, nu, na, cen, coff, box, nbr_off, nbr, out):
+    """:func:`_inside_of` on this thread alone (:func:`contact.use_threads`)."""
+    M = nu.shape[0]
+    for i in range(M):
+        _inside_of_one(i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, out)
+
+
+@njit(cache=True)
+def _inside_of_one(i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, out):
+    """:func:`_inside_of` for muscle i."""
+    q = np.empty(contact.QUERY_SIZE)
+    for k in range(off[i], off[i + 1]):
+        out[k] = -1
+        x = grid[k]
+        for jj in range(nbr_off[i], nbr_off[i + 1]):
+            j = nbr[jj]
+            if not contact._may_meet(x, j, box, 0.0):
+                continue
+            if contact._muscle_query(x, grid, off[j], nu[j], na[j], cen, coff[j], 0.0, q) and q[0] < q[1]:
+                out[k] = j
+                break
+
 
 
 # ----------------------------------------------------------------------------- the fit
@@ -518,9 +564,10 @@ def measure_rest(models, cm: "contact.ContactModel", rest_inv: np.ndarray) -> np
     grid, off, nu, na, cen, coff, box = _grids(models)
     f = cm.fields
     out = np.zeros((len(models), 3))
-    contact._measure(grid, off, nu, na, cen, coff, box, *contact._neighbours(box, cm.allow, 0.0), rest_inv, f.bones,
-                     f.origin, f.h, f.dims, f.offset, f.values, *contact._field_lists(box, f, rest_inv, 0.0), out,
-                     contact._work(nu, na, f))
+    measure = contact._measure if contact.use_threads() else contact._measure_serial
+    measure(grid, off, nu, na, cen, coff, box, *contact._neighbours(box, cm.allow, 0.0), rest_inv, f.bones,
+            f.origin, f.h, f.dims, f.offset, f.values, *contact._field_lists(box, f, rest_inv, 0.0), out,
+            contact._work(nu, na, f))
     return out
 
 
@@ -534,6 +581,11 @@ def pack(specs, models, skeleton, rest_world: np.ndarray, cm: "contact.ContactMo
     M = len(models)
     inv = np.linalg.inv(rest_world)
     f = cm.fields
+    # on numba's threads, but not in a worker or a forked process (contact.use_threads)
+    threads = contact.use_threads()
+    ring_targets = _ring_targets if threads else _ring_targets_serial
+    owned_all = _owned_all if threads else _owned_all_serial
+    inside_of = _inside_of if threads else _inside_of_serial
     grid, off, nu, na, cen, coff, box = _grids(models)  # the envelopes: the original rest shapes
     rmax = np.array([cen[coff[m]:coff[m + 1], 3].max() for m in range(M)])
     layouts = [section_layout(sp, sections) for sp in specs]
@@ -560,8 +612,8 @@ def pack(specs, models, skeleton, rest_world: np.ndarray, cm: "contact.ContactMo
         args = (grid, off, nu, na, cen, coff, box, reach, nbr_off, nbr, inv, f.bones, f.origin, f.h, f.dims,
                 f.offset, f.values, fl_off, fl)
         full = np.zeros(len(rows), np.bool_)
-        _ring_targets(s, *args, pixels, tol.PACK_GROW * max(1.0, float(s.max())), tol.CONTACT_BONE_MARGIN,
-                      tol.PACK_MARGIN, rows, targets, origins, full)
+        ring_targets(s, *args, pixels, tol.PACK_GROW * max(1.0, float(s.max())), tol.CONTACT_BONE_MARGIN,
+                     tol.PACK_MARGIN, rows, targets, origins, full)
         # a muscle whose territory is its whole rest shape (nothing claims any of it) is kept as it is
         clear = (np.bincount(rows[:, 0], weights=(~full).astype(np.float64), minlength=M) == 0) & (s == 1.0)
         # fit; where a fitted vertex leaves its territory, its target is drawn in and fitted again
@@ -574,7 +626,7 @@ def pack(specs, models, skeleton, rest_world: np.ndarray, cm: "contact.ContactMo
                 break
             pts = np.concatenate([ft[1].reshape(-1, 3) for ft in fits])
             ok = np.zeros(len(pts), np.bool_)
-            _owned_all(pts, owner, s, *args, 0.0, ok)
+            owned_all(pts, owner, s, *args, 0.0, ok)
             draw = np.zeros(len(grid), np.bool_)
             draw[ring_rows[~ok]] = True
             # where the fit overshot its target outwards, the target is set back by the overshoot
@@ -595,7 +647,7 @@ def pack(specs, models, skeleton, rest_world: np.ndarray, cm: "contact.ContactMo
             contact._centres(fg, off, nu, na, fcen, coff)
             contact._boxes(fg, off, fbox)
             held = np.empty(len(fg), np.int64)
-            _inside_of(fg, off, nu, na, fcen, coff, fbox, *contact._neighbours(fbox, cm.allow, 0.0), held)
+            inside_of(fg, off, nu, na, fcen, coff, fbox, *contact._neighbours(fbox, cm.allow, 0.0), held)
             for k in np.nonzero(held >= 0)[0]:
                 j = int(held[k])
                 vj = fg[off[j]:off[j + 1]]
