@@ -374,6 +374,14 @@ def _centres_and_boxes(grid, off, nu, na, cen, coff, box):
         _box_one(m, grid, off, box)
 
 
+@njit(cache=True)
+def _centres_and_boxes_serial(grid, off, nu, na, cen, coff, box):
+    """:func:`_centres_and_boxes` on this thread alone (:func:`use_threads`)."""
+    for m in range(nu.shape[0]):
+        _centres_one(m, grid, off, nu, na, cen, coff)
+        _box_one(m, grid, off, box)
+
+
 @njit(cache=True, inline="always")
 def _ring_radius(grid, base, A, cx0, cx1, cx2, a0, a1, a2, b0, b1, b2):
     """Radius of a ring (A points from ``base``) along (a0, a1, a2) from the centre (cx0, cx1,
@@ -1419,13 +1427,7 @@ def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np
     ring_modes = _ring_modes if threads else _ring_modes_serial
     apply_and_solve = _apply_and_solve if threads else _apply_and_solve_serial
     normals_all = _normals_all if threads else _normals_all_serial
-
-    def centres_and_boxes():
-        if threads:
-            _centres_and_boxes(grid, off, nu, na, cen, coff, box)
-        else:
-            _centres(grid, off, nu, na, cen, coff)
-            _boxes(grid, off, box)
+    centres_and_boxes = _centres_and_boxes if threads else _centres_and_boxes_serial
     if M == 0:
         return [], [], np.zeros(0, bool), np.zeros((0, 3)), np.zeros((0, 3))
     nu = np.array([s[0] for s in shapes], dtype=np.int64)
@@ -1438,7 +1440,7 @@ def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np
     cen = np.zeros((int(coff[-1]), CEN_COLUMNS))
     box = np.empty((M, 6))
     f = model.fields
-    centres_and_boxes()
+    centres_and_boxes(grid, off, nu, na, cen, coff, box)
     reach = tol.CONTACT_BONE_MARGIN + iterations * tol.CONTACT_MAX_STEP
     args_b = (world_inv, f.bones, f.origin, f.h, f.dims, f.offset, f.values, *_field_lists(box, f, world_inv, reach))
     before = np.full((M, 3), np.nan)
@@ -1475,7 +1477,7 @@ def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np
         _smooth_rings(coefb, nu, coff, tol.CONTACT_SMOOTH_PASSES, True, tmp)
         coef += coefb
         apply_and_solve(grid, rad, coef, off, nu, na, coff, touched, target, tol.CONTACT_MAX_STEP, ga, sigma)
-        centres_and_boxes()
+        centres_and_boxes(grid, off, nu, na, cen, coff, box)
     if volumes is not None and touched.any():
         _grid_volumes(grid, off, nu, na, volumes)
     if not touched.any() and not np.isnan(before).any():  # nothing moved (or no pass): the first measures
