@@ -32,13 +32,17 @@ Response (tol.CONTACT_ITERATIONS Jacobi passes, every muscle against every other
    point's ring is thin against j (tol.CONTACT_THIN; not near i's ends, :data:`END_FADE`), j's
    section at the point's angle pulled in past it by j's share (a thin muscle inside a thick
    one: none of the thick one's points is inside the thin one, so its own samples never ask it
-   to give way; the gracilis' origin in the adductor brevis, a tendon in a belly);
+   to give way; the gracilis' origin in the adductor brevis, a tendon in a belly); and at
+   each pole (the end cap's tip), the bones' push by the same rule, as a whole: a model's
+   attachment point often lies a few mm inside its bone's mesh (gait2392's soleus origin
+   6.7 mm inside the tibia, the tensor fasciae latae's insertion 6.3 mm), and so did the
+   mesh's tip; the path, and so the length, stays the model's;
 2. per ring, the pushes' low-pass around the ring: the ring's shift, tilt of one side and
    flattening (the first two Fourier modes, the least-squares fit of those modes to the
    evenly spaced pushes), linear between sampled rings and smoothed along the muscle: the
    muscles' pushes with the poles (attachments) fixed, the bones' pushes with free ends (the
-   rings next to an attachment keep their own push out of the bone; the pole itself never
-   moves); each point moves by its ring's modes, soft-capped at
+   rings next to an attachment keep their own push out of the bone, the pole its own);
+   each point moves by its ring's modes, soft-capped at
    tol.CONTACT_MAX_STEP a pass. So the surface stays as smooth as the muscle (no point is
    moved alone: no dents, no wrapping under a bone), with 5 x 3 unknowns per ring;
 3. the volume is solved exactly again: every point moves along its no-contact radial offset
@@ -711,6 +715,34 @@ def _section_angle(grid, off_j, A, cen, coff_j, U, bu, bl, r0, r1, r2):
 
 
 @njit(cache=True, inline="always")
+def _give_way(amt, j, grid, off, nu, na, cen, coff, q, g, rec):
+    """Record that muscle j's section at the point of query q (:func:`_query_in`) is pulled in
+    by ``amt`` (m) at the point's angle: for each of j's two rings there, a record in rec
+    (count in rec[0, 0]): the row, the modes of the pull (the Fourier sums of one sample,
+    weighted by its length and the ring's share of the segment), and that weight
+    (:func:`_add_reactions` takes their weighted mean). g: scratch (NMODES)."""
+    th = _section_angle(grid, off[j], na[j], cen, coff[j], nu[j], int(q[8]), q[9], q[5], q[6], q[7])
+    if not (amt > 0.0 and th == th):
+        return
+    bu = int(q[8])
+    _modes(th, g)
+    for e in range(2):
+        wr = amt * ((1.0 - q[9]) if e == 0 else q[9])
+        if wr <= 0.0:
+            continue
+        n = int(rec[0, 0])
+        rec[0, 0] += 1.0
+        if n + 1 >= rec.shape[0]:
+            continue  # no room: counted, and the pass is run again with more
+        rec[n + 1, 0] = coff[j] + bu + e
+        for r in range(NMODES):
+            br = (1.0 if r == 0 else 2.0) * g[r]
+            for c in range(3):
+                rec[n + 1, 1 + r * 3 + c] = wr * br * amt * q[5 + c]
+        rec[n + 1, 1 + 3 * NMODES] = wr
+
+
+@njit(cache=True, inline="always")
 def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, actm, nmm, share, inv, fb, fo, fh, fd, foff, fv,
                 actb, nbb, gl, gn, prm, q, g, p, rec):
     """The pushes that point x of muscle i (its ring's centre ci) asks for, against the bone
@@ -769,25 +801,8 @@ def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, actm, nmm, share, i
         # and go)
         thin = (1.0 - _smoothstep((ci[3] / q[1] - thin0) / (thin1 - thin0))) * ci[9]
         if thin > 0.0:
-            amt = thin * fade * share[j, i] * (rr - rho)
-            th = _section_angle(grid, off[j], na[j], cen, coff[j], nu[j], int(q[8]), q[9], q[5], q[6], q[7])
-            if amt > 0.0 and th == th:
-                bu = int(q[8])
-                _modes(th, g)  # (g: free again once the bones' push is taken)
-                for e in range(2):
-                    wr = amt * ((1.0 - q[9]) if e == 0 else q[9])
-                    if wr <= 0.0:
-                        continue
-                    n = int(rec[0, 0])
-                    rec[0, 0] += 1.0
-                    if n + 1 >= rec.shape[0]:
-                        continue  # no room: counted, and the pass is run again with more
-                    rec[n + 1, 0] = coff[j] + bu + e
-                    for r in range(NMODES):
-                        br = (1.0 if r == 0 else 2.0) * g[r]
-                        for c in range(3):
-                            rec[n + 1, 1 + r * 3 + c] = wr * br * amt * q[5 + c]
-                    rec[n + 1, 1 + 3 * NMODES] = wr
+            # (g: free again once the bones' push is taken)
+            _give_way(thin * fade * share[j, i] * (rr - rho), j, grid, off, nu, na, cen, coff, q, g, rec)
         bl = radial_blend * q[1]
         e0 = ci[0] - q[2]
         e1 = ci[1] - q[3]
@@ -823,7 +838,7 @@ def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, actm, nmm, share, i
 
 @njit(cache=True, parallel=True)
 def _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb, fo, fh, fd, foff, fv, fl_off, fl,
-                margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, thin0, thin1, cstep, rstep, coef, coefb,
+                margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, thin0, thin1, cstep, rstep, poles, coef, coefb,
                 touched, buried, work):
     """One Jacobi pass (module doc, steps 1-2), every muscle from the same state: the pushes at
     ``ns`` = A / ``cstep`` evenly spaced points of every ``rstep``-th ring (and the last inner
@@ -831,7 +846,7 @@ def _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb,
     :data:`NMODES` modes, which for evenly spaced samples are the discrete Fourier coefficients
     (the modes are orthogonal there): C_0 = mean p, C_k = (2 / ns) sum p b_k, the muscles'
     pushes into coef and the bones' into coefb (smoothed with different ends). coef (rings,
-    NMODES, 3); rings between sampled ones: linear between theirs; poles: 0. touched (M,):
+    NMODES, 3); rings between sampled ones: linear between theirs; poles: the bones' push alone, mode 0 alone. touched (M,):
     set where a sample was pushed; buried (M,): the share of samples inside a bone. work:
     scratch arrays (:func:`_work`), one set per muscle, and each muscle's thick neighbours'
     giving way recorded in its own rows of them (:func:`_add_reactions` adds them up in
@@ -841,23 +856,23 @@ def _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb,
     prm = (margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, thin0, thin1)
     for i in prange(nu.shape[0]):
         _ring_modes_one(i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb, fo, fh, fd, foff, fv,
-                        fl_off, fl, prm, cstep, rstep, coef, coefb, touched, buried, work)
+                        fl_off, fl, prm, cstep, rstep, poles, coef, coefb, touched, buried, work)
 
 
 @njit(cache=True)
 def _ring_modes_serial(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb, fo, fh, fd, foff, fv, fl_off,
-                       fl, margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, thin0, thin1, cstep, rstep, coef,
+                       fl, margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, thin0, thin1, cstep, rstep, poles, coef,
                        coefb, touched, buried, work):
     """:func:`_ring_modes` on this thread alone (:func:`use_threads`)."""
     prm = (margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, thin0, thin1)
     for i in range(nu.shape[0]):
         _ring_modes_one(i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb, fo, fh, fd, foff, fv,
-                        fl_off, fl, prm, cstep, rstep, coef, coefb, touched, buried, work)
+                        fl_off, fl, prm, cstep, rstep, poles, coef, coefb, touched, buried, work)
 
 
 @njit(cache=True, _nrt=False)
 def _ring_modes_one(i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb, fo, fh, fd, foff, fv, fl_off,
-                    fl, prm, cstep, rstep, coef, coefb, touched, buried, work):
+                    fl, prm, cstep, rstep, poles, coef, coefb, touched, buried, work):
     """:func:`_ring_modes` for muscle i, with its own scratch arrays (row i of each of
     work's). Compiled without numba's reference counting (it allocates nothing): the helpers
     inlined into its loops otherwise count references to each array they are handed, twice
@@ -922,11 +937,44 @@ def _ring_modes_one(i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, i
         if u == U - 2:
             break
         u = min(u + rstep, U - 2)
+    # the poles (the tips of the end caps, on the attachments): pushed as a whole (mode 0 only,
+    # so the pole's A grid copies stay one point) out of the bones they lie in, by the same
+    # rule as a ring's samples: the mesh's tip leaves the bone where the model's attachment
+    # point lies inside its mesh (the path, and so the length, stays the model's). Not out of
+    # muscles: where attachments crowd (the adductors' origins by the pubis) a pole pushed
+    # near a neighbour's axis turned between frames (a 2.4x step on the walk)
     for v in (0, U - 1):
+        r0 = coff[i] + v
         for r in range(NMODES):
             for c in range(3):
-                coef[coff[i] + v, r, c] = 0.0
-                coefb[coff[i] + v, r, c] = 0.0
+                coef[r0, r, c] = 0.0
+                coefb[r0, r, c] = 0.0
+        if not poles:
+            continue
+        ci = cen[r0]
+        nbb, nmm = _ring_lists(ci, i, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, nbr_off, nbr, box, margin_b,
+                               margin_m, actb, actm, cen, coff, nu, gl, gn)
+        x = grid[off[i] + v * A]
+        if nbb > 0:
+            _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, actm, 0, share, inv, fb, fo, fh, fd, foff, fv,
+                        actb, nbb, gl, gn, prm, q, g, p, rec)
+            for c in range(3):
+                coefb[r0, 0, c] = p[4 + c]
+            if p[4] != 0.0 or p[5] != 0.0 or p[6] != 0.0:
+                touched[i] = True
+        # a pole inside a neighbour: the neighbour gives way (the pole is an attachment, as
+        # thin as can be), pulled in past it by its share, faded near its axis as a push is
+        for jj in range(nmm):
+            j = actm[jj]
+            if not _may_meet(x, j, box, margin_m):
+                continue
+            if not _query_in(x, grid, off[j], nu[j], na[j], cen, coff[j], margin_m, q, gl, jj, gn[jj]):
+                continue
+            rr = q[1] + margin_m
+            if q[0] >= rr or q[1] <= 0.0:
+                continue
+            fade = _smoothstep((q[0] / q[1] - prm[2]) / (prm[3] - prm[2]))
+            _give_way(fade * share[j, i] * (rr - q[0]), j, grid, off, nu, na, cen, coff, q, g, rec)
     buried[i] = nb / max(nsamp, 1)
 
 
@@ -961,9 +1009,9 @@ def _add_reactions(rec, react, coef, nu, coff, touched, floor):
 
 @njit(cache=True)
 def _smooth_rings(coef, nu, coff, passes, free_ends, tmp):
-    """``passes`` rounds of [1 2 1]/4 smoothing of the modes along each muscle (the poles stay
-    at 0: the attachments do not move; ``free_ends``: the end rings are smoothed as if the
-    pole moved with them, so they keep their own push)."""
+    """``passes`` rounds of [1 2 1]/4 smoothing of the modes along each muscle (the poles keep
+    their own: 0 for the muscles' pushes, the attachments hold; ``free_ends``: the end rings
+    are smoothed as if the pole moved with them, so they keep their own push)."""
     for i in range(nu.shape[0]):
         U = nu[i]
         o = coff[i]
@@ -1313,6 +1361,14 @@ def _normals(grid, off, nu, na, m, out_v, out_n):
             s1 += ga[U - 2, a, c]
         e0[0, c] = ga[0, 0, c] - s0 / A
         e1[0, c] = ga[U - 1, 0, c] - s1 / A
+    # unit outward directions at the poles, as the surface stage's (-T(0), T(1)): the fan's
+    # normal is kept where it is within 60 degrees of them (unnormalized, a few mm long, they
+    # replaced every pole's fan normal)
+    for e in (e0, e1):
+        el = np.sqrt(e[0, 0] ** 2 + e[0, 1] ** 2 + e[0, 2] ** 2)
+        if el > 0.0:
+            for c in range(3):
+                e[0, c] /= el
     kernels._ring_vertices(ga, out_v, out_n, 0)
     kernels._pole_normals(ga, e0, e1, out_n, 0)
 
@@ -1410,7 +1466,7 @@ def vertices_to_grid(v: np.ndarray, U: int, A: int) -> np.ndarray:
 
 def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np.ndarray,
                   iterations: int = tol.CONTACT_ITERATIONS, measure_before: bool = True,
-                  volumes: np.ndarray | None = None):
+                  volumes: np.ndarray | None = None, poles: bool = True):
     """Contact for one frame.
 
     vertices : [(V_m, 3) float64] every muscle's no-contact mesh; world_inv : (B, 4, 4) world
@@ -1419,7 +1475,9 @@ def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np
     before (M, 3), after (M, 3)): inside-muscle share, inside-bone share and deepest
     penetration before and after contact. ``measure_before`` False (the stage, to halve the
     measuring): before's inside-bone share is that of the first pass's samples, the rest NaN.
-    ``volumes`` (M,): filled with each muscle's mesh volume after contact where any moved."""
+    ``volumes`` (M,): filled with each muscle's mesh volume after contact where any moved.
+    ``poles`` False: the poles stay where they are (the packer, which fits the rest sections
+    to the rings contact gives, the poles being the model's attachments)."""
     shapes = model.shapes
     M = len(vertices)
     threads = use_threads()
@@ -1465,7 +1523,7 @@ def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np
                         tol.CONTACT_MARGIN, tol.CONTACT_BONE_MARGIN, tol.CONTACT_DEEP_FADE[0],
                         tol.CONTACT_DEEP_FADE[1], tol.CONTACT_AXES_FADE[0], tol.CONTACT_AXES_FADE[1],
                         tol.CONTACT_RADIAL_BLEND, tol.CONTACT_THIN[0], tol.CONTACT_THIN[1],
-                        tol.CONTACT_SAMPLE_COLUMNS, tol.CONTACT_SAMPLE_RINGS, coef, coefb, touched, buried, work)
+                        tol.CONTACT_SAMPLE_COLUMNS, tol.CONTACT_SAMPLE_RINGS, poles, coef, coefb, touched, buried, work)
             need = int(work[8][:, 0, 0].max())
             if need < work[8].shape[1]:
                 break

@@ -29,8 +29,9 @@ The method: a weighted partition of space, then a fit.
    not reach it within tol.PACK_SCALE_MAX; its volume is then what it could take (reported).
 5. **Polish.** The round kept leaves what the fit could not follow: smooth sections cut a
    little across territory boundaries (on Rajagopal2016, 2.9% of the rest vertices inside
-   another muscle). The frame's own contact stage (:func:`contact.resolve_frame`, volume kept)
-   is run at the rest pose with many passes, and the sections are fitted to the rings it gives,
+   another muscle). The frame's own contact stage (:func:`contact.resolve_frame`, volume kept,
+   the poles where they are: packing fits sections, not attachments) is run at the rest pose
+   with many passes, and the sections are fitted to the rings it gives,
    without the smoothing of step 3 (contact's displacements are smooth along the muscle
    already); tol.PACK_POLISH_ROUNDS times. Each round is scored like the others, and the best
    of all is written.
@@ -709,7 +710,7 @@ def _polish(best, specs, models, skeleton, rest_world, cm, layouts, frames, v0, 
     fits = {}
     for r in range(rounds):
         verts = [m.rest_vertices.astype(np.float64) for m in cur_models]
-        moved, _, touched, _, _ = contact.resolve_frame(cm, verts, inv, tol.PACK_POLISH_PASSES, False)
+        moved, _, touched, _, _ = contact.resolve_frame(cm, verts, inv, tol.PACK_POLISH_PASSES, False, poles=False)
         shift = [mv - v for mv, v in zip(moved, verts)]
         n = 1
         if poses is not None:
@@ -718,7 +719,7 @@ def _polish(best, specs, models, skeleton, rest_world, cm, layouts, frames, v0, 
                 vs = [pv[fi].astype(np.float64) for pv in pverts]
                 if not all(np.isfinite(v).all() for v in vs):
                     continue
-                pm, _, pt, _, _ = contact.resolve_frame(cm, vs, pinv[fi], tol.PACK_POLISH_PASSES, False)
+                pm, _, pt, _, _ = contact.resolve_frame(cm, vs, pinv[fi], tol.PACK_POLISH_PASSES, False, poles=False)
                 n += 1
                 for i in np.nonzero(pt)[0]:
                     shift[i] = shift[i] + to_rest(pm[i] - vs[i], verts[i], vs[i], models[i].U, models[i].A)
