@@ -42,7 +42,8 @@ if "NUMBA_THREADING_LAYER" not in _os.environ:
 def _kernel_cache() -> str | None:
     """numba's cache folder for axdf's kernels: $XDG_CACHE_HOME/axdf/numba/<hash> (default
     ~/.cache), the hash of every source file under axdf_cli/model/ (where all the kernels
-    are). numba keys a cached kernel by its own file only, while a kernel holds the code of
+    are) and of tolerances.py (whose constants the kernels read as compile-time globals).
+    numba keys a cached kernel by its own file only, while a kernel holds the code of
     the kernels it calls from other files (pack.py's hold contact.py's query): after an
     edit or an upgrade of one file, the others' cached kernels ran the old code (a packed
     library made so was not what its code makes). Folders unused for 30 days are removed."""
@@ -53,8 +54,8 @@ def _kernel_cache() -> str | None:
 
     model = Path(__file__).resolve().parent / "model"
     h = hashlib.sha256()
-    for f in sorted(model.rglob("*.py")):
-        h.update(str(f.relative_to(model)).encode() + b"\0" + f.read_bytes() + b"\0")
+    for f in [*sorted(model.rglob("*.py")), model.parent / "tolerances.py"]:
+        h.update(str(f.relative_to(model.parent)).encode() + b"\0" + f.read_bytes() + b"\0")
     base = Path(_os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "axdf" / "numba"
     here = base / h.hexdigest()[:16]
     try:

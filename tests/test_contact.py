@@ -659,7 +659,7 @@ def test_a_worker_keeps_contact_on_its_thread(monkeypatch):
 def test_the_kernel_cache_follows_every_model_source(tmp_path, monkeypatch):
     """numba keys a cached kernel by its own file, while pack.py's kernels hold contact.py's
     query: axdf keeps numba's cache in a folder keyed by every source under axdf_cli/model
-    (a packed library made with pack's kernels cached before a change of the query was not
+    and tolerances.py (a packed library made with pack's kernels cached before a change of the query was not
     what the code makes). The folder is this process's (NUMBA_CACHE_DIR); others unused for
     30 days are removed, recent ones kept."""
     import hashlib
@@ -676,8 +676,9 @@ def test_the_kernel_cache_follows_every_model_source(tmp_path, monkeypatch):
     here = axdf_cli._kernel_cache()
     model = REPO_ROOT / "axdf_cli" / "model"
     h = hashlib.sha256()
-    for f in sorted(model.rglob("*.py")):
-        h.update(str(f.relative_to(model)).encode() + b"\0" + f.read_bytes() + b"\0")
+    # tolerances.py too: the kernels read its constants as compile-time globals
+    for f in [*sorted(model.rglob("*.py")), model.parent / "tolerances.py"]:
+        h.update(str(f.relative_to(model.parent)).encode() + b"\0" + f.read_bytes() + b"\0")
     assert here == str(base / h.hexdigest()[:16])
     assert not old.exists() and recent.is_dir() and os.path.isdir(here)
     # what numba is told in a process that imports axdf

@@ -26,8 +26,9 @@ Response (tol.CONTACT_ITERATIONS Jacobi passes, every muscle against every other
    for (:func:`_point_push`): out of a neighbour j it lies within the margin of, along the line
    from j's axis to the centre of its own ring, by its share of the distance to leave j's
    section (a circle of radius R + margin; :func:`pair_shares`: a deeper muscle gives way
-   more), faded out for points near j's axis (two muscles on one line of action have no side
-   to push to: pushing them piles them up); out of a bone by (margin - d) times the field's gradient (not normalized: it
+   more), faded out where the point and its ring's centre both lie near j's axis (two
+   muscles on one line of action have no side to push to: pushing them piles them up; a ring
+   that crosses j off its axis is pushed out even where its points pass near that axis); out of a bone by (margin - d) times the field's gradient (not normalized: it
    shortens deep inside where the field's sides meet and its direction turns); and, where the
    point's ring is thin against j (tol.CONTACT_THIN; not near i's ends, :data:`END_FADE`), j's
    section at the point's angle pulled in past it by j's share (a thin muscle inside a thick
@@ -750,9 +751,11 @@ def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, actm, nmm, share, i
     every bone field by (margin_b - d) along the field's gradient where d < margin_b; in
     p[:3], out of every neighbour j it lies within the margin of, by i's share of the distance to leave j's
     section (a circle of j's radius + margin about j's axis point) along the line from j's axis
-    to ci (plus a little of x's radial direction from j's axis), faded out smoothly for points
-    nearer j's axis than deep1 of j's radius (none below deep0: two muscles on one line of
-    action have no side to push to, and pushing them anyway piles them up); p[3]: the signed
+    to ci (plus a little of x's radial direction from j's axis, faded out for points nearer j's
+    axis than deep1 of j's radius, none below deep0), the push faded out likewise where both x
+    and ci lie near j's axis (ci's distance read as tol.CONTACT_DEEP_FADE_CENTRES of itself: two
+    muscles on one line of action have no side to push to, and pushing them anyway piles them
+    up; a ring that crosses j off its axis has one); p[3]: the signed
     distance to the nearest bone (1e30: none near). Kept apart, the two are smoothed along the
     muscle with different ends (:func:`_ring_modes`). Where x's ring is thin against j (its
     radius under thin1 of j's, fully under thin0, times the ring's end fade ci[9]), j gives way
@@ -792,25 +795,29 @@ def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, actm, nmm, share, i
         rr = q[1] + margin_m
         if rho >= rr or q[1] <= 0.0:
             continue
-        fade = _smoothstep((rho / q[1] - deep0) / (deep1 - deep0))
-        if fade <= 0.0:
+        fade = _smoothstep((rho / q[1] - deep0) / (deep1 - deep0))  # x near j's axis
+        e0 = ci[0] - q[2]
+        e1 = ci[1] - q[3]
+        e2 = ci[2] - q[4]
+        sep = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2) / q[1]  # x's ring centre from j's axis, in j's radii
+        if fade <= 0.0 and tol.CONTACT_DEEP_FADE_CENTRES * sep <= deep0:
             continue
         # a thin muscle inside a thick one: the thick one gives way too, its section at x's
         # angle pulled in past x by its share (react: per ring of j, the modes' sums weighted
         # by the push's length, and those lengths: a weighted mean, continuous as samples come
         # and go)
         thin = (1.0 - _smoothstep((ci[3] / q[1] - thin0) / (thin1 - thin0))) * ci[9]
-        if thin > 0.0:
+        if thin > 0.0 and fade > 0.0:
             # (g: free again once the bones' push is taken)
             _give_way(thin * fade * share[j, i] * (rr - rho), j, grid, off, nu, na, cen, coff, q, g, rec)
-        bl = radial_blend * q[1]
-        e0 = ci[0] - q[2]
-        e1 = ci[1] - q[3]
-        e2 = ci[2] - q[4]
-        # the two axes' separation against j's radius: where they (nearly) meet, the direction
-        # from one to the other turns fast as they move, so the push fades out there too
-        sep = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2) / q[1]
-        fade *= _smoothstep((sep - sep0) / (sep1 - sep0))
+        # the push: along the line from j's axis to x's ring centre, plus a little of x's radial
+        # direction, which turns fast near j's axis (so that part fades there); faded out
+        # where the two axes (nearly) meet, whose direction from one to the other turns fast as
+        # they move, and where both x and its ring centre lie near j's axis (one line of
+        # action: no side to push to), not where a ring crosses j off its axis
+        bl = radial_blend * q[1] * fade
+        fade = (_smoothstep((max(rho / q[1], tol.CONTACT_DEEP_FADE_CENTRES * sep) - deep0) / (deep1 - deep0))
+                * _smoothstep((sep - sep0) / (sep1 - sep0)))
         if fade <= 0.0:
             continue
         e0 += bl * q[5]
