@@ -716,6 +716,18 @@ def _section_angle(grid, off_j, A, cen, coff_j, U, bu, bl, r0, r1, r2):
 
 
 @njit(cache=True, inline="always")
+def _within(x, j, jj, grid, off, nu, na, cen, coff, box, margin, q, gl, gn):
+    """Whether point x lies within ``margin`` of neighbour j's surface (j = actm[jj], its
+    segment groups gl[jj, :gn[jj]]: :func:`_ring_lists`), with j's query in q
+    (:func:`_query_in`)."""
+    if not _may_meet(x, j, box, margin):
+        return False
+    if not _query_in(x, grid, off[j], nu[j], na[j], cen, coff[j], margin, q, gl, jj, gn[jj]):
+        return False
+    return q[0] < q[1] + margin and q[1] > 0.0
+
+
+@njit(cache=True, inline="always")
 def _give_way(amt, j, grid, off, nu, na, cen, coff, q, g, rec):
     """Record that muscle j's section at the point of query q (:func:`_query_in`) is pulled in
     by ``amt`` (m) at the point's angle: for each of j's two rings there, a record in rec
@@ -787,14 +799,10 @@ def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, actm, nmm, share, i
     nm = 0
     for jj in range(nmm):
         j = actm[jj]
-        if not _may_meet(x, j, box, margin_m):
-            continue
-        if not _query_in(x, grid, off[j], nu[j], na[j], cen, coff[j], margin_m, q, gl, jj, gn[jj]):
+        if not _within(x, j, jj, grid, off, nu, na, cen, coff, box, margin_m, q, gl, gn):
             continue
         rho = q[0]
         rr = q[1] + margin_m
-        if rho >= rr or q[1] <= 0.0:
-            continue
         fade = _smoothstep((rho / q[1] - deep0) / (deep1 - deep0))  # x near j's axis
         e0 = ci[0] - q[2]
         e1 = ci[1] - q[3]
@@ -973,13 +981,9 @@ def _ring_modes_one(i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, i
         # thin as can be), pulled in past it by its share, faded near its axis as a push is
         for jj in range(nmm):
             j = actm[jj]
-            if not _may_meet(x, j, box, margin_m):
-                continue
-            if not _query_in(x, grid, off[j], nu[j], na[j], cen, coff[j], margin_m, q, gl, jj, gn[jj]):
+            if not _within(x, j, jj, grid, off, nu, na, cen, coff, box, margin_m, q, gl, gn):
                 continue
             rr = q[1] + margin_m
-            if q[0] >= rr or q[1] <= 0.0:
-                continue
             fade = _smoothstep((q[0] / q[1] - prm[2]) / (prm[3] - prm[2]))
             _give_way(fade * share[j, i] * (rr - q[0]), j, grid, off, nu, na, cen, coff, q, g, rec)
     buried[i] = nb / max(nsamp, 1)
