@@ -28,8 +28,9 @@ Response (tol.CONTACT_ITERATIONS Jacobi passes, every muscle against every other
    section (a circle of radius R + margin; :func:`pair_shares`: a deeper muscle gives way
    more), faded out where the point and its ring's centre both lie near j's axis (two
    muscles on one line of action have no side to push to: pushing them piles them up; a ring
-   that crosses j off its axis is pushed out even where its points pass near that axis); out of a bone by (margin - d) times the field's gradient (not normalized: it
-   shortens deep inside where the field's sides meet and its direction turns); and, where the
+   that crosses j off its axis is pushed out even where its points pass near that axis); out
+   of a bone by (margin - d) times the field's gradient (not normalized: it shortens deep
+   inside where the field's sides meet and its direction turns); and, where the
    point's ring is thin against j (tol.CONTACT_THIN; not near i's ends, :data:`END_FADE`), j's
    section at the point's angle pulled in past it by j's share (a thin muscle inside a thick
    one: none of the thick one's points is inside the thin one, so its own samples never ask it
@@ -37,7 +38,8 @@ Response (tol.CONTACT_ITERATIONS Jacobi passes, every muscle against every other
    each pole (the end cap's tip), the bones' push by the same rule, as a whole: a model's
    attachment point often lies a few mm inside its bone's mesh (gait2392's soleus origin
    6.7 mm inside the tibia, the tensor fasciae latae's insertion 6.3 mm), and so did the
-   mesh's tip; the path, and so the length, stays the model's;
+   mesh's tip; the path, and so the length, stays the model's; a neighbour a pole lies in
+   gives way to it, as to a thin muscle (the pole itself does not move out of muscles);
 2. per ring, the pushes' low-pass around the ring: the ring's shift, tilt of one side and
    flattening (the first two Fourier modes, the least-squares fit of those modes to the
    evenly spaced pushes), linear between sampled rings and smoothed along the muscle: the
@@ -853,15 +855,16 @@ def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, actm, nmm, share, i
 
 @njit(cache=True, parallel=True)
 def _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb, fo, fh, fd, foff, fv, fl_off, fl,
-                margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, thin0, thin1, cstep, rstep, poles, coef, coefb,
-                touched, buried, work):
+                margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, thin0, thin1, cstep, rstep, poles, coef,
+                coefb, touched, buried, work):
     """One Jacobi pass (module doc, steps 1-2), every muscle from the same state: the pushes at
     ``ns`` = A / ``cstep`` evenly spaced points of every ``rstep``-th ring (and the last inner
     ring), and per such ring their low-pass around the ring, the least-squares fit of the
     :data:`NMODES` modes, which for evenly spaced samples are the discrete Fourier coefficients
     (the modes are orthogonal there): C_0 = mean p, C_k = (2 / ns) sum p b_k, the muscles'
     pushes into coef and the bones' into coefb (smoothed with different ends). coef (rings,
-    NMODES, 3); rings between sampled ones: linear between theirs; poles: the bones' push alone, mode 0 alone. touched (M,):
+    NMODES, 3); rings between sampled ones: linear between theirs; poles: the bones' push alone,
+    mode 0 alone (and the neighbours they lie in give way; ``poles`` False: 0). touched (M,):
     set where a sample was pushed; buried (M,): the share of samples inside a bone. work:
     scratch arrays (:func:`_work`), one set per muscle, and each muscle's thick neighbours'
     giving way recorded in its own rows of them (:func:`_add_reactions` adds them up in
@@ -876,8 +879,8 @@ def _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb,
 
 @njit(cache=True)
 def _ring_modes_serial(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb, fo, fh, fd, foff, fv, fl_off,
-                       fl, margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, thin0, thin1, cstep, rstep, poles, coef,
-                       coefb, touched, buried, work):
+                       fl, margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, thin0, thin1, cstep, rstep,
+                       poles, coef, coefb, touched, buried, work):
     """:func:`_ring_modes` on this thread alone (:func:`use_threads`)."""
     prm = (margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, thin0, thin1)
     for i in range(nu.shape[0]):
@@ -984,7 +987,7 @@ def _ring_modes_one(i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, i
             if not _within(x, j, jj, grid, off, nu, na, cen, coff, box, margin_m, q, gl, gn):
                 continue
             rr = q[1] + margin_m
-            fade = _smoothstep((q[0] / q[1] - prm[2]) / (prm[3] - prm[2]))
+            fade = _smoothstep((q[0] / q[1] - prm[2]) / (prm[3] - prm[2]))  # (prm[2:4]: deep0, deep1)
             _give_way(fade * share[j, i] * (rr - q[0]), j, grid, off, nu, na, cen, coff, q, g, rec)
     buried[i] = nb / max(nsamp, 1)
 
