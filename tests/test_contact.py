@@ -112,6 +112,30 @@ def test_contact_lowers_penetration_and_keeps_volume(demo):
             assert np.isfinite(v[k]).all() and (n[k] is None or np.allclose(np.linalg.norm(n[k], axis=1), 1.0))
 
 
+def test_over_relaxed_passes_clear_more_and_keep_volume(demo):
+    """tol.CONTACT_RELAX asks for each push more than once over: a pass clears more of the
+    twins' overlap and of the bones' than the same pass asking once (the packer's (1, 1, 1)),
+    and the volume stays exact."""
+    plan, world, frames = demo
+    assert min(tol.CONTACT_RELAX) > 1.0
+    for fi in range(len(frames)):
+        inv = np.linalg.inv(world[fi])
+        v, _, touched, before, relaxed = contact.resolve_frame(plan.contact, frames[fi], inv, iterations=1)
+        _, _, touched1, _, once = contact.resolve_frame(plan.contact, frames[fi], inv, iterations=1,
+                                                        relax=(1.0, 1.0, 1.0))
+        assert (touched == touched1).all()
+        # one pass: 8.8% of the vertices inside another muscle, asked once 7.4%, over-relaxed
+        # 6.5% (frame 1: 8.0%, 6.4%, 5.3%); inside a bone, asked once 1.7%, over-relaxed 1.4%;
+        # the deepest 16.7 → 13.9 mm
+        assert relaxed[:, 0].mean() < 0.95 * once[:, 0].mean() and once[:, 0].mean() < 0.9 * before[:, 0].mean()
+        assert relaxed[:, 1].mean() < 0.9 * once[:, 1].mean()
+        assert relaxed[:, 2].max() < before[:, 2].max()
+        for k, m in enumerate(plan.models):
+            U, A = m.spec.resolution
+            v0 = contact._grid_volume(contact.vertices_to_grid(frames[fi][k], U, A), U, A)
+            assert abs(contact._grid_volume(contact.vertices_to_grid(v[k], U, A), U, A) / v0 - 1.0) < 1e-9
+
+
 WALK_JOB = REPO_ROOT / "poses" / "jobs" / "gait2392_walk.yaml"
 POP_RATIO = 1.5  # the issue's rule: no vertex steps more than this times its no-contact step
 
@@ -455,10 +479,10 @@ def _thin_in_thick(off_y: float, U: int = 24, A: int = 24):
 def test_a_thick_muscle_gives_way_to_a_thin_one_inside_it(monkeypatch):
     """None of the thick muscle's points is inside the thin one, so only the thin one's samples
     can ask for room: they pull the thick one's section in at their angle (tol.CONTACT_THIN).
-    With that, the thin one ends 34% inside (its own 2 passes alone: still wholly inside), the
-    thick one's side facing it gives way (-4.7 mm) and the section shifts from it (its far
-    side -2.7 mm), its volume exact; moved across in 0.5 mm steps, the thick one's vertices
-    change smoothly (no step over 1.5 mm)."""
+    With that, the thin one ends 4% inside (34% asking for each push once, tol.CONTACT_RELAX;
+    its own 2 passes alone: 67% inside), the thick one's side facing it gives way (-5.7 mm)
+    and the section shifts from it (its far side -4.3 mm), its volume exact; moved across in
+    0.5 mm steps, the thick one's vertices change smoothly (no step over 1.5 mm)."""
     U, A = 24, 24
     model, (thick, thin) = _thin_in_thick(0.012)
     v, _, touched, before, after = contact.resolve_frame(model, [thick, thin], np.eye(4)[None])
@@ -471,12 +495,13 @@ def test_a_thick_muscle_gives_way_to_a_thin_one_inside_it(monkeypatch):
     assert d[near, 1] < -0.003 and d[far, 1] < -0.001  # gives way, and shifts away
     vol = [contact._grid_volume(contact.vertices_to_grid(x, U, A), U, A) for x in (thick, v[0])]
     assert vol[1] == pytest.approx(vol[0], rel=1e-8)
-    # without it (no ring counts as thin) the thick one stays, and the thin one stays inside it
-    # (its poles, inside the thick one too, left where they are: they would make it give way)
+    # without it (no ring counts as thin) the thick one stays, and the thin one stays mostly
+    # inside it (its poles, inside the thick one too, left where they are: they would make it
+    # give way)
     monkeypatch.setattr(tol, "CONTACT_THIN", (-2.0, -1.0))
     v_off, _, touched_off, _, after_off = contact.resolve_frame(model, [thick, thin], np.eye(4)[None], poles=False)
     monkeypatch.undo()
-    assert not touched_off[0] and np.array_equal(v_off[0], thick) and after_off[1, 0] == 1.0
+    assert not touched_off[0] and np.array_equal(v_off[0], thick) and after_off[1, 0] > 0.6 > 0.1 > after[1, 0]
     prev = None
     for oy in np.arange(0.008, 0.0171, 0.0005):
         model, meshes = _thin_in_thick(oy)

@@ -730,12 +730,13 @@ def _within(x, j, jj, grid, off, nu, na, cen, coff, box, margin, q, gl, gn):
 
 
 @njit(cache=True, inline="always")
-def _give_way(amt, j, grid, off, nu, na, cen, coff, q, g, rec):
+def _give_way(amt, gain, j, grid, off, nu, na, cen, coff, q, g, rec):
     """Record that muscle j's section at the point of query q (:func:`_query_in`) is pulled in
-    by ``amt`` (m) at the point's angle: for each of j's two rings there, a record in rec
-    (count in rec[0, 0]): the row, the modes of the pull (the Fourier sums of one sample,
-    weighted by its length and the ring's share of the segment), and that weight
-    (:func:`_add_reactions` takes their weighted mean). g: scratch (NMODES)."""
+    by ``amt`` (m) at the point's angle, asked for ``gain`` times over (tol.CONTACT_RELAX):
+    for each of j's two rings there, a record in rec (count in rec[0, 0]): the row, the modes
+    of the pull (the Fourier sums of one sample, weighted by its length and the ring's share of
+    the segment, times ``gain``), and that weight (:func:`_add_reactions` takes their weighted
+    mean). g: scratch (NMODES)."""
     th = _section_angle(grid, off[j], na[j], cen, coff[j], nu[j], int(q[8]), q[9], q[5], q[6], q[7])
     if not (amt > 0.0 and th == th):
         return
@@ -753,7 +754,7 @@ def _give_way(amt, j, grid, off, nu, na, cen, coff, q, g, rec):
         for r in range(NMODES):
             br = (1.0 if r == 0 else 2.0) * g[r]
             for c in range(3):
-                rec[n + 1, 1 + r * 3 + c] = wr * br * amt * q[5 + c]
+                rec[n + 1, 1 + r * 3 + c] = gain * wr * br * amt * q[5 + c]
         rec[n + 1, 1 + 3 * NMODES] = wr
 
 
@@ -778,10 +779,12 @@ def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, actm, nmm, share, i
     sums of one sample, weighted by the push's length and the ring's share of the segment),
     and that weight (:func:`_add_reactions` takes their weighted mean). Returns how many
     neighbours pushed.
-    prm: (margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, thin0, thin1), a tuple: the call stays
+    Each of the three is asked for relax_m, relax_b, relax_r times over (tol.CONTACT_RELAX).
+    prm: (margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, thin0, thin1, relax_m, relax_b,
+    relax_r), a tuple: the call stays
     under 30 arguments, which Python would otherwise pass as *args, and numba then packs a
     tuple of every array on each call (several times the query's own cost)."""
-    margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, thin0, thin1 = prm
+    margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, thin0, thin1, relax_m, relax_b, relax_r = prm
     p[0] = 0.0
     p[1] = 0.0
     p[2] = 0.0
@@ -797,7 +800,7 @@ def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, actm, nmm, share, i
             # where the field's sides meet deep inside, so the push fades where its direction
             # turns (normalized, it flipped there between frames: pops)
             for c in range(3):
-                p[4 + c] = (margin_b - d) * g[c]
+                p[4 + c] = relax_b * (margin_b - d) * g[c]
     nm = 0
     for jj in range(nmm):
         j = actm[jj]
@@ -819,7 +822,7 @@ def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, actm, nmm, share, i
         thin = (1.0 - _smoothstep((ci[3] / q[1] - thin0) / (thin1 - thin0))) * ci[9]
         if thin > 0.0 and fade > 0.0:
             # (g: free again once the bones' push is taken)
-            _give_way(thin * fade * share[j, i] * (rr - rho), j, grid, off, nu, na, cen, coff, q, g, rec)
+            _give_way(thin * fade * share[j, i] * (rr - rho), relax_r, j, grid, off, nu, na, cen, coff, q, g, rec)
         # the push: along the line from j's axis to x's ring centre, plus a little of x's radial
         # direction, which turns fast near j's axis (so that part fades there); faded out
         # where the two axes (nearly) meet, whose direction from one to the other turns fast as
@@ -845,7 +848,7 @@ def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, actm, nmm, share, i
         # leave the circle of radius rr about the axis point along e: x + s e
         b = rho * (q[5] * e0 + q[6] * e1 + q[7] * e2)
         s = -b + np.sqrt(max(b * b + rr * rr - rho * rho, 0.0))
-        w = fade * share[i, j] * s
+        w = relax_m * fade * share[i, j] * s
         p[0] += w * e0
         p[1] += w * e1
         p[2] += w * e2
@@ -855,8 +858,8 @@ def _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, actm, nmm, share, i
 
 @njit(cache=True, parallel=True)
 def _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb, fo, fh, fd, foff, fv, fl_off, fl,
-                margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, thin0, thin1, cstep, rstep, poles, coef,
-                coefb, touched, buried, work):
+                margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, thin0, thin1, relax_m, relax_b, relax_r,
+                cstep, rstep, poles, coef, coefb, touched, buried, work):
     """One Jacobi pass (module doc, steps 1-2), every muscle from the same state: the pushes at
     ``ns`` = A / ``cstep`` evenly spaced points of every ``rstep``-th ring (and the last inner
     ring), and per such ring their low-pass around the ring, the least-squares fit of the
@@ -871,7 +874,7 @@ def _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb,
     muscle order): the muscles are independent within a pass and run on numba's threads
     (:func:`_ring_modes_one`), the same bytes for any number of threads
     (:func:`_ring_modes_serial`: the same on this thread alone)."""
-    prm = (margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, thin0, thin1)
+    prm = (margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, thin0, thin1, relax_m, relax_b, relax_r)
     for i in prange(nu.shape[0]):
         _ring_modes_one(i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb, fo, fh, fd, foff, fv,
                         fl_off, fl, prm, cstep, rstep, poles, coef, coefb, touched, buried, work)
@@ -879,10 +882,10 @@ def _ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb,
 
 @njit(cache=True)
 def _ring_modes_serial(grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb, fo, fh, fd, foff, fv, fl_off,
-                       fl, margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, thin0, thin1, cstep, rstep,
-                       poles, coef, coefb, touched, buried, work):
+                       fl, margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, thin0, thin1, relax_m, relax_b,
+                       relax_r, cstep, rstep, poles, coef, coefb, touched, buried, work):
     """:func:`_ring_modes` on this thread alone (:func:`use_threads`)."""
-    prm = (margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, thin0, thin1)
+    prm = (margin_m, margin_b, deep0, deep1, sep0, sep1, radial_blend, thin0, thin1, relax_m, relax_b, relax_r)
     for i in range(nu.shape[0]):
         _ring_modes_one(i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, inv, fb, fo, fh, fd, foff, fv,
                         fl_off, fl, prm, cstep, rstep, poles, coef, coefb, touched, buried, work)
@@ -974,8 +977,11 @@ def _ring_modes_one(i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, i
                                margin_m, actb, actm, cen, coff, nu, gl, gn)
         x = grid[off[i] + v * A]
         if nbb > 0:
+            # asked for once (relax_b 1): the pole moves by its own push, which no low-pass
+            # spreads, so over-relaxed it would overshoot the bone's surface
+            prm1 = (prm[0], prm[1], prm[2], prm[3], prm[4], prm[5], prm[6], prm[7], prm[8], prm[9], 1.0, prm[11])
             _point_push(x, ci, i, grid, off, nu, na, cen, coff, box, actm, 0, share, inv, fb, fo, fh, fd, foff, fv,
-                        actb, nbb, gl, gn, prm, q, g, p, rec)
+                        actb, nbb, gl, gn, prm1, q, g, p, rec)
             for c in range(3):
                 coefb[r0, 0, c] = p[4 + c]
             if p[4] != 0.0 or p[5] != 0.0 or p[6] != 0.0:
@@ -988,7 +994,7 @@ def _ring_modes_one(i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, share, i
                 continue
             rr = q[1] + margin_m
             fade = _smoothstep((q[0] / q[1] - prm[2]) / (prm[3] - prm[2]))  # (prm[2:4]: deep0, deep1)
-            _give_way(fade * share[j, i] * (rr - q[0]), j, grid, off, nu, na, cen, coff, q, g, rec)
+            _give_way(fade * share[j, i] * (rr - q[0]), prm[11], j, grid, off, nu, na, cen, coff, q, g, rec)
     buried[i] = nb / max(nsamp, 1)
 
 
@@ -1480,7 +1486,7 @@ def vertices_to_grid(v: np.ndarray, U: int, A: int) -> np.ndarray:
 
 def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np.ndarray,
                   iterations: int = tol.CONTACT_ITERATIONS, measure_before: bool = True,
-                  volumes: np.ndarray | None = None, poles: bool = True):
+                  volumes: np.ndarray | None = None, poles: bool = True, relax: tuple = tol.CONTACT_RELAX):
     """Contact for one frame.
 
     vertices : [(V_m, 3) float64] every muscle's no-contact mesh; world_inv : (B, 4, 4) world
@@ -1491,7 +1497,10 @@ def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np
     measuring): before's inside-bone share is that of the first pass's samples, the rest NaN.
     ``volumes`` (M,): filled with each muscle's mesh volume after contact where any moved.
     ``poles`` False: the poles stay where they are (the packer, which fits the rest sections
-    to the rings contact gives, the poles being the model's attachments)."""
+    to the rings contact gives, the poles being the model's attachments). ``relax``: how many
+    times over each pass asks for the muscles' pushes, the bones' and the thick muscles' giving
+    way (tol.CONTACT_RELAX; the packer, iterating to the end, asks for them once: (1, 1, 1))."""
+    relax = tuple(float(r) for r in relax)
     shapes = model.shapes
     M = len(vertices)
     threads = use_threads()
@@ -1536,7 +1545,7 @@ def resolve_frame(model: ContactModel, vertices: list[np.ndarray], world_inv: np
             ring_modes(grid, off, nu, na, cen, coff, box, nbr_off, nbr, model.share, *args_b,
                         tol.CONTACT_MARGIN, tol.CONTACT_BONE_MARGIN, tol.CONTACT_DEEP_FADE[0],
                         tol.CONTACT_DEEP_FADE[1], tol.CONTACT_AXES_FADE[0], tol.CONTACT_AXES_FADE[1],
-                        tol.CONTACT_RADIAL_BLEND, tol.CONTACT_THIN[0], tol.CONTACT_THIN[1],
+                        tol.CONTACT_RADIAL_BLEND, tol.CONTACT_THIN[0], tol.CONTACT_THIN[1], *relax,
                         tol.CONTACT_SAMPLE_COLUMNS, tol.CONTACT_SAMPLE_RINGS, poles, coef, coefb, touched, buried, work)
             need = int(work[8][:, 0, 0].max())
             if need < work[8].shape[1]:

@@ -698,6 +698,11 @@ def _score(models, cm, inv, v0):
     return float(meas[:, 0].mean() + meas[:, 1].mean() + np.abs(ratio - 1.0).mean()), row, ratio
 
 
+#: The polish asks for each push once (no over-relaxation, tol.CONTACT_RELAX): its passes
+#: run to the end (tol.PACK_POLISH_PASSES), and the shipped libraries were packed so.
+PACK_RELAX = (1.0, 1.0, 1.0)
+
+
 def _polish(best, specs, models, skeleton, rest_world, cm, layouts, frames, v0, history, rounds, progress,
             poses=None, rays=None):
     """Step 5 (module doc): the frame's own contact, resolved at the rest pose (and at every
@@ -710,7 +715,8 @@ def _polish(best, specs, models, skeleton, rest_world, cm, layouts, frames, v0, 
     fits = {}
     for r in range(rounds):
         verts = [m.rest_vertices.astype(np.float64) for m in cur_models]
-        moved, _, touched, _, _ = contact.resolve_frame(cm, verts, inv, tol.PACK_POLISH_PASSES, False, poles=False)
+        moved, _, touched, _, _ = contact.resolve_frame(cm, verts, inv, tol.PACK_POLISH_PASSES, False, poles=False,
+                                                      relax=PACK_RELAX)
         shift = [mv - v for mv, v in zip(moved, verts)]
         n = 1
         if poses is not None:
@@ -719,7 +725,8 @@ def _polish(best, specs, models, skeleton, rest_world, cm, layouts, frames, v0, 
                 vs = [pv[fi].astype(np.float64) for pv in pverts]
                 if not all(np.isfinite(v).all() for v in vs):
                     continue
-                pm, _, pt, _, _ = contact.resolve_frame(cm, vs, pinv[fi], tol.PACK_POLISH_PASSES, False, poles=False)
+                pm, _, pt, _, _ = contact.resolve_frame(cm, vs, pinv[fi], tol.PACK_POLISH_PASSES, False, poles=False,
+                                                            relax=PACK_RELAX)
                 n += 1
                 for i in np.nonzero(pt)[0]:
                     shift[i] = shift[i] + to_rest(pm[i] - vs[i], verts[i], vs[i], models[i].U, models[i].A)
