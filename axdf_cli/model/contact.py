@@ -40,6 +40,9 @@ Response (tol.CONTACT_ITERATIONS Jacobi passes, every muscle against every other
    6.7 mm inside the tibia, the tensor fasciae latae's insertion 6.3 mm), and so did the
    mesh's tip; the path, and so the length, stays the model's; a neighbour a pole lies in
    gives way to it, as to a thin muscle (the pole itself does not move out of muscles);
+   each of the three asked for tol.CONTACT_RELAX times over (over-relaxation: step 2's
+   low-pass spreads a local push, and step 3 gives some of it back, so a pass delivers only
+   part of what its samples ask for at the deepest points), a pole's own push once;
 2. per ring, the pushes' low-pass around the ring: the ring's shift, tilt of one side and
    flattening (the first two Fourier modes, the least-squares fit of those modes to the
    evenly spaced pushes), linear between sampled rings and smoothed along the muscle: the
