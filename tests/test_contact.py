@@ -66,6 +66,11 @@ def demo(tmp_path_factory):
     return plan, chunk.world, frames
 
 
+def _volume(v, U, A):
+    """The mesh volume of one muscle's (V, 3) vertices at resolution (U, A)."""
+    return contact._grid_volume(contact.vertices_to_grid(v, U, A), U, A)
+
+
 def _bones_world(plan, world):
     return [(v.astype(np.float64) @ world[b, :3, :3].T + world[b, :3, 3], f)
             for b, (v, f, _) in sorted(plan.bone_meshes.items())]
@@ -106,9 +111,7 @@ def test_contact_lowers_penetration_and_keeps_volume(demo):
         assert more[:, 2].max() <= before[:, 2].max() + 1.5 * tol.CONTACT_MAX_STEP
         for k, m in enumerate(plan.models):
             U, A = m.spec.resolution
-            v0 = contact._grid_volume(contact.vertices_to_grid(frames[fi][k], U, A), U, A)
-            v1 = contact._grid_volume(contact.vertices_to_grid(v[k], U, A), U, A)
-            assert abs(v1 / v0 - 1.0) < 1e-9
+            assert abs(_volume(v[k], U, A) / _volume(frames[fi][k], U, A) - 1.0) < 1e-9
             assert np.isfinite(v[k]).all() and (n[k] is None or np.allclose(np.linalg.norm(n[k], axis=1), 1.0))
 
 
@@ -132,8 +135,7 @@ def test_over_relaxed_passes_clear_more_and_keep_volume(demo):
         assert relaxed[:, 2].max() < before[:, 2].max()
         for k, m in enumerate(plan.models):
             U, A = m.spec.resolution
-            v0 = contact._grid_volume(contact.vertices_to_grid(frames[fi][k], U, A), U, A)
-            assert abs(contact._grid_volume(contact.vertices_to_grid(v[k], U, A), U, A) / v0 - 1.0) < 1e-9
+            assert abs(_volume(v[k], U, A) / _volume(frames[fi][k], U, A) - 1.0) < 1e-9
 
 
 WALK_JOB = REPO_ROOT / "poses" / "jobs" / "gait2392_walk.yaml"
@@ -412,7 +414,7 @@ def test_a_pole_inside_its_bone_is_moved_out_to_the_surface():
     shift = v[0][0] - m[0]
     assert 0.005 < shift[0] < 0.007 and np.abs(shift[1:]).max() < 1e-4  # out along +x, the face's normal
     np.testing.assert_array_equal(v[0][-1], m[-1])  # the other pole stays
-    vol = [contact._grid_volume(contact.vertices_to_grid(x, U, A), U, A) for x in (m, v[0])]
+    vol = [_volume(x, U, A) for x in (m, v[0])]
     assert vol[1] == pytest.approx(vol[0], rel=1e-8)
     prev = None
     for depth in np.arange(0.0, 0.0091, 0.0005):
@@ -441,7 +443,7 @@ def test_a_neighbour_gives_way_to_a_pole_inside_it():
     mid = 1 + (U // 2 - 1) * A
     near = mid + thick[mid:mid + A, 1].argmax()
     assert v[0][near, 1] - thick[near, 1] < -0.002  # gives way where the pole is
-    vol = [contact._grid_volume(contact.vertices_to_grid(x, U, A), U, A) for x in (thick, v[0])]
+    vol = [_volume(x, U, A) for x in (thick, v[0])]
     assert vol[1] == pytest.approx(vol[0], rel=1e-8)
     assert after[1, 2] < before[1, 2] - 0.002
     v_off, _, touched_off, _, after_off = contact.resolve_frame(model, [thick, thin], np.eye(4)[None], poles=False)
@@ -493,7 +495,7 @@ def test_a_thick_muscle_gives_way_to_a_thin_one_inside_it(monkeypatch):
     near, far = mid + ring[:, 1].argmax(), mid + ring[:, 1].argmin()
     d = v[0] - thick
     assert d[near, 1] < -0.003 and d[far, 1] < -0.001  # gives way, and shifts away
-    vol = [contact._grid_volume(contact.vertices_to_grid(x, U, A), U, A) for x in (thick, v[0])]
+    vol = [_volume(x, U, A) for x in (thick, v[0])]
     assert vol[1] == pytest.approx(vol[0], rel=1e-8)
     # without it (no ring counts as thin) the thick one stays, and the thin one stays mostly
     # inside it (its poles, inside the thick one too, left where they are: they would make it
