@@ -1220,6 +1220,11 @@ def contact_rows(table: "Table", quick: bool, tmp: Path | None = None) -> None:
         a, b = after[..., 2].max(), before[..., 2].max()
         table.add("deepest penetration", f"{a * 1000:.1f} mm", f"before {b * 1000:.1f} mm",
                   f"{a / max(b, 1e-12):.2f}x", f"<= {TARGET_DEPTH * 1000:g} mm {_mark(a <= TARGET_DEPTH)}")
+        deep_a, deep_b = after[..., 2], before[..., 2]
+        table.add(f"muscle-frames deeper than {TARGET_DEPTH * 1000:g} mm", f"{(deep_a > TARGET_DEPTH).sum()}",
+                  f"before {(deep_b > TARGET_DEPTH).sum()} of {deep_a.size}",
+                  f"> 5 mm: {(deep_a > 0.005).sum()} (before {(deep_b > 0.005).sum()})",
+                  f"p99 {np.percentile(deep_a, 99) * 1000:.1f} mm (before {np.percentile(deep_b, 99) * 1000:.1f})")
         dv = np.abs(vol1 / vol0 - 1.0).max()
         table.add("volume against no contact", f"{dv * 100:.2g}% off", "", "", f"<= 0.5% {_mark(dv <= 0.005)}")
         ratio = step1[1:] / np.maximum(step0[1:], 1e-12)

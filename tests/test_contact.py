@@ -716,3 +716,26 @@ def test_the_kernel_cache_follows_every_model_source(tmp_path, monkeypatch):
     got = subprocess.run([sys.executable, "-c", "import os, axdf_cli; print(os.environ['NUMBA_CACHE_DIR'])"],
                          env=env, capture_output=True, text=True, check=True, cwd=REPO_ROOT).stdout.strip()
     assert got == here
+
+
+def test_a_bone_field_computed_by_another_libigl_is_not_read_back(tmp_path, monkeypatch):
+    """The bone fields' disk cache is keyed by the mesh, the grid and libigl's version: a
+    field another release computed (kept in ~/.cache across installs) is computed again, and
+    the same release reads its own back (the same values)."""
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    v = np.array([[0, 0, 0], [0.02, 0, 0], [0, 0.02, 0], [0, 0, 0.02]], float)
+    f = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    contact._field_cached.cache_clear()
+    a = contact.bone_field(0, v, f, h=0.005, pad=0.01)
+    files = sorted((tmp_path / "axdf" / "sdf").glob("*.npz"))
+    assert len(files) == 1 and contact._igl_version().startswith("libigl ")
+    contact._field_cached.cache_clear()
+    again = contact.bone_field(0, v, f, h=0.005, pad=0.01)  # read back: no new file
+    assert sorted((tmp_path / "axdf" / "sdf").glob("*.npz")) == files
+    assert np.array_equal(a.values, again.values)
+    monkeypatch.setattr(contact, "_igl_version", lambda: "libigl 0.0.0")
+    contact._field_cached.cache_clear()
+    other = contact.bone_field(0, v, f, h=0.005, pad=0.01)
+    assert len(list((tmp_path / "axdf" / "sdf").glob("*.npz"))) == 2  # computed again, kept apart
+    assert np.array_equal(other.values, a.values)
+    contact._field_cached.cache_clear()

@@ -145,12 +145,26 @@ def bone_field(bone: int, vertices: np.ndarray, faces: np.ndarray, clip: np.ndar
             return None
     lo = np.floor(lo / h) * h  # on a grid fixed in the bone: the same field for any box
     box = np.concatenate([lo, hi])
-    key = hashlib.sha256(v.tobytes() + f.tobytes() + np.array([h, *box]).tobytes()).hexdigest()
+    key = hashlib.sha256(v.tobytes() + f.tobytes() + np.array([h, *box]).tobytes()
+                         + _igl_version().encode()).hexdigest()
     origin, values = _field_cached(key, v.tobytes(), f.tobytes(), v.shape[0], f.shape[0], h, box.tobytes())
     return BoneField(bone, origin, h, values)
 
 
 CACHE_VERSION = 1  # part of the cache key: bump when the field's computation changes
+
+
+@functools.lru_cache(maxsize=1)
+def _igl_version() -> str:
+    """libigl's installed version, part of a field's cache key: a field computed by another
+    release (its distances or its winding-number sign may differ) is computed again, not read
+    back (the cache outlives installs, as numba's does: axdf_cli/__init__.py)."""
+    from importlib import metadata
+
+    try:
+        return "libigl " + metadata.version("libigl")
+    except metadata.PackageNotFoundError:
+        return "libigl ?"
 
 
 def cache_dir() -> Path:
