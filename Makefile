@@ -24,7 +24,7 @@ BVH    := $(DATA)/bvh/cmu_131_01_walk_scaled.bvh
 MYO    := out/myo-sim
 MJCF_MESHES := --max-faces 2000 --mesh-edge 0.004
 
-.PHONY: all setup sysdeps demo dataset test bench golden clean import import-mjcf pack blender
+.PHONY: all setup sysdeps demo dataset test bench golden clean import import-mjcf pack pack-check lock blender
 
 all: demo
 
@@ -42,14 +42,23 @@ sysdeps:
 	  echo "warning: Mesa EGL missing; install it with: sudo apt-get install -y libegl1 libegl-mesa0 libgl1-mesa-dri libgles2" >&2; \
 	fi
 
-$(STAMP): pyproject.toml
+# The packages come at the versions in constraints.txt (the environment the shipped
+# muscles/gait2392_packed was made in: packing amplifies the last digits of numba's, numpy's
+# and libigl's arithmetic, so another release makes another library). Where those versions
+# cannot be installed (another Python), the newest that pyproject.toml allows, with a warning.
+CONSTRAINTS := constraints.txt
+PIP_PINNED   = $(BIN)/python -m pip install -q -c $(CONSTRAINTS)
+
+$(STAMP): pyproject.toml $(CONSTRAINTS)
 	@echo "set-up 1/3: Mesa's EGL libraries (headless rendering), when missing"
 	@$(MAKE) --no-print-directory sysdeps
 	@echo "set-up 2/3: a virtual environment in $(VENV)"
 	@$(PY) -m venv $(VENV)
 	@$(BIN)/python -m pip install -q --upgrade pip
 	@echo "set-up 3/3: axdf and its packages into $(VENV) (numpy, scipy, numba, moderngl, OpenEXR, ...; about a minute)"
-	@$(BIN)/python -m pip install -q -e '.[test]'
+	@$(PIP_PINNED) -e '.[test]' || { echo "warning: the versions in $(CONSTRAINTS) could not be installed;" \
+	  "installing the newest that pyproject.toml allows (make pack-check may then differ)" >&2; \
+	  $(BIN)/python -m pip install -q -e '.[test]'; }
 	@touch $@
 	@echo "set-up done: $(BIN)/axdf"
 
@@ -91,7 +100,7 @@ golden: $(STAMP)
 	$(BIN)/axdf compare out/golden-check tests/golden --update
 
 bench: $(STAMP)
-	$(BIN)/python -m pip install -q -e '.[bench]'
+	$(PIP_PINNED) -e '.[bench]' || $(BIN)/python -m pip install -q -e '.[bench]'
 	$(BIN)/python -m benchmarks.bench $(BENCH_ARGS)
 
 # Regenerate the shipped OpenSim library: muscles/{arm26,gait2392}, poses/skeletons/{arm26,gait2392}.yaml
@@ -136,6 +145,23 @@ import: $(STAMP)
 pack: $(STAMP)
 	$(BIN)/axdf pack muscles/gait2392 --skeleton poses/skeletons/gait2392.yaml --pose poses/gait2392_walk.yaml \
 	  --out muscles/gait2392_packed --overwrite
+
+# Whether this install makes the shipped muscles/gait2392_packed again, byte for byte: packs
+# into out/pack-check and compares every file (exit 1 and the files that differ when not).
+pack-check: $(STAMP)
+	$(BIN)/axdf pack muscles/gait2392 --skeleton poses/skeletons/gait2392.yaml --pose poses/gait2392_walk.yaml \
+	  --out out/pack-check --overwrite --quiet
+	@if diff -rq out/pack-check muscles/gait2392_packed; then \
+	  echo "pack-check: make pack makes the shipped muscles/gait2392_packed again, byte for byte"; \
+	else echo "pack-check: this install makes another library than the shipped one (files above);" \
+	  "compare your packages with $(CONSTRAINTS)" >&2; exit 1; fi
+
+# constraints.txt made again from the environment in $(VENV) (after a deliberate upgrade; then
+# make pack, and ship the library it makes with the new constraints).
+lock: $(STAMP)
+	@{ grep '^#' $(CONSTRAINTS); $(BIN)/python -m pip freeze --exclude-editable; } > $(CONSTRAINTS).new && mv $(CONSTRAINTS).new $(CONSTRAINTS)
+	@touch $(STAMP)  # the environment is the one the file was made from: no set-up again
+	@echo "lock: $(CONSTRAINTS) made from $(VENV)"
 
 # The MyoSuite library (myo-sim, Apache-2.0): muscles/{myoarm,myobody}, poses/skeletons/{myoarm,myobody}.yaml
 # (+ meshes/), poses/myoarm_elbow.yaml (arm26's elbow flexion), poses/myobody_gait.yaml (MyoSuite's gait cycle),
