@@ -142,19 +142,26 @@ import: $(STAMP)
 # --pose: no overlap, volumes kept, section outlines): muscles/gait2392_packed/ (PACK.md), the
 # muscles of poses/jobs/gait2392_{walk,hop,cmu_walk}.yaml. From the shipped muscles/gait2392 and
 # poses/gait2392_walk.yaml alone (no DATA needed); about two and a half minutes.
-pack: $(STAMP)
-	$(BIN)/axdf pack muscles/gait2392 --skeleton poses/skeletons/gait2392.yaml --pose poses/gait2392_walk.yaml \
-	  --out muscles/gait2392_packed --overwrite
+# And arm26's 6 muscles over its elbow flexion (poses/jobs/arm26_flex.yaml): muscles/arm26_packed/.
+PACKS := gait2392:gait2392_walk arm26:arm26_flex
 
-# Whether this install makes the shipped muscles/gait2392_packed again, byte for byte: packs
-# into out/pack-check and compares every file (exit 1 and the files that differ when not).
+pack: $(STAMP)
+	@for p in $(PACKS); do lib=$${p%%:*}; pose=$${p#*:}; \
+	  echo "axdf pack muscles/$$lib --skeleton poses/skeletons/$$lib.yaml --pose poses/$$pose.yaml --out muscles/$${lib}_packed"; \
+	  $(BIN)/axdf pack muscles/$$lib --skeleton poses/skeletons/$$lib.yaml --pose poses/$$pose.yaml \
+	    --out muscles/$${lib}_packed --overwrite || exit $$?; done
+
+# Whether this install makes the shipped packed libraries again, byte for byte: packs each
+# into out/pack-check/ and compares every file (exit 1 and the files that differ when not).
 pack-check: $(STAMP)
-	$(BIN)/axdf pack muscles/gait2392 --skeleton poses/skeletons/gait2392.yaml --pose poses/gait2392_walk.yaml \
-	  --out out/pack-check --overwrite --quiet
-	@if diff -rq out/pack-check muscles/gait2392_packed; then \
-	  echo "pack-check: make pack makes the shipped muscles/gait2392_packed again, byte for byte"; \
-	else echo "pack-check: this install makes another library than the shipped one (files above);" \
-	  "compare your packages with $(CONSTRAINTS)" >&2; exit 1; fi
+	@for p in $(PACKS); do lib=$${p%%:*}; pose=$${p#*:}; \
+	  echo "axdf pack muscles/$$lib ... --out out/pack-check/$${lib}_packed"; \
+	  $(BIN)/axdf pack muscles/$$lib --skeleton poses/skeletons/$$lib.yaml --pose poses/$$pose.yaml \
+	    --out out/pack-check/$${lib}_packed --overwrite --quiet || exit $$?; \
+	  if diff -rq out/pack-check/$${lib}_packed muscles/$${lib}_packed; then \
+	    echo "pack-check: make pack makes the shipped muscles/$${lib}_packed again, byte for byte"; \
+	  else echo "pack-check: this install makes another muscles/$${lib}_packed than the shipped one" \
+	    "(files above); compare your packages with $(CONSTRAINTS)" >&2; exit 1; fi; done
 
 # constraints.txt made again from the environment in $(VENV) (after a deliberate upgrade; then
 # make pack, and ship the library it makes with the new constraints).

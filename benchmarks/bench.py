@@ -85,6 +85,7 @@ CMU_GAIT_JOB = ROOT / "poses" / "jobs" / "gait2392_cmu_walk.yaml"
 NO_CONTACT = {"contact": False}
 ARM_MUSCLES = ROOT / "muscles" / "arm26"
 ARM_POSE = ROOT / "poses" / "arm26_flex.yaml"
+ARM_JOB = ROOT / "poses" / "jobs" / "arm26_flex.yaml"
 #: Wrapping may add at most this to evaluation (issue 14).
 TARGET_WRAP = 1.5
 DEMO_MUSCLES = ROOT / "muscles" / "demo"
@@ -1170,8 +1171,8 @@ def pack_rows(table: "Table") -> None:
 
 
 def contact_rows(table: "Table", quick: bool, tmp: Path | None = None) -> None:
-    """The shipped gait2392 walk (every frame; every 6th with --quick) and Rajagopal2016's
-    running stride (muscles only: imported without bone meshes): evaluation without any
+    """The shipped gait2392 walk (every frame; every 6th with --quick), its CMU walk, arm26's
+    elbow flexion (as imported and packed) and Rajagopal2016's running stride (muscles only: imported without bone meshes): evaluation without any
     stage, with the penetration stage alone (--penetration: measures only), and with contact;
     the shares of vertices inside another muscle and inside a bone (mean over muscle-frames),
     the deepest penetration, the volume, and the muscle-frames whose largest vertex step from
@@ -1186,7 +1187,11 @@ def contact_rows(table: "Table", quick: bool, tmp: Path | None = None) -> None:
              ("gait2392 walk, packed (axdf pack --pose: the job's muscles)",
               lambda sw: plan_run(load_job(GAIT_JOB), frames_arg=frames, stages=sw)),
              ("CMU walk retargeted onto gait2392, packed (not the motion packed over)",
-              lambda sw: plan_run(load_job(CMU_GAIT_JOB), frames_arg="0:248:24" if quick else None, stages=sw))]
+              lambda sw: plan_run(load_job(CMU_GAIT_JOB), frames_arg="0:248:24" if quick else None, stages=sw)),
+             ("arm26 elbow flexion, muscles as imported", lambda sw: plan_run(
+                 load_job(ARM_JOB), muscle_args=[str(ROOT / "muscles" / "arm26")], stages=sw)),
+             ("arm26 elbow flexion, packed (axdf pack --pose: the job's muscles)",
+              lambda sw: plan_run(load_job(ARM_JOB), stages=sw))]
     if tmp is not None:
         cases.append(("Rajagopal2016 run, no bones", lambda sw: rajagopal_plan(tmp, sw)))
         cases.append(("Rajagopal2016 run, no bones, packed", lambda sw: rajagopal_plan(tmp, sw, packed=True)))

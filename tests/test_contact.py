@@ -739,3 +739,39 @@ def test_a_bone_field_computed_by_another_libigl_is_not_read_back(tmp_path, monk
     assert len(list((tmp_path / "axdf" / "sdf").glob("*.npz"))) == 2  # computed again, kept apart
     assert np.array_equal(other.values, a.values)
     contact._field_cached.cache_clear()
+
+
+def test_muscles_that_overlap_in_bulk_are_told_to_pack(tmp_path, capsys):
+    """arm26 as imported (generic sections through each other): after contact ~30% of its
+    vertices lie inside another muscle, more than contact clears; the run says so once, with
+    the `axdf pack` command for its folder, skeleton and pose (stderr and the manifest), and
+    --strict refuses it before writing. Packed (the job's own muscles/arm26_packed), or
+    without contact, the run has no such warning."""
+    from axdf_cli.pipeline.execute import BULK_OVERLAP
+
+    arm = ["--frames", "0:4", "--no-render", "--quiet"]
+    job = str(REPO_ROOT / "poses" / "jobs" / "arm26_flex.yaml")
+    imported = ["--muscles", str(REPO_ROOT / "muscles" / "arm26")]
+    assert run_cli(REPO_ROOT, "run", job, *imported, *arm, "--out", str(tmp_path / "imp")) == 0
+    err = capsys.readouterr().err
+    assert err.count("overlap in bulk") == 1
+    assert ("axdf pack muscles/arm26 --skeleton poses/skeletons/arm26.yaml --pose poses/arm26_flex.yaml "
+            "--out muscles/arm26_packed") in err
+    man = json.loads((tmp_path / "imp" / "manifest.json").read_text())
+    bulk = [w for w in man["warnings"] if "overlap in bulk" in w]
+    assert len(bulk) == 1
+    stats = (tmp_path / "imp" / "stats.csv").read_text()
+    share = float(bulk[0].split("after contact ")[1].split("%")[0]) / 100
+    inside = np.array([float(r.split(",")[8]) for r in stats.splitlines()[1:]])
+    assert share > BULK_OVERLAP and abs(share - inside.mean()) < 0.05  # (weighted by vertices)
+    assert "overlap in bulk" not in stats  # a run's warning, not a frame's
+    assert run_cli(REPO_ROOT, "run", job, *imported, *arm, "--out", str(tmp_path / "strict"), "--strict") == 2
+    assert "overlap in bulk" in capsys.readouterr().err
+    assert not (tmp_path / "strict").exists()
+    assert run_cli(REPO_ROOT, "run", job, *imported, *arm, "--out", str(tmp_path / "nc"), "--no-contact") == 0
+    assert "overlap in bulk" not in capsys.readouterr().err
+    assert not any("overlap in bulk" in w for w in json.loads((tmp_path / "nc" / "manifest.json").read_text())["warnings"])
+    assert run_cli(REPO_ROOT, "run", job, *arm, "--out", str(tmp_path / "packed"), "--strict") == 0
+    assert "overlap in bulk" not in capsys.readouterr().err
+    inside = np.array([float(r.split(",")[8]) for r in (tmp_path / "packed" / "stats.csv").read_text().splitlines()[1:]])
+    assert inside.mean() < 0.2 * BULK_OVERLAP

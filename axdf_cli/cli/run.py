@@ -108,12 +108,15 @@ def run(args) -> int:
         for b in (bar, rbar):
             if b:
                 b.close()
+    for w in summary.get("run_warnings", ()):
+        print(f"warning: {w}", file=sys.stderr)
     if not args.quiet:
         print(f"wrote {summary['files']} files ({summary['muscles']} muscles x {summary['frames']} frames) "
               f"to {summary['out']}" + (f", {summary['skipped']} already complete" if summary["skipped"] else ""))
         print(f"worst volume error {summary['worst_volume_error'] * 100:.3f}%")
-        if summary["warnings"]:
-            print(f"{len(summary['warnings'])} warning(s): see {summary['out']}/stats.csv", file=sys.stderr)
+        n = len(summary["warnings"]) - len(plan.warnings) - len(summary.get("run_warnings", ()))
+        if n > 0:
+            print(f"{n} warning(s): see {summary['out']}/stats.csv", file=sys.stderr)
     return 0
 
 
