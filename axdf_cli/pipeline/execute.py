@@ -76,24 +76,30 @@ BULK_OVERLAP = 0.05
 
 
 def bulk_overlap(plan: RunPlan, inside: np.ndarray) -> str | None:
-    """The run's warning when its muscles overlap in bulk after contact (:data:`BULK_OVERLAP`),
-    with the ``axdf pack`` command that makes their rest shapes share space; None otherwise
-    (or where contact did not run). inside (F, M): stats.csv's inside_muscle, each muscle's
-    share weighted by its vertices."""
+    """The run's warning when its muscles overlap in bulk after contact (:data:`BULK_OVERLAP`);
+    None otherwise (or where contact did not run). inside (F, M): stats.csv's inside_muscle,
+    each muscle's share weighted by its vertices. Names no path (it goes in the manifest):
+    :func:`pack_command` is the command for this run, for the terminal."""
     if not any(st.name == "contact" for st in plan.stages) or inside.size == 0:
         return None
     n = np.array([m.n_vertices for m in plan.models], dtype=np.float64)
     share = float((inside * n).sum() / (n.sum() * inside.shape[0]))
     if not share > BULK_OVERLAP:
         return None
+    return (f"the muscles overlap in bulk: after contact {share * 100:.1f}% of their vertices lie inside another "
+            f"muscle (over {inside.shape[0]} frame(s); stats.csv's inside_muscle), more than contact clears (it "
+            f"resolves what motion adds, a few millimetres a frame); make their rest shapes share space once "
+            f"with axdf pack (docs/METHOD.md, Packing)")
+
+
+def pack_command(plan: RunPlan) -> str:
+    """The ``axdf pack`` command line for the run's muscles (their folders), skeleton and pose,
+    its paths as the manifest's (relative to the current folder where below it)."""
     folders = sorted({display_path(Path(s.source).parent) for s in plan.muscles if s.source}) or ["MUSCLES"]
     skeleton = display_path(Path(plan.pose.skeleton_path)) if plan.pose.skeleton_path else "SKELETON"
     pose = f" --pose {display_path(Path(plan.pose.source))}" if plan.pose.source else ""
     out = folders[0].rstrip("/") + "_packed" if len(folders) == 1 else "DIR"
-    return (f"the muscles overlap in bulk: after contact {share * 100:.1f}% of their vertices lie inside another "
-            f"muscle (over {inside.shape[0]} frame(s); stats.csv's inside_muscle), more than contact clears (it "
-            f"resolves what motion adds, a few millimetres a frame); make their rest shapes share space once: "
-            f"axdf pack {' '.join(folders)} --skeleton {skeleton}{pose} --out {out} (docs/METHOD.md, Packing)")
+    return f"axdf pack {' '.join(folders)} --skeleton {skeleton}{pose} --out {out}"
 
 
 def manifest_dict(plan: RunPlan, files: dict, warnings: list, complete: bool, extra: dict | None = None) -> dict:
@@ -394,7 +400,7 @@ def strict_check(plan: RunPlan, prep: Prepass) -> None:
             found += [f"{plan.names[j]} frame {int(plan.frames[sl.start + i])}: non-finite vertices"
                       for i in np.nonzero(bad)[0]]
     bulk = bulk_overlap(plan, inside)
-    found += [bulk] if bulk else []
+    found += [f"{bulk}: {pack_command(plan)}"] if bulk else []
     if found:
         raise InputError(None, f"{len(found)} warning(s) with --strict; first: {found[0]}",
                          "fix the inputs or run without --strict")
@@ -477,8 +483,8 @@ def _write_run(plan: RunPlan, session, prep: Prepass, progress, render_progress,
             all_warns += part.warnings
         warnings: list[str] = list(plan.warnings)
         bulk = bulk_overlap(plan, stats[..., STATS_COLUMNS.index("inside_muscle")])
-        run_warnings = [bulk] if bulk else []
-        warnings += run_warnings
+        warnings += [bulk] if bulk else []
+        run_warnings = [f"{bulk}: {pack_command(plan)}"] if bulk else []  # (the terminal's: with the command)
         for fi, j, msg in sorted(all_warns, key=lambda w: (w[0], w[1])):
             warn_text[fi][j] = (warn_text[fi][j] + "; " if warn_text[fi][j] else "") + msg
             warnings.append(f"{plan.names[j]} frame {int(plan.frames[fi])}: {msg}")
