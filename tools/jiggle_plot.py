@@ -37,7 +37,11 @@ def bone_frames(run: Path, bone: str) -> tuple[np.ndarray, np.ndarray]:
 
 
 def main() -> None:
-    import matplotlib
+    try:
+        import matplotlib
+    except ImportError:
+        raise SystemExit("jiggle_plot.py needs matplotlib, the bench extra: .venv/bin/python -m pip install "
+                         "-c constraints.txt -e '.[bench]' (make bench installs it)") from None
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

@@ -70,7 +70,7 @@ MEASURED_COLUMNS = 3
 #: A run whose muscles, after contact, keep more than this share of their vertices inside
 #: another muscle (over its frames) overlaps in bulk: contact, a few millimetres a pass and
 #: continuous in the frame, clears what motion adds to rest shapes that share space, not rest
-#: shapes through each other (an import's generic sections: gait2392 about 28%, arm26 30%,
+#: shapes through each other (an import's generic sections: gait2392 23%, arm26 30%,
 #: myoarm 43%). Packed libraries stay under 3% (the walk 0.23%, its CMU walk 2.65%).
 BULK_OVERLAP = 0.05
 
