@@ -143,21 +143,21 @@ import: $(STAMP)
 # muscles of poses/jobs/gait2392_{walk,hop,cmu_walk}.yaml. From the shipped muscles/gait2392 and
 # poses/gait2392_walk.yaml alone (no DATA needed); about two and a half minutes.
 # And arm26's 6 muscles over its elbow flexion (poses/jobs/arm26_flex.yaml): muscles/arm26_packed/.
+# PACK_OUT: the folder the packed libraries go in (make pack-check packs into out/pack-check).
 PACKS := gait2392:gait2392_walk arm26:arm26_flex
+PACK_OUT ?= muscles
 
 pack: $(STAMP)
 	@for p in $(PACKS); do lib=$${p%%:*}; pose=$${p#*:}; \
-	  echo "axdf pack muscles/$$lib --skeleton poses/skeletons/$$lib.yaml --pose poses/$$pose.yaml --out muscles/$${lib}_packed"; \
+	  echo "axdf pack muscles/$$lib --skeleton poses/skeletons/$$lib.yaml --pose poses/$$pose.yaml --out $(PACK_OUT)/$${lib}_packed"; \
 	  $(BIN)/axdf pack muscles/$$lib --skeleton poses/skeletons/$$lib.yaml --pose poses/$$pose.yaml \
-	    --out muscles/$${lib}_packed --overwrite || exit $$?; done
+	    --out $(PACK_OUT)/$${lib}_packed --overwrite $(PACK_FLAGS) || exit $$?; done
 
 # Whether this install makes the shipped packed libraries again, byte for byte: packs each
 # into out/pack-check/ and compares every file (exit 1 and the files that differ when not).
 pack-check: $(STAMP)
-	@for p in $(PACKS); do lib=$${p%%:*}; pose=$${p#*:}; \
-	  echo "axdf pack muscles/$$lib ... --out out/pack-check/$${lib}_packed"; \
-	  $(BIN)/axdf pack muscles/$$lib --skeleton poses/skeletons/$$lib.yaml --pose poses/$$pose.yaml \
-	    --out out/pack-check/$${lib}_packed --overwrite --quiet || exit $$?; \
+	@$(MAKE) --no-print-directory pack PACK_OUT=out/pack-check PACK_FLAGS=--quiet
+	@for p in $(PACKS); do lib=$${p%%:*}; \
 	  if diff -rq out/pack-check/$${lib}_packed muscles/$${lib}_packed; then \
 	    echo "pack-check: make pack makes the shipped muscles/$${lib}_packed again, byte for byte"; \
 	  else echo "pack-check: this install makes another muscles/$${lib}_packed than the shipped one" \

@@ -1172,8 +1172,9 @@ def pack_rows(table: "Table") -> None:
 
 def contact_rows(table: "Table", quick: bool, tmp: Path | None = None) -> None:
     """The shipped gait2392 walk (every frame; every 6th with --quick), its CMU walk, arm26's
-    elbow flexion (as imported and packed) and Rajagopal2016's running stride (muscles only: imported without bone meshes): evaluation without any
-    stage, with the penetration stage alone (--penetration: measures only), and with contact;
+    elbow flexion (as imported and packed) and Rajagopal2016's running stride (muscles only:
+    imported without bone meshes): evaluation without any stage, with the penetration stage
+    alone (--penetration: measures only), and with contact;
     the shares of vertices inside another muscle and inside a bone (mean over muscle-frames),
     the deepest penetration, the volume, and the muscle-frames whose largest vertex step from
     the previous frame exceeds POP_RATIO times the no-contact one (pops)."""
