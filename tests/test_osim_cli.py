@@ -284,3 +284,25 @@ def test_bad_body_name_points_at_the_osim_line(tmp_path, capsys):
     assert rc == 2
     assert f"bad.osim:{line}:" in err and "r humerus" in err, err
     assert not out.exists()
+
+
+def test_an_import_names_the_pack_command_that_runs(tmp_path, capsys, monkeypatch):
+    """The import's last line names the next step, `axdf pack` for the muscles, skeleton and pose
+    it wrote (paths from the current folder), and that command runs as printed: the packed
+    muscles then keep under a tenth of the overlap the imported ones have at rest."""
+    import shlex
+
+    from axdf_cli.cli.main import main
+
+    monkeypatch.chdir(tmp_path)
+    assert main(["import", "osim", str(ARM), "--out", "imp", "--motion", str(ARM_Q), "--fps", "60"]) == 0
+    line = capsys.readouterr().out.strip().splitlines()[-1]
+    assert line.startswith("next: axdf pack imp/muscles --skeleton imp/skeletons/arm26.yaml --pose imp/")
+    argv = shlex.split(line[len("next: "):].split("  (")[0])
+    assert argv[-2:] == ["--out", "imp/muscles_packed"]
+    assert main(argv[1:] + ["-q"]) == 0
+    report = json.loads((tmp_path / "imp" / "muscles_packed" / "pack_report.json").read_text())
+    assert report["after"]["inside_muscle"] < 0.1 * report["before"]["inside_muscle"]
+    # -q: no summary, no next step
+    assert main(["import", "osim", str(ARM), "--out", "imp2", "-q"]) == 0
+    assert "next:" not in capsys.readouterr().out

@@ -223,6 +223,12 @@ def _print_summary(args, res, counts: str) -> None:
         for path in sorted(res.files):
             print(path)
     print(f"report: {Path(args.out) / 'IMPORT.md'}")
+    if res.report.get("counts", {}).get("muscles", 0) > 1 and res.layout:
+        from axdf_cli.pipeline.execute import pack_command_line
+
+        lay = res.layout
+        print(f"next: {pack_command_line([lay['muscles']], lay['skeleton'], lay['pose'])}  (imported muscles "
+              "overlap in bulk, more than contact clears: packing makes their rest shapes share space; README, Contact)")
 
 
 def run_mjcf(args) -> int:

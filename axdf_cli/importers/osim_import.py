@@ -432,7 +432,8 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
     report["files"] = sorted(relative_ref(Path(p), out_dir) for p in files)
     files[str(out_dir / "import_report.json")] = (json.dumps(report, indent=1, sort_keys=True) + "\n").encode()
     files[str(out_dir / "IMPORT.md")] = import_markdown(report).encode()
-    return ImportResult(files, report, warnings, model, inputs)
+    return ImportResult(files, report, warnings, model, inputs,
+                        layout={"muscles": mus_dir, "skeleton": skel_path, "pose": pose_path})
 
 
 def import_markdown(r: dict) -> str:

@@ -28,6 +28,7 @@ class ImportResult:
     model: object | None = None  # the importer's model (OpenSim's Model; None for MuJoCo)
     inputs: list[Path] = field(default_factory=list)  # the model, its includes, the motion: listed in the manifest
     assets: list[Path] = field(default_factory=list)  # other files read (bone meshes): never an output either
+    layout: dict = field(default_factory=dict)  # "muscles", "skeleton", "pose": where the import put them (or None)
 
 
 def relative_ref(target: Path | str, start_dir: Path | str) -> str:

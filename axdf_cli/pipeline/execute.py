@@ -93,13 +93,27 @@ def bulk_overlap(plan: RunPlan, inside: np.ndarray) -> str | None:
 
 
 def pack_command(plan: RunPlan) -> str:
-    """The ``axdf pack`` command line for the run's muscles (their folders), skeleton and pose,
-    its paths as the manifest's (relative to the current folder where below it)."""
-    folders = sorted({display_path(Path(s.source).parent) for s in plan.muscles if s.source}) or ["MUSCLES"]
-    skeleton = display_path(Path(plan.pose.skeleton_path)) if plan.pose.skeleton_path else "SKELETON"
-    pose = f" --pose {display_path(Path(plan.pose.source))}" if plan.pose.source else ""
-    out = folders[0].rstrip("/") + "_packed" if len(folders) == 1 else "DIR"
-    return f"axdf pack {' '.join(folders)} --skeleton {skeleton}{pose} --out {out}"
+    """The ``axdf pack`` command line for the run's muscles (their folders), skeleton and pose."""
+    return pack_command_line([Path(s.source).parent for s in plan.muscles if s.source],
+                             plan.pose.skeleton_path or None, plan.pose.source or None)
+
+
+def pack_command_line(folders, skeleton, pose) -> str:
+    """``axdf pack FOLDERS --skeleton SKELETON [--pose POSE] --out FOLDER_packed`` for the
+    terminal (paths relative to the current folder where below it, else absolute; placeholders
+    where unknown): the next step that a run whose muscles overlap in bulk, or an import, names."""
+    def arg(p) -> str:
+        p = Path(p).resolve()
+        try:
+            return p.relative_to(Path.cwd().resolve()).as_posix()
+        except ValueError:
+            return p.as_posix()
+
+    names = sorted({arg(f) for f in folders}) or ["MUSCLES"]
+    sk = arg(skeleton) if skeleton else "SKELETON"
+    po = f" --pose {arg(pose)}" if pose else ""
+    out = names[0].rstrip("/") + "_packed" if len(names) == 1 and names[0] != "MUSCLES" else "DIR"
+    return f"axdf pack {' '.join(names)} --skeleton {sk}{po} --out {out}"
 
 
 def manifest_dict(plan: RunPlan, files: dict, warnings: list, complete: bool, extra: dict | None = None) -> dict:
