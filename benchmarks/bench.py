@@ -1190,7 +1190,7 @@ def contact_rows(table: "Table", quick: bool, tmp: Path | None = None) -> None:
              ("CMU walk retargeted onto gait2392, packed (not the motion packed over)",
               lambda sw: plan_run(load_job(CMU_GAIT_JOB), frames_arg="0:248:24" if quick else None, stages=sw)),
              ("arm26 elbow flexion, muscles as imported", lambda sw: plan_run(
-                 load_job(ARM_JOB), muscle_args=[str(ROOT / "muscles" / "arm26")], stages=sw)),
+                 load_job(ARM_JOB), muscle_args=[str(ARM_MUSCLES)], stages=sw)),
              ("arm26 elbow flexion, packed (axdf pack --pose: the job's muscles)",
               lambda sw: plan_run(load_job(ARM_JOB), stages=sw))]
     if tmp is not None:
