@@ -14,6 +14,9 @@ STAMP  := $(VENV)/.installed
 BLENDER_VENV  := .venv-blender
 BLENDER_STAMP := $(BLENDER_VENV)/.installed
 BLENDER_PKGS  ?= bpy>=4.2 usd-core>=24.11
+# at the versions the check last passed with (constraints-blender.txt); the ranges above when
+# those cannot be installed
+BLENDER_CONSTRAINTS := constraints-blender.txt
 DEMO   ?= poses/jobs/demo.yaml
 
 # OpenSim data for `make import` (opensim-models; see README "Data credits").
@@ -64,9 +67,11 @@ $(STAMP): pyproject.toml $(CONSTRAINTS)
 
 blender: $(BLENDER_STAMP)
 
-$(BLENDER_STAMP):
+$(BLENDER_STAMP): $(BLENDER_CONSTRAINTS)
 	@if $(PY) -m venv $(BLENDER_VENV) && $(BLENDER_VENV)/bin/python -m pip install -q --upgrade pip \
-	   && $(BLENDER_VENV)/bin/python -m pip install -q $(foreach p,$(BLENDER_PKGS),'$(p)') \
+	   && { $(BLENDER_VENV)/bin/python -m pip install -q -c $(BLENDER_CONSTRAINTS) $(foreach p,$(BLENDER_PKGS),'$(p)') \
+	        || { echo "warning: the versions in $(BLENDER_CONSTRAINTS) could not be installed; the newest allowed" >&2; \
+	             $(BLENDER_VENV)/bin/python -m pip install -q $(foreach p,$(BLENDER_PKGS),'$(p)'); }; } \
 	   && $(BLENDER_VENV)/bin/python -c "import bpy"; then touch $@; \
 	else echo "warning: could not install bpy into $(BLENDER_VENV); tests/test_blender.py will skip" >&2; fi
 
@@ -169,6 +174,10 @@ lock: $(STAMP)
 	@{ grep '^#' $(CONSTRAINTS); $(BIN)/python -m pip freeze --exclude-editable; } > $(CONSTRAINTS).new && mv $(CONSTRAINTS).new $(CONSTRAINTS)
 	@touch $(STAMP)  # the environment is the one the file was made from: no set-up again
 	@echo "lock: $(CONSTRAINTS) made from $(VENV)"
+	@if [ -x $(BLENDER_VENV)/bin/python ]; then \
+	  { grep '^#' $(BLENDER_CONSTRAINTS); $(BLENDER_VENV)/bin/python -m pip freeze; } > $(BLENDER_CONSTRAINTS).new \
+	    && mv $(BLENDER_CONSTRAINTS).new $(BLENDER_CONSTRAINTS) && touch $(BLENDER_STAMP) \
+	    && echo "lock: $(BLENDER_CONSTRAINTS) made from $(BLENDER_VENV)"; fi
 
 # The MyoSuite library (myo-sim, Apache-2.0): muscles/{myoarm,myobody}, poses/skeletons/{myoarm,myobody}.yaml
 # (+ meshes/), poses/myoarm_elbow.yaml (arm26's elbow flexion), poses/myobody_gait.yaml (MyoSuite's gait cycle),

@@ -45,6 +45,18 @@ class Outcome:
     rows: int = 0
     missing: list = field(default_factory=list)  # sequences of the data set not complete yet
     gl_renderer: str = ""
+    # With contact, over the sequences made now: frames measured, the sum of their share of
+    # vertices inside another muscle over those frames, and how many sequences overlap in bulk
+    # (their manifests say so; axdf_cli.pipeline.execute.BULK_OVERLAP)
+    overlap_frames: int = 0
+    overlap_sum: float = 0.0
+    overlap_bulk: int = 0
+
+    @property
+    def overlap(self) -> float | None:
+        """The share of the vertices made now inside another muscle after contact (mean over
+        the frames of the sequences made now); None without contact or sequences."""
+        return self.overlap_sum / self.overlap_frames if self.overlap_frames else None
 
 
 class WorkerFailed(AxdfError):
@@ -301,6 +313,11 @@ def build(path: Path | str, out: Path | str, *, seed: int | None = None, jobs: i
                 res.built_samples += _samples(ctx, i)
                 for key in res.timing:
                     res.timing[key] += timing[key]
+                if "overlap" in timing:
+                    share, frames = timing["overlap"]
+                    res.overlap_frames += frames
+                    res.overlap_sum += share * frames
+                    res.overlap_bulk += bool(share > door.BULK_OVERLAP)
             res.gl_renderer = res.gl_renderer or renderer
             if progress:
                 progress(_samples(ctx, i))

@@ -212,7 +212,9 @@ def release_renderer() -> None:
 
 
 def build_sequence(ctx: Context, index: int, out: Path, resume: bool) -> tuple[dict, dict]:
-    """Make sequence ``index`` whole in ``out``; return (its record, seconds per stage).
+    """Make sequence ``index`` whole in ``out``; return (its record, seconds per stage; with
+    contact, ``"overlap"``: (share of its vertices inside another muscle, frames), its run's
+    :func:`~axdf_cli.pipeline.execute.overlap_share`).
     With ``resume`` a complete sequence is kept as it is and a partial one finished;
     otherwise it is made again: the files its earlier record lists and the new one lacks
     are deleted once the new record is written, nothing else (dataset/folder.py). The
@@ -255,6 +257,8 @@ def _make_sequence(ctx: Context, seq: Sequence, folder: Path, resume: bool, timi
     summary = door.run_sequence(plan, resume)
     t1 = time.perf_counter()
     timing["run"] = t1 - t0
+    if summary.get("overlap") is not None:  # (contact ran: the share inside another muscle, and over how many frames)
+        timing["overlap"] = (summary["overlap"], len(frames))
 
     coords = sample_coordinates(pose, frames)
     world = forward_kinematics(ctx.skeleton, coords)

@@ -75,21 +75,33 @@ MEASURED_COLUMNS = 3
 BULK_OVERLAP = 0.05
 
 
-def bulk_overlap(plan: RunPlan, inside: np.ndarray) -> str | None:
-    """The run's warning when its muscles overlap in bulk after contact (:data:`BULK_OVERLAP`);
-    None otherwise (or where contact did not run). inside (F, M): stats.csv's inside_muscle,
-    each muscle's share weighted by its vertices. Names no path (it goes in the manifest):
-    :func:`pack_command` is the command for this run, for the terminal."""
+def overlap_share(plan: RunPlan, inside: np.ndarray) -> float | None:
+    """The share of the run's vertices inside another muscle over its frames: inside (F, M),
+    stats.csv's inside_muscle, each muscle's share weighted by its vertices. None where
+    contact did not run (nothing measured)."""
     if not any(st.name == "contact" for st in plan.stages) or inside.size == 0:
         return None
     n = np.array([m.n_vertices for m in plan.models], dtype=np.float64)
-    share = float((inside * n).sum() / (n.sum() * inside.shape[0]))
-    if not share > BULK_OVERLAP:
+    return float((inside * n).sum() / (n.sum() * inside.shape[0]))
+
+
+def bulk_overlap_text(share: float | None, over: str) -> str | None:
+    """The warning for muscles that overlap in bulk after contact (``share`` above
+    :data:`BULK_OVERLAP`, measured ``over`` "N frame(s)" or the like); None otherwise. Names
+    no path (it goes in manifests): :func:`pack_command_line` is the next step, for the terminal."""
+    if share is None or not share > BULK_OVERLAP:
         return None
     return (f"the muscles overlap in bulk: after contact {share * 100:.1f}% of their vertices lie inside another "
-            f"muscle (over {inside.shape[0]} frame(s); stats.csv's inside_muscle), more than contact clears (it "
+            f"muscle (over {over}; stats.csv's inside_muscle), more than contact clears (it "
             f"resolves what motion adds, a few millimetres a frame); make their rest shapes share space once "
             f"with axdf pack (docs/METHOD.md, Packing)")
+
+
+def bulk_overlap(plan: RunPlan, inside: np.ndarray) -> str | None:
+    """The run's warning when its muscles overlap in bulk after contact (:func:`overlap_share`,
+    :func:`bulk_overlap_text`); None otherwise (or where contact did not run). :func:`pack_command`
+    is the command for this run, for the terminal."""
+    return bulk_overlap_text(overlap_share(plan, inside), f"{inside.shape[0]} frame(s)")
 
 
 def pack_command(plan: RunPlan) -> str:
@@ -496,7 +508,8 @@ def _write_run(plan: RunPlan, session, prep: Prepass, progress, render_progress,
                 bone_rows[part.rows] = part.bone_rows
             all_warns += part.warnings
         warnings: list[str] = list(plan.warnings)
-        bulk = bulk_overlap(plan, stats[..., STATS_COLUMNS.index("inside_muscle")])
+        share = overlap_share(plan, stats[..., STATS_COLUMNS.index("inside_muscle")])
+        bulk = bulk_overlap_text(share, f"{nf} frame(s)")
         warnings += [bulk] if bulk else []
         run_warnings = [f"{bulk}: {pack_command(plan)}"] if bulk else []  # (the terminal's: with the command)
         for fi, j, msg in sorted(all_warns, key=lambda w: (w[0], w[1])):
@@ -534,7 +547,7 @@ def _write_run(plan: RunPlan, session, prep: Prepass, progress, render_progress,
     return {
         "out": str(plan.out), "muscles": nm, "frames": nf, "files": len(writer.files), "skipped": writer.skipped,
         "warnings": warnings, "worst_volume_error": float(np.max(np.abs(ratio - 1.0))) if ratio.size else 0.0,
-        "stats": stats, "run_warnings": run_warnings,
+        "stats": stats, "run_warnings": run_warnings, "overlap": share,
     }
 
 
