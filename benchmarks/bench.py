@@ -28,7 +28,9 @@ so figures are noisy and only ratios taken in the same run are compared with tar
    and without the contact stage (µs per muscle-frame, the ratio), and the shares of vertices
    inside another muscle or a bone and the deepest penetration before and after (the
    product's own measures, stats.csv's), the volume, and the muscle-frames that pop (a
-   vertex step over 1.5x the no-contact one);
+   vertex step over 1.5x the no-contact one); where the skeleton has bone meshes, the share
+   inside a bone and the deepest point in one after contact by libigl's distance to the
+   meshes themselves, against the fields the product reads them through;
 10. rendering split over processes: ``make demo``'s first job (poses/jobs/demo.yaml, meshes and
    512x512 frames; every 2nd frame with ``--quick``) as a subprocess at ``--jobs 1`` and
    ``--jobs 2``, and their ratio.
@@ -1116,6 +1118,41 @@ def contact_pass(plan) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
     return time.perf_counter() - t0, out, step, vol
 
 
+def bones_by_libigl(plan, every: int = 1) -> tuple[float, float, float, int]:
+    """What a bone's mesh says, not its field: every ``every``-th frame of ``plan`` (its
+    stages, contact included) evaluated, and every vertex within 1 cm of a bone's mesh box
+    tested by libigl's signed distance to that mesh (the fast-winding-number sign, as the
+    fields are made). Returns (share of the vertices inside a bone by libigl, the same by the
+    product's measure (stats.csv's inside_bone, weighted by vertices), the deepest point in a
+    bone by libigl (m), frames read)."""
+    import igl
+
+    from axdf_cli.pipeline.evaluate import evaluate_plan
+
+    meshes = {i: (np.asarray(v, np.float64), np.asarray(f, np.int64)) for i, (v, f, _) in plan.bone_meshes.items()}
+    sub = dataclasses.replace(plan, frames=plan.frames[::every])
+    n_all = n_in = 0
+    field = deep = 0.0
+    for chunk, results in evaluate_plan(sub):
+        results = list(results)
+        for fi in range(len(chunk.frames)):
+            X = np.concatenate([r.vertices[fi] for _, r in results]).astype(np.float64)
+            nv = np.array([len(r.vertices[fi]) for _, r in results], dtype=np.float64)
+            field += float(sum(n * r.contact[fi, 1] for n, (_, r) in zip(nv, results) if r.contact is not None))
+            sd = np.full(len(X), np.inf)
+            inv = np.linalg.inv(chunk.world[fi])
+            for b, (bv, bf) in meshes.items():
+                y = X @ inv[b, :3, :3].T + inv[b, :3, 3]
+                near = np.all((y > bv.min(axis=0) - 0.01) & (y < bv.max(axis=0) + 0.01), axis=1)
+                if near.any():
+                    d = igl.signed_distance(y[near], bv, bf, sign_type=igl.SIGNED_DISTANCE_TYPE_FAST_WINDING_NUMBER)[0]
+                    sd[near] = np.minimum(sd[near], d)
+            n_all += len(X)
+            n_in += int((sd < 0).sum())
+            deep = max(deep, float(-sd.min()))
+    return n_in / max(n_all, 1), field / max(n_all, 1), deep, len(sub.frames)
+
+
 def rajagopal_plan(tmp: Path, stages=None, packed: bool = False):
     """Rajagopal2016 over its running stride (tests/data/rajagopal2016, imported without bone
     meshes into ``tmp``: the contact is muscle against muscle only); ``packed``: its muscles
@@ -1231,6 +1268,15 @@ def contact_rows(table: "Table", quick: bool, tmp: Path | None = None) -> None:
                   f"before {(deep_b > TARGET_DEPTH).sum()} of {deep_a.size}",
                   f"> 5 mm: {(deep_a > 0.005).sum()} (before {(deep_b > 0.005).sum()})",
                   f"p99 {np.percentile(deep_a, 99) * 1000:.1f} mm (before {np.percentile(deep_b, 99) * 1000:.1f})")
+        if plan.bone_meshes:
+            exact, field, deep, nb = bones_by_libigl(plan)
+            table.add("vertices inside a bone by the meshes (libigl)",
+                      f"{exact * 100:.3f}%", f"the fields {field * 100:.3f}% ({nb} frames)",
+                      f"{exact / max(field, 1e-12):.2f}x", f"<= {TARGET_INSIDE_BONE * 100:g}% "
+                      f"{_mark(exact <= TARGET_INSIDE_BONE)}")
+            table.add("deepest in a bone by the meshes (libigl)", f"{deep * 1000:.1f} mm",
+                      f"as measured {a * 1000:.1f} mm (all frames)", "",
+                      f"<= {TARGET_DEPTH * 1000:g} mm {_mark(deep <= TARGET_DEPTH)}")
         dv = np.abs(vol1 / vol0 - 1.0).max()
         table.add("volume against no contact", f"{dv * 100:.2g}% off", "", "", f"<= 0.5% {_mark(dv <= 0.005)}")
         ratio = step1[1:] / np.maximum(step0[1:], 1e-12)

@@ -129,3 +129,37 @@ def test_contact_pass(repo_root):
     assert (s0[0] == 0).all() and (s0[1:] > 0).all()
     np.testing.assert_allclose(v1, v0, rtol=1e-9)
     assert (s1[1:] <= bench.POP_RATIO * s0[1:]).all()
+
+
+def test_bones_by_libigl_counts_what_winding_numbers_count(repo_root):
+    """The bench's bone check (libigl's signed distance to the bone meshes) on a few demo frames
+    measured without contact (vertices in the bones): its share inside a bone is the one our
+    own generalized winding numbers give (tests/winding.py), its field share the product's
+    stats weighted by vertices, and its deepest point lies inside."""
+    from winding import inside_shares
+
+    from axdf_cli.pipeline.evaluate import evaluate_plan
+    from axdf_cli.pipeline.plan import plan_run
+    from axdf_cli.specs import load_job
+
+    plan = plan_run(load_job(repo_root / "poses" / "jobs" / "demo.yaml"), frames_arg="60:76:5",
+                    stages={"contact": False, "penetration": True})
+    exact, field, deep, nf = bench.bones_by_libigl(plan)
+    assert nf == len(plan.frames) == 4
+    inside = n = 0.0
+    measured = 0.0
+    for chunk, results in evaluate_plan(plan):
+        results = list(results)
+        for fi in range(len(chunk.frames)):
+            w = chunk.world[fi]
+            bones = [(v.astype(np.float64) @ w[b, :3, :3].T + w[b, :3, 3], f) for b, (v, f, _) in plan.bone_meshes.items()]
+            meshes = [(r.vertices[fi].astype(np.float64), plan.models[j].faces) for j, r in results]
+            nv = np.array([len(v) for v, _ in meshes], dtype=np.float64)
+            ref = inside_shares(meshes, bones, np.zeros((len(meshes), len(meshes)), bool))
+            inside += float((ref[:, 1] * nv).sum())
+            measured += float(sum(n_ * r.contact[fi, 1] for n_, (_, r) in zip(nv, results)))
+            n += nv.sum()
+    assert inside / n > 0.01  # the demo's muscles reach into their bones without contact
+    assert abs(exact - inside / n) <= 0.002, (exact, inside / n)
+    assert field == pytest.approx(measured / n, abs=1e-12)
+    assert deep > 0.0
