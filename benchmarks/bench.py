@@ -1118,9 +1118,9 @@ def contact_pass(plan) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
     return time.perf_counter() - t0, out, step, vol
 
 
-def bones_by_libigl(plan, every: int = 1) -> tuple[float, float, float, int]:
-    """What a bone's mesh says, not its field: every ``every``-th frame of ``plan`` (its
-    stages, contact included) evaluated, and every vertex within 1 cm of a bone's mesh box
+def bones_by_libigl(plan) -> tuple[float, float, float, int]:
+    """What a bone's mesh says, not its field: every frame of ``plan`` (its stages, contact
+    included) evaluated again (apart from :func:`contact_pass`, which is timed), and every vertex within 1 cm of a bone's mesh box
     tested by libigl's signed distance to that mesh (the fast-winding-number sign, as the
     fields are made). Returns (share of the vertices inside a bone by libigl, the same by the
     product's measure (stats.csv's inside_bone, weighted by vertices), the deepest point in a
@@ -1130,10 +1130,9 @@ def bones_by_libigl(plan, every: int = 1) -> tuple[float, float, float, int]:
     from axdf_cli.pipeline.evaluate import evaluate_plan
 
     meshes = {i: (np.asarray(v, np.float64), np.asarray(f, np.int64)) for i, (v, f, _) in plan.bone_meshes.items()}
-    sub = dataclasses.replace(plan, frames=plan.frames[::every])
     n_all = n_in = 0
     field = deep = 0.0
-    for chunk, results in evaluate_plan(sub):
+    for chunk, results in evaluate_plan(plan):
         results = list(results)
         for fi in range(len(chunk.frames)):
             X = np.concatenate([r.vertices[fi] for _, r in results]).astype(np.float64)
@@ -1150,7 +1149,7 @@ def bones_by_libigl(plan, every: int = 1) -> tuple[float, float, float, int]:
             n_all += len(X)
             n_in += int((sd < 0).sum())
             deep = max(deep, float(-sd.min()))
-    return n_in / max(n_all, 1), field / max(n_all, 1), deep, len(sub.frames)
+    return n_in / max(n_all, 1), field / max(n_all, 1), deep, len(plan.frames)
 
 
 def rajagopal_plan(tmp: Path, stages=None, packed: bool = False):

@@ -18,8 +18,8 @@ from axdf_cli.specs.render import RenderSettings, parse_render_settings, setting
 from axdf_cli.specs.render import parse_camera  # noqa: F401  (a job's camera: mapping)
 from axdf_cli.pipeline import RunPlan, build_stages, evaluate_chunks, execute, load_bone_mesh  # noqa: F401
 from axdf_cli.pipeline.stages import stages_record  # noqa: F401  (dataset.json names the stages)
-from axdf_cli.pipeline.execute import (BULK_OVERLAP, bulk_overlap_text,  # noqa: F401  (muscles that overlap in bulk,
-                                       pack_command_line)  # as a run tells them)
+from axdf_cli.pipeline.execute import (bulk_overlap_text, overlaps_in_bulk,  # noqa: F401  (muscles that overlap
+                                       pack_command_line)  # in bulk, as a run tells them)
 from axdf_cli.pipeline.plan import display_path, load_muscle_specs  # noqa: F401  (as a run's manifest shows paths)
 from axdf_cli.workers import WorkerDied, one_thread, process_map  # noqa: F401  (worker processes, as axdf run's)
 from axdf_cli.fileio.runfolder import own_entry  # noqa: F401  (the lock and temporaries axdf leaves while writing)

@@ -47,7 +47,7 @@ class Outcome:
     gl_renderer: str = ""
     # With contact, over the sequences made now: frames measured, the sum of their share of
     # vertices inside another muscle over those frames, and how many sequences overlap in bulk
-    # (their manifests say so; axdf_cli.pipeline.execute.BULK_OVERLAP)
+    # (their manifests say so; axdf_cli.pipeline.execute.overlaps_in_bulk)
     overlap_frames: int = 0
     overlap_sum: float = 0.0
     overlap_bulk: int = 0
@@ -317,7 +317,7 @@ def build(path: Path | str, out: Path | str, *, seed: int | None = None, jobs: i
                     share, frames = timing["overlap"]
                     res.overlap_frames += frames
                     res.overlap_sum += share * frames
-                    res.overlap_bulk += bool(share > door.BULK_OVERLAP)
+                    res.overlap_bulk += door.overlaps_in_bulk(share)
             res.gl_renderer = res.gl_renderer or renderer
             if progress:
                 progress(_samples(ctx, i))

@@ -85,11 +85,17 @@ def overlap_share(plan: RunPlan, inside: np.ndarray) -> float | None:
     return float((inside * n).sum() / (n.sum() * inside.shape[0]))
 
 
+def overlaps_in_bulk(share: float | None) -> bool:
+    """Whether muscles keeping ``share`` of their vertices inside another muscle after contact
+    (:func:`overlap_share`; None: not measured) overlap in bulk (:data:`BULK_OVERLAP`)."""
+    return share is not None and share > BULK_OVERLAP
+
+
 def bulk_overlap_text(share: float | None, over: str) -> str | None:
-    """The warning for muscles that overlap in bulk after contact (``share`` above
-    :data:`BULK_OVERLAP`, measured ``over`` "N frame(s)" or the like); None otherwise. Names
-    no path (it goes in manifests): :func:`pack_command_line` is the next step, for the terminal."""
-    if share is None or not share > BULK_OVERLAP:
+    """The warning for muscles that overlap in bulk after contact (:func:`overlaps_in_bulk`;
+    ``share`` measured ``over`` "N frame(s)" or the like); None otherwise. Names no path (it
+    goes in manifests): :func:`pack_command_line` is the next step, for the terminal."""
+    if not overlaps_in_bulk(share):
         return None
     return (f"the muscles overlap in bulk: after contact {share * 100:.1f}% of their vertices lie inside another "
             f"muscle (over {over}; stats.csv's inside_muscle), more than contact clears (it "
