@@ -110,6 +110,12 @@ def bulk_overlap(plan: RunPlan, inside: np.ndarray) -> str | None:
     return bulk_overlap_text(overlap_share(plan, inside), f"{inside.shape[0]} frame(s)")
 
 
+def with_pack_command(plan: RunPlan, warning: str) -> str:
+    """The bulk-overlap warning as the terminal shows it: ending with the run's own
+    :func:`pack_command` (the manifest's names no path)."""
+    return f"{warning}: {pack_command(plan)}"
+
+
 def pack_command(plan: RunPlan) -> str:
     """The ``axdf pack`` command line for the run's muscles (their folders), skeleton and pose."""
     return pack_command_line([Path(s.source).parent for s in plan.muscles if s.source],
@@ -432,7 +438,7 @@ def strict_check(plan: RunPlan, prep: Prepass) -> None:
             found += [f"{plan.names[j]} frame {int(plan.frames[sl.start + i])}: non-finite vertices"
                       for i in np.nonzero(bad)[0]]
     bulk = bulk_overlap(plan, inside)
-    found += [f"{bulk}: {pack_command(plan)}"] if bulk else []
+    found += [with_pack_command(plan, bulk)] if bulk else []
     if found:
         raise InputError(None, f"{len(found)} warning(s) with --strict; first: {found[0]}",
                          "fix the inputs or run without --strict")
@@ -517,7 +523,7 @@ def _write_run(plan: RunPlan, session, prep: Prepass, progress, render_progress,
         share = overlap_share(plan, stats[..., STATS_COLUMNS.index("inside_muscle")])
         bulk = bulk_overlap_text(share, f"{nf} frame(s)")
         warnings += [bulk] if bulk else []
-        run_warnings = [f"{bulk}: {pack_command(plan)}"] if bulk else []  # (the terminal's: with the command)
+        run_warnings = [with_pack_command(plan, bulk)] if bulk else []
         for fi, j, msg in sorted(all_warns, key=lambda w: (w[0], w[1])):
             warn_text[fi][j] = (warn_text[fi][j] + "; " if warn_text[fi][j] else "") + msg
             warnings.append(f"{plan.names[j]} frame {int(plan.frames[fi])}: {msg}")
