@@ -20,7 +20,7 @@ def _unit(d: np.ndarray) -> np.ndarray:
 
 def _apply(model, b: str, p: np.ndarray) -> np.ndarray:
     """X[f,s,c] = sum_i B[s,i] P[f,i,c] for the basis matrix named ``b`` (its sparse rows)."""
-    idx, w = model._sparse[b]
+    idx, w = model.sparse[b]
     return np.einsum("sk,fskc->fsc", w, p[:, idx])
 
 

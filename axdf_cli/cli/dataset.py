@@ -6,7 +6,7 @@ import re
 import sys
 from pathlib import Path
 
-from axdf_cli.cli.run import _positive
+from axdf_cli.cli.run import positive
 from axdf_cli.errors import UsageError
 from axdf_cli.tolerances import MAX_SEED
 
@@ -21,7 +21,7 @@ def add_args(p) -> None:
     b.add_argument("dataset", metavar="DATASET.yaml", help="dataset file")
     b.add_argument("--out", metavar="DIR", help="output folder (default out/<dataset name>)")
     b.add_argument("--seed", type=int, metavar="N", help="override the file's seed")
-    b.add_argument("--jobs", type=_positive, default=1, metavar="N",
+    b.add_argument("--jobs", type=positive, default=1, metavar="N",
                    help="worker processes (meshes and rendering); Ray CPUs for a local Ray (default 1)")
     b.add_argument("--shard", metavar="K/N", default="0/1",
                    help="make only sequences with index %% N == K (a SLURM array: $SLURM_ARRAY_TASK_ID/N)")

@@ -16,7 +16,7 @@ import sys
 import time
 from pathlib import Path
 
-from axdf_cli.cli.run import _positive
+from axdf_cli.cli.run import positive
 from axdf_cli.errors import InputError, Mark, UsageError
 from axdf_cli.specs.render import add_render_args, settings_from_args, settings_to_dict
 from axdf_cli.fileio.runfolder import (RUN_COMMAND, command_of, CAMERA, FRAME_EXTENSIONS, MANIFEST_INTERVAL_S, Root, Session, Target,
@@ -31,7 +31,7 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     g = parser.add_mutually_exclusive_group()
     g.add_argument("--overwrite", action="store_true", help="render frames that exist again")
     g.add_argument("--resume", action="store_true", help="finish an interrupted render (same settings)")
-    parser.add_argument("--jobs", type=_positive, default=1, metavar="N",
+    parser.add_argument("--jobs", type=positive, default=1, metavar="N",
                         help="worker processes for the rendering (default 1; same output bytes)")
     add_render_args(parser)
 

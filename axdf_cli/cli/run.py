@@ -19,7 +19,7 @@ def add_args(p) -> None:
     g = p.add_mutually_exclusive_group()
     g.add_argument("--render", dest="render", action="store_true", default=None, help="render preview frames")
     g.add_argument("--no-render", dest="render", action="store_false", help="do not render")
-    p.add_argument("--jobs", type=_positive, default=1, metavar="N",
+    p.add_argument("--jobs", type=positive, default=1, metavar="N",
                    help="worker processes for the mesh pass and the rendering (default 1; same output bytes)")
     g2 = p.add_mutually_exclusive_group()
     g2.add_argument("--resume", action="store_true", help="finish an interrupted run in OUT, skipping finished files")
@@ -56,7 +56,7 @@ def stage_switches(args) -> dict:
     return {name: v for name in STAGES if (v := getattr(args, f"stage_{name}", None)) is not None}
 
 
-def _positive(text: str) -> int:
+def positive(text: str) -> int:
     import argparse
 
     try:

@@ -127,7 +127,7 @@ def _safe_build(ctx: wk.Context, index: int, out: Path, resume: bool) -> tuple:
     """Run one sequence; errors come back as values (they cross process boundaries intact)."""
     try:
         rec, timing = wk.build_sequence(ctx, index, out, resume)
-        vr = wk._RENDERERS.get(os.getpid())
+        vr = wk.RENDERERS.get(os.getpid())
         return ("ok", index, rec, timing, vr.info.renderer if vr else "")
     except InputError as e:
         return ("input", index, str(e), None, "")
@@ -200,7 +200,7 @@ def _run_local(ctx, mine, out, jobs, resume, done, where) -> None:
         try:
             for i in mine:
                 rec, timing = wk.build_sequence(ctx, i, out, resume)
-                vr = wk._RENDERERS.get(os.getpid())
+                vr = wk.RENDERERS.get(os.getpid())
                 done(("ok", i, rec, timing, vr.info.renderer if vr else ""))
         finally:
             wk.release_renderer()

@@ -193,20 +193,20 @@ def sequence_pose(ctx: Context, seq: Sequence):
     return with_activation(spec, seq, pose, ctx.names, frames), frames
 
 
-_RENDERERS: dict = {}  # pid -> ViewRenderer (a GL context never crosses a fork)
+RENDERERS: dict = {}  # pid -> ViewRenderer (a GL context never crosses a fork)
 
 
 def view_renderer(ctx: Context):
     from axdf_cli.render.views import ViewRenderer
 
-    vr = _RENDERERS.get(os.getpid())
+    vr = RENDERERS.get(os.getpid())
     if vr is None:
-        vr = _RENDERERS[os.getpid()] = ViewRenderer(ctx.scene, ctx.spec.render)
+        vr = RENDERERS[os.getpid()] = ViewRenderer(ctx.scene, ctx.spec.render)
     return vr
 
 
 def release_renderer() -> None:
-    vr = _RENDERERS.pop(os.getpid(), None)
+    vr = RENDERERS.pop(os.getpid(), None)
     if vr is not None:
         vr.release()
 

@@ -448,7 +448,7 @@ def belly_doc(name: str, path: list, wraps: list, max_force: float, fibre_length
     """
     from axdf_cli.model.measure import belly_slenderness
 
-    rest_ctrl, path_length = _rest_path(name, path, wraps, skel, world, axis_points)
+    rest_ctrl, path_length = rest_path(name, path, wraps, skel, world, axis_points)
     t_of, axis_length = _arc_parameter_of(rest_ctrl)
     pcsa = max_force / SPECIFIC_TENSION
     volume = pcsa * fibre_length
@@ -518,7 +518,7 @@ def _model(doc: dict, name: str, skel: Skeleton, world: np.ndarray):
     return MuscleModel(spec, skel.bone_index, world, skel)
 
 
-def _rest_path(name: str, path: list, wraps: list, skel: Skeleton, world: np.ndarray, axis_points: int = 0):
+def rest_path(name: str, path: list, wraps: list, skel: Skeleton, world: np.ndarray, axis_points: int = 0):
     """The path documents read back through the loader, evaluated at the rest pose: the axis
     control points (n, 3) and the wrapped path's length."""
     from axdf_cli.specs import parse_muscle_path

@@ -566,9 +566,9 @@ def probe_poses(skel, motion_q: np.ndarray | None = None) -> np.ndarray:
 
 
 def _rest_length(name: str, path: list, wraps: list, skel, world) -> float:
-    from axdf_cli.importers.emit import _rest_path
+    from axdf_cli.importers.emit import rest_path
 
-    return _rest_path(name, path, wraps, skel, world)[1]
+    return rest_path(name, path, wraps, skel, world)[1]
 
 
 def import_markdown(r: dict) -> str:

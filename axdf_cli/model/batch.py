@@ -90,7 +90,7 @@ class MuscleBatch:
             m = models[j]
             self.bones[self.a_off[j]:self.a_off[j + 1]] = m.bones
             self.at[self.a_off[j]:self.a_off[j + 1]] = m.at
-        sp = [m._sparse for m in models]
+        sp = [m.sparse for m in models]
         self.s_off, self.bs_idx, self.bs_w = _rows([s["Bs"] for s in sp])
         _, self.dbs_idx, self.dbs_w = _rows([s["dBs"] for s in sp])
         self.c_off, self.bc_idx, self.bc_w = _rows([s["Bc"] for s in sp])

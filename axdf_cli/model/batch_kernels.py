@@ -45,7 +45,7 @@ from llvmlite import ir
 from numba import njit, types
 from numba.extending import intrinsic
 
-from axdf_cli.model.kernels import _solve_scale, quad_volume_terms
+from axdf_cli.model.kernels import solve_scale, quad_volume_terms
 from axdf_cli.model.paths import wrap as W
 
 _EPS = 1e-30  # as axdf_cli.model.rmf._EPS
@@ -580,7 +580,7 @@ def _grid(net_a, net_w, u_idx, u_w, v_idx, v_w, ta, tw, ga, gw):
 
 @njit(cache=True, error_model="numpy")
 def _volume_terms(ga, gw, terms):
-    """Each quad's four contributions to :func:`axdf_cli.model.kernels._volume_cubic`'s sums
+    """Each quad's four contributions to :func:`axdf_cli.model.kernels.volume_cubic`'s sums
     (terms (4, (A + 2) U) at the quad's corner (u, a): flat index (a + 1) U + u), computed over
     the whole grid at once (the rows u = U - 1 and the ghost columns are not quads: unused).
     Indices are unsigned: numba's negative-index wraparound on ``i + U`` would keep the
@@ -622,7 +622,7 @@ def _volume_terms(ga, gw, terms):
 
 @njit(cache=True, error_model="numpy")
 def _ring_normals(ga, nrm):
-    """:func:`axdf_cli.model.kernels._ring_vertices`' normals of one frame's grid (3, A + 2, U)
+    """:func:`axdf_cli.model.kernels.ring_vertices`' normals of one frame's grid (3, A + 2, U)
     into nrm (same layout), over the whole grid at once (rows 0 and U - 1 and the ghost
     columns come out meaningless: unused). Unsigned indices, as :func:`_volume_terms`."""
     nu = _U(ga.shape[2])
@@ -667,7 +667,7 @@ def _unpack_grid(ga, nrm, bv, bn):
 
 @njit(cache=True, error_model="numpy")
 def _pole_normal(ga, row, ring, sign, e0, e1, e2, out):
-    """:func:`axdf_cli.model.kernels._pole_normals` of one pole (grid (3, A + 2, U); the pole
+    """:func:`axdf_cli.model.kernels.pole_normals` of one pole (grid (3, A + 2, U); the pole
     at along-row ``row``, its fan to ``ring``) into out (3,): the fan's area-weighted normal,
     or the outward axis direction e where the fan folds."""
     na = ga.shape[1] - 2
@@ -826,7 +826,7 @@ def shape_pass(js, p, a_off, fr, ends, theta, tension, scale0, q_off, lam, uvw, 
                 c1 = 0.0
                 c2 = 0.0
                 c3 = 0.0
-                for u in range(nu - 1):  # the quads' sums in kernels._volume_cubic's order
+                for u in range(nu - 1):  # the quads' sums in kernels.volume_cubic's order
                     for a in range(na):
                         i = (a + 1) * nu + u
                         c0 += terms[0, i]
@@ -840,7 +840,7 @@ def shape_pass(js, p, a_off, fr, ends, theta, tension, scale0, q_off, lam, uvw, 
                 s = sf
                 bad = False
                 if solve[j]:
-                    s, bad = _solve_scale(c0, c1, c2, c3, v0[j], sf, iters, rtol)
+                    s, bad = solve_scale(c0, c1, c2, c3, v0[j], sf, iters, rtol)
                 sc = min(max(s, s_min), s_max)
                 out_vol[j, ff] = ((c3 * sc + c2) * sc + c1) * sc + c0
                 out_s[j, ff] = s

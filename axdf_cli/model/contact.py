@@ -1115,7 +1115,7 @@ def _apply_one(m, grid, rad, coef, off, nu, na, coff, target, max_step, ga, sigm
             grid[k, 2] += f * d2
             for c in range(3):
                 ga[u, a, c] = grid[k, c]
-    c0, c1, c2, c3 = kernels._volume_cubic(ga[:U, :A], rad[o:o + U * A].reshape(U, A, 3))
+    c0, c1, c2, c3 = kernels.volume_cubic(ga[:U, :A], rad[o:o + U * A].reshape(U, A, 3))
     s = _solve_offset(c0, c1, c2, c3, target[m])
     sigma[m] += s
     for k in range(o, o + U * A):
@@ -1407,8 +1407,8 @@ def _normals(grid, off, nu, na, m, out_v, out_n):
         if el > 0.0:
             for c in range(3):
                 e[0, c] /= el
-    kernels._ring_vertices(ga, out_v, out_n, 0)
-    kernels._pole_normals(ga, e0, e1, out_n, 0)
+    kernels.ring_vertices(ga, out_v, out_n, 0)
+    kernels.pole_normals(ga, e0, e1, out_n, 0)
 
 
 @njit(cache=True)
@@ -1666,7 +1666,7 @@ def _grid_volumes(grid, off, nu, na, out):
         U = nu[m]
         A = na[m]
         ga = grid[off[m]:off[m + 1]].reshape(U, A, 3)
-        out[m] = kernels._volume_cubic(ga, np.zeros_like(ga))[0]
+        out[m] = kernels.volume_cubic(ga, np.zeros_like(ga))[0]
 
 
 def _grid_volume(g: np.ndarray, U: int, A: int) -> float:

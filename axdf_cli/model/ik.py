@@ -82,7 +82,7 @@ class _Problem:
         self.key = None
         self.count = 0
 
-    def _eval(self, x):
+    def evaluate(self, x):
         key = x.tobytes()
         if key != self.key:
             q = self.q.copy()
@@ -94,13 +94,13 @@ class _Problem:
         return self.pts, self.jac
 
     def residual(self, x):
-        pts, _ = self._eval(x)
+        pts, _ = self.evaluate(x)
         w = self.sqrt_w * self.active
         r = (w[:, None] * (pts - self.target)).reshape(-1)
         return np.concatenate([r, self.smooth * (x - self.prev)])
 
     def jacobian(self, x):
-        _, jac = self._eval(x)
+        _, jac = self.evaluate(x)
         w = self.sqrt_w * self.active
         j = (w[:, None, None] * jac).reshape(-1, len(self.free))
         return np.concatenate([j, np.diag(self.smooth)])
@@ -165,7 +165,7 @@ def fit_frames(skel: Skeleton, bones, local, weights, targets: np.ndarray, free,
         q[free] = x
         prob.q = q
         q_out[f] = q
-        pts_out[f] = prob._eval(x)[0]
+        pts_out[f] = prob.evaluate(x)[0]
         evals[f] = prob.count
         width = np.where(np.isfinite(hi - lo), hi - lo, 1.0)
         at_bound[f, free] = (x - lo <= tol.IK_AT_BOUND * width) | (hi - x <= tol.IK_AT_BOUND * width)

@@ -94,7 +94,7 @@ def _tessellate(net_a, net_w, u_idx, u_w, v_idx, v_w, ta, tw, ga, gw):
 def quad_volume_terms(ax0, ax1, ax2, wx0, wx1, wx2, ay0, ay1, ay2, wy0, wy1, wy2, ad0, ad1, ad2, wd0, wd1, wd2):
     """One quad's four contributions (times 6) to the volume cubic of the grid a + s w: the
     triple product x . (y x d) with x = ax + s wx, y = ay + s wy, d = ad + s wd, by powers of s
-    (P = ay x ad, Q = wy x wd, R = wy x ad + ay x wd). Shared by :func:`_volume_cubic` and the
+    (P = ay x ad, Q = wy x wd, R = wy x ad + ay x wd). Shared by :func:`volume_cubic` and the
     batch pass (:mod:`axdf_cli.model.batch_kernels`), so both add the same terms in the same order."""
     p0 = ay1 * ad2 - ay2 * ad1
     p1 = ay2 * ad0 - ay0 * ad2
@@ -112,7 +112,7 @@ def quad_volume_terms(ax0, ax1, ax2, wx0, wx1, wx2, ay0, ay1, ay2, wy0, wy1, wy2
 
 
 @njit(cache=True)
-def _volume_cubic(ga, gw):
+def volume_cubic(ga, gw):
     """Stage 3: coefficients (c0, c1, c2, c3) of the mesh volume V(s) of the grid ga + s gw.
     Each quad's two triangles give p01 . (p10 x (p00 - p11)) / 6, a trilinear form in
     (p01, p10, p00 - p11), each affine in s."""
@@ -153,7 +153,7 @@ def _volume_cubic(ga, gw):
 
 
 @njit(cache=True)
-def _solve_scale(c0, c1, c2, c3, v0, s0, iters, rtol):
+def solve_scale(c0, c1, c2, c3, v0, s0, iters, rtol):
     """Stage 4 (``exact``): the root s of V(s) = v0 by safeguarded Newton from the paper's
     scale s0 (V is a cubic: quadratic convergence). Returns (s, no_solution); s0 when none."""
     s = s0
@@ -173,7 +173,7 @@ def _solve_scale(c0, c1, c2, c3, v0, s0, iters, rtol):
 
 
 @njit(cache=True)
-def _ring_vertices(ga, out_v, out_n, f):
+def ring_vertices(ga, out_v, out_n, f):
     """Stage 5: the final grid's vertices (poles collapsed) and the rings' normals."""
     nu = ga.shape[0]
     na = ga.shape[1]
@@ -204,7 +204,7 @@ def _ring_vertices(ga, out_v, out_n, f):
 
 
 @njit(cache=True)
-def _pole_normals(ga, end0, end1, out_n, f):
+def pole_normals(ga, end0, end1, out_n, f):
     """Stage 6: pole normals, the fan's area-weighted normal; the axis direction where the
     fan folds."""
     nu = ga.shape[0]
@@ -270,19 +270,19 @@ def surface_frame(fixed, scaled, pole0, pole1, end0, end1, u_idx, u_w, v_idx, v_
     na = v_idx.shape[0]
     _fill_net(net_a, net_w, fixed, scaled, pole0, pole1, f)
     _tessellate(net_a, net_w, u_idx, u_w, v_idx, v_w, ta, tw, ga, gw)
-    c0, c1, c2, c3 = _volume_cubic(ga, gw)
+    c0, c1, c2, c3 = volume_cubic(ga, gw)
     s = s0
     bad = False
     if exact:
-        s, bad = _solve_scale(c0, c1, c2, c3, v0, s0, iters, rtol)
+        s, bad = solve_scale(c0, c1, c2, c3, v0, s0, iters, rtol)
     sc = min(max(s, s_min), s_max)
     volume = ((c3 * sc + c2) * sc + c1) * sc + c0
     for u in range(nu):
         for a in range(na):
             for c in range(3):
                 ga[u, a, c] += sc * gw[u, a, c]
-    _ring_vertices(ga, out_v, out_n, f)
-    _pole_normals(ga, end0, end1, out_n, f)
+    ring_vertices(ga, out_v, out_n, f)
+    pole_normals(ga, end0, end1, out_n, f)
     return volume, s, bad
 
 

@@ -260,7 +260,7 @@ class MuscleModel:
         self.dBg = bspline.basis_matrix(knots, 2, gt, 1)
         # the same bases as sparse rows (3 non-zeros each): products cost O(3), not O(n)
         # (keyed by the basis' attribute name, so a pickled or copied model keeps them)
-        self._sparse = {k: kernels.sparse_rows(getattr(self, k)) for k in ("Bs", "dBs", "Bc", "dBc", "dBg")}
+        self.sparse = {k: kernels.sparse_rows(getattr(self, k)) for k in ("Bs", "dBs", "Bc", "dBc", "dBg")}
 
     def _stage_rest_axis(self, rest_world: np.ndarray):
         """The rest axis: control points, rest length l0 (checked), sampled frames, the start
@@ -332,7 +332,7 @@ class MuscleModel:
                              np.einsum("nc,nc->n", off, sb[0])], axis=1)  # (8N, 3)
         self.Bb = bspline.basis_matrix(self.knots, 2, self.bind_t)
         self.dBb = bspline.basis_matrix(self.knots, 2, self.bind_t, 1)
-        self._sparse.update({k: kernels.sparse_rows(getattr(self, k)) for k in ("Bb", "dBb")})
+        self.sparse.update({k: kernels.sparse_rows(getattr(self, k)) for k in ("Bb", "dBb")})
         self.lam = np.interp(self.bind_t, self.ts, self.arc)  # rest arc fraction of each bound point
 
     def _stage_belly_weights(self) -> None:
@@ -384,7 +384,7 @@ class MuscleModel:
 
     def _apply(self, b: str, p: np.ndarray) -> np.ndarray:
         """X[f,s,c] = sum_i B[s,i] P[f,i,c] for the basis matrix named ``b`` (its sparse rows)."""
-        idx, w = self._sparse[b]
+        idx, w = self.sparse[b]
         return np.einsum("sk,fskc->fsc", w, p[:, idx])
 
     def _samples(self, p: np.ndarray, b: str, db: str):
