@@ -2,6 +2,8 @@
 #   make demo   set up (.venv, packages, Mesa EGL if missing) and run the demo job into out/demo
 #   make test   set up and run the whole test suite (CI calls this through .ci/run); also
 #               creates .venv-blender (bpy) for the Blender check
+#   make test-fast  the unit tier only (TIER="integration" etc. picks another: unit, integration,
+#               judges, hostile; see tests/conftest.py TIERS)
 #   make dataset  set up and build a small gait2392 data set into out/gait2392_small
 #   make bench  set up and print the benchmark table (BENCH_ARGS="--quick", "--long")
 PY     ?= python3
@@ -27,7 +29,7 @@ BVH    := $(DATA)/bvh/cmu_131_01_walk_scaled.bvh
 MYO    := out/myo-sim
 MJCF_MESHES := --max-faces 2000 --mesh-edge 0.004
 
-.PHONY: all setup sysdeps demo dataset test bench golden clean import import-mjcf pack pack-check lock blender
+.PHONY: all setup sysdeps demo dataset test test-fast bench golden clean import import-mjcf pack pack-check lock blender
 
 all: demo
 
@@ -98,6 +100,12 @@ test: $(STAMP) $(BLENDER_STAMP)
 	@echo "golden check: a fresh run of tests/golden_job.yaml against tests/golden"
 	$(BIN)/axdf run tests/golden_job.yaml --out out/golden-check --overwrite --quiet
 	$(BIN)/axdf compare out/golden-check tests/golden --junit out/golden-junit.xml --report out/golden-report.json
+
+# One tier of the suite, for development: the unit tier by default (about a minute once the
+# kernels are compiled; the first run compiles them, and says so).
+TIER ?= unit
+test-fast: $(STAMP)
+	$(BIN)/python -m pytest -q -m "$(TIER)" tests
 
 # Re-bless our own golden files from the current code, printing what changed.
 golden: $(STAMP)

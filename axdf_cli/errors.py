@@ -5,7 +5,9 @@
 """
 from __future__ import annotations
 
+import difflib
 from dataclasses import dataclass
+from typing import Iterable
 
 
 @dataclass(frozen=True)
@@ -70,3 +72,17 @@ class EnvironmentProblem(AxdfError):
 
 class Interrupted(AxdfError):
     exit_code = 130
+
+
+def nearest(word, choices: Iterable[str]) -> str | None:
+    """The choice closest to ``word`` (difflib), or None when none is close."""
+    if not isinstance(word, str):
+        return None
+    hits = difflib.get_close_matches(word, [c for c in choices if isinstance(c, str)], n=1, cutoff=0.6)
+    return hits[0] if hits else None
+
+
+def did_you_mean(word, choices: Iterable[str]) -> str:
+    """``"did you mean 'x'? "`` for the nearest choice, or ``""``."""
+    near = nearest(word, choices)
+    return f"did you mean {near!r}? " if near else ""

@@ -25,6 +25,48 @@ import yaml
 sys.path.insert(0, str(Path(__file__).parent))
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
+
+#: Every test module's tier (a pytest marker of the same name, pyproject.toml): `make test`
+#: runs all of them, `make test-fast` the unit tier. A test module named in none is refused
+#: at collection, so a new one says where it belongs.
+TIERS = {
+    "unit": ("axis_points", "batch", "bspline", "coupled", "formats_table", "house", "inputs", "jiggle_law",
+             "kernel", "keypoints", "muscle", "paths", "path_inside", "rmf", "writers_fast", "render_settings",
+             "dataset_sampling", "runtime"),
+    "integration": ("bellies", "bench_smoke", "bvh_import", "camera", "cli", "compare", "compare_formats", "contact",
+                    "dataset", "dataset_amodal", "dataset_bench", "dataset_labels", "gait2392", "jiggle_run",
+                    "meshes", "mjcf_import", "osim_cli", "outputs", "pack", "packed", "rajagopal", "render_cli",
+                    "render_jobs", "render_output", "retarget", "retarget_myobody", "stages", "transfer",
+                    "transfer_paths"),
+    "judges": ("blender", "mjcf_judge", "opensim_judge", "osim_fk", "osim_muscles"),
+    "hostile": ("compare_hostile", "fuzz_yaml", "hostile", "inputs_hostile", "robustness", "safety"),
+}
+TIER_OF = {f"test_{name}": tier for tier, names in TIERS.items() for name in names}
+
+
+def pytest_collection_modifyitems(config, items):
+    untiered = set()
+    for item in items:
+        module = item.module.__name__.rsplit(".", 1)[-1]
+        tier = TIER_OF.get(module)
+        if tier is None:
+            untiered.add(module)
+        else:
+            item.add_marker(getattr(pytest.mark, tier))
+    if untiered:
+        raise pytest.UsageError(f"test modules in no tier: {', '.join(sorted(untiered))}; "
+                                "name each in tests/conftest.py TIERS")
+
+
+def pytest_sessionstart(session):
+    """Say so when numba's kernels compile on this run (a cold cache): minutes on 2 cores,
+    paid once, before the first test that needs them."""
+    from kernel_cache import cache_report
+
+    line = cache_report()
+    reporter = session.config.pluginmanager.get_plugin("terminalreporter")
+    if line and reporter is not None:
+        reporter.write_line(line)
 DEMO_MUSCLE_FILES = sorted((REPO_ROOT / "muscles" / "demo").glob("*.yaml"))
 DEMO_POSE = REPO_ROOT / "poses" / "demo.yaml"
 DEMO_JOB = REPO_ROOT / "poses" / "jobs" / "demo.yaml"

@@ -102,3 +102,97 @@ def test_the_rules_catch_what_they_forbid():
                      "def f():\n    print('x')\n    sys.stderr.write('y')\n    sys.exit(1)\n")
     assert imported_rooms(tree) == [(2, "pipeline"), (3, "dataset"), (3, "__init__")]
     assert _talks(tree) == ["line 5: print()", "line 6: sys.stderr", "line 7: sys.exit"]
+
+
+# --- size and coupling: what keeps a module readable and its insides its own ---
+
+MAX_LINES = 800  # a module longer than this does more than one job
+MAX_PARAMS = 12  # a function with more takes named groups (a NamedTuple, a params object)
+#: what model/ may import of axdf: it is pure functions of arrays and small specs
+MODEL_MAY_IMPORT = {"model", "errors", "tolerances"}
+#: what model/ never touches: files, the environment, the process
+MODEL_FORBIDDEN_CALLS = {"open", "getenv", "getpid", "savez", "savez_compressed", "save", "load", "mkdir",
+                         "write_bytes", "write_text", "read_bytes", "read_text"}
+
+
+def _params(fn: ast.AST) -> int:
+    a = fn.args
+    return len(a.posonlyargs) + len(a.args) + len(a.kwonlyargs) + bool(a.vararg) + bool(a.kwarg)
+
+
+def _too_many_params(tree: ast.AST) -> list[str]:
+    return [f"line {n.lineno}: {n.name}() takes {_params(n)} parameters (at most {MAX_PARAMS})"
+            for n in ast.walk(tree) if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef))
+            and _params(n) > MAX_PARAMS]
+
+
+def _is_module(dotted: str) -> bool:
+    rel = PACKAGE.parent.joinpath(*dotted.split("."))
+    return rel.with_suffix(".py").is_file() or (rel / "__init__.py").is_file()
+
+
+def _private_uses(tree: ast.AST) -> list[str]:
+    """Another axdf module's ``_private`` names used here: ``from axdf_cli.m import _x``, or
+    ``m._x`` where ``m`` names an axdf module imported into this one."""
+    found, modules = [], set()
+    for n in ast.walk(tree):
+        if isinstance(n, ast.ImportFrom) and n.level == 0 and n.module and n.module.split(".")[0] == "axdf_cli":
+            for a in n.names:
+                if a.name.startswith("_") and not a.name.startswith("__"):
+                    found.append(f"line {n.lineno}: from {n.module} import {a.name}")
+                elif _is_module(f"{n.module}.{a.name}"):
+                    modules.add(a.asname or a.name)
+        elif isinstance(n, ast.Import):
+            for a in n.names:
+                if a.name.split(".")[0] == "axdf_cli" and a.asname:
+                    modules.add(a.asname)
+    for n in ast.walk(tree):
+        if isinstance(n, ast.Attribute) and isinstance(n.value, ast.Name) and n.value.id in modules \
+                and n.attr.startswith("_") and not n.attr.startswith("__"):
+            found.append(f"line {n.lineno}: {n.value.id}.{n.attr}")
+    return found
+
+
+def _model_touches(tree: ast.AST) -> list[str]:
+    found = []
+    for n in ast.walk(tree):
+        if isinstance(n, ast.Attribute) and isinstance(n.value, ast.Name) and n.value.id == "os" and n.attr == "environ":
+            found.append(f"line {n.lineno}: os.environ")
+        if isinstance(n, ast.Call):
+            name = n.func.attr if isinstance(n.func, ast.Attribute) else getattr(n.func, "id", "")
+            if name in MODEL_FORBIDDEN_CALLS:
+                found.append(f"line {n.lineno}: {name}()")
+    return found
+
+
+@pytest.mark.parametrize("path", MODULES, ids=lambda p: p.relative_to(PACKAGE).as_posix())
+def test_a_module_stays_small_and_keeps_its_insides(path):
+    text = path.read_text()
+    tree = ast.parse(text, str(path))
+    lines = text.count("\n")
+    found = [f"{lines} lines (at most {MAX_LINES})"] if lines > MAX_LINES else []
+    found += _too_many_params(tree) + _private_uses(tree)
+    assert not found, "\n".join(found)
+
+
+@pytest.mark.parametrize("path", [p for p in MODULES if room_of(p) == "model"],
+                         ids=lambda p: p.relative_to(PACKAGE).as_posix())
+def test_the_model_imports_nothing_above_it_and_touches_no_file(path):
+    """model/ is pure: it imports only its own room, errors and tolerances, and neither reads
+    the environment nor opens, loads or saves a file (caches and threads are decided by its
+    callers)."""
+    tree = ast.parse(path.read_text(), str(path))
+    found = [f"line {line}: imports {room}" for line, room in imported_rooms(tree) if room not in MODEL_MAY_IMPORT]
+    found += _model_touches(tree)
+    assert not found, "\n".join(found)
+
+
+def test_the_size_and_coupling_rules_catch_what_they_forbid():
+    tree = ast.parse("import os\nfrom axdf_cli.model import contact\nfrom axdf_cli.model.kernels import _x\n"
+                     "import axdf_cli.model.pack as pk\n"
+                     "def f(a, b, c, d, e, f, g, h, i, j, k, l, m):\n    return contact._y + pk._z + contact.ok\n"
+                     "def g(*a, **k):\n    return os.environ, open('f'), os.getpid()\n")
+    assert _too_many_params(tree) == ["line 5: f() takes 13 parameters (at most 12)"]
+    assert _private_uses(tree) == ["line 3: from axdf_cli.model.kernels import _x", "line 6: contact._y",
+                                   "line 6: pk._z"]
+    assert _model_touches(tree) == ["line 8: os.environ", "line 8: open()", "line 8: getpid()"]

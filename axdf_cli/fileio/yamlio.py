@@ -15,7 +15,6 @@ nearest allowed key is suggested (``did you mean 'radii'?``).
 """
 from __future__ import annotations
 
-import difflib
 import math
 import os
 import re
@@ -26,7 +25,7 @@ from typing import Any, Iterable, Sequence
 import yaml
 
 from axdf_cli import tolerances as tol
-from axdf_cli.errors import InputError, Mark
+from axdf_cli.errors import InputError, Mark, did_you_mean, nearest  # noqa: F401  (the suggestions every spec reader gives)
 
 NAME_RE = re.compile(r"^[A-Za-z0-9_.-]+$")
 #: Longest name (characters = bytes: names are ASCII). Names become file names: the longest
@@ -35,19 +34,6 @@ NAME_RE = re.compile(r"^[A-Za-z0-9_.-]+$")
 NAME_MAX = 200
 NAME_ALLOWED = f"names use letters, digits, '_', '.', '-' (not '.' or '..' alone), at most {NAME_MAX} characters"
 
-
-def nearest(word, choices: Iterable[str]) -> str | None:
-    """The choice closest to ``word`` (difflib), or None when none is close."""
-    if not isinstance(word, str):
-        return None
-    hits = difflib.get_close_matches(word, [c for c in choices if isinstance(c, str)], n=1, cutoff=0.6)
-    return hits[0] if hits else None
-
-
-def did_you_mean(word, choices: Iterable[str]) -> str:
-    """``"did you mean 'x'? "`` for the nearest choice, or ``""``."""
-    near = nearest(word, choices)
-    return f"did you mean {near!r}? " if near else ""
 
 _STD_TAGS = {
     "tag:yaml.org,2002:str",

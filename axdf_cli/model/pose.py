@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from axdf_cli.errors import InputError, Mark
-from axdf_cli.fileio.yamlio import nearest
+from axdf_cli.errors import nearest
 
 #: Frames sampled at once when scanning a whole sequence (bounds memory for long poses).
 SCAN_FRAMES = 65536
