@@ -1,11 +1,17 @@
 """The benchmark's helpers run on a tiny case (1 muscle, 5 frames): keeps benchmarks.bench from
-rotting. No speed assertions: timings are only checked to be positive numbers."""
+rotting. No speed assertions: a timing is checked to be a figure in its unit (µs per
+muscle-frame: finite, positive, under a second), and what it counts is checked exactly."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
 from benchmarks import bench
+
+
+def microseconds(x: float) -> bool:
+    """A per-item time in µs as the bench reports it: finite, positive, under a second."""
+    return bool(np.isfinite(x)) and 0 < x < 1e6
 
 
 @pytest.fixture(scope="module")
@@ -27,20 +33,22 @@ def test_case_shapes(case, synthetic):
 
 def test_evaluation_limit_and_peer(case):
     models = case.models(1, (8, 6))
-    assert bench.time_evaluation(models, case.world, case.tension, repeats=1, chunk=2) > 0
-    assert bench.time_limit(5, models[0].n_vertices, repeats=1) > 0
+    assert microseconds(bench.time_evaluation(models, case.world, case.tension, repeats=1, chunk=2))
+    assert microseconds(bench.time_limit(5, models[0].n_vertices, repeats=1))
     pytest.importorskip("geomdl")
     us, err = bench.time_geomdl(models[0], case.rest, n_frames=1)
-    assert us > 0
+    assert microseconds(us)
     assert err < 1e-6  # geomdl tessellates the same surface (rest vertices are float32)
 
 
 def test_writers(case, tmp_path):
     model = case.models(1, (8, 6))[0]
     out = bench.time_writers(model, case.world, case.tension, tmp_path, n_files=5, repeats=1)
+    # binary PLY: at least 3 float32 per vertex, a count byte and 3 int32 per face
+    assert out["ply"]["bytes"] > model.n_vertices * 12 + len(model.faces) * 13
+    assert out["obj"]["bytes"] > out["ply"]["bytes"]  # the same mesh as text
     for ext in ("ply", "obj"):
-        assert out[ext]["bytes"] > 0
-        assert all(out[ext][k] > 0 for k in ("encode", "write", "write_bytes", "tofile"))
+        assert all(microseconds(out[ext][k]) for k in ("encode", "write", "write_bytes", "tofile"))
 
 
 def test_long_pose_stretch_and_table():
@@ -64,7 +72,8 @@ def test_wrapping_rows():
         pytest.skip("arm26 library not shipped")
     assert any(s.path.wraps for s in wc.specs) and not any(s.path.wraps for s in nc.specs)
     for c in (wc, nc):
-        assert bench.time_evaluation(c.models(2, (8, 6)), c.world, c.tension, repeats=1, chunk=4, coords=c.coords) > 0
+        assert microseconds(bench.time_evaluation(c.models(2, (8, 6)), c.world, c.tension, repeats=1, chunk=4,
+                                                  coords=c.coords))
 
 
 def test_packed_writers(case, tmp_path):
