@@ -3,7 +3,7 @@
 #   make test   set up and run the whole test suite (CI calls this through .ci/run); also
 #               creates .venv-blender (bpy) for the Blender check
 #   make dataset  set up and build a small gait2392 data set into out/gait2392_small
-#   make bench  set up and print the benchmark table (BENCH_ARGS="--quick", "--long")
+#   make bench  set up, print the benchmark table and write it to docs/BENCH.md (BENCH_ARGS="--quick", "--long")
 PY     ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
@@ -106,7 +106,7 @@ golden: $(STAMP)
 
 bench: $(STAMP)
 	$(PIP_PINNED) -e '.[bench]' || $(BIN)/python -m pip install -q -e '.[bench]'
-	$(BIN)/python -m benchmarks.bench $(BENCH_ARGS)
+	$(BIN)/python -m benchmarks.bench --markdown docs/BENCH.md $(BENCH_ARGS)
 
 # Regenerate the shipped OpenSim library: muscles/{arm26,gait2392}, poses/skeletons/{arm26,gait2392}.yaml
 # (+ meshes/), poses/arm26_flex.yaml, poses/gait2392_walk.yaml. Reports: muscles/*/IMPORT.md.
