@@ -1,6 +1,6 @@
 """``make bench``: one table of speed figures, every figure and every limit measured in the same run.
 
-    python -m benchmarks.bench [--quick] [--long] [--profile]
+    python -m benchmarks.bench [--quick] [--long] [--profile] [--only ROWS] [--markdown PATH]
 
 Rows (medians of repeated runs timed with ``time.perf_counter``; the machine may be shared,
 so figures are noisy and only ratios taken in the same run are compared with targets):
@@ -34,11 +34,11 @@ so figures are noisy and only ratios taken in the same run are compared with tar
 10. rendering split over processes: ``make demo``'s first job (poses/jobs/demo.yaml, meshes and
    512x512 frames; every 2nd frame with ``--quick``) as a subprocess at ``--jobs 1`` and
    ``--jobs 2``, and their ratio.
-10. retargeting: ``axdf retarget``'s fit of the CMU walk onto gait2392 (frames per second at 30
+11. retargeting: ``axdf retarget``'s fit of the CMU walk onto gait2392 (frames per second at 30
    and 120 fps; every 4th frame of the take with ``--quick``), and one Jacobian of the mapped
    points by the analytic formula against central differences batched as frames of one
    forward-kinematics call (the alternative the fit could use).
-11. jiggle: ``evaluate_plan`` of the gait2392 walk (92 muscles, the whole trial; 54 jiggle)
+12. jiggle: ``evaluate_plan`` of the gait2392 walk (92 muscles, the whole trial; 54 jiggle)
    with and without the jiggle stage (timed in turn, medians of 5), µs per muscle-frame, and
    the stage alone; and a ``--frames`` subset's extra cost (frames not selected are advanced too).
 
@@ -51,6 +51,10 @@ into fresh memory against steady state; numba's first-run compile cost).
 ``--long`` adds the memory check of 10,000 frames x 92 muscles streamed through
 ``pipeline.evaluate_chunks`` in a subprocess (several minutes). Helpers are importable for the
 smoke test (``tests/test_bench_smoke.py``), which runs them on a tiny case.
+
+``--markdown PATH`` also writes the table as a generated Markdown page (``make bench`` writes
+docs/BENCH.md, which the docs link to instead of pasting figures): a header with the command,
+the commit and the machine, then one table per section.
 """
 from __future__ import annotations
 
@@ -88,7 +92,7 @@ NO_CONTACT = {"contact": False}
 ARM_MUSCLES = ROOT / "muscles" / "arm26"
 ARM_POSE = ROOT / "poses" / "arm26_flex.yaml"
 ARM_JOB = ROOT / "poses" / "jobs" / "arm26_flex.yaml"
-#: Wrapping may add at most this to evaluation (issue 14).
+#: Wrapping may add at most this to evaluation.
 TARGET_WRAP = 1.5
 DEMO_MUSCLES = ROOT / "muscles" / "demo"
 DEMO_POSE = ROOT / "poses" / "demo.yaml"
@@ -1044,7 +1048,7 @@ def first_touch(job: Path, repeats: int) -> tuple[float, float, int]:
 
 
 def compiled_rows(table: "Table", tmp: Path, quick: bool, top: int = 0) -> list[str]:
-    """The compiled pass (issue 18 part 2): a whole run per muscle-frame against tofile of the
+    """The compiled pass: a whole run per muscle-frame against tofile of the
     same bytes, the data-set sample's evaluation (92 muscles x 1 frame), the first-touch cost
     of a chunk's outputs, and numba's first-run compile cost. Returns cProfile texts (``top``)."""
     job = GAIT_JOB if GAIT_JOB.is_file() else DEMO_JOB
@@ -1082,7 +1086,7 @@ def compiled_rows(table: "Table", tmp: Path, quick: bool, top: int = 0) -> list[
 # ----------------------------------------------------------------------------- the table
 
 
-#: Contact may at most double evaluation (issue 18), and its targets on the walk.
+#: Contact may at most double evaluation, and its targets on the walk.
 TARGET_CONTACT_COST = 2.0
 TARGET_INSIDE_MUSCLE = 0.02
 TARGET_INSIDE_BONE = 0.005
