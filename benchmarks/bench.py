@@ -1306,7 +1306,7 @@ class Table:
     def text(self) -> str:
         head = ("measure", "figure", "reference (same run)", "ratio", "target")
         body = [r for r in self.rows if len(r) == 5]
-        widths = [max(len(head[i]), *(len(r[i]) for r in body)) for i in range(5)]
+        widths = [max([len(head[i])] + [len(r[i]) for r in body]) for i in range(5)]  # sections alone: the heads
         line = "  ".join("-" * w for w in widths)
         fmt = lambda r: "  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip()  # noqa: E731
         out = [fmt(head), line]
@@ -1318,12 +1318,15 @@ class Table:
         """The rows as Markdown: one table per section (a section's title as a heading)."""
         head = "| measure | figure | reference (same run) | ratio | target |\n|---|---|---|---|---|"
         out: list[str] = []
+        open_table = False
         for r in self.rows:
             if len(r) == 1:
-                out += ["", f"### {r[0]}", "", head]
+                out += ["", f"### {r[0]}", ""]
+                open_table = False
             else:
-                if not out:
-                    out += [head]
+                if not open_table:
+                    out.append(head)
+                    open_table = True
                 out.append("| " + " | ".join(c.replace("|", "\\|") for c in r) + " |")
         return "\n".join(out).strip() + "\n"
 
@@ -1366,6 +1369,8 @@ def write_markdown(path: Path, table: "Table", argv: list[str], seconds: float) 
         "Medians of repeated runs; the machine may be shared, so absolute figures are noisy and only "
         "ratios taken in the same run are compared with targets. µs/mf: microseconds per muscle-frame.",
         "",
+        *([f"This page holds only the `{argv[argv.index('--only') + 1]}` rows (`--only`); `make bench` "
+           "without it measures every section.", ""] if "--only" in argv[:-1] else []),
         table.markdown(),
     ])
     atomic.write_bytes(Path(path), text.encode("utf-8"))

@@ -55,6 +55,10 @@ def test_long_pose_stretch_and_table():
     t.section("s")
     t.add("a", "1 µs", "x", "2x", "✓")
     assert "a" in t.text() and "[s]" in t.text()
+    skipped = bench.Table()
+    skipped.section("retargeting: skipped")  # a section whose rows were skipped: printed, not a crash
+    assert skipped.text().splitlines()[-1] == "[retargeting: skipped]"
+    assert skipped.markdown() == "### retargeting: skipped\n"  # a heading, no empty table
     assert np.isfinite(bench.median_time(lambda: None, 3))
 
 
