@@ -5,7 +5,7 @@
 #   make test-fast  the unit tier only (TIER="integration" etc. picks another: unit, integration,
 #               judges, hostile; see tests/conftest.py TIERS)
 #   make dataset  set up and build a small gait2392 data set into out/gait2392_small
-#   make bench  set up and print the benchmark table (BENCH_ARGS="--quick", "--long")
+#   make bench  set up, print the benchmark table and write it to docs/BENCH.md (BENCH_ARGS="--quick", "--long")
 PY     ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
@@ -114,7 +114,7 @@ golden: $(STAMP)
 
 bench: $(STAMP)
 	$(PIP_PINNED) -e '.[bench]' || $(BIN)/python -m pip install -q -e '.[bench]'
-	$(BIN)/python -m benchmarks.bench $(BENCH_ARGS)
+	$(BIN)/python -m benchmarks.bench --markdown docs/BENCH.md $(BENCH_ARGS)
 
 # Regenerate the shipped OpenSim library: muscles/{arm26,gait2392}, poses/skeletons/{arm26,gait2392}.yaml
 # (+ meshes/), poses/arm26_flex.yaml, poses/gait2392_walk.yaml. Reports: muscles/*/IMPORT.md.

@@ -91,8 +91,8 @@ IK_MAX_EVALUATIONS = 200
 # centre error. Where the points decide a coordinate it is negligible (a 0.4 m lever moves its
 # end 7 mm per degree, ~50 times the pull's weight in the cost: a lag of ~2% of a frame's
 # change); it decides what the points barely tell: a hip's rotation about a nearly straight
-# leg, a toe's flexion on a 5 cm lever (CMU's noisy toe joints turned the toes through 60 deg
-# in a 30th of a second with 1e-4). Translations: 0.01 m per metre (the root is seen directly).
+# leg, a toe's flexion on a 5 cm lever (with a pull ten times weaker, CMU's noisy toe joints
+# turn the toes through 60 degrees in a 30th of a second). Translations: 0.01 m per metre (the root is seen directly).
 IK_SMOOTH_ROTATION = 1e-3
 IK_SMOOTH_TRANSLATION = 1e-2
 # A free coordinate within this share of its range's width of an end is reported as held there.
@@ -134,7 +134,7 @@ COUPLED_COLUMN_ATOL = 1e-5
 # AXIS_SHORTFALL_MAX is half of the 1% within which every imported muscle must match its
 # simulator's own length (OpenSim's getLength, MuJoCo's ten_length): the rest is room for the
 # wrapping's own tolerances and for poses the importer did not measure. The shipped gait2392
-# walk and arm26 flexion reach 0.47% and 0.31% at the default counts (they keep them).
+# walk and arm26 flexion stay within it at the default counts.
 AXIS_SHORTFALL_MAX = 5e-3
 AXIS_POINTS_STEP = 4
 AXIS_POINTS_FINE_MAX = 48
@@ -164,35 +164,29 @@ CONTACT_MARGIN = 0.001
 CONTACT_BONE_MARGIN = 0.001
 # Jacobi passes (push, fit the rings' modes, re-solve the volume); a fixed number, so the result
 # is a continuous function of the frame. More passes clear more overlap but, the volume being
-# kept, press it into the next layer and follow the neighbours' motion more. On the packed walk
-# (every ring sampled at 12 points, the bone's push free at the ends, below): 1 pass leaves
-# 2.2% of vertices inside another muscle and 0.94% inside a bone, 2 passes 1.68% and 0.46%
-# with every step within 1.42x the no-contact one (no pops); 3 passes popped (2.1x) with the
-# sparser sampling. Measured by `make bench --only contact` (README, Contact).
+# kept, press it into the next layer and follow the neighbours' motion more. Two passes clear
+# about half of one pass's overlap with every vertex step within 1.5x the no-contact one (no
+# pops); a third pass pops. The contact rows of `make bench` (docs/BENCH.md) measure it.
 CONTACT_ITERATIONS = 2
 # Over-relaxation of a pass's pushes: the muscles' pushes, the bones' and the thick muscles'
 # giving way (to a thin muscle or a pole inside them) are asked for this many times over. A
 # pass delivers only part of what its samples ask for at the deepest points (the rings' five
 # modes and the smoothing along the muscle spread a local push, and the volume's re-solve
-# gives some back), so a fixed two passes left overlap they could clear. On the packed walk
-# (1, 1, 1) → (1.6, 2, 2): 0.54% → 0.30% of vertices inside another muscle, 0.12% → 0.07%
-# inside a bone, muscle-frames deeper than 3 mm 262 → 179; the held-out CMU walk 3.58% /
-# 0.68% → 2.49% / 0.45%; the worst step 1.23x → 1.31x (the walk as imported 1.41x → 1.48x;
-# 2 on the muscles' pushes made it 1.52x); about 10% more time (more samples push). A pole's
-# own push out of a bone is asked for once (nothing spreads it). Packing's polish, which
-# iterates to the end, does not over-relax (README, Contact).
+# gives some back), so two passes without it leave overlap they could clear. 2 on the
+# muscles' pushes takes the worst step past 1.5x (a pop). A pole's own push out of a bone is
+# asked for once (nothing spreads it, so more would overshoot the bone's surface). Packing's
+# polish, which iterates to the end, does not over-relax (the packer's PACK_RELAX; docs/CONTACT.md).
 CONTACT_RELAX = (1.6, 2.0, 2.0)
 # [1 2 1]/4 smoothing rounds of the rings' modes along the muscle (no creases). The modes of the
 # muscles' pushes are pinned at the poles (the attachments, where muscles meet at a shared
 # origin, do not move); those of the bones' pushes are smoothed with free ends, so the rings
-# next to an attachment keep their own push out of the bone (the pole itself stays): the end
-# rings' share of vertices inside a bone on the walk went from 0.23% to 0.02%.
+# next to an attachment keep their own push out of the bone (the pole itself stays): pinned,
+# a tendon's end ring would never leave the bone it attaches to.
 CONTACT_SMOOTH_PASSES = 4
 # Bones' signed distance fields: grid step and padding around the mesh (m). Trilinear on a
 # 3 mm grid reads a convex bone's distance too large (a convex function's chords lie above
-# it): at the vertices the packed walk leaves inside a bone after contact, 0.30 mm shallower
-# than libigl's distance to the mesh on average, at most 1.3 mm. A 2 mm grid halves that, for
-# 3.4x the memory, and barely changes what contact leaves inside (README, Contact).
+# it), by up to about 1 mm at the vertices contact leaves inside a bone. A 2 mm grid halves
+# that, for 3.4x the memory, and barely changes what contact leaves inside (docs/CONTACT.md).
 CONTACT_SDF_STEP = 0.003
 CONTACT_SDF_PAD = 0.02
 # Shares of an overlap: 0.5 each for equal yields, +CONTACT_SHARE_PER_LAYER per layer of
@@ -227,9 +221,8 @@ CONTACT_AXES_FADE = (0.1, 0.4)
 # The deep fade reads the larger of the point's distance from the neighbour's axis and this
 # much of its ring centre's: a ring that crosses a neighbour off its axis is pushed out even
 # where its points pass near that axis (the push's direction is the centres', defined there;
-# the point's own radial part of it still fades). On the packed walk the sartorius crossing
-# the adductor brevis, 7.9 mm deep, ends 6.1 mm deep; 1.0 made the walk as imported step
-# 1.54x (quadratus femoris), 0.75 1.41x (1.37x with the point's distance alone).
+# the point's own radial part of it still fades), as the sartorius crossing the adductor
+# brevis. 1.0 makes the walk as imported step over 1.5x (a pop); 0.75 stays under it.
 CONTACT_DEEP_FADE_CENTRES = 0.75
 # A thin muscle inside a thick one (its ring's radius below CONTACT_THIN[1] of the neighbour's
 # radius, fully from CONTACT_THIN[0], smoothstep between) also makes the thick one give way:
@@ -237,10 +230,8 @@ CONTACT_DEEP_FADE_CENTRES = 0.75
 CONTACT_THIN = (0.25, 0.5)
 # The pushes are sampled at A / CONTACT_SAMPLE_COLUMNS evenly spaced points (12 of 24) of every
 # CONTACT_SAMPLE_RINGS-th ring; each sampled ring's displacement modes are fitted to them.
-# Sparser (8 points of every second ring) aliases: with 2 passes the packed walk's pushes
-# turned between frames near shared attachments (4 pops, worst 1.87x); every ring at 12 points
-# has none (worst 1.42x); every ring at all 24 points gains nothing (1.67%, 1.44x) for 1.5x
-# the cost.
+# Sparser (8 points of every second ring) aliases: the pushes turn between frames near shared
+# attachments (pops); all 24 points of every ring gain nothing for 1.5x the cost.
 CONTACT_SAMPLE_COLUMNS = 2
 CONTACT_SAMPLE_RINGS = 1
 
@@ -264,8 +255,8 @@ PACK_FIT_ROUNDS = 12
 PACK_DRAW_IN = 0.8
 # Polish (step 5): rounds of the frame's contact resolved at the rest pose with this many passes
 # (a one-off, so no pops to avoid: as many as clear it), the sections fitted to it each round.
-# Rest overlap after packing: gait2392 0.70% -> 0.19% after 1 round; Rajagopal2016 2.95% ->
-# 0.69%, 0.27%, 0.02% after 1, 2, 3 rounds (24 passes; 16 passes left 2.11% after one).
+# Each round clears most of what the one before left; three leave a few hundredths of a per
+# cent of the rest vertices inside another muscle, and fewer passes a round leave more.
 PACK_POLISH_ROUNDS = 3
 PACK_POLISH_PASSES = 24
 # `axdf pack --pose`: the polish also runs at this many of the pose's frames (evenly spaced;

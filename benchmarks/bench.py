@@ -1,6 +1,6 @@
 """``make bench``: one table of speed figures, every figure and every limit measured in the same run.
 
-    python -m benchmarks.bench [--quick] [--long] [--profile]
+    python -m benchmarks.bench [--quick] [--long] [--profile] [--only ROWS] [--markdown PATH]
 
 Rows (medians of repeated runs timed with ``time.perf_counter``; the machine may be shared,
 so figures are noisy and only ratios taken in the same run are compared with targets):
@@ -34,11 +34,11 @@ so figures are noisy and only ratios taken in the same run are compared with tar
 10. rendering split over processes: ``make demo``'s first job (poses/jobs/demo.yaml, meshes and
    512x512 frames; every 2nd frame with ``--quick``) as a subprocess at ``--jobs 1`` and
    ``--jobs 2``, and their ratio.
-10. retargeting: ``axdf retarget``'s fit of the CMU walk onto gait2392 (frames per second at 30
+11. retargeting: ``axdf retarget``'s fit of the CMU walk onto gait2392 (frames per second at 30
    and 120 fps; every 4th frame of the take with ``--quick``), and one Jacobian of the mapped
    points by the analytic formula against central differences batched as frames of one
    forward-kinematics call (the alternative the fit could use).
-11. jiggle: ``evaluate_plan`` of the gait2392 walk (92 muscles, the whole trial; 54 jiggle)
+12. jiggle: ``evaluate_plan`` of the gait2392 walk (92 muscles, the whole trial; 54 jiggle)
    with and without the jiggle stage (timed in turn, medians of 5), µs per muscle-frame, and
    the stage alone; and a ``--frames`` subset's extra cost (frames not selected are advanced too).
 
@@ -51,6 +51,10 @@ into fresh memory against steady state; numba's first-run compile cost).
 ``--long`` adds the memory check of 10,000 frames x 92 muscles streamed through
 ``pipeline.evaluate_chunks`` in a subprocess (several minutes). Helpers are importable for the
 smoke test (``tests/test_bench_smoke.py``), which runs them on a tiny case.
+
+``--markdown PATH`` also writes the table as a generated Markdown page (``make bench`` writes
+docs/BENCH.md, which the docs link to instead of pasting figures): a header with the command,
+the commit and the machine, then one table per section.
 """
 from __future__ import annotations
 
@@ -88,7 +92,7 @@ NO_CONTACT = {"contact": False}
 ARM_MUSCLES = ROOT / "muscles" / "arm26"
 ARM_POSE = ROOT / "poses" / "arm26_flex.yaml"
 ARM_JOB = ROOT / "poses" / "jobs" / "arm26_flex.yaml"
-#: Wrapping may add at most this to evaluation (issue 14).
+#: Wrapping may add at most this to evaluation.
 TARGET_WRAP = 1.5
 DEMO_MUSCLES = ROOT / "muscles" / "demo"
 DEMO_POSE = ROOT / "poses" / "demo.yaml"
@@ -1044,7 +1048,7 @@ def first_touch(job: Path, repeats: int) -> tuple[float, float, int]:
 
 
 def compiled_rows(table: "Table", tmp: Path, quick: bool, top: int = 0) -> list[str]:
-    """The compiled pass (issue 18 part 2): a whole run per muscle-frame against tofile of the
+    """The compiled pass: a whole run per muscle-frame against tofile of the
     same bytes, the data-set sample's evaluation (92 muscles x 1 frame), the first-touch cost
     of a chunk's outputs, and numba's first-run compile cost. Returns cProfile texts (``top``)."""
     job = GAIT_JOB if GAIT_JOB.is_file() else DEMO_JOB
@@ -1082,7 +1086,7 @@ def compiled_rows(table: "Table", tmp: Path, quick: bool, top: int = 0) -> list[
 # ----------------------------------------------------------------------------- the table
 
 
-#: Contact may at most double evaluation (issue 18), and its targets on the walk.
+#: Contact may at most double evaluation, and its targets on the walk.
 TARGET_CONTACT_COST = 2.0
 TARGET_INSIDE_MUSCLE = 0.02
 TARGET_INSIDE_BONE = 0.005
@@ -1302,13 +1306,74 @@ class Table:
     def text(self) -> str:
         head = ("measure", "figure", "reference (same run)", "ratio", "target")
         body = [r for r in self.rows if len(r) == 5]
-        widths = [max(len(head[i]), *(len(r[i]) for r in body)) for i in range(5)]
+        widths = [max([len(head[i])] + [len(r[i]) for r in body]) for i in range(5)]  # sections alone: the heads
         line = "  ".join("-" * w for w in widths)
         fmt = lambda r: "  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip()  # noqa: E731
         out = [fmt(head), line]
         for r in self.rows:
             out.append(f"[{r[0]}]" if len(r) == 1 else fmt(r))
         return "\n".join(out)
+
+    def markdown(self) -> str:
+        """The rows as Markdown: one table per section (a section's title as a heading)."""
+        head = "| measure | figure | reference (same run) | ratio | target |\n|---|---|---|---|---|"
+        out: list[str] = []
+        open_table = False
+        for r in self.rows:
+            if len(r) == 1:
+                out += ["", f"### {r[0]}", ""]
+                open_table = False
+            else:
+                if not open_table:
+                    out.append(head)
+                    open_table = True
+                out.append("| " + " | ".join(c.replace("|", "\\|") for c in r) + " |")
+        return "\n".join(out).strip() + "\n"
+
+
+def machine_line() -> str:
+    """The machine and commit a table was measured on, for the generated file's header."""
+    import platform
+
+    cpu_name = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu_name = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    try:
+        commit = subprocess.run(["git", "rev-parse", "--short=12", "HEAD"], cwd=ROOT, capture_output=True,
+                                text=True, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=ROOT,
+                               capture_output=True, text=True, check=True).stdout.strip()
+        commit += " (with uncommitted changes)" if dirty else ""
+    except (OSError, subprocess.CalledProcessError):
+        commit = "unknown (not a git checkout)"
+    return (f"commit {commit}; {cpu_name}, {os.cpu_count()} logical CPUs; {platform.system()} "
+            f"{platform.release()}; Python {platform.python_version()}, numpy {np.__version__}")
+
+
+def write_markdown(path: Path, table: "Table", argv: list[str], seconds: float) -> None:
+    """Write ``table`` as a generated Markdown page (docs/BENCH.md from ``make bench``)."""
+    args = " ".join(argv)
+    text = "\n".join([
+        "# Benchmark tables",
+        "",
+        "<!-- Generated by `make bench` (python -m benchmarks.bench); do not edit by hand. -->",
+        "",
+        f"Generated by `make bench` (`python -m benchmarks.bench{' ' + args if args else ''}`) on: "
+        f"{machine_line()}. Total bench time {seconds:.0f} s.",
+        "",
+        "Medians of repeated runs; the machine may be shared, so absolute figures are noisy and only "
+        "ratios taken in the same run are compared with targets. µs/mf: microseconds per muscle-frame.",
+        "",
+        *([f"This page holds only the `{argv[argv.index('--only') + 1]}` rows (`--only`); `make bench` "
+           "without it measures every section.", ""] if "--only" in argv[:-1] else []),
+        table.markdown(),
+    ])
+    atomic.write_bytes(Path(path), text.encode("utf-8"))
 
 
 def _mbs(nbytes: float, us: float) -> str:
@@ -1327,15 +1392,32 @@ def main(argv=None) -> int:
                          "and without contact)")
     ap.add_argument("--dataset-samples", type=int, default=None, metavar="N",
                     help=f"samples of the data-set rows (default {DATASET_SAMPLES}, 100 with --quick; 0: skip them)")
+    ap.add_argument("--markdown", default=None, metavar="PATH",
+                    help="also write the table as Markdown to PATH (make bench: docs/BENCH.md)")
     args = ap.parse_args(argv)
+    argv_used = list(sys.argv[1:] if argv is None else argv)
+    argv_shown = [a for i, a in enumerate(argv_used)
+                  if a != "--markdown" and not a.startswith("--markdown=")
+                  and not (i > 0 and argv_used[i - 1] == "--markdown")]
 
     t_start = time.perf_counter()
+
+    def emit(table: Table, texts=(), unit: bool = True) -> int:
+        seconds = time.perf_counter() - t_start
+        print(table.text())
+        print(f"({'µs/mf: microseconds per muscle-frame; ' if unit else ''}total bench time {seconds:.0f} s)")
+        for t in texts:
+            print()
+            print(t)
+        if args.markdown:
+            write_markdown(Path(args.markdown), table, argv_shown, seconds)
+            print(f"(tables written to {args.markdown})", file=sys.stderr)
+        return 0
+
     if args.only == "retarget":
         table = Table()
         retarget_rows(table, args.quick)
-        print(table.text())
-        print(f"(total bench time {time.perf_counter() - t_start:.0f} s)")
-        return 0
+        return emit(table, unit=False)
     if args.only == "compiled":
         table = Table()
         tmp = Path(tempfile.mkdtemp(prefix="axdf-bench-", dir=args.tmp))
@@ -1343,12 +1425,7 @@ def main(argv=None) -> int:
             texts = compiled_rows(table, tmp, args.quick, top=25 if args.profile else 0)
         finally:
             shutil.rmtree(tmp, ignore_errors=True)
-        print(table.text())
-        print(f"(µs/mf: microseconds per muscle-frame; total bench time {time.perf_counter() - t_start:.0f} s)")
-        for t in texts:
-            print()
-            print(t)
-        return 0
+        return emit(table, texts)
     if args.only == "contact":
         table = Table()
         tmp = Path(tempfile.mkdtemp(prefix="axdf-bench-", dir=args.tmp))
@@ -1357,15 +1434,11 @@ def main(argv=None) -> int:
             pack_rows(table)
         finally:
             shutil.rmtree(tmp, ignore_errors=True)
-        print(table.text())
-        print(f"(µs/mf: microseconds per muscle-frame; total bench time {time.perf_counter() - t_start:.0f} s)")
-        return 0
+        return emit(table)
     if args.only == "jiggle":
         table = Table()
         jiggle_rows(table, 3 if args.quick else 5)
-        print(table.text())
-        print(f"(µs/mf: microseconds per muscle-frame; total bench time {time.perf_counter() - t_start:.0f} s)")
-        return 0
+        return emit(table)
     n_frames = 200 if args.quick else 1000
     reps = 2 if args.quick else 3
     counts = (1, 10) if args.quick else MUSCLE_COUNTS
@@ -1510,12 +1583,7 @@ def main(argv=None) -> int:
             table.add("manifest JSON (files list only)", f"{lr['manifest_bytes'] / 2**20:.0f} MiB")
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-    print(table.text())
-    print(f"(µs/mf: microseconds per muscle-frame; total bench time {time.perf_counter() - t_start:.0f} s)")
-    for p in profiles:
-        print()
-        print(p)
-    return 0
+    return emit(table, profiles)
 
 
 if __name__ == "__main__":

@@ -168,8 +168,8 @@ def test_bad_usage_exit_2(tmp_path, capsys):
 
 def test_readme_tolerance_example_loads(tmp_path):
     from pathlib import Path
-    readme = (Path(__file__).parents[1] / "README.md").read_text()
-    block = readme.split("### Tolerance file", 1)[1].split("```yaml\n", 1)[1].split("```", 1)[0]
+    readme = (Path(__file__).parents[1] / "docs" / "COMPARE.md").read_text()
+    block = readme.split("## Tolerance file", 1)[1].split("```yaml\n", 1)[1].split("```", 1)[0]
     (tmp_path / "tol.yaml").write_text(block)
     tol = T.load_tolerances(tmp_path / "tol.yaml")
     assert tol.base == T.FileTol(png=T.PngTol(threshold=0.0196), exr=T.ExrTol(color=T.ChannelTol(0.0196, 0.02)))

@@ -212,10 +212,10 @@ def test_readme_loading_snippet_runs(tiny):
     from conftest import REPO_ROOT
 
     text = (REPO_ROOT / "README.md").read_text()
-    block = text[text.index("## Data sets"):].split("```python\n", 1)[1].split("```", 1)[0]
+    block = text[text.index("### ML researcher"):].split("```python\n", 1)[1].split("```", 1)[0]
     assert len(block.strip().splitlines()) <= 10
     scope: dict = {}
-    exec(block.replace('"out/gait2392_small"', repr(str(tiny / "ref"))), scope)
+    exec(block.replace('"out/my_data"', repr(str(tiny / "ref"))), scope)
     # the chain's keypoints: its 4 articulated joints (b0, a root without DOFs, has none)
     assert scope["image"].shape == (48, 40, 4) and scope["uv"].shape == (4, 2) and scope["visible"].dtype == bool
 

@@ -1,6 +1,6 @@
 """Which files a comparison sees, and reading them without being led astray.
 
-Policy (README, "Golden comparison"):
+Policy (docs/COMPARE.md):
 
 - Every entry under ACTUAL and GOLDEN that is not a folder is listed: regular files, symbolic
   links (to anything), FIFOs, devices. Folders are descended; a symbolic link to a folder is

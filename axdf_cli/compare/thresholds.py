@@ -2,7 +2,7 @@
 numeric tolerances are :mod:`axdf_cli.tolerances`): the defaults (all in one place, each with
 its reason), the tolerance YAML reader, and per-file resolution of glob overrides.
 
-Two requirements fix the image defaults (README "Golden comparison" repeats them):
+Two requirements fix the image defaults (docs/COMPARE.md repeats them):
 
 - a run rendered by llvmpipe on another CPU must pass: different SIMD widths and FMA use
   change shading by a few 8-bit steps and may flip the coverage or depth test of a few

@@ -11,7 +11,7 @@ Entries (``.npy``, stored uncompressed, in this order)::
 ``np.savez`` stamps each entry with the current time, so the zip is written here: stored
 entries at offsets fixed up front (every size is known from F, V and T), the points and
 normals of each chunk written in place as they arrive (two regions of one file, each with a
-running CRC-32, computed by zlib-ng: zlib's own took as long as writing the bytes), the
+running CRC-32, computed by zlib-ng: zlib's own costs as much as writing the bytes), the
 local headers, central directory and end record last, every date the zip epoch 1980-01-01
 00:00 (same inputs, same bytes). ZIP64 records are used for any size or
 offset past 4 GiB (APPNOTE 6.3.x, 4.5.3), as zipfile reads them.
