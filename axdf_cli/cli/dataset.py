@@ -6,6 +6,7 @@ import re
 import sys
 from pathlib import Path
 
+from axdf_cli.cli import progress
 from axdf_cli.cli.run import positive
 from axdf_cli.errors import UsageError
 from axdf_cli.tolerances import MAX_SEED
@@ -80,11 +81,7 @@ def _build(args) -> int:
     mine = [s for s in ctx.sequences if s.index % shard[1] == shard[0]]
     views = len(ctx.spec.views)
     total = sum(s.n_frames for s in mine) * views
-    bar = None
-    if not args.quiet and sys.stderr.isatty():
-        from tqdm import tqdm
-
-        bar = tqdm(total=total, unit="sample", file=sys.stderr, desc=ctx.spec.name, smoothing=0.05)
+    bar = progress.bar(args.quiet, "sample", total=total, desc=ctx.spec.name, smoothing=0.05)
     try:
         res = engine.build(args.dataset, out, seed=args.seed, jobs=args.jobs, shard=shard, engine=args.engine,
                            address=args.address, resume=args.resume, overwrite=args.overwrite,
