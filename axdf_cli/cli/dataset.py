@@ -102,14 +102,14 @@ def bulk_warning(res, ctx) -> str | None:
     the frames made now (as ``axdf run`` tells a run, each sequence's manifest its own), with
     the ``axdf pack`` command for its muscle folders and skeleton (at the rest pose: a data
     set's poses are sampled); None otherwise."""
-    from axdf_cli.dataset import door
+    from axdf_cli.pipeline.overlap import bulk_overlap_text, pack_command_line
 
-    text = door.bulk_overlap_text(res.overlap, f"the {res.overlap_frames} frame(s) made")
+    text = bulk_overlap_text(res.overlap, f"the {res.overlap_frames} frame(s) made")
     if text is None:
         return None
     folders = [Path(m.source).parent for m in ctx.muscles if m.source]
     return (f"{text}; {res.overlap_bulk} of {res.built} sequence(s) made say so in their manifests: "
-            f"{door.pack_command_line(folders, ctx.spec.skeleton_path, None)}")
+            f"{pack_command_line(folders, ctx.spec.skeleton_path, None)}")
 
 
 def _dry_run(args, shard, policy) -> int:

@@ -216,7 +216,7 @@ def _print_summary(args, res, counts: str) -> None:
             print(path)
     print(f"report: {Path(args.out) / 'IMPORT.md'}")
     if res.report.get("counts", {}).get("muscles", 0) > 1 and res.layout:
-        from axdf_cli.pipeline.execute import pack_command_line
+        from axdf_cli.pipeline.overlap import pack_command_line
 
         lay = res.layout
         print(f"next: {pack_command_line([lay['muscles']], lay['skeleton'], lay['pose'])}  (imported muscles "
