@@ -269,9 +269,12 @@ def test_resume_refuses_a_changed_model_naming_it(project, capsys, monkeypatch, 
     """A run records its identity (pipeline/manifest.py: the model's sources and every numeric
     tolerance): --resume of an interrupted run after a tolerance or the model's code changed
     is refused (exit 2), naming the constant, and writes nothing; unchanged, it finishes."""
-    from axdf_cli import tolerances as tol
-    from axdf_cli.pipeline import execute, manifest
+    import importlib
 
+    from axdf_cli import tolerances as tol
+    from axdf_cli.pipeline import manifest
+
+    execute = importlib.import_module("axdf_cli.pipeline.execute")  # (the package's `execute` is the function)
     args = DEMO + ["--frames", "0:2", "--out", "out"]
 
     def interrupted(*a, **k):
@@ -289,8 +292,8 @@ def test_resume_refuses_a_changed_model_naming_it(project, capsys, monkeypatch, 
     with monkeypatch.context() as m:
         if change == "tolerance":
             relaxed = (tol.CONTACT_RELAX[0] + 0.1,) + tuple(tol.CONTACT_RELAX[1:])
-            m.setattr(tol, "CONTACT_RELAX", relaxed)
             expect = f"tolerances.CONTACT_RELAX {json.dumps(list(tol.CONTACT_RELAX))} -> {json.dumps(list(relaxed))}"
+            m.setattr(tol, "CONTACT_RELAX", relaxed)
         else:
             m.setattr(manifest, "model_sources_sha", lambda: "0" * 64)
             expect = "the model's sources changed"

@@ -23,7 +23,7 @@ The rules:
 - A folder is a *run* when its ``manifest.json`` is a JSON object with ``tool: axdf``. Only a
   run is resumed, re-rendered or overwritten; any other non-empty folder is refused (exit 2).
 - Every check comes before the first byte is written: :func:`prepare` only reads.
-- One writer at a time: :class:`Session` holds ``flock`` on ``.axdf-lock`` for the whole run;
+- One writer at a time: :class:`Session` holds ``flock`` on ``.axdf-lock`` (:mod:`.lock`) for the whole run;
   a second writer is refused (exit 3).
 - ``--overwrite`` deletes only the files the old manifest lists, and only once the new run
   is complete (built in ``.axdf-new-<pid>/``, then :meth:`Session.commit` swaps it in).
@@ -277,7 +277,7 @@ class Manifest:
     def read(cls, path: Path) -> "Manifest":
         where = Mark(str(path))
         try:
-            raw = read_regular(path, tol.INPUT_MAX_BYTES)  # a FIFO there blocked every reader
+            raw = read_regular(path, tol.INPUT_MAX_BYTES)  # (bounded, regular files only: a FIFO there would block the reader)
         except FileNotFoundError:
             raise InputError(where, "no manifest.json", "a folder written by axdf run") from None
         except FileRefused as e:
