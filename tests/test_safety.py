@@ -307,6 +307,27 @@ def test_resume_refuses_a_changed_model_naming_it(project, capsys, monkeypatch, 
     assert done["complete"] is True and "stats.csv" in done["files"] and done["identity"] == written["identity"]
 
 
+def test_the_run_identity_names_each_change():
+    """identity_differences names every tolerance that changed, came or went, and an identity
+    missing from an older manifest; the identity holds every numeric tolerance."""
+    from axdf_cli import tolerances as tol
+    from axdf_cli.pipeline.manifest import identity_differences, run_identity
+
+    new = run_identity()
+    assert new["tolerances"]["CONTACT_RELAX"] == list(tol.CONTACT_RELAX)
+    assert new["tolerances"]["MAX_SEED"] == tol.MAX_SEED and len(new["model"]) == 64
+    assert all(isinstance(v, (int, float, list)) and not isinstance(v, bool) for v in new["tolerances"].values())
+    old = {"model": new["model"], "tolerances": {**new["tolerances"], "CONTACT_MARGIN": 0.5, "GONE": 1}}
+    del old["tolerances"]["PACK_GAIN"]
+    assert identity_differences(old, new) == [
+        f"tolerances.CONTACT_MARGIN 0.5 -> {json.dumps(tol.CONTACT_MARGIN)}", "tolerances.GONE is gone",
+        "tolerances.PACK_GAIN is new"]
+    assert identity_differences(dict(new, model="0" * 64), new) == ["the model's sources changed (sha256 differs)"]
+    assert identity_differences(None, new) == [
+        "the interrupted run records no identity of the model (an older axdf wrote it)"]
+    assert identity_differences(new, new) == []
+
+
 def test_dry_run_makes_the_folder_checks(project, capsys):
     assert run_main(DEMO + ["--frames", "0", "--out", "out"], capsys)[0] == 0
     before = snapshot(project)

@@ -220,7 +220,7 @@ def _run_local(ctx, mine, out, jobs, resume, done, where) -> None:
 
     try:
         process_map(_pool_task, list(mine), (where, str(Path(out).resolve()), resume), jobs=jobs,
-                           on_result=finished, fresh=True, preload=("axdf_cli.dataset.worker",))
+                    on_result=finished, fresh=True, preload=("axdf_cli.dataset.worker",))
     except WorkerDied:
         raise WorkerFailed(f"a worker process died (killed, or out of memory) while making "
                            f"{_names(ctx, sorted(left))}; the other sequences of this run are complete; "
