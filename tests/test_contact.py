@@ -747,7 +747,7 @@ def test_muscles_that_overlap_in_bulk_are_told_to_pack(tmp_path, capsys):
     the `axdf pack` command for its folder, skeleton and pose (stderr and the manifest), and
     --strict refuses it before writing. Packed (the job's own muscles/arm26_packed), or
     without contact, the run has no such warning."""
-    from axdf_cli.pipeline.execute import BULK_OVERLAP
+    from axdf_cli.pipeline.overlap import BULK_OVERLAP
 
     arm = ["--frames", "0:4", "--no-render", "--quiet"]
     job = str(REPO_ROOT / "poses" / "jobs" / "arm26_flex.yaml")

@@ -176,7 +176,8 @@ def test_dead_worker_is_reported_and_resume_finishes(tiny, tmp_path):
     cmd = [sys.executable, "-c", "import os, sys; os.environ['AXDF_TEST_PARENT'] = str(os.getpid()); "
            "from axdf_cli.cli.main import main; sys.exit(main(sys.argv[1:]))",
            "dataset", "build", "tiny.yaml", "--out", "dies", "--jobs", "2"]
-    env = dict(os.environ, PYTHONPATH=str(tmp_path))
+    # (before the PYTHONPATH already set: both builds run the same axdf)
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(tmp_path), os.environ.get("PYTHONPATH")])))
     p = subprocess.run(cmd, cwd=tiny, env=env, capture_output=True, text=True, timeout=300)
     assert p.returncode == 3 and "died" in p.stderr and "seq_00003" in p.stderr and "--resume" in p.stderr, p.stderr
     assert "Traceback" not in p.stderr

@@ -80,6 +80,7 @@ def test_sphere_cameras_keep_distance_elevation_and_look_at_the_target(tiny_spec
     from axdf_cli.dataset import labels as lab
     from axdf_cli.dataset.spec import Sequence
     from axdf_cli.model.skeleton import forward_kinematics
+    from axdf_cli.render.framing import skeleton_points
 
     ctx = tiny_spec
     sph = ctx.spec.sphere
@@ -87,7 +88,7 @@ def test_sphere_cameras_keep_distance_elevation_and_look_at_the_target(tiny_spec
     q = np.tile(skel.rest_coordinates(), (3, 1))
     q[:, skel.coord_index["bend"]] = [0, 20, 40]
     world = forward_kinematics(skel, q)
-    subject = lab.subject_points(skel, world, ctx.bone_meshes)
+    subject = skeleton_points(skel, world, ctx.bone_meshes)
     # the fixed root b0 is left out; its children's balls are in
     assert subject.shape == (3, 4 + 4 * 8, 3)
     np.testing.assert_allclose(subject[0, 4:12].min(0), world[0, 1, :3, 3] - BALL_R, atol=2e-3)

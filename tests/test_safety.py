@@ -264,6 +264,70 @@ def test_resume_refuses_other_inputs_or_settings(project, capsys, change):
     assert snapshot(project) == before
 
 
+@pytest.mark.parametrize("change", ["tolerance", "model"])
+def test_resume_refuses_a_changed_model_naming_it(project, capsys, monkeypatch, change):
+    """A run records its identity (pipeline/manifest.py: the model's sources and every numeric
+    tolerance): --resume of an interrupted run after a tolerance or the model's code changed
+    is refused (exit 2), naming the constant, and writes nothing; unchanged, it finishes."""
+    import importlib
+
+    from axdf_cli import tolerances as tol
+    from axdf_cli.pipeline import manifest
+
+    execute = importlib.import_module("axdf_cli.pipeline.execute")  # (the package's `execute` is the function)
+    args = DEMO + ["--frames", "0:2", "--out", "out"]
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt
+
+    with monkeypatch.context() as m:
+        m.setattr(execute, "stats_csv", interrupted)  # the meshes are written, the tables not
+        assert run_main(args, capsys)[0] == 130
+    written = json.loads((project / "out" / "manifest.json").read_text())
+    assert written["complete"] is False and "stats.csv" not in written["files"]
+    assert sum(r.startswith("meshes/") for r in written["files"]) == 3 * len(written["muscles"])
+    assert written["identity"]["tolerances"]["CONTACT_RELAX"] == list(tol.CONTACT_RELAX)
+    assert written["identity"]["model"] == manifest.model_sources_sha()
+    before = snapshot(project)
+    with monkeypatch.context() as m:
+        if change == "tolerance":
+            relaxed = (tol.CONTACT_RELAX[0] + 0.1,) + tuple(tol.CONTACT_RELAX[1:])
+            expect = f"tolerances.CONTACT_RELAX {json.dumps(list(tol.CONTACT_RELAX))} -> {json.dumps(list(relaxed))}"
+            m.setattr(tol, "CONTACT_RELAX", relaxed)
+        else:
+            m.setattr(manifest, "model_sources_sha", lambda: "0" * 64)
+            expect = "the model's sources changed"
+        rc, _, err = run_main(args + ["--resume"], capsys)
+    assert rc == 2 and "--resume would mix two runs" in err and expect in err, err
+    assert POSITION.search(err)
+    assert snapshot(project) == before
+    rc, _, err = run_main(args + ["--resume"], capsys)
+    assert rc == 0, err
+    done = json.loads((project / "out" / "manifest.json").read_text())
+    assert done["complete"] is True and "stats.csv" in done["files"] and done["identity"] == written["identity"]
+
+
+def test_the_run_identity_names_each_change():
+    """identity_differences names every tolerance that changed, came or went, and an identity
+    missing from an older manifest; the identity holds every numeric tolerance."""
+    from axdf_cli import tolerances as tol
+    from axdf_cli.pipeline.manifest import identity_differences, run_identity
+
+    new = run_identity()
+    assert new["tolerances"]["CONTACT_RELAX"] == list(tol.CONTACT_RELAX)
+    assert new["tolerances"]["MAX_SEED"] == tol.MAX_SEED and len(new["model"]) == 64
+    assert all(isinstance(v, (int, float, list)) and not isinstance(v, bool) for v in new["tolerances"].values())
+    old = {"model": new["model"], "tolerances": {**new["tolerances"], "CONTACT_MARGIN": 0.5, "GONE": 1}}
+    del old["tolerances"]["PACK_GAIN"]
+    assert identity_differences(old, new) == [
+        f"tolerances.CONTACT_MARGIN 0.5 -> {json.dumps(tol.CONTACT_MARGIN)}", "tolerances.GONE is gone",
+        "tolerances.PACK_GAIN is new"]
+    assert identity_differences(dict(new, model="0" * 64), new) == ["the model's sources changed (sha256 differs)"]
+    assert identity_differences(None, new) == [
+        "the interrupted run records no identity of the model (an older axdf wrote it)"]
+    assert identity_differences(new, new) == []
+
+
 def test_dry_run_makes_the_folder_checks(project, capsys):
     assert run_main(DEMO + ["--frames", "0", "--out", "out"], capsys)[0] == 0
     before = snapshot(project)

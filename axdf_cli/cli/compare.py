@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import argparse
 import os
-import sys
 from pathlib import Path
 
+from axdf_cli.cli import progress
 from axdf_cli.fileio.atomic import write_bytes, write_text
 from axdf_cli.errors import UsageError
 
@@ -132,12 +132,12 @@ def run(args) -> int:
 
     if diff_dir is not None and diff_dir.is_dir():
         _clear_old_pictures(diff_dir)
-    progress = _progress_bar(args)
+    bar = progress.bar(args.quiet or bool(os.environ.get("CI")), "file", total=0, desc="compare", leave=False)
     try:
-        report = compare_paths(actual, golden, tol, diff_dir, exclude, progress)
+        report = compare_paths(actual, golden, tol, diff_dir, exclude, bar.show if bar else None)
     finally:
-        if progress is not None:
-            progress.close()
+        if bar is not None:
+            bar.close()
     if report_path:
         write_text(report_path, to_json(report, tol.source))
     if junit_path:
@@ -175,24 +175,3 @@ def _clear_old_pictures(diff_dir: Path) -> None:
                 p.unlink()
             except OSError:
                 pass
-
-
-class _Bar:
-    def __init__(self):
-        from tqdm import tqdm
-
-        self.bar = tqdm(total=0, unit="file", desc="compare", file=sys.stderr, leave=False)
-
-    def __call__(self, done: int, total: int) -> None:
-        self.bar.total = total
-        self.bar.n = done
-        self.bar.refresh()
-
-    def close(self) -> None:
-        self.bar.close()
-
-
-def _progress_bar(args):
-    if args.quiet or not sys.stderr.isatty() or os.environ.get("CI"):
-        return None
-    return _Bar()

@@ -6,6 +6,7 @@ import re
 import sys
 from pathlib import Path
 
+from axdf_cli.cli import progress
 from axdf_cli.cli.run import positive
 from axdf_cli.errors import UsageError
 from axdf_cli.tolerances import MAX_SEED
@@ -80,11 +81,7 @@ def _build(args) -> int:
     mine = [s for s in ctx.sequences if s.index % shard[1] == shard[0]]
     views = len(ctx.spec.views)
     total = sum(s.n_frames for s in mine) * views
-    bar = None
-    if not args.quiet and sys.stderr.isatty():
-        from tqdm import tqdm
-
-        bar = tqdm(total=total, unit="sample", file=sys.stderr, desc=ctx.spec.name, smoothing=0.05)
+    bar = progress.bar(args.quiet, "sample", total=total, desc=ctx.spec.name, smoothing=0.05)
     try:
         res = engine.build(args.dataset, out, seed=args.seed, jobs=args.jobs, shard=shard, engine=args.engine,
                            address=args.address, resume=args.resume, overwrite=args.overwrite,
@@ -105,14 +102,14 @@ def bulk_warning(res, ctx) -> str | None:
     the frames made now (as ``axdf run`` tells a run, each sequence's manifest its own), with
     the ``axdf pack`` command for its muscle folders and skeleton (at the rest pose: a data
     set's poses are sampled); None otherwise."""
-    from axdf_cli.dataset import door
+    from axdf_cli.pipeline.overlap import bulk_overlap_text, pack_command_line
 
-    text = door.bulk_overlap_text(res.overlap, f"the {res.overlap_frames} frame(s) made")
+    text = bulk_overlap_text(res.overlap, f"the {res.overlap_frames} frame(s) made")
     if text is None:
         return None
     folders = [Path(m.source).parent for m in ctx.muscles if m.source]
     return (f"{text}; {res.overlap_bulk} of {res.built} sequence(s) made say so in their manifests: "
-            f"{door.pack_command_line(folders, ctx.spec.skeleton_path, None)}")
+            f"{pack_command_line(folders, ctx.spec.skeleton_path, None)}")
 
 
 def _dry_run(args, shard, policy) -> int:

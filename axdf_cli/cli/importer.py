@@ -27,6 +27,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from axdf_cli.cli import progress
 from axdf_cli.errors import Mark
 from axdf_cli.fileio.outputs import OutputSet, check_outputs, write_checked
 from axdf_cli.importers.check import check_documents
@@ -158,17 +159,8 @@ def add_overwrite_arg(p) -> None:
 def progress_bar(steps, quiet: bool, desc: str):
     """(tick(step), close()) for a tqdm bar over ``steps`` on stderr; silent when stderr is
     not a terminal or with -q."""
-    if quiet or not sys.stderr.isatty():
-        return (lambda step: None), (lambda: None)
-    from tqdm import tqdm
-
-    bar = tqdm(total=len(steps), unit="step", file=sys.stderr, desc=desc, leave=False)
-
-    def tick(step: str) -> None:
-        bar.set_postfix_str(step)
-        bar.update(1)
-
-    return tick, bar.close
+    bar = progress.bar(quiet, "step", total=len(steps), desc=desc, leave=False)
+    return (bar.tick, bar.close) if bar is not None else ((lambda step: None), (lambda: None))
 
 
 def run(args) -> int:
@@ -224,7 +216,7 @@ def _print_summary(args, res, counts: str) -> None:
             print(path)
     print(f"report: {Path(args.out) / 'IMPORT.md'}")
     if res.report.get("counts", {}).get("muscles", 0) > 1 and res.layout:
-        from axdf_cli.pipeline.execute import pack_command_line
+        from axdf_cli.pipeline.overlap import pack_command_line
 
         lay = res.layout
         print(f"next: {pack_command_line([lay['muscles']], lay['skeleton'], lay['pose'])}  (imported muscles "

@@ -16,6 +16,7 @@ import sys
 import time
 from pathlib import Path
 
+from axdf_cli.cli import progress
 from axdf_cli.cli.run import positive
 from axdf_cli.errors import InputError, Mark, UsageError
 from axdf_cli.specs.render import add_render_args, settings_from_args, settings_to_dict
@@ -34,15 +35,6 @@ def add_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--jobs", type=positive, default=1, metavar="N",
                         help="worker processes for the rendering (default 1; same output bytes)")
     add_render_args(parser)
-
-
-def progress_bar(total: int, quiet: bool):
-    """A tqdm bar on stderr when it is a terminal, else None."""
-    if quiet or not sys.stderr.isatty():
-        return None
-    from tqdm import tqdm
-
-    return tqdm(total=total, unit="frame", file=sys.stderr, leave=False)
 
 
 def _select(spec: str, frames: list[int]) -> list[int]:
@@ -143,7 +135,7 @@ def run(args: argparse.Namespace) -> int:
     kept = {r: s for r, s in old_files.items() if r not in stale}
     base.update(complete=False, settings={**(base.get("settings") or {}), "render": new_render}, files=kept)
 
-    bar = progress_bar(len(todo), args.quiet)
+    bar = progress.bar(args.quiet, "frame", total=len(todo), leave=False)
     with Session(target) as session:
         root = session.root  # OUT, or the staging folder when the frames of another run are replaced
         write_manifest(root, base)  # incomplete while frames are written
@@ -157,7 +149,7 @@ def run(args: argparse.Namespace) -> int:
 
         try:
             result = render_frames_of(scene, source, todo, settings, Root(root), args.jobs,
-                                      progress=(lambda f: bar.update(1)) if bar else None, on_frame=checkpoint)
+                                      progress=(lambda f: bar.update()) if bar else None, on_frame=checkpoint)
         except BaseException:  # stopped: list the whole frames, for --resume (a staging folder goes)
             if not target.replace:
                 try_write_manifest(out, dict(base, files={**kept, **clock["files"]}))

@@ -14,9 +14,9 @@ and per coordinate figures), and ``manifest.json``: DIR is the command's own fol
 """
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
+from axdf_cli.cli import progress
 from axdf_cli.cli.importer import add_overwrite_arg, parse_scale_step, write_imported
 from axdf_cli.fileio.outputs import OutputSet
 
@@ -45,7 +45,7 @@ def run(args) -> int:
     scale = parse_scale_step(args)
     policy = RefPolicy.for_command([args.map, args.onto, args.motion], args.allow_outside)
     skel = load_skeleton(Path(args.onto), policy) if args.onto else None
-    bar = _Bar() if not args.quiet and sys.stderr.isatty() else None
+    bar = progress.bar(args.quiet, "frame", desc="fit", leave=False, lazy=True)  # opened at the first fitted frame
     try:
         res = build_retarget(Path(args.motion), Path(args.map), Path(args.out), skeleton=skel,
                              skeleton_path=Path(args.onto) if args.onto else None, name=args.name, scale=scale,
@@ -65,24 +65,6 @@ def run(args) -> int:
         print("\n".join(summary(res.report, args.verbose)))
         print(f"report: {Path(args.out) / 'retarget_report.json'}")
     return 0
-
-
-class _Bar:
-    """A tqdm bar on stderr, opened at the first fitted frame."""
-
-    def __init__(self):
-        self.bar = None
-
-    def __call__(self, n: int) -> None:
-        if self.bar is None:
-            from tqdm import tqdm
-
-            self.bar = tqdm(unit="frame", desc="fit", file=sys.stderr, leave=False)
-        self.bar.update(n)
-
-    def close(self) -> None:
-        if self.bar is not None:
-            self.bar.close()
 
 
 def summary(rep: dict, verbose: bool = False) -> list[str]:

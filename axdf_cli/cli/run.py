@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import sys
 
+from axdf_cli.cli import progress
 from axdf_cli.formats import FORMATS
 from axdf_cli.specs import RefPolicy, load_job
 
@@ -92,17 +93,12 @@ def run(args) -> int:
             print(f"  {s.name}: {m.n_vertices} vertices, {len(m.faces)} faces, rest length {m.l0:.4f} m, "
                   f"rest volume {m.v0 * 1e6:.2f} cm^3")
         return 0
-    bar = rbar = None
-    if not args.quiet and sys.stderr.isatty():
-        from tqdm import tqdm
-
-        bar = tqdm(total=total, unit="mesh", file=sys.stderr, desc="meshes")
-        if plan.rendering:
-            rbar = tqdm(total=len(plan.frames), unit="frame", file=sys.stderr, desc="frames")
+    bar = progress.bar(args.quiet, "mesh", total=total, desc="meshes")
+    rbar = progress.bar(args.quiet, "frame", total=len(plan.frames), desc="frames") if plan.rendering else None
     try:
         summary = pipeline.execute(plan, resume=args.resume, overwrite=args.overwrite,
                                  progress=bar.update if bar else None, strict=args.strict, jobs=args.jobs,
-                                 render_progress=(lambda _f: rbar.update(1)) if rbar else None,
+                                 render_progress=(lambda _f: rbar.update()) if rbar else None,
                                  on_note=lambda text: print(f"note: {text}", file=sys.stderr))
     finally:
         for b in (bar, rbar):

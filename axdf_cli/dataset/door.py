@@ -1,6 +1,8 @@
-"""The data set's one door into the rest of axdf: the run machinery, render settings and the
-OpenSim motion reader. Everything the data-set room needs from other rooms is imported here,
-so that when those rooms move, only this module follows them.
+"""What the data set adds to the run machinery and the motion readers: a sequence's run plan
+and its run (``axdf run``'s own code), the meshes a run wrote read back, the muscle models at
+rest, and motions read as poses of the data set's skeleton (OpenSim, MuJoCo ``qpos``, motion
+capture through a retarget map). The data-set room imports everything else it needs from
+the modules that own it.
 """
 from __future__ import annotations
 
@@ -10,20 +12,9 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from axdf_cli.specs import Pose
-from axdf_cli.render.camera import intrinsics, look_at  # noqa: F401  (the conventions of camera.json)
-from axdf_cli.render.renderer import id_map  # noqa: F401  (the EXR id pass's table)
-from axdf_cli.render.passes import FRAME_WRITERS  # noqa: F401  (image passes: png, exr)
-from axdf_cli.specs.render import RenderSettings, parse_render_settings, settings_to_dict  # noqa: F401
-from axdf_cli.specs.render import parse_camera  # noqa: F401  (a job's camera: mapping)
-from axdf_cli.pipeline import RunPlan, build_stages, evaluate_chunks, execute, load_bone_mesh  # noqa: F401
-from axdf_cli.pipeline.stages import stages_record  # noqa: F401  (dataset.json names the stages)
-from axdf_cli.pipeline.execute import (bulk_overlap_text, overlaps_in_bulk,  # noqa: F401  (muscles that overlap
-                                       pack_command_line)  # in bulk, as a run tells them)
-from axdf_cli.pipeline.plan import display_path, load_muscle_specs  # noqa: F401  (as a run's manifest shows paths)
-from axdf_cli.workers import WorkerDied, one_thread, process_map  # noqa: F401  (worker processes, as axdf run's)
-from axdf_cli.fileio.runfolder import own_entry  # noqa: F401  (the lock and temporaries axdf leaves while writing)
 from axdf_cli.model.skeleton import forward_kinematics
+from axdf_cli.pipeline import RunPlan, execute
+from axdf_cli.specs import Pose
 
 
 def sequence_plan(pose: Pose, frames: np.ndarray, muscles, models, fmt: str, out: Path, inputs: dict,

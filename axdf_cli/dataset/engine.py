@@ -18,13 +18,14 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from axdf_cli.fileio import atomic
-from axdf_cli.fileio.runfolder import Root, remove_stale_staging
+from axdf_cli.fileio import atomic, lock
+from axdf_cli.fileio.runfolder import LOCK, Root, remove_stale_staging
 from axdf_cli.dataset import folder as dsfolder
 from axdf_cli.dataset import worker as wk
 from axdf_cli.dataset.index import write_index
 from axdf_cli.errors import AxdfError, EnvironmentProblem, InputError, Interrupted
-from axdf_cli.dataset import door
+from axdf_cli.pipeline.overlap import overlaps_in_bulk
+from axdf_cli.workers import WorkerDied, one_thread, process_map
 
 ENGINES = ("local", "ray")
 
@@ -47,7 +48,7 @@ class Outcome:
     gl_renderer: str = ""
     # With contact, over the sequences made now: frames measured, the sum of their share of
     # vertices inside another muscle over those frames, and how many sequences overlap in bulk
-    # (their manifests say so; axdf_cli.pipeline.execute.overlaps_in_bulk)
+    # (their manifests say so; axdf_cli.pipeline.overlap.overlaps_in_bulk)
     overlap_frames: int = 0
     overlap_sum: float = 0.0
     overlap_bulk: int = 0
@@ -69,7 +70,7 @@ class WorkerFailed(AxdfError):
 
 
 def check_out(out: Path, ctx: wk.Context, mine: list[int], resume: bool, overwrite: bool,
-              shards: int = 1) -> dsfolder.Target:
+              shards: int = 1) -> dsfolder.DatasetTarget:
     """Every check of OUT before anything is written (dataset/folder.py): what it holds,
     whether this build may write it, no links on the way to any folder it writes."""
     names = [ctx.sequences[i].name for i in mine]
@@ -77,14 +78,14 @@ def check_out(out: Path, ctx: wk.Context, mine: list[int], resume: bool, overwri
     return dsfolder.check(out, ctx.dataset_json, names, dirs, resume=resume, overwrite=overwrite, shards=shards)
 
 
-def claim(target: dsfolder.Target, ctx: wk.Context, mine: list[int], resume: bool, shared: bool) -> int:
+def claim(target: dsfolder.DatasetTarget, ctx: wk.Context, mine: list[int], resume: bool, shared: bool) -> int:
     """Create OUT, lock it (exclusive while claiming), check that it is still what
     :func:`check_out` saw, write dataset.json and the bone meshes (into the staging folder
     when replacing another data set); returns the lock's descriptor (shared afterwards when
     ``shared``: the shards of one data set write side by side)."""
     out = target.out
     atomic.ensure_dir(out)
-    fd = dsfolder.lock_folder(out, what=str(out))
+    fd = lock.lock_folder(out, what=str(out))
     try:
         dj = out / wk.DATASET_JSON
         now = dj.read_bytes() if dj.is_file() and not dj.is_symlink() else None
@@ -102,7 +103,7 @@ def claim(target: dsfolder.Target, ctx: wk.Context, mine: list[int], resume: boo
             folders = [root, root / dsfolder.BONES]
             for n in names:
                 folders += [root / n] + [root / n / "views" / v for v in ctx.spec.views]
-                dsfolder.remove_stale_lock(root / n)
+                lock.remove_stale_lock(root / n / LOCK)
             atomic.remove_stale_temporaries(folders)
         rroot = Root(root)
         if not (root / wk.DATASET_JSON).is_file() or (root / wk.DATASET_JSON).read_bytes() != ctx.dataset_json:
@@ -112,10 +113,10 @@ def claim(target: dsfolder.Target, ctx: wk.Context, mine: list[int], resume: boo
             if not (p.is_file() and not p.is_symlink() and p.read_bytes() == data):
                 atomic.write_bytes(p, data)
         if shared:
-            dsfolder.relock_folder(fd, True, str(out))
+            lock.relock_folder(fd, True, str(out))
     except BaseException:
         dsfolder.discard_staging(target)
-        dsfolder.unlock_folder(fd)
+        lock.unlock_folder(fd)
         raise
     return fd
 
@@ -152,7 +153,7 @@ def worker_context(where: tuple) -> wk.Context:
     # the workers are the parallelism: each renders with one llvmpipe thread (Mesa's default is
     # one per core, which oversubscribes the cores N workers share); a value you set is kept
     os.environ.setdefault("LP_NUM_THREADS", "1")
-    door.one_thread()  # contact's kernels likewise: one thread each
+    one_thread()  # contact's kernels likewise: one thread each
     os.chdir(cwd)
     ctx = _CONTEXTS.get(where)
     if ctx is None:
@@ -218,9 +219,9 @@ def _run_local(ctx, mine, out, jobs, resume, done, where) -> None:
         done(r)
 
     try:
-        door.process_map(_pool_task, list(mine), (where, str(Path(out).resolve()), resume), jobs=jobs,
-                           on_result=finished, fresh=True, preload=("axdf_cli.dataset.worker",))
-    except door.WorkerDied:
+        process_map(_pool_task, list(mine), (where, str(Path(out).resolve()), resume), jobs=jobs,
+                    on_result=finished, fresh=True, preload=("axdf_cli.dataset.worker",))
+    except WorkerDied:
         raise WorkerFailed(f"a worker process died (killed, or out of memory) while making "
                            f"{_names(ctx, sorted(left))}; the other sequences of this run are complete; "
                            "rerun the same command with --resume to finish") from None
@@ -264,7 +265,7 @@ def clean_stopped(root: Path, names: list[str], views) -> None:
         folder = Path(root) / n
         if not folder.is_dir() or folder.is_symlink():
             continue
-        dsfolder.remove_stale_lock(folder)
+        lock.remove_stale_lock(folder / LOCK)
         try:
             runfolder.remove_stale(folder)
         except OSError:
@@ -299,7 +300,7 @@ def build(path: Path | str, out: Path | str, *, seed: int | None = None, jobs: i
             stack.callback(clean_stopped, target.root, [ctx.sequences[i].name for i in mine], ctx.spec.views)
         ray = stack.enter_context(ray_engine) if ray_engine is not None else None
         fd = claim(target, ctx, mine, resume, shared=n > 1 and target.mode != "replace")
-        stack.callback(dsfolder.unlock_folder, fd)
+        stack.callback(lock.unlock_folder, fd)
         stack.callback(dsfolder.discard_staging, target)
         res = Outcome(out, sequences=len(mine), samples=sum(_samples(ctx, i) for i in mine))
         t0 = time.perf_counter()
@@ -317,7 +318,7 @@ def build(path: Path | str, out: Path | str, *, seed: int | None = None, jobs: i
                     share, frames = timing["overlap"]
                     res.overlap_frames += frames
                     res.overlap_sum += share * frames
-                    res.overlap_bulk += door.overlaps_in_bulk(share)
+                    res.overlap_bulk += overlaps_in_bulk(share)
             res.gl_renderer = res.gl_renderer or renderer
             if progress:
                 progress(_samples(ctx, i))
@@ -368,14 +369,14 @@ def merge(out: Path | str) -> tuple[Path, int]:
     position)."""
     out = Path(out)
     m = dsfolder.check_merge(out)
-    fd = dsfolder.lock_folder(out, what=str(out))
+    fd = lock.lock_folder(out, what=str(out))
     try:
         data = (out / wk.DATASET_JSON).read_bytes()
         if hashlib.sha256(data).hexdigest() != m.sha:
             raise InputError(None, f"{out / wk.DATASET_JSON} changed while axdf was reading it", "run again")
         idx, rows, missing = _finish(out, data)
     finally:
-        dsfolder.unlock_folder(fd)
+        lock.unlock_folder(fd)
     if missing:
         other = [n for n, why in missing if why.startswith("made for another data set")]
         names = [n for n, _ in missing]

@@ -17,7 +17,8 @@ output folder is safe to point anywhere").
   N > 1) of another data set are refused: each shard would replace the folder alone.
 - Nothing is written or deleted through a link: OUT's sequence folders, ``views``,
   ``views/<view>``, ``meshes``, ``bones`` are checked to be real folders first.
-- One writer: ``flock`` on OUT (the folder itself, so a killed build leaves no lock file):
+- One writer (axdf_cli/fileio/lock.py, the run's rule): ``flock`` on OUT (the folder itself,
+  so a killed build leaves no lock file):
   exclusive for a build of the whole data set and for ``merge``, shared between the shards
   of one data set (after an exclusive claim of ``dataset.json``); each sequence is locked
   exclusively by the worker that makes it. A second writer is refused (exit 3).
@@ -31,9 +32,9 @@ import stat
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
 
-from axdf_cli.errors import EnvironmentProblem, InputError, Mark
+from axdf_cli.errors import InputError, Mark
 from axdf_cli.fileio import atomic
-from axdf_cli.fileio.runfolder import (LOCK, MANIFEST, STAGING_PREFIX, Manifest, check_dirs, check_way, own_entry, prepare,
+from axdf_cli.fileio.runfolder import (MANIFEST, STAGING_PREFIX, Manifest, check_dirs, check_way, own_entry, prepare,
                                        plain_relpath, swap_in)
 from axdf_cli.fileio.yamlio import is_name
 from axdf_cli.tolerances import MAX_SEED
@@ -125,7 +126,7 @@ def _json_object(path: Path):
 
 
 @dataclass
-class Target:
+class DatasetTarget:
     """A data-set folder, checked: how this build writes it."""
 
     out: Path
@@ -150,7 +151,7 @@ def sequence_dirs(names, views, muscles, fmt: str) -> list[str]:
 
 
 def check(out: Path, dataset_json: bytes, names: list[str], dirs: list[str], *, resume: bool, overwrite: bool,
-          shards: int) -> Target:
+          shards: int) -> DatasetTarget:
     """Every check of a build's output folder (reads only). ``names``: this build's
     sequences; ``dirs``: folders below OUT it writes into; ``shards``: N of ``--shard K/N``."""
     out = Path(out)
@@ -160,7 +161,7 @@ def check(out: Path, dataset_json: bytes, names: list[str], dirs: list[str], *, 
         if os.path.lexists(out):  # a dangling link: nothing is made at its far end
             raise InputError(None, f"--out {out} is a symbolic link to nothing", "give a folder") from None
         check_way(out, "--out")
-        return Target(out, "new")
+        return DatasetTarget(out, "new")
     except OSError as e:
         raise atomic.environment_problem(out, e) from None
     if not stat.S_ISDIR(st.st_mode):
@@ -170,7 +171,7 @@ def check(out: Path, dataset_json: bytes, names: list[str], dirs: list[str], *, 
     except OSError as e:
         raise atomic.environment_problem(out, e) from None
     if not entries:
-        return Target(out, "new")
+        return DatasetTarget(out, "new")
     dj = out / DATASET_JSON
     if os.path.islink(dj):
         raise InputError(None, f"{dj} is a symbolic link", "a data set's dataset.json is a file axdf wrote")
@@ -194,7 +195,7 @@ def check(out: Path, dataset_json: bytes, names: list[str], dirs: list[str], *, 
         for n in present:  # each is an axdf run folder, finished or made again by the run's rule: its
             # refusals (a damaged manifest, files but no run) come now, not after other sequences were made
             prepare(out / n, resume=resume, overwrite=not resume)
-        return Target(out, "same", old)
+        return DatasetTarget(out, "same", old)
     if not overwrite:
         raise InputError(old.mark(("seed",)), f"output folder {out} holds another data set (its dataset.json differs: "
                          "other inputs, settings or seed)",
@@ -207,7 +208,7 @@ def check(out: Path, dataset_json: bytes, names: list[str], dirs: list[str], *, 
     old_files = listed_files(out, old)
     check_dirs(out, sorted({str(PurePosixPath(r).parent) for r in old_files} - {"."}) + [BONES] + list(names)
                + dirs)
-    return Target(out, "replace", old, old_files=old_files)
+    return DatasetTarget(out, "replace", old, old_files=old_files)
 
 
 def check_dry(out: Path, *, resume: bool, overwrite: bool) -> None:
@@ -227,64 +228,6 @@ def check_dry(out: Path, *, resume: bool, overwrite: bool) -> None:
     read_dataset_json(dj)
 
 
-# ----------------------------------------------------------------------------- locks
-
-
-def lock_folder(path: Path, shared: bool = False, what: str | None = None) -> int:
-    """``flock`` on the folder ``path`` itself (no lock file: nothing is left behind when the
-    holder is killed); exclusive, or ``shared``. Another holder: exit 3. Returns the
-    descriptor (:func:`unlock_folder`)."""
-    import fcntl
-
-    try:
-        fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW | os.O_CLOEXEC)
-    except OSError as e:
-        raise atomic.environment_problem(Path(path), e) from None
-    try:
-        fcntl.flock(fd, (fcntl.LOCK_SH if shared else fcntl.LOCK_EX) | fcntl.LOCK_NB)
-    except OSError:
-        os.close(fd)
-        raise EnvironmentProblem(f"another axdf process is writing {what or path}",
-                                 "wait for it to finish, or choose another output folder") from None
-    return fd
-
-
-def relock_folder(fd: int, shared: bool, what: str) -> None:
-    import fcntl
-
-    try:
-        fcntl.flock(fd, (fcntl.LOCK_SH if shared else fcntl.LOCK_EX) | fcntl.LOCK_NB)
-    except OSError:
-        raise EnvironmentProblem(f"another axdf process is writing {what}",
-                                 "wait for it to finish, or choose another output folder") from None
-
-
-def unlock_folder(fd: int | None) -> None:
-    if fd is not None:
-        os.close(fd)
-
-
-def remove_stale_lock(folder: Path) -> None:
-    """A run's ``.axdf-lock`` left by a killed process (nobody holds it): removed."""
-    import fcntl
-
-    path = Path(folder) / LOCK
-    try:
-        fd = os.open(path, os.O_RDWR | os.O_NOFOLLOW | os.O_CLOEXEC)
-    except OSError:
-        return
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        try:
-            os.unlink(path)
-        except OSError:
-            pass
-    except OSError:
-        pass  # held: a live writer's
-    finally:
-        os.close(fd)
-
-
 # ----------------------------------------------------------------------------- the swap
 
 
@@ -298,14 +241,14 @@ def staged_files(root: Path) -> list[str]:
     return sorted(out)
 
 
-def commit_replace(target: Target) -> None:
+def commit_replace(target: DatasetTarget) -> None:
     """Swap a complete new data set from its staging folder into OUT (signals held): the old
     data set's listed files are deleted, the new ones moved in, ``dataset.json`` last."""
     with atomic.deferred_signals():
         swap_in(target.root, target.out, target.old_files, staged_files(target.root), last=DATASET_JSON)
 
 
-def discard_staging(target: Target) -> None:
+def discard_staging(target: DatasetTarget) -> None:
     if target.mode == "replace":
         shutil.rmtree(target.root, ignore_errors=True)
 

@@ -14,7 +14,7 @@ its bones and muscles, a few centimetres behind the surface that shows it, while
 hides it is farther in front.
 
 Sphere cameras aim at the subject: with ``target: auto`` the centre of the box around the
-moving bones' joint centres and mesh boxes (:func:`subject_points`), over the sequence
+moving bones' joint centres and mesh boxes (:func:`axdf_cli.render.framing.skeleton_points`), over the sequence
 (``per: sequence``) or at the frame (``per: frame``); near and far planes keep that box.
 """
 from __future__ import annotations
@@ -31,42 +31,12 @@ FLESH_MARGIN = 0.3  # metres of flesh kept inside the clip range beyond the subj
 NEAR_MIN = 0.01  # metres
 
 
-def joint_centres(skeleton, world: np.ndarray) -> np.ndarray:
-    """(F, B, 3) world joint centres from bone frames ``world`` (F, B, 4, 4)."""
-    post = np.array([b.post_offset for b in skeleton.bones], dtype=np.float64)  # (B, 3)
-    # J[f,b,i] = sum_j R[f,b,i,j] post[b,j] + t[f,b,i]
-    return np.einsum("fbij,bj->fbi", world[:, :, :3, :3], post) + world[:, :, :3, 3]
-
-
-def moving_bones(skeleton) -> list[int]:
-    """Bones that move with the pose: all but a root without DOFs (a fixed "ground" frame)."""
-    return [i for i, b in enumerate(skeleton.bones) if b.parent >= 0 or b.dofs]
-
-
-def subject_points(skeleton, world: np.ndarray, bone_meshes: dict) -> np.ndarray:
-    """(F, P, 3) world points that bound the subject: the joint centres of the moving bones and
-    the corners of their meshes' boxes (the skeleton only, never the muscles)."""
-    move = moving_bones(skeleton)
-    pts = [joint_centres(skeleton, world)[:, move]]
-    meshed = [i for i in move if i in bone_meshes]
-    if meshed:
-        lo = np.array([bone_meshes[i][0].min(0) for i in meshed], np.float64)
-        hi = np.array([bone_meshes[i][0].max(0) for i in meshed], np.float64)
-        pick = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)])  # (8, 3) corner choice
-        corners = np.where(pick[None], hi[:, None], lo[:, None])  # (Bm, 8, 3) bone-local
-        w = world[:, meshed]
-        # c[f,b,k,i] = sum_j R[f,b,i,j] corners[b,k,j] + t[f,b,i]
-        c = np.einsum("fbij,bkj->fbki", w[..., :3, :3], corners) + w[:, :, None, :3, 3]
-        pts.append(c.reshape(len(world), -1, 3))
-    return np.concatenate(pts, axis=1)
-
-
 def view_cameras(spec: DatasetSpec, seq: Sequence, frames: np.ndarray, subject: np.ndarray,
                  world: np.ndarray, bone_index: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Cameras of every view at every frame, from the skeleton only (never the muscles):
-    ``subject`` (F, P, 3) are the points of :func:`subject_points`. Returns ``K`` (V, 3, 3),
+    ``subject`` (F, P, 3) are the points of :func:`axdf_cli.render.framing.skeleton_points`. Returns ``K`` (V, 3, 3),
     ``world_to_camera`` (F, V, 4, 4), ``clip`` (F, V, 2) near and far."""
-    from axdf_cli.dataset.door import intrinsics, look_at
+    from axdf_cli.render.camera import intrinsics, look_at
 
     W, H = spec.render.size
     nf = len(frames)

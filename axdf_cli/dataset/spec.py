@@ -9,8 +9,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from axdf_cli.dataset.door import (FRAME_WRITERS, RenderSettings, load_muscle_specs, motion_pose, parse_camera,
-                                   parse_render_settings, qpos_pose, retarget_pose)
+from axdf_cli.dataset.door import motion_pose, qpos_pose, retarget_pose
+from axdf_cli.pipeline.plan import load_muscle_specs
+from axdf_cli.render.passes import FRAME_WRITERS
+from axdf_cli.specs.render import RenderSettings, parse_camera, parse_render_settings
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.tolerances import MAX_ABS_NUMBER, MAX_FPS, MAX_SEED
 from axdf_cli.formats import WRITERS

@@ -20,13 +20,17 @@ import numpy as np
 
 from axdf_cli import __version__
 from axdf_cli import tolerances as tol
-from axdf_cli.fileio import atomic, runfolder
+from axdf_cli.fileio import atomic, lock, runfolder
 from axdf_cli.fileio.yamlio import FileRefused, read_regular
 from axdf_cli.dataset import amodal as coco
-from axdf_cli.dataset import folder as dsfolder
 from axdf_cli.dataset.folder import DATASET_JSON, INDEX, RECORD  # noqa: F401  (RECORD: written last)
 from axdf_cli.dataset import labels as lab
 from axdf_cli.dataset import door
+from axdf_cli.pipeline.plan import display_path, load_bone_mesh, load_muscle_specs
+from axdf_cli.pipeline.stages import build_stages, stages_record
+from axdf_cli.render.framing import skeleton_points
+from axdf_cli.render.renderer import id_map
+from axdf_cli.specs.render import settings_to_dict
 from axdf_cli.errors import InputError
 from axdf_cli.dataset.sampling import sample_pose, with_activation
 from axdf_cli.dataset.spec import (DatasetSpec, Sequence, expand_sequences, load_dataset, load_motion,
@@ -73,12 +77,12 @@ def build_context(path: Path | str, seed: int | None = None, policy=None, listed
 
     spec = load_dataset(path, seed, policy)
     skel = load_skeleton(spec.skeleton_path, spec.policy)
-    muscles = door.load_muscle_specs(spec.muscle_files)
+    muscles = load_muscle_specs(spec.muscle_files)
     models = door.build_models(muscles, skel)
-    bone_meshes = {i: door.load_bone_mesh(b.mesh, spec.skeleton_path) for i, b in enumerate(skel.bones) if b.mesh}
+    bone_meshes = {i: load_bone_mesh(b.mesh, spec.skeleton_path) for i, b in enumerate(skel.bones) if b.mesh}
     srcs = [spec.source, spec.skeleton_path, *spec.muscle_files, *sorted({b.mesh for b in skel.bones if b.mesh})]
-    inputs = {door.display_path(Path(s)): atomic.sha256_file(s) for s in srcs}
-    motion_inputs = {m.name: {door.display_path(Path(p)): atomic.sha256_file(p) for p in (m.path, m.map) if p}
+    inputs = {display_path(Path(s)): atomic.sha256_file(s) for s in srcs}
+    motion_inputs = {m.name: {display_path(Path(p)): atomic.sha256_file(p) for p in (m.path, m.map) if p}
                      for m in spec.motions.values()}
     scene_bones = sorted(bone_meshes) if spec.render.bones else []
     scene = Scene(muscles=tuple(SceneMuscle(s.name, s.color, m.faces) for s, m in zip(muscles, models)),
@@ -88,7 +92,7 @@ def build_context(path: Path | str, seed: int | None = None, policy=None, listed
     keypoints = skeleton_keypoints(skel, {i: m[0] for i, m in bone_meshes.items()})
     ctx = Context(spec, sequences, skel, door.without_meshes(skel), muscles, models, bone_meshes, keypoints,
                   inputs, motion_inputs, scene, scene_bones, b"", "",
-                  stages=door.build_stages(dict(spec.stages), muscles=muscles))
+                  stages=build_stages(dict(spec.stages), muscles=muscles))
     if not listed:
         return ctx
     ctx.dataset_json = (json.dumps(dataset_dict(ctx), indent=1) + "\n").encode()
@@ -116,8 +120,8 @@ def dataset_dict(ctx: Context) -> dict:
         "muscles": ctx.names,
         "views": list(spec.views),
         "image": {"width": W, "height": H, "passes": list(spec.passes)},
-        "render": door.settings_to_dict(spec.render),
-        "ids": door.id_map(ctx.scene, spec.render.bones),
+        "render": settings_to_dict(spec.render),
+        "ids": id_map(ctx.scene, spec.render.bones),
         "format": spec.format,
         "shards": spec.shards,
         "bones": {skel.bones[i].name: f"bones/{skel.bones[i].name}.ply" for i in sorted(ctx.bone_meshes)},
@@ -137,7 +141,7 @@ def dataset_dict(ctx: Context) -> dict:
         **({"amodal": f"<sequence>/{AMODAL}: COCO annotations per view and frame, each muscle's full extent "
                       "(occluders ignored) as uncompressed RLE, category id = the muscle's EXR id"}
            if "amodal" in spec.passes else {}),
-        **({"stages": door.stages_record(ctx.stages)} if ctx.stages else {}),
+        **({"stages": stages_record(ctx.stages)} if ctx.stages else {}),
         "sequences": [{"name": s.name, "source": spec.entries[s.entry].label, "frames": s.n_frames}
                       for s in ctx.sequences],
     }
@@ -214,7 +218,7 @@ def release_renderer() -> None:
 def build_sequence(ctx: Context, index: int, out: Path, resume: bool) -> tuple[dict, dict]:
     """Make sequence ``index`` whole in ``out``; return (its record, seconds per stage; with
     contact, ``"overlap"``: (share of its vertices inside another muscle, frames), its run's
-    :func:`~axdf_cli.pipeline.execute.overlap_share`).
+    :func:`~axdf_cli.pipeline.overlap.overlap_share`).
     With ``resume`` a complete sequence is kept as it is and a partial one finished;
     otherwise it is made again: the files its earlier record lists and the new one lacks
     are deleted once the new record is written, nothing else (dataset/folder.py). The
@@ -229,12 +233,12 @@ def build_sequence(ctx: Context, index: int, out: Path, resume: bool) -> tuple[d
             return rec, timing
     runfolder.check_dirs(Path(out), [seq.name])
     atomic.ensure_dir(folder)
-    fd = dsfolder.lock_folder(folder, what=str(folder))
+    fd = lock.lock_folder(folder, what=str(folder))
     try:
-        dsfolder.remove_stale_lock(folder)
+        lock.remove_stale_lock(folder / runfolder.LOCK)
         return _make_sequence(ctx, seq, folder, resume, timing)
     finally:
-        dsfolder.unlock_folder(fd)
+        lock.unlock_folder(fd)
 
 
 def _make_sequence(ctx: Context, seq: Sequence, folder: Path, resume: bool, timing: dict) -> tuple[dict, dict]:
@@ -263,7 +267,7 @@ def _make_sequence(ctx: Context, seq: Sequence, folder: Path, resume: bool, timi
     coords = sample_coordinates(pose, frames)
     world = forward_kinematics(ctx.skeleton, coords)
     joints = ctx.keypoints.positions(world)
-    subject = lab.subject_points(ctx.skeleton, world, ctx.bone_meshes)
+    subject = skeleton_points(ctx.skeleton, world, ctx.bone_meshes)
     K, w2c, clip = lab.view_cameras(spec, seq, frames, subject, world, ctx.skeleton.bone_index)
     uv, z = lab.project(K, w2c, joints)
     _check_finite(seq.name, K=K, world_to_camera=w2c, joints3d=joints, joints2d=uv, joints_depth=z)

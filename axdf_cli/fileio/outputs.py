@@ -311,7 +311,7 @@ def _earlier_outside(checked: Checked, new_outside: dict) -> dict:
     """Files outside OUT that an earlier output wrote and this one does not (never deleted:
     they stay where they are): still recognised as axdf's while their bytes are unchanged, so
     that a later ``--overwrite`` writing them again may replace them (an import with another
-    ``--name`` and then the first one again was refused on its own earlier files)."""
+    ``--name``, then the first one again, replaces its own earlier files)."""
     previous = checked.target.previous
     out = os.path.abspath(checked.outputs.out)
     earlier: dict = {}

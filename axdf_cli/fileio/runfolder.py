@@ -23,7 +23,7 @@ The rules:
 - A folder is a *run* when its ``manifest.json`` is a JSON object with ``tool: axdf``. Only a
   run is resumed, re-rendered or overwritten; any other non-empty folder is refused (exit 2).
 - Every check comes before the first byte is written: :func:`prepare` only reads.
-- One writer at a time: :class:`Session` holds ``flock`` on ``.axdf-lock`` for the whole run;
+- One writer at a time: :class:`Session` holds ``flock`` on ``.axdf-lock`` (:mod:`.lock`) for the whole run;
   a second writer is refused (exit 3).
 - ``--overwrite`` deletes only the files the old manifest lists, and only once the new run
   is complete (built in ``.axdf-new-<pid>/``, then :meth:`Session.commit` swaps it in).
@@ -46,7 +46,8 @@ from pathlib import Path, PurePosixPath
 
 from axdf_cli import tolerances as tol
 from axdf_cli.fileio import atomic
-from axdf_cli.errors import EnvironmentProblem, InputError, Mark, UsageError
+from axdf_cli.fileio.lock import link_refused, lock_file, unlock_file
+from axdf_cli.errors import EnvironmentProblem, InputError, Mark
 from axdf_cli.fileio.yamlio import FileRefused, read_regular
 
 MANIFEST = "manifest.json"
@@ -61,7 +62,7 @@ STAGING_PREFIX = ".axdf-new-"
 LAYOUT_DIRS = ("meshes", "bones", "frames")
 
 # the manifest's keys, in the one order every writer uses (unknown keys follow, sorted)
-MANIFEST_KEYS = ("tool", "version", "command", "complete", "inputs", "settings", "frames", "muscles", "bones",
+MANIFEST_KEYS = ("tool", "version", "command", "complete", "inputs", "settings", "identity", "frames", "muscles", "bones",
                  "warnings", "files", "outside", "outside_previous", "outside_earlier", "bounds", "gl")
 #: The command that wrote a folder (``command`` in its manifest; a run's manifest has none).
 RUN_COMMAND = "run"
@@ -126,12 +127,6 @@ def try_write_manifest(folder: Path, manifest: dict) -> None:
         pass
 
 
-def _refuse_link(path: Path) -> InputError:
-    return InputError(None, f"{path} is a symbolic link",
-                      "axdf never writes through a link out of its output folder; remove the link or choose "
-                      "another output folder")
-
-
 def check_dirs(root: Path, rel_dirs) -> bool:
     """Every existing folder on the way from ``root`` to each of ``rel_dirs`` is a real folder
     (not a symbolic link, not a file). Reads only; the rest will be created below ``root``.
@@ -147,7 +142,7 @@ def check_dirs(root: Path, rel_dirs) -> bool:
                 whole = False
                 break
             if stat.S_ISLNK(st.st_mode):
-                raise _refuse_link(p)
+                raise link_refused(p)
             if not stat.S_ISDIR(st.st_mode):
                 raise InputError(None, f"{p} is not a folder", "the run folder's layout needs a folder there")
     return whole
@@ -156,7 +151,7 @@ def check_dirs(root: Path, rel_dirs) -> bool:
 def check_way(path: Path, what: str) -> None:
     """A path still to be made (``path`` absent): the nearest of its parents that exists is a
     folder. A file there (``--out walk.bvh/x``) or a link loop is bad input (exit 2), not a
-    machine that cannot write (it was exit 3, "Not a directory"; or 70)."""
+    machine that cannot write (exit 3)."""
     p = Path(os.path.abspath(path)).parent
     while True:
         try:
@@ -282,7 +277,7 @@ class Manifest:
     def read(cls, path: Path) -> "Manifest":
         where = Mark(str(path))
         try:
-            raw = read_regular(path, tol.INPUT_MAX_BYTES)  # a FIFO there blocked every reader
+            raw = read_regular(path, tol.INPUT_MAX_BYTES)  # (bounded, regular files only: a FIFO there would block the reader)
         except FileNotFoundError:
             raise InputError(where, "no manifest.json", "a folder written by axdf run") from None
         except FileRefused as e:
@@ -477,7 +472,7 @@ def read_run_manifest(folder: Path) -> Manifest:
     """The manifest of an axdf run folder (exit 2 with its position when it is not one)."""
     path = Path(folder) / MANIFEST
     if os.path.islink(path):
-        raise _refuse_link(path)
+        raise link_refused(path)
     m = Manifest.read(path)
     if not m.is_run:
         raise m.error(("tool",), "not written by axdf", "a manifest.json with tool 'axdf' (written by axdf run)")
@@ -561,54 +556,6 @@ def remove_stale_staging(out: Path) -> None:
             pid = atomic.temp_owner(e.name)
             if pid is None or not atomic.pid_alive(pid):
                 shutil.rmtree(e.path, ignore_errors=True)
-
-
-def lock_file(path: Path, folder: Path) -> int:
-    """Take ``flock`` on the lock file ``path`` (created, never through a link) for the one
-    writer of ``folder``; return its descriptor. Another holder: exit 3 naming its pid."""
-    import fcntl
-
-    for _ in range(8):
-        try:
-            fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644)
-        except OSError as e:
-            if e.errno == errno.ELOOP:
-                raise _refuse_link(path) from None
-            if e.errno == errno.EISDIR:  # not ours: a folder where the lock goes
-                raise UsageError(f"{path} is a folder", f"axdf keeps its lock file there ({LOCK}); "
-                                 "move the folder away") from None
-            raise atomic.environment_problem(path, e) from None
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            owner = os.read(fd, 32).decode("ascii", "replace").strip()
-            os.close(fd)
-            raise EnvironmentProblem(
-                f"another axdf process{f' (pid {owner})' if owner.isdigit() else ''} is writing {folder}",
-                "wait for it to finish, or choose another output folder") from None
-        try:
-            same = os.fstat(fd).st_ino == os.stat(path, follow_symlinks=False).st_ino
-        except FileNotFoundError:
-            same = False
-        if same:
-            try:
-                os.ftruncate(fd, 0)
-                os.write(fd, f"{os.getpid()}\n".encode())
-            except OSError as e:  # a full disk takes the lock's inode, not its pid's block
-                unlock_file(path, fd)
-                raise atomic.environment_problem(path, e) from None
-            return fd
-        os.close(fd)  # its holder removed it as we opened it: lock the file there now
-    raise EnvironmentProblem(f"cannot lock {path}", "try again")
-
-
-def unlock_file(path: Path, fd: int) -> None:
-    """Release :func:`lock_file`'s lock and remove the file (a waiting writer locks anew)."""
-    try:
-        os.unlink(path)
-    except OSError:
-        pass
-    os.close(fd)
 
 
 class Session:

@@ -48,7 +48,7 @@ _FLOAT_TAG = "tag:yaml.org,2002:float"
 
 
 class _Loader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):
-    """PyYAML's safe loader (libyaml's parser when PyYAML was built with it: 10x faster on
+    """PyYAML's safe loader (libyaml's parser when PyYAML was built with it: much faster on
     large pose files; the same safe constructor and the same marks either way), with YAML
     1.2's floats: YAML 1.1 (PyYAML) reads ``1e-5``, ``2E3`` and ``1.0e9`` as strings
     because its float needs a dot and a signed exponent. Registered on this class only

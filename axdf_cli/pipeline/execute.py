@@ -1,6 +1,7 @@
-"""Executing a plan: the mesh pass (in this process or forked workers), the tables, the
-render pass (in this process or render workers) and the manifest, written into the run
-folder (:mod:`axdf_cli.fileio.runfolder`).
+"""Executing a plan: every check first, then the mesh pass (in this process or forked
+workers), the tables, the render pass (in this process or render workers) and the manifest,
+written into the run folder (:mod:`axdf_cli.fileio.runfolder`). The manifest's schema is
+:mod:`.manifest`'s, the tables' :mod:`.tables`', the bulk-overlap policy :mod:`.overlap`'s.
 
 How ``--jobs`` splits the mesh pass follows from the plan's stages (:func:`split_of`):
 without a FRAME stage each worker takes some muscles over every frame; with one (it needs
@@ -16,28 +17,22 @@ from pathlib import Path, PurePosixPath
 
 import numpy as np
 
-from axdf_cli import __version__
-from axdf_cli.fileio import runfolder
 from axdf_cli.errors import InputError
-from axdf_cli.fileio import atomic
+from axdf_cli.fileio import atomic, runfolder
+from axdf_cli.fileio.runfolder import (BONES_CSV, FRAME_EXTENSIONS, MANIFEST_INTERVAL_S, STATS, OutputWriter,
+                                       bone_mesh_relpath, frame_relpath, gl_record, is_file_with, mesh_relpath,
+                                       write_manifest)
 from axdf_cli.formats import WRITERS
 from axdf_cli.pipeline.evaluate import Prepass, chunk_frames, evaluate_plan, finite_or_rest, prepare
-from axdf_cli.pipeline.plan import RunPlan, display_path, framing
-from axdf_cli.pipeline.stages import Scope, of_scope, stages_record
-from axdf_cli.workers import check_parent, process_map
+from axdf_cli.pipeline.manifest import check_resume, manifest_dict
+from axdf_cli.pipeline.overlap import bulk_overlap, bulk_overlap_text, overlap_share, with_pack_command
 from axdf_cli.pipeline.packed import SequenceFiles, file_relpath, sequence_formats, write_run_files
-from axdf_cli.fileio.runfolder import (BONES_CSV, FRAME_EXTENSIONS, MANIFEST_INTERVAL_S, STATS, OutputWriter, bone_mesh_relpath,
-                                describe_differences, frame_relpath, gl_record, is_file_with, mesh_relpath,
-                                write_manifest)
+from axdf_cli.pipeline.plan import RunPlan
+from axdf_cli.pipeline.stages import Scope, of_scope
+from axdf_cli.render.framing import framing_record, run_framing
+from axdf_cli.pipeline.tables import NSTATS, STATS_COLUMNS, bones_csv, stats_csv
+from axdf_cli.workers import check_parent, process_map
 from axdf_cli.model.skeleton import matrix_to_quaternion
-
-
-def render_dict(settings) -> dict | None:
-    if settings is None or not settings.enabled:
-        return None
-    from axdf_cli.specs.render import settings_to_dict
-
-    return settings_to_dict(settings)
 
 
 def run_dirs(plan: RunPlan) -> list[str]:
@@ -55,124 +50,6 @@ def run_dirs(plan: RunPlan) -> list[str]:
 def previous_subset(previous: dict, out: Path) -> dict:
     """The previous manifest's files that are still on disk (kept listed while resuming)."""
     return {k: v for k, v in previous.items() if (out / k).is_file()}
-
-
-#: stats.csv's numeric columns. The last three (inside_muscle, inside_bone: shares of the
-#: muscle's vertices inside another muscle it collides with, inside a bone; depth: its deepest
-#: penetration, m) are written when a stage measures them (the contact or penetration stage:
-#: ``measures = True``); without, stats.csv has the first six.
-STATS_COLUMNS = ("length", "volume", "volume_ratio", "tension", "twist", "scale", "inside_muscle", "inside_bone",
-                 "depth")
-NSTATS = len(STATS_COLUMNS)
-MEASURED_COLUMNS = 3
-
-
-#: A run whose muscles, after contact, keep more than this share of their vertices inside
-#: another muscle (over its frames) overlaps in bulk: contact, a few millimetres a pass and
-#: continuous in the frame, clears what motion adds to rest shapes that share space, not rest
-#: shapes through each other (an import's generic sections: gait2392 23%, arm26 30%,
-#: myoarm 43%). Packed libraries stay under 3% (the walk 0.23%, its CMU walk 2.65%).
-BULK_OVERLAP = 0.05
-
-
-def overlap_share(plan: RunPlan, inside: np.ndarray) -> float | None:
-    """The share of the run's vertices inside another muscle over its frames: inside (F, M),
-    stats.csv's inside_muscle, each muscle's share weighted by its vertices. None where
-    contact did not run (nothing measured)."""
-    if not any(st.name == "contact" for st in plan.stages) or inside.size == 0:
-        return None
-    n = np.array([m.n_vertices for m in plan.models], dtype=np.float64)
-    return float((inside * n).sum() / (n.sum() * inside.shape[0]))
-
-
-def overlaps_in_bulk(share: float | None) -> bool:
-    """Whether muscles keeping ``share`` of their vertices inside another muscle after contact
-    (:func:`overlap_share`; None: not measured) overlap in bulk (:data:`BULK_OVERLAP`)."""
-    return share is not None and share > BULK_OVERLAP
-
-
-def bulk_overlap_text(share: float | None, over: str) -> str | None:
-    """The warning for muscles that overlap in bulk after contact (:func:`overlaps_in_bulk`;
-    ``share`` measured ``over`` "N frame(s)" or the like); None otherwise. Names no path (it
-    goes in manifests): :func:`pack_command_line` is the next step, for the terminal."""
-    if not overlaps_in_bulk(share):
-        return None
-    return (f"the muscles overlap in bulk: after contact {share * 100:.1f}% of their vertices lie inside another "
-            f"muscle (over {over}; stats.csv's inside_muscle), more than contact clears (it "
-            f"resolves what motion adds, a few millimetres a frame); make their rest shapes share space once "
-            f"with axdf pack (docs/METHOD.md, Packing)")
-
-
-def bulk_overlap(plan: RunPlan, inside: np.ndarray) -> str | None:
-    """The run's warning when its muscles overlap in bulk after contact (:func:`overlap_share`,
-    :func:`bulk_overlap_text`); None otherwise (or where contact did not run). :func:`pack_command`
-    is the command for this run, for the terminal."""
-    return bulk_overlap_text(overlap_share(plan, inside), f"{inside.shape[0]} frame(s)")
-
-
-def with_pack_command(plan: RunPlan, warning: str) -> str:
-    """The bulk-overlap warning as the terminal shows it: ending with the run's own
-    :func:`pack_command` (the manifest's names no path)."""
-    return f"{warning}: {pack_command(plan)}"
-
-
-def pack_command(plan: RunPlan) -> str:
-    """The ``axdf pack`` command line for the run's muscles (their folders), skeleton and pose."""
-    return pack_command_line([Path(s.source).parent for s in plan.muscles if s.source],
-                             plan.pose.skeleton_path or None, plan.pose.source or None)
-
-
-def pack_command_line(folders, skeleton, pose) -> str:
-    """``axdf pack FOLDERS --skeleton SKELETON [--pose POSE] --out FOLDER_packed`` for the
-    terminal (paths relative to the current folder where below it, else absolute; placeholders
-    where unknown): the next step that a run whose muscles overlap in bulk, or an import, names."""
-    def arg(p) -> str:
-        p = Path(p).resolve()
-        try:
-            return p.relative_to(Path.cwd().resolve()).as_posix()
-        except ValueError:
-            return p.as_posix()
-
-    names = sorted({arg(f) for f in folders}) or ["MUSCLES"]
-    sk = arg(skeleton) if skeleton else "SKELETON"
-    po = f" --pose {arg(pose)}" if pose else ""
-    out = names[0].rstrip("/") + "_packed" if len(names) == 1 and names[0] != "MUSCLES" else "DIR"
-    return f"axdf pack {' '.join(names)} --skeleton {sk}{po} --out {out}"
-
-
-def manifest_dict(plan: RunPlan, files: dict, warnings: list, complete: bool, extra: dict | None = None) -> dict:
-    m = {
-        "tool": "axdf",
-        "version": __version__,
-        "complete": complete,
-        "inputs": dict(sorted(plan.inputs.items())),
-        "settings": {
-            "format": plan.fmt,
-            "pose": plan.pose.name,
-            "skeleton": plan.pose.skeleton.name,
-            "fps": plan.pose.fps,
-            "render": render_dict(plan.render),
-        },
-        "frames": [int(f) for f in plan.frames],
-        "muscles": [
-            {"name": s.name, "group": s.group, "color": [round(c, 6) for c in s.color],
-             "source": display_path(Path(s.source)),
-             "volume": s.volume, "vertices": int(m.n_vertices), "faces": int(len(m.faces)),
-             "rest_length": round(m.l0, 12), "rest_volume": float(f"{m.v0:.12g}")}
-            for s, m in zip(plan.muscles, plan.models)
-        ],
-        "bones": [{"name": b.name, "mesh": bone_mesh_relpath(b.name) if b.mesh else None,
-                   "stick_from": plan.pose.skeleton.bones[p].name if p >= 0 else None}
-                  for b, p in zip(plan.pose.skeleton.bones, plan.pose.skeleton.stick_parents())],
-        "warnings": warnings,
-        "files": files,
-    }
-    stages = stages_record(plan.stages)
-    if stages is not None:  # (left out without stages: the manifests of such runs are as they were)
-        m["settings"]["stages"] = stages
-    if extra:
-        m.update(extra)
-    return m
 
 
 @dataclass
@@ -398,32 +275,6 @@ def rendered_frames(plan: RunPlan, previous: dict, root: Path) -> set[int]:
             if all(r in previous and is_file_with(root / r, previous[r]) for r in frame_files(int(f)))}
 
 
-def stats_csv(plan: RunPlan, stats: np.ndarray, warn_text: list) -> bytes:
-    """stats.csv: a row per frame and muscle; numbers to 9 significant digits (-0 written 0).
-    One ``%`` per row over plain floats (a tenth of the time of formatting each number alone)."""
-    columns = STATS_COLUMNS if any(getattr(st, "measures", False) for st in plan.stages) else \
-        STATS_COLUMNS[:-MEASURED_COLUMNS]
-    stats = stats[..., :len(columns)]
-    fmt = "%d,%s" + ",%.9g" * stats.shape[-1] + ",%s\n"
-    rows = (stats + 0.0).tolist()  # (+ 0.0: -0 is written 0)
-    out = [",".join(("frame", "muscle", *columns, "warning")) + "\n"]
-    names = plan.names
-    for i, frame in enumerate(plan.frames.tolist()):
-        row, warn = rows[i], warn_text[i]
-        out += [fmt % (frame, name, *row[j], _csv_text(warn[j])) for j, name in enumerate(names)]
-    return "".join(out).encode()
-
-
-def bones_csv(plan: RunPlan, bone_rows: np.ndarray) -> bytes:
-    fmt = "%d,%s" + ",%.9g" * bone_rows.shape[-1] + "\n"
-    rows = (bone_rows + 0.0).tolist()
-    out = ["frame,bone,x,y,z,qw,qx,qy,qz\n"]
-    names = [b.name for b in plan.pose.skeleton.bones]
-    for i, frame in enumerate(plan.frames.tolist()):
-        out += [fmt % (frame, name, *rows[i][b]) for b, name in enumerate(names)]
-    return "".join(out).encode()
-
-
 def strict_check(plan: RunPlan, prep: Prepass) -> None:
     """Evaluate everything once: with --strict, any warning stops the run before it writes."""
     found = [f"{plan.names[j]} frame {int(plan.frames[i])}: {msg}" for i, j, msg in plan.frame_warnings]
@@ -442,17 +293,6 @@ def strict_check(plan: RunPlan, prep: Prepass) -> None:
     if found:
         raise InputError(None, f"{len(found)} warning(s) with --strict; first: {found[0]}",
                          "fix the inputs or run without --strict")
-
-
-def check_resume(plan: RunPlan, previous) -> None:
-    """--resume finishes the same run only: same tool version, inputs (sha256) and settings."""
-    new = manifest_dict(plan, {}, [], complete=False)
-    changed = describe_differences(previous, new)
-    if changed:
-        first = next(k for k in runfolder.RUN_IDENTITY if previous.data.get(k) != new[k])
-        raise InputError(previous.mark((first,)),
-                         f"--resume would mix two runs: {'; '.join(changed)}",
-                         "resume with the inputs and settings of the interrupted run, or pass --overwrite")
 
 
 def check_output(plan: RunPlan, *, resume: bool = False, overwrite: bool = False) -> runfolder.Target:
@@ -532,9 +372,9 @@ def _write_run(plan: RunPlan, session, prep: Prepass, progress, render_progress,
             writer.write(bone_mesh_relpath(bones[i].name), data)
         writer.write(STATS, stats_csv(plan, stats, warn_text))
         writer.write(BONES_CSV, bones_csv(plan, bone_rows))
-        frame_pts = framing(plan)
+        frame_pts = run_framing(plan.pose, plan.models)
         extra = {"bounds": [[float(f"{x:.9g}") for x in lo], [float(f"{x:.9g}") for x in hi]],
-                 "framing": {"first_frame": int(plan.pose.first), "points": frame_pts.tolist()}}
+                 "framing": framing_record(frame_pts, plan.pose.first)}
         if sequence_formats(plan.formats):
             write_run_files(plan, writer, bone_rows, np.array([lo, hi]), frame_pts)
         if plan.rendering:
@@ -589,7 +429,3 @@ def _render_pass(plan: RunPlan, root: Path, previous: dict, writer: OutputWriter
     return info
 
 
-def _csv_text(s: str) -> str:
-    if not s:
-        return ""
-    return '"' + s.replace('"', '""') + '"'

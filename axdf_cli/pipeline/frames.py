@@ -13,7 +13,8 @@ from typing import Callable, Iterator
 import numpy as np
 
 from axdf_cli.pipeline.evaluate import Prepass, evaluate_plan, finite_or_rest
-from axdf_cli.pipeline.plan import camera_targets, framing
+from axdf_cli.pipeline.plan import camera_targets
+from axdf_cli.render.framing import run_framing
 from axdf_cli.render.renderer import bone_layout
 from axdf_cli.render.scene import FrameChunk, Scene, SceneMuscle
 from axdf_cli.render.framefiles import RENDER_CHUNK, render_frames_of
@@ -25,10 +26,10 @@ def render_plan(plan, out_dir: Path, bounds, prep: Prepass, progress: Callable[[
     """Render a run plan's frames into ``out_dir`` (``axdf run --render``) over ``jobs``
     processes (:func:`render_frames_of`); ``frames``: those to draw now (default all of the
     plan's; the cameras and camera.json are always the whole sequence's). ``framing_points``:
-    what the automatic camera frames (default :func:`axdf_cli.pipeline.plan.framing`); ``prep``:
+    what the automatic camera frames (default :func:`axdf_cli.render.framing.run_framing`); ``prep``:
     the run's pre-pass (:func:`axdf_cli.pipeline.evaluate.prepare`)."""
     skel = plan.pose.skeleton
-    framing_points = framing(plan) if framing_points is None else framing_points
+    framing_points = run_framing(plan.pose, plan.models) if framing_points is None else framing_points
     shown = skel.bones if plan.render.bones else ()
     layout = bone_layout([b.name for b in shown], skel.stick_parents() if shown else [],
                          {i: (v, f) for i, (v, f, _) in plan.bone_meshes.items() if shown},

@@ -138,7 +138,7 @@ def write_run_files(plan, writer, bone_rows: np.ndarray, bounds: np.ndarray, fra
     hashed, skipped on resume when unchanged): the point caches' rest meshes, and for USD
     ``usd/bones.usdc`` and the root stage ``scene.usda``. ``bone_rows``: (F, B, 7) x y z qw
     qx qy qz; ``bounds``: (2, 3) of every vertex written; ``framing``: (N, 3) what the
-    automatic camera frames (:func:`axdf_cli.pipeline.plan.framing`), as ``--render`` frames it."""
+    automatic camera frames (:func:`axdf_cli.render.framing.run_framing`), as ``--render`` frames it."""
     from axdf_cli.formats.ply import PlyWriter
 
     for fmt in sequence_formats(plan.formats):

@@ -13,7 +13,7 @@ from axdf_cli.errors import InputError, Mark
 from axdf_cli.formats import parse_formats
 from axdf_cli.specs import Job, Pose, RefPolicy, expand_muscle_paths, load_muscle_file, load_pose
 from axdf_cli.model.muscle import MuscleModel, MuscleSpec
-from axdf_cli.model.pose import activation_problems, muscle_range_warnings, parse_frames, subject_points
+from axdf_cli.model.pose import activation_problems, muscle_range_warnings, parse_frames
 from axdf_cli.model.skeleton import forward_kinematics
 from axdf_cli.pipeline.stages import build_stages
 
@@ -225,39 +225,6 @@ def load_bone_mesh(path: str, skeleton_file: str):
     if Path(path).suffix.lower() != "." + PlyWriter.extension:
         data = PlyWriter(f).encode(v)
     return np.ascontiguousarray(v, dtype=np.float32), f, data
-
-
-def framing(plan: RunPlan) -> np.ndarray:
-    """What the automatic camera frames: the run's muscles swept over the whole pose (not the
-    selected frames), rounded to 1 µm so that the manifest holds it exactly. Each muscle's
-    rest mesh rides rigidly on the bones of its two nearest anchors (axis control points or
-    path points) at rest, posed by forward kinematics at every frame of the pose
-    (:func:`muscle_anchored_points`, :func:`axdf_cli.model.pose.subject_points`): a muscle
-    between two bones lies between the copies its bones carry, so the hull holds it while
-    the camera frames the muscles, not the whole skeleton, and never depends on ``--frames``."""
-    pts = subject_points(plan.pose, muscle_anchored_points(plan.models, plan.pose.skeleton), joints=False)
-    return np.round(pts, 6) + 0.0
-
-
-def muscle_anchored_points(models, skel) -> dict:
-    """Bone index -> (N, 3) bone-local points: each muscle's rest vertices (V, 3), carried by
-    the bones of the two anchors nearest each vertex at rest (its axis control points'
-    bones, or its path points' for a path muscle)."""
-    rest = forward_kinematics(skel, skel.rest_coordinates()[None])[0]  # (B, 4, 4)
-    out: dict[int, list] = {}
-    for m in models:
-        src = m.path.points if m.path is not None else m
-        bones, at = np.asarray(src.bones), np.asarray(src.at, dtype=np.float64)
-        # a[k,i] = sum_j R[bones_k,i,j] at[k,j] + t[bones_k,i]: the anchors at rest (world)
-        anchors = np.einsum("kij,kj->ki", rest[bones, :3, :3], at) + rest[bones, :3, 3]
-        v = m.rest_vertices.astype(np.float64)  # (V, 3) world at rest
-        d = np.linalg.norm(v[:, None] - anchors[None], axis=2)  # (V, K)
-        near = np.argsort(d, axis=1, kind="stable")[:, :2]  # (V, 2) the two nearest anchors
-        for b in np.unique(bones):
-            sel = np.isin(bones[near], b).any(axis=1)
-            R, t = rest[b, :3, :3], rest[b, :3, 3]
-            out.setdefault(int(b), []).append((v[sel] - t) @ R)  # world -> bone-local: R^T (v - t)
-    return {b: np.concatenate(p) for b, p in out.items()}
 
 
 def camera_targets(plan: RunPlan, frames=None) -> np.ndarray | None:

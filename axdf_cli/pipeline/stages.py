@@ -151,9 +151,9 @@ STAGES: dict[str, Callable[[], Stage]] = {
     "contact": ContactStage,  # FRAME: muscles push each other, bones push muscles
     "penetration": PenetrationStage,  # FRAME: the contact measures where contact is off
 }
-#: Stages a run leaves out unless asked for. Contact is on (issue 18: its overlap and bone
-#: targets met on the shipped walk, no pops; ``--no-contact`` or a job's ``contact: false``
-#: leaves it out); its measures alone (``penetration``) are for runs without it.
+#: Stages a run leaves out unless asked for. Contact is on (``--no-contact`` or a job's
+#: ``contact: false`` leaves it out); its measures alone (``penetration``) are for runs
+#: without it.
 OFF_BY_DEFAULT: frozenset[str] = frozenset({"penetration"})
 
 

@@ -17,11 +17,10 @@ the top-left pixel and its centre is at (0.5, 0.5); a world point P projects to
 For a sheet each panel has its own camera whose ``K`` already includes the panel's
 horizontal offset, so projected pixels are pixels of the whole sheet.
 
-Automatic framing frames ``Scene.framing`` (points whose hull holds the subject: the
-skeleton's bones over *every* frame of the pose, see :func:`axdf_cli.model.pose.subject_points`;
-``Scene.bounds`` when a scene has none): the camera depends on the skeleton, the whole pose
-and the render settings only, never on which frames are written or on the muscles, so a
-muscle edit or a ``--frames`` subset leaves every frame's camera as it was. For a fixed view
+Automatic framing frames ``Scene.framing`` (points whose hull holds the subject over *every*
+frame of the pose; what they are is :mod:`axdf_cli.render.framing`'s rule; ``Scene.bounds``
+when a scene has none): the camera never depends on which frames are written, so a
+``--frames`` subset leaves every frame's camera as it was. For a fixed view
 the fit is exact and centred: the distance is the least that shows every point inside the
 image less ``FRAME_MARGIN`` at each border, and the camera is shifted sideways so that the
 projected subject sits in the middle both ways (:func:`fit_distance_view`, :func:`centre_shift`). The panels of a sheet
@@ -35,6 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from axdf_cli.render.framing import MIN_EXTENT, framing_points
 from axdf_cli.specs.render import RenderSettings
 
 # Fraction of the image kept free at each border by automatic framing.
@@ -43,8 +43,6 @@ FRAME_MARGIN = 0.04
 ORBIT_FIT_STEP = 1.0
 # Direction from the target to the camera for view "auto" (front, +X side, above).
 AUTO_FROM = (0.6, -1.0, 0.45)
-# Smallest extent (metres) used for framing, so a point-like scene still frames.
-MIN_EXTENT = 1e-3
 
 # view -> (forward, up) in world coordinates
 VIEW_AXES = {
@@ -112,24 +110,6 @@ def rot_z(deg: float) -> np.ndarray:
     a = math.radians(deg)
     c, s = math.cos(a), math.sin(a)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
-def _box_corners(bounds: np.ndarray) -> np.ndarray:
-    """(8, 3) corners of a (2, 3) AABB, grown to at least MIN_EXTENT each way."""
-    lo, hi = np.asarray(bounds, float)
-    c = 0.5 * (lo + hi)
-    half = np.maximum(0.5 * (hi - lo), 0.5 * MIN_EXTENT)
-    signs = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], float)
-    return c + signs * half
-
-
-def framing_points(scene) -> np.ndarray:
-    """(N, 3) world points the automatic camera frames: ``scene.framing``, else the corners
-    of ``scene.bounds``."""
-    framing = getattr(scene, "framing", None)
-    if framing is not None and len(framing):
-        return np.asarray(framing, dtype=np.float64)
-    return _box_corners(scene.bounds)
 
 
 def fit_distance(corners_rel: np.ndarray, R: np.ndarray, tan_x: float, tan_y: float) -> float:

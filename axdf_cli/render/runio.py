@@ -32,6 +32,7 @@ from axdf_cli.specs.render import RenderSettings, parse_render_settings
 from axdf_cli.fileio.runfolder import BONES_CSV, Manifest, mesh_relpath, read_run_manifest
 from axdf_cli.fileio.runfolder import plain_relpath as _plain
 from axdf_cli.fileio.yamlio import NAME_ALLOWED, is_name
+from axdf_cli.render.framing import recorded_framing
 from axdf_cli.render.scene import FrameChunk, Scene, SceneMuscle
 
 def _color(c, where: Mark) -> tuple[float, float, float]:
@@ -239,22 +240,6 @@ class RunFrames:
                 ps.append(pos[None])
                 ns.append(nrm[None])
             yield FrameChunk(np.array([f]), tuple(ps), tuple(ns), self.bone_world[row[f]:row[f] + 1])
-
-
-def recorded_framing(m: Manifest) -> tuple[np.ndarray | None, int | None]:
-    """The run's ``framing`` (what its automatic camera framed, so that rendering the run
-    again frames it the same way): (points (N, 3) or None, the pose's first frame or None)."""
-    if m.get(("framing",), (dict, type(None)), "{first_frame, points}", required=False) is None:
-        return None, None
-    raw = m.get(("framing", "points"), list, "a list of [x, y, z] points")
-    try:
-        pts = np.array(raw, dtype=np.float64)
-    except (TypeError, ValueError):
-        pts = np.zeros((0, 0))
-    if pts.ndim != 2 or pts.shape[1:] != (3,) or not len(pts) or not np.isfinite(pts).all():
-        raise m.error(("framing", "points"), "is not a list of [x, y, z] numbers", "the points axdf run framed")
-    first = m.get(("framing", "first_frame"), int, "the pose's first frame", required=False, default=None)
-    return pts, first
 
 
 def recorded_render_settings(m: Manifest) -> RenderSettings:

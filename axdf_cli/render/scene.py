@@ -31,7 +31,7 @@ class Scene:
     bones: tuple[SceneBone, ...]  # bones drawn: their meshes, or sticks (render.renderer.BoneLayout)
     bounds: np.ndarray  # (2, 3) float64 world AABB of every muscle over the written frames
     frames: tuple[int, ...]  # every output frame number, in order
-    framing: np.ndarray | None = None  # (N, 3) points the automatic camera frames (pose.subject_points)
+    framing: np.ndarray | None = None  # (N, 3) points the automatic camera frames (render/framing.py)
     first_frame: int | None = None  # the pose's first frame: where an orbit's angle is 0
     targets: np.ndarray | None = None  # (F, 3) the camera's target bone's origin at each of `frames`
 
