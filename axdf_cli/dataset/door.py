@@ -111,7 +111,7 @@ def retarget_pose(path: Path, map_path: Path, skeleton, name: str, step: int = 1
     the retarget map as ``axdf retarget`` fits it (the map's ``onto:`` gives way to the data
     set's skeleton)."""
     from axdf_cli.importers.mocap import read_motion
-    from axdf_cli.importers.retarget import as_pose, load_map, retarget
+    from axdf_cli.tools.retarget import as_pose, load_map, retarget
 
     rmap = load_map(map_path, skeleton, policy)
     return as_pose(retarget(rmap, read_motion(path, scale=scale, step=step)), name)

@@ -519,7 +519,7 @@ def muscle_mark(path: Path, name: str) -> Mark:
 
 def transfer_markdown(r: dict) -> str:
     lines = [f"# Transfer `{r['map']}`: {r['from']} → {r['to']}", "",
-             f"Map `{r['map_file']}`; rules: `axdf_cli/importers/transfer.py` and docs/FORMATS.md (Transfer map).", "",
+             f"Map `{r['map_file']}`; rules: `axdf_cli/tools/transfer.py` and docs/FORMATS.md (Transfer map).", "",
              "| bone (from) | bone (to) | scale k | segment lengths (m) | rest rotation (°) |", "|---|---|---|---|---|"]
     for b in r["bones"]:
         seg = "–" if b["segment_lengths"] is None else f"{b['segment_lengths'][0]:.4f} → {b['segment_lengths'][1]:.4f}"
