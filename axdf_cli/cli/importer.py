@@ -177,16 +177,16 @@ def run(args) -> int:
     if args.source == "mjcf":
         return run_mjcf(args)
     from axdf_cli.errors import UsageError
-    from axdf_cli.importers.osim_import import build_import
+    from axdf_cli.importers.emit import build_import
+    from axdf_cli.importers.osim_import import read_import
 
     if args.fps is not None and not (0 < args.fps <= 10000):
         raise UsageError(f"--fps {args.fps}", "a frame rate in (0, 10000]")
     tick, close = progress_bar(("read", "check", "write"), args.quiet, f"import {args.model.name}")
     try:
-        res = build_import(args.model, args.out, name=args.name, motion=args.motion, controls=args.controls,
-                           skeleton_out=args.skeleton_out, muscles_out=args.muscles_out, pose_out=args.pose_out,
-                           meshes_out=args.meshes_out, pose_name=args.pose_name, fps=args.fps,
-                           meshes=not args.no_meshes, palette=args.palette)
+        model = read_import(args.model, name=args.name, motion=args.motion, controls=args.controls,
+                            pose_name=args.pose_name, fps=args.fps, meshes=not args.no_meshes)
+        res = build_import(model, _outputs(args), args.palette)
         tick("read")
         files = OutputSet(args.out, "import osim")
         for path, data in res.files.items():
@@ -233,7 +233,8 @@ def _print_summary(args, res, counts: str) -> None:
 
 def run_mjcf(args) -> int:
     from axdf_cli.errors import UsageError
-    from axdf_cli.importers.mjcf_import import build_import
+    from axdf_cli.importers.emit import build_import
+    from axdf_cli.importers.mjcf_import import read_import
 
     if args.fps is not None and not (0 < args.fps <= 10000):
         raise UsageError(f"--fps {args.fps}", "a frame rate in (0, 10000]")
@@ -243,10 +244,9 @@ def run_mjcf(args) -> int:
         raise UsageError(f"--mesh-edge {args.mesh_edge}", "metres in [0, 1] (0: off)")
     tick, close = progress_bar(("read", "check", "write"), args.quiet, f"import {args.model.name}")
     try:
-        res = build_import(args.model, args.out, name=args.name, motion=args.motion, skeleton_out=args.skeleton_out,
-                           muscles_out=args.muscles_out, pose_out=args.pose_out, meshes_out=args.meshes_out,
-                           pose_name=args.pose_name, fps=args.fps, meshes=not args.no_meshes,
-                           max_faces=args.max_faces, mesh_edge=args.mesh_edge, palette=args.palette)
+        model = read_import(args.model, name=args.name, motion=args.motion, pose_name=args.pose_name, fps=args.fps,
+                            meshes=not args.no_meshes, max_faces=args.max_faces, mesh_edge=args.mesh_edge)
+        res = build_import(model, _outputs(args), args.palette)
         tick("read")
         files = OutputSet(args.out, "import mjcf")
         for path, data in res.files.items():
@@ -263,25 +263,43 @@ def run_mjcf(args) -> int:
     return 0
 
 
+def _outputs(args):
+    """Where an import writes: ``--out`` and the flags that move its parts."""
+    from axdf_cli.importers.model import Outputs
+
+    return Outputs(args.out, args.skeleton_out, getattr(args, "muscles_out", None), args.pose_out,
+                   getattr(args, "meshes_out", None))
+
+
 def run_bvh(args) -> int:
-    from axdf_cli.importers.bvh import STEPS, build_import
+    from axdf_cli.importers.bvh import STEPS, read_import
+    from axdf_cli.importers.emit import build_import
 
     scale = parse_scale_step(args)
 
     tick, close = progress_bar(STEPS + ("check", "write"), args.quiet, f"import {args.model.name}")
     try:
-        res = build_import(args.model, args.out, name=args.name, scale=scale, step=args.step,
-                           skeleton_out=args.skeleton_out, pose_out=args.pose_out, pose_name=args.pose_name,
-                           progress=tick)
-        write_imported(res.files, [args.model], args.overwrite, args.model, tick)
+        model = read_import(args.model, name=args.name, scale=scale, step=args.step, pose_name=args.pose_name)
+        tick("read")
+        res = build_import(model, _outputs(args))
+        tick("skeleton")
+        tick("pose")
+        files = OutputSet(args.out, "import bvh")
+        roles = {str(res.layout["skeleton"]): "--skeleton-out" if args.skeleton_out else "the skeleton",
+                 str(res.layout["pose"]): "--pose-out" if args.pose_out else "the pose"}
+        for path, data in res.files.items():
+            files.add(path, data, roles[path])
+        files.settings = {"scale": model.report["scale"], "step": args.step, "name": model.name,
+                          "pose_name": model.motion.name}
+        write_imported(files, [args.model], args.overwrite, args.model, tick)
     finally:
         close()
     if not args.quiet:
         r = res.report
-        for line in res.notes:
+        for line in res.warnings:
             print(line)
         print(f"imported {args.model.name}: {r['joints']} joints, {r['end_sites']} end sites, {r['channels']} channels, "
               f"{r['frames']} frames at {r['fps']:g} fps")
-        for o in res.files:
+        for o in files:
             print(o.path if not o.path.is_relative_to(Path.cwd()) else o.path.relative_to(Path.cwd()))
     return 0

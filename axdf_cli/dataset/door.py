@@ -71,7 +71,7 @@ def build_models(specs, skeleton) -> list:
 def motion_pose(path: Path, skeleton, name: str, fps: float | None = None) -> Pose:
     """An OpenSim motion (.mot/.sto) as a Pose of ``skeleton``, read and converted by the
     importer (columns to coordinates, the degrees/radians rule, resampling to ``fps``)."""
-    from axdf_cli.importers.osim_import import pose_doc
+    from axdf_cli.importers.osim_import import motion_doc as pose_doc
     from axdf_cli.importers.storage import read_storage
 
     table = read_storage(path)
