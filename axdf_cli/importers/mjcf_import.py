@@ -1,8 +1,9 @@
-"""``axdf import mjcf``: a MuJoCo model (+ a ``qpos`` motion) → axdf files, in memory.
+"""``axdf import mjcf``: a MuJoCo model (+ a ``qpos`` motion) → the neutral import model.
 
-:func:`build_import` reads and checks every input first and returns an
-:class:`~axdf_cli.importers.result.ImportResult` holding the bytes of every output file;
-the CLI writes them (atomically) only when all inputs were good.
+:func:`read_import` reads and checks every input and fills an
+:class:`~axdf_cli.importers.model.ImportedModel`, which
+:func:`~axdf_cli.importers.emit.build_import` turns into the bytes of every output file; the
+CLI writes them (atomically) only when all inputs were good.
 
 How MuJoCo maps to axdf (docs/FORMATS.md, "Imported MuJoCo models")
 --------------------------------------------------------------------
@@ -29,7 +30,7 @@ How MuJoCo maps to axdf (docs/FORMATS.md, "Imported MuJoCo models")
 - Muscles: every muscle actuator on a spatial tendon becomes a path muscle of the same name:
   its sites are the path points, each wrap geom a ``mujoco_sphere`` or ``mujoco_cylinder``
   surface with its ``side`` point (the sidesite) and ``range`` the two sites around it.
-  Its size follows the belly law of OpenSim imports (:func:`~axdf_cli.importers.emit.belly_doc`)
+  Its size follows the one belly law of every import (:func:`~axdf_cli.importers.emit.belly_doc`)
   from MuJoCo's own numbers (:func:`hill_numbers`).
 - Bone meshes: the mesh geoms of a body, placed by the geom's frame (mesh ``scale``,
   ``refpos``, ``refquat`` applied as MuJoCo does), one PLY per body; ``max_faces`` decimates

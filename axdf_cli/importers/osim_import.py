@@ -1,8 +1,31 @@
-"""``axdf import osim``: an OpenSim model (+ motion, + controls) → axdf files, in memory.
+"""``axdf import osim``: an OpenSim model (+ motion, + controls) → the neutral import model.
 
-:func:`build_import` reads and checks every input first and returns an :class:`ImportResult`
-holding the bytes of every output file; the CLI writes them (atomically) only when all
-inputs were good, so bad input writes nothing.
+:func:`read_import` reads and checks every input and fills an
+:class:`~axdf_cli.importers.model.ImportedModel`, which
+:func:`~axdf_cli.importers.emit.build_import` turns into the bytes of every output file; the
+CLI writes them (atomically) only when all inputs were good, so bad input writes nothing.
+
+Conversions (OpenSim → axdf)
+----------------------------
+- World: a root bone ``ground`` with ``orient: [90, -90, 0]`` turns OpenSim's Y-up, X-forward
+  ground into axdf's Z-up world; every body keeps its own OpenSim frame, so path points and
+  meshes are copied unchanged.
+- Joints: parent offset frame → ``offset``/``orient``; child offset frame →
+  ``post_offset``/``post_orient``; transform axes → ordered DOFs, translations first (Simbody
+  sums them in the parent frame), then rotations (a body-fixed sequence). Axes whose function
+  is the constant 0 are dropped; an identity ``LinearFunction`` of a coordinate of the
+  axis's own type becomes a plain DOF; anything else a coupled DOF with ``function``.
+- Coupled coordinates: the dependent coordinate of a ``CoordinateCouplerConstraint`` is
+  written ``follows: {coord: INDEPENDENT, function: scale · f}`` (no default, no range: the
+  skeleton sets it from the coordinate it follows), its function converted like a DOF's
+  (input in the independent coordinate's units, output in its own).
+- Units: rotational coordinates and rotation outputs rad → degrees. A function
+  ``y = f(x)`` in OpenSim units becomes ``y' = k_out · f(k_in · x')`` with
+  ``k_in = π/180`` for a rotational coordinate and ``k_out = 180/π`` for a rotation axis:
+  spline knots x / k_in and values y · k_out, linear slope · k_in · k_out, polynomial
+  c_i · k_out · k_in^i, multiplier scales unchanged (its inner function converted).
+- Muscles: path points, wrap surfaces and Hill numbers as the model gives them; the belly law
+  and the axis control points are the emitter's (:func:`~axdf_cli.importers.emit.belly_doc`).
 
 Motion files (``.mot``/``.sto``) and the angle-unit rule
 --------------------------------------------------------
@@ -49,9 +72,10 @@ from axdf_cli.fileio.atomic import sha256_file
 from axdf_cli.fileio.yamlio import NAME_ALLOWED, check_name, is_name
 from axdf_cli.importers import emit
 from axdf_cli.importers.model import Bone, Coordinate, Dof, Hill, ImportedModel, Motion, Muscle, Rules
-from axdf_cli.importers.osim import Axis, FConst, FLinear, FMult, FPoly, FSpline, Model, load_osim
-from axdf_cli.importers.osim import Coordinate as OsimCoordinate
-from axdf_cli.importers.osim import Muscle as OsimMuscle
+from axdf_cli.importers.osim import load_osim
+from axdf_cli.importers.osim_model import Axis, FConst, FLinear, FMult, FPoly, FSpline, Model
+from axdf_cli.importers.osim_model import Coordinate as OsimCoordinate
+from axdf_cli.importers.osim_model import Muscle as OsimMuscle
 from axdf_cli.importers.result import SIDE_SUFFIX, safe_name, strip_dirs, yaml_number
 from axdf_cli.importers.storage import Table, read_storage
 from axdf_cli.importers.vtp import read_vtp
