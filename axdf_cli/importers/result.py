@@ -165,23 +165,24 @@ def belly_markdown(r: dict, fibre_words: str = "optimal fibre length") -> list[s
     return lines
 
 
-#: IMPORT.md's muscle table: column → (header, the cell of a report row).
+#: IMPORT.md's muscle table: column → (header, the report row's key, factor, format); a list
+#: value is counted, a factor of None writes the value as it is.
 COLUMNS = {
-    "muscle": ("muscle", lambda m: m["muscle"]),
-    "path_points": ("path points", lambda m: f"{m['path_points']}"),
-    "sites": ("sites", lambda m: f"{m['path_points']}"),
-    "wrap_geoms": ("wrap geoms", lambda m: f"{len(m['wraps'])}"),
-    "control_points": ("control points", lambda m: f"{m['control_points']}"),
-    "rest_path": ("rest path (cm)", lambda m: f"{m['rest_path_length'] * 100:.1f}"),
-    "force": ("force (N)", lambda m: f"{m['force']:.0f}"),
-    "pcsa": ("PCSA (cm²)", lambda m: f"{m['pcsa_m2'] * 1e4:.2f}"),
-    "fibres": ("fibres (cm)", lambda m: f"{m['optimal_fiber_length'] * 100:.1f}"),
-    "free_tendon": ("free tendon (cm)", lambda m: f"{m['free_tendon'] * 100:.1f}"),
-    "belly": ("belly (cm)", lambda m: f"{m['belly_length'] * 100:.1f}"),
-    "belly_d": ("belly Ø (mm)", lambda m: f"{m['belly_radius'] * 2e3:.1f}"),
-    "tendon_d": ("tendon Ø (mm)", lambda m: f"{m['tendon_radius'] * 2e3:.1f}"),
-    "slenderness": ("slenderness", lambda m: f"{m['slenderness']:.2f}"),
+    "muscle": ("muscle", "muscle", None, ""), "path_points": ("path points", "path_points", None, ""),
+    "sites": ("sites", "path_points", None, ""), "wrap_geoms": ("wrap geoms", "wraps", None, ""),
+    "control_points": ("control points", "control_points", None, ""), "force": ("force (N)", "force", 1, ".0f"),
+    "rest_path": ("rest path (cm)", "rest_path_length", 100, ".1f"), "pcsa": ("PCSA (cm²)", "pcsa_m2", 1e4, ".2f"),
+    "fibres": ("fibres (cm)", "optimal_fiber_length", 100, ".1f"), "belly": ("belly (cm)", "belly_length", 100, ".1f"),
+    "free_tendon": ("free tendon (cm)", "free_tendon", 100, ".1f"), "belly_d": ("belly Ø (mm)", "belly_radius", 2e3, ".1f"),
+    "tendon_d": ("tendon Ø (mm)", "tendon_radius", 2e3, ".1f"), "slenderness": ("slenderness", "slenderness", 1, ".2f"),
 }
+
+
+def _cell(m: dict, key: str, factor, fmt: str) -> str:
+    v = m[key]
+    if isinstance(v, list):
+        v = len(v)
+    return f"{v}" if factor is None else f"{v * factor:{fmt}}"
 
 
 def import_markdown(r: dict, intro: list[str], poses: str, rules) -> str:
@@ -196,6 +197,6 @@ def import_markdown(r: dict, intro: list[str], poses: str, rules) -> str:
         ["| – | – | – | nothing |"]
     lines += belly_markdown(r, rules.fibre_words)
     cols = [COLUMNS[c] for c in rules.columns]
-    lines += ["", "## Muscles", "", "| " + " | ".join(h for h, _ in cols) + " |", "|" + "---|" * len(cols)]
-    lines += ["| " + " | ".join(cell(m) for _, cell in cols) + " |" for m in r["muscles"]]
+    lines += ["", "## Muscles", "", "| " + " | ".join(c[0] for c in cols) + " |", "|" + "---|" * len(cols)]
+    lines += ["| " + " | ".join(_cell(m, *c[1:]) for c in cols) + " |" for m in r["muscles"]]
     return "\n".join(lines) + "\n"

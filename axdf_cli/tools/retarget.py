@@ -123,13 +123,16 @@ def _scale(v, where: Mark):
     return float(check_number(v, where, "scale", 0.01, 100.0))
 
 
+def _coordinate_entries(value: YMap | None, skel: Skeleton):
+    """(name, value, key mark, value mark, coordinate) of each entry of a ``{COORD: ...}`` mapping."""
+    for c, v in (value.items() if value is not None else ()):
+        km, vm = value.key_mark(c), value.value_mark(c)
+        yield c, v, km, vm, _coordinate(c, km, skel)
+
+
 def _hold(value: YMap | None, skel: Skeleton) -> dict:
     out = {}
-    if value is None:
-        return out
-    for c, v in value.items():
-        km, vm = value.key_mark(c), value.value_mark(c)
-        coord = _coordinate(c, km, skel)
+    for c, v, km, vm, coord in _coordinate_entries(value, skel):
         lo, hi = coord.range if coord.range else (None, None)
         out[c] = float(check_number(v, vm, f"hold value of {c}", lo, hi))
     return out
@@ -148,11 +151,7 @@ def _ranges(value: YMap | None, skel: Skeleton, hold: dict) -> dict:
     from axdf_cli.fileio.yamlio import check_vector
 
     out = {}
-    if value is None:
-        return out
-    for c, v in value.items():
-        km, vm = value.key_mark(c), value.value_mark(c)
-        coord = _coordinate(c, km, skel)
+    for c, v, km, vm, coord in _coordinate_entries(value, skel):
         if c in hold:
             raise InputError(km, f"coordinate {c!r} is both held and given a range", "hold it, or give it a range")
         lo, hi = check_vector(v, vm, f"range of {c}", 2)
