@@ -271,6 +271,19 @@ def _outputs(args):
                    getattr(args, "meshes_out", None))
 
 
+class _Adding(dict):
+    """A file mapping that adds each file to an :class:`OutputSet` as it comes, under the next
+    of ``roles`` (the set refuses a path twice, naming both roles)."""
+
+    def __init__(self, files: OutputSet, roles):
+        super().__init__()
+        self.files, self.roles = files, roles
+
+    def __setitem__(self, path, data) -> None:
+        self.files.add(path, data, next(self.roles))
+        super().__setitem__(path, data)
+
+
 def run_bvh(args) -> int:
     from axdf_cli.importers.bvh import STEPS, read_import
     from axdf_cli.importers.emit import build_import
@@ -281,14 +294,12 @@ def run_bvh(args) -> int:
     try:
         model = read_import(args.model, name=args.name, scale=scale, step=args.step, pose_name=args.pose_name)
         tick("read")
-        res = build_import(model, _outputs(args))
+        files = OutputSet(args.out, "import bvh")
+        roles = iter(("--skeleton-out" if args.skeleton_out else "the skeleton",
+                      "--pose-out" if args.pose_out else "the pose"))
+        res = build_import(model, _outputs(args), files=_Adding(files, roles))
         tick("skeleton")
         tick("pose")
-        files = OutputSet(args.out, "import bvh")
-        roles = {str(res.layout["skeleton"]): "--skeleton-out" if args.skeleton_out else "the skeleton",
-                 str(res.layout["pose"]): "--pose-out" if args.pose_out else "the pose"}
-        for path, data in res.files.items():
-            files.add(path, data, roles[path])
         files.settings = {"scale": model.report["scale"], "step": args.step, "name": model.name,
                           "pose_name": model.motion.name}
         write_imported(files, [args.model], args.overwrite, args.model, tick)

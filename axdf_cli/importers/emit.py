@@ -460,13 +460,15 @@ def muscle_docs(model: ImportedModel, skel: Skeleton, world: np.ndarray, palette
     return out
 
 
-def build_import(model: ImportedModel, outputs: Outputs, palette: str = "anatomical") -> ImportResult:
+def build_import(model: ImportedModel, outputs: Outputs, palette: str = "anatomical", files: dict | None = None) \
+        -> ImportResult:
     """Every output file's bytes of an imported model (nothing is written here).
 
     Layout (defaults under ``outputs.out``): ``skeletons/NAME.yaml``, ``skeletons/meshes/NAME/*.ply``,
     ``muscles/MUSCLE.yaml``, ``POSE.yaml`` (with a motion), and with the rules' report
     ``import_report.json`` and ``IMPORT.md``. Paths written inside the files are relative to
-    the file holding them. ``palette``: muscle colours, a key of :data:`PALETTES`.
+    the file holding them. ``palette``: muscle colours, a key of :data:`PALETTES`. ``files``:
+    the mapping the files go into (default: one that refuses a path twice).
     """
     out_dir = Path(outputs.out)
     motion = model.motion
@@ -474,7 +476,7 @@ def build_import(model: ImportedModel, outputs: Outputs, palette: str = "anatomi
     mesh_dir = Path(outputs.meshes) if outputs.meshes else skel_path.parent / "meshes" / model.name
     mus_dir = Path(outputs.muscles) if outputs.muscles else out_dir / "muscles"
     pose_path = (Path(outputs.pose) if outputs.pose else out_dir / f"{motion.name}.yaml") if motion else None
-    files: dict[str, bytes] = UniqueFiles()  # a path twice: exit 2, never one file lost
+    files = UniqueFiles() if files is None else files  # a path twice: exit 2, never one file lost
     mesh_refs = {}
     for bone, data in model.meshes.items():
         p = mesh_dir / f"{bone}.ply"
