@@ -739,7 +739,7 @@ def jacobian_times(rmap, repeats: int) -> tuple[float, float, float]:
     """µs per Jacobian of the map's points at one pose: analytic (``point_jacobian``) and central
     differences batched as 2C + 1 frames of one ``forward_kinematics`` call; and their largest
     difference (metres per unit)."""
-    from axdf_cli.importers.retarget import model_points
+    from axdf_cli.tools.retarget import model_points
     from axdf_cli.model.ik import pose_points, subskeleton
     from axdf_cli.model.skeleton import dof_frames, point_jacobian
 
@@ -766,7 +766,7 @@ def jacobian_times(rmap, repeats: int) -> tuple[float, float, float]:
 
 def retarget_rows(table: "Table", quick: bool) -> None:
     from axdf_cli.importers.mocap import read_motion
-    from axdf_cli.importers.retarget import load_map, retarget
+    from axdf_cli.tools.retarget import load_map, retarget
 
     if not CMU_BVH.is_file():
         table.section("retargeting: the CMU walk is not here (../shared/data/bvh); skipped")

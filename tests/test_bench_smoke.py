@@ -107,7 +107,7 @@ def test_jiggle_rows_helpers(repo_root):
 
 
 def test_retarget_jacobian_timing():
-    from axdf_cli.importers.retarget import load_map
+    from axdf_cli.tools.retarget import load_map
 
     a, b, diff = bench.jacobian_times(load_map(bench.CMU_MAP), repeats=1)
     assert a > 0 and b > 0

@@ -27,10 +27,11 @@ ROOMS = (
     ("formats",),  # mesh formats: one entry per format in FORMATS
     ("model",),  # skeleton + FK, poses, the muscle model, paths, kernels
     ("specs",),  # YAML file specs by kind
+    ("importers",),  # OpenSim, MuJoCo and BVH readers, one neutral model, one emitter
     ("render",),  # the EGL renderer: a scene and array chunks in, never evaluates
     ("compare",),  # axdf compare
     ("pipeline",),  # plan, stages, evaluate, execute, the sinks
-    ("importers",),  # OpenSim, BVH, transfer
+    ("tools",),  # commands that rewrite axdf files: transfer, retarget, pack
     ("dataset",),  # axdf dataset
     ("cli", "__main__"),  # one module per subcommand; the only room that prints or exits
 )

@@ -176,7 +176,7 @@ def test_pack_command_follows_the_output_rule(demo, tmp_path, capsys):
 def test_a_muscle_document_keeps_its_contact_keys(tmp_path):
     """transfer and pack write muscles through one document writer: `contact:` survives it."""
     from axdf_cli.importers import emit
-    from axdf_cli.importers.transfer import file_doc
+    from axdf_cli.tools.transfer import file_doc
 
     src = (REPO_ROOT / "muscles" / "demo" / "biceps_brachii.yaml").read_text()
     p = tmp_path / "b.yaml"
@@ -211,7 +211,7 @@ def test_polishing_over_a_pose_shares_space_at_its_frames(demo):
     """``pose``: the polish also resolves contact at the pose's frames and fits the mean of its
     displacements carried back to rest, so the packed shapes overlap less at those frames and
     between them (no contact stage: the shapes alone), and still little at rest."""
-    from axdf_cli.importers.pack import build_pack
+    from axdf_cli.tools.pack import build_pack
 
     d, plan, rest, cm = demo
     files = sorted(d.glob("*.yaml"))

@@ -209,7 +209,7 @@ def test_same_inputs_same_bytes(tmp_path):
 
 @pytest.fixture(scope="module")
 def cmu_walk():
-    from axdf_cli.importers.retarget import build_retarget
+    from axdf_cli.tools.retarget import build_retarget
 
     return build_retarget(CMU_BVH, CMU_MAP, SHIPPED, step=4, name="cmu_131_01_walk_gait2392")
 

@@ -18,7 +18,7 @@ JOB = REPO / "poses" / "jobs" / "myobody_cmu_walk.yaml"
 
 @pytest.fixture(scope="module")
 def myo_walk():
-    from axdf_cli.importers.retarget import build_retarget
+    from axdf_cli.tools.retarget import build_retarget
 
     return build_retarget(CMU_BVH, MYO_MAP, SHIPPED, step=4, name="cmu_131_01_walk_myobody")
 

@@ -127,7 +127,7 @@ def test_moving_point_functions_recombine_exactly():
     """A rest rotation that mixes a moving point's axes: the location along each axis of B is
     a weighted sum of A's functions of the same coordinate, written exactly as one function."""
     from axdf_cli.model.skeleton import Constant, Linear, Multiplier, Polynomial, Spline
-    from axdf_cli.importers.transfer import combine_functions
+    from axdf_cli.tools.transfer import combine_functions
 
     x = np.linspace(-150, 150, 301)
     knots = np.array([-120.0, -60.0, 0.0, 10.0, 120.0])
@@ -190,7 +190,7 @@ def test_moving_point_through_a_rotation_that_mixes_its_axes():
     point's location on B equals the map applied to its location on A, at every coordinate value."""
     from axdf_cli.model.paths import Moving, PathPoint
     from axdf_cli.model.skeleton import Linear, Spline, euler_xyz
-    from axdf_cli.importers.transfer import NotCarried, PairTransform, _carry_point
+    from axdf_cli.tools.transfer import NotCarried, PairTransform, _carry_point
 
     knots = np.array([-120.0, -60.0, 0.0, 10.0, 120.0])
     fx = Spline(knots, np.array([0.01, 0.03, 0.06, 0.065, 0.05]), "fmm")

@@ -169,16 +169,16 @@ def run(args) -> int:
     if args.source == "mjcf":
         return run_mjcf(args)
     from axdf_cli.errors import UsageError
-    from axdf_cli.importers.osim_import import build_import
+    from axdf_cli.importers.emit import build_import
+    from axdf_cli.importers.osim_import import read_import
 
     if args.fps is not None and not (0 < args.fps <= 10000):
         raise UsageError(f"--fps {args.fps}", "a frame rate in (0, 10000]")
     tick, close = progress_bar(("read", "check", "write"), args.quiet, f"import {args.model.name}")
     try:
-        res = build_import(args.model, args.out, name=args.name, motion=args.motion, controls=args.controls,
-                           skeleton_out=args.skeleton_out, muscles_out=args.muscles_out, pose_out=args.pose_out,
-                           meshes_out=args.meshes_out, pose_name=args.pose_name, fps=args.fps,
-                           meshes=not args.no_meshes, palette=args.palette)
+        model = read_import(args.model, name=args.name, motion=args.motion, controls=args.controls,
+                            pose_name=args.pose_name, fps=args.fps, meshes=not args.no_meshes)
+        res = build_import(model, _outputs(args), args.palette)
         tick("read")
         files = OutputSet(args.out, "import osim")
         for path, data in res.files.items():
@@ -225,7 +225,8 @@ def _print_summary(args, res, counts: str) -> None:
 
 def run_mjcf(args) -> int:
     from axdf_cli.errors import UsageError
-    from axdf_cli.importers.mjcf_import import build_import
+    from axdf_cli.importers.emit import build_import
+    from axdf_cli.importers.mjcf_import import read_import
 
     if args.fps is not None and not (0 < args.fps <= 10000):
         raise UsageError(f"--fps {args.fps}", "a frame rate in (0, 10000]")
@@ -235,10 +236,9 @@ def run_mjcf(args) -> int:
         raise UsageError(f"--mesh-edge {args.mesh_edge}", "metres in [0, 1] (0: off)")
     tick, close = progress_bar(("read", "check", "write"), args.quiet, f"import {args.model.name}")
     try:
-        res = build_import(args.model, args.out, name=args.name, motion=args.motion, skeleton_out=args.skeleton_out,
-                           muscles_out=args.muscles_out, pose_out=args.pose_out, meshes_out=args.meshes_out,
-                           pose_name=args.pose_name, fps=args.fps, meshes=not args.no_meshes,
-                           max_faces=args.max_faces, mesh_edge=args.mesh_edge, palette=args.palette)
+        model = read_import(args.model, name=args.name, motion=args.motion, pose_name=args.pose_name, fps=args.fps,
+                            meshes=not args.no_meshes, max_faces=args.max_faces, mesh_edge=args.mesh_edge)
+        res = build_import(model, _outputs(args), args.palette)
         tick("read")
         files = OutputSet(args.out, "import mjcf")
         for path, data in res.files.items():
@@ -255,25 +255,54 @@ def run_mjcf(args) -> int:
     return 0
 
 
+def _outputs(args):
+    """Where an import writes: ``--out`` and the flags that move its parts."""
+    from axdf_cli.importers.model import Outputs
+
+    return Outputs(args.out, args.skeleton_out, getattr(args, "muscles_out", None), args.pose_out,
+                   getattr(args, "meshes_out", None))
+
+
+class _Adding(dict):
+    """A file mapping that adds each file to an :class:`OutputSet` as it comes, under the next
+    of ``roles`` (the set refuses a path twice, naming both roles)."""
+
+    def __init__(self, files: OutputSet, roles):
+        super().__init__()
+        self.files, self.roles = files, roles
+
+    def __setitem__(self, path, data) -> None:
+        self.files.add(path, data, next(self.roles))
+        super().__setitem__(path, data)
+
+
 def run_bvh(args) -> int:
-    from axdf_cli.importers.bvh import STEPS, build_import
+    from axdf_cli.importers.bvh import STEPS, read_import
+    from axdf_cli.importers.emit import build_import
 
     scale = parse_scale_step(args)
 
     tick, close = progress_bar(STEPS + ("check", "write"), args.quiet, f"import {args.model.name}")
     try:
-        res = build_import(args.model, args.out, name=args.name, scale=scale, step=args.step,
-                           skeleton_out=args.skeleton_out, pose_out=args.pose_out, pose_name=args.pose_name,
-                           progress=tick)
-        write_imported(res.files, [args.model], args.overwrite, args.model, tick)
+        model = read_import(args.model, name=args.name, scale=scale, step=args.step, pose_name=args.pose_name)
+        tick("read")
+        files = OutputSet(args.out, "import bvh")
+        roles = iter(("--skeleton-out" if args.skeleton_out else "the skeleton",
+                      "--pose-out" if args.pose_out else "the pose"))
+        res = build_import(model, _outputs(args), files=_Adding(files, roles))
+        tick("skeleton")
+        tick("pose")
+        files.settings = {"scale": model.report["scale"], "step": args.step, "name": model.name,
+                          "pose_name": model.motion.name}
+        write_imported(files, [args.model], args.overwrite, args.model, tick)
     finally:
         close()
     if not args.quiet:
         r = res.report
-        for line in res.notes:
+        for line in res.warnings:
             print(line)
         print(f"imported {args.model.name}: {r['joints']} joints, {r['end_sites']} end sites, {r['channels']} channels, "
               f"{r['frames']} frames at {r['fps']:g} fps")
-        for o in res.files:
+        for o in files:
             print(o.path if not o.path.is_relative_to(Path.cwd()) else o.path.relative_to(Path.cwd()))
     return 0

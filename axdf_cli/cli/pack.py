@@ -40,7 +40,7 @@ def add_args(p) -> None:
 def run(args) -> int:
     from axdf_cli import tolerances as tol
     from axdf_cli.errors import Mark, UsageError
-    from axdf_cli.importers.pack import SUMMARY, build_pack
+    from axdf_cli.tools.pack import SUMMARY, build_pack
     from axdf_cli.specs import RefPolicy, expand_muscle_paths
 
     if args.rounds is not None and not 1 <= args.rounds <= 200:

@@ -39,7 +39,7 @@ def add_args(p) -> None:
 
 
 def run(args) -> int:
-    from axdf_cli.importers.retarget import build_retarget
+    from axdf_cli.tools.retarget import build_retarget
     from axdf_cli.specs import RefPolicy, load_skeleton
 
     scale = parse_scale_step(args)

@@ -35,7 +35,7 @@ def add_args(p) -> None:
 def run(args) -> int:
     from axdf_cli.errors import Mark
     from axdf_cli.specs import RefPolicy, expand_muscle_paths, load_skeleton
-    from axdf_cli.importers.transfer import build_transfer
+    from axdf_cli.tools.transfer import build_transfer
 
     # files named here, and their folders, are trusted roots (as for axdf run)
     policy = RefPolicy.for_command([args.map, args.skel_from, args.skel_to] + list(args.muscles), args.allow_outside)

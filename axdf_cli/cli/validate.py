@@ -68,12 +68,12 @@ def validate_file(path: Path, policy, args) -> tuple[str, str | None, list[str]]
         plan = _plan(job=str(path), allow_outside=args.allow_outside)
         return f"job: {len(plan.models)} muscles x {len(plan.frames)} frames", kind, _plan_warnings(plan)
     if kind == "transfer":
-        from axdf_cli.importers.transfer import load_map
+        from axdf_cli.tools.transfer import load_map
 
         m = load_map(path, policy=policy)
         return f"transfer map {m.name}: {len(m.pairs)} bones, {m.skel_a.name} -> {m.skel_b.name}", kind, []
     if kind == "retarget":
-        from axdf_cli.importers.retarget import load_map as load_retarget_map
+        from axdf_cli.tools.retarget import load_map as load_retarget_map
 
         r = load_retarget_map(path, policy=policy)
         joints = sorted({j for p in r.points for j, _ in p.sources})

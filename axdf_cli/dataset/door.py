@@ -62,7 +62,7 @@ def build_models(specs, skeleton) -> list:
 def motion_pose(path: Path, skeleton, name: str, fps: float | None = None) -> Pose:
     """An OpenSim motion (.mot/.sto) as a Pose of ``skeleton``, read and converted by the
     importer (columns to coordinates, the degrees/radians rule, resampling to ``fps``)."""
-    from axdf_cli.importers.osim_import import pose_doc
+    from axdf_cli.importers.osim_import import motion_doc as pose_doc
     from axdf_cli.importers.storage import read_storage
 
     table = read_storage(path)
@@ -102,7 +102,7 @@ def retarget_pose(path: Path, map_path: Path, skeleton, name: str, step: int = 1
     the retarget map as ``axdf retarget`` fits it (the map's ``onto:`` gives way to the data
     set's skeleton)."""
     from axdf_cli.importers.mocap import read_motion
-    from axdf_cli.importers.retarget import as_pose, load_map, retarget
+    from axdf_cli.tools.retarget import as_pose, load_map, retarget
 
     rmap = load_map(map_path, skeleton, policy)
     return as_pose(retarget(rmap, read_motion(path, scale=scale, step=step)), name)

@@ -4,8 +4,9 @@
 names ``FILE:LINE:COL``: unbalanced braces, a ``CHANNELS`` count that does not match the
 channel names after it, an unknown keyword, a malformed number, a motion row with the wrong
 number of values, a ``Frames:`` count that the rows contradict (fewer rows: truncated; more
-rows: the count lies). :func:`build_import` turns a parsed file into the bytes of a skeleton
-and a pose YAML; the CLI writes them only when everything was good.
+rows: the count lies). :func:`read_import` turns a parsed file into the neutral model of a
+skeleton and its motion, which :func:`axdf_cli.importers.emit.build_import` writes; the CLI
+writes the files only when everything was good.
 
 Conversions (BVH → axdf):
 
@@ -44,8 +45,8 @@ import numpy as np
 
 from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError, Mark
-from axdf_cli.importers import emit
-from axdf_cli.importers.result import relative_ref, safe_name
+from axdf_cli.importers.model import Bone, Dof, ImportedModel, Motion, Rules
+from axdf_cli.importers.result import safe_name
 from axdf_cli.fileio.atomic import sha256_file
 from axdf_cli.fileio.yamlio import NAME_ALLOWED, is_name, read_text, unique_names
 
@@ -421,7 +422,7 @@ def coordinate_name(bone: str, channel: str) -> str:
     return f"{bone}_{channel}"
 
 
-def _dofs(bone: str, channels: tuple[str, ...]) -> list[dict]:
+def _dofs(bone: str, channels: tuple[str, ...]) -> list[Dof]:
     """Position channels first (translations in the parent frame), then rotations in file order."""
     dofs = []
     for want in ("translation", "rotation"):
@@ -430,24 +431,22 @@ def _dofs(bone: str, channels: tuple[str, ...]) -> list[dict]:
             if kind == want:
                 axis = [0, 0, 0]
                 axis[ax] = 1
-                dofs.append({"coord": coordinate_name(bone, c), "type": kind, "axis": axis})
+                dofs.append(Dof(kind, axis, coordinate_name(bone, c)))
     return dofs
 
 
-def skeleton_doc(bvh: BVH, name: str, scale: float) -> dict:
+def bvh_bones(bvh: BVH, scale: float) -> list[Bone]:
+    """``ground`` (BVH's Y-up world in axdf's Z-up one), then a bone per joint and end site."""
     names = bone_names(bvh)
-    bones = [{"name": "ground", "orient": list(GROUND_ORIENT)}]
+    bones = [Bone("ground", orient=list(GROUND_ORIENT))]
     for j, bname in zip(bvh.joints, names):
-        b = {"name": bname, "parent": names[j.parent] if j.parent >= 0 else "ground",
-             "offset": [float(v) * scale for v in j.offset]}
-        if j.channels:
-            b["dofs"] = _dofs(bname, j.channels)
-        bones.append(b)
-    return {"skeleton": name, "bones": bones}
+        bones.append(Bone(bname, names[j.parent] if j.parent >= 0 else "ground",
+                          [float(v) * scale for v in j.offset], dofs=_dofs(bname, j.channels)))
+    return bones
 
 
-def pose_doc(bvh: BVH, name: str, skeleton_ref: str, scale: float, step: int) -> tuple[dict, float]:
-    """The pose document (every ``step``-th row) and its fps."""
+def motion_of(bvh: BVH, name: str, scale: float, step: int) -> Motion:
+    """The motion of every ``step``-th row; a coordinate that never changes is keyed at frame 0 only."""
     names = bone_names(bvh)
     rows = bvh.data[::step]
     fps = frame_rate(bvh.frame_time, bvh.frame_time_text) / step
@@ -458,16 +457,8 @@ def pose_doc(bvh: BVH, name: str, skeleton_ref: str, scale: float, step: int) ->
     keys: dict[int, dict] = {}
     for f in range(len(rows)):
         keys[f] = {cname: float(v[f]) for cname, v in cols if f == 0 or not np.all(v == v[0])}
-    doc = {"pose": name, "skeleton": skeleton_ref, "fps": int(fps) if float(fps).is_integer() else fps,
-           "frames": [0, len(rows) - 1], "interpolation": "linear", "keys": keys}
-    return doc, fps
-
-
-@dataclass
-class ImportResult:
-    files: object  # OutputSet: every output path with its bytes (nothing written yet)
-    report: dict
-    notes: list[str]  # lines for the user (the unit guess)
+    return Motion(name, fps, len(rows), keys, f"Imported from {Path(bvh.source).name} by `axdf import bvh` "
+                                              f"(every {step} of {len(bvh.data)} rows).")
 
 
 def check_limits(bvh: BVH, scale: float) -> None:
@@ -494,22 +485,16 @@ def check_limits(bvh: BVH, scale: float) -> None:
                              "after --scale")
 
 
-def build_import(bvh_path: Path | str, out_dir: Path | str, *, name: str | None = None, scale: float | None = None,
-                 step: int = 1, skeleton_out: Path | str | None = None, pose_out: Path | str | None = None,
-                 pose_name: str | None = None, progress=None) -> ImportResult:
-    """Read ``bvh_path`` and build the skeleton and pose files' bytes (nothing is written here).
+RULES = Rules("axdf import bvh", report=False)
 
-    Layout (defaults under ``out_dir``): ``skeletons/NAME.yaml`` and ``POSE.yaml``; the pose
-    refers to the skeleton by a path relative to itself. ``scale`` None: the guessed unit.
-    ``progress(step)``: called after each of :data:`STEPS`.
-    """
-    from axdf_cli.fileio.outputs import OutputSet
 
-    tick = progress or (lambda step: None)
+def read_import(bvh_path: Path | str, *, name: str | None = None, scale: float | None = None, step: int = 1,
+                pose_name: str | None = None) -> ImportedModel:
+    """``axdf import bvh``: a BVH file read and checked into the neutral model (a skeleton and
+    its motion; ``scale`` None: the guessed unit). The model's ``warnings`` are the lines that
+    tell the user the unit guess."""
     bvh_path = Path(bvh_path)
-    out_dir = Path(out_dir)
     bvh = read_bvh(bvh_path)
-    tick("read")
     name = name or safe_name(bvh_path.stem)
     pname = pose_name or name
     for what, v in (("--name", name), ("--pose-name", pname)):
@@ -522,27 +507,17 @@ def build_import(bvh_path: Path | str, out_dir: Path | str, *, name: str | None 
         scale = UNITS[unit]
         notes.append(f"using --scale {scale:g} (pass --scale to override)")
     check_limits(bvh, scale)
-    skel_path = Path(skeleton_out) if skeleton_out else out_dir / "skeletons" / f"{name}.yaml"
-    pose_path = Path(pose_out) if pose_out else out_dir / f"{pname}.yaml"
-    header = f"Imported from {bvh_path.name} by `axdf import bvh` (--scale {scale:g}).\n" \
-             "Regenerate with the importer rather than editing by hand."
-    files = OutputSet(out_dir, "import bvh")
-    files.add(skel_path, emit.dump_yaml(skeleton_doc(bvh, name, scale), header).encode(),
-              "--skeleton-out" if skeleton_out else "the skeleton")
-    tick("skeleton")
-    pdoc, fps = pose_doc(bvh, pname, relative_ref(skel_path, pose_path.parent), scale, step)
-    files.add(pose_path, emit.dump_yaml(pdoc, f"Imported from {bvh_path.name} by `axdf import bvh` "
-                                              f"(every {step} of {len(bvh.data)} rows).").encode(),
-              "--pose-out" if pose_out else "the pose")
-    tick("pose")
+    motion = motion_of(bvh, pname, scale, step)
     report = {"source": {"file": bvh_path.name, "sha256": sha256_file(bvh_path)}, "tool": "axdf import bvh",
               "skeleton": name, "pose": pname, "scale": scale, "guessed_unit": unit, "rest_height_units": height,
               "joints": sum(not j.end_site for j in bvh.joints), "end_sites": sum(j.end_site for j in bvh.joints),
               "channels": int(bvh.data.shape[1]), "rows": int(len(bvh.data)), "step": step,
-              "frames": int(len(bvh.data[::step])), "fps": fps}
-    files.settings = {"scale": scale, "step": step, "name": name, "pose_name": pname}
-    return ImportResult(files, report, notes)
+              "frames": int(len(bvh.data[::step])), "fps": motion.fps}
+    return ImportedModel(name, f"Imported from {bvh_path.name} by `axdf import bvh` (--scale {scale:g}).\n"
+                               "Regenerate with the importer rather than editing by hand.",
+                         bvh_bones(bvh, scale), RULES, motion=motion, report=report, warnings=notes,
+                         inputs=[bvh_path])
 
 
-#: The steps :func:`build_import` reports (its progress bar's units).
+#: The steps of ``axdf import bvh`` (its progress bar's units).
 STEPS = ("read", "skeleton", "pose")

@@ -1,4 +1,6 @@
-"""An OpenSim :class:`~axdf_cli.importers.osim.Model` → axdf documents and YAML text.
+"""The one emitter of every importer: a neutral :class:`~axdf_cli.importers.model.ImportedModel`
+→ the bytes of its skeleton, bone meshes, muscles, pose, ``import_report.json`` and
+``IMPORT.md`` (:func:`build_import`), and the deterministic YAML text they are written in.
 
 Output is deterministic: no timestamps, no absolute paths, keys in a fixed order. Numbers
 are written rounded to what they mean (:func:`rounded`): positions (``offset``,
@@ -7,45 +9,31 @@ The digits beyond come from matrix products whose last bits differ between CPUs 
 builds; rounding them away keeps the files readable and (but for a rare value on a
 rounding boundary) the same on every machine.
 
-Conversions (OpenSim → axdf):
-
-- World: a root bone ``ground`` with ``orient: [90, -90, 0]`` turns OpenSim's Y-up, X-forward ground into
-  axdf's Z-up world; every body keeps its own OpenSim frame, so path points and meshes are
-  copied unchanged.
-- Joints: parent offset frame → ``offset``/``orient``; child offset frame →
-  ``post_offset``/``post_orient``; transform axes → ordered DOFs, translations first (Simbody
-  sums them in the parent frame), then rotations (a body-fixed sequence). Axes whose function
-  is the constant 0 are dropped; an identity ``LinearFunction`` of a coordinate of the
-  axis's own type becomes a plain DOF; anything else a coupled DOF with ``function``.
-- Coupled coordinates: the dependent coordinate of a ``CoordinateCouplerConstraint`` is
-  written ``follows: {coord: INDEPENDENT, function: scale · f}`` (no default, no range: the
-  skeleton sets it from the coordinate it follows), its function converted like a DOF's
-  (input in the independent coordinate's units, output in its own).
-- Units: rotational coordinates and rotation outputs rad → degrees. A function
-  ``y = f(x)`` in OpenSim units becomes ``y' = k_out · f(k_in · x')`` with
-  ``k_in = π/180`` for a rotational coordinate and ``k_out = 180/π`` for a rotation axis:
-  spline knots x / k_in and values y · k_out, linear slope · k_in · k_out, polynomial
-  c_i · k_out · k_in^i, multiplier scales unchanged (its inner function converted).
-- Muscles: see :func:`muscle_doc` (axis control points, sections, tendons, colour).
+Muscles are sized by one belly law (:func:`belly_doc`) from their Hill numbers, their axis
+control points chosen by one rule (:func:`axis_points_for`), whatever format they came from.
 """
 from __future__ import annotations
 
 import colorsys
 import functools
 import hashlib
+import json
 import math
 import re
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import yaml
 
+from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError, Mark
-from axdf_cli.importers.osim import Axis, FConst, FLinear, FMult, FPoly, FSpline, Model, Muscle
+from axdf_cli.fileio.outputs import UniqueFiles
+from axdf_cli.formats.ply import PlyWriter
+from axdf_cli.importers.model import Hill, ImportedModel, Motion, Outputs
+from axdf_cli.importers.result import SIDE_SUFFIX, ImportResult, import_markdown, relative_ref, strip_dirs, yaml_number
 from axdf_cli.model.jiggle import JiggleSpec
-from axdf_cli.model.skeleton import Skeleton, Spline, forward_kinematics
-
-DEG = 180.0 / math.pi
+from axdf_cli.model.skeleton import Constant, Linear, Multiplier, Polynomial, Skeleton, Spline, forward_kinematics
 
 #: Specific tension σ (N/m²) turning max isometric force into PCSA. 0.6 MPa: inside the
 #: 0.3-1 MPa range reported for human muscle, the 61 N/cm² of the lower-limb model of Arnold
@@ -73,25 +61,6 @@ BELLY_PROFILE = ((0.04, 0.45), (0.15, 0.8), (0.32, 0.97), (0.5, 1.0), (0.68, 0.9
 TENDON_SECTIONS = (0.3, 0.75)
 MIN_TENDON_FRACTION = 0.02
 
-#: Secondary motion (``jiggle:``, README "Jiggle") of the calf's and the thigh's muscles, by
-#: name without the side suffix (OpenSim's gait2392/gait2354 names). Soft tissue of the leg
-#: rings at 10-50 Hz after a heel strike (Wakeling & Nigg 2001, skin-mounted accelerometers);
-#: animators' jiggle sits lower (a few Hz: a slow, visible sway). We take the bottom of the
-#: measured range: it still shows at the library's 60 fps (6 frames per cycle; above half the
-#: frame rate a ring aliases) and keeps a hard landing's sag to about 2 cm (the amplitude of a
-#: stop goes as speed / (2 pi f)), where 5 Hz sagged the calf by 4 cm. The thigh's bellies are
-#: heavier: a little lower. Relaxed, damping 0.2 lets a stop ring for about two visible cycles
-#: (each extremum 0.53 of the last). A tensed muscle rings faster and dies out sooner (measured
-#: frequency and damping both rise with muscle force).
-JIGGLE_CALF = JiggleSpec(10.0, 0.2, tensed_frequency=16.0, tensed_damping_ratio=0.45)
-JIGGLE_THIGH = JiggleSpec(8.0, 0.2, tensed_frequency=14.0, tensed_damping_ratio=0.45)
-JIGGLE = {**{m: JIGGLE_CALF for m in ("med_gas", "lat_gas", "soleus", "tib_ant", "tib_post", "per_long",
-                                      "per_brev", "per_tert", "ext_dig", "ext_hal", "flex_dig", "flex_hal")},
-          **{m: JIGGLE_THIGH for m in ("rect_fem", "vas_med", "vas_int", "vas_lat", "bifemlh", "bifemsh",
-                                       "semimem", "semiten", "sar", "grac", "add_long", "add_brev", "add_mag1",
-                                       "add_mag2", "add_mag3")}}
-
-
 def jiggle_doc(spec: JiggleSpec) -> dict:
     """A muscle's ``jiggle:`` mapping (docs/FORMATS.md), optional keys only when set."""
     d = {"frequency": spec.frequency, "damping_ratio": spec.damping_ratio}
@@ -102,105 +71,6 @@ def jiggle_doc(spec: JiggleSpec) -> dict:
     if tensed:
         d["tensed"] = tensed
     return d
-
-
-# ----------------------------------------------------------------------------- functions
-
-
-def convert_function(fn, k_in: float, k_out: float):
-    """A function of OpenSim units → the same function of axdf units (see module doc)."""
-    if isinstance(fn, FConst):
-        return FConst(fn.value * k_out)
-    if isinstance(fn, FLinear):
-        return FLinear(fn.slope * k_in * k_out, fn.intercept * k_out)
-    if isinstance(fn, FPoly):
-        return FPoly(tuple(c * k_out * k_in ** i for i, c in enumerate(fn.coefficients)))
-    if isinstance(fn, Spline):
-        return FSpline(fn.x / k_in, fn.y * k_out, fn.kind)
-    if isinstance(fn, FMult):
-        return FMult(fn.scale, convert_function(fn.function, k_in, k_out))
-    raise TypeError(f"unknown function {fn!r}")
-
-
-def function_doc(fn) -> dict:
-    if isinstance(fn, FConst):
-        return {"constant": fn.value}
-    if isinstance(fn, FLinear):
-        return {"linear": [fn.slope, fn.intercept]}
-    if isinstance(fn, FPoly):
-        return {"polynomial": list(fn.coefficients)}
-    if isinstance(fn, Spline):
-        return {"spline": {"x": [float(v) for v in fn.x], "y": [float(v) for v in fn.y], "kind": fn.kind}}
-    if isinstance(fn, FMult):
-        return {"multiplier": {"scale": fn.scale, "function": function_doc(fn.function)}}
-    raise TypeError(f"unknown function {fn!r}")
-
-
-def _is_zero(fn) -> bool:
-    return (isinstance(fn, FConst) and fn.value == 0.0) or (isinstance(fn, FMult) and (fn.scale == 0.0 or _is_zero(fn.function)))
-
-
-# ----------------------------------------------------------------------------- skeleton
-
-
-def _deg(v) -> list[float]:
-    return [x * DEG for x in v]
-
-
-def _dof(model: Model, a: Axis) -> dict | None:
-    if _is_zero(a.function):
-        return None
-    d: dict = {}
-    if a.coord is not None and not isinstance(a.function, FConst):
-        d["coord"] = a.coord
-    d["type"] = a.type
-    d["axis"] = list(a.axis)
-    if "coord" in d:
-        ctype = model.coordinates[a.coord].type
-        if ctype == a.type and isinstance(a.function, FLinear) and a.function.slope == 1.0 and a.function.intercept == 0.0:
-            return d
-        k_in = math.pi / 180.0 if ctype == "rotation" else 1.0
-    else:
-        k_in = 1.0
-    k_out = DEG if a.type == "rotation" else 1.0
-    d["function"] = function_doc(convert_function(a.function, k_in, k_out))
-    return d
-
-
-def skeleton_doc(model: Model, name: str, meshes: dict[str, str]) -> dict:
-    """The skeleton YAML document. ``meshes``: body → mesh path relative to the skeleton file."""
-    coords = {}
-    for c in model.coordinates.values():
-        k = DEG if c.type == "rotation" else 1.0
-        if c.follows is not None:  # a CoordinateCouplerConstraint's dependent: no default, no range of its own
-            k_in = math.pi / 180.0 if model.coordinates[c.follows].type == "rotation" else 1.0
-            coords[c.name] = {"type": c.type, "follows": {"coord": c.follows,
-                                                          "function": function_doc(convert_function(c.function, k_in, k))}}
-            continue
-        cd = {"type": c.type, "default": c.default * k}
-        if c.range is not None:
-            cd["range"] = [c.range[0] * k, c.range[1] * k]
-        coords[c.name] = cd
-    bones = [{"name": "ground", "orient": [90.0, -90.0, 0.0]}]
-    if "ground" in meshes:
-        bones[0]["mesh"] = meshes["ground"]
-    for j in model.joints:
-        b: dict = {"name": j.child.body, "parent": j.parent.body,
-                   "offset": list(j.parent.translation), "orient": _deg(j.parent.orientation)}
-        dofs = [d for d in (_dof(model, a) for a in j.axes) if d is not None]
-        if dofs:
-            b["dofs"] = dofs
-        if not j.child.is_identity:
-            b["post_offset"] = list(j.child.translation)
-            b["post_orient"] = _deg(j.child.orientation)
-        if j.child.body in meshes:
-            b["mesh"] = meshes[j.child.body]
-        bones.append(b)
-    doc = {"skeleton": name}
-    if coords:
-        doc["coordinates"] = coords
-    doc["bones"] = bones
-    return doc
 
 
 # ----------------------------------------------------------------------------- muscles
@@ -214,10 +84,6 @@ def hashed_color(name: str) -> str:
     """A deterministic colour from the muscle's name: any hue (sha256), muscle-like saturation."""
     h = hashlib.sha256(name.encode()).digest()
     return _hex(colorsys.hsv_to_rgb(h[0] / 255.0, 0.45 + 0.3 * h[1] / 255.0, 0.7 + 0.25 * h[2] / 255.0))
-
-
-#: Side suffixes: a muscle and its mirror image share their anatomical colour.
-SIDE_SUFFIX = re.compile(r"_[lr]$")
 
 
 def srgb_to_linear(c: float) -> float:
@@ -240,10 +106,19 @@ def anatomical_color(name: str) -> str:
 PALETTES = {"anatomical": anatomical_color, "hashed": hashed_color}
 
 
-def _world_points(skel: Skeleton, world: np.ndarray, pts) -> np.ndarray:
-    """Rest-pose world positions (n, 3) of points ``[(body, (x, y, z)), ...]``; world (B, 4, 4)."""
-    bi = skel.bone_index
-    return np.array([(world[bi[b]] @ np.append(p, 1.0))[:3] for b, p in pts])
+def function_doc(fn) -> dict:
+    """A skeleton function (:mod:`axdf_cli.model.skeleton`) as the axdf file writes it."""
+    if isinstance(fn, Constant):
+        return {"constant": fn.value}
+    if isinstance(fn, Linear):
+        return {"linear": [fn.slope, fn.intercept]}
+    if isinstance(fn, Polynomial):
+        return {"polynomial": list(fn.coefficients)}
+    if isinstance(fn, Spline):
+        return {"spline": {"x": [float(v) for v in fn.x], "y": [float(v) for v in fn.y], "kind": fn.kind}}
+    if isinstance(fn, Multiplier):
+        return {"multiplier": {"scale": fn.scale, "function": function_doc(fn.function)}}
+    raise TypeError(f"unknown function {fn!r}")
 
 
 def point_doc(p) -> dict:
@@ -286,37 +161,6 @@ def wrap_doc(w) -> dict:
     if not w.active:
         d["active"] = False
     return d
-
-
-def path_docs(model: Model, m: Muscle) -> tuple[list, list]:
-    """The muscle's ``path`` (every path point; moving ones with their functions in axdf
-    units, conditional ones with their ``active`` range) and ``wrap`` (its wrap surfaces,
-    copied per muscle with the path wrap's range and method) documents."""
-    from axdf_cli.model.paths import Moving, PathPoint, WrapSurface
-
-    path = []
-    for p in m.points:
-        moving = None
-        if p.moving is not None:
-            if p.frame is not None:
-                raise InputError(p.mark, f"moving point {p.name!r} of {m.name} is attached to an offset frame",
-                                 "moving points attached to a body")
-            moving = tuple(None if a is None else
-                           Moving(a[0], convert_function(a[1], math.pi / 180.0 if model.coordinates[a[0]].type
-                                                         == "rotation" else 1.0, 1.0)) for a in p.moving)
-        active = None
-        if p.condition is not None:
-            coord, lo, hi = p.condition
-            k = DEG if model.coordinates[coord].type == "rotation" else 1.0
-            active = (coord, lo * k, hi * k)
-        path.append(point_doc(PathPoint(p.body, tuple(p.location), moving, active)))
-    wraps = []
-    for pw in m.wraps:
-        w = model.wrap_objects[pw.wrap]
-        wraps.append(wrap_doc(WrapSurface(w.name, w.body, w.shape, tuple(w.size) + (0.0,) * (3 - len(w.size)),
-                                          tuple(w.translation), tuple(_deg(w.rotation)), w.quadrant, pw.method,
-                                          tuple(pw.range), w.active)))
-    return path, wraps
 
 
 @dataclass(frozen=True)
@@ -393,34 +237,11 @@ def motion_poses(skel: Skeleton, motion_q: np.ndarray | None) -> np.ndarray:
     return q
 
 
-def muscle_doc(m: Muscle, skel: Skeleton, world: np.ndarray, model: Model | None = None,
-               palette: str = "anatomical", motion_q: np.ndarray | None = None) -> tuple[dict, dict]:
-    """One OpenSim muscle's YAML document and summary row for the import report: its path
-    (:func:`path_docs`) sized by :func:`belly_doc` from its Hill-type parameters, with the
-    calf's and thigh's jiggle (``JIGGLE``). ``axis_points`` is written when the rest pose
-    and the imported motion ``motion_q`` (F, C) need more than the default
-    (:func:`axis_points_for` over :func:`motion_poses`)."""
-    path, wraps = path_docs(model, m)
-    axis = axis_points_for(m.name, path, wraps, skel, motion_poses(skel, motion_q))
-    doc, row = belly_doc(m.name, path, wraps, m.max_isometric_force, m.optimal_fiber_length, m.tendon_slack_length,
-                         m.pennation_angle, skel, world, palette, axis.n if axis.raised else 0,
-                         jiggle=JIGGLE.get(SIDE_SUFFIX.sub("", m.name)))
-    row.update({"type": m.type, "path_points": len(m.points),
-                "conditional": [p.name for p in m.points if p.kind == "conditional"],
-                "conditional_inactive_at_rest": [p.name for p in m.points if not p.active_at_rest],
-                "moving": [p.name for p in m.points if p.kind == "moving"], "wraps": [w.wrap for w in m.wraps]})
-    if axis.raised:  # the worst shortfall over the motion at the default count and at the count written
-        row["axis_points_raised"] = axis.row()
-    return doc, rounded(row)
-
-
-def belly_doc(name: str, path: list, wraps: list, max_force: float, fibre_length: float, tendon_slack: float,
-              pennation: float, skel: Skeleton, world: np.ndarray, palette: str = "anatomical",
-              axis_points: int = 0, min_slenderness: float = 0.0,
+def belly_doc(name: str, path: list, wraps: list, hill: Hill, skel: Skeleton, world: np.ndarray,
+              palette: str = "anatomical", axis_points: int = 0, min_slenderness: float = 0.0,
               jiggle: JiggleSpec | None = None) -> tuple[dict, dict]:
     """A path muscle's YAML document sized by its model's own numbers, and its summary row
-    (unrounded): the path and wrap documents ``path``, ``wraps``, the max isometric force (N),
-    optimal fibre length, tendon slack length (m) and pennation (rad).
+    (unrounded): the path and wrap documents ``path``, ``wraps``, and the muscle's Hill numbers.
 
     The belly law (README, "OpenSim models"), from the model's own numbers:
 
@@ -448,6 +269,8 @@ def belly_doc(name: str, path: list, wraps: list, max_force: float, fibre_length
     """
     from axdf_cli.model.measure import belly_slenderness
 
+    max_force, fibre_length, tendon_slack, pennation = hill.max_force, hill.fibre_length, hill.tendon_slack, \
+        hill.pennation
     rest_ctrl, path_length = rest_path(name, path, wraps, skel, world, axis_points)
     t_of, axis_length = _arc_parameter_of(rest_ctrl)
     pcsa = max_force / SPECIFIC_TENSION
@@ -556,6 +379,148 @@ def rest_world(skel: Skeleton) -> np.ndarray:
     return forward_kinematics(skel, skel.rest_coordinates()[None, :])[0]
 
 
+# ----------------------------------------------------------------------------- the import
+
+
+def skeleton_doc(model: ImportedModel, meshes: dict[str, str]) -> dict:
+    """The skeleton YAML document. ``meshes``: bone → mesh path relative to the skeleton file."""
+    doc: dict = {"skeleton": model.name}
+    if model.coordinates:
+        doc["coordinates"] = {c.name: c.doc() for c in model.coordinates}
+    doc["bones"] = [b.doc(meshes.get(b.name)) for b in model.bones]
+    return doc
+
+
+def pose_doc(motion: Motion, skeleton_ref: str) -> dict:
+    """The pose YAML document of a motion, referring to its skeleton by ``skeleton_ref``."""
+    doc = {"pose": motion.name, "skeleton": skeleton_ref, "fps": yaml_number(motion.fps),
+           "frames": [0, motion.frames - 1], "interpolation": "linear", "keys": motion.keys}
+    if motion.activation:
+        doc["activation"] = motion.activation
+    return doc
+
+
+def body_ply(parts: list[tuple[np.ndarray, np.ndarray]]) -> bytes:
+    """One body's meshes (vertices, faces) merged into the bytes of one binary PLY."""
+    vs, ts, base = [], [], 0
+    for v, f in parts:
+        vs.append(v)
+        ts.append(f + base)
+        base += len(v)
+    return PlyWriter(np.concatenate(ts)).encode(np.concatenate(vs))
+
+
+def motion_coordinates(skel: Skeleton, motion: Motion) -> np.ndarray:
+    """The coordinates (F, C) of every frame of a motion on ``skel`` (keyed ones as given, the
+    others at rest, coupled ones following): what ``axdf run`` samples there."""
+    q = np.broadcast_to(skel.rest_coordinates(), (len(motion.keys), len(skel.coordinates))).copy()
+    cidx = skel.coord_index
+    for f, row in enumerate(motion.keys.values()):
+        for c, v in row.items():
+            q[f, cidx[c]] = v
+    return skel.couple(q)
+
+
+def probe_poses(skel: Skeleton, motion_q: np.ndarray | None = None) -> np.ndarray:
+    """Coordinates (P, C) of the poses the axes are measured on besides the motion: the rest
+    pose and AXIS_PROBE_POSES poses with every ranged coordinate uniform in its range (seeded:
+    the same poses every import), then the motion's frames ``motion_q`` (:func:`motion_poses`)."""
+    rng = np.random.default_rng(tol.AXIS_PROBE_SEED)
+    q = np.tile(skel.rest_coordinates(), (tol.AXIS_PROBE_POSES + 1, 1))
+    for i, c in enumerate(skel.coordinates):
+        if c.range is not None:
+            q[1:, i] = rng.uniform(c.range[0], c.range[1], size=tol.AXIS_PROBE_POSES)
+    q = skel.couple(q)
+    return q if motion_q is None else np.concatenate([q, motion_poses(skel, motion_q)[1:]])
+
+
+def muscle_docs(model: ImportedModel, skel: Skeleton, world: np.ndarray, palette: str,
+                motion_q: np.ndarray | None) -> list[tuple]:
+    """(muscle, document, rounded report row) of every muscle, sized by :func:`belly_doc`."""
+    rules = model.rules
+    probe = probe_poses(skel, motion_q) if rules.probe_ranges else motion_poses(skel, motion_q)
+    out = []
+    for m in model.muscles:
+        path = [point_doc(p) for p in m.path]
+        wraps = [wrap_doc(w) for w in m.wraps]
+        hill = m.hill
+        if hill is None:  # fibres a share of the rest path, the rest of it tendon slack
+            rest = rest_path(m.name, path, wraps, skel, world)[1]
+            hill = Hill(m.force, m.fibre_share * rest, rest - m.fibre_share * rest)
+        axis = axis_points_for(m.name, path, wraps, skel, probe)
+        doc, row = belly_doc(m.name, path, wraps, hill, skel, world, palette, axis.n if axis.raised else 0,
+                             rules.min_slenderness, m.jiggle)
+        row.update(m.row)
+        row.update({"path_points": len(path), "wraps": [w["name"] for w in wraps]})
+        if rules.shortfall:
+            row["axis_shortfall"] = axis.error
+        if axis.raised:  # the worst shortfall over the poses at the default count and at the count written
+            row["axis_points_raised"] = axis.row()
+        out.append((m, doc, rounded(row)))
+    return out
+
+
+def build_import(model: ImportedModel, outputs: Outputs, palette: str = "anatomical", files: dict | None = None) \
+        -> ImportResult:
+    """Every output file's bytes of an imported model (nothing is written here).
+
+    Layout (defaults under ``outputs.out``): ``skeletons/NAME.yaml``, ``skeletons/meshes/NAME/*.ply``,
+    ``muscles/MUSCLE.yaml``, ``POSE.yaml`` (with a motion), and with the rules' report
+    ``import_report.json`` and ``IMPORT.md``. Paths written inside the files are relative to
+    the file holding them. ``palette``: muscle colours, a key of :data:`PALETTES`. ``files``:
+    the mapping the files go into (default: one that refuses a path twice).
+    """
+    out_dir = Path(outputs.out)
+    motion = model.motion
+    skel_path = Path(outputs.skeleton) if outputs.skeleton else out_dir / "skeletons" / f"{model.name}.yaml"
+    mesh_dir = Path(outputs.meshes) if outputs.meshes else skel_path.parent / "meshes" / model.name
+    mus_dir = Path(outputs.muscles) if outputs.muscles else out_dir / "muscles"
+    pose_path = (Path(outputs.pose) if outputs.pose else out_dir / f"{motion.name}.yaml") if motion else None
+    files = UniqueFiles() if files is None else files  # a path twice: exit 2, never one file lost
+    mesh_refs = {}
+    for bone, data in model.meshes.items():
+        p = mesh_dir / f"{bone}.ply"
+        files[str(p)] = data
+        mesh_refs[bone] = relative_ref(p, skel_path.parent)
+    text = dump_yaml(skeleton_doc(model, mesh_refs), model.header)
+    files[str(skel_path)] = text.encode()
+    if motion is not None:
+        pose = dump_yaml(pose_doc(motion, relative_ref(skel_path, pose_path.parent)), motion.header).encode()
+        if motion.mark is not None and len(pose) > tol.YAML_MAX_BYTES:
+            raise InputError(motion.mark, f"the pose would be {len(pose)} bytes ({motion.frames} frames)",
+                             f"axdf reads YAML files up to {tol.YAML_MAX_BYTES} bytes; {motion.remedy}")
+        files[str(pose_path)] = pose
+    report = model.report
+    layout = {"muscles": mus_dir, "skeleton": skel_path, "pose": pose_path}
+    if not model.rules.report:
+        return ImportResult(files, report, model.warnings, model.inputs, model.assets, layout)
+    from axdf_cli.specs import RefPolicy, parse_skeleton_text
+
+    try:  # the file as axdf will read it back; its mesh references name files this import writes
+        skel = parse_skeleton_text(text, skel_path, RefPolicy(allow_outside=True))
+    except InputError as e:  # a limit of the file format that the model's numbers exceed
+        if model.refuse_at is None:
+            raise
+        raise InputError(model.refuse_at, f"the skeleton {skel_path.name} would not pass axdf validate ({e})",
+                         "numbers and names within what axdf files hold") from None
+    world = rest_world(skel)
+    motion_q = motion_coordinates(skel, motion) if motion is not None else None
+    rows = []
+    for m, doc, row in muscle_docs(model, skel, world, palette, motion_q):
+        rows.append(row)
+        files[str(mus_dir / f"{m.name}.yaml")] = dump_yaml(doc, m.header).encode()
+    report["muscles"] = rows
+    report.setdefault("settings", {})["palette"] = palette
+    model.complete(report)
+    report["ignored"] = [dict(i, where=strip_dirs(i["where"], model.strip)) for i in model.ignored]
+    report["warnings"] = [strip_dirs(w, model.strip) for w in model.warnings]
+    report["files"] = sorted(relative_ref(Path(p), out_dir) for p in files)
+    files[str(out_dir / "import_report.json")] = (json.dumps(report, indent=1, sort_keys=True) + "\n").encode()
+    files[str(out_dir / "IMPORT.md")] = import_markdown(report, model.intro(report), model.poses,
+                                                        model.rules).encode()
+    return ImportResult(files, report, model.warnings, model.inputs, model.assets, layout)
+
+
 # ----------------------------------------------------------------------------- YAML text
 
 #: Positions are rounded to this many decimals of a metre (0.1 µm): OpenSim path points and
@@ -661,11 +626,6 @@ def _inline_text(v, limit: int = 120) -> str | None:
         text = "{" + ", ".join(parts) + "}"
         return text if len(text) <= limit else None
     return _scalar(v)
-
-
-def _inline_ok(v, limit: int = 120) -> bool:
-    """Small mappings of simple values, and lists of scalars, go on one line."""
-    return _inline_text(v, limit) is not None
 
 
 #: Mappings whose entries are always written on one line each (pose keys, activation curves).

@@ -1,8 +1,9 @@
-"""``axdf import mjcf``: a MuJoCo model (+ a ``qpos`` motion) → axdf files, in memory.
+"""``axdf import mjcf``: a MuJoCo model (+ a ``qpos`` motion) → the neutral import model.
 
-:func:`build_import` reads and checks every input first and returns an
-:class:`~axdf_cli.importers.result.ImportResult` holding the bytes of every output file;
-the CLI writes them (atomically) only when all inputs were good.
+:func:`read_import` reads and checks every input and fills an
+:class:`~axdf_cli.importers.model.ImportedModel`, which
+:func:`~axdf_cli.importers.emit.build_import` turns into the bytes of every output file; the
+CLI writes them (atomically) only when all inputs were good.
 
 How MuJoCo maps to axdf (docs/FORMATS.md, "Imported MuJoCo models")
 --------------------------------------------------------------------
@@ -29,7 +30,7 @@ How MuJoCo maps to axdf (docs/FORMATS.md, "Imported MuJoCo models")
 - Muscles: every muscle actuator on a spatial tendon becomes a path muscle of the same name:
   its sites are the path points, each wrap geom a ``mujoco_sphere`` or ``mujoco_cylinder``
   surface with its ``side`` point (the sidesite) and ``range`` the two sites around it.
-  Its size follows the belly law of OpenSim imports (:func:`~axdf_cli.importers.emit.belly_doc`)
+  Its size follows the one belly law of every import (:func:`~axdf_cli.importers.emit.belly_doc`)
   from MuJoCo's own numbers (:func:`hill_numbers`).
 - Bone meshes: the mesh geoms of a body, placed by the geom's frame (mesh ``scale``,
   ``refpos``, ``refquat`` applied as MuJoCo does), one PLY per body; ``max_faces`` decimates
@@ -37,9 +38,7 @@ How MuJoCo maps to axdf (docs/FORMATS.md, "Imported MuJoCo models")
 """
 from __future__ import annotations
 
-import json
 import math
-import re
 from pathlib import Path
 
 import numpy as np
@@ -47,15 +46,13 @@ import numpy as np
 from axdf_cli import tolerances as tol
 from axdf_cli.errors import EnvironmentProblem, InputError, Mark
 from axdf_cli.fileio.atomic import sha256_file
-from axdf_cli.fileio.outputs import UniqueFiles
 from axdf_cli.fileio.yamlio import NAME_ALLOWED, is_name
-from axdf_cli.formats.ply import PlyWriter
 from axdf_cli.importers import emit
-from axdf_cli.importers.mjcf import Body, Coupling, Joint, MjcfModel, Muscle, load_mjcf, quat_matrix
+from axdf_cli.importers.mjcf import Coupling, Joint, MjcfModel, Muscle, load_mjcf, quat_matrix
+from axdf_cli.importers.model import Bone, Coordinate, Dof, Hill, ImportedModel, Motion, Rules
+from axdf_cli.importers.model import Muscle as ImportedMuscle
 from axdf_cli.importers.qpos import WIDTH, QposJoint, qpos_coordinates, quat_to_euler, read_motion
-from axdf_cli.importers.result import (ImportResult, axis_markdown, belly_markdown, relative_ref, safe_name,
-                                      strip_dirs, yaml_number)
-from axdf_cli.specs import RefPolicy, parse_skeleton_text
+from axdf_cli.importers.result import safe_name, yaml_number
 
 DEG = 180.0 / math.pi
 #: Without a ``lengthrange`` (MuJoCo computes one when it compiles the model), the optimal
@@ -103,9 +100,9 @@ def _clean(v) -> list[float]:
     return [float(x) + 0.0 for x in v]
 
 
-def _const_translation(d: np.ndarray) -> dict:
+def _const_translation(d: np.ndarray) -> Dof:
     n = float(np.linalg.norm(d))
-    return {"type": "translation", "axis": _clean(d / n), "function": {"constant": n}}
+    return Dof("translation", _clean(d / n), None, {"constant": n})
 
 
 def _poly_function(p: np.polynomial.Polynomial) -> dict | None:
@@ -158,25 +155,21 @@ def dof_function(model: MjcfModel, j: Joint, by: dict[str, Coupling]) -> tuple[s
     return root, _poly_function(f)
 
 
-def skeleton_doc(model: MjcfModel, name: str, names: Names, meshes: dict[str, str]) -> tuple[dict, list[QposJoint]]:
-    """The skeleton YAML document and the joints that are its coordinates, with their qpos
-    indices (qpos order: the order of the coordinates and of the pose's values). ``meshes``:
-    body → mesh path relative to the skeleton file."""
+def skeleton(model: MjcfModel, names: Names) -> tuple[list[Bone], list[Coordinate], list[QposJoint]]:
+    """The bones (``world``, then a bone per body), the coordinates in qpos order, and the
+    joints that are coordinates with their qpos indices (qpos order: the order of the
+    coordinates and of the pose's values)."""
     by = {}
     for c in model.couplings:
         if c.joint1 in by:
             raise InputError(c.mark, f"joint {c.joint1!r} is coupled twice", "one joint equality per dependent joint")
         by[c.joint1] = c
-    coords: dict[str, dict] = {}
+    coords: dict[str, Coordinate] = {}
     rows: list[QposJoint] = []
     nq = 0  # the next joint's qpos index
-    bones: list[dict] = [{"name": "world"}]
-    if "world" in meshes:
-        bones[0]["mesh"] = meshes["world"]
+    bones = [Bone("world")]
     for body in model.bodies:
-        bname = names("body", body.name)
-        b: dict = {"name": bname, "parent": names("body", body.parent) if body.parent else "world"}
-        dofs: list[dict] = []
+        b = Bone(names("body", body.name), names("body", body.parent) if body.parent else "world", anchor_first=True)
         free = body.joints and body.joints[0].type == "free"
         if free:
             j = body.joints[0]
@@ -184,68 +177,56 @@ def skeleton_doc(model: MjcfModel, name: str, names: Names, meshes: dict[str, st
             euler = quat_to_euler(body.quat)
             for k, ax in enumerate("xyz"):
                 c = f"{jn}_t{ax}"
-                coords[c] = {"type": "translation", "default": float(body.pos[k])}
-                dofs.append({"coord": c, "type": "translation", "axis": _clean(np.eye(3)[k])})
+                coords[c] = Coordinate(c, "translation", float(body.pos[k]))
+                b.dofs.append(Dof("translation", _clean(np.eye(3)[k]), c))
             for k, ax in enumerate("xyz"):
                 c = f"{jn}_r{ax}"
-                coords[c] = {"type": "rotation", "default": float(euler[k])}
-                dofs.append({"coord": c, "type": "rotation", "axis": _clean(np.eye(3)[k])})
+                coords[c] = Coordinate(c, "rotation", float(euler[k]))
+                b.dofs.append(Dof("rotation", _clean(np.eye(3)[k]), c))
             rows.append(QposJoint(j.name, "free", nq, tuple(f"{jn}_{s}" for s in ("tx", "ty", "tz", "rx", "ry", "rz"))))
             nq += WIDTH["free"]
         else:
-            b["offset"] = _clean(body.pos)
-            b["orient"] = _clean(quat_to_euler(body.quat))
+            b.offset = _clean(body.pos)
+            b.orient = _clean(quat_to_euler(body.quat))
             anchor = np.zeros(3)
             for j in body.joints:
                 jn = names("joint", j.name)
                 if j.type in ("hinge", "ball") and np.any(j.pos != anchor):
-                    dofs.append(_const_translation(j.pos - anchor))
+                    b.dofs.append(_const_translation(j.pos - anchor))
                     anchor = j.pos.copy()
                 if j.type == "ball":
                     for k, ax in enumerate("xyz"):
                         c = f"{jn}_r{ax}"
-                        coords[c] = {"type": "rotation", "default": 0.0}
-                        dofs.append({"coord": c, "type": "rotation", "axis": _clean(np.eye(3)[k])})
+                        coords[c] = Coordinate(c, "rotation", 0.0)
+                        b.dofs.append(Dof("rotation", _clean(np.eye(3)[k]), c))
                     rows.append(QposJoint(j.name, "ball", nq, tuple(f"{jn}_r{s}" for s in "xyz")))
                     nq += WIDTH["ball"]
                     continue
                 dtype = "rotation" if j.type == "hinge" else "translation"
                 coord, fn = dof_function(model, j, by)
-                d: dict = {}
-                if coord is not None:
-                    d["coord"] = names("joint", coord)
-                d["type"] = dtype
-                d["axis"] = _clean(j.axis)
-                if fn is not None:
-                    d["function"] = fn
-                dofs.append(d)
+                b.dofs.append(Dof(dtype, _clean(j.axis), names("joint", coord) if coord is not None else None, fn))
                 if j.name not in by:
-                    k = _unit(j)
-                    cd = {"type": dtype, "default": j.ref * k}
-                    if j.range is not None:
-                        cd["range"] = [j.range[0] * k, j.range[1] * k]
-                    for key in ("default", "range"):
-                        far = [v for v in np.atleast_1d(cd.get(key, [])) if abs(v) > tol.MAX_ABS_NUMBER]
-                        if far:
-                            unit = "degrees" if dtype == "rotation" else "m"
-                            raise InputError(j.mark, f"joint {j.name!r}: its {'ref' if key == 'default' else key} "
-                                             f"is {far[0]:g} {unit}", f"within ±{tol.MAX_ABS_NUMBER:g} {unit} "
-                                             "(what every axdf file holds)")
-                    coords[jn] = cd
+                    coords[jn] = _coordinate(j, jn, dtype)
                     rows.append(QposJoint(j.name, j.type, nq, (jn,)))
                 nq += WIDTH[j.type]
             if np.any(anchor != 0):
-                b["post_offset"] = _clean(anchor)
-        if dofs:
-            b["dofs"] = dofs
-        if body.name in meshes:
-            b["mesh"] = meshes[body.name]
+                b.post_offset = _clean(anchor)
         bones.append(b)
-    # coordinates in qpos order
-    doc = {"skeleton": name, "coordinates": {c: coords[c] for r in rows for c in r.coords}, "bones": bones}
-    if not doc["coordinates"]:
-        del doc["coordinates"]
-    return doc, rows
+    return bones, [coords[c] for r in rows for c in r.coords], rows
+
+
+def _coordinate(j: Joint, name: str, dtype: str) -> Coordinate:
+    """A hinge's or slide's coordinate in axdf units: its ref the default, its range when limited."""
+    k = _unit(j)
+    c = Coordinate(name, dtype, j.ref * k, (j.range[0] * k, j.range[1] * k) if j.range is not None else None)
+    for key, values in (("default", [c.default]), ("range", list(c.range or []))):
+        far = [v for v in values if abs(v) > tol.MAX_ABS_NUMBER]
+        if far:
+            unit = "degrees" if dtype == "rotation" else "m"
+            raise InputError(j.mark, f"joint {j.name!r}: its {'ref' if key == 'default' else key} "
+                             f"is {far[0]:g} {unit}", f"within ±{tol.MAX_ABS_NUMBER:g} {unit} "
+                             "(what every axdf file holds)")
+    return c
 
 
 # ----------------------------------------------------------------------------- meshes
@@ -301,14 +282,14 @@ def decimate(v: np.ndarray, f: np.ndarray, max_faces: int) -> tuple[np.ndarray, 
     return np.asarray(pv, dtype=np.float64), np.asarray(pf, dtype=np.int64)
 
 
-def body_meshes(model: MjcfModel, max_faces: int, report: dict, edge: float = 0.0) -> dict[str, bytes]:
+def geom_meshes(model: MjcfModel, max_faces: int, report: dict, edge: float = 0.0) -> dict[str, bytes]:
     """Body → binary PLY bytes: its mesh geoms in the body frame (``v_body = R_g (s ⊙ R_ref^T
     (v − refpos)) + p_g``, as MuJoCo places them), faces turned when the scale mirrors."""
     out = {}
     cache: dict[str, tuple] = {}
     rows = []
     for body in model.bodies:
-        vs, ts, base = [], [], 0
+        parts = []
         for g in body.geoms:
             if g.type != "mesh" or g.mesh is None:
                 continue
@@ -326,11 +307,9 @@ def body_meshes(model: MjcfModel, max_faces: int, report: dict, edge: float = 0.
                 cache[asset.name] = (v, f)
                 rows.append({"mesh": asset.name, "file": asset.file.name, "faces": int(n0), "kept": int(len(f))})
             v, f = cache[asset.name]
-            vs.append(v @ quat_matrix(g.quat).T + g.pos)
-            ts.append(f + base)
-            base += len(v)
-        if vs:
-            out[body.name] = PlyWriter(np.concatenate(ts)).encode(np.concatenate(vs))
+            parts.append((v @ quat_matrix(g.quat).T + g.pos, f))
+        if parts:
+            out[body.name] = emit.body_ply(parts)
     report["meshes"] = rows
     return out
 
@@ -338,9 +317,9 @@ def body_meshes(model: MjcfModel, max_faces: int, report: dict, edge: float = 0.
 # ----------------------------------------------------------------------------- muscles
 
 
-def hill_numbers(m: Muscle, rest_length: float) -> tuple[float, float, float, list[str]]:
-    """(max isometric force N, optimal fibre length m, tendon slack length m, notes) of a MuJoCo
-    muscle. MuJoCo's muscle (Todorov's, ``mjs_setToMuscle``) has no fibre length of its own:
+def hill_numbers(m: Muscle) -> tuple[Hill | None, float, list[str]]:
+    """(Hill numbers, max isometric force N, notes) of a MuJoCo muscle; the Hill numbers None
+    without a ``lengthrange`` (the emitter then takes FALLBACK_FIBRE_SHARE of the rest path). MuJoCo's muscle (Todorov's, ``mjs_setToMuscle``) has no fibre length of its own:
     its ``lengthrange`` [L_lo, L_hi] (actuator length = gear × tendon length) is what the
     normalized fibre length's ``range`` [r_lo, r_hi] spans, so L0 = (L_hi − L_lo) / (r_hi −
     r_lo) / gear and the tendon slack length LT = L_lo / gear − r_lo · L0. Force at the tendon:
@@ -350,19 +329,18 @@ def hill_numbers(m: Muscle, rest_length: float) -> tuple[float, float, float, li
         l0 = (m.lengthrange[1] - m.lengthrange[0]) / (m.range[1] - m.range[0]) / m.gear
         lt = max(m.lengthrange[0] / m.gear - m.range[0] * l0, 0.0)
     else:
-        l0 = FALLBACK_FIBRE_SHARE * rest_length
-        lt = rest_length - l0
+        l0 = lt = None
         notes.append(f"no lengthrange (MuJoCo computes it when compiling): fibres {FALLBACK_FIBRE_SHARE:g} of the rest path")
     if m.force > 0:
         force = m.force * m.gear
     else:
         force = m.scale * m.gear
         notes.append(f"force {m.force:g} (MuJoCo's scale / acc0, known only to its compiler): {m.scale:g} N assumed")
-    return force, l0, lt, notes
+    return (Hill(force, l0, lt) if l0 is not None else None), force, notes
 
 
 def tendon_paths(model: MjcfModel, names: Names, m: Muscle) -> tuple[list, list] | None:
-    """A muscle's path and wrap documents from its spatial tendon; None when it has a pulley."""
+    """A muscle's path points and wrap surfaces from its spatial tendon; None when it has a pulley."""
     from axdf_cli.model.paths import PathPoint, WrapSurface
 
     t = model.tendons[m.tendon]
@@ -372,8 +350,8 @@ def tendon_paths(model: MjcfModel, names: Names, m: Muscle) -> tuple[list, list]
     for it in t.items:
         if it.kind == "site":
             s = model.sites[it.name]
-            path.append(emit.point_doc(PathPoint(names("body", s.body) if s.body != "world" else "world",
-                                                 tuple(float(x) for x in s.pos))))
+            path.append(PathPoint(names("body", s.body) if s.body != "world" else "world",
+                                  tuple(float(x) for x in s.pos)))
             continue
         g = model.geoms[it.name]
         gname = names("geom", it.name)
@@ -385,9 +363,9 @@ def tendon_paths(model: MjcfModel, names: Names, m: Muscle) -> tuple[list, list]
             side = (names("body", s.body) if s.body != "world" else "world", tuple(float(x) for x in s.pos))
         k = len(path)  # the site before the geom is path point k (1-based)
         bone = names("body", g.body) if g.body != "world" else "world"
-        wraps.append(emit.wrap_doc(WrapSurface(wname, bone, MJ_SHAPES[g.type], (float(g.size[0]), 0.0, 0.0),
-                                               tuple(float(x) for x in g.pos), tuple(_clean(quat_to_euler(g.quat))),
-                                               range=(k, k + 1), side=side)))
+        wraps.append(WrapSurface(wname, bone, MJ_SHAPES[g.type], (float(g.size[0]), 0.0, 0.0),
+                                 tuple(float(x) for x in g.pos), tuple(_clean(quat_to_euler(g.quat))),
+                                 range=(k, k + 1), side=side))
     return path, wraps
 
 
@@ -418,34 +396,32 @@ def coupled_deviation(model: MjcfModel, q: np.ndarray) -> dict[str, float]:
     return out
 
 
-def pose_doc(rows: list[QposJoint], q: np.ndarray, fps: float, pose_name: str, skeleton_ref: str,
-             source: str) -> dict:
+def motion_keys(rows: list[QposJoint], q: np.ndarray, source: str) -> dict[int, dict[str, float]]:
+    """Frame → {coordinate: value} of a qpos motion (every coordinate at every frame)."""
     values = qpos_coordinates(rows, q, source)
     names = list(values)
     arr = np.stack([values[c] for c in names], axis=1) if names else np.zeros((len(q), 0))
-    keys = {f: {c: float(arr[f, i]) for i, c in enumerate(names)} for f in range(len(q))}
-    return {"pose": pose_name, "skeleton": skeleton_ref, "fps": yaml_number(fps), "frames": [0, len(q) - 1],
-            "interpolation": "linear", "keys": keys}
+    return {f: {c: float(arr[f, i]) for i, c in enumerate(names)} for f in range(len(q))}
 
 
 # ----------------------------------------------------------------------------- all
 
 
-def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | None = None,
-                 motion: Path | str | None = None, skeleton_out: Path | str | None = None,
-                 muscles_out: Path | str | None = None, pose_out: Path | str | None = None,
-                 meshes_out: Path | str | None = None, pose_name: str | None = None, fps: float | None = None,
-                 meshes: bool = True, max_faces: int = 0, mesh_edge: float = 0.0,
-                 palette: str = "anatomical") -> ImportResult:
-    """Read ``model_path`` (+ a qpos motion) and build every output file's bytes.
+# ----------------------------------------------------------------------------- the model
 
-    Layout as ``axdf import osim``'s: ``skeletons/NAME.yaml``, ``skeletons/meshes/NAME/*.ply``,
-    ``muscles/MUSCLE.yaml``, ``POSE.yaml`` (with a motion), ``import_report.json``, ``IMPORT.md``.
-    ``fps`` overrides the motion's; ``max_faces`` (0: all) bounds each bone mesh, ``mesh_edge``
-    (m, 0: off) decimates it to about that edge length (:func:`face_budget`).
-    """
+RULES = Rules("axdf import mjcf", probe_ranges=True, min_slenderness=MIN_REST_SLENDERNESS, shortfall=True,
+              columns=("muscle", "sites", "wrap_geoms", "rest_path", "force", "pcsa", "fibres", "free_tendon",
+                       "belly", "belly_d", "tendon_d", "slenderness"),
+              fibre_words="optimal fibre length (MuJoCo: lengthrange / range)")
+
+
+def read_import(model_path: Path | str, *, name: str | None = None, motion: Path | str | None = None,
+                pose_name: str | None = None, fps: float | None = None, meshes: bool = True, max_faces: int = 0,
+                mesh_edge: float = 0.0) -> ImportedModel:
+    """``axdf import mjcf``: a MuJoCo model (+ a qpos motion) read and checked into the neutral
+    model. ``fps`` overrides the motion's; ``max_faces`` (0: all) bounds each bone mesh,
+    ``mesh_edge`` (m, 0: off) decimates it to about that edge length (:func:`face_budget`)."""
     model_path = Path(model_path)
-    out_dir = Path(out_dir)
     model = load_mjcf(model_path)
     name = name or safe_name(model.name)
     pname = pose_name or (safe_name(Path(motion).stem) if motion is not None else None)
@@ -458,42 +434,21 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
     if motion is not None:
         q, motion_fps = read_motion(Path(motion), qpos_layout(model)["__nq__"])
         fps = fps or motion_fps
-
-    skel_path = Path(skeleton_out) if skeleton_out else out_dir / "skeletons" / f"{name}.yaml"
-    mesh_dir = Path(meshes_out) if meshes_out else skel_path.parent / "meshes" / name
-    mus_dir = Path(muscles_out) if muscles_out else out_dir / "muscles"
-    pose_path = (Path(pose_out) if pose_out else out_dir / f"{pname}.yaml") if motion is not None else None
-
-    warnings: list[str] = []
     report: dict = {"source": {"model": model_path.name, "sha256": sha256_file(model_path), "model_name": model.name},
                     "tool": "axdf import mjcf", "skeleton": name}
-    files: dict[str, bytes] = UniqueFiles()  # a path twice: exit 2, never one file lost
-    mesh_bytes = body_meshes(model, max_faces, report, mesh_edge) if meshes else {}
-    mesh_refs = {}
-    for body, data in sorted(mesh_bytes.items()):
-        p = mesh_dir / f"{names('body', body)}.ply"
-        files[str(p)] = data
-        mesh_refs[body] = relative_ref(p, skel_path.parent)
-    sdoc, rows = skeleton_doc(model, name, names, mesh_refs)
-    header = (f"Imported from {model_path.name} (MuJoCo model {model.name!r}) by `axdf import mjcf`.\n"
-              "Regenerate with the importer rather than editing by hand.")
-    text = emit.dump_yaml(sdoc, header)
-    files[str(skel_path)] = text.encode()
-    try:  # the skeleton as axdf will read it back (its meshes are files this import writes)
-        skel = parse_skeleton_text(text, skel_path, RefPolicy(allow_outside=True))
-    except InputError as e:  # a limit of the file format that the model's numbers exceed
-        raise InputError(Mark(str(model_path)), f"the skeleton {skel_path.name} would not pass axdf validate ({e})",
-                         "numbers and names within what axdf files hold") from None
-    world = emit.rest_world(skel)
-
-    mrows, skipped = [], []
-    motion_q = None
-    if q is not None:  # the motion's coordinates (F, C), as the pose will give them
-        motion_q = np.tile(skel.rest_coordinates(), (len(q), 1))
-        for c, v in qpos_coordinates(rows, q, str(motion)).items():
-            motion_q[:, skel.coord_index[c]] = v
-        motion_q = skel.couple(motion_q)
-    probe = probe_poses(skel, motion_q)
+    mesh_bytes = geom_meshes(model, max_faces, report, mesh_edge) if meshes else {}
+    plys = {names("body", body): data for body, data in sorted(mesh_bytes.items())}
+    bones, coords, rows = skeleton(model, names)
+    inputs = [Path(x) for x in (model_path, motion) if x is not None]
+    out = ImportedModel(name, f"Imported from {model_path.name} (MuJoCo model {model.name!r}) by `axdf import mjcf`.\n"
+                              "Regenerate with the importer rather than editing by hand.",
+                        bones, RULES, coords, plys, report=report, strip=inputs,
+                        inputs=[model_path, *model.includes, *([Path(motion)] if motion is not None else [])],
+                        assets=sorted({model.meshes[m["mesh"]].file for m in report.get("meshes", [])}),
+                        refuse_at=Mark(str(model_path)), intro=_intro,
+                        poses=f"the rest pose, {tol.AXIS_PROBE_POSES} seeded poses in the joints' ranges"
+                              + (" and the motion's frames" if motion is not None else ""))
+    skipped = []
     for m in model.muscles:
         mname = names("muscle", m.name or m.tendon)
         docs = tendon_paths(model, names, m)
@@ -501,80 +456,42 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
             skipped.append({"kind": "muscle", "name": m.name, "where": str(m.mark),
                             "why": "its tendon branches at a pulley: not one path"})
             continue
+        hill, force, notes = hill_numbers(m)
+        out.warnings += [f"{m.mark}: muscle {m.name!r}: {n}" for n in notes]
         path, wraps = docs
-        rest = _rest_length(mname, path, wraps, skel, world)
-        force, l0, lt, notes = hill_numbers(m, rest)
-        for n in notes:
-            warnings.append(f"{m.mark}: muscle {m.name!r}: {n}")
-        axis = emit.axis_points_for(mname, path, wraps, skel, probe)
-        doc, row = emit.belly_doc(mname, path, wraps, force, l0, lt, 0.0, skel, world, palette,
-                                  axis.n if axis.raised else 0, MIN_REST_SLENDERNESS)
-        row.update({"type": m.kind, "tendon": m.tendon, "path_points": len(path), "wraps": [w["name"] for w in wraps],
-                    "sidesites": sum("side" in w for w in wraps), "force": force, "lengthrange": m.lengthrange,
-                    "notes": notes, "axis_shortfall": axis.error})
-        if axis.raised:
-            row["axis_points_raised"] = axis.row()
-        mrows.append(emit.rounded(row))
-        files[str(mus_dir / f"{mname}.yaml")] = emit.dump_yaml(
-            doc, f"{mname}: imported from {model_path.name} (MuJoCo {m.kind} on tendon {m.tendon}) "
-                 "by `axdf import mjcf`.").encode()
-    report["muscles"] = mrows
+        out.muscles.append(ImportedMuscle(
+            mname, path, wraps, hill, f"{mname}: imported from {model_path.name} (MuJoCo {m.kind} on tendon "
+                                      f"{m.tendon}) by `axdf import mjcf`.",
+            {"type": m.kind, "tendon": m.tendon, "sidesites": sum(w.side is not None for w in wraps), "force": force,
+             "lengthrange": m.lengthrange, "notes": notes}, fibre_share=FALLBACK_FIBRE_SHARE, force=force))
     if q is not None:
-        pdoc = pose_doc(rows, q, fps, pname, relative_ref(skel_path, pose_path.parent), str(motion))
-        text = emit.dump_yaml(pdoc, f"Imported from {Path(motion).name} by `axdf import mjcf`.").encode()
-        if len(text) > tol.YAML_MAX_BYTES:
-            raise InputError(Mark(str(motion)), f"the pose would be {len(text)} bytes ({len(q)} frames)",
-                             f"axdf reads YAML files up to {tol.YAML_MAX_BYTES} bytes; a shorter motion")
-        files[str(pose_path)] = text
-        dev = coupled_deviation(model, q)
+        out.motion = Motion(pname, fps, len(q), motion_keys(rows, q, str(motion)),
+                            f"Imported from {Path(motion).name} by `axdf import mjcf`.", mark=Mark(str(motion)),
+                            remedy="a shorter motion")
         report["motion"] = {"file": Path(motion).name, "sha256": sha256_file(Path(motion)), "frames": int(len(q)),
-                            "fps": yaml_number(fps), "coupled_joints_ignored": emit.rounded(dev)}
-    report["counts"] = {"bodies": len(model.bodies), "joints": len(model.joints),
-                        "coordinates": sum(len(r.coords) for r in rows), "couplings": len(model.couplings),
-                        "muscles": len(mrows), "meshes": len(mesh_bytes),
-                        "path_points": sum(r["path_points"] for r in mrows),
-                        "wrap_surfaces": sum(len(r["wraps"]) for r in mrows),
-                        "sidesites": sum(r["sidesites"] for r in mrows)}
-    inputs = [Path(x) for x in (model_path, motion) if x is not None]
-    read = [model_path, *model.includes, *([Path(motion)] if motion is not None else [])]
-    assets = sorted({model.meshes[m["mesh"]].file for m in report.get("meshes", [])})
-    report["ignored"] = [dict(i, where=strip_dirs(i["where"], inputs)) for i in model.ignored + skipped]
-    report["warnings"] = [strip_dirs(w, inputs) for w in warnings]
-    report["renamed"] = names.renamed
+                            "fps": yaml_number(fps), "coupled_joints_ignored": emit.rounded(coupled_deviation(model, q))}
+    out.ignored = model.ignored + skipped
     report["settings"] = {"specific_tension_Pa": emit.SPECIFIC_TENSION, "tendon_stress_Pa": emit.TENDON_STRESS,
-                          "free_tendon_share": emit.FREE_TENDON_SHARE, "palette": palette, "max_faces": max_faces,
-                          "mesh_edge_m": mesh_edge}
-    report["files"] = sorted(relative_ref(Path(p), out_dir) for p in files)
-    files[str(out_dir / "import_report.json")] = (json.dumps(report, indent=1, sort_keys=True) + "\n").encode()
-    files[str(out_dir / "IMPORT.md")] = import_markdown(report).encode()
-    return ImportResult(files, report, warnings, None, read, assets,
-                        layout={"muscles": mus_dir, "skeleton": skel_path, "pose": pose_path})
+                          "free_tendon_share": emit.FREE_TENDON_SHARE, "max_faces": max_faces, "mesh_edge_m": mesh_edge}
+
+    def complete(r: dict) -> None:
+        mrows = r["muscles"]
+        r["counts"] = {"bodies": len(model.bodies), "joints": len(model.joints),
+                       "coordinates": sum(len(x.coords) for x in rows), "couplings": len(model.couplings),
+                       "muscles": len(mrows), "meshes": len(mesh_bytes),
+                       "path_points": sum(x["path_points"] for x in mrows),
+                       "wrap_surfaces": sum(len(x["wraps"]) for x in mrows),
+                       "sidesites": sum(x["sidesites"] for x in mrows)}
+        r["renamed"] = names.renamed
+
+    out.complete = complete
+    return out
 
 
-def probe_poses(skel, motion_q: np.ndarray | None = None) -> np.ndarray:
-    """Coordinates (P, C) of the poses the axes are measured on (:func:`emit.axis_points_for`):
-    the rest pose, AXIS_PROBE_POSES poses with every ranged coordinate uniform in its range
-    (seeded: the same poses every import), and the imported motion's frames ``motion_q``
-    (F, C) as an OpenSim import measures them (:func:`emit.motion_poses`)."""
-    rng = np.random.default_rng(tol.AXIS_PROBE_SEED)
-    q = np.tile(skel.rest_coordinates(), (tol.AXIS_PROBE_POSES + 1, 1))
-    for i, c in enumerate(skel.coordinates):
-        if c.range is not None:
-            q[1:, i] = rng.uniform(c.range[0], c.range[1], size=tol.AXIS_PROBE_POSES)
-    q = skel.couple(q)
-    return q if motion_q is None else np.concatenate([q, emit.motion_poses(skel, motion_q)[1:]])
-
-
-def _rest_length(name: str, path: list, wraps: list, skel, world) -> float:
-    from axdf_cli.importers.emit import rest_path
-
-    return rest_path(name, path, wraps, skel, world)[1]
-
-
-def import_markdown(r: dict) -> str:
+def _intro(r: dict) -> list[str]:
+    """IMPORT.md's opening of a MuJoCo import: source, counts, bone meshes, motion, renames."""
     c = r["counts"]
-    lines = [f"# Import of {r['source']['model']} (`{r['skeleton']}`)", "",
-             f"Source: `{r['source']['model']}` (sha256 `{r['source']['sha256'][:16]}…`), "
+    lines = [f"Source: `{r['source']['model']}` (sha256 `{r['source']['sha256'][:16]}…`), "
              f"MuJoCo model `{r['source']['model_name']}`, by `axdf import mjcf`.", "",
              f"- bodies {c['bodies']}, joints {c['joints']} ({c['couplings']} coupled by joint equalities), "
              f"coordinates {c['coordinates']}, bone meshes {c['meshes']}",
@@ -596,26 +513,4 @@ def import_markdown(r: dict) -> str:
     if r["renamed"]:
         lines += ["Renamed (axdf names use letters, digits, '_', '.', '-'): "
                   + ", ".join(f"{x['kind']} `{x['mjcf']}` → `{x['axdf']}`" for x in r["renamed"]) + ".", ""]
-    lines += axis_markdown(r, f"the rest pose, {tol.AXIS_PROBE_POSES} seeded poses in the joints' ranges"
-                              + (" and the motion's frames" if "motion" in r else ""))
-    lines += ["## Warnings", ""] + ([f"- {w}" for w in r["warnings"]] or ["- none"]) + [""]
-    lines += ["## Not imported", "", "| kind | name | where | why |", "|---|---|---|---|"]
-    lines += [f"| {i['kind']} | {i['name']} | {i['where']} | {i['why']} |" for i in r["ignored"]] or \
-        ["| – | – | – | nothing |"]
-    lines += belly_markdown_mjcf(r) if r["muscles"] else ["", "## Bellies", "", "No muscles."]
-    lines += ["", "## Muscles", "", "| muscle | sites | wrap geoms | rest path (cm) | force (N) | PCSA (cm²) | "
-              "fibres (cm) | free tendon (cm) | belly (cm) | belly Ø (mm) | tendon Ø (mm) | slenderness |",
-              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
-    for m in r["muscles"]:
-        lines.append(f"| {m['muscle']} | {m['path_points']} | {len(m['wraps'])} | {m['rest_path_length'] * 100:.1f} | "
-                     f"{m['force']:.0f} | {m['pcsa_m2'] * 1e4:.2f} | {m['optimal_fiber_length'] * 100:.1f} | "
-                     f"{m['free_tendon'] * 100:.1f} | {m['belly_length'] * 100:.1f} | {m['belly_radius'] * 2e3:.1f} | "
-                     f"{m['tendon_radius'] * 2e3:.1f} | {m['slenderness']:.2f} |")
-    return "\n".join(lines) + "\n"
-
-
-def belly_markdown_mjcf(r: dict) -> list[str]:
-    """The "Bellies" section, with MuJoCo's numbers in the law's words."""
-    lines = belly_markdown(r)
-    return [re.sub(r"optimal fibre length", "optimal fibre length (MuJoCo: lengthrange / range)", x, count=1)
-            for x in lines]
+    return lines

@@ -79,19 +79,19 @@ def read_motion(path: Path | str, *, scale: float | None = None, step: int = 1, 
 
 
 def bvh_skeleton(bvh, scale: float) -> Skeleton:
-    """The skeleton ``axdf import bvh`` writes for ``bvh`` (``bvh.skeleton_doc``), as a
+    """The skeleton ``axdf import bvh`` writes for ``bvh`` (``bvh.bvh_bones``), as a
     :class:`Skeleton` in memory."""
-    from axdf_cli.importers.bvh import skeleton_doc
+    from axdf_cli.importers.bvh import bvh_bones
 
-    doc = skeleton_doc(bvh, "mocap", scale)
-    index = {b["name"]: i for i, b in enumerate(doc["bones"])}
+    bones_in = bvh_bones(bvh, scale)
+    index = {b.name: i for i, b in enumerate(bones_in)}
     bones, coords = [], []
-    for b in doc["bones"]:
-        dofs = tuple(Dof(d["type"], tuple(float(x) for x in d["axis"]), d["coord"]) for d in b.get("dofs", ()))
+    for b in bones_in:
+        dofs = tuple(Dof(d.type, tuple(float(x) for x in d.axis), d.coord) for d in b.dofs)
         coords.extend(Coordinate(d.coord, d.type) for d in dofs)
-        bones.append(Bone(b["name"], index[b["parent"]] if "parent" in b else -1,
-                          tuple(float(x) for x in b.get("offset", (0.0, 0.0, 0.0))),
-                          tuple(float(x) for x in b.get("orient", (0.0, 0.0, 0.0))), dofs))
+        bones.append(Bone(b.name, index[b.parent] if b.parent is not None else -1,
+                          tuple(float(x) for x in (b.offset or (0.0, 0.0, 0.0))),
+                          tuple(float(x) for x in (b.orient or (0.0, 0.0, 0.0))), dofs))
     return Skeleton("mocap", tuple(bones), tuple(coords), bvh.source)
 
 

@@ -1,8 +1,31 @@
-"""``axdf import osim``: an OpenSim model (+ motion, + controls) → axdf files, in memory.
+"""``axdf import osim``: an OpenSim model (+ motion, + controls) → the neutral import model.
 
-:func:`build_import` reads and checks every input first and returns an :class:`ImportResult`
-holding the bytes of every output file; the CLI writes them (atomically) only when all
-inputs were good, so bad input writes nothing.
+:func:`read_import` reads and checks every input and fills an
+:class:`~axdf_cli.importers.model.ImportedModel`, which
+:func:`~axdf_cli.importers.emit.build_import` turns into the bytes of every output file; the
+CLI writes them (atomically) only when all inputs were good, so bad input writes nothing.
+
+Conversions (OpenSim → axdf)
+----------------------------
+- World: a root bone ``ground`` with ``orient: [90, -90, 0]`` turns OpenSim's Y-up, X-forward
+  ground into axdf's Z-up world; every body keeps its own OpenSim frame, so path points and
+  meshes are copied unchanged.
+- Joints: parent offset frame → ``offset``/``orient``; child offset frame →
+  ``post_offset``/``post_orient``; transform axes → ordered DOFs, translations first (Simbody
+  sums them in the parent frame), then rotations (a body-fixed sequence). Axes whose function
+  is the constant 0 are dropped; an identity ``LinearFunction`` of a coordinate of the
+  axis's own type becomes a plain DOF; anything else a coupled DOF with ``function``.
+- Coupled coordinates: the dependent coordinate of a ``CoordinateCouplerConstraint`` is
+  written ``follows: {coord: INDEPENDENT, function: scale · f}`` (no default, no range: the
+  skeleton sets it from the coordinate it follows), its function converted like a DOF's
+  (input in the independent coordinate's units, output in its own).
+- Units: rotational coordinates and rotation outputs rad → degrees. A function
+  ``y = f(x)`` in OpenSim units becomes ``y' = k_out · f(k_in · x')`` with
+  ``k_in = π/180`` for a rotational coordinate and ``k_out = 180/π`` for a rotation axis:
+  spline knots x / k_in and values y · k_out, linear slope · k_in · k_out, polynomial
+  c_i · k_out · k_in^i, multiplier scales unchanged (its inner function converted).
+- Muscles: path points, wrap surfaces and Hill numbers as the model gives them; the belly law
+  and the axis control points are the emitter's (:func:`~axdf_cli.importers.emit.belly_doc`).
 
 Motion files (``.mot``/``.sto``) and the angle-unit rule
 --------------------------------------------------------
@@ -38,7 +61,6 @@ holds the nearest key, as every axdf pose does) and clipped to 0..1 (warning whe
 """
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 
@@ -46,19 +68,21 @@ import numpy as np
 
 from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError, Mark
-from axdf_cli.formats.ply import PlyWriter
-from axdf_cli.importers import emit
-from axdf_cli.specs import RefPolicy, parse_skeleton_text
 from axdf_cli.fileio.atomic import sha256_file
-from axdf_cli.fileio.outputs import UniqueFiles
 from axdf_cli.fileio.yamlio import NAME_ALLOWED, check_name, is_name
-from axdf_cli.importers.osim import Coordinate as OsimCoordinate
-from axdf_cli.importers.osim import Model, load_osim
-from axdf_cli.importers.result import (ImportResult, axis_markdown, belly_markdown, relative_ref, safe_name,
-                                      strip_dirs, yaml_number)
+from axdf_cli.importers import emit
+from axdf_cli.importers.model import Bone, Coordinate, Dof, Hill, ImportedModel, Motion, Muscle, Rules
+from axdf_cli.importers.osim import load_osim
+from axdf_cli.importers.osim_model import Axis, FConst, FLinear, FMult, FPoly, FSpline, Model
+from axdf_cli.importers.osim_model import Coordinate as OsimCoordinate
+from axdf_cli.importers.osim_model import Muscle as OsimMuscle
+from axdf_cli.importers.result import SIDE_SUFFIX, safe_name, strip_dirs, yaml_number
 from axdf_cli.importers.storage import Table, read_storage
 from axdf_cli.importers.vtp import read_vtp
+from axdf_cli.model.jiggle import JiggleSpec
+from axdf_cli.model.skeleton import Spline
 
+DEG = 180.0 / math.pi
 #: The angle-unit rule's thresholds (see module doc).
 RADIAN_BOUND = 2.0 * math.pi
 MAX_RADIAN_STEP = 0.35
@@ -173,7 +197,7 @@ def _axdf_function(model: Model, c: str):
     if not isinstance(coord, OsimCoordinate):
         return coord.function
     k_in = math.pi / 180.0 if model.coordinates[coord.follows].type == "rotation" else 1.0
-    return emit.convert_function(coord.function, k_in, emit.DEG if coord.type == "rotation" else 1.0)
+    return convert_function(coord.function, k_in, DEG if coord.type == "rotation" else 1.0)
 
 
 def followed_columns(model: Model, motion: Table, pairs: list[tuple[int, str]], degrees: bool,
@@ -205,8 +229,11 @@ def followed_columns(model: Model, motion: Table, pairs: list[tuple[int, str]], 
     return out
 
 
-def pose_doc(model: Model, motion: Table, controls: Table | None, pose_name: str, skeleton_ref: str,
-             fps: float | None, muscle_names: list[str], report: dict, warnings: list[str]) -> dict:
+def motion_of(model: Model, motion: Table, controls: Table | None, pose_name: str, fps: float | None,
+              muscle_names: list[str], report: dict, warnings: list[str]) -> Motion:
+    """The motion of a ``.mot``/``.sto`` table (+ controls) on ``model``: its coordinates'
+    columns in axdf units, the angle-unit rule, resampling at ``fps``; what it did goes into
+    ``report`` and ``warnings``."""
     pairs, skipped = coordinate_columns(motion, model)
     rot = [i for i, c in pairs if model.coordinates[c].type == "rotation" and not _coupled(model, c)]
     degrees, warn = angle_unit(motion, rot)
@@ -225,8 +252,8 @@ def pose_doc(model: Model, motion: Table, controls: Table | None, pose_name: str
                 v = math.degrees(v)
             row[c] = v
         keys[f] = row
-    doc = {"pose": pose_name, "skeleton": skeleton_ref, "fps": yaml_number(fps), "frames": [0, len(times) - 1],
-           "interpolation": "linear", "keys": keys}
+    out = Motion(pose_name, fps, len(times), keys, f"Imported from {Path(motion.source).name} by `axdf import osim`.",
+                 mark=motion.mark(len(motion.time) - 1), remedy="a lower --fps or a shorter motion")
     report["motion"] = {"file": Path(motion.source).name, "sha256": sha256_file(Path(motion.source)),
                         "rows": int(len(motion.time)), "frames": int(len(times)), "fps": yaml_number(fps),
                         "resampled": not direct, "rotations_read_as": "degrees" if degrees else "radians",
@@ -265,22 +292,146 @@ def pose_doc(model: Model, motion: Table, controls: Table | None, pose_name: str
             warnings.append(f"{controls.source}: the controls' time span "
                             f"[{controls.time[0]}, {controls.time[-1]}] misses every pose frame")
         if act:
-            doc["activation"] = {n: act[n] for n in muscle_names if n in act}
+            out.activation = {n: act[n] for n in muscle_names if n in act}
         report["controls"] = {"file": Path(controls.source).name, "sha256": sha256_file(Path(controls.source)),
                               "muscles": [n for _, n in cols], "ignored_columns": ignored, "clipped_values": clipped,
                               "keyed_frames": [int(frames[0]), int(frames[-1])] if len(frames) else []}
-    return doc
+    return out
 
 
-def pose_coordinates(skel, pdoc: dict) -> np.ndarray:
-    """The coordinates (F, C) of every frame of a pose document on ``skel`` (keyed ones as
-    written, the others at rest, coupled ones following): what ``axdf run`` samples there."""
-    q = np.broadcast_to(skel.rest_coordinates(), (len(pdoc["keys"]), len(skel.coordinates))).copy()
-    cidx = skel.coord_index
-    for f, row in enumerate(pdoc["keys"].values()):
-        for c, v in row.items():
-            q[f, cidx[c]] = v
-    return skel.couple(q)
+def motion_doc(model: Model, motion: Table, controls: Table | None, pose_name: str, skeleton_ref: str,
+               fps: float | None, muscle_names: list[str], report: dict, warnings: list[str]) -> dict:
+    """The pose document of a motion on ``model`` (:func:`motion_of`), as ``axdf import osim`` writes it."""
+    return emit.pose_doc(motion_of(model, motion, controls, pose_name, fps, muscle_names, report, warnings),
+                         skeleton_ref)
+
+
+# ----------------------------------------------------------------------------- units and skeleton
+
+
+def convert_function(fn, k_in: float, k_out: float):
+    """A function of OpenSim units → the same function of axdf units (see module doc)."""
+    if isinstance(fn, FConst):
+        return FConst(fn.value * k_out)
+    if isinstance(fn, FLinear):
+        return FLinear(fn.slope * k_in * k_out, fn.intercept * k_out)
+    if isinstance(fn, FPoly):
+        return FPoly(tuple(c * k_out * k_in ** i for i, c in enumerate(fn.coefficients)))
+    if isinstance(fn, Spline):
+        return FSpline(fn.x / k_in, fn.y * k_out, fn.kind)
+    if isinstance(fn, FMult):
+        return FMult(fn.scale, convert_function(fn.function, k_in, k_out))
+    raise TypeError(f"unknown function {fn!r}")
+
+
+def _is_zero(fn) -> bool:
+    return (isinstance(fn, FConst) and fn.value == 0.0) or (isinstance(fn, FMult) and (fn.scale == 0.0 or _is_zero(fn.function)))
+
+
+def _deg(v) -> list[float]:
+    return [x * DEG for x in v]
+
+
+def _dof(model: Model, a: Axis) -> Dof | None:
+    """A transform axis as a DOF: None for the constant 0; a plain DOF for the identity of a
+    coordinate of its own type; else the axis's function in axdf units."""
+    if _is_zero(a.function):
+        return None
+    coord = a.coord if a.coord is not None and not isinstance(a.function, FConst) else None
+    d = Dof(a.type, list(a.axis), coord)
+    if coord is not None:
+        ctype = model.coordinates[coord].type
+        if ctype == a.type and isinstance(a.function, FLinear) and a.function.slope == 1.0 and a.function.intercept == 0.0:
+            return d
+        k_in = math.pi / 180.0 if ctype == "rotation" else 1.0
+    else:
+        k_in = 1.0
+    d.function = emit.function_doc(convert_function(a.function, k_in, DEG if a.type == "rotation" else 1.0))
+    return d
+
+
+def coordinates(model: Model) -> list[Coordinate]:
+    """The model's coordinates in axdf units; a coupler's dependent follows its independent one."""
+    out = []
+    for c in model.coordinates.values():
+        k = DEG if c.type == "rotation" else 1.0
+        if c.follows is not None:  # a CoordinateCouplerConstraint's dependent: no default, no range of its own
+            k_in = math.pi / 180.0 if model.coordinates[c.follows].type == "rotation" else 1.0
+            out.append(Coordinate(c.name, c.type, follows=c.follows,
+                                  function=emit.function_doc(convert_function(c.function, k_in, k))))
+            continue
+        out.append(Coordinate(c.name, c.type, c.default * k,
+                              (c.range[0] * k, c.range[1] * k) if c.range is not None else None))
+    return out
+
+
+def bones(model: Model) -> list[Bone]:
+    """``ground`` (OpenSim's Y-up, X-forward ground in axdf's Z-up world), then a bone per joint's child body."""
+    out = [Bone("ground", orient=[90.0, -90.0, 0.0])]
+    for j in model.joints:
+        b = Bone(j.child.body, j.parent.body, list(j.parent.translation), _deg(j.parent.orientation),
+                 [d for d in (_dof(model, a) for a in j.axes) if d is not None])
+        if not j.child.is_identity:
+            b.post_offset, b.post_orient = list(j.child.translation), _deg(j.child.orientation)
+        out.append(b)
+    return out
+
+
+# ----------------------------------------------------------------------------- muscles
+
+#: Secondary motion (``jiggle:``, README "Jiggle") of the calf's and the thigh's muscles, by
+#: name without the side suffix (OpenSim's gait2392/gait2354 names). Soft tissue of the leg
+#: rings at 10-50 Hz after a heel strike (Wakeling & Nigg 2001, skin-mounted accelerometers);
+#: animators' jiggle sits lower (a few Hz: a slow, visible sway). The bottom of the measured
+#: range still shows at the library's 60 fps (6 frames per cycle; above half the frame rate a
+#: ring aliases) and keeps a hard landing's sag to about 2 cm (the amplitude of a stop goes as
+#: speed / (2 pi f)). The thigh's bellies are heavier: a little lower. Relaxed, damping 0.2
+#: lets a stop ring for about two visible cycles (each extremum 0.53 of the last). A tensed
+#: muscle rings faster and dies out sooner (frequency and damping both rise with muscle force).
+JIGGLE_CALF = JiggleSpec(10.0, 0.2, tensed_frequency=16.0, tensed_damping_ratio=0.45)
+JIGGLE_THIGH = JiggleSpec(8.0, 0.2, tensed_frequency=14.0, tensed_damping_ratio=0.45)
+JIGGLE = {**{m: JIGGLE_CALF for m in ("med_gas", "lat_gas", "soleus", "tib_ant", "tib_post", "per_long",
+                                      "per_brev", "per_tert", "ext_dig", "ext_hal", "flex_dig", "flex_hal")},
+          **{m: JIGGLE_THIGH for m in ("rect_fem", "vas_med", "vas_int", "vas_lat", "bifemlh", "bifemsh",
+                                       "semimem", "semiten", "sar", "grac", "add_long", "add_brev", "add_mag1",
+                                       "add_mag2", "add_mag3")}}
+
+
+def muscle(model: Model, m: OsimMuscle, source: str) -> Muscle:
+    """An OpenSim muscle: every path point (moving ones with their functions in axdf units,
+    conditional ones with their ``active`` range), its wrap surfaces (copied per muscle with the
+    path wrap's range and method), its Hill numbers and the calf's and thigh's jiggle."""
+    from axdf_cli.model.paths import Moving, PathPoint, WrapSurface
+
+    path = []
+    for p in m.points:
+        moving = None
+        if p.moving is not None:
+            if p.frame is not None:
+                raise InputError(p.mark, f"moving point {p.name!r} of {m.name} is attached to an offset frame",
+                                 "moving points attached to a body")
+            moving = tuple(None if a is None else
+                           Moving(a[0], convert_function(a[1], math.pi / 180.0 if model.coordinates[a[0]].type
+                                                         == "rotation" else 1.0, 1.0)) for a in p.moving)
+        active = None
+        if p.condition is not None:
+            coord, lo, hi = p.condition
+            k = DEG if model.coordinates[coord].type == "rotation" else 1.0
+            active = (coord, lo * k, hi * k)
+        path.append(PathPoint(p.body, tuple(p.location), moving, active))
+    wraps = []
+    for pw in m.wraps:
+        w = model.wrap_objects[pw.wrap]
+        wraps.append(WrapSurface(w.name, w.body, w.shape, tuple(w.size) + (0.0,) * (3 - len(w.size)),
+                                 tuple(w.translation), tuple(_deg(w.rotation)), w.quadrant, pw.method,
+                                 tuple(pw.range), w.active))
+    row = {"type": m.type, "conditional": [p.name for p in m.points if p.kind == "conditional"],
+           "conditional_inactive_at_rest": [p.name for p in m.points if not p.active_at_rest],
+           "moving": [p.name for p in m.points if p.kind == "moving"]}
+    return Muscle(m.name, path, wraps, Hill(m.max_isometric_force, m.optimal_fiber_length, m.tendon_slack_length,
+                                            m.pennation_angle),
+                  f"{m.name}: imported from {source} ({m.type}) by `axdf import osim`.", row,
+                  JIGGLE.get(SIDE_SUFFIX.sub("", m.name)))
 
 
 # ----------------------------------------------------------------------------- meshes
@@ -294,12 +445,12 @@ def _find_mesh(model_path: Path, name: str) -> Path | None:
     return None
 
 
-def body_meshes(model: Model, model_path: Path, warnings: list[str], report: dict) -> dict[str, bytes]:
-    """Body → binary PLY bytes (its Mesh geometry merged, scale factors baked in)."""
+def vtp_meshes(model: Model, model_path: Path, warnings: list[str], report: dict) -> dict[str, bytes]:
+    """Body → binary PLY bytes (its ``.vtp`` Mesh geometry merged, scale factors baked in)."""
     out = {}
     missing = []
     for body in model.bodies.values():
-        vs, ts, base = [], [], 0
+        parts = []
         for ref in body.meshes:
             p = _find_mesh(model_path, ref.file)
             if p is None:
@@ -310,11 +461,9 @@ def body_meshes(model: Model, model_path: Path, warnings: list[str], report: dic
                                 "why": "only .vtp geometry is converted"})
                 continue
             v, t = read_vtp(p)
-            vs.append(v * np.asarray(ref.scale))
-            ts.append(t + base)
-            base += len(v)
-        if vs:
-            out[body.name] = PlyWriter(np.concatenate(ts)).encode(np.concatenate(vs))
+            parts.append((v * np.asarray(ref.scale), t))
+        if parts:
+            out[body.name] = emit.body_ply(parts)
     for m in missing:
         warnings.append(f"{m['where']}: mesh {m['mesh_file']!r} of body {m['body']} "
                         f"{m.get('why', 'not found beside the model or in Geometry/')}; skipped")
@@ -322,33 +471,17 @@ def body_meshes(model: Model, model_path: Path, warnings: list[str], report: dic
     return out
 
 
-# ----------------------------------------------------------------------------- all
+# ----------------------------------------------------------------------------- the model
+
+RULES = Rules("axdf import osim", columns=("muscle", "path_points", "control_points", "rest_path", "pcsa", "fibres",
+                                          "free_tendon", "belly", "belly_d", "tendon_d", "slenderness"))
 
 
-def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | None = None,
-                 motion: Path | str | None = None, controls: Path | str | None = None,
-                 skeleton_out: Path | str | None = None, muscles_out: Path | str | None = None,
-                 pose_out: Path | str | None = None, meshes_out: Path | str | None = None,
-                 pose_name: str | None = None, fps: float | None = None, meshes: bool = True,
-                 palette: str = "anatomical") -> ImportResult:
-    """Read ``model_path`` (+ motion, controls) and build every output file's bytes.
-
-    Layout (defaults under ``out_dir``): ``skeletons/NAME.yaml``, ``skeletons/meshes/NAME/*.ply``,
-    ``muscles/MUSCLE.yaml``, ``POSE.yaml`` (when a motion is given), ``import_report.json``
-    and ``IMPORT.md``. Paths written inside the files are relative to the file holding them.
-    ``palette``: muscle colours, a key of :data:`emit.PALETTES`.
-    """
-    model_path = Path(model_path)
-    out_dir = Path(out_dir)
-    if controls is not None and motion is None:
-        raise InputError(None, "--controls needs --motion", "give the motion the controls belong to")
-    model = load_osim(model_path)
-    name = name or safe_name(model.name)
-    pname = pose_name or (safe_name(Path(motion).stem) if motion is not None else None)
+def _check_names(model: Model, name: str | None, pname: str | None) -> None:
+    """Names become axdf names in files that do not exist yet: checked here, at the .osim line."""
     for what, v in (("--name", name), ("--pose-name", pname)):
         if v is not None and not is_name(v):
             raise InputError(None, f"{what} {v!r}", NAME_ALLOWED)
-    # names become axdf names in files that do not exist yet: check them here, at the .osim line
     for what, items in (("body", model.bodies.values()), ("coordinate", model.coordinates.values()),
                         ("wrap object", model.wrap_objects.values())):
         for item in items:
@@ -360,86 +493,68 @@ def build_import(model_path: Path | str, out_dir: Path | str, *, name: str | Non
     for m in model.muscles:
         if not is_name(m.name):
             raise InputError(m.mark, f"muscle name {m.name!r}", "names use letters, digits, '_', '.', '-'")
+
+
+def read_import(model_path: Path | str, *, name: str | None = None, motion: Path | str | None = None,
+                controls: Path | str | None = None, pose_name: str | None = None, fps: float | None = None,
+                meshes: bool = True) -> ImportedModel:
+    """``axdf import osim``: an OpenSim model (+ motion, + controls) read and checked into the
+    neutral model, every input read before anything is emitted."""
+    model_path = Path(model_path)
+    if controls is not None and motion is None:
+        raise InputError(None, "--controls needs --motion", "give the motion the controls belong to")
+    model = load_osim(model_path)
+    name = name or safe_name(model.name)
+    pname = pose_name or (safe_name(Path(motion).stem) if motion is not None else None)
+    _check_names(model, name, pname)
     motion_t = read_storage(motion) if motion is not None else None
     controls_t = read_storage(controls) if controls is not None else None
-
-    skel_path = Path(skeleton_out) if skeleton_out else out_dir / "skeletons" / f"{name}.yaml"
-    mesh_dir = Path(meshes_out) if meshes_out else skel_path.parent / "meshes" / name
-    mus_dir = Path(muscles_out) if muscles_out else out_dir / "muscles"
-    pose_path = (Path(pose_out) if pose_out else out_dir / f"{pname}.yaml") if motion is not None else None
-
     warnings: list[str] = [f"{i['where']}: muscle {i['name']} skipped: {i['why']}" for i in model.ignored
                            if i["kind"] == "muscle"]
     report: dict = {"source": {"model": model_path.name, "sha256": sha256_file(model_path), "model_name": model.name},
                     "tool": "axdf import osim", "skeleton": name}
-    files: dict[str, bytes] = UniqueFiles()  # a path twice: exit 2, never one file lost
-    mesh_bytes = body_meshes(model, model_path, warnings, report) if meshes else {}
-    mesh_refs = {}
-    for body, data in sorted(mesh_bytes.items()):
-        p = mesh_dir / f"{body}.ply"
-        files[str(p)] = data
-        mesh_refs[body] = relative_ref(p, skel_path.parent)
-
-    sdoc = emit.skeleton_doc(model, name, mesh_refs)
-    header = (f"Imported from {model_path.name} (OpenSim model {model.name!r}) by `axdf import osim`.\n"
-              "Regenerate with the importer rather than editing by hand.")
-    text = emit.dump_yaml(sdoc, header)
-    files[str(skel_path)] = text.encode()
-    # the file as axdf will read it back; its mesh references name files this import writes
-    skel = parse_skeleton_text(text, skel_path, RefPolicy(allow_outside=True))
-    world = emit.rest_world(skel)
-
-    motion_q = None
+    mesh_bytes = vtp_meshes(model, model_path, warnings, report) if meshes else {}
+    inputs = [Path(x) for x in (model_path, motion, controls) if x is not None]
+    out = ImportedModel(name, f"Imported from {model_path.name} (OpenSim model {model.name!r}) by `axdf import osim`.\n"
+                              "Regenerate with the importer rather than editing by hand.",
+                        bones(model), RULES, coordinates(model), dict(sorted(mesh_bytes.items())),
+                        report=report, warnings=warnings, ignored=model.ignored, inputs=inputs, strip=inputs,
+                        intro=_intro, poses="the rest pose and the motion's frames")
     if motion_t is not None:
-        pdoc = pose_doc(model, motion_t, controls_t, pname, relative_ref(skel_path, pose_path.parent), fps,
-                        [m.name for m in model.muscles], report, warnings)
-        text = emit.dump_yaml(pdoc, f"Imported from {Path(motion).name} by `axdf import osim`.").encode()
-        if len(text) > tol.YAML_MAX_BYTES:
-            raise InputError(motion_t.mark(len(motion_t.time) - 1),
-                             f"the pose would be {len(text)} bytes ({len(pdoc['keys'])} frames)",
-                             f"axdf reads YAML files up to {tol.YAML_MAX_BYTES} bytes; a lower --fps or a shorter motion")
-        files[str(pose_path)] = text
-        motion_q = pose_coordinates(skel, pdoc)
-    rows = []
-    for m in model.muscles:
-        mdoc, row = emit.muscle_doc(m, skel, world, model, palette, motion_q)
-        rows.append(row)
-        files[str(mus_dir / f"{m.name}.yaml")] = emit.dump_yaml(mdoc, f"{m.name}: imported from {model_path.name} "
-                                                                      f"({m.type}) by `axdf import osim`.").encode()
-    report["muscles"] = rows
+        out.motion = motion_of(model, motion_t, controls_t, pname, fps, [m.name for m in model.muscles], report,
+                               warnings)
+    out.muscles = [muscle(model, m, model_path.name) for m in model.muscles]
     coupled = [{"coordinate": c.name, "follows": c.follows, "constraint": c.coupler}
                for c in model.coordinates.values() if c.follows is not None]
     if coupled:
         report["coupled_coordinates"] = coupled
-    report["counts"] = {"bodies": len(model.bodies), "joints": len(model.joints), "coordinates": len(model.coordinates),
-                        "muscles": len(model.muscles), "meshes": len(mesh_bytes),
-                        "path_points": sum(r["path_points"] for r in rows),
-                        "conditional_path_points": sum(len(r["conditional"]) for r in rows),
-                        "conditional_inactive_at_rest": sum(len(r["conditional_inactive_at_rest"]) for r in rows),
-                        "moving_path_points": sum(len(r["moving"]) for r in rows),
-                        "wrap_surfaces": sum(len(r["wraps"]) for r in rows)}
-    inputs = [Path(x) for x in (model_path, motion, controls) if x is not None]
-    report["ignored"] = [dict(i, where=strip_dirs(i["where"], inputs)) for i in model.ignored]
-    report["warnings"] = [strip_dirs(w, inputs) for w in warnings]
-    for mm in report.get("missing_meshes", []):
-        mm["where"] = strip_dirs(mm["where"], inputs)
     report["settings"] = {"specific_tension_Pa": emit.SPECIFIC_TENSION, "tendon_stress_Pa": emit.TENDON_STRESS,
                           "free_tendon_share": emit.FREE_TENDON_SHARE,
                           "belly_profile": [list(x) for x in emit.BELLY_PROFILE],
                           "tendon_sections": list(emit.TENDON_SECTIONS),
                           "origin_tendon_share": emit.ORIGIN_TENDON_SHARE,
-                          "max_tendon_fraction": emit.MAX_TENDON_FRACTION, "palette": palette}
-    report["files"] = sorted(relative_ref(Path(p), out_dir) for p in files)
-    files[str(out_dir / "import_report.json")] = (json.dumps(report, indent=1, sort_keys=True) + "\n").encode()
-    files[str(out_dir / "IMPORT.md")] = import_markdown(report).encode()
-    return ImportResult(files, report, warnings, model, inputs,
-                        layout={"muscles": mus_dir, "skeleton": skel_path, "pose": pose_path})
+                          "max_tendon_fraction": emit.MAX_TENDON_FRACTION}
+
+    def complete(r: dict) -> None:
+        rows = r["muscles"]
+        r["counts"] = {"bodies": len(model.bodies), "joints": len(model.joints),
+                       "coordinates": len(model.coordinates), "muscles": len(model.muscles),
+                       "meshes": len(mesh_bytes), "path_points": sum(x["path_points"] for x in rows),
+                       "conditional_path_points": sum(len(x["conditional"]) for x in rows),
+                       "conditional_inactive_at_rest": sum(len(x["conditional_inactive_at_rest"]) for x in rows),
+                       "moving_path_points": sum(len(x["moving"]) for x in rows),
+                       "wrap_surfaces": sum(len(x["wraps"]) for x in rows)}
+        for mm in r.get("missing_meshes", []):
+            mm["where"] = strip_dirs(mm["where"], inputs)
+
+    out.complete = complete
+    return out
 
 
-def import_markdown(r: dict) -> str:
+def _intro(r: dict) -> list[str]:
+    """IMPORT.md's opening of an OpenSim import: source, counts, motion, controls, couplers."""
     c = r["counts"]
-    lines = [f"# Import of {r['source']['model']} (`{r['skeleton']}`)", "",
-             f"Source: `{r['source']['model']}` (sha256 `{r['source']['sha256'][:16]}…`), "
+    lines = [f"Source: `{r['source']['model']}` (sha256 `{r['source']['sha256'][:16]}…`), "
              f"OpenSim model `{r['source']['model_name']}`.", "",
              f"- bodies {c['bodies']}, joints {c['joints']}, coordinates {c['coordinates']}, meshes {c['meshes']}",
              f"- muscles {c['muscles']} from {c['path_points']} path points "
@@ -459,18 +574,4 @@ def import_markdown(r: dict) -> str:
                   "follows, as OpenSim's constraint does; a motion's column of one is checked, not read):", ""]
         lines += [f"- `{c['coordinate']}` follows `{c['follows']}` (CoordinateCouplerConstraint `{c['constraint']}`)"
                   for c in r["coupled_coordinates"]] + [""]
-    lines += axis_markdown(r, "the rest pose and the motion's frames")
-    lines += ["## Warnings", ""] + ([f"- {w}" for w in r["warnings"]] or ["- none"]) + [""]
-    lines += ["## Not imported", "", "| kind | name | where | why |", "|---|---|---|---|"]
-    lines += [f"| {i['kind']} | {i['name']} | {i['where']} "
-              f"| {i['why']} |" for i in r["ignored"]] or ["| – | – | – | nothing |"]
-    lines += belly_markdown(r)
-    lines += ["", "## Muscles", "", "| muscle | path points | control points | rest path (cm) | PCSA (cm²) | "
-              "fibres (cm) | free tendon (cm) | belly (cm) | belly Ø (mm) | tendon Ø (mm) | slenderness |",
-              "|---|---|---|---|---|---|---|---|---|---|---|"]
-    for m in r["muscles"]:
-        lines.append(f"| {m['muscle']} | {m['path_points']} | {m['control_points']} | {m['rest_path_length'] * 100:.1f} | "
-                     f"{m['pcsa_m2'] * 1e4:.2f} | {m['optimal_fiber_length'] * 100:.1f} | {m['free_tendon'] * 100:.1f} | "
-                     f"{m['belly_length'] * 100:.1f} | {m['belly_radius'] * 2e3:.1f} | {m['tendon_radius'] * 2e3:.1f} | "
-                     f"{m['slenderness']:.2f} |")
-    return "\n".join(lines) + "\n"
+    return lines

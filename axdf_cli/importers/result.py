@@ -1,9 +1,9 @@
-"""What every model importer (``axdf import osim``, ``axdf import mjcf``) returns, the small
-rules for what goes into the files it writes (references between output files are relative,
-no absolute path or directory of an input appears, names are axdf names, whole numbers are
-written as integers), and the part of IMPORT.md both write: the bellies.
+"""What every import returns (:class:`ImportResult`), the small rules for what goes into the
+files it writes (references between output files are relative, no absolute path or directory
+of an input appears, names are axdf names, whole numbers are written as integers), and the
+text of IMPORT.md (:func:`import_markdown`).
 
-The importers build their files in memory (:class:`ImportResult`); the CLI hands them to
+Imports build their files in memory; the CLI hands them to
 ``axdf_cli.cli.importer.write_imported``, which checks and writes them (the output rule).
 """
 from __future__ import annotations
@@ -16,16 +16,15 @@ from pathlib import Path
 
 import numpy as np
 
-from axdf_cli.importers import emit
-
+#: Side suffixes: a muscle and its mirror image share their colour and their belly note.
+SIDE_SUFFIX = re.compile(r"_[lr]$")
 
 
 @dataclass
 class ImportResult:
     files: dict[str, bytes]  # output path (as given by the layout) -> bytes
     report: dict
-    warnings: list[str] = field(default_factory=list)
-    model: object | None = None  # the importer's model (OpenSim's Model; None for MuJoCo)
+    warnings: list[str] = field(default_factory=list)  # for the user (stderr; BVH: the unit guess, stdout)
     inputs: list[Path] = field(default_factory=list)  # the model, its includes, the motion: listed in the manifest
     assets: list[Path] = field(default_factory=list)  # other files read (bone meshes): never an output either
     layout: dict = field(default_factory=dict)  # "muscles", "skeleton", "pose": where the import put them (or None)
@@ -115,22 +114,24 @@ BELLY_NOTES = {
 
 def belly_note(muscle: str) -> str | None:
     """The anatomical reason a muscle's belly is short or squat, or None if none is recorded."""
-    base = emit.SIDE_SUFFIX.sub("", muscle)
+    base = SIDE_SUFFIX.sub("", muscle)
     for key, note in BELLY_NOTES.items():
         if base == key or (key.endswith("_") and base.startswith(key)) or base.startswith(key):
             return note
     return None
 
 
-def belly_markdown(r: dict) -> list[str]:
-    """IMPORT.md's "Bellies" section: the law, the library's slenderness, and every short or
-    squat belly with its numbers and reason."""
+def belly_markdown(r: dict, fibre_words: str = "optimal fibre length") -> list[str]:
+    """IMPORT.md's "Bellies" section: the law (its optimal fibre length named ``fibre_words``),
+    the library's slenderness, and every short or squat belly with its numbers and reason."""
     ms = r["muscles"]
+    if not ms:
+        return ["", "## Bellies", "", "No muscles."]
     sl = [m["slenderness"] for m in ms]
     st = r["settings"]
     lines = ["", "## Bellies", "",
              f"Law (README, \"The muscle model\", Imported bellies): PCSA = max isometric force / {st['specific_tension_Pa'] / 1e6:g} MPa; "
-             "belly volume = PCSA × optimal fibre length; free tendon = "
+             f"belly volume = PCSA × {fibre_words}; free tendon = "
              f"{st['free_tendon_share']:g} × tendon slack length (the rest of it is aponeurosis, inside the belly), "
              "shortened where the belly would not hold its fibres (optimal fibre length × cos pennation); "
              "belly length = rest path − free tendon; tendon Ø from max force at "
@@ -162,3 +163,40 @@ def belly_markdown(r: dict) -> list[str]:
         lines.append(f"- **{m['muscle']}** (slenderness {m['slenderness']:.2f}"
                      f"{', squat' if m['slenderness'] < SQUAT_BELLY else ''}): " + "; ".join(why) + ".")
     return lines
+
+
+#: IMPORT.md's muscle table: column → (header, the report row's key, factor, format); a list
+#: value is counted, a factor of None writes the value as it is.
+COLUMNS = {
+    "muscle": ("muscle", "muscle", None, ""), "path_points": ("path points", "path_points", None, ""),
+    "sites": ("sites", "path_points", None, ""), "wrap_geoms": ("wrap geoms", "wraps", None, ""),
+    "control_points": ("control points", "control_points", None, ""), "force": ("force (N)", "force", 1, ".0f"),
+    "rest_path": ("rest path (cm)", "rest_path_length", 100, ".1f"), "pcsa": ("PCSA (cm²)", "pcsa_m2", 1e4, ".2f"),
+    "fibres": ("fibres (cm)", "optimal_fiber_length", 100, ".1f"), "belly": ("belly (cm)", "belly_length", 100, ".1f"),
+    "free_tendon": ("free tendon (cm)", "free_tendon", 100, ".1f"), "belly_d": ("belly Ø (mm)", "belly_radius", 2e3, ".1f"),
+    "tendon_d": ("tendon Ø (mm)", "tendon_radius", 2e3, ".1f"), "slenderness": ("slenderness", "slenderness", 1, ".2f"),
+}
+
+
+def _cell(m: dict, key: str, factor, fmt: str) -> str:
+    v = m[key]
+    if isinstance(v, list):
+        v = len(v)
+    return f"{v}" if factor is None else f"{v * factor:{fmt}}"
+
+
+def import_markdown(r: dict, intro: list[str], poses: str, rules) -> str:
+    """IMPORT.md of a model import: its title and source, the format's ``intro`` lines, the
+    muscles whose axes were raised over ``poses``, warnings, what was not imported, the
+    bellies and the muscle table (``rules.columns``, ``rules.fibre_words``)."""
+    lines = [f"# Import of {r['source']['model']} (`{r['skeleton']}`)", ""] + intro
+    lines += axis_markdown(r, poses)
+    lines += ["## Warnings", ""] + ([f"- {w}" for w in r["warnings"]] or ["- none"]) + [""]
+    lines += ["## Not imported", "", "| kind | name | where | why |", "|---|---|---|---|"]
+    lines += [f"| {i['kind']} | {i['name']} | {i['where']} | {i['why']} |" for i in r["ignored"]] or \
+        ["| – | – | – | nothing |"]
+    lines += belly_markdown(r, rules.fibre_words)
+    cols = [COLUMNS[c] for c in rules.columns]
+    lines += ["", "## Muscles", "", "| " + " | ".join(c[0] for c in cols) + " |", "|" + "---|" * len(cols)]
+    lines += ["| " + " | ".join(_cell(m, *c[1:]) for c in cols) + " |" for m in r["muscles"]]
+    return "\n".join(lines) + "\n"

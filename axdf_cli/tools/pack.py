@@ -15,7 +15,7 @@ import numpy as np
 from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError
 from axdf_cli.importers import emit
-from axdf_cli.importers.transfer import UniqueFiles, file_doc, load_muscle_files
+from axdf_cli.tools.transfer import UniqueFiles, file_doc, load_muscle_files
 from axdf_cli.model import contact, pack
 from axdf_cli.model.muscle import MuscleModel
 from axdf_cli.model.skeleton import forward_kinematics

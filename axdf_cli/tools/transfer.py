@@ -48,11 +48,12 @@ import numpy as np
 
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.importers import emit
-from axdf_cli.specs import RefPolicy, load_muscle_file, load_skeleton
+from axdf_cli.specs import RefPolicy, load_muscle_file
 from axdf_cli.model.muscle import AxisPoint, MuscleModel, MuscleSpec
 from axdf_cli.model.skeleton import Constant, Linear, Multiplier, Polynomial, Skeleton, Spline, axis_angle, euler_xyz
 from axdf_cli.fileio.outputs import UniqueFiles
 from axdf_cli.fileio.yamlio import Fields, check_name, check_vector, item_marks, load_yaml
+from axdf_cli.tools.maps import map_skeleton, open_map, shorthand
 
 #: A segment shorter than this (metres) has no direction: the entry is treated as segment-less.
 MIN_SEGMENT = 1e-6
@@ -112,23 +113,10 @@ def load_map(path: Path | str, skel_a: Skeleton | None = None, skel_b: Skeleton 
 
     A skeleton not given here (``--from`` / ``--to``) is the one the map names (``from:`` /
     ``to:``, relative to the map file)."""
-    path = Path(path)
-    doc = load_yaml(path)
-    top = Mark(str(path), 1, 1)
-    f = Fields(doc, top, "transfer map")
+    path, f = open_map(path, "transfer map")
     name = f.name("transfer", required=True)
-    skels = []
-    for key, given in (("from", skel_a), ("to", skel_b)):
-        ref = f.string(key, default=None)
-        if given is None:
-            if ref is None:
-                raise InputError(top, f"transfer map names no {key!r} skeleton",
-                                 f"give --{key} SKELETON, or `{key}: PATH` (relative to the map) in the map")
-            p = (policy or RefPolicy()).resolve(path, ref, f.vmark(key))
-            if not p.is_file():
-                raise InputError(f.vmark(key), f"skeleton file {ref!r} not found", "a path relative to the map file")
-            given = load_skeleton(p, policy)
-        skels.append(given)
+    skels = [map_skeleton(f, key, given, path, f"transfer map names no {key!r} skeleton", key, policy)
+             for key, given in (("from", skel_a), ("to", skel_b))]
     skel_a, skel_b = skels
     bones = f.mapping("bones", required=True)
     f.done()
@@ -139,7 +127,7 @@ def load_map(path: Path | str, skel_a: Skeleton | None = None, skel_b: Skeleton 
         if src not in skel_a.bone_index:
             raise InputError(km, f"unknown bone {src!r} of skeleton {skel_a.name} (--from)",
                              "bones of " + skel_a.name + ": " + ", ".join(skel_a.bone_index))
-        e = Fields(_single(val, vm) if isinstance(val, str) else val, vm, f"bone {src}")
+        e = Fields(shorthand("to", val, vm) if isinstance(val, str) else val, vm, f"bone {src}")
         dst = e.name("to", required=True)
         if dst not in skel_b.bone_index:
             raise InputError(e.vmark("to"), f"unknown bone {dst!r} of skeleton {skel_b.name} (--to)",
@@ -154,15 +142,6 @@ def load_map(path: Path | str, skel_a: Skeleton | None = None, skel_b: Skeleton 
         pairs[src] = BonePair(src, dst, seg_a, seg_b, scale, rotate, float(roll), km,
                               (e.vmark("segment") if seg_a else None, e.vmark("to_segment") if seg_b else None))
     return BoneMap(name, pairs, str(path), skel_a, skel_b)
-
-
-def _single(val: str, vm: Mark):
-    """``bone: OTHER`` shorthand as a mapping ``{to: OTHER}`` whose value sits at ``vm``."""
-    from axdf_cli.fileio.yamlio import YMap
-
-    m = YMap(to=val)
-    m.mark, m.key_marks, m.value_marks = vm, {"to": vm}, {"to": vm}
-    return m
 
 
 # ----------------------------------------------------------------------------- geometry
@@ -519,7 +498,7 @@ def muscle_mark(path: Path, name: str) -> Mark:
 
 def transfer_markdown(r: dict) -> str:
     lines = [f"# Transfer `{r['map']}`: {r['from']} → {r['to']}", "",
-             f"Map `{r['map_file']}`; rules: `axdf_cli/importers/transfer.py` and docs/FORMATS.md (Transfer map).", "",
+             f"Map `{r['map_file']}`; rules: `axdf_cli/tools/transfer.py` and docs/FORMATS.md (Transfer map).", "",
              "| bone (from) | bone (to) | scale k | segment lengths (m) | rest rotation (°) |", "|---|---|---|---|---|"]
     for b in r["bones"]:
         seg = "–" if b["segment_lengths"] is None else f"{b['segment_lengths'][0]:.4f} → {b['segment_lengths'][1]:.4f}"

@@ -44,11 +44,12 @@ import numpy as np
 from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.fileio.atomic import sha256_file
-from axdf_cli.fileio.yamlio import Fields, YMap, check_name, check_number, did_you_mean, load_yaml, mark_of
+from axdf_cli.fileio.yamlio import Fields, YMap, check_name, check_number, did_you_mean, mark_of
 from axdf_cli.importers.mocap import Mocap
 from axdf_cli.model.ik import FitResult, fit_frames, pose_points
 from axdf_cli.model.skeleton import Skeleton, forward_kinematics
-from axdf_cli.specs import RefPolicy, load_skeleton
+from axdf_cli.specs import RefPolicy
+from axdf_cli.tools.maps import map_skeleton, open_map, shorthand
 
 MAP_KEYS = ("retarget", "onto", "scale", "align", "smooth", "max_speed", "hold", "ranges", "joints")
 POINT_KEYS = ("bone", "at", "from", "weight")
@@ -92,19 +93,9 @@ class RetargetMap:
 def load_map(path: Path | str, skeleton: Skeleton | None = None, policy: RefPolicy | None = None) -> RetargetMap:
     """Read and check a retarget map against the model's skeleton (``--onto``, else the
     map's ``onto:``, relative to the map). Mocap joint names are checked by :func:`check_sources`."""
-    path = Path(path)
-    top = Mark(str(path), 1, 1)
-    f = Fields(load_yaml(path), top, "retarget map", keys=MAP_KEYS)
+    path, f = open_map(path, "retarget map", MAP_KEYS)
     name = f.name("retarget", required=True)
-    ref = f.string("onto", default=None)
-    if skeleton is None:
-        if ref is None:
-            raise InputError(top, "retarget map names no skeleton",
-                             "give --onto SKELETON, or `onto: PATH` (relative to the map) in the map")
-        p = (policy or RefPolicy()).resolve(path, ref, f.vmark("onto"), "skeleton")
-        if not p.is_file():
-            raise InputError(f.vmark("onto"), f"skeleton file {ref!r} not found", "a path relative to the map file")
-        skeleton = load_skeleton(p, policy)
+    skeleton = map_skeleton(f, "onto", skeleton, path, "retarget map names no skeleton", "onto", policy, "skeleton")
     scale = _scale(f.raw("scale", default="fit"), f.vmark("scale"))
     align = f.choice("align", ALIGN, default="centre")
     smooth = float(f.number("smooth", default=tol.IK_SMOOTH_ROTATION, lo=0.0, hi=1.0))
@@ -132,13 +123,16 @@ def _scale(v, where: Mark):
     return float(check_number(v, where, "scale", 0.01, 100.0))
 
 
+def _coordinate_entries(value: YMap | None, skel: Skeleton):
+    """(name, value, key mark, value mark, coordinate) of each entry of a ``{COORD: ...}`` mapping."""
+    for c, v in (value.items() if value is not None else ()):
+        km, vm = value.key_mark(c), value.value_mark(c)
+        yield c, v, km, vm, _coordinate(c, km, skel)
+
+
 def _hold(value: YMap | None, skel: Skeleton) -> dict:
     out = {}
-    if value is None:
-        return out
-    for c, v in value.items():
-        km, vm = value.key_mark(c), value.value_mark(c)
-        coord = _coordinate(c, km, skel)
+    for c, v, km, vm, coord in _coordinate_entries(value, skel):
         lo, hi = coord.range if coord.range else (None, None)
         out[c] = float(check_number(v, vm, f"hold value of {c}", lo, hi))
     return out
@@ -157,11 +151,7 @@ def _ranges(value: YMap | None, skel: Skeleton, hold: dict) -> dict:
     from axdf_cli.fileio.yamlio import check_vector
 
     out = {}
-    if value is None:
-        return out
-    for c, v in value.items():
-        km, vm = value.key_mark(c), value.value_mark(c)
-        coord = _coordinate(c, km, skel)
+    for c, v, km, vm, coord in _coordinate_entries(value, skel):
         if c in hold:
             raise InputError(km, f"coordinate {c!r} is both held and given a range", "hold it, or give it a range")
         lo, hi = check_vector(v, vm, f"range of {c}", 2)
@@ -186,9 +176,7 @@ def _point(key, value, joints: YMap, skel: Skeleton) -> MapPoint:
     km, vm = joints.key_mark(key), joints.value_mark(key)
     check_name(key, km, "joints entry")
     if isinstance(value, str):
-        value_map = YMap({"from": value})
-        value_map.mark, value_map.key_marks, value_map.value_marks = vm, {"from": vm}, {"from": vm}
-        value = value_map
+        value = shorthand("from", value, vm)
     e = Fields(value, vm, f"joints entry {key}", keys=POINT_KEYS)
     bone = e.name("bone", default=None)
     if bone is None:
