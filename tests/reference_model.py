@@ -57,7 +57,7 @@ def reference_step_1b(model, world: np.ndarray, points: np.ndarray, tension: np.
                       ) -> FrameResult:
     """Step 1b of ``model`` in numpy: world (F, B, 4, 4), points (F, n, 3), tension (F,),
     twist_reference (F,) or None; as :meth:`MuscleModel.surface` was (its warnings left out);
-    ``blas``: the arc length's sum by ``@`` (as it was) or in order (:func:`length`)."""
+    ``blas``: the arc length's sum by ``@`` (OpenBLAS's order) or in order (:func:`length`)."""
     p = points
     x, t, r = axis_frames(model, world, p)
     theta = roll(model, world, t[:, -1], r[:, -1])

@@ -46,8 +46,8 @@ from numba.extending import intrinsic
 
 from axdf_cli.model.paths import wrap as W
 
-_EPS = 1e-30  # as axdf_cli.model.rmf._EPS
-_TINY = 1e-300  # the unit tangent's floor (as MuscleModel's _unit)
+_EPS = 1e-30  # the floor of axdf_cli.model.rmf's norms
+_TINY = 1e-300  # the unit tangent's floor (as axdf_cli.model.muscle normalises)
 LANES = 8  # frames made at once in the innermost loops (one AVX-512 vector of float64)
 _U = np.uint64  # loop indices the compiler can vectorize over (no negative-index wraparound)
 
@@ -363,9 +363,9 @@ def _finish(r0, r1, r2, t0, t1, t2, out):
 
 @njit(cache=True, error_model="numpy")
 def _roll_args(rot, local, r_end, t_end, tgt, out):
-    """The insertion roll's arctan2 arguments (y, x) (:meth:`MuscleModel._roll`): the angle from
-    the propagated r_end to the insertion bone's reference ``rot @ local`` made ⟂ t_end
-    (into tgt (3,), scratch)."""
+    """The insertion roll's arctan2 arguments (y, x) (as :func:`axdf_cli.model.rmf.signed_angle`):
+    the angle from the propagated r_end to the insertion bone's reference ``rot @ local`` made
+    ⟂ t_end (into tgt (3,), scratch)."""
     _start_vector(rot, local, t_end[0], t_end[1], t_end[2], tgt)
     a0, a1, a2 = r_end[0], r_end[1], r_end[2]
     c0 = a1 * tgt[2] - a2 * tgt[1]

@@ -42,8 +42,8 @@ cannot wrap there: the frame is flagged and the straight segment kept.
 
 Which segment and in which order (GeometryPath::applyWrapObjects): the path's active
 points in order; for each wrap surface in turn, every segment between the first and last
-active points of its ``range`` (1-based path point indices, -1 meaning the ends) is
-tried; a segment that crosses the surface wins at once (``mandatoryWrap``), otherwise the
+active points of its ``range`` (1-based path point indices, -1 meaning the ends) is a
+candidate; a segment that crosses the surface wins at once (``mandatoryWrap``), otherwise the
 one that lengthens the path least; the two tangent points are inserted. With two or more
 surfaces this repeats (at most 8 times) until the length changes by less than 0.5 mm.
 """
