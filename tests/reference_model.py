@@ -1,17 +1,18 @@
-"""The numpy formulation of step 1b (:meth:`MuscleModel.surface` as it was before the compiled
-batch pass, :mod:`axdf_cli.model.batch`): the reference the compiled pass is tested against
+"""The numpy formulation of step 1b (:meth:`MuscleModel.surface`): the reference the compiled
+batch pass (:mod:`axdf_cli.model.batch`) is tested against
 (``tests/test_batch.py``). Written with whole-array numpy operations over frames: the RMF by
 :func:`axdf_cli.model.rmf.propagate`, the bound points' frames by one
 :func:`~axdf_cli.model.rmf.reflect_step`, the twist, the tension law and the split into the
 fixed and the volume-scaled parts of the bound control points; the surface itself by
-:func:`axdf_cli.model.kernels.surface_stage` (tested against ``reference_surface.py``)."""
+:func:`surface_kernel.surface_stage` (tested against ``reference_surface.py``)."""
 from __future__ import annotations
 
 import numpy as np
 
 from axdf_cli import tolerances as tol
-from axdf_cli.model import kernels, rmf
+from axdf_cli.model import rmf
 from axdf_cli.model.muscle import SOLVED_MODES, FrameResult, start_scale
+import surface_kernel
 
 
 def _unit(d: np.ndarray) -> np.ndarray:
@@ -56,7 +57,7 @@ def reference_step_1b(model, world: np.ndarray, points: np.ndarray, tension: np.
                       ) -> FrameResult:
     """Step 1b of ``model`` in numpy: world (F, B, 4, 4), points (F, n, 3), tension (F,),
     twist_reference (F,) or None; as :meth:`MuscleModel.surface` was (its warnings left out);
-    ``blas``: the arc length's sum by ``@`` (as it was) or in order (:func:`length`)."""
+    ``blas``: the arc length's sum by ``@`` (OpenBLAS's order) or in order (:func:`length`)."""
     p = points
     x, t, r = axis_frames(model, world, p)
     theta = roll(model, world, t[:, -1], r[:, -1])
@@ -91,11 +92,11 @@ def reference_step_1b(model, world: np.ndarray, points: np.ndarray, tension: np.
     verts = np.empty((nf, model.n_vertices, 3))
     norms = np.empty((nf, model.n_vertices, 3))
     volume, scale, bad = np.empty(nf), np.empty(nf), np.zeros(nf, dtype=np.bool_)
-    kernels.surface_stage(np.ascontiguousarray(fixed), np.ascontiguousarray(scaled), np.ascontiguousarray(p[:, 0]),
-                          np.ascontiguousarray(p[:, -1]), np.ascontiguousarray(-t[:, 0]),
-                          np.ascontiguousarray(t[:, -1]), model.u_idx, model.u_w, model.v_idx, model.v_w,
-                          v0 is not None, float(v0 or 0.0), np.ascontiguousarray(s, dtype=np.float64), tol.SCALE_MIN,
-                          tol.SCALE_MAX, tol.VOLUME_SOLVE_ITERS, tol.VOLUME_SOLVE_RTOL, verts, norms, volume, scale,
-                          bad)
+    surface_kernel.surface_stage(np.ascontiguousarray(fixed), np.ascontiguousarray(scaled), np.ascontiguousarray(p[:, 0]),
+                                 np.ascontiguousarray(p[:, -1]), np.ascontiguousarray(-t[:, 0]),
+                                 np.ascontiguousarray(t[:, -1]), model.u_idx, model.u_w, model.v_idx, model.v_w,
+                                 v0 is not None, float(v0 or 0.0), np.ascontiguousarray(s, dtype=np.float64),
+                                 tol.SCALE_MIN, tol.SCALE_MAX, tol.VOLUME_SOLVE_ITERS, tol.VOLUME_SOLVE_RTOL, verts,
+                                 norms, volume, scale, bad)
     return FrameResult(verts, norms, ln, volume, np.clip(scale, tol.SCALE_MIN, tol.SCALE_MAX), np.degrees(theta), e,
                        [(int(i), "no solution") for i in np.nonzero(bad)[0]])

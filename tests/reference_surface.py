@@ -1,5 +1,5 @@
 """The numpy formulation of the surface stage: the reference the compiled kernel
-(:mod:`axdf_cli.model.kernels`) is tested against. Dense Kronecker tessellation, component-major
+(``surface_kernel.py``, on :mod:`axdf_cli.model.kernels`) is tested against. Dense Kronecker tessellation, component-major
 grids, whole-array cross products: slow, but written independently of the kernel's loops."""
 from __future__ import annotations
 
@@ -122,7 +122,7 @@ def _solve_cubic(coef: np.ndarray, v0: float, s0: np.ndarray):
 
 
 def reference_surface(model, fixed, scaled, p, t, s0, v0):
-    """What :func:`axdf_cli.model.kernels.surface_stage` computes, in numpy, from the bound
+    """What :func:`surface_kernel.surface_stage` computes, in numpy, from the bound
     control points fixed, scaled (F, Q, 3), the axis points p (F, n, 3; its ends are the poles),
     the unit tangents t (F, S, 3; its first and last give the pole normals' fallback), the
     start scales s0 (F,) and the volume v0 to keep (None: keep s0): (vertices, normals,

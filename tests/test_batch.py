@@ -1,10 +1,10 @@
-"""The compiled pass over every muscle of a chunk (axdf_cli/model/batch.py, batch_kernels.py)
-against the numpy formulation of step 1b it replaced (tests/reference_model.py).
+"""The compiled pass over every muscle of a chunk (axdf_cli/model/batch.py, batch_kernels.py,
+batch_surface.py) against the numpy formulation of step 1b (tests/reference_model.py).
 
 The compiled arithmetic follows numpy's operation for operation, so with the arc length summed
-in order in both, every float64 of every output is the same bit for bit. The numpy code summed
-the arc length with ``@`` (OpenBLAS's dot, whose order changes with the number of frames: a
-frame's length could differ in its last bit with the chunk it was evaluated in); against that
+in order in both, every float64 of every output is the same bit for bit. Summed with ``@``
+instead (OpenBLAS's dot, whose order changes with the number of frames: a frame's length can
+differ in its last bit with the chunk it is evaluated in), against that
 the difference is the length's last bits and what they move (a few 1e-16 m), and the packed
 outputs' float32 bytes are the same but for a handful of values one float32 step apart.
 """
@@ -87,12 +87,9 @@ def test_one_muscle_alone_with_twist_references_and_volume_modes(demo, volume):
 
 
 def test_against_the_numpy_code_as_it_was_the_difference_is_the_arc_length_sum():
-    """With numpy's BLAS sum of the arc length, as the numpy code had it: lengths within 2e-15
-    relative, vertices within 2e-15 m, normals 1e-10, volumes 1e-15 relative (measured over
-    every frame of the walk as imported: 1.3e-15, 4.4e-16 m, 1.8e-13, 7.2e-16; its packed
-    muscles' outlines, free in shape, gave normals 4.1e-11 at 4 of 46614 values, and packed
-    again with star-shaped sections polished over the walk, every 4th frame: 1.3e-15,
-    1.1e-15 m, 7.0e-13, 7.8e-16)."""
+    """With numpy's BLAS sum of the arc length (whose order changes with the number of frames):
+    lengths within 2e-15 relative, vertices within 2e-15 m, normals 1e-10, volumes 1e-15
+    relative, over the walk as imported."""
     plan, world, q, tension = _case("gait2392_walk.yaml", 4)
     batch = MuscleBatch(plan.models)
     every = range(len(plan.models))

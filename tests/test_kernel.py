@@ -1,5 +1,5 @@
-"""The compiled surface stage (axdf_cli/model/kernels.py) against its numpy formulation
-(tests/reference_surface.py): the same vertices, normals, volumes and scales."""
+"""The compiled surface (tests/surface_kernel.py, on axdf_cli/model/kernels.py's kernels) against
+its numpy formulation (tests/reference_surface.py): the same vertices, normals, volumes and scales."""
 from __future__ import annotations
 
 import dataclasses
@@ -11,7 +11,7 @@ from axdf_cli.model.pose import sample_coordinates
 from axdf_cli.model.skeleton import forward_kinematics
 from axdf_cli.model.muscle import MuscleModel
 import reference_model
-from axdf_cli.model import kernels
+import surface_kernel
 from reference_surface import reference_surface
 
 
@@ -25,7 +25,7 @@ def test_kernel_matches_the_numpy_reference(demo, volume):
     for model in demo.models:
         model = MuscleModel(dataclasses.replace(model.spec, volume=volume), demo.skel.bone_index, demo.rest)
         calls = []
-        real = kernels.surface_stage
+        real = surface_kernel.surface_stage
 
         def spy(*args):
             calls.append(args)
@@ -33,7 +33,7 @@ def test_kernel_matches_the_numpy_reference(demo, volume):
 
         p = model._axis_points(world)
         with pytest.MonkeyPatch.context() as mp:
-            mp.setattr(reference_model.kernels, "surface_stage", spy)
+            mp.setattr(reference_model.surface_kernel, "surface_stage", spy)
             reference_model.reference_step_1b(model, world, p, tension)
         (args,) = calls
         fixed, scaled, pole0, pole1, end0, end1 = args[:6]

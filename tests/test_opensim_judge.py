@@ -54,9 +54,8 @@ def test_wrapped_path_points_match_getCurrentPath(case):
         for name in om.names:
             ref = om.current_path(name) @ g[:3, :3].T + g[:3, 3]
             pm = PathModel(specs[name].path, skel.bone_index, skel.coord_index)
-            pm.wrapped(world[f:f + 1], q[f:f + 1])
-            pts, count = pm.last_points
-            ours = pts[0, :count[0]]
+            path = pm.wrap(world[f:f + 1], q[f:f + 1])
+            ours = path.points[0, :path.count[0]]
             assert len(ours) == len(ref), (name, f, len(ours), len(ref))
             np.testing.assert_allclose(ours, ref, rtol=0, atol=POINT_TOL, err_msg=f"{name} frame {f}")
             wrapped += len(ref) > sum(1 for p in specs[name].path.points if p.active is None) and bool(

@@ -172,11 +172,11 @@ def test_ellipsoid_closest_point_off_a_pole(y1):
     """Found carrying arm26's BIClong onto a scaled arm: the humeral head (two equal shortest
     semi-axes) and a point whose coordinate along them is 1e-18 m made the Newton start land
     on the pole t = -a_k^2 and divide by zero (a ZeroDivisionError out of the compiled path)."""
-    from axdf_cli.model.paths.wrap import _closest_xyz
+    from axdf_cli.model.paths.opensim_shapes import closest_xyz
 
     a = (0.0325, 0.026, 0.026)
     y = (0.015061078825635527, y1, 0.034729132694275154)
-    x = np.array(_closest_xyz(*a, *y))
+    x = np.array(closest_xyz(*a, *y))
     assert np.isfinite(x).all()
     assert abs(np.sum((x / np.array(a)) ** 2) - 1.0) < 1e-9  # on the surface
     # the closest point: y - x is along the surface normal at x

@@ -13,8 +13,9 @@ A chunk of F frames of K muscles is then two steps, as the run's stages need the
     (F, ΣN, 3) (fixed points compiled in one call; paths through :mod:`axdf_cli.model.paths`);
 1b. :meth:`MuscleBatch.surfaces`: from those points (as a TIME stage left them), the RMF, the
     bound points' frames, twist, tension, exact volume, surface and normals of every muscle
-    in two compiled calls (:mod:`axdf_cli.model.batch_kernels`), with the roll's arctan2 and
-    branch and the arc length's quadrature in numpy between them.
+    in two compiled calls (:func:`axdf_cli.model.batch_kernels.frames_pass`,
+    :func:`axdf_cli.model.batch_surface.shape_pass`), with the roll's arctan2 and branch in
+    numpy between them.
 
 The results are the fields of a :class:`~axdf_cli.model.muscle.FrameResult` per muscle, the
 vertices and normals views of one buffer (each muscle's block (F, V_j, 3) contiguous). The arithmetic is
@@ -29,7 +30,9 @@ import numpy as np
 
 from axdf_cli import tolerances as tol
 from axdf_cli.model import batch_kernels as K
+from axdf_cli.model import batch_surface as S
 from axdf_cli.model.batch_kernels import LANES  # noqa: F401 (frames per vector: chunk sizes are multiples)
+from axdf_cli.model.paths.wrap import Surfaces
 from axdf_cli.model.rmf import STEP_RTOL
 
 _RTOL2 = STEP_RTOL ** 2  # (as rmf computes it)
@@ -40,12 +43,11 @@ POOL = 6  # buffers a batch keeps for reuse: the scratch, a chunk's vertices and
 class _Pool:
     """Float64 buffers handed out again once nothing refers to them any more (no result of an
     earlier call alive): a chunk's vertices and normals land in memory that is already
-    mapped and in the caches, instead of fresh pages the kernel must first fault in and zero
-    (the bench's "first touch" row measures what that costs)."""
+    mapped and in the caches, instead of fresh pages the kernel must first fault in and zero."""
 
     def __init__(self, keep: int = POOL):
         self.keep = keep
-        self.free = True  # False: always fresh memory (the bench's first-touch measurement)
+        self.free = True  # False: always fresh memory (what the bench compares against)
         self.buffers: list = []
 
     def take(self, n: int) -> np.ndarray:
@@ -116,6 +118,14 @@ class MuscleBatch:
         self.u_off, self.u_idx, self.u_w = _rows([(m.u_idx, m.u_w) for m in models])
         self.v_off, self.v_idx, self.v_w = _rows([(m.v_idx, m.v_w) for m in models])
         self.n_vertices = np.array([m.n_vertices for m in models], dtype=np.int64)
+        # the same arrays, grouped as the compiled passes take them
+        self.samples = K.Basis(self.s_off, self.bs_idx, self.bs_w, self.dbs_idx, self.dbs_w)
+        self.coarse = K.Basis(self.c_off, self.bc_idx, self.bc_w, self.dbc_idx, self.dbc_w)
+        self.bound = K.Basis(self.q_off, self.bb_idx, self.bb_w, self.dbb_idx, self.dbb_w)
+        self.gauss = K.Quadrature(self.g_off, self.dbg_idx, self.dbg_w, self.gw)
+        self.anchors = K.Anchors(self.origin, self.insertion, self.r0_local, self.rend_local)
+        self.binding = S.Binding(self.q_off, self.lam, self.uvw, self.beta, self.bump)
+        self.bases = S.SurfaceBases(self.m_off, self.u_off, self.u_idx, self.u_w, self.v_off, self.v_idx, self.v_w)
         self._pack_paths(models)
         self.pool = _Pool()
 
@@ -150,6 +160,10 @@ class MuscleBatch:
         self.fractions = cat(lambda pm: pm.fractions, (), np.float64)
         self.fit = cat(lambda pm: pm.fit, (), np.float64)
         self.wrap_names = [[] if pm is None else [w.name for w in pm.spec.wraps] for pm in paths]
+        self.wraps = K.Wraps(self.w_off, self.wbones, self.wlocal, self.side_bones, self.side_at)
+        self.surfaces_of_paths = Surfaces(self.kind, self.prm, self.wrap_axis, self.wrap_sign, self.method, self.on,
+                                          self.rng, self.has_side)
+        self.fits = K.Fits(self.k_off, self.fractions, self.fit_off, self.fit)
         # per chunk: (muscle, packed point row, axis, coordinate, function) and (muscle, row, coordinate, lo, hi)
         self.moving = [(j, int(self.p_off[j]) + k, a, c, fn) for j, pm in enumerate(paths) if pm is not None
                        for k, a, c, fn in pm.points.moving]
@@ -184,10 +198,8 @@ class MuscleBatch:
                 if chosen[j]:
                     active[:, row] = (coords[:, c] >= lo) & (coords[:, c] <= hi)
             inside = np.zeros((self.n, nf), dtype=np.int64)
-            K.axis_paths(js, world, self.pbones, loc, active, self.p_off, self.wbones, self.wlocal, self.w_off,
-                         self.kind, self.prm, self.wrap_axis, self.wrap_sign, self.method, self.on, self.rng,
-                         self.side_bones, self.side_at, self.has_side, self.fractions, self.k_off, self.fit,
-                         self.fit_off, self.a_off, p, inside)
+            K.axis_paths(js, world, K.PathPoints(self.p_off, self.pbones, loc, active), self.wraps,
+                         self.surfaces_of_paths, self.fits, self.a_off, p, inside)
             for j in js[inside[js].any(axis=1)]:
                 names = self.wrap_names[j]
                 notes[int(j)] = [(int(i), f"path cannot wrap over {names[int(inside[j, i]) - 1]!r}: an end point "
@@ -212,9 +224,7 @@ class MuscleBatch:
         samples (:meth:`MuscleModel.end_twist`), from packed axis points p: (F, K)."""
         js = np.asarray(list(muscles), dtype=np.int64)
         roll = np.zeros((self.n, world.shape[0], 2))
-        K.roll_pass(js, p, np.ascontiguousarray(world), self.a_off, self.c_off, self.bc_idx, self.bc_w,
-                    self.dbc_idx, self.dbc_w, self.origin, self.insertion, self.r0_local, self.rend_local, _RTOL2,
-                    roll)
+        K.roll_pass(js, p, np.ascontiguousarray(world), self.a_off, self.coarse, self.anchors, _RTOL2, roll)
         return np.arctan2(roll[js, :, 0], roll[js, :, 1]).T
 
     # -- step 1b ------------------------------------------------------------------------
@@ -240,10 +250,9 @@ class MuscleBatch:
         ends = np.zeros((self.n, nf, 2, 3))
         roll = np.zeros((self.n, nf, 2))
         length = np.zeros((self.n, nf))
-        K.frames_pass(js, p, world, self.a_off, self.s_off, self.bs_idx, self.bs_w, self.dbs_idx, self.dbs_w,
-                      self.q_off, self.bb_idx, self.bb_w, self.dbb_idx, self.dbb_w, self.bind_j, self.g_off,
-                      self.dbg_idx, self.dbg_w, self.gw, self.origin, self.insertion, self.r0_local, self.rend_local,
-                      _RTOL2, fr, ends, roll, length)
+        frames = K.FrameOut(fr, ends, roll, length)
+        K.frames_pass(js, p, world, self.a_off, self.samples, self.bound, self.bind_j, self.gauss, self.anchors,
+                      _RTOL2, frames)
         # the roll on its branch (numpy's arctan2, as MuscleModel._roll)
         theta = np.arctan2(roll[js, :, 0], roll[js, :, 1])  # (K, F)
         if twist_reference is None:
@@ -267,11 +276,11 @@ class MuscleBatch:
         vol = np.zeros((self.n, nf))
         scale = np.zeros((self.n, nf))
         bad = np.zeros((self.n, nf), dtype=np.bool_)
-        K.shape_pass(js, p, self.a_off, fr, ends, full[0], full[1], full[2], self.q_off, self.lam, self.uvw,
-                     self.beta, self.bump, tol.TENSION_GAIN, self.m_off, self.u_off, self.u_idx, self.u_w, self.v_off,
-                     self.v_idx, self.v_w, solve, v0, tol.SCALE_MIN, tol.SCALE_MAX, tol.VOLUME_SOLVE_ITERS,
-                     tol.VOLUME_SOLVE_RTOL, vert_off, out_v, out_n, vol, scale, bad,
-                     np.zeros((0, 0, 3)) if control_points is None else control_points)
+        S.shape_pass(js, p, self.a_off, frames, S.Drive(full[0], full[1], full[2], solve, v0), self.binding,
+                     self.bases, S.ShapeParams(tol.TENSION_GAIN, tol.SCALE_MIN, tol.SCALE_MAX,
+                                               tol.VOLUME_SOLVE_ITERS, tol.VOLUME_SOLVE_RTOL),
+                     S.ShapeOut(vert_off, out_v, out_n, vol, scale, bad,
+                                np.zeros((0, 0, 3)) if control_points is None else control_points))
         twist = np.degrees(theta)
         vol, scale, bad = vol[js], scale[js], bad[js]
         clipped = np.clip(scale, tol.SCALE_MIN, tol.SCALE_MAX)

@@ -1,20 +1,16 @@
-"""The muscle surface stage of one muscle, frame by frame (numba), and what is written.
+"""The surface kernels shared by the batch pass and the contact stage, and what is written.
 
-For every frame (:func:`surface_frame`): build the control net [origin pole, sections...,
-insertion pole] of the fixed part A and the volume-scaled part W, tessellate both
-(separable: along, then around, 3 basis functions each way), accumulate the mesh volume's
-cubic V(s) = c0 + c1 s + c2 s^2 + c3 s^3 over the quads, solve V(s) = V0 (``exact``), form
-the final grid A + s W, and write vertices, outward normals and volume. The run's compiled
-pass over every muscle at once (:mod:`axdf_cli.model.batch_kernels`) does the same steps
-with the same operations, laid out for vector instructions; :func:`surface_stage` is the
-frame-by-frame form, which ``tests/test_kernel.py`` compares with the numpy formulation in
-``tests/reference_surface.py`` (``planar_volume_cubic``, ``planar_normals``).
-:func:`written` makes what the sinks write of a result (float32, non-finite frames to the
-rest shape, bounds).
+A muscle's surface is the grid A + s W of a fixed part A and a volume-scaled part W, both
+tessellated from their control nets. :func:`volume_cubic` gives the mesh volume's cubic
+V(s) = c0 + c1 s + c2 s^2 + c3 s^3 over the grid's quads (:func:`quad_volume_terms` per quad),
+:func:`solve_scale` the s with V(s) = V0 (``exact``), :func:`ring_vertices` and
+:func:`pole_normals` the final grid's vertices and outward normals. The run's compiled pass
+over every muscle at once (:mod:`axdf_cli.model.batch_surface`) does the same steps with the
+same operations, laid out for vector instructions. :func:`written` makes what the sinks write
+of a result (float32, non-finite frames to the rest shape, bounds).
 
-Compiled once and cached beside the module (numba ``cache=True``); no ``fastmath`` (but for
-the bounds' minima and maxima, over finite numbers only), so the same inputs give the same
-bytes.
+Compiled once and cached (numba ``cache=True``); no ``fastmath`` (but for the bounds' minima
+and maxima, over finite numbers only), so the same inputs give the same bytes.
 """
 from __future__ import annotations
 
@@ -42,60 +38,18 @@ def sparse_rows(basis: np.ndarray, width: int = 3) -> tuple[np.ndarray, np.ndarr
     return idx, w
 
 
-@njit(cache=True)
-def _fill_net(net_a, net_w, fixed, scaled, pole0, pole1, f):
-    """Stage 1: the control net of frame f, fixed part A and scaled part W (m, 8, 3): pole
-    rows (A = the axis end, W = 0) around the bound section control points."""
-    m = net_a.shape[0]
-    for j in range(8):
-        for c in range(3):
-            net_a[0, j, c] = pole0[f, c]
-            net_a[m - 1, j, c] = pole1[f, c]
-            net_w[0, j, c] = 0.0
-            net_w[m - 1, j, c] = 0.0
-    for k in range(m - 2):
-        for j in range(8):
-            for c in range(3):
-                net_a[k + 1, j, c] = fixed[f, 8 * k + j, c]
-                net_w[k + 1, j, c] = scaled[f, 8 * k + j, c]
-
-
-@njit(cache=True)
-def _tessellate(net_a, net_w, u_idx, u_w, v_idx, v_w, ta, tw, ga, gw):
-    """Stage 2: separable tessellation of both nets into grids ga, gw (U, A, 3): along
-    (T[u, j] = sum_i Bu[u, i] net[i, j]), then around (G[u, a] = sum_k Bv[a, k] T[u, k])."""
-    nu = u_idx.shape[0]
-    na = v_idx.shape[0]
-    for u in range(nu):
-        for j in range(8):
-            for c in range(3):
-                sa = 0.0
-                sw = 0.0
-                for i in range(3):
-                    wgt = u_w[u, i]
-                    sa += wgt * net_a[u_idx[u, i], j, c]
-                    sw += wgt * net_w[u_idx[u, i], j, c]
-                ta[u, j, c] = sa
-                tw[u, j, c] = sw
-    for u in range(nu):
-        for a in range(na):
-            for c in range(3):
-                sa = 0.0
-                sw = 0.0
-                for k in range(3):
-                    wgt = v_w[a, k]
-                    sa += wgt * ta[u, v_idx[a, k], c]
-                    sw += wgt * tw[u, v_idx[a, k], c]
-                ga[u, a, c] = sa
-                gw[u, a, c] = sw
-
-
 @njit(cache=True, inline="always")
-def quad_volume_terms(ax0, ax1, ax2, wx0, wx1, wx2, ay0, ay1, ay2, wy0, wy1, wy2, ad0, ad1, ad2, wd0, wd1, wd2):
+def quad_volume_terms(ax, wx, ay, wy, ad, wd):
     """One quad's four contributions (times 6) to the volume cubic of the grid a + s w: the
-    triple product x . (y x d) with x = ax + s wx, y = ay + s wy, d = ad + s wd, by powers of s
-    (P = ay x ad, Q = wy x wd, R = wy x ad + ay x wd). Shared by :func:`volume_cubic` and the
-    batch pass (:mod:`axdf_cli.model.batch_kernels`), so both add the same terms in the same order."""
+    triple product x . (y x d) with x = ax + s wx, y = ay + s wy, d = ad + s wd (each a tuple of
+    3 floats), by powers of s (P = ay x ad, Q = wy x wd, R = wy x ad + ay x wd). Shared by
+    :func:`volume_cubic` and the batch pass, so both add the same terms in the same order."""
+    ax0, ax1, ax2 = ax
+    wx0, wx1, wx2 = wx
+    ay0, ay1, ay2 = ay
+    wy0, wy1, wy2 = wy
+    ad0, ad1, ad2 = ad
+    wd0, wd1, wd2 = wd
     p0 = ay1 * ad2 - ay2 * ad1
     p1 = ay2 * ad0 - ay0 * ad2
     p2 = ay0 * ad1 - ay1 * ad0
@@ -113,7 +67,7 @@ def quad_volume_terms(ax0, ax1, ax2, wx0, wx1, wx2, ay0, ay1, ay2, wy0, wy1, wy2
 
 @njit(cache=True)
 def volume_cubic(ga, gw):
-    """Stage 3: coefficients (c0, c1, c2, c3) of the mesh volume V(s) of the grid ga + s gw.
+    """Coefficients (c0, c1, c2, c3) of the mesh volume V(s) of the grid ga + s gw.
     Each quad's two triangles give p01 . (p10 x (p00 - p11)) / 6, a trilinear form in
     (p01, p10, p00 - p11), each affine in s."""
     nu = ga.shape[0]
@@ -143,8 +97,8 @@ def volume_cubic(ga, gw):
             wd0 = gw[u, a, 0] - gw[u + 1, a1, 0]
             wd1 = gw[u, a, 1] - gw[u + 1, a1, 1]
             wd2 = gw[u, a, 2] - gw[u + 1, a1, 2]
-            t0, t1, t2, t3 = quad_volume_terms(ax0, ax1, ax2, wx0, wx1, wx2, ay0, ay1, ay2, wy0, wy1, wy2,
-                                               ad0, ad1, ad2, wd0, wd1, wd2)
+            t0, t1, t2, t3 = quad_volume_terms((ax0, ax1, ax2), (wx0, wx1, wx2), (ay0, ay1, ay2), (wy0, wy1, wy2),
+                                               (ad0, ad1, ad2), (wd0, wd1, wd2))
             c0 += t0
             c1 += t1
             c2 += t2
@@ -154,7 +108,7 @@ def volume_cubic(ga, gw):
 
 @njit(cache=True)
 def solve_scale(c0, c1, c2, c3, v0, s0, iters, rtol):
-    """Stage 4 (``exact``): the root s of V(s) = v0 by safeguarded Newton from the paper's
+    """The root s of V(s) = v0 by safeguarded Newton from the paper's
     scale s0 (V is a cubic: quadratic convergence). Returns (s, no_solution); s0 when none."""
     s = s0
     for _ in range(iters):
@@ -174,7 +128,7 @@ def solve_scale(c0, c1, c2, c3, v0, s0, iters, rtol):
 
 @njit(cache=True)
 def ring_vertices(ga, out_v, out_n, f):
-    """Stage 5: the final grid's vertices (poles collapsed) and the rings' normals."""
+    """The final grid's vertices (poles collapsed) and the rings' normals."""
     nu = ga.shape[0]
     na = ga.shape[1]
     last = 1 + (nu - 2) * na
@@ -205,7 +159,7 @@ def ring_vertices(ga, out_v, out_n, f):
 
 @njit(cache=True)
 def pole_normals(ga, end0, end1, out_n, f):
-    """Stage 6: pole normals, the fan's area-weighted normal; the axis direction where the
+    """Pole normals, the fan's area-weighted normal; the axis direction where the
     fan folds."""
     nu = ga.shape[0]
     na = ga.shape[1]
@@ -244,72 +198,6 @@ def pole_normals(ga, end0, end1, out_n, f):
         out_n[f, vi, 0] = f0
         out_n[f, vi, 1] = f1
         out_n[f, vi, 2] = f2
-
-
-@njit(cache=True)
-def surface_frame(fixed, scaled, pole0, pole1, end0, end1, u_idx, u_w, v_idx, v_w, exact, v0, s0, s_min, s_max,
-                  iters, rtol, net_a, net_w, ta, tw, ga, gw, out_v, out_n, f):
-    """Frame f of one muscle (Q = 8 N bound points, U rows, A columns, m = N + 2):
-
-    fixed, scaled : (F, Q, 3)  bound control points: the part that keeps its size, and the
-                    part multiplied by the section scale s
-    pole0, pole1  : (F, 3)     axis ends (the pole rows of the net)
-    end0, end1    : (F, 3)     outward axis directions at the poles (-T(0), T(1))
-    u_idx, u_w    : (U, 3)     along basis (rational), sparse rows over the m net rows
-    v_idx, v_w    : (A, 3)     around basis (closed), sparse rows over the 8 columns
-    exact, v0     : whether to solve for the scale that gives volume v0
-    s0            : frame f's starting scale (the paper's sqrt(l0/l1), or 1)
-    scratch       : net_a, net_w (m, 8, 3); ta, tw (U, 8, 3); ga, gw (U, A, 3)
-    outputs       : out_v[f], out_n[f] (V, 3) with V = 2 + (U-2) A
-    returns       : (volume, scale s, no-solution flag)
-
-    The pipeline: net (1), tessellation (2), volume cubic (3), scale (4, ``exact`` only),
-    vertices and ring normals of A + s W (5), pole normals (6).
-    """
-    nu = u_idx.shape[0]
-    na = v_idx.shape[0]
-    _fill_net(net_a, net_w, fixed, scaled, pole0, pole1, f)
-    _tessellate(net_a, net_w, u_idx, u_w, v_idx, v_w, ta, tw, ga, gw)
-    c0, c1, c2, c3 = volume_cubic(ga, gw)
-    s = s0
-    bad = False
-    if exact:
-        s, bad = solve_scale(c0, c1, c2, c3, v0, s0, iters, rtol)
-    sc = min(max(s, s_min), s_max)
-    volume = ((c3 * sc + c2) * sc + c1) * sc + c0
-    for u in range(nu):
-        for a in range(na):
-            for c in range(3):
-                ga[u, a, c] += sc * gw[u, a, c]
-    ring_vertices(ga, out_v, out_n, f)
-    pole_normals(ga, end0, end1, out_n, f)
-    return volume, s, bad
-
-
-@njit(cache=True)
-def surface_stage(fixed, scaled, pole0, pole1, end0, end1, u_idx, u_w, v_idx, v_w,
-                  exact, v0, s_in, s_min, s_max, iters, rtol,
-                  out_v, out_n, out_vol, out_s, out_bad):
-    """:func:`surface_frame` over the F frames: fixed, scaled (F, Q, 3); pole0, pole1, end0,
-    end1 (F, 3); s_in (F,) starting scales (the paper's sqrt(l0/l1), or 1); exact: solve for
-    the scale that keeps volume v0; outputs out_v, out_n (F, V, 3) with V = 2 + (U-2) A;
-    out_vol, out_s (F,); out_bad (F,) no solution (the start scale kept)."""
-    nf = fixed.shape[0]
-    nu = u_idx.shape[0]
-    na = v_idx.shape[0]
-    m = fixed.shape[1] // 8 + 2
-    net_a = np.zeros((m, 8, 3))
-    net_w = np.zeros((m, 8, 3))
-    ta = np.empty((nu, 8, 3))
-    tw = np.empty((nu, 8, 3))
-    ga = np.empty((nu, na, 3))
-    gw = np.empty((nu, na, 3))
-    for f in range(nf):
-        vol, s, bad = surface_frame(fixed, scaled, pole0, pole1, end0, end1, u_idx, u_w, v_idx, v_w, exact, v0,
-                                    s_in[f], s_min, s_max, iters, rtol, net_a, net_w, ta, tw, ga, gw, out_v, out_n, f)
-        out_vol[f] = vol
-        out_s[f] = s
-        out_bad[f] = bad
 
 
 @njit(cache=True, error_model="numpy")

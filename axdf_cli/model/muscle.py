@@ -26,8 +26,8 @@ Radial factor of a control point c: ``k_c = (1 - beta_c) + beta_c * K_c`` with
   g = TENSION_GAIN. The share e*b of a belly point (its middle at full tension) keeps the
   length-only scale s0 = sqrt(l0/l1) instead of s, so with ``exact`` only the rest (the ends)
   gives way to keep the volume: ``k_c = tau_c (e b s0 + (1 - e b) s)`` (still affine in s).
-  Length and volume do not change; tension 1 adds 27-39% area at mid-belly (rest pose) on the demo
-  muscles (tests require at least 15%).
+  Length and volume do not change; tension 1 thickens the mid-belly (the tests require at
+  least 15% more area there on the demo muscles).
 
 Surface: a tensor-product quadratic NURBS over the control net [origin pole (8 copies of
 C(0)), sections..., insertion pole], clamped along and closed around, tessellated at

@@ -82,6 +82,8 @@ class PathModel:
                 self.has_side[i] = True
                 self.side_bones[i] = bone_of(bone_index, w.side[0], w.mark)
                 self.side_at[i, :3] = w.side[1]
+        self.surfaces = W.Surfaces(self.kind, self.prm, self.axis, self.sign, self.method, self.on, self.rng,
+                                   self.has_side)
         self.origin_bone = int(self.points.bones[0])
         self.insertion_bone = int(self.points.bones[-1])
         if spec.points[0].active is not None or spec.points[-1].active is not None:
@@ -92,9 +94,10 @@ class PathModel:
     def uses_coordinates(self) -> bool:
         return self.points.uses_coordinates
 
-    def wrapped(self, world: np.ndarray, coords: np.ndarray | None):
-        """Samples (F, K, 3) of the wrapped path, its length (F,), and per frame the index + 1
-        of a surface the path could not wrap over (an end point inside it), 0 if none."""
+    def wrap(self, world: np.ndarray, coords: np.ndarray | None) -> W.PathOut:
+        """The wrapped path of every frame (:class:`~axdf_cli.model.paths.wrap.PathOut`): its
+        samples (F, K, 3), length (F,), the could-not-wrap flags (F,) and its points, tangent
+        points included (F, P + 2 W, 3), the first count (F,) of each frame's in use."""
         pts, active = self.points.evaluate(world, coords)
         nf = world.shape[0]
         xf = np.einsum("fwij,wjk->fwik", world[:, self.wrap_bones], self.wrap_local) if len(self.kind) else \
@@ -102,17 +105,17 @@ class PathModel:
         # side[f,w,c] = sum_k world[f,bone(w),c,k] at[w,k]  (zeros where a surface has no side point)
         side = np.einsum("fwck,wk->fwc", world[:, self.side_bones, :3, :], self.side_at) if len(self.kind) else \
             np.zeros((nf, 0, 3))
-        samples = np.empty((nf, len(self.fractions), 3))
-        length = np.empty(nf)
-        inside = np.zeros(nf, np.int64)
-        points = np.zeros((nf, pts.shape[1] + 2 * len(self.kind), 3))
-        count = np.zeros(nf, np.int64)
+        out = W.PathOut(np.empty((nf, len(self.fractions), 3)), np.empty(nf), np.zeros(nf, np.int64),
+                        np.zeros((nf, pts.shape[1] + 2 * len(self.kind), 3)), np.zeros(nf, np.int64))
         W.wrapped_paths(np.ascontiguousarray(pts), np.ascontiguousarray(active), np.ascontiguousarray(xf),
-                        self.kind, self.prm, self.axis, self.sign, self.method, self.on, self.rng,
-                        np.ascontiguousarray(side), self.has_side, self.fractions,
-                        samples, length, inside, points, count)
-        self.last_points = (points, count)  # the current path (tangent points included), for tests
-        return samples, length, inside
+                        np.ascontiguousarray(side), self.surfaces, self.fractions, out)
+        return out
+
+    def wrapped(self, world: np.ndarray, coords: np.ndarray | None):
+        """Samples (F, K, 3) of the wrapped path, its length (F,), and per frame the index + 1
+        of a surface the path could not wrap over (an end point inside it), 0 if none."""
+        out = self.wrap(world, coords)
+        return out.samples, out.length, out.inside
 
     def control_points(self, world: np.ndarray, coords: np.ndarray | None):
         """Axis control points (F, n, 3) and the could-not-wrap flags (F,)."""

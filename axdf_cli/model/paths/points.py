@@ -73,8 +73,9 @@ class PathSpec:
 
 def default_control_points(spec: PathSpec) -> int:
     """Axis control points for a path: 8, plus 4 per interior path point and per wrap surface
-    (sharp corners at via points need denser sampling for the axis length to stay within
-    0.6% of the path's on the measured walk; see README), at most 48."""
+    (sharp corners at via points need denser sampling for the axis length to stay close to the
+    path's; importers add more where it falls short by over ``tolerances.AXIS_SHORTFALL_MAX``),
+    at most 48."""
     return int(np.clip(8 + 4 * (len(spec.points) - 2) + 4 * len(spec.wraps), 8, 48))
 
 
