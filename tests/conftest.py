@@ -13,6 +13,10 @@ straight line at rest and stays straight (and on the roll axis) when only ``stre
 """
 from __future__ import annotations
 
+from axdf_cli import runtime
+
+runtime.configure()  # threads and numba's kernel cache, as the command line sets them (before numpy)
+
 import dataclasses
 import sys
 from pathlib import Path

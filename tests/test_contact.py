@@ -692,7 +692,7 @@ def test_the_kernel_cache_follows_every_model_source(tmp_path, monkeypatch):
     import hashlib
     import time
 
-    import axdf_cli
+    from axdf_cli import runtime
 
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     base = tmp_path / "axdf" / "numba"
@@ -700,7 +700,7 @@ def test_the_kernel_cache_follows_every_model_source(tmp_path, monkeypatch):
     for d in (old, recent):
         d.mkdir(parents=True)
     os.utime(old, (time.time() - 40 * 86400,) * 2)
-    here = axdf_cli._kernel_cache()
+    here = runtime.kernel_cache()
     model = REPO_ROOT / "axdf_cli" / "model"
     h = hashlib.sha256()
     # tolerances.py too: the kernels read its constants as compile-time globals
@@ -708,12 +708,12 @@ def test_the_kernel_cache_follows_every_model_source(tmp_path, monkeypatch):
         h.update(str(f.relative_to(model.parent)).encode() + b"\0" + f.read_bytes() + b"\0")
     assert here == str(base / h.hexdigest()[:16])
     assert not old.exists() and recent.is_dir() and os.path.isdir(here)
-    # what numba is told in a process that imports axdf
+    # what numba is told in a process that configures axdf's runtime (the command line's entry)
     import subprocess
     import sys
 
     env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
-    got = subprocess.run([sys.executable, "-c", "import os, axdf_cli; print(os.environ['NUMBA_CACHE_DIR'])"],
+    got = subprocess.run([sys.executable, "-c", "import os; from axdf_cli import runtime; runtime.configure(); print(os.environ['NUMBA_CACHE_DIR'])"],
                          env=env, capture_output=True, text=True, check=True, cwd=REPO_ROOT).stdout.strip()
     assert got == here
 
