@@ -153,8 +153,8 @@ def _sigint_held():
     """SIGINT blocked in this thread while the pool starts its processes. A child inherits
     the mask (through fork, and through the fork server's exec and forks), so a Ctrl-C to
     the whole process group while a worker starts, or while the fork server imports its
-    preload, is never a KeyboardInterrupt traceback there (it was: the fork server ignores
-    SIGINT only once its imports are done, a worker once :func:`_init_worker` runs); this
+    preload, is never a KeyboardInterrupt traceback there (the fork server ignores SIGINT
+    only once its imports are done, a worker once :func:`_init_worker` runs); this
     process gets the signal when it is unblocked: held, not lost (as multiprocessing's own
     resource tracker is started)."""
     old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
