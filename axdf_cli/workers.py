@@ -14,8 +14,8 @@ either
   default of one thread per core oversubscribes the cores they share; a value you set is
   kept).
 
-A worker runs the contact stage's kernels on its own thread (:func:`one_thread`), where a
-single process (``--jobs 1``) runs them on numba's threads: N workers with a thread per core
+A worker runs the contact stage's kernels on its own thread (:func:`axdf_cli.runtime.one_thread`),
+where a single process (``--jobs 1``) runs them on numba's threads: N workers with a thread per core
 each would oversubscribe the cores they share (and a worker that starts numba's threads
 leaves a semaphore behind when it is stopped). The bytes do not depend on it.
 
@@ -38,8 +38,10 @@ import os
 import signal
 import threading
 
-from axdf_cli.fileio import atomic
+from axdf_cli import runtime
 from axdf_cli.errors import EnvironmentProblem
+from axdf_cli.fileio import atomic
+from axdf_cli.runtime import THREADS_VAR, one_thread  # noqa: F401  (a worker's switch, for its callers)
 
 _STATE = {"parent": None, "in_task": False, "stopping": False}
 _SHARED: dict = {}  # a worker's ``shared``
@@ -97,20 +99,11 @@ def _watch(pid: int) -> None:
     threading.Thread(target=wait, name="axdf-parent-watch", daemon=True).start()
 
 
-#: Set to 1 in a worker process: the contact stage's kernels stay on its thread
-#: (:func:`axdf_cli.model.contact.use_threads`).
-THREADS_VAR = "AXDF_NUM_THREADS"
-
-
-def one_thread() -> None:
-    """This process (a worker) runs the contact stage's kernels on its own thread."""
-    os.environ[THREADS_VAR] = "1"
-
-
 def _init_worker(owner: int, shared, cwd: str | None) -> None:
     """Each worker's start (nothing here may raise: the executor would print a traceback).
     ``cwd``: None for a forked worker, the owner's current folder for a fork server's."""
     fresh = cwd is not None
+    runtime.configure()  # (a fork server's worker is a fresh interpreter; a forked one: already done)
     one_thread()
     _STATE["parent"] = os.getppid() if fresh else owner
     signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -160,8 +153,8 @@ def _sigint_held():
     """SIGINT blocked in this thread while the pool starts its processes. A child inherits
     the mask (through fork, and through the fork server's exec and forks), so a Ctrl-C to
     the whole process group while a worker starts, or while the fork server imports its
-    preload, is never a KeyboardInterrupt traceback there (it was: the fork server ignores
-    SIGINT only once its imports are done, a worker once :func:`_init_worker` runs); this
+    preload, is never a KeyboardInterrupt traceback there (the fork server ignores SIGINT
+    only once its imports are done, a worker once :func:`_init_worker` runs); this
     process gets the signal when it is unblocked: held, not lost (as multiprocessing's own
     resource tracker is started)."""
     old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})

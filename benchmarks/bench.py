@@ -72,9 +72,13 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
+from axdf_cli import runtime
 
-from axdf_cli.fileio import atomic
+runtime.configure()  # threads and numba's kernel cache as the command line sets them (before numpy)
+
+import numpy as np  # noqa: E402
+
+from axdf_cli.fileio import atomic  # noqa: E402
 from axdf_cli.formats import FORMATS, ObjWriter, PlyWriter, read_preference
 from axdf_cli.specs import Pose, expand_muscle_paths, load_muscle_file, load_pose
 from axdf_cli.model.muscle import OCT, MuscleModel, MuscleSpec

@@ -13,6 +13,10 @@ straight line at rest and stays straight (and on the roll axis) when only ``stre
 """
 from __future__ import annotations
 
+from axdf_cli import runtime
+
+runtime.configure()  # threads and numba's kernel cache, as the command line sets them (before numpy)
+
 import dataclasses
 import sys
 from pathlib import Path
@@ -296,14 +300,11 @@ def demo_extreme_coordinates(skel, rng: np.random.Generator, n_random: int = 12)
 @pytest.fixture(scope="session", autouse=True)
 def contact_kernels_compiled():
     """Contact's kernels compiled (or loaded from numba's cache) before any test, both the
-    threaded ones (this process) and their serial twins (a worker's: AXDF_NUM_THREADS=1), as
+    threaded ones (this process) and their serial twins (a worker's), as
     a run's first use would: a test that stops a worker (SIGTERM) must find it working, not
     compiling, where Python prints the interrupt it raises inside LLVM's callback as
     "Exception ignored" (a worker compiling on a cold cache is stopped all the same)."""
-    import os
-
     from axdf_cli.model import contact
-    from axdf_cli.workers import THREADS_VAR
 
     U, A = 12, 16
     th = 2.0 * np.pi * np.arange(A) / A
@@ -314,14 +315,6 @@ def contact_kernels_compiled():
         meshes.append(np.concatenate([[[0.0, dy, 0.0]], rings, [[0.2, dy, 0.0]]]))
     model = contact.ContactModel(~np.eye(2, dtype=bool), contact.pair_shares(np.zeros(2)), contact.BoneFields.pack([]),
                                  ((U, A), (U, A)), np.zeros(2))
-    old = os.environ.get(THREADS_VAR)
-    try:
-        for value in ("", "1"):
-            os.environ[THREADS_VAR] = value
-            contact.resolve_frame(model, meshes, np.eye(4)[None], volumes=np.zeros(2))
-    finally:
-        if old is None:
-            os.environ.pop(THREADS_VAR, None)
-        else:
-            os.environ[THREADS_VAR] = old
+    for threads in (True, False):
+        contact.resolve_frame(model, meshes, np.eye(4)[None], volumes=np.zeros(2), threads=threads)
     yield

@@ -68,7 +68,7 @@ def demo(tmp_path_factory):
 
 def _volume(v, U, A):
     """The mesh volume of one muscle's (V, 3) vertices at resolution (U, A)."""
-    return contact._grid_volume(contact.vertices_to_grid(v, U, A), U, A)
+    return contact.grid_volume(contact.vertices_to_grid(v, U, A), U, A)
 
 
 def _bones_world(plan, world):
@@ -392,8 +392,8 @@ def _bone_depth(fields, x):
     """Depth (m) of points x (N, 3) inside the cube (0 outside), from its field."""
     g = np.empty(6)
     sel = np.arange(len(fields.bones))
-    d = [contact._bone_query(p, np.eye(4)[None], fields.bones, fields.origin, fields.h, fields.dims, fields.offset,
-                             fields.values, sel, 0, len(sel), -1e300, g) for p in np.asarray(x, float)]
+    posed = fields.posed(np.eye(4)[None])
+    d = [contact.query.bone_query(p, posed, sel, 0, len(sel), -1e300, g) for p in np.asarray(x, float)]
     return np.maximum(-np.array(d), 0.0)
 
 
@@ -463,7 +463,7 @@ def test_a_moved_muscles_normals_are_the_surface_stages(demo):
         v = r.vertices[0].astype(np.float64)
         grid = contact.vertices_to_grid(v, U, A)
         out_v, out_n = np.empty((1, len(v), 3)), np.empty((1, len(v), 3))
-        contact._normals(grid, np.array([0, U * A]), np.array([U]), np.array([A]), 0, out_v, out_n)
+        contact.volume.normals(grid, np.array([0, U * A]), np.array([U]), np.array([A]), 0, out_v, out_n)
         np.testing.assert_array_equal(out_v[0], v)
         np.testing.assert_allclose(out_n[0], r.normals[0], atol=1e-5)
 
@@ -560,16 +560,16 @@ def test_a_section_oblique_to_the_line_of_its_centres_is_read_across_its_own_pla
     grid = contact.vertices_to_grid(flat, U, A)
     off, nu, na = np.array([0, U * A]), np.array([U]), np.array([A])
     cen = np.zeros((U, contact.CEN_COLUMNS))
-    contact._centres(grid, off, nu, na, cen, np.array([0, U]))
+    contact.query.centres(grid, off, nu, na, cen, np.array([0, U]))
     q = np.empty(contact.QUERY_SIZE)
-    read = np.array([contact._muscle_query(x, grid, 0, U, A, cen, 0, 0.0, q) and q[0] < q[1] for x in pts])
+    read = np.array([contact.query.muscle_query(x, grid, 0, U, A, cen, 0, 0.0, q) and q[0] < q[1] for x in pts])
     assert gwn[clear].sum() > 200 and (~gwn[clear]).sum() > 200
     assert (read != gwn)[clear].mean() < 0.02
 
 
 def _thin_beside_thick_frames():
     """Three muscles where thin ones lie in a thick one (the thick one's pulls are recorded:
-    :func:`contact._point_push`), and their models."""
+    :func:`contact.rings.point_push`), and their models."""
     model, (thick, thin) = _thin_in_thick(0.012)
     _, (_, thin2) = _thin_in_thick(-0.009)
     U, A = 24, 24
@@ -586,6 +586,7 @@ def test_the_bytes_do_not_depend_on_threads_or_the_room_for_records(demo, monkey
     frames and a thick muscle with two thin ones in it."""
     import numba
 
+    from axdf_cli import runtime
     from axdf_cli.workers import THREADS_VAR
 
     plan, world, frames = demo
@@ -597,7 +598,8 @@ def test_the_bytes_do_not_depend_on_threads_or_the_room_for_records(demo, monkey
         outs = []
         for model, verts, inv in cases:
             vol = np.zeros(len(verts))
-            v, n, touched, before, after = contact.resolve_frame(model, verts, inv, volumes=vol)
+            v, n, touched, before, after = contact.resolve_frame(model, verts, inv, volumes=vol,
+                                                                 threads=runtime.use_threads())
             outs.append(([x.copy() for x in v], [None if x is None else x.copy() for x in n], touched.copy(), after,
                          vol))
         return outs
@@ -612,10 +614,10 @@ def test_the_bytes_do_not_depend_on_threads_or_the_room_for_records(demo, monkey
     finally:
         numba.set_num_threads(before_threads)
     monkeypatch.setenv(THREADS_VAR, "1")
-    assert not contact.use_threads()
+    assert not runtime.use_threads()
     serial = all_out()
     monkeypatch.setenv(THREADS_VAR, "")
-    monkeypatch.setattr(contact, "REACTION_RECORDS", 0)
+    monkeypatch.setattr(contact.query, "REACTION_RECORDS", 0)
     no_room = all_out()
     for other in (one, serial, no_room):
         for a, b in zip(ref, other):
@@ -628,11 +630,12 @@ def test_contact_in_forked_workers_after_this_process_used_its_threads(demo):
     """This process runs contact on numba's threads, then forked workers (as `axdf run
     --jobs`) run it again, each on its own thread (GNU OpenMP, numba's threading layer here,
     stops a forked child that starts its threads), to the same bytes."""
+    from axdf_cli import runtime
     from axdf_cli.workers import process_map
 
     plan, world, frames = demo
     inv = np.linalg.inv(world[0])
-    here = contact.resolve_frame(plan.contact, frames[0], inv)[0]
+    here = contact.resolve_frame(plan.contact, frames[0], inv, threads=runtime.use_threads())[0]
     there = process_map(_contact_in_worker, [0, 1], (plan.contact, frames[0], inv), jobs=2)
     for v in there:
         assert all(np.array_equal(a, b) for a, b in zip(here, v))
@@ -644,18 +647,21 @@ def test_a_forked_process_keeps_contact_on_its_thread(demo, tmp_path):
     ("fork() called from a process already using GNU OpenMP"). The same bytes."""
     import pickle
 
+    from axdf_cli import runtime
+
     plan, world, frames = demo
     inv = np.linalg.inv(world[0])
-    assert contact.use_threads() or os.environ.get("AXDF_NUM_THREADS") == "1"
-    here = contact.resolve_frame(plan.contact, frames[0], inv)[0]  # (on this process's threads)
+    assert runtime.use_threads() or os.environ.get("AXDF_NUM_THREADS") == "1"
+    here = contact.resolve_frame(plan.contact, frames[0], inv, threads=runtime.use_threads())[0]  # (on its threads)
     out = tmp_path / "child.pkl"
     pid = os.fork()
     if pid == 0:  # the child: no AXDF_NUM_THREADS set for it
         code = 1
         try:
             os.environ.pop("AXDF_NUM_THREADS", None)
-            assert not contact.use_threads()
-            out.write_bytes(pickle.dumps(contact.resolve_frame(plan.contact, frames[0], inv)[0]))
+            assert not runtime.use_threads()
+            out.write_bytes(pickle.dumps(contact.resolve_frame(plan.contact, frames[0], inv,
+                                                               threads=runtime.use_threads())[0]))
             code = 0
         finally:
             os._exit(code)
@@ -666,8 +672,10 @@ def test_a_forked_process_keeps_contact_on_its_thread(demo, tmp_path):
 
 
 def _contact_in_worker(shared, _item):
+    from axdf_cli import runtime
+
     model, verts, inv = shared
-    return contact.resolve_frame(model, verts, inv)[0]
+    return contact.resolve_frame(model, verts, inv, threads=runtime.use_threads())[0]
 
 
 def test_a_worker_keeps_contact_on_its_thread(monkeypatch):
@@ -675,12 +683,13 @@ def test_a_worker_keeps_contact_on_its_thread(monkeypatch):
     thread, a single process on numba's threads; the switch is AXDF_NUM_THREADS."""
     import numba
 
+    from axdf_cli import runtime
     from axdf_cli.workers import THREADS_VAR, one_thread
 
     monkeypatch.setenv(THREADS_VAR, "")  # (restored after the test, as it was)
-    assert contact.use_threads() == (numba.config.NUMBA_NUM_THREADS > 1)
+    assert runtime.use_threads() == (numba.config.NUMBA_NUM_THREADS > 1)
     one_thread()
-    assert os.environ[THREADS_VAR] == "1" and not contact.use_threads()
+    assert os.environ[THREADS_VAR] == "1" and not runtime.use_threads()
 
 
 def test_the_kernel_cache_follows_every_model_source(tmp_path, monkeypatch):
@@ -692,7 +701,7 @@ def test_the_kernel_cache_follows_every_model_source(tmp_path, monkeypatch):
     import hashlib
     import time
 
-    import axdf_cli
+    from axdf_cli import runtime
 
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     base = tmp_path / "axdf" / "numba"
@@ -700,7 +709,7 @@ def test_the_kernel_cache_follows_every_model_source(tmp_path, monkeypatch):
     for d in (old, recent):
         d.mkdir(parents=True)
     os.utime(old, (time.time() - 40 * 86400,) * 2)
-    here = axdf_cli._kernel_cache()
+    here = runtime.kernel_cache()
     model = REPO_ROOT / "axdf_cli" / "model"
     h = hashlib.sha256()
     # tolerances.py too: the kernels read its constants as compile-time globals
@@ -708,12 +717,12 @@ def test_the_kernel_cache_follows_every_model_source(tmp_path, monkeypatch):
         h.update(str(f.relative_to(model.parent)).encode() + b"\0" + f.read_bytes() + b"\0")
     assert here == str(base / h.hexdigest()[:16])
     assert not old.exists() and recent.is_dir() and os.path.isdir(here)
-    # what numba is told in a process that imports axdf
+    # what numba is told in a process that configures axdf's runtime (the command line's entry)
     import subprocess
     import sys
 
     env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
-    got = subprocess.run([sys.executable, "-c", "import os, axdf_cli; print(os.environ['NUMBA_CACHE_DIR'])"],
+    got = subprocess.run([sys.executable, "-c", "import os; from axdf_cli import runtime; runtime.configure(); print(os.environ['NUMBA_CACHE_DIR'])"],
                          env=env, capture_output=True, text=True, check=True, cwd=REPO_ROOT).stdout.strip()
     assert got == here
 
@@ -722,23 +731,26 @@ def test_a_bone_field_computed_by_another_libigl_is_not_read_back(tmp_path, monk
     """The bone fields' disk cache is keyed by the mesh, the grid and libigl's version: a
     field another release computed (kept in ~/.cache across installs) is computed again, and
     the same release reads its own back (the same values)."""
+    from axdf_cli.fileio import fieldcache
+
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     v = np.array([[0, 0, 0], [0.02, 0, 0], [0, 0.02, 0], [0, 0, 0.02]], float)
     f = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
-    contact._field_cached.cache_clear()
-    a = contact.bone_field(0, v, f, h=0.005, pad=0.01)
+    fieldcache.clear()
+    a = contact.bone_field(0, v, f, h=0.005, pad=0.01, cache=fieldcache.cached)
     files = sorted((tmp_path / "axdf" / "sdf").glob("*.npz"))
-    assert len(files) == 1 and contact._igl_version().startswith("libigl ")
-    contact._field_cached.cache_clear()
-    again = contact.bone_field(0, v, f, h=0.005, pad=0.01)  # read back: no new file
+    assert len(files) == 1 and fieldcache.igl_version().startswith("libigl ")
+    fieldcache.clear()
+    again = contact.bone_field(0, v, f, h=0.005, pad=0.01, cache=fieldcache.cached)  # read back: no new file
     assert sorted((tmp_path / "axdf" / "sdf").glob("*.npz")) == files
     assert np.array_equal(a.values, again.values)
-    monkeypatch.setattr(contact, "_igl_version", lambda: "libigl 0.0.0")
-    contact._field_cached.cache_clear()
-    other = contact.bone_field(0, v, f, h=0.005, pad=0.01)
+    assert np.array_equal(contact.bone_field(0, v, f, h=0.005, pad=0.01).values, a.values)  # (no cache)
+    monkeypatch.setattr(fieldcache, "igl_version", lambda: "libigl 0.0.0")
+    fieldcache.clear()
+    other = contact.bone_field(0, v, f, h=0.005, pad=0.01, cache=fieldcache.cached)
     assert len(list((tmp_path / "axdf" / "sdf").glob("*.npz"))) == 2  # computed again, kept apart
     assert np.array_equal(other.values, a.values)
-    contact._field_cached.cache_clear()
+    fieldcache.clear()
 
 
 def test_muscles_that_overlap_in_bulk_are_told_to_pack(tmp_path, capsys):

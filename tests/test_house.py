@@ -23,7 +23,7 @@ PACKAGE = REPO_ROOT / "axdf_cli"
 ROOMS = (
     ("__init__", "errors", "tolerances"),  # the version, the error hierarchy, every numeric tolerance
     ("fileio",),  # atomic writes, bounded reads, YAML with positions, the run folder's rules
-    ("workers",),  # process pools whose workers die with the parent
+    ("workers", "runtime"),  # process pools whose workers die with the parent; threads and kernel cache
     ("formats",),  # mesh formats: one entry per format in FORMATS
     ("model",),  # skeleton + FK, poses, the muscle model, paths, kernels
     ("specs",),  # YAML file specs by kind

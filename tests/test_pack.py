@@ -47,7 +47,10 @@ def demo(tmp_path_factory):
 @pytest.fixture(scope="module")
 def packed(demo):
     d, plan, rest, cm = demo
-    return pack.pack(plan.muscles, plan.models, plan.pose.skeleton, rest, cm, iterations=12)
+    from axdf_cli import runtime
+
+    return pack.pack(plan.muscles, plan.models, plan.pose.skeleton, rest, cm, iterations=12,
+                     threads=runtime.use_threads())
 
 
 def _gwn_shares(plan, models, rest, cm):
@@ -77,7 +80,8 @@ def test_the_fit_is_exact_on_the_rest_mesh(demo):
 def test_territories_never_overlap(demo):
     """Every point lies in at most one muscle's territory, however the envelopes are grown."""
     d, plan, rest, cm = demo
-    grid, off, nu, na, cen, coff, box = pack._grids(plan.models)
+    mesh = pack._grids(plan.models)
+    grid, box = mesh.grid, mesh.box
     f = cm.fields
     inv = np.linalg.inv(rest)
     M = len(plan.models)
@@ -85,18 +89,18 @@ def test_territories_never_overlap(demo):
     pts = grid[rng.integers(0, len(grid), 6000)] + rng.normal(0.0, 0.01, (6000, 3))  # around the muscles
     for s in (np.ones(M), 1.0 + rng.random(M)):
         reach = (s - 1.0) * 0.05 + 1e-3
-        nbr_off, nbr = contact._neighbours(box + np.concatenate([-reach[:, None] * np.ones((1, 3)),
-                                                                 reach[:, None] * np.ones((1, 3))], axis=1), cm.allow, 0.0)
-        fl_off, fl = contact._field_lists(box, f, inv, 0.05)
+        nbr_off, nbr = contact.query.neighbours(box + np.concatenate([-reach[:, None] * np.ones((1, 3)),
+                                                                      reach[:, None] * np.ones((1, 3))], axis=1),
+                                                cm.allow, 0.0)
+        lists = contact.Lists(nbr_off, nbr, *contact.query.field_lists(box, f, inv, 0.05))
         owners = np.zeros(len(pts), int)
         enveloped = np.zeros(len(pts), int)
         held_any = 0
         q = np.empty(contact.QUERY_SIZE)
         for i in range(M):
-            enveloped += [pack._frac(x, i, grid, off, nu, na, cen, coff, box, reach[i], q) < s[i] for x in pts]
+            enveloped += [pack._frac(x, i, mesh, reach[i], q) < s[i] for x in pts]
             ok = np.zeros(len(pts), np.bool_)
-            pack._owned_all(pts, np.full(len(pts), i), s, grid, off, nu, na, cen, coff, box, reach, nbr_off, nbr, inv,
-                            f.bones, f.origin, f.h, f.dims, f.offset, f.values, fl_off, fl, 0.0, ok)
+            pack._owned_all(pts, np.full(len(pts), i), s, mesh, reach, lists, f.posed(inv), 0.0, ok)
             owners += ok
             held_any += ok.sum()
         assert owners.max() <= 1
@@ -290,7 +294,7 @@ def test_a_forked_process_packs_on_its_thread_to_the_same_result(demo, packed, t
     """Packing in a process forked from one that used numba's threads (the `packed` fixture
     packed on them) runs pack's kernels' twins on its own thread (GNU OpenMP, numba's
     threading layer here, stops a forked child that starts its threads:
-    contact.use_threads); the same packed shapes and measures, bit for bit."""
+    runtime.use_threads); the same packed shapes and measures, bit for bit."""
     import os
     import pickle
 
@@ -300,8 +304,11 @@ def test_a_forked_process_packs_on_its_thread_to_the_same_result(demo, packed, t
     if pid == 0:
         code = 1
         try:
-            assert not contact.use_threads()
-            res = pack.pack(plan.muscles, plan.models, plan.pose.skeleton, rest, cm, iterations=12)
+            from axdf_cli import runtime
+
+            assert not runtime.use_threads()
+            res = pack.pack(plan.muscles, plan.models, plan.pose.skeleton, rest, cm, iterations=12,
+                            threads=runtime.use_threads())
             out.write_bytes(pickle.dumps(([m.rest_vertices for m in res.models], res.before, res.after, res.volume)))
             code = 0
         finally:

@@ -54,6 +54,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from axdf_cli import runtime
+
+    runtime.configure()  # threads and numba's cache, before a subcommand imports numba or numpy
     from axdf_cli.fileio import atomic
 
     old = {}

@@ -18,6 +18,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from axdf_cli import runtime
 from axdf_cli.fileio import atomic, lock
 from axdf_cli.fileio.runfolder import LOCK, Root, remove_stale_staging
 from axdf_cli.dataset import folder as dsfolder
@@ -153,6 +154,7 @@ def worker_context(where: tuple) -> wk.Context:
     # the workers are the parallelism: each renders with one llvmpipe thread (Mesa's default is
     # one per core, which oversubscribes the cores N workers share); a value you set is kept
     os.environ.setdefault("LP_NUM_THREADS", "1")
+    runtime.configure()  # (a Ray worker is a fresh interpreter)
     one_thread()  # contact's kernels likewise: one thread each
     os.chdir(cwd)
     ctx = _CONTEXTS.get(where)

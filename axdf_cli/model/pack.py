@@ -1,8 +1,7 @@
-"""Packing: the rest shapes of a body's muscles made to share space (issue 18, contact).
+"""Packing: the rest shapes of a body's muscles made to share space.
 
 Imported muscles overlap in bulk, not at their skins: OpenSim's lines of action with volumes
-from the force a muscle makes put several muscles on nearly one line (on the gait2392 walk
-37% of the muscles' volume lies inside another muscle, the vasti 63%). No push made frame by
+from the force a muscle makes put several muscles on nearly one line. No push made frame by
 frame separates that without popping. So the overlap is resolved once, at the rest pose, and
 written into the muscle files as section outlines (``outline:``, 8 control points each, which
 may leave the line of action and take any shape); the frame's contact stage then only meets
@@ -12,7 +11,7 @@ The method: a weighted partition of space, then a fit.
 
 1. **Territories.** Every muscle i has an envelope, its rest shape scaled by s_i about its
    axis: the points whose axis-space radial fraction q_i(x) = rho_i / R_i (the distance from
-   i's centre line over i's surface radius in that direction, :func:`contact._muscle_query`)
+   i's centre line over i's surface radius in that direction, :func:`query.muscle_query`)
    is below s_i. A point belongs to the muscle of least q_i / s_i whose envelope holds it,
    and to none inside a bone (its signed distance field, :mod:`axdf_cli.model.contact`). The
    territories never overlap, by construction; where two envelopes overlap the boundary lies
@@ -28,8 +27,7 @@ The method: a weighted partition of space, then a fit.
    loses what it shared), and steps 1-3 repeat. A muscle boxed in by bone and neighbours may
    not reach it within tol.PACK_SCALE_MAX; its volume is then what it could take (reported).
 5. **Polish.** The round kept leaves what the fit could not follow: smooth sections cut a
-   little across territory boundaries (on Rajagopal2016, 2.9% of the rest vertices inside
-   another muscle). The frame's own contact stage (:func:`contact.resolve_frame`, volume kept,
+   little across territory boundaries. The frame's own contact stage (:func:`contact.resolve_frame`, volume kept,
    the poles where they are: packing fits sections, not attachments) is run at the rest pose
    with many passes, and the sections are fitted to the rings it gives,
    without the smoothing of step 3 (contact's displacements are smooth along the muscle
@@ -42,28 +40,39 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from typing import NamedTuple
 
 import numpy as np
+from numba import njit, prange
 
 from axdf_cli import tolerances as tol
 from axdf_cli.model import bspline, contact
+from axdf_cli.model.contact import query
+from axdf_cli.model.contact.params import NMODES, QUERY_SIZE, SEG_GROUP, Lists, Mesh, Rows
 from axdf_cli.model.muscle import OCT, MuscleModel, MuscleSpec, Section
 
-try:
-    from numba import njit, prange
-except ImportError as e:  # a dependency: make setup installs it
-    raise ImportError(f"axdf needs numba ({e}); run `make setup` or `pip install numba`") from None
+
+class RingCut(NamedTuple):
+    """How a ring is cut with its territory (module doc, step 2): on a ``pixels`` x ``pixels``
+    grid over the ring's radius times ``grow`` (plus 2 mm), outside the bones by
+    ``bone_margin``, the targets ``margin`` inside the territory's edge."""
+
+    pixels: int
+    grow: float
+    bone_margin: float
+    margin: float
 
 
 # ----------------------------------------------------------------------------- territories
 
 
 @njit(cache=True)
-def _frac(x, j, grid, off, nu, na, cen, coff, box, reach, q):
+def _frac(x, j, mesh, reach, q):
     """q_j(x) = rho / R of point x against muscle j's rest shape, 1e30 where it cannot hold x."""
-    if not contact._may_meet(x, j, box, reach):
+    grid, off, nu, na, cen, coff, box = mesh
+    if not query.may_meet(x, j, box, reach):
         return 1e30
-    if not contact._muscle_query(x, grid, off[j], nu[j], na[j], cen, coff[j], reach, q):
+    if not query.muscle_query(x, grid, off[j], nu[j], na[j], cen, coff[j], reach, q):
         return 1e30
     if q[1] <= 1e-9:
         return 1e30
@@ -71,19 +80,20 @@ def _frac(x, j, grid, off, nu, na, cen, coff, box, reach, q):
 
 
 @njit(cache=True)
-def _owned(x, i, s, grid, off, nu, na, cen, coff, box, reach, actm, nmm, inv, fb, fo, fh, fd, foff, fv, actb, nb,
-           bone_margin, q, g):
-    """Whether point x lies in muscle i's territory (module doc, step 1)."""
-    qi = _frac(x, i, grid, off, nu, na, cen, coff, box, reach[i], q) / s[i]
+def _owned(x, i, s, mesh, reach, fields, nmm, nb, bone_margin, rows):
+    """Whether point x lies in muscle i's territory (module doc, step 1), against the bone
+    fields rows.actb[:nb] and the neighbours rows.actm[:nmm] (:func:`query.ring_lists`)."""
+    q, g, actb, actm = rows.q, rows.g, rows.actb, rows.actm
+    qi = _frac(x, i, mesh, reach[i], q) / s[i]
     if not qi < 1.0:
         return False
     if nb > 0:
-        d = contact._bone_query(x, inv, fb, fo, fh, fd, foff, fv, actb, 0, nb, -1e300, g)
+        d = query.bone_query(x, fields, actb, 0, nb, -1e300, g)
         if d < bone_margin:
             return False
     for jj in range(nmm):
         j = actm[jj]
-        qj = _frac(x, j, grid, off, nu, na, cen, coff, box, reach[j], q) / s[j]
+        qj = _frac(x, j, mesh, reach[j], q) / s[j]
         if qj < qi or (qj == qi and j < i):
             return False
     return True
@@ -132,50 +142,50 @@ def _largest_piece(mask, K, lab, stack):
 
 @njit(cache=True)
 def _query_scratch(nu, nfields):
-    """Scratch arrays for contact's queries of one point or ring: q, g, actb, actm, gl, gn
-    (:func:`contact._ring_lists`, :func:`_owned`)."""
+    """Scratch arrays for contact's queries of one point or ring (:class:`params.Rows`;
+    :func:`query.ring_lists`, :func:`_owned`)."""
     M = nu.shape[0]
-    ngmax = (nu.max() - 2) // contact.SEG_GROUP + 1
-    return (np.empty(contact.QUERY_SIZE), np.empty(6), np.empty(max(nfields, 1), np.int64),
-            np.empty(max(M, 1), np.int64), np.empty((max(M, 1), ngmax), np.int64), np.empty(max(M, 1), np.int64))
+    ngmax = (nu.max() - 2) // SEG_GROUP + 1
+    return Rows(np.empty(QUERY_SIZE), np.empty(6), np.empty(7), np.empty(max(nfields, 1), np.int64),
+                np.empty(max(M, 1), np.int64), np.empty((max(M, 1), ngmax), np.int64), np.empty(max(M, 1), np.int64),
+                np.empty((1, 3 * NMODES + 2)))
 
 
 @njit(cache=True, parallel=True)
-def _ring_targets(s, grid, off, nu, na, cen, coff, box, reach, nbr_off, nbr, inv, fb, fo, fh, fd, foff, fv,
-                  fl_off, fl, K, grow, bone_margin, margin, rows, targets, origins, full):
-    """Targets of every ring vertex (module doc, step 2). rows (R, 2): (muscle, ring) pairs of
-    the rings to cut (the pole rows are not); targets, origins: like grid (each vertex's target
-    and the ray origin it was found from); full (R,): whether the ring's territory is its whole
-    envelope (nothing claims any of it)."""
+def _ring_targets(s, mesh, reach, lists, fields, cut, rows, targets, origins, full):
+    """Targets of every ring vertex (module doc, step 2). mesh, lists, fields:
+    :class:`params.Mesh`, :class:`params.Lists`, :class:`params.Fields`; cut: :class:`RingCut`;
+    rows (R, 2): (muscle, ring) pairs of the rings to cut (the pole rows are not); targets,
+    origins: like grid (each vertex's target and the ray origin it was found from); full (R,):
+    whether the ring's territory is its whole envelope (nothing claims any of it)."""
     for r in prange(rows.shape[0]):
-        _ring_targets_one(r, s, grid, off, nu, na, cen, coff, box, reach, nbr_off, nbr, inv, fb, fo, fh, fd, foff, fv,
-                          fl_off, fl, K, grow, bone_margin, margin, rows, targets, origins, full)
+        _ring_targets_one(r, s, mesh, reach, lists, fields, cut, rows, targets, origins, full)
 
 
 @njit(cache=True)
-def _ring_targets_serial(s, grid, off, nu, na, cen, coff, box, reach, nbr_off, nbr, inv, fb, fo, fh, fd, foff,
-                         fv, fl_off, fl, K, grow, bone_margin, margin, rows, targets, origins, full):
-    """:func:`_ring_targets` on this thread alone (:func:`contact.use_threads`)."""
+def _ring_targets_serial(s, mesh, reach, lists, fields, cut, rows, targets, origins, full):
+    """:func:`_ring_targets` on this thread alone."""
     for r in range(rows.shape[0]):
-        _ring_targets_one(r, s, grid, off, nu, na, cen, coff, box, reach, nbr_off, nbr, inv, fb, fo, fh, fd, foff, fv,
-                          fl_off, fl, K, grow, bone_margin, margin, rows, targets, origins, full)
+        _ring_targets_one(r, s, mesh, reach, lists, fields, cut, rows, targets, origins, full)
 
 
 @njit(cache=True)
-def _ring_targets_one(r, s, grid, off, nu, na, cen, coff, box, reach, nbr_off, nbr, inv, fb, fo, fh, fd, foff, fv,
-                      fl_off, fl, K, grow, bone_margin, margin, rows, targets, origins, full):
+def _ring_targets_one(r, s, mesh, reach, lists, fields, cut, rows, targets, origins, full):
     """:func:`_ring_targets` for row r of ``rows``."""
+    grid, off, nu, na, cen, coff, box = mesh
+    K, grow, bone_margin, margin = cut
     i = rows[r, 0]
     u = rows[r, 1]
     U = nu[i]
     A = na[i]
-    q, g, actb, actm, gl, gn = _query_scratch(nu, fb.shape[0])
+    sc = _query_scratch(nu, fields.fb.shape[0])
+    q = sc.q
     mask = np.zeros(K * K, np.bool_)
     lab = np.zeros(K * K, np.int64)
     stack = np.zeros(K * K, np.int64)
     dist = np.zeros(K * K, np.int64)
     ci = cen[coff[i] + u].copy()
-    t0, t1, t2 = contact._centre_tangent(cen, coff[i], U, u)
+    t0, t1, t2 = query.centre_tangent(cen, coff[i], U, u)
     # e1: towards the ring's first vertex, across the tangent; e2 = t x e1
     base = off[i] + u * A
     d0 = grid[base, 0] - ci[0]
@@ -202,8 +212,7 @@ def _ring_targets_one(r, s, grid, off, nu, na, cen, coff, box, reach, nbr_off, n
     L = grow * s[i] * ci[3] + 0.002
     h = 2.0 * L / K
     ci[3] = L * 1.4143
-    nb, nmm = contact._ring_lists(ci, i, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, nbr_off, nbr, box,
-                                  0.0, reach.max(), actb, actm, cen, coff, nu, gl, gn)
+    nb, nmm = query.ring_lists(ci, i, mesh, fields, lists, 0.0, reach.max(), sc)
     x = np.empty(3)
     n_env = 0
     for ix in range(K):
@@ -213,10 +222,9 @@ def _ring_targets_one(r, s, grid, off, nu, na, cen, coff, box, reach, nbr_off, n
             x[0] = ci[0] + a_ * e10 + b_ * e20
             x[1] = ci[1] + a_ * e11 + b_ * e21
             x[2] = ci[2] + a_ * e12 + b_ * e22
-            if _frac(x, i, grid, off, nu, na, cen, coff, box, reach[i], q) < s[i]:
+            if _frac(x, i, mesh, reach[i], q) < s[i]:
                 n_env += 1
-            mask[ix * K + iy] = _owned(x, i, s, grid, off, nu, na, cen, coff, box, reach, actm, nmm, inv, fb,
-                                       fo, fh, fd, foff, fv, actb, nb, bone_margin, q, g)
+            mask[ix * K + iy] = _owned(x, i, s, mesh, reach, fields, nmm, nb, bone_margin, sc)
     n = _largest_piece(mask, K, lab, stack)
     full[r] = n == n_env
     if n == 0:
@@ -298,68 +306,62 @@ def _deepest(mask, K, dist):
 
 
 @njit(cache=True, parallel=True)
-def _owned_all(pts, owner, s, grid, off, nu, na, cen, coff, box, reach, nbr_off, nbr, inv, fb, fo, fh, fd, foff, fv,
-               fl_off, fl, bone_margin, out):
+def _owned_all(pts, owner, s, mesh, reach, lists, fields, bone_margin, out):
     """Whether each point pts[p] lies in the territory of muscle owner[p] (module doc, step 1)."""
     for p in prange(pts.shape[0]):
-        _owned_all_one(p, pts, owner, s, grid, off, nu, na, cen, coff, box, reach, nbr_off, nbr, inv, fb, fo, fh, fd,
-                       foff, fv, fl_off, fl, bone_margin, out)
+        _owned_all_one(p, pts, owner, s, mesh, reach, lists, fields, bone_margin, out)
 
 
 @njit(cache=True)
-def _owned_all_serial(pts, owner, s, grid, off, nu, na, cen, coff, box, reach, nbr_off, nbr, inv, fb, fo, fh, fd,
-                      foff, fv, fl_off, fl, bone_margin, out):
-    """:func:`_owned_all` on this thread alone (:func:`contact.use_threads`)."""
+def _owned_all_serial(pts, owner, s, mesh, reach, lists, fields, bone_margin, out):
+    """:func:`_owned_all` on this thread alone."""
     for p in range(pts.shape[0]):
-        _owned_all_one(p, pts, owner, s, grid, off, nu, na, cen, coff, box, reach, nbr_off, nbr, inv, fb, fo, fh, fd,
-                       foff, fv, fl_off, fl, bone_margin, out)
+        _owned_all_one(p, pts, owner, s, mesh, reach, lists, fields, bone_margin, out)
 
 
 @njit(cache=True)
-def _owned_all_one(p, pts, owner, s, grid, off, nu, na, cen, coff, box, reach, nbr_off, nbr, inv, fb, fo, fh, fd,
-                   foff, fv, fl_off, fl, bone_margin, out):
+def _owned_all_one(p, pts, owner, s, mesh, reach, lists, fields, bone_margin, out):
     """:func:`_owned_all` for point p."""
     i = owner[p]
-    q, g, actb, actm, gl, gn = _query_scratch(nu, fb.shape[0])
+    sc = _query_scratch(mesh.nu, fields.fb.shape[0])
     ci = np.empty(8)
     for c in range(3):
         ci[c] = pts[p, c]
     ci[3] = 0.0
-    nb, nmm = contact._ring_lists(ci, i, inv, fb, fo, fh, fd, foff, fv, fl_off, fl, nbr_off, nbr, box,
-                                  0.0, reach.max(), actb, actm, cen, coff, nu, gl, gn)
-    out[p] = _owned(pts[p], i, s, grid, off, nu, na, cen, coff, box, reach, actm, nmm, inv, fb, fo, fh, fd, foff,
-                    fv, actb, nb, bone_margin, q, g)
+    nb, nmm = query.ring_lists(ci, i, mesh, fields, lists, 0.0, reach.max(), sc)
+    out[p] = _owned(pts[p], i, s, mesh, reach, fields, nmm, nb, bone_margin, sc)
 
 
 @njit(cache=True, parallel=True)
-def _inside_of(grid, off, nu, na, cen, coff, box, nbr_off, nbr, out):
+def _inside_of(mesh, nbr_off, nbr, out):
     """For every vertex of every muscle (grid rows), the first neighbour whose mesh holds it
     (axis-space query), or -1."""
-    M = nu.shape[0]
+    M = mesh.nu.shape[0]
     for i in prange(M):
-        _inside_of_one(i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, out)
+        _inside_of_one(i, mesh, nbr_off, nbr, out)
 
 
 @njit(cache=True)
-def _inside_of_serial(grid, off, nu, na, cen, coff, box, nbr_off, nbr, out):
-    """:func:`_inside_of` on this thread alone (:func:`contact.use_threads`)."""
-    M = nu.shape[0]
+def _inside_of_serial(mesh, nbr_off, nbr, out):
+    """:func:`_inside_of` on this thread alone."""
+    M = mesh.nu.shape[0]
     for i in range(M):
-        _inside_of_one(i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, out)
+        _inside_of_one(i, mesh, nbr_off, nbr, out)
 
 
 @njit(cache=True)
-def _inside_of_one(i, grid, off, nu, na, cen, coff, box, nbr_off, nbr, out):
+def _inside_of_one(i, mesh, nbr_off, nbr, out):
     """:func:`_inside_of` for muscle i."""
-    q = np.empty(contact.QUERY_SIZE)
+    grid, off, nu, na, cen, coff, box = mesh
+    q = np.empty(QUERY_SIZE)
     for k in range(off[i], off[i + 1]):
         out[k] = -1
         x = grid[k]
         for jj in range(nbr_off[i], nbr_off[i + 1]):
             j = nbr[jj]
-            if not contact._may_meet(x, j, box, 0.0):
+            if not query.may_meet(x, j, box, 0.0):
                 continue
-            if contact._muscle_query(x, grid, off[j], nu[j], na[j], cen, coff[j], 0.0, q) and q[0] < q[1]:
+            if query.muscle_query(x, grid, off[j], nu[j], na[j], cen, coff[j], 0.0, q) and q[0] < q[1]:
                 out[k] = j
                 break
 
@@ -419,7 +421,7 @@ class Fit:
     reference's mean are raised to it. The surface stays linear in (c, rho): 8 unknowns a
     section instead of 16. Unconstrained, a fit to a territory that wraps around a neighbour
     (the soleus round tibialis posterior) folds its section into a bow tie, a surface that cuts
-    itself (10.6% of the packed gait2392 rings did)."""
+    itself."""
 
     def __init__(self, model: MuscleModel, fr: _Frames, x0: np.ndarray | None, pull: float, smooth: float = 0.0,
                  rays: np.ndarray | None = None):
@@ -555,39 +557,41 @@ def _grids(models):
     grid = np.concatenate([contact.vertices_to_grid(m.rest_vertices.astype(np.float64), m.U, m.A) for m in models])
     cen = np.zeros((int(coff[-1]), contact.CEN_COLUMNS))
     box = np.empty((len(models), 6))
-    contact._centres(grid, off, nu, na, cen, coff)
-    contact._boxes(grid, off, box)
-    return grid, off, nu, na, cen, coff, box
+    query.centres(grid, off, nu, na, cen, coff)
+    query.boxes(grid, off, box)
+    return Mesh(grid, off, nu, na, cen, coff, box)
 
 
-def measure_rest(models, cm: "contact.ContactModel", rest_inv: np.ndarray) -> np.ndarray:
-    """(M, 3) the rest meshes' inside-muscle share, inside-bone share and deepest penetration."""
-    grid, off, nu, na, cen, coff, box = _grids(models)
+def measure_rest(models, cm: contact.ContactModel, rest_inv: np.ndarray, threads: bool = False) -> np.ndarray:
+    """(M, 3) the rest meshes' inside-muscle share, inside-bone share and deepest penetration
+    (``threads``: on numba's threads, the same values; :func:`contact.resolve_frame`)."""
+    mesh = _grids(models)
     f = cm.fields
     out = np.zeros((len(models), 3))
-    measure = contact._measure if contact.use_threads() else contact._measure_serial
-    measure(grid, off, nu, na, cen, coff, box, *contact._neighbours(box, cm.allow, 0.0), rest_inv, f.bones,
-            f.origin, f.h, f.dims, f.offset, f.values, *contact._field_lists(box, f, rest_inv, 0.0), out,
-            contact._work(nu, na, f))
+    measure = contact.measures.measure if threads else contact.measures.measure_serial
+    lists = Lists(*query.neighbours(mesh.box, cm.allow, 0.0), *query.field_lists(mesh.box, f, rest_inv, 0.0))
+    measure(mesh, lists, f.posed(rest_inv), out, query.make_work(mesh.nu, mesh.na, f))
     return out
 
 
 def pack(specs, models, skeleton, rest_world: np.ndarray, cm: "contact.ContactModel", *,
          iterations: int = tol.PACK_ITERATIONS, pixels: int = tol.PACK_PIXELS,
          sections: int = tol.PACK_SECTIONS, polish: int = tol.PACK_POLISH_ROUNDS, poses=None,
-         progress=None) -> PackResult:
+         progress=None, threads: bool = False) -> PackResult:
     """Pack the rest shapes (module doc): ``iterations`` rounds of steps 1-4, then ``polish``
     rounds of step 5 (over the rest pose and the frames of ``poses``: :func:`_polish`).
-    ``cm``: the muscles' contact model (pairs, bone fields)."""
+    ``cm``: the muscles' contact model (pairs, bone fields). ``threads``: the kernels run on
+    numba's threads (the same bytes; never in a process forked from one that used them:
+    :func:`axdf_cli.runtime.use_threads`)."""
     M = len(models)
     inv = np.linalg.inv(rest_world)
     f = cm.fields
-    # on numba's threads, but not in a worker or a forked process (contact.use_threads)
-    threads = contact.use_threads()
+    fields = f.posed(inv)
     ring_targets = _ring_targets if threads else _ring_targets_serial
     owned_all = _owned_all if threads else _owned_all_serial
     inside_of = _inside_of if threads else _inside_of_serial
-    grid, off, nu, na, cen, coff, box = _grids(models)  # the envelopes: the original rest shapes
+    mesh = _grids(models)  # the envelopes: the original rest shapes
+    grid, off, nu, na, cen, coff, box = mesh
     rmax = np.array([cen[coff[m]:coff[m + 1], 3].max() for m in range(M)])
     layouts = [section_layout(sp, sections) for sp in specs]
     frames = [_frames(m, rest_world, t) for m, t in zip(models, layouts)]
@@ -596,7 +600,7 @@ def pack(specs, models, skeleton, rest_world: np.ndarray, cm: "contact.ContactMo
                                  .reshape(m.U, m.A, 3))[0] for m, fr in zip(models, frames)]
     fitters = [Fit(m, fr, x, tol.PACK_PULL, tol.PACK_SMOOTH, rays=x) for m, fr, x in zip(models, frames, x0)]
     v0 = np.array([m.v0 for m in models])
-    before = measure_rest(models, cm, inv)
+    before = measure_rest(models, cm, inv, threads)
     s = np.ones(M)
     rows = np.array([(i, u) for i in range(M) for u in range(1, nu[i] - 1)], dtype=np.int64)
     history = []
@@ -606,15 +610,12 @@ def pack(specs, models, skeleton, rest_world: np.ndarray, cm: "contact.ContactMo
         growb = box.copy()
         growb[:, :3] -= reach[:, None]
         growb[:, 3:] += reach[:, None]
-        nbr_off, nbr = contact._neighbours(growb, cm.allow, 0.0)
-        fl_off, fl = contact._field_lists(growb, f, inv, 0.0)
+        lists = Lists(*query.neighbours(growb, cm.allow, 0.0), *query.field_lists(growb, f, inv, 0.0))
         targets = grid.copy()
         origins = grid.copy()
-        args = (grid, off, nu, na, cen, coff, box, reach, nbr_off, nbr, inv, f.bones, f.origin, f.h, f.dims,
-                f.offset, f.values, fl_off, fl)
         full = np.zeros(len(rows), np.bool_)
-        ring_targets(s, *args, pixels, tol.PACK_GROW * max(1.0, float(s.max())), tol.CONTACT_BONE_MARGIN,
-                     tol.PACK_MARGIN, rows, targets, origins, full)
+        cut = RingCut(pixels, tol.PACK_GROW * max(1.0, float(s.max())), tol.CONTACT_BONE_MARGIN, tol.PACK_MARGIN)
+        ring_targets(s, mesh, reach, lists, fields, cut, rows, targets, origins, full)
         # a muscle whose territory is its whole rest shape (nothing claims any of it) is kept as it is
         clear = (np.bincount(rows[:, 0], weights=(~full).astype(np.float64), minlength=M) == 0) & (s == 1.0)
         # fit; where a fitted vertex leaves its territory, its target is drawn in and fitted again
@@ -627,7 +628,7 @@ def pack(specs, models, skeleton, rest_world: np.ndarray, cm: "contact.ContactMo
                 break
             pts = np.concatenate([ft[1].reshape(-1, 3) for ft in fits])
             ok = np.zeros(len(pts), np.bool_)
-            owned_all(pts, owner, s, *args, 0.0, ok)
+            owned_all(pts, owner, s, mesh, reach, lists, fields, 0.0, ok)
             draw = np.zeros(len(grid), np.bool_)
             draw[ring_rows[~ok]] = True
             # where the fit overshot its target outwards, the target is set back by the overshoot
@@ -645,10 +646,10 @@ def pack(specs, models, skeleton, rest_world: np.ndarray, cm: "contact.ContactMo
             fg[ring_rows] = pts
             fcen = np.zeros_like(cen)
             fbox = np.empty_like(box)
-            contact._centres(fg, off, nu, na, fcen, coff)
-            contact._boxes(fg, off, fbox)
+            query.centres(fg, off, nu, na, fcen, coff)
+            query.boxes(fg, off, fbox)
             held = np.empty(len(fg), np.int64)
-            inside_of(fg, off, nu, na, fcen, coff, fbox, *contact._neighbours(fbox, cm.allow, 0.0), held)
+            inside_of(Mesh(fg, off, nu, na, fcen, coff, fbox), *query.neighbours(fbox, cm.allow, 0.0), held)
             for k in np.nonzero(held >= 0)[0]:
                 j = int(held[k])
                 vj = fg[off[j]:off[j + 1]]
@@ -670,7 +671,7 @@ def pack(specs, models, skeleton, rest_world: np.ndarray, cm: "contact.ContactMo
             spec = with_outlines(specs[i], layouts[i], to_file_outlines(fits[i][0], frames[i]))
             new_specs.append(spec)
             new_models.append(MuscleModel(spec, skeleton.bone_index, rest_world, skeleton))
-        score, row, ratio = _score(new_models, cm, inv, v0)
+        score, row, ratio = _score(new_models, cm, inv, v0, threads)
         history.append(row)
         # the round kept: the least overlap plus volume change (all shares)
         if best is None or score < best[0]:
@@ -679,20 +680,20 @@ def pack(specs, models, skeleton, rest_world: np.ndarray, cm: "contact.ContactMo
             progress(it, history[-1])
         # grow the envelope of each muscle short of its volume (area ~ s^2 where free)
         s = np.clip(s * np.clip(ratio ** -tol.PACK_GAIN, 1.0 / tol.PACK_STEP, tol.PACK_STEP), 1.0, tol.PACK_SCALE_MAX)
-    best = _polish(best, specs, models, skeleton, rest_world, cm, layouts, frames, v0, history, polish, progress,
-                   poses, x0)
+    job = _Job(specs, models, skeleton, rest_world, cm, layouts, frames, v0, x0, threads)
+    best = _polish(best, job, history, polish, progress, poses)
     _, kept, cur_specs, cur_models, s = best
-    after = measure_rest(cur_models, cm, inv)
+    after = measure_rest(cur_models, cm, inv, threads)
     return PackResult(cur_specs, cur_models, before, after, v0, np.array([m.v0 for m in cur_models]), s, history, kept,
                       iterations)
 
 
-def _score(models, cm, inv, v0):
+def _score(models, cm, inv, v0, threads):
     """(the round's score: mean inside-muscle share + mean inside-bone share + mean |volume
     ratio - 1|, its history row, the volume ratios)."""
     vol = np.array([m.v0 for m in models])
     ratio = vol / v0
-    meas = measure_rest(models, cm, inv)
+    meas = measure_rest(models, cm, inv, threads)
     row = (float(meas[:, 0].mean()), float(meas[:, 1].mean()), float(meas[:, 2].max()), float(ratio.min()),
            float(ratio.max()))
     return float(meas[:, 0].mean() + meas[:, 1].mean() + np.abs(ratio - 1.0).mean()), row, ratio
@@ -703,20 +704,38 @@ def _score(models, cm, inv, v0):
 PACK_RELAX = (1.0, 1.0, 1.0)
 
 
-def _polish(best, specs, models, skeleton, rest_world, cm, layouts, frames, v0, history, rounds, progress,
-            poses=None, rays=None):
+@dataclass(frozen=True)
+class _Job:
+    """What the polish works on: the muscles as given, their section layouts and frames, the
+    rest volumes v0, the rays the fits keep (None: the sections' own), and ``threads``."""
+
+    specs: list
+    models: list
+    skeleton: object
+    rest_world: np.ndarray
+    cm: contact.ContactModel
+    layouts: list
+    frames: list
+    v0: np.ndarray
+    rays: list | None
+    threads: bool
+
+
+def _polish(best, job: _Job, history, rounds, progress, poses=None):
     """Step 5 (module doc): the frame's own contact, resolved at the rest pose (and at every
     frame ``poses`` gives) with tol.PACK_POLISH_PASSES passes, and the sections fitted to the
     mean of where it put the rings, mapped back to the rest pose; ``rounds`` times, from the
     best round so far. ``poses(specs, models)`` → (world to bone-local (F, B, 4, 4), [(F, V, 3)
     every muscle's no-contact vertices]). Returns the best (score, round, specs, models, scales)."""
+    specs, models, skeleton, rest_world, cm = job.specs, job.models, job.skeleton, job.rest_world, job.cm
+    layouts, frames, v0, rays, threads = job.layouts, job.frames, job.v0, job.rays, job.threads
     inv = np.linalg.inv(rest_world)
     _, _, cur_specs, cur_models, s = best
     fits = {}
     for r in range(rounds):
         verts = [m.rest_vertices.astype(np.float64) for m in cur_models]
         moved, _, touched, _, _ = contact.resolve_frame(cm, verts, inv, tol.PACK_POLISH_PASSES, False, poles=False,
-                                                      relax=PACK_RELAX)
+                                                        relax=PACK_RELAX, threads=threads)
         shift = [mv - v for mv, v in zip(moved, verts)]
         n = 1
         if poses is not None:
@@ -726,7 +745,7 @@ def _polish(best, specs, models, skeleton, rest_world, cm, layouts, frames, v0, 
                 if not all(np.isfinite(v).all() for v in vs):
                     continue
                 pm, _, pt, _, _ = contact.resolve_frame(cm, vs, pinv[fi], tol.PACK_POLISH_PASSES, False, poles=False,
-                                                            relax=PACK_RELAX)
+                                                        relax=PACK_RELAX, threads=threads)
                 n += 1
                 for i in np.nonzero(pt)[0]:
                     shift[i] = shift[i] + to_rest(pm[i] - vs[i], verts[i], vs[i], models[i].U, models[i].A)
@@ -742,7 +761,7 @@ def _polish(best, specs, models, skeleton, rest_world, cm, layouts, frames, v0, 
             coords, _ = fits[i](contact.vertices_to_grid(target, m.U, m.A).reshape(m.U, m.A, 3))
             cur_specs[i] = with_outlines(specs[i], layouts[i], to_file_outlines(coords, frames[i]))
             cur_models[i] = MuscleModel(cur_specs[i], skeleton.bone_index, rest_world, skeleton)
-        score, row, _ = _score(cur_models, cm, inv, v0)
+        score, row, _ = _score(cur_models, cm, inv, v0, threads)
         history.append(row)
         if score < best[0]:
             best = (score, len(history) - 1, cur_specs, cur_models, s)

@@ -47,7 +47,9 @@ from typing import Callable, Mapping, Protocol
 
 import numpy as np
 
+from axdf_cli import runtime
 from axdf_cli import tolerances as tol
+from axdf_cli.fileio import fieldcache
 from axdf_cli.model import contact
 from axdf_cli.model.muscle import FrameResult
 from axdf_cli.model.skeleton import forward_kinematics
@@ -101,7 +103,7 @@ class Stage(Protocol):
 def _contact_model(plan, enabled: bool):
     rest = forward_kinematics(plan.pose.skeleton, plan.pose.skeleton.rest_coordinates()[None])[0]
     meshes = plan.bone_meshes or getattr(plan, "collision_meshes", None) or {}
-    return contact.build(plan.muscles, plan.models, rest, meshes, enabled=enabled)
+    return contact.build(plan.muscles, plan.models, rest, meshes, enabled=enabled, field_cache=fieldcache.cached)
 
 
 class ContactStage:
@@ -122,7 +124,7 @@ class ContactStage:
         return _contact_model(plan, True)
 
     def __call__(self, state, chunk: Chunk):
-        contact.apply(state, chunk.results, chunk.world)
+        contact.apply(state, chunk.results, chunk.world, threads=runtime.use_threads())
         return state, chunk
 
 
@@ -139,7 +141,7 @@ class PenetrationStage:
 
     def __call__(self, state, chunk: Chunk):
         if any(r.contact is None for r in chunk.results.values()):
-            contact.apply(state, chunk.results, chunk.world)
+            contact.apply(state, chunk.results, chunk.world, threads=runtime.use_threads())
         return state, chunk
 
 
