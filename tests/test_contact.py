@@ -100,7 +100,7 @@ def test_contact_lowers_penetration_and_keeps_volume(demo):
         v, n, touched, before, after = contact.resolve_frame(plan.contact, frames[fi], np.linalg.inv(world[fi]))
         assert touched.any()
         # the default single pass clears part of the twins' overlap and of the bones'; more
-        # passes clear more (README, Contact: what the passes trade). The deepest point may
+        # passes clear more (docs/CONTACT.md: what the passes trade). The deepest point may
         # deepen, by less than a pass's step and a half (no pile-up): the deepest points lie
         # near the other twin's axis, where pushes fade out, while their rings follow their
         # pushed points and the volume's re-solve inflates the other twin
@@ -250,8 +250,8 @@ def test_jobs_and_frames_give_the_same_bytes(tmp_path):
 
 
 def test_rest_pose_writes_the_rest_muscle_after_contact(tmp_path):
-    """With contact on, the rest muscle is the rest shape after contact at the rest pose (README,
-    Contact): frame 0 of the demo pose (the rest pose, zero tension) is written as
+    """With contact on, the rest muscle is the rest shape after contact at the rest pose (docs/CONTACT.md):
+    frame 0 of the demo pose (the rest pose, zero tension) is written as
     :func:`contact.resolve_frame` makes the models' rest meshes at the rest transforms, to
     float32 rounding; with --no-contact, as the rest meshes themselves."""
     from axdf_cli.formats import read_triangles

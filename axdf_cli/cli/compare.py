@@ -3,7 +3,7 @@
 Meshes by vertex distance with exact topology, images (PNG, EXR) by a per-pixel tolerance,
 an allowed fraction of failing pixels and a hard maximum, CSV/JSON numerically, the
 manifest's inputs and settings as likely causes, anything else byte for byte. Tolerances
-and their reasons: README.md, "Golden comparison".
+and their reasons: docs/COMPARE.md.
 """
 from __future__ import annotations
 
@@ -29,7 +29,7 @@ def add_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--tolerances", metavar="FILE.yaml", help="tolerance YAML with per-glob overrides")
     p.add_argument("--ignore", metavar="GLOB", action="append", default=[],
                    help="leave files matching GLOB out (relative path; repeatable)")
-    g = p.add_argument_group("tolerances (override the YAML's top level; defaults in README)")
+    g = p.add_argument_group("tolerances (override the YAML's top level; defaults in docs/COMPARE.md)")
     g.add_argument("--mesh-max", type=_nonneg, metavar="M", help="max vertex distance in metres")
     g.add_argument("--mesh-rms", type=_nonneg, metavar="M", help="RMS vertex distance in metres")
     g.add_argument("--pixel-threshold", type=_unit, metavar="T", help="PNG per-pixel threshold in [0, 1]")

@@ -220,7 +220,7 @@ def _print_summary(args, res, counts: str) -> None:
 
         lay = res.layout
         print(f"next: {pack_command_line([lay['muscles']], lay['skeleton'], lay['pose'])}  (imported muscles "
-              "overlap in bulk, more than contact clears: packing makes their rest shapes share space; README, Contact)")
+              "overlap in bulk, more than contact clears: packing makes their rest shapes share space; docs/CONTACT.md)")
 
 
 def run_mjcf(args) -> int:

@@ -1,5 +1,5 @@
-"""A data set's output folder under the output rule (axdf_cli/fileio/outputs.py, README "The
-output folder is safe to point anywhere").
+"""A data set's output folder under the output rule (axdf_cli/fileio/outputs.py,
+docs/OUTPUTS.md).
 
 - OUT is written only when it is absent, empty, or holds an axdf data set (``dataset.json``
   with ``tool: axdf``); anything else is refused (exit 2), before anything is written.

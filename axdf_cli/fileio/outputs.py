@@ -14,7 +14,7 @@ specs (what ``axdf validate`` accepts). Give the command ``--overwrite``
 (:func:`axdf_cli.cli.importer.add_overwrite_arg`). A builder that collects ``path -> bytes`` in
 a dict uses :class:`UniqueFiles`, so that two outputs on one path are refused, not merged.
 
-The rule (README, "The output folder is safe to point anywhere"):
+The rule (docs/OUTPUTS.md):
 
 - **OUT is a folder the command owns.** It is written only when it is absent, empty, or
   holds the output of the same command (its ``manifest.json`` says ``tool: axdf`` and

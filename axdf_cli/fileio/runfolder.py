@@ -1,7 +1,7 @@
 """The run folder: where each file of a run lives, its manifest, and the rules that keep a
 user's files safe.
 
-One module for everything that knows the layout (README "What a run writes"), shared by
+One module for everything that knows the layout (docs/OUTPUTS.md), shared by
 ``axdf run`` (:mod:`axdf_cli.pipeline`), ``axdf render`` and reading a run back
 (:mod:`axdf_cli.render.runio`)::
 

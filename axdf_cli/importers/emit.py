@@ -243,7 +243,7 @@ def belly_doc(name: str, path: list, wraps: list, hill: Hill, skel: Skeleton, wo
     """A path muscle's YAML document sized by its model's own numbers, and its summary row
     (unrounded): the path and wrap documents ``path``, ``wraps``, and the muscle's Hill numbers.
 
-    The belly law (README, "OpenSim models"), from the model's own numbers:
+    The belly law (docs/IMPORTERS.md), from the model's own numbers:
 
     - volume V = PCSA × optimal fibre length, PCSA = F_max / SPECIFIC_TENSION (a pennate
       muscle's fibres are short, but there are many of them side by side: V holds);

@@ -379,7 +379,7 @@ def bones(model: Model) -> list[Bone]:
 
 # ----------------------------------------------------------------------------- muscles
 
-#: Secondary motion (``jiggle:``, README "Jiggle") of the calf's and the thigh's muscles, by
+#: Secondary motion (``jiggle:``, docs/JIGGLE.md) of the calf's and the thigh's muscles, by
 #: name without the side suffix (OpenSim's gait2392/gait2354 names). Soft tissue of the leg
 #: rings at 10-50 Hz after a heel strike (Wakeling & Nigg 2001, skin-mounted accelerometers);
 #: animators' jiggle sits lower (a few Hz: a slow, visible sway). The bottom of the measured

@@ -130,7 +130,7 @@ def belly_markdown(r: dict, fibre_words: str = "optimal fibre length") -> list[s
     sl = [m["slenderness"] for m in ms]
     st = r["settings"]
     lines = ["", "## Bellies", "",
-             f"Law (README, \"The muscle model\", Imported bellies): PCSA = max isometric force / {st['specific_tension_Pa'] / 1e6:g} MPa; "
+             f"Law (docs/METHOD.md, \"Choices in detail\"): PCSA = max isometric force / {st['specific_tension_Pa'] / 1e6:g} MPa; "
              f"belly volume = PCSA × {fibre_words}; free tendon = "
              f"{st['free_tendon_share']:g} × tendon slack length (the rest of it is aponeurosis, inside the belly), "
              "shortened where the belly would not hold its fibres (optimal fibre length × cos pennation); "

@@ -12,8 +12,10 @@ from pathlib import Path
 
 import numpy as np
 
+from axdf_cli import runtime
 from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError
+from axdf_cli.fileio import fieldcache
 from axdf_cli.importers import emit
 from axdf_cli.tools.transfer import UniqueFiles, file_doc, load_muscle_files
 from axdf_cli.model import contact, pack
@@ -50,11 +52,11 @@ def build_pack(muscle_files: list[Path], skeleton_path: Path | str, policy: RefP
     rest = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
     models = [MuscleModel(s, skel.bone_index, rest, skel) for s in specs]
     meshes = {i: load_bone_mesh(b.mesh, str(skeleton_path)) for i, b in enumerate(skel.bones) if b.mesh}
-    cm = contact.build(specs, models, rest, meshes)
+    cm = contact.build(specs, models, rest, meshes, field_cache=fieldcache.cached)
     kw = {} if rounds is None else {"iterations": rounds}
     poses, pose_record, pose_inputs = (None, None, []) if pose_path is None else \
         _pose_frames(muscle_files, skel, Path(pose_path), frames, policy, [sp.name for sp in specs])
-    res = pack.pack(specs, models, skel, rest, cm, progress=progress, poses=poses, **kw)
+    res = pack.pack(specs, models, skel, rest, cm, progress=progress, poses=poses, threads=runtime.use_threads(), **kw)
 
     files: dict[str, bytes] = UniqueFiles()
     k = 0

@@ -1,6 +1,6 @@
 """Contact's volume and output: every muscle's rings moved by their modes, the volume solved
 exactly again (every point moves along its no-contact radial offset by sigma, the root of the
-mesh volume's cubic V(sigma) = V, as in :func:`axdf_cli.model.kernels.surface_stage`), and the
+mesh volume's cubic V(sigma) = V, as in :func:`axdf_cli.model.batch_surface.shape_pass`), and the
 grids' conversion from and to the surface stage's vertices and normals."""
 from __future__ import annotations
 
