@@ -652,6 +652,7 @@ def dataset_evaluation(n_sequences: int) -> float:
     kinematics, ``evaluate``), timed alone on the data set's first sequences."""
     from axdf_cli.dataset import door
     from axdf_cli.dataset.worker import build_context, sequence_pose
+    from axdf_cli.pipeline import evaluate_chunks
     from axdf_cli.specs import RefPolicy
 
     ctx = build_context(DATASET_FILE, policy=RefPolicy.for_command([DATASET_FILE]))
@@ -661,7 +662,7 @@ def dataset_evaluation(n_sequences: int) -> float:
         pose, frames = sequence_pose(ctx, seq)
         plan = door.sequence_plan(pose, frames, ctx.muscles, ctx.models, "ply", Path("unused"), {}, ctx.stages)
         t0 = time.perf_counter()
-        for _, _, results in door.evaluate_chunks(plan):
+        for _, _, results in evaluate_chunks(plan):
             for _ in results:
                 pass
         t += time.perf_counter() - t0
