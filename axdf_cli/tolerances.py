@@ -195,7 +195,7 @@ CONTACT_SHARE_PER_LAYER = 0.3
 CONTACT_SHARE_MAX = 0.8
 # A bone's field covers the muscles' rest meshes (in that bone's frame) grown by this (m):
 # far enough for a pose to bring a muscle near its neighbour bones (a muscle that moves further
-# from a bone than this between rest and pose is not measured against it), small enough not to
+# from a bone than this between rest and pose is not compared with it), small enough not to
 # sample a whole floor or torso.
 CONTACT_REACH = 0.1
 # One yield layer (m of distance from the bone surface): a muscle whose middle lies
