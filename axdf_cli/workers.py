@@ -108,6 +108,7 @@ def _init_worker(owner: int, shared, cwd: str | None) -> None:
     _STATE["parent"] = os.getppid() if fresh else owner
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, _on_sigterm)
+    atomic.catch_interrupts_in_callbacks()
     _die_with_parent()
     check_parent()
     _SHARED["value"] = shared

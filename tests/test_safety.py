@@ -477,6 +477,39 @@ def test_stopping_a_jobs_run_exits_130_without_tracebacks(project, how):
     json.loads((out / "manifest.json").read_text())
 
 
+CALLBACK_INTERRUPT = """
+import ctypes, signal, sys, time
+from axdf_cli.fileio import atomic
+signal.signal(signal.SIGTERM, atomic.on_signal)
+atomic.catch_interrupts_in_callbacks()
+libc = ctypes.CDLL(None)
+CMP = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p)
+def compare(a, b):  # Python inside a C callback, as llvmlite's object cache while numba loads a kernel
+    signal.raise_signal(signal.SIGTERM)
+    for _ in range(100):
+        pass
+    return 0
+arr = (ctypes.c_int * 4)(4, 3, 2, 1)
+try:
+    libc.qsort(arr, 4, ctypes.sizeof(ctypes.c_int), CMP(compare))
+    print("after the callback", flush=True)
+    time.sleep(5)
+    print("never stopped", flush=True)
+except KeyboardInterrupt:
+    print("stopped", flush=True)
+"""
+
+
+def test_an_interrupt_inside_a_c_callback_stops_quietly_once_it_returns():
+    """A SIGTERM that lands while Python runs inside a C callback (numba loading a kernel
+    from its cache, in a worker the pool is stopping) cannot raise there: no traceback, and
+    the interrupt arrives again once the callback has returned."""
+    r = subprocess.run([sys.executable, "-c", CALLBACK_INTERRUPT], capture_output=True, timeout=60,
+                       cwd=REPO_ROOT, env={**os.environ, "PYTHONPATH": str(REPO_ROOT)})
+    assert r.stdout.decode().split() == ["after", "the", "callback", "stopped"], r
+    assert b"Traceback" not in r.stderr and b"Exception ignored" not in r.stderr, r.stderr.decode()
+
+
 # ----------------------------------------------------------------------------- 6. axdf render
 
 

@@ -65,6 +65,9 @@ def main(argv: list[str] | None = None) -> int:
             old[sig] = signal.signal(sig, atomic.on_signal)
         except ValueError:  # not the main thread (tests calling main in a thread)
             pass
+    hook = sys.unraisablehook
+    if old:
+        atomic.catch_interrupts_in_callbacks()  # a Ctrl-C while numba loads a kernel
     args = None
     try:
         for a in sys.argv[1:] if argv is None else argv:
@@ -109,6 +112,7 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         for sig, handler in old.items():
             signal.signal(sig, handler)
+        sys.unraisablehook = hook
 
 
 def entry() -> None:

@@ -20,15 +20,40 @@ TMP_PREFIX = ".axdf-tmp-"
 # Signal deferral: SIGINT/SIGTERM arriving while a file is being written and renamed are held
 # until the file is whole (the CLI's handlers call :func:`on_signal`). A write takes
 # milliseconds, so an interrupt still ends the run promptly, and never leaves a temporary.
-_state = {"depth": 0, "pending": False}
+_state = {"depth": 0, "pending": False, "signum": None}
 
 
 def on_signal(signum=None, frame=None) -> None:
     """Signal handler: raise KeyboardInterrupt now, or when the current write is done."""
+    _state["signum"] = signum
     if _state["depth"] > 0:
         _state["pending"] = True
         return
     raise KeyboardInterrupt
+
+
+def _unraisable(hook):
+    """``sys.unraisablehook``: a KeyboardInterrupt raised while Python code ran inside a C
+    callback (llvmlite's object cache, loading a numba kernel) cannot propagate; Python would
+    print it with a traceback and go on. Instead say nothing and send the signal again a
+    moment later, when the callback has returned."""
+    def unraisable(args) -> None:
+        if not isinstance(args.exc_value, KeyboardInterrupt) or _state["signum"] is None:
+            return hook(args)
+        signum = _state["signum"]
+        timer = threading.Timer(0.05, os.kill, (os.getpid(), signum))
+        timer.daemon = True
+        timer.start()
+    unraisable.axdf = True
+    return unraisable
+
+
+def catch_interrupts_in_callbacks() -> None:
+    """Install :func:`_unraisable` (once) where :func:`on_signal` is the signal handler."""
+    import sys
+
+    if not getattr(sys.unraisablehook, "axdf", False):
+        sys.unraisablehook = _unraisable(sys.unraisablehook)
 
 
 @contextlib.contextmanager
