@@ -36,14 +36,15 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 TIERS = {
     "unit": ("axis_points", "batch", "bspline", "coupled", "formats_table", "house", "inputs", "jiggle_law",
              "kernel", "keypoints", "muscle", "paths", "path_inside", "rmf", "writers_fast", "render_settings",
-             "dataset_sampling", "runtime"),
+             "dataset_sampling", "runtime", "jiggle_preroll", "bvh_units"),
     "integration": ("bellies", "bench_smoke", "bvh_import", "camera", "cli", "compare", "compare_formats", "contact",
                     "dataset", "dataset_amodal", "dataset_bench", "dataset_labels", "gait2392", "jiggle_run",
                     "meshes", "mjcf_import", "osim_cli", "outputs", "pack", "packed", "rajagopal", "render_cli",
                     "render_jobs", "render_output", "retarget", "retarget_myobody", "stages", "transfer",
-                    "transfer_paths"),
+                    "transfer_paths", "retarget_fit", "first_hour", "framing", "outputs_per_frame"),
     "judges": ("blender", "mjcf_judge", "opensim_judge", "osim_fk", "osim_muscles"),
-    "hostile": ("compare_hostile", "fuzz_yaml", "hostile", "inputs_hostile", "robustness", "safety"),
+    "hostile": ("compare_hostile", "fuzz_yaml", "hostile", "inputs_hostile", "robustness", "safety", "hostile_import",
+                "hostile_run"),
 }
 TIER_OF = {f"test_{name}": tier for tier, names in TIERS.items() for name in names}
 
