@@ -4,18 +4,22 @@ from __future__ import annotations
 import sys
 
 from axdf_cli.cli import progress
-from axdf_cli.formats import FORMATS
+from axdf_cli.formats import FORMATS, MESH_FILES
 from axdf_cli.specs import RefPolicy, load_job
 
 
 def add_args(p) -> None:
-    p.add_argument("job", nargs="?", help="job YAML (muscles, pose, out, format, frames, render)")
+    p.add_argument("job", nargs="?", help="job YAML (muscles, pose, out, format, mesh_files, frames, render)")
     p.add_argument("--muscles", nargs="+", metavar="PATH", help="muscle files, folders or globs (override the job)")
     p.add_argument("--pose", metavar="FILE", help="pose YAML (overrides the job)")
     p.add_argument("--out", metavar="DIR", help="output folder (default: the job's out, else out/run)")
     p.add_argument("--format", action="append", metavar="FMT",
                    help="mesh format(s): " + ", ".join(FORMATS) + " (ply, obj: a file per frame; the others a file "
                         "per muscle); several as ply,usd or repeated (default ply)")
+    p.add_argument("--mesh-files", choices=MESH_FILES, default=None,
+                   help="ply and obj files: one per muscle per frame (muscle, the default) or one per frame "
+                        "holding every muscle as a named part (frame: meshes/<frame>.obj|ply); overrides the "
+                        "job's mesh_files")
     p.add_argument("--frames", metavar="SPEC", help="frames to write: 0:48, 0:48:2, 3,7,10:12 (ends inclusive)")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--render", dest="render", action="store_true", default=None, help="render preview frames")
@@ -87,7 +91,9 @@ def run(args) -> int:
     total = len(plan.frames) * len(plan.models)
     if args.dry_run:
         pipeline.check_output(plan, resume=args.resume, overwrite=args.overwrite)
-        print(f"would write {total} meshes ({len(plan.models)} muscles x {len(plan.frames)} frames, "
+        what = f"{total} meshes" if plan.mesh_files == "muscle" else \
+            f"{len(plan.frames)} mesh files per format, each with every muscle"
+        print(f"would write {what} ({len(plan.models)} muscles x {len(plan.frames)} frames, "
               f"{plan.fmt}) to {plan.out}, plus stats.csv, bones.csv, manifest.json")
         for s, m in zip(plan.muscles, plan.models):
             print(f"  {s.name}: {m.n_vertices} vertices, {len(m.faces)} faces, rest length {m.l0:.4f} m, "
@@ -132,7 +138,8 @@ def plan_from_args(args):
     return pipeline.plan_run(job, muscle_args=args.muscles, pose_arg=args.pose, out_arg=args.out,
                            fmt_arg=args.format, frames_arg=args.frames, render=settings_from_args(settings, args),
                            policy=policy, clamp_ranges=args.clamp_ranges,
-                           stages={**job_switches(job), **stage_switches(args)})
+                           stages={**job_switches(job), **stage_switches(args)},
+                           mesh_files_arg=getattr(args, "mesh_files", None))
 
 
 def job_switches(job) -> dict:

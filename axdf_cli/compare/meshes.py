@@ -1,5 +1,7 @@
 """Mesh comparison (any format of :data:`axdf_cli.formats.FORMATS`, PLY and OBJ): exact
-topology, then per-vertex distances, in the files' own vertex order."""
+topology, then per-vertex distances, in the files' own vertex order. A file holding every
+muscle of a frame (``--mesh-files frame``) is one mesh whose named parts
+(:attr:`~axdf_cli.formats.Mesh.groups`) must match too; its worst vertex is named by its part."""
 from __future__ import annotations
 
 import numpy as np
@@ -30,6 +32,8 @@ def compare_meshes(a: Mesh, g: Mesh, tol: MeshTol) -> Outcome:
     and RMS vertex distance and the maximum normal difference are held against ``tol``."""
     metrics: dict = {"vertices": len(g.vertices), "faces": len(g.face_sizes)}
     reasons: list[str] = []
+    if a.groups and g.groups and a.groups != g.groups:  # (a per-muscle OBJ names its one part, a PLY none)
+        return Outcome(False, (f"named parts differ: {_parts_text(a.groups, g.groups)}",), metrics)
     same_faces = (np.array_equal(a.face_sizes, g.face_sizes) and np.array_equal(a.face_indices, g.face_indices))
     if len(a.vertices) != len(g.vertices) or not same_faces:
         h = hausdorff(a.vertices, g.vertices)
@@ -51,8 +55,11 @@ def compare_meshes(a: Mesh, g: Mesh, tol: MeshTol) -> Outcome:
     rms = float(np.sqrt(np.mean(d * d)))
     metrics.update(max_distance=dmax, rms_distance=rms, worst_vertex=worst,
                    vertices_over=int(np.sum(~(d <= tol.max_distance))))
+    if len(g.groups) > 1:
+        metrics["worst_part"] = _part_of(g.groups, worst)
     if not dmax <= tol.max_distance:
-        reasons.append(f"max vertex distance {dmax:.3g} m (vertex {worst}) > {tol.max_distance:g} m; "
+        reasons.append(f"max vertex distance {dmax:.3g} m (vertex {worst}{_in_part(g.groups, worst)}) > "
+                       f"{tol.max_distance:g} m; "
                        f"{metrics['vertices_over']} of {len(d)} vertices over")
     if not rms <= tol.rms_distance:
         reasons.append(f"RMS vertex distance {rms:.3g} m > {tol.rms_distance:g} m")
@@ -66,6 +73,33 @@ def compare_meshes(a: Mesh, g: Mesh, tol: MeshTol) -> Outcome:
             reasons.append(f"normal difference {nmax:.3g} (vertex {int(np.nanargmax(dn)) if np.any(np.isfinite(dn)) else 0})"
                            f" > {tol.normal_max:g}")
     return Outcome(not reasons, tuple(reasons), metrics)
+
+
+def _part_of(groups: tuple, vertex: int) -> str:
+    """The name of the part (``Mesh.groups``) holding ``vertex``."""
+    starts = [s for _, s in groups]
+    return groups[max(0, int(np.searchsorted(starts, vertex, side="right")) - 1)][0]
+
+
+def _in_part(groups: tuple, vertex: int) -> str:
+    if len(groups) < 2:
+        return ""
+    name = _part_of(groups, vertex)
+    start = next(s for n, s in groups if n == name)
+    return f", vertex {vertex - start} of {name}"
+
+
+def _parts_text(a: tuple, g: tuple) -> str:
+    """The first difference between two files' named parts, in words."""
+    an, gn = [n for n, _ in a], [n for n, _ in g]
+    if an != gn:
+        missing, extra = [n for n in gn if n not in an], [n for n in an if n not in gn]
+        if missing or extra:
+            return (f"{', '.join(missing[:5]) or 'none'} in golden only, {', '.join(extra[:5]) or 'none'} "
+                    "in actual only")
+        return f"order {', '.join(an[:5])} ... vs golden {', '.join(gn[:5])} ..."
+    k = next(i for i, (x, y) in enumerate(zip(a, g)) if x != y)
+    return f"part {gn[k]} starts at vertex {a[k][1]} vs golden {g[k][1]}"
 
 
 def _non_finite(m: Mesh, side: str) -> list[str]:

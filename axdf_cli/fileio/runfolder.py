@@ -7,6 +7,7 @@ One module for everything that knows the layout (docs/OUTPUTS.md), shared by
 
     manifest.json                 MANIFEST_KEYS, in that order
     meshes/<m>/<m>_<frame:04d>.<fmt>
+    meshes/<frame:04d>.<fmt>      --mesh-files frame: every muscle of a frame in one file
     bones/<bone>.ply
     stats.csv, bones.csv
     frames/<frame:04d>.png|exr, camera.json
@@ -76,6 +77,11 @@ def command_of(manifest: "Manifest") -> str:
 
 def mesh_relpath(muscle: str, frame: int, fmt: str) -> str:
     return f"meshes/{muscle}/{muscle}_{frame:04d}.{fmt}"
+
+
+def frame_mesh_relpath(frame: int, fmt: str) -> str:
+    """One frame's file holding every muscle (``--mesh-files frame``)."""
+    return f"meshes/{frame:04d}.{fmt}"
 
 
 def sequence_relpath(muscle: str, folder: str, extension: str) -> str:

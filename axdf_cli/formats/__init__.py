@@ -12,7 +12,8 @@ tests (parametrized over the table).
 A format is laid out per frame or per sequence (:attr:`Format.layout`):
 
 - ``"frame"``: one file per muscle per frame (``meshes/<m>/<m>_<frame:04d>.<suffix>``), as
-  PLY and OBJ. The writer is built once per muscle from its fixed faces ``(T, 3) int32``
+  PLY and OBJ; or, with ``--mesh-files frame`` (:data:`MESH_FILES`), one file per frame
+  holding every muscle (``meshes/<frame:04d>.<suffix>``, :attr:`Format.frame_writer`). The writer is built once per muscle from its fixed faces ``(T, 3) int32``
   (``writer(faces, name)``) and writes one frame: ``.encode(positions (V, 3), normals (V, 3))
   -> bytes`` and ``.write(path, positions, normals, sha256=False)``. The reader turns one
   file's bytes into one :class:`Mesh`.
@@ -34,12 +35,16 @@ import numpy as np
 
 from axdf_cli.formats.mesh import Mesh, MeshReadError
 from axdf_cli.formats.npz import NpzWriter, read_npz, verify_npz
-from axdf_cli.formats.obj import ObjWriter, read_obj
+from axdf_cli.formats.obj import ObjFrameWriter, ObjWriter, read_obj
 from axdf_cli.formats.pc2 import MddWriter, Pc2Writer, check_frames, read_mdd, read_pc2, verify_mdd, verify_pc2
-from axdf_cli.formats.ply import PlyWriter, read_ply
+from axdf_cli.formats.ply import PlyFrameWriter, PlyWriter, read_ply
 from axdf_cli.formats.usd import UsdWriter, pxr, read_usd, verify_usd
 
 LAYOUTS = ("frame", "sequence")
+#: How a per-frame format's files are cut (a job's ``mesh_files:``, ``--mesh-files``):
+#: ``muscle`` (the default), one file per muscle per frame; ``frame``, one file per frame
+#: holding every muscle as a named part (:attr:`Format.frame_writer`).
+MESH_FILES = ("muscle", "frame")
 FRAME_SETS = ("any", "even")  # which frames a format holds: any, or evenly spaced (one start, one step)
 
 
@@ -61,11 +66,14 @@ class Format:
     #                                when this machine cannot write the format
     verify: Callable | None = None  # ("sequence") file path -> None: the file's own checks (checksums, frame
     #                                  times), MeshReadError naming the first problem (axdf compare)
+    frame_writer: type | None = None  # ("frame") one file per frame holding every muscle (--mesh-files frame):
+    #                                   writer([(name, faces, n_vertices)]), .encode(positions, normals) with
+    #                                   one (V_m, 3) array per muscle; its reader gives Mesh.groups
 
 
 FORMATS: dict[str, Format] = {
-    "ply": Format("ply", ".ply", PlyWriter, read_ply),
-    "obj": Format("obj", ".obj", ObjWriter, read_obj, decimals=6),
+    "ply": Format("ply", ".ply", PlyWriter, read_ply, frame_writer=PlyFrameWriter),
+    "obj": Format("obj", ".obj", ObjWriter, read_obj, decimals=6, frame_writer=ObjFrameWriter),
     # (+ the run's stage scene.usda and usd/bones.usdc)
     "usd": Format("usd", ".usdc", UsdWriter, read_usd, "sequence", folder="usd", read_order=3, check=pxr,
                   verify=verify_usd),
@@ -108,6 +116,17 @@ FORMAT_ALIASES = {"usdc": "usd"}  # --format usdc: the USD layers are usdc, the 
 def format_names() -> tuple[str, ...]:
     """Every ``--format`` value: the table's names, then the aliases."""
     return tuple(FORMATS) + tuple(FORMAT_ALIASES)
+
+
+def parse_mesh_files(value, mark) -> str:
+    """A job's ``mesh_files:`` or ``--mesh-files`` value -> one of :data:`MESH_FILES`;
+    anything else is an InputError at ``mark`` listing them."""
+    from axdf_cli.errors import InputError
+
+    if not isinstance(value, str) or value.strip().lower() not in MESH_FILES:
+        raise InputError(mark, f"mesh_files is {value!r}",
+                         "muscle (a file per muscle per frame) or frame (a file per frame with every muscle)")
+    return value.strip().lower()
 
 
 def parse_formats(value, mark) -> tuple[str, ...]:
@@ -193,7 +212,7 @@ def load_triangles_and_bytes(path: Path | str) -> tuple[tuple, bytes]:
         raise InputError(Mark(str(path)), f"not a readable mesh ({e})", allowed) from None
 
 
-__all__ = ["FORMATS", "FRAME_SETS", "Format", "LAYOUTS", "WRITERS", "Mesh", "MeshReadError", "PlyWriter", "ObjWriter",
+__all__ = ["FORMATS", "FRAME_SETS", "Format", "LAYOUTS", "MESH_FILES", "parse_mesh_files", "WRITERS", "Mesh", "MeshReadError", "PlyWriter", "ObjWriter",
            "format_of", "format_names", "frames_problem", "of_layout", "parse_formats", "read_mesh",
            "read_preference", "read_sequence", "read_triangles",
            "load_triangles", "load_triangles_and_bytes"]

@@ -20,6 +20,9 @@ class Mesh:
     normals: np.ndarray | None  # (V, 3) float64 per-vertex normals, or None
     face_sizes: np.ndarray  # (M,) int64 vertices per face
     face_indices: np.ndarray  # (sum(face_sizes),) int64 zero-based vertex indices
+    # the file's named parts in vertex order, ((name, first vertex), ...): OBJ ``o`` lines, a
+    # PLY's ``muscle`` vertex property (one file per frame holding every muscle); () if none
+    groups: tuple = ()
 
     def __post_init__(self):
         v = self.vertices
@@ -31,8 +34,19 @@ class Mesh:
             raise MeshReadError("a face has a negative number of corners")
         if int(self.face_sizes.sum()) != len(self.face_indices):
             raise MeshReadError("face sizes and indices disagree")
+        starts = [g[1] for g in self.groups]
+        if starts and (starts != sorted(starts) or starts[0] < 0 or starts[-1] > len(v)):
+            raise MeshReadError(f"named parts start at vertices {starts[:8]}, not in order within 0..{len(v)}")
         if len(self.face_indices) and (self.face_indices.min() < 0 or self.face_indices.max() >= len(v)):
             raise MeshReadError(f"a face index is outside 0..{len(v) - 1}")
+
+    def group_slices(self) -> dict[str, slice]:
+        """Each named part's vertices, ``name -> slice`` (a name used twice: its first part)."""
+        out: dict[str, slice] = {}
+        ends = [g[1] for g in self.groups[1:]] + [len(self.vertices)]
+        for (name, start), end in zip(self.groups, ends):
+            out.setdefault(name, slice(start, end))
+        return out
 
     def triangles(self) -> np.ndarray:
         """The faces as (T, 3) int32; raises MeshReadError unless every face is a triangle."""

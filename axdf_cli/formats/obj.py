@@ -1,9 +1,10 @@
-"""Wavefront OBJ: the writer (``v``, ``vn`` and ``f a//a b//b c//c`` lines, 1-based, one
-object per file) and the reader (``v``/``vn``/``f`` lines in file order, at C speed).
+"""Wavefront OBJ: the writers (``v``, ``vn`` and ``f a//a b//b c//c`` lines, 1-based: one
+object per file, :class:`ObjWriter`, or every muscle of a frame as named objects,
+:class:`ObjFrameWriter`) and the reader (``v``/``vn``/``f`` lines in file order, at C speed).
 
 The reader keeps the file's vertex order (trimesh's OBJ loader may merge or split vertices by
-normals, so it is not used here); other lines (``o``, ``g``, ``vt``, ``usemtl`` ...) are
-skipped. Malformed files raise :class:`MeshReadError`.
+normals, so it is not used here); ``o`` lines name parts (:attr:`Mesh.groups`, by the ``v``
+lines before them); other lines (``g``, ``vt``, ``usemtl`` ...) are skipped. Malformed files raise :class:`MeshReadError`.
 
 Coordinates are written with 6 decimals (micrometres), enough for metres-scale muscles. The
 face block is formatted once per muscle; per frame only the vertex lines are.
@@ -110,10 +111,66 @@ class ObjWriter:
         return h.hexdigest()
 
 
+class ObjFrameWriter:
+    """One OBJ per frame holding every muscle: per muscle an ``o <name>`` line (Blender's
+    importer makes it one object; trimesh one geometry of that name), then its ``v`` and
+    ``vn`` lines and its ``f a//a`` lines, indices counted over the whole file (1-based). The
+    vertex and face lines are the per-muscle file's, so each object equals that muscle's
+    :class:`ObjWriter` file with its indices shifted."""
+
+    extension = "obj"
+
+    def __init__(self, parts):
+        """``parts``: ``[(name, faces (T, 3) int, vertex count)]`` in file order (the run's
+        muscle order)."""
+        self.names = [p[0] for p in parts]
+        self._heads, self._faces, self.n_vertices = [], [], []
+        offset = 0
+        for name, faces, n in parts:
+            f = np.asarray(faces, dtype=np.int64)
+            self._heads.append(f"o {name}\n".encode("ascii"))
+            self._faces.append(ObjWriter(f + offset)._faces)
+            self.n_vertices.append(int(n))
+            offset += int(n)
+
+    def _parts(self, positions, normals) -> list[bytes]:
+        if len(positions) != len(self.names) or len(normals) != len(self.names):
+            raise ValueError(f"{len(positions)} position and {len(normals)} normal arrays for "
+                             f"{len(self.names)} muscles")
+        out: list[bytes] = []
+        for head, p, nn, f in zip(self._heads, positions, normals, self._faces):
+            out += [head, _vertex_lines(p, nn), f]
+        return out
+
+    def encode(self, positions, normals) -> bytes:
+        """positions, normals : one (V_m, 3) array per muscle, in the writer's order → file bytes."""
+        return b"".join(self._parts(positions, normals))
+
+    def write(self, path: Path | str, positions, normals, sha256: bool = False) -> str | None:
+        """Write one frame to ``path`` atomically (the bytes :meth:`encode` gives); return its
+        sha256 hex digest when ``sha256`` is true, else None."""
+        data = self.encode(positions, normals)
+        atomic.write_parts(path, (data,))
+        return hashlib.sha256(data).hexdigest() if sha256 else None
+
+
 # ----------------------------------------------------------------------------- reading
 _OBJ_V = re.compile(rb"^v[ \t]+([^\n]*)", re.M)
 _OBJ_VN = re.compile(rb"^vn[ \t]+([^\n]*)", re.M)
 _OBJ_F = re.compile(rb"^f[ \t]+([^\n]*)", re.M)
+_OBJ_O = re.compile(rb"^o[ \t]+([^\n]*)", re.M)
+
+
+def _objects(data: bytes) -> tuple:
+    """``((name, first vertex), ...)`` of the ``o`` lines: the ``v`` lines before each."""
+    out = []
+    n, last = 0, 0
+    for m in _OBJ_O.finditer(data):
+        seg = b"\n" + data[last:m.start()]
+        n += seg.count(b"\nv ") + seg.count(b"\nv\t")
+        last = m.start()
+        out.append((m.group(1).strip().decode("utf-8", "replace"), n))
+    return tuple(out)
 
 
 def _parse_numbers(text: bytes, dtype, what: str) -> np.ndarray:
@@ -148,7 +205,7 @@ def read_obj(data: bytes) -> Mesh:
     face_lines = _OBJ_F.findall(data)
     if not face_lines:
         return Mesh(verts, vn if len(vn) == len(verts) and len(vn) else None,
-                    np.zeros(0, np.int64), np.zeros(0, np.int64))
+                    np.zeros(0, np.int64), np.zeros(0, np.int64), _objects(data))
     sizes = np.array([len(line.split()) for line in face_lines], np.int64)
     if sizes.min() == 0:
         raise MeshReadError("an OBJ 'f' line names no vertex")
@@ -173,4 +230,4 @@ def read_obj(data: bytes) -> Mesh:
         ni = np.where(ni < 0, ni + len(vn), ni - 1)
         if np.array_equal(ni, flat):
             normals = vn[:, :3]
-    return Mesh(verts, normals, sizes, flat)
+    return Mesh(verts, normals, sizes, flat, _objects(data))

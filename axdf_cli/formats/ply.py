@@ -1,5 +1,6 @@
-"""PLY: the writer (binary little-endian, float32 x y z nx ny nz per vertex, ``list uchar
-int`` faces) and the reader (any PLY: binary little/big endian or ascii).
+"""PLY: the writers (binary little-endian, float32 x y z nx ny nz per vertex, ``list uchar
+int`` faces: one muscle per file, :class:`PlyWriter`, or every muscle of a frame with a
+``muscle`` index per vertex, :class:`PlyFrameWriter`) and the reader (any PLY: binary little/big endian or ascii).
 
 What the writer writes is read back by Blender, trimesh (``process=False``) and meshio. The
 header holds no timestamp or path, so identical meshes give identical bytes.
@@ -84,6 +85,59 @@ class PlyWriter:
         return hashlib.sha256(buf).hexdigest() if sha256 else None
 
 
+#: The vertex property of :class:`PlyFrameWriter` naming each vertex's muscle (an index into
+#: the header's ``comment axdf muscle <index> <name>`` lines).
+MUSCLE_PROPERTY = "muscle"
+
+
+class PlyFrameWriter:
+    """One PLY per frame holding every muscle: binary little-endian, per vertex float32
+    ``x y z nx ny nz`` and ``ushort muscle`` (the muscle's index, 0-based, in the header's
+    ``comment axdf muscle <index> <name>`` lines), muscles one after another in the run's
+    order; faces as :class:`PlyWriter`'s, indices counted over the whole file. A reader
+    that ignores the ``muscle`` property (Blender, meshio) gets every muscle as one mesh."""
+
+    extension = "ply"
+
+    def __init__(self, parts):
+        """``parts``: ``[(name, faces (T, 3) int, vertex count)]`` in file order."""
+        if len(parts) > 65536:
+            raise ValueError(f"{len(parts)} muscles; a ushort muscle index holds at most 65536")
+        self.names = [p[0] for p in parts]
+        counts = np.array([int(p[2]) for p in parts], np.int64)
+        offsets = np.concatenate([[0], np.cumsum(counts)])
+        faces = [np.asarray(p[1], np.int64) + offsets[k] for k, p in enumerate(parts)]
+        self._writer = PlyWriter(np.concatenate(faces) if faces else np.zeros((0, 3), np.int64))
+        n = int(offsets[-1])
+        self._rec = np.zeros(n, dtype=[("p", "<f4", (6,)), ("m", "<u2")])
+        self._rec["m"] = np.repeat(np.arange(len(parts)), counts)
+        self._offsets = offsets
+        lines = ["ply", "format binary_little_endian 1.0"]
+        lines += [f"comment axdf muscle {k} {name}" for k, name in enumerate(self.names)]
+        lines += [f"element vertex {n}"] + [f"property float {c}" for c in ("x", "y", "z", "nx", "ny", "nz")]
+        lines += [f"property ushort {MUSCLE_PROPERTY}", f"element face {self._writer.n_faces}",
+                  "property list uchar int vertex_indices", "end_header", ""]
+        self._head = "\n".join(lines).encode("ascii")
+
+    def encode(self, positions, normals) -> bytes:
+        """positions, normals : one (V_m, 3) array per muscle, in the writer's order → file bytes."""
+        if len(positions) != len(self.names) or len(normals) != len(self.names):
+            raise ValueError(f"{len(positions)} position and {len(normals)} normal arrays for "
+                             f"{len(self.names)} muscles")
+        o = self._offsets
+        for k, (p, nn) in enumerate(zip(positions, normals)):
+            self._rec["p"][o[k]:o[k + 1], :3] = p
+            self._rec["p"][o[k]:o[k + 1], 3:] = nn
+        return b"".join([self._head, self._rec.tobytes(), self._writer._faces])
+
+    def write(self, path: Path | str, positions, normals, sha256: bool = False) -> str | None:
+        """Write one frame to ``path`` atomically (the bytes :meth:`encode` gives); return its
+        sha256 hex digest when ``sha256`` is true, else None."""
+        data = self.encode(positions, normals)
+        atomic.write_parts(path, (data,))
+        return hashlib.sha256(data).hexdigest() if sha256 else None
+
+
 # ----------------------------------------------------------------------------- reading
 _TYPES = {
     "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
@@ -153,13 +207,30 @@ def read_ply(data: bytes) -> Mesh:
     normals = None
     if all(k in v for k in ("nx", "ny", "nz")):
         normals = np.stack([v["nx"], v["ny"], v["nz"]], axis=1).astype(np.float64)
+    groups = _muscle_groups(data[:end].decode("ascii", "replace"), v.get(MUSCLE_PROPERTY))
     f = arrays.get("face")
     if not f:
-        return Mesh(verts, normals, np.zeros(0, np.int64), np.zeros(0, np.int64))
+        return Mesh(verts, normals, np.zeros(0, np.int64), np.zeros(0, np.int64), groups)
     value = next(iter(f.values()))
     if not isinstance(value, tuple):
         raise MeshReadError("PLY face element has no vertex index list")
-    return Mesh(verts, normals, *value)
+    return Mesh(verts, normals, *value, groups)
+
+
+def _muscle_groups(header: str, index) -> tuple:
+    """``((name, first vertex), ...)`` from a ``muscle`` vertex property (a run of equal
+    indices is one part) named by ``comment axdf muscle <index> <name>`` lines (an index
+    without a line is named by its number); () without the property."""
+    if index is None or isinstance(index, tuple) or not len(index):
+        return ()
+    names = {}
+    for line in header.splitlines():
+        tok = line.split()
+        if len(tok) == 5 and tok[:3] == ["comment", "axdf", "muscle"] and tok[3].isdigit():
+            names.setdefault(int(tok[3]), tok[4])
+    idx = np.asarray(index)
+    starts = np.flatnonzero(np.concatenate([[True], idx[1:] != idx[:-1]]))
+    return tuple((names.get(int(idx[s]), str(idx[s])), int(s)) for s in starts)
 
 
 def _binary_body(body: memoryview, elements, order: str) -> dict[str, dict]:

@@ -20,9 +20,9 @@ import numpy as np
 from axdf_cli.errors import InputError
 from axdf_cli.fileio import atomic, runfolder
 from axdf_cli.fileio.runfolder import (BONES_CSV, FRAME_EXTENSIONS, MANIFEST_INTERVAL_S, STATS, OutputWriter,
-                                       bone_mesh_relpath, frame_relpath, gl_record, is_file_with, mesh_relpath,
-                                       write_manifest)
-from axdf_cli.formats import WRITERS
+                                       bone_mesh_relpath, frame_mesh_relpath, frame_relpath, gl_record, is_file_with,
+                                       mesh_relpath, write_manifest)
+from axdf_cli.formats import FORMATS, WRITERS
 from axdf_cli.pipeline.evaluate import Prepass, chunk_frames, evaluate_plan, finite_or_rest, prepare
 from axdf_cli.pipeline.manifest import check_resume, manifest_dict
 from axdf_cli.pipeline.overlap import bulk_overlap, bulk_overlap_text, overlap_share, with_pack_command
@@ -37,8 +37,11 @@ from axdf_cli.model.skeleton import matrix_to_quaternion
 
 def run_dirs(plan: RunPlan) -> list[str]:
     """The folders below OUT that the plan writes into."""
-    dirs = [PurePosixPath(mesh_relpath(n, 0, f)).parent.as_posix() for f in plan.formats if f in WRITERS
-            for n in plan.names]
+    if plan.mesh_files == "frame":
+        dirs = sorted({PurePosixPath(frame_mesh_relpath(0, f)).parent.as_posix() for f in plan.formats if f in WRITERS})
+    else:
+        dirs = [PurePosixPath(mesh_relpath(n, 0, f)).parent.as_posix() for f in plan.formats if f in WRITERS
+                for n in plan.names]
     dirs += sorted({PurePosixPath(file_relpath(n, f)).parent.as_posix() for f in sequence_formats(plan.formats)
                     for n in plan.names})
     dirs += [PurePosixPath(bone_mesh_relpath("b")).parent.as_posix()]
@@ -70,8 +73,8 @@ class MeshPassResult:
 
 def split_of(plan: RunPlan) -> str:
     """How ``--jobs`` splits the mesh pass: ``"frames"`` when a FRAME stage needs every muscle
-    of a frame together, else ``"muscles"``."""
-    return "frames" if of_scope(plan.stages, Scope.FRAME) else "muscles"
+    of a frame together, or one mesh file per frame holds every muscle, else ``"muscles"``."""
+    return "frames" if of_scope(plan.stages, Scope.FRAME) or plan.mesh_files == "frame" else "muscles"
 
 
 class Spill:
@@ -116,7 +119,13 @@ def mesh_pass(plan: RunPlan, prep: Prepass, writer: OutputWriter, muscles: list[
     rows = slice(0, len(plan.frames)) if rows is None else rows
     n_rows = rows.stop - rows.start
     frame_formats = [f for f in plan.formats if f in WRITERS]
-    writers = {(j, f): WRITERS[f](plan.models[j].faces, plan.muscles[j].name) for j in muscles for f in frame_formats}
+    per_frame = plan.mesh_files == "frame"  # one file per frame, every muscle (muscles: all of them, split_of)
+    if per_frame:
+        parts = [(plan.muscles[j].name, plan.models[j].faces, plan.models[j].n_vertices) for j in muscles]
+        writers = {f: FORMATS[f].frame_writer(parts) for f in frame_formats}
+    else:
+        writers = {(j, f): WRITERS[f](plan.models[j].faces, plan.muscles[j].name) for j in muscles
+                   for f in frame_formats}
     col = {j: k for k, j in enumerate(muscles)}
     stats = np.zeros((n_rows, len(muscles), NSTATS))
     bone_rows = np.zeros((n_rows, len(plan.pose.skeleton.bones), 7)) if bones else None
@@ -132,6 +141,7 @@ def mesh_pass(plan: RunPlan, prep: Prepass, writer: OutputWriter, muscles: list[
             sl = chunk.rows
             here = slice(sl.start - rows.start, sl.stop - rows.start)
             frames = chunk.frames
+            meshes = []  # (positions, normals) per muscle of the chunk, for the files per frame
             if bones:
                 bone_rows[here, :, :3] = chunk.world[:, :, :3, 3]
                 bone_rows[here, :, 3:] = matrix_to_quaternion(chunk.world[:, :, :3, :3])
@@ -141,10 +151,12 @@ def mesh_pass(plan: RunPlan, prep: Prepass, writer: OutputWriter, muscles: list[
                 name = plan.muscles[j].name
                 pos, nrm, bad = finite_or_rest(res, plan.models[j], box := np.empty((len(frames), 2, 3), np.float32))
                 res.warnings += [(int(i), "non-finite vertices; the rest shape was written instead") for i in bad]
-                for f in frame_formats:
+                for f in frame_formats if not per_frame else ():
                     w = writers[(j, f)]
                     for i, frame in enumerate(frames):
                         writer.write(mesh_relpath(name, int(frame), f), w.encode(pos[i], nrm[i]))
+                if per_frame:
+                    meshes.append((pos, nrm))
                 if seq is not None:
                     seq.append(j, pos, nrm)
                 if raw is not None:
@@ -158,6 +170,11 @@ def mesh_pass(plan: RunPlan, prep: Prepass, writer: OutputWriter, muscles: list[
                 warns += [(sl.start + i, j, msg) for i, msg in res.warnings]
                 if progress:
                     progress(len(frames))
+            if per_frame:
+                for f in frame_formats:
+                    for i, frame in enumerate(frames):
+                        writer.write(frame_mesh_relpath(int(frame), f),
+                                     writers[f].encode([p[i] for p, _ in meshes], [n[i] for _, n in meshes]))
             if seq is not None:
                 seq.end_chunk()
             if on_chunk:

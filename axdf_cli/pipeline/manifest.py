@@ -121,6 +121,8 @@ def manifest_dict(plan: RunPlan, files: dict, warnings: list, complete: bool, ex
         "warnings": warnings,
         "files": files,
     }
+    if plan.mesh_files != "muscle":  # (the default is left unsaid: earlier runs' manifests stay the same)
+        m["settings"]["mesh_files"] = plan.mesh_files
     stages = stages_record(plan.stages)
     if stages is not None:  # (left out without stages: such a run's settings name none)
         m["settings"]["stages"] = stages

@@ -36,6 +36,7 @@ class RunPlan:
     frame_warnings: list = field(default_factory=list)  # [(frame index, muscle index, message)] known before evaluation
     stages: tuple = ()  # the run's stages (axdf_cli.pipeline.stages: build_stages), in order within each scope
     collision_meshes: dict | None = None  # bone meshes contact uses where the run stores none (a data set's sequences)
+    mesh_files: str = "muscle"  # formats.MESH_FILES: per-frame formats one file per muscle per frame, or per frame
 
     @property
     def names(self) -> list[str]:
@@ -90,14 +91,15 @@ def load_muscle_specs(files) -> list[MuscleSpec]:
 
 def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, fmt_arg=None,
              frames_arg=None, render=None, policy: RefPolicy | None = None, clamp_ranges: bool = False,
-             stages=None) -> RunPlan:
+             stages=None, mesh_files_arg=None) -> RunPlan:
     """Load and check every input; build the muscle models. Writes nothing.
 
     ``render``: the RenderSettings to use (None: the job's ``render:``); ``policy``: where
     referenced files may lie (default: the job's); ``clamp_ranges``: hold coordinates inside
     their ranges (as the pose's ``clamp_ranges``); ``stages``: stage name -> on, from the
     command line and the job (:func:`axdf_cli.pipeline.stages.build_stages`; default every
-    registered stage)."""
+    registered stage); ``mesh_files_arg``: ``--mesh-files`` (None: the job's ``mesh_files:``,
+    else ``muscle``)."""
     policy = policy or (job.policy if job is not None else RefPolicy())
     if pose_arg is not None:
         pose_path, pose_mark = Path(pose_arg), Mark(str(pose_arg))
@@ -141,6 +143,7 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
         formats = job.format  # (parsed by the job reader)
     else:
         formats = ("ply",)
+    mesh_files = plan_mesh_files(job, mesh_files_arg, formats)
     check_formats(formats, frames, Mark("--frames") if frames_arg is not None else
                   (job.frames_mark if job is not None and job.frames is not None else Mark(pose.source)))
     if out_arg is not None:
@@ -168,7 +171,25 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
         notes += jiggle_notes(pose, specs)
     return RunPlan(pose, specs, models, frames, formats, out, inputs, render=render, warnings=warnings,
                    bone_meshes=bone_meshes, notes=notes, frame_warnings=muscle_range_warnings(pose, frames, specs),
-                   stages=built)
+                   stages=built, mesh_files=mesh_files)
+
+
+def plan_mesh_files(job: Job | None, arg, formats) -> str:
+    """How the per-frame formats' files are cut (:data:`axdf_cli.formats.MESH_FILES`): the
+    flag's word, else the job's, else ``muscle``. ``frame`` needs a per-frame format among
+    ``formats`` (it says nothing about the per-sequence ones)."""
+    from axdf_cli.formats import of_layout, parse_mesh_files
+
+    if arg is not None:
+        value, mark = parse_mesh_files(arg, Mark("--mesh-files")), Mark("--mesh-files")
+    elif job is not None and job.mesh_files is not None:
+        value, mark = job.mesh_files
+    else:
+        return "muscle"
+    if value == "frame" and not of_layout("frame", formats):
+        raise InputError(mark, f"mesh files per frame, but the formats {','.join(formats)} hold no per-frame "
+                         "mesh", "add ply or obj to the formats, or leave mesh_files out")
+    return value
 
 
 def jiggle_notes(pose: Pose, specs) -> list[str]:

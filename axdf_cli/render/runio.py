@@ -12,7 +12,9 @@ The layout and the manifest are :mod:`axdf_cli.fileio.runfolder`'s. What is read
   camera frames) and optional ``settings.render``. A damaged manifest is an input error at
   its line and column.
 - ``meshes/<muscle>/<muscle>_<frame:04d>.ply`` (binary little-endian, float32 x y z nx ny
-  nz, int32 triangle lists) or ``.obj`` (``v``, ``vn``, ``f a//a``); in a run without a
+  nz, int32 triangle lists) or ``.obj`` (``v``, ``vn``, ``f a//a``), or with
+  ``settings.mesh_files: frame`` one file per frame, ``meshes/<frame:04d>.ply|obj``, each
+  muscle a named part (OBJ ``o``, PLY ``muscle`` vertex property); in a run without a
   per-frame format, each muscle's per-sequence file (``npz/<m>.npz``, ``pc2/<m>.pc2`` with
   its rest mesh ``pc2/<m>.ply``, ``mdd/<m>.mdd``, ``usd/<m>.usdc``), read a frame at a time.
 - ``bones.csv``: ``frame,bone,x,y,z,qw,qx,qy,qz`` world pose of each bone per frame.
@@ -27,9 +29,9 @@ from typing import Iterator
 import numpy as np
 
 from axdf_cli.errors import InputError, Mark
-from axdf_cli.formats import FORMATS, MeshReadError, load_triangles, read_preference, read_sequence
+from axdf_cli.formats import FORMATS, MESH_FILES, MeshReadError, load_triangles, read_preference, read_sequence
 from axdf_cli.specs.render import RenderSettings, parse_render_settings
-from axdf_cli.fileio.runfolder import BONES_CSV, Manifest, mesh_relpath, read_run_manifest
+from axdf_cli.fileio.runfolder import BONES_CSV, Manifest, frame_mesh_relpath, mesh_relpath, read_run_manifest
 from axdf_cli.fileio.runfolder import plain_relpath as _plain
 from axdf_cli.fileio.yamlio import NAME_ALLOWED, is_name
 from axdf_cli.render.framing import recorded_framing
@@ -71,6 +73,56 @@ class _FrameFiles:
         return load_triangles(self.where(frame))
 
 
+class _OneFilePerFrame:
+    """A run's files holding every muscle of a frame (``meshes/<frame>.<fmt>``): the last
+    frame read, split into its named parts (muscles read a frame at a time share one read)."""
+
+    def __init__(self, run_dir: Path, fmt: str):
+        self.run_dir, self.fmt = run_dir, fmt
+        self.frame, self.mesh, self.tri, self.parts = None, None, None, {}
+
+    def where(self, frame: int) -> Path:
+        p = self.run_dir / frame_mesh_relpath(frame, self.fmt)
+        if not p.is_file():
+            raise InputError(Mark(str(p)), "mesh file missing", "the run folder must hold every frame's mesh file")
+        return p
+
+    def part(self, frame: int, name: str):
+        """(V, 3) float32 positions, normals or None, (T, 3) faces of muscle ``name``."""
+        if frame != self.frame:
+            from axdf_cli.formats import read_mesh
+
+            path = self.where(frame)
+            try:
+                mesh = read_mesh(path.read_bytes(), path.suffix)
+                tri = mesh.triangles()
+            except MeshReadError as e:
+                raise InputError(Mark(str(path)), f"not a readable mesh ({e})", "a mesh file written by axdf run") \
+                    from None
+            self.frame, self.mesh, self.tri, self.parts = frame, mesh, tri, mesh.group_slices()
+        sl = self.parts.get(name)
+        if sl is None:
+            raise InputError(Mark(str(self.where(frame))), f"holds no part named {name!r}",
+                             "a file per frame with every muscle of the manifest as a named part")
+        m = self.mesh
+        faces = self.tri[(self.tri[:, 0] >= sl.start) & (self.tri[:, 0] < sl.stop)] - sl.start
+        nrm = None if m.normals is None else m.normals[sl].astype(np.float32)
+        return m.vertices[sl].astype(np.float32), nrm, faces.astype(np.int32)
+
+
+class _FramePart:
+    """A muscle read from :class:`_OneFilePerFrame` files."""
+
+    def __init__(self, files: _OneFilePerFrame, name: str):
+        self.files, self.name = files, name
+
+    def where(self, frame: int) -> Path:
+        return self.files.where(frame)
+
+    def read(self, frame: int):
+        return self.files.part(frame, self.name)
+
+
 class _SequenceFile:
     """A muscle written in a per-sequence format (npz, pc2, mdd, usd), read a frame at a time."""
 
@@ -87,16 +139,17 @@ class _SequenceFile:
         return np.asarray(self.seq.points[k], np.float32), nrm, self.faces
 
 
-def muscle_frames(run_dir: Path, name: str, formats, frames: tuple[int, ...], fps=None):
+def muscle_frames(run_dir: Path, name: str, formats, frames: tuple[int, ...], fps=None, per_frame=None):
     """Where a muscle's frames are read from: its per-frame meshes when the run wrote a
-    per-frame format, else its per-sequence file (npz, pc2, mdd, usd: the first the run
+    per-frame format (``per_frame``: the run's :class:`_OneFilePerFrame` files when it wrote one
+    file per frame with every muscle), else its per-sequence file (npz, pc2, mdd, usd: the first the run
     wrote in its order of preference: ``Format.read_order``), whose frames must be the run's. ``.read(frame)`` gives (V, 3) float32 positions,
     normals or None, (T, 3) faces."""
     from axdf_cli.fileio.runfolder import rest_mesh_relpath, sequence_relpath
 
     for fmt in formats:
         if FORMATS[fmt].layout == "frame":
-            return _FrameFiles(run_dir, name, fmt)
+            return _FrameFiles(run_dir, name, fmt) if per_frame is None else _FramePart(per_frame, name)
     fmt = read_preference(formats)[0]
     path = run_dir / sequence_relpath(name, FORMATS[fmt].folder, FORMATS[fmt].writer.extension)
     if not path.is_file() or path.is_symlink():
@@ -143,6 +196,9 @@ def load_run_source(run_dir: Path, manifest: Manifest | None = None, frames=None
     if any(f not in FORMATS for f in formats):
         raise m.error(("settings", "format"), f"unknown mesh format in {','.join(formats)!r}", allowed)
     fps = m.get(("settings", "fps"), (int, float), "the pose's frames per second", required=False, default=None)
+    mesh_files = m.get(("settings", "mesh_files"), str, " or ".join(MESH_FILES), required=False, default="muscle")
+    if mesh_files not in MESH_FILES:
+        raise m.error(("settings", "mesh_files"), f"mesh_files is {mesh_files!r}", " or ".join(MESH_FILES))
     names, colors = [], []
     for i, mu in enumerate(muscles_raw):
         m.get(("muscles", i), dict, "an object {name, color, ...}")
@@ -169,17 +225,19 @@ def load_run_source(run_dir: Path, manifest: Manifest | None = None, frames=None
     settings = recorded_render_settings(m)
     selected = all_frames if frames is None else tuple(int(f) for f in frames)
 
-    # pass 1: topology from the first frame, bounds over every frame
-    sources = [muscle_frames(run_dir, name, formats, all_frames, fps) for name in names]
+    # pass 1: topology from the first frame, bounds over every frame (frame by frame: a file
+    # per frame with every muscle is read once)
+    sources = per_frame_sources(run_dir, names, formats, all_frames, fps, mesh_files)
     muscles, lo, hi = [], np.full(3, np.inf), np.full(3, -np.inf)
-    for name, color, src in zip(names, colors, sources):
-        for k, f in enumerate(all_frames):
+    nv: list[int] = []
+    for k, f in enumerate(all_frames):
+        for j, (name, color, src) in enumerate(zip(names, colors, sources)):
             pos, _, faces = src.read(f)
             if k == 0:
                 muscles.append(SceneMuscle(name, color, faces))
-                nv = len(pos)
-            elif len(pos) != nv:
-                raise InputError(Mark(str(src.where(f))), f"{len(pos)} vertices, frame {all_frames[0]} has {nv}",
+                nv.append(len(pos))
+            elif len(pos) != nv[j]:
+                raise InputError(Mark(str(src.where(f))), f"{len(pos)} vertices, frame {all_frames[0]} has {nv[j]}",
                                  "every frame has the same vertex count")
             lo, hi = np.minimum(lo, pos.min(0)), np.maximum(hi, pos.max(0))
     bounds = np.stack([lo, hi]) if muscles else np.zeros((2, 3))
@@ -205,8 +263,18 @@ def load_run_source(run_dir: Path, manifest: Manifest | None = None, frames=None
     scene = Scene(tuple(muscles), layout.bones, bounds.astype(np.float64), all_frames,
                   framing=framing, first_frame=first_frame, targets=targets)
 
-    source = RunFrames(run_dir, names, formats, all_frames, fps, selected, bone_world, sources)
+    source = RunFrames(run_dir, names, formats, all_frames, fps, selected, bone_world, sources, mesh_files)
     return scene, source, settings
+
+
+def per_frame_sources(run_dir: Path, names, formats, all_frames, fps, mesh_files: str = "muscle") -> list:
+    """Every muscle's :func:`muscle_frames`; with ``mesh_files`` ``frame`` they share one
+    reader of the files per frame (of the first per-frame format the run wrote)."""
+    shared = None
+    if mesh_files == "frame":
+        fmt = next((f for f in formats if FORMATS[f].layout == "frame"), None)
+        shared = _OneFilePerFrame(run_dir, fmt) if fmt is not None else None
+    return [muscle_frames(run_dir, n, formats, all_frames, fps, shared) for n in names]
 
 
 class RunFrames:
@@ -215,8 +283,10 @@ class RunFrames:
     opened in the process that reads: a render worker opens its own), normals computed where
     the format has none; the bones' transforms of the ``selected`` frames."""
 
-    def __init__(self, run_dir: Path, names, formats, all_frames, fps, selected, bone_world, sources=None):
+    def __init__(self, run_dir: Path, names, formats, all_frames, fps, selected, bone_world, sources=None,
+                 mesh_files: str = "muscle"):
         self.run_dir, self.names, self.formats, self.all_frames, self.fps = run_dir, names, formats, all_frames, fps
+        self.mesh_files = mesh_files
         self.selected = tuple(selected)
         self.bone_world = bone_world  # (len(selected), n_scene_bones, 4, 4)
         self._sources = sources
@@ -227,8 +297,8 @@ class RunFrames:
     def chunks(self, frames) -> Iterator[FrameChunk]:
         """One-frame chunks of ``frames`` (some of ``selected``), in order."""
         if self._sources is None:
-            self._sources = [muscle_frames(self.run_dir, n, self.formats, self.all_frames, self.fps)
-                             for n in self.names]
+            self._sources = per_frame_sources(self.run_dir, self.names, self.formats, self.all_frames, self.fps,
+                                              self.mesh_files)
         row = {f: k for k, f in enumerate(self.selected)}
         for f in frames:
             ps, ns = [], []

@@ -1,4 +1,5 @@
-"""Job files (``muscles:``, ``pose:``, ``out:``, ``format:``, ``frames:``, ``render:``) → a frozen :class:`Job`."""
+"""Job files (``muscles:``, ``pose:``, ``out:``, ``format:``, ``mesh_files:``, ``frames:``,
+``render:``) → a frozen :class:`Job`."""
 from __future__ import annotations
 
 import os
@@ -6,7 +7,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from axdf_cli.errors import InputError, Mark
-from axdf_cli.formats import parse_formats
+from axdf_cli.formats import parse_formats, parse_mesh_files
 from axdf_cli.specs.render import parse_render_settings
 from axdf_cli.specs.refs import RefPolicy
 from axdf_cli.fileio.yamlio import Fields, item_marks, load_yaml
@@ -15,7 +16,7 @@ from axdf_cli.fileio.yamlio import Fields, item_marks, load_yaml
 #: Job keys that switch a stage of the pipeline on or off (axdf_cli.pipeline.stages.STAGES; a
 #: test checks the two agree): `jiggle: false`, as --no-jiggle; `contact: false`, as --no-contact.
 STAGE_KEYS = ("jiggle", "contact", "penetration")
-JOB_KEYS = ("muscles", "pose", "out", "format", "frames", "render") + STAGE_KEYS
+JOB_KEYS = ("muscles", "pose", "out", "format", "mesh_files", "frames", "render") + STAGE_KEYS
 
 
 @dataclass(frozen=True)
@@ -30,6 +31,7 @@ class Job:
     render: object  # RenderSettings (disabled when the job has no `render:`)
     policy: RefPolicy = RefPolicy()  # the policy the job was read with (its muscles are read with it)
     stages: tuple = ()  # ((stage, True | False), ...): what the job's STAGE_KEYS say, in that order; unsaid: absent
+    mesh_files: tuple | None = None  # (one of formats.MESH_FILES, Mark) or None: the job's `mesh_files:`
 
 
 def load_job(path: Path | str, policy: RefPolicy | None = None) -> Job:
@@ -54,9 +56,11 @@ def load_job(path: Path | str, policy: RefPolicy | None = None) -> Job:
     if out is not None:
         out = Path(os.path.normpath(policy.resolve(path, out, f.vmark("out"), "out")))
     fmt = parse_formats(f.raw("format"), f.vmark("format")) if f.has("format") else None
+    mesh_files = (parse_mesh_files(f.raw("mesh_files"), f.vmark("mesh_files")), f.vmark("mesh_files")) \
+        if f.has("mesh_files") else None
     frames = f.raw("frames")
     frames_mark = f.vmark("frames") if frames is not None else None
     render = parse_render_settings(f.raw("render"), f.vmark("render") if f.has("render") else top)
     stages = tuple((k, f.boolean(k)) for k in STAGE_KEYS if f.has(k))
     f.done()
-    return Job(str(path), tuple(muscles), pose, out, fmt, frames, frames_mark, render, policy, stages)
+    return Job(str(path), tuple(muscles), pose, out, fmt, frames, frames_mark, render, policy, stages, mesh_files)
