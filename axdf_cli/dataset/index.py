@@ -17,7 +17,7 @@ from axdf_cli.fileio import atomic
 from axdf_cli.errors import EnvironmentProblem
 
 COLUMNS = ("sample", "sequence", "sequence_index", "source", "frame", "frame_index", "view", "view_index",
-           "seed", "shard", "png", "exr", "labels", "amodal", "meshes")
+           "seed", "shard", "png", "exr", "labels", "amodal", "meshes", "mask", "depth")
 
 
 def _pyarrow():
@@ -53,6 +53,8 @@ def index_rows(records: list[dict], seed: int, shards: int, passes) -> dict:
                 cols["labels"].append(f"{name}/labels.npz")
                 cols["amodal"].append(f"{name}/amodal.json" if "amodal" in passes else None)
                 cols["meshes"].append(f"{name}/meshes")
+                for p in ("mask", "depth"):  # (views.VIEW_PNG_PASSES: <frame>.mask.png, .depth.png)
+                    cols[p].append(f"{name}/views/{view}/{frame:04d}.{p}.png" if p in passes else None)
                 n += 1
     return cols
 

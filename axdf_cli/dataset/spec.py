@@ -416,8 +416,10 @@ def _parse_cameras(value, where: Mark, skel):
 
 
 #: Passes of a data set beyond the image files: ``amodal``, each muscle's full extent per view
-#: and frame (``<seq>/amodal.json``, COCO RLE; :mod:`axdf_cli.dataset.amodal`).
-DATASET_PASSES = ("amodal",)
+#: and frame (``<seq>/amodal.json``, COCO RLE; :mod:`axdf_cli.dataset.amodal`); ``mask`` and
+#: ``depth``, the EXR's id and Z as PNG (``<frame>.mask.png``, ``.depth.png``:
+#: :data:`axdf_cli.render.views.VIEW_PNG_PASSES`).
+DATASET_PASSES = ("amodal", "mask", "depth")
 
 
 def _parse_render(value, where: Mark):

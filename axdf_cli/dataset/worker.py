@@ -102,6 +102,8 @@ def build_context(path: Path | str, seed: int | None = None, policy=None, listed
 
 def dataset_dict(ctx: Context) -> dict:
     """``dataset.json``: names, conventions, settings and the list of sequences."""
+    from axdf_cli.render.views import VIEW_PNG_NOTES
+
     spec, skel = ctx.spec, ctx.skeleton
     W, H = spec.render.size
     return {
@@ -142,6 +144,7 @@ def dataset_dict(ctx: Context) -> dict:
                       "(occluders ignored) as uncompressed RLE, category id = the muscle's EXR id"}
            if "amodal" in spec.passes else {}),
         **({"stages": stages_record(ctx.stages)} if ctx.stages else {}),
+        **{p: VIEW_PNG_NOTES[p] for p in VIEW_PNG_NOTES if p in spec.passes},
         "sequences": [{"name": s.name, "source": spec.entries[s.entry].label, "frames": s.n_frames}
                       for s in ctx.sequences],
     }
@@ -297,7 +300,8 @@ def _make_sequence(ctx: Context, seq: Sequence, folder: Path, resume: bool, timi
         visible[fi] = lab.visibility(uv[fi:fi + 1], z[fi:fi + 1], depth, spec.visibility_tolerance)[0]
         for v, im in enumerate(imgs):
             rel = f"views/{views[v]}"
-            files.update(write_view_images(root.path(f"{rel}/{int(frame):04d}").parent, rel, im, spec.passes))
+            files.update(write_view_images(root.path(f"{rel}/{int(frame):04d}").parent, rel, im, spec.passes,
+                                           vr.labels))
             if amodal:
                 image_id = len(coco_images)
                 coco_images.append({"id": image_id, "file_name": f"{rel}/{int(frame):04d}.png", "width": W,
