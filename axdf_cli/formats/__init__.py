@@ -13,10 +13,11 @@ A format is laid out per frame or per sequence (:attr:`Format.layout`):
 
 - ``"frame"``: one file per muscle per frame (``meshes/<m>/<m>_<frame:04d>.<suffix>``), as
   PLY and OBJ; or, with ``--mesh-files frame`` (:data:`MESH_FILES`), one file per frame
-  holding every muscle (``meshes/<frame:04d>.<suffix>``, :attr:`Format.frame_writer`). The writer is built once per muscle from its fixed faces ``(T, 3) int32``
-  (``writer(faces, name)``) and writes one frame: ``.encode(positions (V, 3), normals (V, 3))
-  -> bytes`` and ``.write(path, positions, normals, sha256=False)``. The reader turns one
-  file's bytes into one :class:`Mesh`.
+  holding every muscle (``meshes/<frame:04d>.<suffix>``, :attr:`Format.frame_writer`). The
+  writer is built once per muscle from its fixed faces ``(T, 3) int32`` (``writer(faces,
+  name)``) and writes one frame: ``.encode(positions (V, 3), normals (V, 3)) -> bytes`` and
+  ``.write(path, positions, normals, sha256=False)``. The reader turns one file's bytes into
+  one :class:`Mesh`.
 - ``"sequence"``: one file per muscle holding every frame (USD, PC2, MDD, NPZ: packed
   formats, :mod:`axdf_cli.formats.packed`). The writer streams:
   ``writer(path, SequenceInfo(frames, fps, name, color), faces, n_vertices)``, then
@@ -212,7 +213,8 @@ def load_triangles_and_bytes(path: Path | str) -> tuple[tuple, bytes]:
         raise InputError(Mark(str(path)), f"not a readable mesh ({e})", allowed) from None
 
 
-__all__ = ["FORMATS", "FRAME_SETS", "Format", "LAYOUTS", "MESH_FILES", "parse_mesh_files", "WRITERS", "Mesh", "MeshReadError", "PlyWriter", "ObjWriter",
+__all__ = ["FORMATS", "FRAME_SETS", "Format", "LAYOUTS", "MESH_FILES", "parse_mesh_files",
+           "WRITERS", "Mesh", "MeshReadError", "PlyWriter", "ObjWriter",
            "format_of", "format_names", "frames_problem", "of_layout", "parse_formats", "read_mesh",
            "read_preference", "read_sequence", "read_triangles",
            "load_triangles", "load_triangles_and_bytes"]

@@ -4,7 +4,8 @@ object per file, :class:`ObjWriter`, or every muscle of a frame as named objects
 
 The reader keeps the file's vertex order (trimesh's OBJ loader may merge or split vertices by
 normals, so it is not used here); ``o`` lines name parts (:attr:`Mesh.groups`, by the ``v``
-lines before them); other lines (``g``, ``vt``, ``usemtl`` ...) are skipped. Malformed files raise :class:`MeshReadError`.
+lines before them); other lines (``g``, ``vt``, ``usemtl`` ...) are skipped. Malformed files
+raise :class:`MeshReadError`.
 
 Coordinates are written with 6 decimals (micrometres), enough for metres-scale muscles. The
 face block is formatted once per muscle; per frame only the vertex lines are.

@@ -1,6 +1,7 @@
 """PLY: the writers (binary little-endian, float32 x y z nx ny nz per vertex, ``list uchar
 int`` faces: one muscle per file, :class:`PlyWriter`, or every muscle of a frame with a
-``muscle`` index per vertex, :class:`PlyFrameWriter`) and the reader (any PLY: binary little/big endian or ascii).
+``muscle`` index per vertex, :class:`PlyFrameWriter`) and the reader (any PLY: binary
+little/big endian or ascii).
 
 What the writer writes is read back by Blender, trimesh (``process=False``) and meshio. The
 header holds no timestamp or path, so identical meshes give identical bytes.
@@ -221,8 +222,8 @@ def _muscle_groups(header: str, index) -> tuple:
     """``((name, first vertex), ...)`` from a ``muscle`` vertex property (a run of equal
     indices is one part) named by ``comment axdf muscle <index> <name>`` lines (an index
     without a line is named by its number); () without the property."""
-    if index is None or isinstance(index, tuple) or not len(index):
-        return ()
+    if index is None or isinstance(index, tuple) or not len(index) or np.asarray(index).dtype.kind not in "iu":
+        return ()  # (an ascii PLY's or a float property is no muscle index)
     names = {}
     for line in header.splitlines():
         tok = line.split()

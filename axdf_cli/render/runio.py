@@ -106,6 +106,9 @@ class _OneFilePerFrame:
                              "a file per frame with every muscle of the manifest as a named part")
         m = self.mesh
         faces = self.tri[(self.tri[:, 0] >= sl.start) & (self.tri[:, 0] < sl.stop)] - sl.start
+        if len(faces) and (faces.min() < 0 or faces.max() >= sl.stop - sl.start):
+            raise InputError(Mark(str(self.where(frame))), f"a face of {name!r} joins vertices of another part",
+                             "a file per frame whose parts' faces stay within their own vertices")
         nrm = None if m.normals is None else m.normals[sl].astype(np.float32)
         return m.vertices[sl].astype(np.float32), nrm, faces.astype(np.int32)
 
