@@ -25,8 +25,14 @@ moves the same way up to how finely its target is sampled. A step's energy
 ``E = (|e'|^2 + omega^2 |e|^2) / 2`` never grows (it decays when zeta > 0); only the bones'
 changes of velocity between frames put energy in.
 
-Before the first frame of the pose the muscle has held that frame's pose for ever (a
-settled pre-roll): the state starts at rest on its target.
+Before the first frame of the pose the muscle has moved for ever at the velocity of the
+pose's first step (a pre-roll at constant velocity), so a motion already under way at its
+first frame has no start-up transient. Under a target moving at constant velocity V
+(T'' = 0) every free solution decays, and what is left is the steady state e = 0, e' = 0:
+since the damping acts on the velocity relative to the target, the oscillator rides exactly
+on the target, x = T, x' = V (:func:`steady_state`; the same state the integrator reaches
+on a long constant-velocity pre-roll, as ``exp(-zeta omega t)``). A pose that starts still
+starts at rest on its target, as before.
 
 Where the muscle is held. What is written is ``T + w (x - T)``: a weight w per control
 point, 0 at the origin and insertion (held by their bones), from the muscle's ``weight``
@@ -127,6 +133,20 @@ def step_matrices(omega: np.ndarray, zeta: np.ndarray, h: float) -> np.ndarray:
         phi[big, 1, 0] = -w * w * (e1 - e2) / two_d
         phi[big, 1, 1] = (r1 * e1 - r2 * e2) / two_d
     return phi
+
+
+def steady_state(t0: np.ndarray, t1: np.ndarray | None, h: float) -> tuple[np.ndarray, np.ndarray]:
+    """The state (x, v) at the first frame after a long pre-roll at the first step's constant
+    velocity: targets t0 at that frame and t1 at the next (None: no next frame, the pose
+    holds still) → x = t0, v = (t1 - t0) / h (module doc: the steady state under constant
+    velocity is on the target, moving with it, for any frequency and damping ratio). A point
+    whose first step is not finite (a degenerate pose's target) starts at rest."""
+    x = np.array(t0, dtype=np.float64, copy=True)
+    if t1 is None:
+        return x, np.zeros_like(x)
+    v = (np.asarray(t1, dtype=np.float64) - x) / h  # the same expression as a step's target velocity
+    v[~np.isfinite(v).all(axis=-1)] = 0.0
+    return x, v
 
 
 def energy(e: np.ndarray, de: np.ndarray, omega) -> np.ndarray:

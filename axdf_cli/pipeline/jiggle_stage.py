@@ -10,8 +10,10 @@ subset, ``--resume``, mesh and render workers all see the axis a whole run compu
 State: for every muscle with ``jiggle``, its oscillators' positions and velocities (n, 3) in
 the world and its targets and effective tension at the frame the state is at, plus what the
 law needs of the muscle (spec, weights, tone). Before the first chunk it is empty: the first
-frame of the pose starts at rest on its target (the muscle has held that pose for ever: a
-settled pre-roll). Every muscle's oscillators are independent and every operation is
+frame of the pose starts on its target, moving at the pose's first step's velocity (the
+muscle has moved at that velocity for ever: a pre-roll at constant velocity,
+:func:`axdf_cli.model.jiggle.steady_state`), so a motion already under way has no start-up
+transient. Every muscle's oscillators are independent and every operation is
 elementwise per control point, so a muscle moves to the same bytes whichever muscles share
 its chunk.
 """
@@ -88,16 +90,16 @@ class JiggleStage:
         targets = np.concatenate([chunk.axis[j] for j in js], axis=1)  # (C, P, 3)
         tone = np.array([o.tone for o in osc])
         tension = effective_tension(tone, chunk.activation[:, js])  # (C, M')
-        if state.frame is None:  # the pose's first frame: at rest on its target
+        if state.frame is None:  # the pose's first frame: the steady state of a constant-velocity pre-roll
             skip, prev_t, prev_e = 1, targets[0].copy(), tension[0].copy()
-            x, v = prev_t.copy(), np.zeros_like(prev_t)
+            x, v = jiggle.steady_state(prev_t, targets[1] if len(frames) > 1 else None, state.dt)
         else:
             skip = 0
             prev_t = np.concatenate([o.target for o in osc])
             prev_e = np.array([o.tension for o in osc])
             x = np.concatenate([o.x for o in osc])
             v = np.concatenate([o.v for o in osc])
-        moved = {j: chunk.axis[j].copy() for j in js}  # (the first frame at rest stays on its target)
+        moved = {j: chunk.axis[j].copy() for j in js}  # (the first frame stays on its target)
         if len(frames) > skip:
             tgt, ten = targets[skip:], tension[skip:]
             # a step's stiffness and damping: at the mean effective tension of its two frames
