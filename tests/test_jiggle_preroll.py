@@ -174,3 +174,73 @@ def test_a_run_already_moving_at_its_first_frame_equals_its_long_preroll(tmp_pat
     assert np.abs(walk - longer).max() <= 1e-6
     assert np.abs(walk[:13] - still[:13]).max() <= 1e-6  # constant velocity: on its target
     assert np.abs(walk[13:] - still[13:]).max() >= 1e-3  # the bend rings
+
+
+# ----------------------------------------------------------------------------- the bound
+
+def _trial_axes(fast: float, bounded: bool = True):
+    """The shipped gait2392 walk (its whole trial, from frame 0) on four of its jiggling
+    muscles, played ``fast`` times as fast (the same frames at ``fast`` times the fps), through
+    the run's own pre-pass: the targets and the written axes, {muscle: (F, n, 3)} each.
+    ``bounded=False``: the same with the bound taken away (the reference)."""
+    from dataclasses import replace
+    from pathlib import Path
+
+    from axdf_cli.pipeline import evaluate
+    from axdf_cli.pipeline.plan import plan_run
+    from axdf_cli.pipeline.stages import Scope, of_scope
+
+    root = Path(__file__).resolve().parents[1]
+    names = ("soleus_l", "per_tert_r", "vas_med_r", "med_gas_l")
+    plan = plan_run(None, muscle_args=[root / "muscles" / "gait2392_packed" / f"{n}.yaml" for n in names],
+                    pose_arg=root / "poses" / "gait2392_walk.yaml")
+    plan = replace(plan, pose=replace(plan.pose, fps=plan.pose.fps * fast))
+    stages = of_scope(plan.stages, Scope.TIME)
+    state = tuple(s.start(plan) for s in stages)
+    targets, written = {n: [] for n in names}, {n: [] for n in names}
+    every = list(range(len(names)))
+    original = jiggle.bounded
+    if not bounded:
+        jiggle.bounded = lambda offset, length: offset
+    try:
+        for b in range(-(-len(plan.pose.frames) // evaluate.TIME_BLOCK)):
+            state, chunk = evaluate.time_block(plan, stages, state, b)
+            raw = evaluate._chunk(plan, chunk.rows, chunk.frames, every)
+            for j, n in enumerate(names):
+                targets[n].append(raw.axis[j])
+                written[n].append(chunk.axis[j])
+    finally:
+        jiggle.bounded = original
+    return ({n: np.concatenate(v) for n, v in targets.items()}, {n: np.concatenate(v) for n, v in written.items()})
+
+
+def _offset_over_length(targets, written) -> dict:
+    return {n: np.linalg.norm(written[n] - targets[n], axis=-1).max(axis=-1) / jiggle.axis_length(targets[n])
+            for n in targets}
+
+
+def test_the_walk_played_10x_fast_stays_within_the_bound():
+    """Played 10x fast, the walk's accelerations are 100x: unbounded, soleus_l's axis is
+    thrown over twice its length off its target; bounded, no control point leaves the bound
+    (a quarter of the length, to rounding) and no axis doubles its length."""
+    from axdf_cli import tolerances as tol
+
+    targets, written = _trial_axes(10.0)
+    ratio = _offset_over_length(targets, written)
+    worst = max(float(r.max()) for r in ratio.values())
+    assert worst <= tol.JIGGLE_BOUND * (1 + 1e-9), worst  # (rounding: the written axis is target + offset)
+    assert float(ratio["soleus_l"].max()) >= tol.JIGGLE_BOUND_KNEE * tol.JIGGLE_BOUND  # it bit
+    for n in targets:
+        assert (jiggle.axis_length(written[n]) / jiggle.axis_length(targets[n])).max() < 2.0
+
+
+def test_the_bound_does_not_bite_on_the_walk_at_its_speed():
+    """At its own speed the walk's written axes are those without the bound, to the bit: no
+    control point of these muscles comes within the knee (75% of the bound) at any frame."""
+    from axdf_cli import tolerances as tol
+
+    targets, written = _trial_axes(1.0)
+    ratio = _offset_over_length(targets, written)
+    assert max(float(r.max()) for r in ratio.values()) < tol.JIGGLE_BOUND_KNEE * tol.JIGGLE_BOUND
+    _, free = _trial_axes(1.0, bounded=False)
+    assert all(np.array_equal(written[n], free[n]) for n in written)

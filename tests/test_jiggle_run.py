@@ -166,7 +166,7 @@ def test_no_jiggle_equals_muscles_without_the_key(tmp_path, hinge_runs, capsys):
     # the manifest: the stage is recorded when it runs; off, the run is that of muscles without
     # jiggle but for the inputs' sha256 (the muscle files differ)
     on, off, plain_m = (json.loads((d / "manifest.json").read_text()) for d in (*hinge_runs, out))
-    assert on["settings"]["stages"][0] == {"name": "jiggle", "scope": "time"}
+    assert on["settings"]["stages"][0] == {"name": "jiggle", "scope": "time", "bound": 0.25, "knee": 0.75}
     assert [s["name"] for s in on["settings"]["stages"]] == ["jiggle", "contact"]  # (contact: on by default)
     assert [s["name"] for s in off["settings"]["stages"]] == ["contact"]
     for m in (off, plain_m):

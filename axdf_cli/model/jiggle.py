@@ -39,6 +39,19 @@ point, 0 at the origin and insertion (held by their bones), from the muscle's ``
 profile along the axis (default sin(pi u)), taken at each control point's Greville abscissa
 u (the parameter a quadratic B-spline's control point mainly acts at).
 
+The bound. A motion too fast for its frame rate (or wrongly timed) would throw the free points
+far off: the offset grows as the target's acceleration over omega^2. What is written is
+bounded instead, relative to the muscle's size: each control point's offset d = w (x - T)
+keeps its direction and its length r becomes f(r), with B = ``JIGGLE_BOUND`` times the
+axis' length at that frame (its control polygon's) and K = ``JIGGLE_BOUND_KNEE`` B:
+
+    f(r) = r                                   for r <= K
+    f(r) = K + (B - K) tanh((r - K) / (B - K)) above,
+
+which has the same value, slope and curvature at K (a soft clamp, no kink) and stays below
+B (:func:`bounded`; axdf_cli/tolerances.py says why these values). The oscillators' state
+is not clamped (the law stays linear and exact); only what is written is.
+
 Tension. A tensed muscle rings faster and less (soft-tissue vibration frequency and damping
 both rise with muscle force: Wakeling & Nigg, J. Appl. Physiol. 90, 2001): with effective
 tension e (the tension law's), the stiffness omega^2 goes linearly from the relaxed value to
@@ -50,6 +63,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from axdf_cli import tolerances as tol
 from axdf_cli.model import bspline
 
 
@@ -147,6 +161,32 @@ def steady_state(t0: np.ndarray, t1: np.ndarray | None, h: float) -> tuple[np.nd
     v = (np.asarray(t1, dtype=np.float64) - x) / h  # the same expression as a step's target velocity
     v[~np.isfinite(v).all(axis=-1)] = 0.0
     return x, v
+
+
+def axis_length(points: np.ndarray) -> np.ndarray:
+    """The length of an axis' control polygon: points (..., n, 3) → (...)."""
+    return np.linalg.norm(np.diff(points, axis=-2), axis=-1).sum(axis=-1)
+
+
+def bounded(offset: np.ndarray, length, bound: float = tol.JIGGLE_BOUND,
+            knee: float = tol.JIGGLE_BOUND_KNEE) -> np.ndarray:
+    """Offsets (..., 3) softly clamped to ``bound`` times ``length`` (broadcast against
+    offset's (...)): unchanged up to ``knee`` of the bound (the same bytes), then
+    ``K + (B - K) tanh((r - K) / (B - K))`` along the same direction (module doc). An
+    offset whose bound is not positive and finite (a degenerate axis) is 0: on the target."""
+    offset = np.asarray(offset, dtype=np.float64)
+    b = bound * np.broadcast_to(np.asarray(length, dtype=np.float64), offset.shape[:-1])
+    k = knee * b
+    r = np.sqrt(np.einsum("...c,...c->...", offset, offset))
+    ok = np.isfinite(b) & (b > 0.0)
+    over = ok & (r > k)
+    if not over.any() and ok.all():
+        return offset
+    out = np.where(ok[..., None], offset, 0.0)
+    rb, kb, ro = b[over], k[over], r[over]
+    soft = kb + (rb - kb) * np.tanh((ro - kb) / (rb - kb))
+    out[over] = offset[over] * (soft / ro)[:, None]
+    return out
 
 
 def energy(e: np.ndarray, de: np.ndarray, omega) -> np.ndarray:

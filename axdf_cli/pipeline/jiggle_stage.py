@@ -23,6 +23,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from axdf_cli import tolerances as tol
 from axdf_cli.model import jiggle
 from axdf_cli.model.pose import effective_tension
 
@@ -59,6 +60,12 @@ class JiggleStage:
     name = "jiggle"
     scope = "time"  # Scope.TIME (its value: :mod:`.stages` registers this stage, so it is not imported here)
 
+    @property
+    def settings(self) -> dict:
+        """The bound on what is written (:func:`axdf_cli.model.jiggle.bounded`), recorded in
+        the manifest so that ``--resume`` refuses a change."""
+        return {"bound": tol.JIGGLE_BOUND, "knee": tol.JIGGLE_BOUND_KNEE}
+
     @staticmethod
     def needed(specs) -> bool:
         """Whether the stage acts on any of these muscles (a run without one leaves it out)."""
@@ -73,7 +80,8 @@ class JiggleStage:
     def __call__(self, state: JiggleState, chunk):
         """Advance every jiggling muscle of ``chunk`` over its frames (consecutive pose frames
         right after the state's: (C,) frames, axis (C, n, 3) each) and move its axis to
-        ``target + weight (x - target)``."""
+        ``target + weight (x - target)``, that offset softly bounded relative to the axis'
+        length at the frame (:func:`axdf_cli.model.jiggle.bounded`)."""
         js = [j for j in chunk.muscles if j in state.muscles]
         if not js:
             return state, chunk
@@ -110,7 +118,9 @@ class JiggleStage:
                 phi[:, cuts[k]:cuts[k + 1]] = jiggle.step_matrices(omega, zeta, state.dt)[:, None]
             xs, x, v = jiggle.oscillate(x, v, np.concatenate([prev_t[None], tgt]), phi, state.dt)
             w = np.concatenate([o.weights for o in osc])[None, :, None]
-            out = tgt + w * (xs - tgt)  # what is written: T + w (x - T)
+            length = np.concatenate([np.repeat(jiggle.axis_length(tgt[:, cuts[k]:cuts[k + 1]])[:, None], n, axis=1)
+                                     for k, n in enumerate(sizes)], axis=1)  # (S, P): each point's muscle's
+            out = tgt + jiggle.bounded(w * (xs - tgt), length)  # what is written: T + w (x - T), bounded
             for k, j in enumerate(js):
                 moved[j][skip:] = out[:, cuts[k]:cuts[k + 1]]
             prev_t, prev_e = tgt[-1], ten[-1]
