@@ -32,7 +32,7 @@ first frame has no start-up transient. Under a target moving at constant velocit
 since the damping acts on the velocity relative to the target, the oscillator rides exactly
 on the target, x = T, x' = V (:func:`steady_state`; the same state the integrator reaches
 on a long constant-velocity pre-roll, as ``exp(-zeta omega t)``). A pose that starts still
-starts at rest on its target, as before.
+starts at rest on its target.
 
 Where the muscle is held. What is written is ``T + w (x - T)``: a weight w per control
 point, 0 at the origin and insertion (held by their bones), from the muscle's ``weight``
