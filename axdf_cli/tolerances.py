@@ -265,3 +265,16 @@ PACK_POSE_FRAMES = 16
 # A packed section's control points keep to their rays from its centre (star-shaped sections,
 # pack.Fit), each at least this share of the section's original mean radius from it.
 PACK_RAY_MIN = 0.15
+
+# Jiggle's bound (axdf_cli/model/jiggle.py, `bounded`): the written offset of an axis control
+# point from where the bones put it is at most JIGGLE_BOUND of the muscle's axis length at
+# that frame (its control polygon's), reached smoothly: unchanged up to JIGGLE_BOUND_KNEE of
+# the bound, then a tanh shoulder (the same value, slope and curvature at the knee: no kink).
+# Soft tissue sways centimetres on muscles tens of centimetres long; the shipped gait2392 walk
+# moves axes by at most 3.5% of their length and the hand-keyed hop's dead-stop landing, the
+# hardest shipped motion, by 16.8% (vastus medialis), below the knee (18.75%), so neither
+# changes. What it stops is a motion too fast for its frame rate (the walk played 10x fast
+# moved axes by 270% of their length): an offset of a quarter of the length in the middle
+# of a two-segment axis lengthens it by sqrt(1 + 4 * 0.25^2) - 1 = 12%.
+JIGGLE_BOUND = 0.25
+JIGGLE_BOUND_KNEE = 0.75

@@ -208,3 +208,38 @@ def test_a_target_that_is_not_finite_stays_one_frame():
     finite = np.isfinite(out).all(axis=(1, 2))
     assert not finite[19] and finite[:19].all() and finite[21:].all()  # out[k] is frame k + 1
     assert np.isfinite(x).all() and np.isfinite(v).all()
+
+
+def test_bound_is_a_soft_clamp_relative_to_the_length():
+    """``bounded``: the same offsets (bytes) below the knee; above it, the same direction and a
+    length that rises monotonically towards the bound, never reaching it; value, slope and
+    curvature continuous at the knee (no kink)."""
+    from axdf_cli import tolerances as tol
+
+    b, k = tol.JIGGLE_BOUND, tol.JIGGLE_BOUND_KNEE
+    assert 0.0 < k < 1.0 and 0.0 < b < 1.0
+    length = 0.4
+    rng = np.random.default_rng(11)
+    small = rng.normal(size=(50, 3))
+    small *= (rng.uniform(0, k * b * length, 50) / np.linalg.norm(small, axis=1))[:, None]
+    assert np.array_equal(jiggle.bounded(small, length), small)
+    direction = np.array([0.6, 0.0, 0.8])
+    r = np.linspace(0.0, 50.0, 200001) * length  # up to 50 lengths
+    got = np.linalg.norm(jiggle.bounded(r[:, None] * direction, np.full(len(r), length)), axis=1)
+    eps = 1e-12 * b * length  # rounding of the rescaled vector's length
+    assert np.all(got <= b * length + eps) and np.all(np.diff(got) >= -eps)
+    assert got[-1] >= (1 - 1e-9) * b * length
+    assert np.allclose(jiggle.bounded(3.0 * length * direction[None], length)[0] / got[-1], direction)
+    # slope and curvature on both sides of the knee, by finite differences
+    f = lambda x: float(np.linalg.norm(jiggle.bounded(np.array([x * direction]), length)[0]))  # noqa: E731
+    kr, d = k * b * length, 1e-5 * length
+    left = (f(kr) - f(kr - d)) / d, (f(kr) - 2 * f(kr - d) + f(kr - 2 * d)) / d ** 2
+    right = (f(kr + d) - f(kr)) / d, (f(kr + 2 * d) - 2 * f(kr + d) + f(kr)) / d ** 2
+    assert abs(left[0] - 1.0) < 1e-6 and abs(right[0] - 1.0) < 1e-3
+    assert abs(right[1]) < 1e-2 / length  # (tanh'' = 0 at 0: curvature 0 on both sides)
+
+
+def test_bound_holds_a_degenerate_axis_on_its_target():
+    off = np.array([[0.1, 0.0, 0.0], [0.0, 0.2, 0.0], [0.0, 0.0, 0.15]])
+    got = jiggle.bounded(off, np.array([0.0, np.nan, 1.0]))
+    assert np.array_equal(got[:2], np.zeros((2, 3))) and np.array_equal(got[2], off[2])

@@ -166,7 +166,7 @@ def test_no_jiggle_equals_muscles_without_the_key(tmp_path, hinge_runs, capsys):
     # the manifest: the stage is recorded when it runs; off, the run is that of muscles without
     # jiggle but for the inputs' sha256 (the muscle files differ)
     on, off, plain_m = (json.loads((d / "manifest.json").read_text()) for d in (*hinge_runs, out))
-    assert on["settings"]["stages"][0] == {"name": "jiggle", "scope": "time"}
+    assert on["settings"]["stages"][0] == {"name": "jiggle", "scope": "time", "bound": 0.25, "knee": 0.75}
     assert [s["name"] for s in on["settings"]["stages"]] == ["jiggle", "contact"]  # (contact: on by default)
     assert [s["name"] for s in off["settings"]["stages"]] == ["contact"]
     for m in (off, plain_m):
@@ -257,6 +257,21 @@ cameras:
 render: {size: [24, 24], supersample: 1}
 """
 
+# The tiny data set's walk, but its stretch (which alone moves the chain muscle's free control
+# points) stops at frame 3: a change of velocity that rings. (At constant velocity from its
+# first frame the muscle would ride on its target: jiggle starts from a constant-velocity
+# pre-roll, tests/test_jiggle_preroll.py.)
+JIGGLE_WALK = """\
+pose: walk
+skeleton: chain.yaml
+fps: 24
+frames: [0, 8]
+keys:
+  0: {bend: 0, roll: 0, stretch: 0.1}
+  3: {bend: 15, roll: 20, stretch: 0.3}
+  8: {bend: 40, roll: 60, stretch: 0.3}
+"""
+
 
 def test_data_set_sequences_honour_jiggle(tmp_path, monkeypatch, capsys):
     """A data set's motion sequence is the run of its frames (jiggle carried from the motion's
@@ -271,6 +286,7 @@ def test_data_set_sequences_honour_jiggle(tmp_path, monkeypatch, capsys):
                          ("still", CHAIN_MUSCLE_YAML)):
         d = tmp_path / name
         write_tiny(d, JIGGLE_DATASET)
+        (d / "walk.yaml").write_text(JIGGLE_WALK)
         (d / "chainm.yaml").write_text(muscle)
         monkeypatch.chdir(d)
         rc, _, err = run_main(["dataset", "build", "tiny.yaml", "--out", "ds", "-q"], capsys)

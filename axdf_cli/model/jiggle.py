@@ -25,13 +25,32 @@ moves the same way up to how finely its target is sampled. A step's energy
 ``E = (|e'|^2 + omega^2 |e|^2) / 2`` never grows (it decays when zeta > 0); only the bones'
 changes of velocity between frames put energy in.
 
-Before the first frame of the pose the muscle has held that frame's pose for ever (a
-settled pre-roll): the state starts at rest on its target.
+Before the first frame of the pose the muscle has moved for ever at the velocity of the
+pose's first step (a pre-roll at constant velocity), so a motion already under way at its
+first frame has no start-up transient. Under a target moving at constant velocity V
+(T'' = 0) every free solution decays, and what is left is the steady state e = 0, e' = 0:
+since the damping acts on the velocity relative to the target, the oscillator rides exactly
+on the target, x = T, x' = V (:func:`steady_state`; the same state the integrator reaches
+on a long constant-velocity pre-roll, as ``exp(-zeta omega t)``). A pose that starts still
+starts at rest on its target.
 
 Where the muscle is held. What is written is ``T + w (x - T)``: a weight w per control
 point, 0 at the origin and insertion (held by their bones), from the muscle's ``weight``
 profile along the axis (default sin(pi u)), taken at each control point's Greville abscissa
 u (the parameter a quadratic B-spline's control point mainly acts at).
+
+The bound. A motion too fast for its frame rate (or wrongly timed) would throw the free points
+far off: the offset grows as the target's acceleration over omega^2. What is written is
+bounded instead, relative to the muscle's size: each control point's offset d = w (x - T)
+keeps its direction and its length r becomes f(r), with B = ``JIGGLE_BOUND`` times the
+axis' length at that frame (its control polygon's) and K = ``JIGGLE_BOUND_KNEE`` B:
+
+    f(r) = r                                   for r <= K
+    f(r) = K + (B - K) tanh((r - K) / (B - K)) above,
+
+which has the same value, slope and curvature at K (a soft clamp, no kink) and stays below
+B (:func:`bounded`; axdf_cli/tolerances.py says why these values). The oscillators' state
+is not clamped (the law stays linear and exact); only what is written is.
 
 Tension. A tensed muscle rings faster and less (soft-tissue vibration frequency and damping
 both rise with muscle force: Wakeling & Nigg, J. Appl. Physiol. 90, 2001): with effective
@@ -44,6 +63,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from axdf_cli import tolerances as tol
 from axdf_cli.model import bspline
 
 
@@ -127,6 +147,46 @@ def step_matrices(omega: np.ndarray, zeta: np.ndarray, h: float) -> np.ndarray:
         phi[big, 1, 0] = -w * w * (e1 - e2) / two_d
         phi[big, 1, 1] = (r1 * e1 - r2 * e2) / two_d
     return phi
+
+
+def steady_state(t0: np.ndarray, t1: np.ndarray | None, h: float) -> tuple[np.ndarray, np.ndarray]:
+    """The state (x, v) at the first frame after a long pre-roll at the first step's constant
+    velocity: targets t0 at that frame and t1 at the next (None: no next frame, the pose
+    holds still) → x = t0, v = (t1 - t0) / h (module doc: the steady state under constant
+    velocity is on the target, moving with it, for any frequency and damping ratio). A point
+    whose first step is not finite (a degenerate pose's target) starts at rest."""
+    x = np.array(t0, dtype=np.float64, copy=True)
+    if t1 is None:
+        return x, np.zeros_like(x)
+    v = (np.asarray(t1, dtype=np.float64) - x) / h  # the same expression as a step's target velocity
+    v[~np.isfinite(v).all(axis=-1)] = 0.0
+    return x, v
+
+
+def axis_length(points: np.ndarray) -> np.ndarray:
+    """The length of an axis' control polygon: points (..., n, 3) → (...)."""
+    return np.linalg.norm(np.diff(points, axis=-2), axis=-1).sum(axis=-1)
+
+
+def bounded(offset: np.ndarray, length, bound: float = tol.JIGGLE_BOUND,
+            knee: float = tol.JIGGLE_BOUND_KNEE) -> np.ndarray:
+    """Offsets (..., 3) softly clamped to ``bound`` times ``length`` (broadcast against
+    offset's (...)): unchanged up to ``knee`` of the bound (the same bytes), then
+    ``K + (B - K) tanh((r - K) / (B - K))`` along the same direction (module doc). An
+    offset whose bound is not positive and finite (a degenerate axis) is 0: on the target."""
+    offset = np.asarray(offset, dtype=np.float64)
+    b = bound * np.broadcast_to(np.asarray(length, dtype=np.float64), offset.shape[:-1])
+    k = knee * b
+    r = np.sqrt(np.einsum("...c,...c->...", offset, offset))
+    ok = np.isfinite(b) & (b > 0.0)
+    over = ok & (r > k)
+    if not over.any() and ok.all():
+        return offset
+    out = np.where(ok[..., None], offset, 0.0)
+    rb, kb, ro = b[over], k[over], r[over]
+    soft = kb + (rb - kb) * np.tanh((ro - kb) / (rb - kb))
+    out[over] = offset[over] * (soft / ro)[:, None]
+    return out
 
 
 def energy(e: np.ndarray, de: np.ndarray, omega) -> np.ndarray:

@@ -10,8 +10,10 @@ subset, ``--resume``, mesh and render workers all see the axis a whole run compu
 State: for every muscle with ``jiggle``, its oscillators' positions and velocities (n, 3) in
 the world and its targets and effective tension at the frame the state is at, plus what the
 law needs of the muscle (spec, weights, tone). Before the first chunk it is empty: the first
-frame of the pose starts at rest on its target (the muscle has held that pose for ever: a
-settled pre-roll). Every muscle's oscillators are independent and every operation is
+frame of the pose starts on its target, moving at the pose's first step's velocity (the
+muscle has moved at that velocity for ever: a pre-roll at constant velocity,
+:func:`axdf_cli.model.jiggle.steady_state`), so a motion already under way has no start-up
+transient. Every muscle's oscillators are independent and every operation is
 elementwise per control point, so a muscle moves to the same bytes whichever muscles share
 its chunk.
 """
@@ -21,6 +23,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from axdf_cli import tolerances as tol
 from axdf_cli.model import jiggle
 from axdf_cli.model.pose import effective_tension
 
@@ -57,6 +60,12 @@ class JiggleStage:
     name = "jiggle"
     scope = "time"  # Scope.TIME (its value: :mod:`.stages` registers this stage, so it is not imported here)
 
+    @property
+    def settings(self) -> dict:
+        """The bound on what is written (:func:`axdf_cli.model.jiggle.bounded`), recorded in
+        the manifest so that ``--resume`` refuses a change."""
+        return {"bound": tol.JIGGLE_BOUND, "knee": tol.JIGGLE_BOUND_KNEE}
+
     @staticmethod
     def needed(specs) -> bool:
         """Whether the stage acts on any of these muscles (a run without one leaves it out)."""
@@ -71,7 +80,8 @@ class JiggleStage:
     def __call__(self, state: JiggleState, chunk):
         """Advance every jiggling muscle of ``chunk`` over its frames (consecutive pose frames
         right after the state's: (C,) frames, axis (C, n, 3) each) and move its axis to
-        ``target + weight (x - target)``."""
+        ``target + weight (x - target)``, that offset softly bounded relative to the axis'
+        length at the frame (:func:`axdf_cli.model.jiggle.bounded`)."""
         js = [j for j in chunk.muscles if j in state.muscles]
         if not js:
             return state, chunk
@@ -88,16 +98,16 @@ class JiggleStage:
         targets = np.concatenate([chunk.axis[j] for j in js], axis=1)  # (C, P, 3)
         tone = np.array([o.tone for o in osc])
         tension = effective_tension(tone, chunk.activation[:, js])  # (C, M')
-        if state.frame is None:  # the pose's first frame: at rest on its target
+        if state.frame is None:  # the pose's first frame: the steady state of a constant-velocity pre-roll
             skip, prev_t, prev_e = 1, targets[0].copy(), tension[0].copy()
-            x, v = prev_t.copy(), np.zeros_like(prev_t)
+            x, v = jiggle.steady_state(prev_t, targets[1] if len(frames) > 1 else None, state.dt)
         else:
             skip = 0
             prev_t = np.concatenate([o.target for o in osc])
             prev_e = np.array([o.tension for o in osc])
             x = np.concatenate([o.x for o in osc])
             v = np.concatenate([o.v for o in osc])
-        moved = {j: chunk.axis[j].copy() for j in js}  # (the first frame at rest stays on its target)
+        moved = {j: chunk.axis[j].copy() for j in js}  # (the first frame stays on its target)
         if len(frames) > skip:
             tgt, ten = targets[skip:], tension[skip:]
             # a step's stiffness and damping: at the mean effective tension of its two frames
@@ -108,7 +118,9 @@ class JiggleStage:
                 phi[:, cuts[k]:cuts[k + 1]] = jiggle.step_matrices(omega, zeta, state.dt)[:, None]
             xs, x, v = jiggle.oscillate(x, v, np.concatenate([prev_t[None], tgt]), phi, state.dt)
             w = np.concatenate([o.weights for o in osc])[None, :, None]
-            out = tgt + w * (xs - tgt)  # what is written: T + w (x - T)
+            length = np.concatenate([np.repeat(jiggle.axis_length(tgt[:, cuts[k]:cuts[k + 1]])[:, None], n, axis=1)
+                                     for k, n in enumerate(sizes)], axis=1)  # (S, P): each point's muscle's
+            out = tgt + jiggle.bounded(w * (xs - tgt), length)  # what is written: T + w (x - T), bounded
             for k, j in enumerate(js):
                 moved[j][skip:] = out[:, cuts[k]:cuts[k + 1]]
             prev_t, prev_e = tgt[-1], ten[-1]
