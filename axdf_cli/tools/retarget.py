@@ -529,6 +529,7 @@ class RetargetResult:
     report: dict
     retargeted: Retargeted
     notes: list
+    warnings: list = field(default_factory=list)  # lines for stderr (``axdf: warning: ...``)
 
 
 def build_retarget(motion: Path | str, map_path: Path | str, out_dir: Path | str, *, skeleton: Skeleton | None = None,
@@ -568,4 +569,4 @@ def build_retarget(motion: Path | str, map_path: Path | str, out_dir: Path | str
     rel = [Path(p).name for p in files] + ["retarget_report.json"]
     rep = report(res, name, rel)
     files[str(out_dir / "retarget_report.json")] = (json.dumps(rep, indent=1, sort_keys=True) + "\n").encode()
-    return RetargetResult(files, rep, res, list(mocap.notes))
+    return RetargetResult(files, rep, res, list(mocap.notes), list(mocap.warnings))
