@@ -18,6 +18,7 @@ import sys
 from pathlib import Path
 
 from axdf_cli.cli import progress
+from axdf_cli.errors import Mark
 from axdf_cli.cli.importer import add_overwrite_arg, add_units_args, parse_scale_step, write_imported
 from axdf_cli.fileio.outputs import OutputSet
 
@@ -35,6 +36,9 @@ def add_args(p) -> None:
                    help="an npz's up axis: z (axdf's world) or y (SMPL, most pose estimators); a BVH is Y-up")
     p.add_argument("--allow-outside", action="store_true",
                    help="allow paths inside YAML files to leave the project folder tree")
+    p.add_argument("--strict", action="store_true",
+                   help="refuse (exit 2, nothing written) a fit that is warned on: error or coordinates held at a "
+                        "range's end beyond the documented bounds, or a scale far from the model's")
     add_overwrite_arg(p)
 
 
@@ -53,6 +57,13 @@ def run(args) -> int:
     finally:
         if bar is not None:
             bar.close()
+    for w in res.warnings:
+        print(f"axdf: warning: {w}", file=sys.stderr)
+    if args.strict and res.warnings:
+        from axdf_cli.errors import InputError
+
+        raise InputError(Mark(str(args.motion)), f"{len(res.warnings)} warning(s) with --strict; first: "
+                         f"{res.warnings[0][:200]}", "fix the map or the motion, or run without --strict")
     files = OutputSet(args.out, "retarget")
     for path, data in res.files.items():
         files.add(path, data, "output")
@@ -60,8 +71,6 @@ def run(args) -> int:
                       "up": args.up}
     write_imported(files, [args.motion, args.map, args.onto or res.retargeted.rmap.skeleton.source],
                    args.overwrite, args.motion)
-    for w in res.warnings:
-        print(f"axdf: warning: {w}", file=sys.stderr)
     if not args.quiet:
         for line in res.notes:
             print(line)
