@@ -59,6 +59,19 @@ XML_MAX_DEPTH = 256
 # BVH motion capture is text too, but long takes are large (100 channels x 100k frames is
 # ~100 MB): read up to this many bytes.
 BVH_MAX_BYTES = 512 * 1024 * 1024
+# A BVH without --units/--scale is taken to hold a person, STATURE_BAND metres tall (adults'
+# stature, 1st to 99th percentile, both sexes: 1.45-1.95 m, with room). The person's stature
+# is estimated from the rest joint span (the extent along BVH Y, up, of every joint and end
+# site at rest) as span / STATURE_SPAN_RATIO: the span is shorter than the stature because the
+# highest end site lies inside the head and a rest pose may splay the legs (CMU's conversions:
+# span 1.37 m, Head's end site ~10 cm below the vertex, thighs 20 deg apart, for subject 131,
+# whose 0.80 m hip-to-ankle legs at 0.49 of stature make ~1.6 m: 0.85); a T-pose whose top end
+# site is the vertex (span = stature) reads 16% tall, still in the band for 1.2-1.8 m spans.
+# The unit (m, cm, mm, in, CMU's 1/0.45 in) whose stature lands in the band is taken; when none
+# does, lengths are scaled to TYPICAL_STATURE and a warning says so.
+STATURE_BAND = (1.4, 2.1)
+STATURE_SPAN_RATIO = 0.86
+TYPICAL_STATURE = 1.7
 # numbers whose magnitude exceeds this are refused (metres, degrees, frames alike)
 MAX_ABS_NUMBER = 1e9
 # The highest frame rate a pose may have (and an importer may write): 100 kHz is beyond any
@@ -111,6 +124,34 @@ SEGMENT_SAMPLES = 16
 # A point is rigid with the root bone when it moves by less than this (metres) in the root's frame
 # over the sampled poses.
 ROOT_RIGID = 1e-6
+# The scale is measured on at most this many frames of the motion (evenly spaced: the median
+# and percentiles of a segment's length settle long before; it bounds the work of long takes).
+SEGMENT_MAX_FRAMES = 2000
+# A retarget map has at most this many points (the scale's segments are pairs of points:
+# their work grows as the square). Marker sets have 40-100 markers, whole-body keypoint sets
+# (COCO-WholeBody, SMPL-X joints) up to ~130.
+RETARGET_MAX_POINTS = 256
+# A segment whose motion length over the scaled model's is off the segments' median ratio by
+# more than this factor is a map mistake, not a subject's proportion (CMU 131 on gait2392 spans
+# 0.86-1.11; a point `at: [6, 0, 0]` meant as [0.06, 0, 0] is 100 times off): refused, naming
+# the point. A fitted scale outside RETARGET_SCALE_BAND (a subject less than half or more than
+# twice the model's size) is warned: a motion in the wrong unit (a BVH in inches read as CMU
+# units, or the reverse) gives 0.43 or 2.2.
+RETARGET_SEGMENT_OUTLIER = 2.0
+RETARGET_SCALE_BAND = (0.5, 2.0)
+# A fit is warned on (axdf retarget; --strict refuses it) when its error exceeds these shares of
+# the mapped body's height (the vertical extent of the map's weighted points in the model's rest
+# pose, times the scale; for a map from the toes to the head, a leg from hip to ankle is ~0.6 of
+# it): the take's RMS over every weighted point beyond RETARGET_RMS_SHARE (1.8%: 3% of the leg),
+# a frame's RMS beyond RETARGET_FRAME_SHARE (4.5%: 7.5% of the leg; the shipped CMU walk's worst,
+# its crouch with the knee at its 120 deg limit, is 3.3%), or one point's error in a frame beyond
+# RETARGET_POINT_SHARE (12%: 20% of the leg; the walk's worst 8%). A coordinate of the root bone
+# at a range's end in any frame, or any other coordinate in more than RETARGET_PINNED_SHARE of
+# the frames (the walk's subtalar joints: 18%), is warned too.
+RETARGET_RMS_SHARE = 0.018
+RETARGET_FRAME_SHARE = 0.045
+RETARGET_POINT_SHARE = 0.12
+RETARGET_PINNED_SHARE = 0.25
 
 # A motion column of a coupled coordinate (a CoordinateCouplerConstraint's dependent) is
 # not read: the skeleton computes it. When it strays from the coupler's function of its

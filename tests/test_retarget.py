@@ -389,7 +389,7 @@ def test_bad_map_entries_exit_2_at_their_position(tmp_path, capsys, case):
 
 @pytest.mark.parametrize("top, word", [
     ("scale: big\n", "scale is 'big'"), ("align: left\n", "align"), ("hold: {knee_angel_r: 0}\n", "knee_angel_r"),
-    ("ranges: {knee_angle_r: [-130, 0]}\n", "inside the skeleton's range"), ("smooth: -1\n", "smooth"), ("max_speed: 0\n", "max_speed"),
+    ("ranges: {knee_angle_r: [0, -130]}\n", "with lo < hi"), ("smooth: -1\n", "smooth"), ("max_speed: 0\n", "max_speed"),
 ])
 def test_bad_map_settings_exit_2(tmp_path, capsys, top, word):
     _, _, pts = known_positions(range(0, 10))

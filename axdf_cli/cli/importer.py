@@ -73,8 +73,8 @@ def add_args(parser: argparse.ArgumentParser) -> None:
                        description="Import a BVH file: a skeleton (Z-up, metres) and a pose of its motion.")
     _add_source(b, "FILE.bvh")
     b.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder (default place of both files)")
-    b.add_argument("--scale", metavar="S",
-                   help="metres per file unit: a number, or m, cm, mm, in (default: guessed from the height)")
+    add_units_args(b, "metres per file unit: a number, or a unit name (default: from the body's height, "
+                      "as --units)")
     b.add_argument("--step", type=int, default=1, metavar="N", help="keep every N-th motion row (fps / N)")
     b.add_argument("--name", help="skeleton name (default: the file's name)")
     b.add_argument("--skeleton-out", type=Path, metavar="FILE", help="skeleton YAML (default DIR/skeletons/NAME.yaml)")
@@ -116,14 +116,28 @@ def _add_model_options(p, decimate: bool = False) -> None:
                    help="muscle colours: muscle reds varied per muscle (default), or any hue from the name's hash")
 
 
+def add_units_args(p, scale_help: str) -> None:
+    """``--units`` and ``--scale`` of ``import bvh`` and ``retarget`` (one or the other)."""
+    from axdf_cli.importers.bvh import UNITS
+
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--units", choices=tuple(UNITS),
+                   help="the motion's length unit (cmu: the CMU database's BVH conversions, 1/0.45 inch; "
+                        "default for a BVH: the unit that makes a 1.4-2.1 m person, printed)")
+    g.add_argument("--scale", metavar="S", help=scale_help)
+
+
 def parse_scale_step(args):
-    """``--scale`` (metres per unit, a number or a unit name; None: guessed) and ``--step`` of
-    ``import bvh`` and ``retarget``, checked: the scale, or a usage error (exit 2)."""
+    """``--units`` or ``--scale`` (metres per unit, a number or a unit name; None: from the
+    body's height) and ``--step`` of ``import bvh`` and ``retarget``, checked: the scale, or a
+    usage error (exit 2)."""
     from axdf_cli.errors import UsageError
     from axdf_cli.importers.bvh import UNITS
 
     scale = None
-    if args.scale is not None:
+    if getattr(args, "units", None) is not None:
+        scale = UNITS[args.units]
+    elif args.scale is not None:
         try:
             scale = UNITS[args.scale] if args.scale in UNITS else float(args.scale)
         except ValueError:
@@ -292,11 +306,13 @@ def run_bvh(args) -> int:
         res = build_import(model, _outputs(args), files=_Adding(files, roles))
         tick("skeleton")
         tick("pose")
-        files.settings = {"scale": model.report["scale"], "step": args.step, "name": model.name,
+        files.settings = {"scale": model.report["scale"], "units": args.units, "step": args.step, "name": model.name,
                           "pose_name": model.motion.name}
         write_imported(files, [args.model], args.overwrite, args.model, tick)
     finally:
         close()
+    for w in model.report.get("unit_warnings", ()):
+        print(f"axdf: warning: {w}", file=sys.stderr)
     if not args.quiet:
         r = res.report
         for line in res.warnings:

@@ -14,10 +14,12 @@ and per coordinate figures), and ``manifest.json``: DIR is the command's own fol
 """
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 from axdf_cli.cli import progress
-from axdf_cli.cli.importer import add_overwrite_arg, parse_scale_step, write_imported
+from axdf_cli.errors import Mark
+from axdf_cli.cli.importer import add_overwrite_arg, add_units_args, parse_scale_step, write_imported
 from axdf_cli.fileio.outputs import OutputSet
 
 
@@ -27,14 +29,16 @@ def add_args(p) -> None:
     p.add_argument("--map", required=True, metavar="MAP.yaml", help="mocap joints → model points (docs/FORMATS.md)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (the pose and the report)")
     p.add_argument("--name", help="pose name (default: MOTION's name and the skeleton's)")
-    p.add_argument("--scale", metavar="S",
-                   help="metres per unit of MOTION: a number, or m, cm, mm, in (default: a BVH's is guessed from "
-                        "its height as `axdf import bvh` does; an npz is in metres)")
+    add_units_args(p, "metres per unit of MOTION: a number, or a unit name (default: a BVH's unit from the "
+                      "body's height as `axdf import bvh` takes it; an npz is in metres)")
     p.add_argument("--step", type=int, default=1, metavar="N", help="keep every N-th frame of MOTION (fps / N)")
     p.add_argument("--up", choices=("z", "y"), default="z",
                    help="an npz's up axis: z (axdf's world) or y (SMPL, most pose estimators); a BVH is Y-up")
     p.add_argument("--allow-outside", action="store_true",
                    help="allow paths inside YAML files to leave the project folder tree")
+    p.add_argument("--strict", action="store_true",
+                   help="refuse (exit 2, nothing written) a fit that is warned on: error or coordinates held at a "
+                        "range's end beyond the documented bounds, or a scale far from the model's")
     add_overwrite_arg(p)
 
 
@@ -53,10 +57,18 @@ def run(args) -> int:
     finally:
         if bar is not None:
             bar.close()
+    for w in res.warnings:
+        print(f"axdf: warning: {w}", file=sys.stderr)
+    if args.strict and res.warnings:
+        from axdf_cli.errors import InputError
+
+        raise InputError(Mark(str(args.motion)), f"{len(res.warnings)} warning(s) with --strict; first: "
+                         f"{res.warnings[0][:200]}", "fix the map or the motion, or run without --strict")
     files = OutputSet(args.out, "retarget")
     for path, data in res.files.items():
         files.add(path, data, "output")
-    files.settings = {"name": res.report.get("pose"), "scale": args.scale, "step": args.step, "up": args.up}
+    files.settings = {"name": res.report.get("pose"), "scale": args.scale, "units": args.units, "step": args.step,
+                      "up": args.up}
     write_imported(files, [args.motion, args.map, args.onto or res.retargeted.rmap.skeleton.source],
                    args.overwrite, args.motion)
     if not args.quiet:

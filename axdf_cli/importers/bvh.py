@@ -28,10 +28,16 @@ Conversions (BVH → axdf):
   a Frame Time that is ``1/n`` rounded to the digits written (``0.008333`` → 120) gives the
   whole ``n``. A coordinate that never changes is keyed once, at frame 0 (poses hold a
   coordinate's value outside its keys): a lossless, much smaller file.
-- Units: ``--scale`` multiplies lengths (offsets, position channels) into metres. Without it,
-  the unit is guessed from the rest skeleton's height (joints and end sites, along BVH Y):
-  the candidate among metres, centimetres, millimetres and inches that makes the height
-  closest to 1.7 m (a 170-unit skeleton is in centimetres, a 67-unit one in inches).
+- Units: ``--scale`` (metres per file unit) or ``--units`` multiplies lengths (offsets,
+  position channels) into metres. Without them the unit comes from the body's height
+  (:func:`choose_unit`): the rest joint span (joints and end sites, along BVH Y) divided by
+  ``tolerances.STATURE_SPAN_RATIO`` (0.86: the top end site lies inside the head, a rest pose
+  may splay the legs) estimates the person's stature, and the unit among metres, centimetres,
+  millimetres, inches and CMU's (1/0.45 inch: the CMU database's conversions, whose 24-unit
+  span is a 1.6 m person) whose stature lands in ``tolerances.STATURE_BAND`` (1.4-2.1 m) is
+  taken; a 170-unit skeleton is in centimetres, a 67-unit one in inches. When no unit makes
+  a person, lengths are scaled to a ``TYPICAL_STATURE`` (1.7 m) person, with a warning. The
+  unit and the stature are printed.
 """
 from __future__ import annotations
 
@@ -56,10 +62,11 @@ CHANNELS = {"xposition": ("translation", 0), "yposition": ("translation", 1), "z
 CHANNEL_NAMES = "Xposition, Yposition, Zposition, Xrotation, Yrotation, Zrotation"
 #: BVH (Y-up, facing +Z) → axdf (Z-up, facing -Y): the root bone's orient (body-fixed XYZ, degrees).
 GROUND_ORIENT = (90.0, 0.0, 0.0)
-#: Unit guesses: name → metres per unit; the guess makes the skeleton closest to HUMAN_HEIGHT.
-UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254}
-UNIT_WORDS = {"m": "metres", "cm": "centimetres", "mm": "millimetres", "in": "inches"}
-HUMAN_HEIGHT = 1.7
+#: Length units a BVH may be in: name → metres per unit (``--units``; ``--scale`` takes them too).
+#: ``cmu``: the CMU Graphics Lab database's BVH conversions, whose lengths are inches times 0.45.
+UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "cmu": 0.0254 / 0.45}
+UNIT_WORDS = {"m": "metres", "cm": "centimetres", "mm": "millimetres", "in": "inches",
+              "cmu": "CMU units (1/0.45 inch)"}
 #: Deepest joint nesting read (a guard against hostile files; real skeletons nest < 30 deep).
 MAX_DEPTH = 256
 
@@ -387,14 +394,81 @@ def rest_positions(bvh: BVH) -> np.ndarray:
     return pos
 
 
-def guess_unit(bvh: BVH) -> tuple[str, float]:
-    """(unit name, rest height in file units): the unit that makes the height closest to HUMAN_HEIGHT."""
+def rest_span(bvh: BVH) -> float:
+    """The rest joint span: the extent along BVH Y (up) of every joint and end site at rest, file units."""
     y = rest_positions(bvh)[:, 1]
-    height = float(y.max() - y.min())
-    if height <= 0:
-        return "m", height
-    unit = min(UNITS, key=lambda u: abs(math.log(height * UNITS[u] / HUMAN_HEIGHT)))
-    return unit, height
+    return float(y.max() - y.min())
+
+
+def stature(span: float, scale: float) -> float:
+    """The person's estimated stature (metres) from a rest joint span in file units."""
+    return span * scale / tol.STATURE_SPAN_RATIO
+
+
+def guess_unit(bvh: BVH) -> tuple[str | None, float]:
+    """(unit name, rest joint span in file units): the unit whose estimated stature lies in
+    tolerances.STATURE_BAND (the one nearest TYPICAL_STATURE should several), None when none does."""
+    span = rest_span(bvh)
+    if span <= 0:
+        return None, span
+    lo, hi = tol.STATURE_BAND
+    fits = [u for u in UNITS if lo <= stature(span, UNITS[u]) <= hi]
+    if not fits:
+        return None, span
+    return min(fits, key=lambda u: abs(math.log(stature(span, UNITS[u]) / tol.TYPICAL_STATURE))), span
+
+
+@dataclass(frozen=True)
+class UnitChoice:
+    """How a BVH's lengths become metres: ``scale`` metres per file unit, ``unit`` its name
+    (None: a number), ``how`` "given" (--scale/--units), "height" (a unit whose person is in
+    the band) or "typical" (no unit was: scaled to TYPICAL_STATURE)."""
+
+    scale: float
+    unit: str | None
+    how: str
+    span: float  # rest joint span, file units
+
+    @property
+    def stature(self) -> float:
+        return stature(self.span, self.scale)
+
+    def notes(self) -> list[str]:
+        """The lines that say which unit was taken and the person's height."""
+        word = UNIT_WORDS[self.unit] if self.unit else f"{self.scale:g} m per unit"
+        person = (f"rest joint span {self.span:.4g} units = {self.span * self.scale:.3g} m: a {self.stature:.2f} m "
+                  f"person (span / {tol.STATURE_SPAN_RATIO:g})")
+        if self.how == "given":
+            return [f"BVH unit: {word} (given); {person}"]
+        if self.how == "typical":
+            return [f"{person}: no unit ({', '.join(UNITS)}) makes a {tol.STATURE_BAND[0]:g}-{tol.STATURE_BAND[1]:g} "
+                    f"m person, so lengths are scaled to a {tol.TYPICAL_STATURE:g} m person (--scale {self.scale:.6g})"]
+        return [f"rest skeleton height {self.span:.4g} units: looks like {word} "
+                f"(a {self.stature:.2f} m person, span / {tol.STATURE_SPAN_RATIO:g})",
+                f"using --scale {self.scale:g} (pass --units or --scale to override)"]
+
+    def warnings(self) -> list[str]:
+        """A scale that is no unit's: what the user should check (stderr)."""
+        if self.how != "typical":
+            return []
+        return [f"no length unit makes this BVH a {tol.STATURE_BAND[0]:g}-{tol.STATURE_BAND[1]:g} m person "
+                f"(rest joint span {self.span:.4g} units): scaled to {tol.TYPICAL_STATURE:g} m; "
+                f"give --units ({', '.join(UNITS)}) or --scale if that is wrong"]
+
+
+def choose_unit(bvh: BVH, scale: float | None = None) -> UnitChoice:
+    """The scale of ``bvh``: ``scale`` when given (named when it is a unit's), else the unit
+    from the body's height (see the module doc)."""
+    span = rest_span(bvh)
+    if scale is not None:
+        unit = next((u for u, v in UNITS.items() if v == scale), None)
+        return UnitChoice(float(scale), unit, "given", span)
+    unit, _ = guess_unit(bvh)
+    if unit is not None:
+        return UnitChoice(UNITS[unit], unit, "height", span)
+    if span <= 0:
+        return UnitChoice(1.0, "m", "given", span)
+    return UnitChoice(tol.TYPICAL_STATURE * tol.STATURE_SPAN_RATIO / span, None, "typical", span)
 
 
 def frame_rate(frame_time: float, text: str) -> float:
@@ -500,22 +574,19 @@ def read_import(bvh_path: Path | str, *, name: str | None = None, scale: float |
     for what, v in (("--name", name), ("--pose-name", pname)):
         if not is_name(v):
             raise InputError(None, f"{what} {v!r}", NAME_ALLOWED)
-    unit, height = guess_unit(bvh)
-    notes = [f"rest skeleton height {height:.4g} units: looks like {UNIT_WORDS[unit]} "
-             f"(--scale {UNITS[unit]:g} gives {height * UNITS[unit]:.3g} m)"]
-    if scale is None:
-        scale = UNITS[unit]
-        notes.append(f"using --scale {scale:g} (pass --scale to override)")
+    units = choose_unit(bvh, scale)
+    scale = units.scale
     check_limits(bvh, scale)
     motion = motion_of(bvh, pname, scale, step)
     report = {"source": {"file": bvh_path.name, "sha256": sha256_file(bvh_path)}, "tool": "axdf import bvh",
-              "skeleton": name, "pose": pname, "scale": scale, "guessed_unit": unit, "rest_height_units": height,
+              "skeleton": name, "pose": pname, "scale": scale, "unit": units.unit, "unit_from": units.how,
+              "rest_height_units": units.span, "stature_m": units.stature, "unit_warnings": units.warnings(),
               "joints": sum(not j.end_site for j in bvh.joints), "end_sites": sum(j.end_site for j in bvh.joints),
               "channels": int(bvh.data.shape[1]), "rows": int(len(bvh.data)), "step": step,
               "frames": int(len(bvh.data[::step])), "fps": motion.fps}
     return ImportedModel(name, f"Imported from {bvh_path.name} by `axdf import bvh` (--scale {scale:g}).\n"
                                "Regenerate with the importer rather than editing by hand.",
-                         bvh_bones(bvh, scale), RULES, motion=motion, report=report, warnings=notes,
+                         bvh_bones(bvh, scale), RULES, motion=motion, report=report, warnings=units.notes(),
                          inputs=[bvh_path])
 
 

@@ -57,6 +57,7 @@ class Mocap:
     positions: np.ndarray  # (F, J, 3) float64, metres, Z-up
     fps: float
     notes: tuple[str, ...] = ()  # lines for the user (the unit guess)
+    warnings: tuple[str, ...] = ()  # what the user should check (a BVH scaled to a typical height)
 
     @property
     def index(self) -> dict[str, int]:
@@ -97,16 +98,11 @@ def bvh_skeleton(bvh, scale: float) -> Skeleton:
 
 def read_bvh_joints(path: Path | str, *, scale: float | None = None, step: int = 1) -> Mocap:
     """Every joint and end site of a BVH take, posed: (F, J, 3) with F = ceil(rows / step)."""
-    from axdf_cli.importers.bvh import CHANNELS, UNIT_WORDS, UNITS, coordinate_name, bone_names, frame_rate, \
-        guess_unit, read_bvh
+    from axdf_cli.importers.bvh import CHANNELS, coordinate_name, bone_names, choose_unit, frame_rate, read_bvh
 
     bvh = read_bvh(path)
-    notes = []
-    if scale is None:
-        unit, height = guess_unit(bvh)
-        scale = UNITS[unit]
-        notes.append(f"rest skeleton height {height:.4g} units: taken as {UNIT_WORDS[unit]} "
-                     f"(--scale {scale:g}; pass --scale to override)")
+    units = choose_unit(bvh, scale)
+    scale, notes = units.scale, units.notes()
     skel = bvh_skeleton(bvh, scale)
     names = bone_names(bvh)
     rows = bvh.data[::step]
@@ -120,7 +116,7 @@ def read_bvh_joints(path: Path | str, *, scale: float | None = None, step: int =
         world = forward_kinematics(skel, q[s:s + FK_CHUNK])  # (chunk, 1 + J, 4, 4): ground first
         positions[s:s + FK_CHUNK] = world[:, 1:, :3, 3]
     fps = frame_rate(bvh.frame_time, bvh.frame_time_text) / step
-    return Mocap(str(path), "bvh", tuple(names), positions, float(fps), tuple(notes))
+    return Mocap(str(path), "bvh", tuple(names), positions, float(fps), tuple(notes), tuple(units.warnings()))
 
 
 # ----------------------------------------------------------------------------- npz

@@ -114,7 +114,8 @@ def fit_frames(skel: Skeleton, bones, local, weights, targets: np.ndarray, free,
     ``root``: coordinates fitted alone first on frame 0, to the points ``root_points``;
     ``smooth``: the pull towards the previous frame, residual metres per degree of a rotation
     (translations: ``tolerances.IK_SMOOTH_TRANSLATION`` per metre); ``max_step``: the most a
-    rotation may change from one frame to the next, degrees (translations are not limited)."""
+    rotation may change from one frame to the next, degrees (translations are not limited): one
+    number, or one per free coordinate (K,)."""
     from scipy.optimize import least_squares
 
     bones_full = np.asarray(bones, int)
@@ -129,7 +130,7 @@ def fit_frames(skel: Skeleton, bones, local, weights, targets: np.ndarray, free,
     lo = np.array([coords[c].range[0] if coords[c].range else -np.inf for c in free])
     hi = np.array([coords[c].range[1] if coords[c].range else np.inf for c in free])
     pull = np.array([smooth if coords[c].type == "rotation" else tol.IK_SMOOTH_TRANSLATION for c in free])
-    step = np.array([max_step if coords[c].type == "rotation" else np.inf for c in free])
+    step = np.where([coords[c].type == "rotation" for c in free], np.broadcast_to(max_step, free.shape), np.inf)
     prob = _Problem(sub, bones, local, np.sqrt(np.asarray(weights, float)), free, pull)
     prob.q = np.asarray(q_start, float).copy()
     opts = dict(method="trf", ftol=tol.IK_FTOL, xtol=tol.IK_XTOL, gtol=tol.IK_GTOL, max_nfev=tol.IK_MAX_EVALUATIONS)

@@ -21,13 +21,27 @@ onto the muscle model's own skeleton, where every muscle keeps its path:
    horizontally so that its heading (the root's points, e.g. the hips, against the model's
    rest pose) is centred on the model's forward over the take and the root's path is centred
    on the model's origin: a take anywhere in the capture volume, facing anywhere, stays
-   inside the ranges of the model's root (gait2392's pelvis turns ±90°). Heights are kept.
-   ``align: none`` keeps the motion's world. Together: one similarity transform, y' = (R y −
-   t) / s, reported.
+   near the model's rest heading and origin. Heights are kept. ``align: none`` keeps the
+   motion's world. Together: one similarity transform, y' = (R y − t) / s, reported.
+   The subject's place and heading in the room are free: the root bone's translations and
+   its turn about the vertical (*room coordinates*, :func:`room_coordinates`) are fitted
+   without the ranges the model's file gives them (an OpenSim file needs a range on every
+   coordinate: gait2392's pelvis_rotation has ±90°, pelvis_tx ±5 m), unless the map's
+   ``ranges:`` names them; their heading is seeded from the motion's (unwrapped over the take)
+   on the first frame and follows it without the map's speed limit, so a take that turns
+   round and round fits as well as one that walks straight. The map's ``ranges:`` may narrow
+   or widen any coordinate's range.
 4. **Fit.** :func:`axdf_cli.model.ik.fit_frames`: per frame, the coordinates that move a
    mapped point, within their ranges, by least squares with the analytic Jacobian, warm-started
    from the previous frame. Coordinates the map ``hold``\\ s stay at their value; the others
    that move no point stay at their rest value.
+5. **Checks** (:func:`fit_warnings`): a fit whose error, or whose coordinates held at a range's
+   end, exceed the bounds of ``tolerances.RETARGET_*`` is warned with its frames and the fix
+   (``--strict`` refuses it); a segment whose ratio is far off the others' (a point's ``at``
+   in the wrong unit) is refused, naming the point, and a fitted scale outside
+   ``RETARGET_SCALE_BAND`` is warned (a motion in the wrong unit). A map holds at most
+   ``RETARGET_MAX_POINTS`` points, and a pose that would pass the YAML size limit is refused
+   before any frame is fitted.
 
 :func:`build_retarget` returns every output file's bytes (nothing is written here): the pose
 (``DIR/NAME.yaml``), the per-frame residual ``DIR/retarget.csv`` and ``DIR/retarget_report.json``.
@@ -50,6 +64,7 @@ from axdf_cli.model.ik import FitResult, fit_frames, pose_points
 from axdf_cli.model.skeleton import Skeleton, forward_kinematics
 from axdf_cli.specs import RefPolicy
 from axdf_cli.tools.maps import map_skeleton, open_map, shorthand
+from axdf_cli.tools.retarget_checks import fit_bounds, fit_warnings, room_notes
 
 MAP_KEYS = ("retarget", "onto", "scale", "align", "smooth", "max_speed", "hold", "ranges", "joints")
 POINT_KEYS = ("bone", "at", "from", "weight")
@@ -88,6 +103,7 @@ class RetargetMap:
     max_speed: float  # the fastest a rotation may turn, degrees per second (inf: no limit)
     marks: dict = field(default_factory=dict)  # key -> Mark (scale, align, joints)
     model: Skeleton | None = None  # the model's skeleton as loaded (poses are written for it)
+    room: tuple = ()  # the root's coordinates fitted without their file's range (room_coordinates)
 
 
 def load_map(path: Path | str, skeleton: Skeleton | None = None, policy: RefPolicy | None = None) -> RetargetMap:
@@ -105,13 +121,19 @@ def load_map(path: Path | str, skeleton: Skeleton | None = None, policy: RefPoli
     ranges = _ranges(f.mapping("ranges", default=None), skeleton, hold)
     joints = f.mapping("joints", required=True)
     f.done()
+    if len(joints) > tol.RETARGET_MAX_POINTS:
+        raise InputError(f.vmark("joints"), f"{len(joints)} points",
+                         f"at most {tol.RETARGET_MAX_POINTS} (the scale's segments are pairs of points)")
     points = tuple(_point(key, joints[key], joints, skeleton) for key in joints)
     if not points or sum(p.weight > 0 for p in points) < 2:
         raise InputError(f.vmark("joints"), f"{sum(p.weight > 0 for p in points)} points with a positive weight",
                          "at least 2 (3 or more not on one line to place a body)")
+    _check_reach(points, skeleton)
     marks = {k: f.vmark(k) for k in ("scale", "align", "joints", "hold", "ranges")}
-    return RetargetMap(name, str(path), _narrowed(skeleton, ranges), points, hold, ranges, scale, align, smooth,
-                       max_speed, marks, skeleton)
+    room = tuple(c for c in room_coordinates(skeleton, hold) if c not in ranges)
+    fit_ranges = {**{c: None for c in room}, **ranges}
+    return RetargetMap(name, str(path), _narrowed(skeleton, fit_ranges), points, hold, ranges, scale, align, smooth,
+                       max_speed, marks, skeleton, room)
 
 
 def _scale(v, where: Mark):
@@ -147,7 +169,9 @@ def _coordinate(c, where: Mark, skel: Skeleton):
 
 
 def _ranges(value: YMap | None, skel: Skeleton, hold: dict) -> dict:
-    """``ranges: {COORD: [lo, hi]}``: where the fit may take a coordinate, inside its own range."""
+    """``ranges: {COORD: [lo, hi]}``: where the fit may take a coordinate, narrower or wider
+    than the skeleton's own range (a wider one: the pose then leaves the skeleton's range,
+    which ``axdf run`` reports per frame)."""
     from axdf_cli.fileio.yamlio import check_vector
 
     out = {}
@@ -155,16 +179,65 @@ def _ranges(value: YMap | None, skel: Skeleton, hold: dict) -> dict:
         if c in hold:
             raise InputError(km, f"coordinate {c!r} is both held and given a range", "hold it, or give it a range")
         lo, hi = check_vector(v, vm, f"range of {c}", 2)
-        own = coord.range or (-math.inf, math.inf)
-        if not (own[0] <= lo < hi <= own[1]):
+        if not lo < hi:
+            own = coord.range or (-math.inf, math.inf)
             raise InputError(vm, f"range of {c} is {[lo, hi]}",
-                             f"[lo, hi] with lo < hi inside the skeleton's range [{own[0]:g}, {own[1]:g}]")
+                             f"[lo, hi] with lo < hi (narrower or wider than the skeleton's [{own[0]:g}, {own[1]:g}])")
         out[c] = (float(lo), float(hi))
     return out
 
 
+def room_coordinates(skel: Skeleton, hold: dict) -> tuple[str, ...]:
+    """The subject's place and heading in the room: the translations of the root bone (the
+    first bone a coordinate that is neither held nor fixed moves) and its rotations whose axis
+    is vertical (within 10 degrees) at rest. Their ranges are the model file's, not the body's."""
+    from axdf_cli.model.skeleton import forward_kinematics
+
+    def movable(d):
+        if d.coord is None or d.coord not in skel.coord_index or d.coord in hold:
+            return False
+        c = skel.coordinates[skel.coord_index[d.coord]]
+        return c.follows is None and not (c.range is not None and c.range[0] == c.range[1])
+
+    root = next((b for b, bone in enumerate(skel.bones) if any(movable(d) for d in bone.dofs)), None)
+    if root is None:
+        return ()
+    q0 = skel.rest_coordinates()
+    r0 = forward_kinematics(skel, q0[None])[0, root, :3, :3]
+    out = []
+    for d in skel.bones[root].dofs:
+        if not movable(d) or d.coord in out:
+            continue
+        c = skel.coord_index[d.coord]
+        if skel.coordinates[c].type == "translation":
+            out.append(d.coord)
+            continue
+        q1 = q0.copy()
+        q1[c] += 1.0
+        turn = forward_kinematics(skel, q1[None])[0, root, :3, :3] @ r0.T  # (3, 3), about the dof's world axis
+        axis = np.array([turn[2, 1] - turn[1, 2], turn[0, 2] - turn[2, 0], turn[1, 0] - turn[0, 1]])
+        if abs(axis[2]) > math.cos(math.radians(10.0)) * np.linalg.norm(axis):
+            out.append(d.coord)
+    return tuple(out)
+
+
+def _check_reach(points, skel: Skeleton) -> None:
+    """A point ``at`` farther from its bone's origin than the model's whole rest extent is not
+    on the body (a length in the wrong unit): refused at its ``at``."""
+    from axdf_cli.model.skeleton import forward_kinematics
+
+    origins = forward_kinematics(skel, skel.rest_coordinates()[None])[0, :, :3, 3]
+    extent = max(float(np.linalg.norm(np.ptp(origins, axis=0))), tol.SEGMENT_MIN_LENGTH)
+    for p in points:
+        if p.at is not None and float(np.linalg.norm(p.at)) > extent:
+            raise InputError(p.mark, f"joints entry {p.name}: at {list(p.at)} lies {np.linalg.norm(p.at):.4g} m "
+                             f"from bone {p.bone}'s origin, beyond the whole model ({extent:.3g} m across at rest)",
+                             "at: metres in the bone's frame, on the body")
+
+
 def _narrowed(skel: Skeleton, ranges: dict) -> Skeleton:
-    """The skeleton with the map's ranges in place of its own (what the fit keeps to)."""
+    """The skeleton with the map's ranges in place of its own (what the fit keeps to; None:
+    no range)."""
     from dataclasses import replace
 
     if not ranges:
@@ -310,23 +383,53 @@ class Segment:
 
 def segments(mp: ModelPoints, rmap: RetargetMap, targets: np.ndarray) -> list[Segment]:
     """Pairs of weighted points a fixed distance apart in the model (over the sampled poses)
-    and in the motion: what the size is measured on."""
+    and in the motion (measured on at most SEGMENT_MAX_FRAMES frames, evenly spaced): what the
+    size is measured on."""
     skel = rmap.skeleton
     pts = pose_points(skel, mp.samples, mp.bones, mp.local)  # (S, P, 3)
+    idx = np.nonzero(mp.weights > 0)[0]
+    ii, jj = np.triu_indices(len(idx), k=1)
+    ii, jj = idx[ii], idx[jj]
+    d = np.linalg.norm(pts[:, ii] - pts[:, jj], axis=2)  # (S, pairs)
+    mean = d.mean(axis=0)
+    rigid = (mean >= tol.SEGMENT_MIN_LENGTH) & (np.ptp(d, axis=0) <= tol.SEGMENT_MODEL_RIGIDITY * mean)
+    ii, jj, d0 = ii[rigid], jj[rigid], d[0, rigid]
+    rows = np.unique(np.linspace(0, len(targets) - 1, min(len(targets), tol.SEGMENT_MAX_FRAMES)).round().astype(int))
+    y = targets[rows]
     out = []
-    idx = [i for i in range(len(rmap.points)) if mp.weights[i] > 0]
-    for k, i in enumerate(idx):
-        for j in idx[k + 1:]:
-            d = np.linalg.norm(pts[:, i] - pts[:, j], axis=1)
-            if d.mean() < tol.SEGMENT_MIN_LENGTH or np.ptp(d) > tol.SEGMENT_MODEL_RIGIDITY * d.mean():
-                continue
-            m = np.linalg.norm(targets[:, i] - targets[:, j], axis=1)
-            p10, med, p90 = np.percentile(m, [10, 50, 90])
-            if med < tol.SEGMENT_MIN_LENGTH or (p90 - p10) > tol.SEGMENT_MOCAP_RIGIDITY * med:
-                continue
-            out.append(Segment(rmap.points[i].name, rmap.points[j].name, float(d[0]), float(med),
-                               float((p90 - p10) / med)))
+    for s in range(0, len(ii), 1024):  # bounded memory: (frames, 1024) lengths at a time
+        m = np.linalg.norm(y[:, ii[s:s + 1024]] - y[:, jj[s:s + 1024]], axis=2)  # (F', chunk)
+        p10, med, p90 = np.percentile(m, [10, 50, 90], axis=0)
+        for k in np.nonzero((med >= tol.SEGMENT_MIN_LENGTH) & (p90 - p10 <= tol.SEGMENT_MOCAP_RIGIDITY * med))[0]:
+            out.append(Segment(rmap.points[ii[s + k]].name, rmap.points[jj[s + k]].name, float(d0[s + k]),
+                               float(med[k]), float((p90[k] - p10[k]) / med[k])))
     return out
+
+
+def check_segments(segs: list[Segment], rmap: RetargetMap) -> None:
+    """A segment whose motion length over the model's is off the segments' median ratio by
+    more than RETARGET_SEGMENT_OUTLIER is a map mistake: refused at the point most of the
+    outlying segments share (the one of its two with the fewest agreeing segments)."""
+    if len(segs) < 2:
+        return
+    ratio = np.array([g.subject / g.model for g in segs])
+    off = np.abs(np.log(ratio / np.median(ratio))) > math.log(tol.RETARGET_SEGMENT_OUTLIER)
+    if not off.any():
+        return
+    bad = {p.name: 0 for p in rmap.points}
+    good = dict(bad)
+    for g, o in zip(segs, off):
+        for n in (g.a, g.b):
+            (bad if o else good)[n] += 1
+    name = max(bad, key=lambda n: (bad[n] - good[n], bad[n]))
+    point = next(p for p in rmap.points if p.name == name)
+    g = next(g for g, o in zip(segs, off) if o and name in (g.a, g.b))
+    other = g.b if g.a == name else g.a
+    raise InputError(point.mark, f"joints entry {name}: {name} to {other} is {g.model:.4g} m in the model but "
+                     f"{g.subject:.4g} m in the motion, {g.subject / g.model / np.median(ratio):.3g} times the "
+                     f"other segments' ratio (median {np.median(ratio):.3g})",
+                     f"a point within a factor {tol.RETARGET_SEGMENT_OUTLIER:g} of the body's proportions: `at:` in "
+                     "metres in the bone's frame, and the motion joint (from:) that sits there")
 
 
 def fit_scale(segs: list[Segment]) -> float | None:
@@ -403,11 +506,21 @@ class Retargeted:
         return self.fit.error * self.world.scale
 
 
-def retarget(rmap: RetargetMap, mocap: Mocap, progress=None) -> Retargeted:
+def retarget(rmap: RetargetMap, mocap: Mocap, progress=None, max_pose_bytes: int | None = None) -> Retargeted:
+    """Fit the motion (see the module doc). ``max_pose_bytes``: refuse, before fitting, a take
+    whose pose file would be larger (:func:`pose_bytes_estimate`)."""
     check_sources(rmap, mocap)
     mp = model_points(rmap)
+    if max_pose_bytes is not None:
+        n = len(mocap.positions)
+        size = pose_bytes_estimate(rmap, mp, n)
+        if size > max_pose_bytes:
+            raise InputError(Mark(mocap.source), f"the pose would be about {size} bytes ({n} frames of "
+                             f"{len(mp.free)} coordinates)", f"axdf reads YAML files up to {max_pose_bytes} bytes; "
+                             "a larger --step or a shorter take")
     targets = blend_targets(rmap, mocap)
     segs = segments(mp, rmap, targets)
+    check_segments(segs, rmap)
     if rmap.scale == "fit":
         s = fit_scale(segs)
         if s is None:
@@ -417,10 +530,48 @@ def retarget(rmap: RetargetMap, mocap: Mocap, progress=None) -> Retargeted:
     else:
         s, source = (1.0, "none") if rmap.scale == "none" else (float(rmap.scale), "map")
     world = align_world(mp, rmap, targets, s)
-    fitted = fit_frames(rmap.skeleton, mp.bones, mp.local, mp.weights, world.apply(targets), mp.free, mp.q_start,
-                        root=mp.root, root_points=mp.root_points, smooth=rmap.smooth,
-                        max_step=rmap.max_speed / mocap.fps, progress=progress)
+    q_start, step = room_start(mp, rmap, targets, world), np.full(len(mp.free), rmap.max_speed / mocap.fps)
+    room = [rmap.skeleton.coord_index[c] for c in rmap.room]
+    step[np.isin(mp.free, room)] = np.inf  # the heading in the room turns as fast as the subject does
+    fitted = fit_frames(rmap.skeleton, mp.bones, mp.local, mp.weights, world.apply(targets), mp.free, q_start,
+                        root=mp.root, root_points=mp.root_points, smooth=rmap.smooth, max_step=step,
+                        progress=progress)
     return Retargeted(rmap, mocap, mp, world, segs, fitted, source)
+
+
+def room_start(mp: ModelPoints, rmap: RetargetMap, targets: np.ndarray, world: World) -> np.ndarray:
+    """The fit's start (C,): rest values with the holds, and the room's vertical turn set to the
+    motion's heading on its first frame (after the world's turn), so that the first frame's
+    root fit starts facing the right way whatever the heading (no range keeps it near rest)."""
+    q = mp.q_start.copy()
+    skel = rmap.skeleton
+    turns = [skel.coord_index[c] for c in rmap.room if skel.coordinates[skel.coord_index[c]].type == "rotation"]
+    use = mp.root_points if len(mp.root_points) >= 2 else np.nonzero(mp.weights > 0)[0]
+    if len(turns) != 1 or len(use) < 2:
+        return q
+    c = turns[0]
+    rest = pose_points(skel, q[None], mp.bones, mp.local)[0]
+    first = world.apply(targets[:1, use])  # (1, U, 3)
+    yaw = float(heading(rest[use, :2], first[:, :, :2], mp.weights[use])[0])
+    # the coordinate's sign about +z: turn it by 1 degree and see which way the points go
+    q1 = q.copy()
+    q1[c] += 1.0
+    moved = pose_points(skel, q1[None], mp.bones, mp.local)[0]
+    sign = math.copysign(1.0, float(heading(rest[use, :2], moved[None, use, :2], mp.weights[use])[0]))
+    q[c] += sign * math.degrees(yaw)
+    return q
+
+
+#: Characters a fitted value takes in the pose at least (dump_yaml writes 9 significant digits:
+#: "-41.1321989", "0.948403729"); a low estimate, so that a take is refused before fitting only
+#: when its pose surely exceeds the limit (the written bytes are checked again).
+VALUE_CHARS = 10
+
+
+def pose_bytes_estimate(rmap: RetargetMap, mp: ModelPoints, frames: int) -> int:
+    """About the size of the pose file (a low estimate): per frame ``  F: {NAME: VALUE, ...}``."""
+    names = [rmap.skeleton.coordinates[c].name for c in mp.free]
+    return frames * (8 + sum(len(n) + 4 + VALUE_CHARS for n in names))
 
 
 def as_pose(res: Retargeted, name: str):
@@ -489,6 +640,7 @@ def report(res: Retargeted, name: str, files: dict) -> dict:
         coord = skel.coordinates[c]
         v = res.fit.q[:, c]
         coords[coord.name] = {"min": float(v.min()), "max": float(v.max()), "range": list(coord.range or ()),
+                              "file_range": list(res.rmap.model.coordinates[c].range or ()),
                               "frames_at_range_end": int(res.fit.at_bound[:, c].sum()),
                               "largest_change_per_30th_s": float(jump[c]), "at_frame": int(jump_at[c])}
     points = {}
@@ -519,6 +671,8 @@ def report(res: Retargeted, name: str, files: dict) -> dict:
                        if i not in set(res.points.free.tolist()) and c.name not in res.rmap.hold),
         "change_window_frames": k,
         "evaluations": {"total": int(res.fit.evaluations.sum()), "max_per_frame": int(res.fit.evaluations.max())},
+        "room": list(res.rmap.room),
+        "checks": {"bounds": fit_bounds(res), "warnings": fit_warnings(res)},
         "files": sorted(files),
     }
 
@@ -529,6 +683,7 @@ class RetargetResult:
     report: dict
     retargeted: Retargeted
     notes: list
+    warnings: list = field(default_factory=list)  # lines for stderr (``axdf: warning: ...``)
 
 
 def build_retarget(motion: Path | str, map_path: Path | str, out_dir: Path | str, *, skeleton: Skeleton | None = None,
@@ -550,7 +705,7 @@ def build_retarget(motion: Path | str, map_path: Path | str, out_dir: Path | str
     name = name or f"{Path(motion).stem}_{rmap.skeleton.name}"
     if not is_name(name):
         raise InputError(None, f"--name {name!r}", NAME_ALLOWED)
-    res = retarget(rmap, mocap, progress)
+    res = retarget(rmap, mocap, progress, max_pose_bytes=tol.YAML_MAX_BYTES)
     skel_file = Path(skeleton_path) if skeleton_path is not None else Path(rmap.skeleton.source)
     pose_path = out_dir / f"{name}.yaml"
     header = (f"Retargeted from {Path(motion).name} onto {rmap.skeleton.name} by `axdf retarget` "
@@ -568,4 +723,5 @@ def build_retarget(motion: Path | str, map_path: Path | str, out_dir: Path | str
     rel = [Path(p).name for p in files] + ["retarget_report.json"]
     rep = report(res, name, rel)
     files[str(out_dir / "retarget_report.json")] = (json.dumps(rep, indent=1, sort_keys=True) + "\n").encode()
-    return RetargetResult(files, rep, res, list(mocap.notes))
+    return RetargetResult(files, rep, res, list(mocap.notes) + room_notes(res),
+                          list(mocap.warnings) + rep["checks"]["warnings"])
