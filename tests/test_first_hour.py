@@ -3,7 +3,11 @@ motion file given as a pose, range warnings for path muscles, a data set's frame
 checked before the work, the compile notice and pack's progress."""
 from __future__ import annotations
 
+import re
+import shlex
 import shutil
+
+import pytest
 
 from compare_helpers import make_run
 from conftest import REPO_ROOT, run_main
@@ -18,3 +22,85 @@ def test_the_compare_header_names_each_folder_once(tmp_path, capsys):
     assert rc == 0, out
     assert "golden golden" not in header
     assert header == f"axdf compare: {actual} (actual) against {golden} (golden)"
+
+
+# ----------------------------------------------------------------------------- ranges of path muscles
+PACKED = REPO_ROOT / "muscles" / "gait2392_packed"
+GAIT_SKELETON = REPO_ROOT / "poses" / "skeletons" / "gait2392.yaml"
+
+
+def _knee_pose(folder, knee: float):
+    p = folder / "bent.yaml"
+    p.write_text(f"pose: bent\nskeleton: {GAIT_SKELETON}\nfps: 30\nframes: [0, 1]\n"
+                 f"keys:\n  0: {{knee_angle_r: 0}}\n  1: {{knee_angle_r: {knee}}}\n")
+    return p
+
+
+def test_a_path_muscle_posed_outside_a_range_is_warned_and_refused_with_strict(tmp_path, capsys):
+    from axdf_cli.model.pose import muscle_bones
+    from axdf_cli.specs import load_muscle_file
+
+    muscle = PACKED / "vas_lat_r.yaml"
+    spec = load_muscle_file(muscle)[0]
+    assert spec.path is not None and not spec.axis and {"femur_r", "tibia_r"} <= muscle_bones(spec)
+    pose = _knee_pose(tmp_path, -500)
+    argv = ["run", "--muscles", muscle, "--pose", pose, "--out", tmp_path / "o", "--no-render", "--allow-outside"]
+    rc, _, err = run_main([*argv, "--dry-run"], capsys)
+    assert rc == 0 and "knee_angle_r = -500 outside its range" in err and "first frame 1" in err, err
+    rc, _, err = run_main([*argv, "--strict"], capsys)
+    assert rc == 2 and "--strict" in err and "vas_lat_r frame 1: knee_angle_r = -500" in err, err
+    assert not (tmp_path / "o").exists()
+    # a muscle the coordinate does not move (the left leg's) is not warned
+    rc, _, err = run_main([*argv[:2], PACKED / "vas_lat_l.yaml", *argv[3:], "--strict", "--dry-run"], capsys)
+    assert rc == 0 and "outside" not in err, err
+
+
+def test_a_data_set_motion_outside_a_range_is_warned(tmp_path, capsys, monkeypatch):
+    mot = ("bent\nversion=1\nnRows=2\nnColumns=2\ninDegrees=yes\nendheader\n"
+           "time\tknee_angle_r\n0.0\t0\n0.1\t-500\n")
+    (tmp_path / "bent.mot").write_text(mot)
+    (tmp_path / "d.yaml").write_text(
+        f"dataset: d\nseed: 1\nskeleton: {GAIT_SKELETON}\nmuscles: [{PACKED / 'vas_lat_r.yaml'}]\n"
+        "motions:\n  bent: {motion: bent.mot, fps: 10}\nsequences:\n  - {motion: bent}\n"
+        "cameras:\n  sphere: {views: 1, distance: [3, 3], elevation: [0, 0], fov: 40}\n"
+        "render: {size: [32, 32], supersample: 1}\n")
+    monkeypatch.chdir(tmp_path)
+    rc, out, err = run_main(["dataset", "build", "d.yaml", "--out", "o", "--dry-run", "--allow-outside"], capsys)
+    assert rc == 0, err
+    assert "warning: motion bent" in err and "knee_angle_r = -500 outside its range" in err and "vas_lat_r" in err
+
+
+# ----------------------------------------------------------------------------- the hint for a BVH given as a pose
+CMU = REPO_ROOT.parent / "shared" / "data" / "bvh" / "cmu_131_01_walk_scaled.bvh"
+
+
+def _hint(tmp_path, capsys, bvh: str = "walk.bvh") -> str:
+    rc, _, err = run_main(["run", "--muscles", PACKED / "vas_lat_r.yaml", "--pose", bvh, "--out", "o", "--dry-run"],
+                          capsys)
+    assert rc == 2 and "is not an axdf pose" in err, err
+    return err
+
+
+def test_the_hint_for_a_bvh_pose_names_retarget_and_a_shipped_map(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "walk.bvh").write_text("HIERARCHY\n")  # refused by its suffix, before it is read
+    err = _hint(tmp_path, capsys)
+    assert "axdf import bvh" not in err
+    assert f"axdf retarget walk.bvh --map {REPO_ROOT / 'poses/maps/cmu_to_gait2392.yaml'}" in err
+    assert "--pose out/walk_gait2392/walk_gait2392.yaml" in err and "cmu_to_myobody.yaml" in err
+
+
+@pytest.mark.skipif(not CMU.is_file(), reason=f"CMU BVH not found at {CMU}")
+def test_following_the_hint_gives_a_pose_for_gait2392s_muscles(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    lines = CMU.read_text().splitlines()
+    m = lines.index("MOTION")  # the take's first 6 frames
+    (tmp_path / "walk.bvh").write_text("\n".join(lines[:m + 1] + ["Frames: 6", lines[m + 2]] + lines[m + 3:m + 9]) + "\n")
+    err = _hint(tmp_path, capsys)
+    found = re.search(r"(axdf retarget .*?), then --pose (\S+)", err)
+    assert found, err
+    rc, _, err = run_main([*shlex.split(found.group(1))[1:], "-q"], capsys)
+    assert rc == 0, err
+    rc, out, err = run_main(["run", "--muscles", PACKED / "vas_lat_r.yaml", "--pose", found.group(2), "--out", "o",
+                             "--dry-run"], capsys)
+    assert rc == 0 and "unknown bone" not in err and "would write 6 meshes" in out, err
