@@ -104,3 +104,33 @@ def test_following_the_hint_gives_a_pose_for_gait2392s_muscles(tmp_path, capsys,
     rc, out, err = run_main(["run", "--muscles", PACKED / "vas_lat_r.yaml", "--pose", found.group(2), "--out", "o",
                              "--dry-run"], capsys)
     assert rc == 0 and "unknown bone" not in err and "would write 6 meshes" in out, err
+
+
+# ----------------------------------------------------------------------------- a data set's frames, before the work
+def test_a_data_sets_frame_ranges_are_checked_before_any_take_is_fitted(tmp_path, capsys, monkeypatch):
+    import numpy as np
+
+    import axdf_cli.tools.retarget as retarget_tool
+    from dataset_helpers import DATASET_YAML, write_tiny
+
+    def no_fit(*a, **k):
+        raise AssertionError("a take was fitted before the frame ranges were checked")
+
+    monkeypatch.setattr(retarget_tool, "retarget", no_fit)
+    rng = np.random.default_rng(37)
+    np.savez(tmp_path / "take.npz", joints=rng.normal(size=(5, 2, 3)), names=np.array(["a", "b"]), fps=30.0)
+    (tmp_path / "map.yaml").write_text("points: {}\n")  # (never read: the frames are refused first)
+    mot = ("walk\nversion=1\nnRows=3\nnColumns=2\ninDegrees=no\nendheader\n"
+           "time\tbend\n0.0\t0.0\n0.5\t0.5\n1.0\t1.0\n")
+    (tmp_path / "walk.mot").write_text(mot)
+    monkeypatch.chdir(tmp_path)
+    for take_frames, mot_frames, bad in (('"0:50"', '"0:2"', "take.npz"), ('"0:4"', '"0:99"', "walk.mot")):
+        yaml = DATASET_YAML.replace(
+            '  walk: {pose: walk.yaml, frames: "0:8:4"}',
+            f"  take: {{retarget: take.npz, map: map.yaml, frames: {take_frames}}}\n"
+            f"  walk: {{motion: walk.mot, fps: 2, frames: {mot_frames}}}")
+        yaml = yaml.replace("  - {motion: walk}\n", "  - {motion: take}\n  - {motion: walk}\n")
+        write_tiny(tmp_path, yaml)
+        rc, _, err = run_main(["dataset", "build", "tiny.yaml", "--out", "o", "-q"], capsys)
+        assert rc == 2 and "tiny.yaml:" in err and "outside" in err and "fitted" not in err, (bad, err)
+        assert not (tmp_path / "o").exists()
