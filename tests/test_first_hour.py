@@ -134,3 +134,40 @@ def test_a_data_sets_frame_ranges_are_checked_before_any_take_is_fitted(tmp_path
         rc, _, err = run_main(["dataset", "build", "tiny.yaml", "--out", "o", "-q"], capsys)
         assert rc == 2 and "tiny.yaml:" in err and "outside" in err and "fitted" not in err, (bad, err)
         assert not (tmp_path / "o").exists()
+
+
+# ----------------------------------------------------------------------------- the compile notice
+def test_the_compile_notice_counts_the_kernels_missing_from_the_cache(tmp_path, monkeypatch):
+    import sys
+
+    from axdf_cli import runtime
+
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    line = runtime.compile_notice("run")
+    total = len(runtime.cached_kernels(lambda m: m not in runtime.PACK_ONLY))
+    assert line.startswith(f"axdf: compiling {total} of {total} numba kernels once (about ")
+    assert line.endswith(f"min of CPU); later runs load them from {tmp_path}")
+    assert len(runtime.cached_kernels()) > total  # pack's own kernels: only `axdf pack` compiles them
+    assert f"of {len(runtime.cached_kernels())} numba" in runtime.compile_notice("pack")
+    tag = f".py{sys.version_info[0]}{sys.version_info[1]}.nbi"
+    for k in runtime.cached_kernels()[:5]:
+        (tmp_path / f"{k}{tag}").touch()
+    assert f"compiling {total - 5} of {total}" in runtime.compile_notice("run")
+    runtime.mark_warm("run")  # the command finished once: its kernels are compiled
+    assert runtime.compile_notice("run") is None and runtime.compile_notice("pack") is not None
+
+
+def test_the_cli_says_so_before_a_cold_compile_once_and_not_for_validate(tmp_path, capsys, monkeypatch):
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    monkeypatch.chdir(REPO_ROOT)
+    run = ["run", "poses/jobs/demo.yaml", "--frames", "0", "--out", tmp_path / "o", "--dry-run"]
+    rc, _, err = run_main(["validate", "poses/jobs/demo.yaml"], capsys)
+    assert rc == 0 and "compiling" not in err, err
+    rc, _, err = run_main(run, capsys)
+    assert rc == 0 and err.count("axdf: compiling ") == 1 and f"later runs load them from {tmp_path}" in err, err
+    rc, _, err = run_main(run, capsys)  # the kernels are compiled now
+    assert rc == 0 and "compiling" not in err, err
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "cold"))
+    (tmp_path / "cold").mkdir()
+    rc, _, err = run_main([*run, "-q"], capsys)
+    assert rc == 0 and "compiling" not in err, err

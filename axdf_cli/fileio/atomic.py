@@ -32,6 +32,18 @@ def on_signal(signum=None, frame=None) -> None:
     raise KeyboardInterrupt
 
 
+def interrupted() -> bool:
+    """Whether :func:`on_signal` has run since :func:`reset_interrupt` (also where the
+    KeyboardInterrupt it raised was caught and dropped by a library)."""
+    return _state["signum"] is not None
+
+
+def reset_interrupt() -> None:
+    """Forget an earlier interrupt (the command line's start: ``main`` may be called again in
+    one process)."""
+    _state.update(pending=False, signum=None)
+
+
 def _unraisable(hook):
     """``sys.unraisablehook``: a KeyboardInterrupt raised while Python code ran inside a C
     callback (llvmlite's object cache, loading a numba kernel) cannot propagate; Python would
@@ -61,6 +73,8 @@ def deferred_signals() -> Iterator[None]:
     if threading.current_thread() is not threading.main_thread():
         yield  # signals only ever interrupt the main thread: nothing to defer here
         return
+    if _state["depth"] == 0 and _state["signum"] is not None:
+        raise KeyboardInterrupt  # an interrupt a library swallowed: no further file is begun
     _state["depth"] += 1
     try:
         yield
