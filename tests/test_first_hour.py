@@ -171,3 +171,21 @@ def test_the_cli_says_so_before_a_cold_compile_once_and_not_for_validate(tmp_pat
     (tmp_path / "cold").mkdir()
     rc, _, err = run_main([*run, "-q"], capsys)
     assert rc == 0 and "compiling" not in err, err
+
+
+# ----------------------------------------------------------------------------- make demo installs no test tools
+def test_make_demo_installs_no_test_tools_and_make_test_adds_them(tmp_path):
+    import subprocess
+
+    if shutil.which("make") is None:
+        pytest.skip("no make here")
+    for name in ("Makefile", "pyproject.toml", "constraints.txt", "constraints-blender.txt"):
+        shutil.copy(REPO_ROOT / name, tmp_path / name)  # a fresh clone's: no .venv yet
+
+    def planned(target: str) -> list[str]:
+        out = subprocess.run(["make", "-n", target], cwd=tmp_path, capture_output=True, text=True, check=True).stdout
+        return [ln for ln in out.splitlines() if "pip install" in ln and "--upgrade pip" not in ln]
+
+    demo, test = planned("demo"), planned("test")
+    assert demo and not any("[test]" in ln or "pytest" in ln for ln in demo), demo
+    assert any(".[test]" in ln for ln in test), test
