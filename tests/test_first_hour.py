@@ -189,3 +189,26 @@ def test_make_demo_installs_no_test_tools_and_make_test_adds_them(tmp_path):
     demo, test = planned("demo"), planned("test")
     assert demo and not any("[test]" in ln or "pytest" in ln for ln in demo), demo
     assert any(".[test]" in ln for ln in test), test
+
+
+# ----------------------------------------------------------------------------- axdf pack's progress
+def test_pack_reports_each_phase_and_round_in_a_log_and_nothing_with_quiet(tmp_path, capsys):
+    from axdf_cli import tolerances as tol
+
+    d = tmp_path / "in"
+    d.mkdir()
+    for name in ("biceps_brachii", "brachioradialis"):
+        shutil.copy(REPO_ROOT / "muscles" / "demo" / f"{name}.yaml", d)
+    common = ["pack", d, "--skeleton", REPO_ROOT / "poses" / "skeletons" / "human_r.yaml", "--rounds", "1",
+              "--allow-outside"]
+    rc, _, err = run_main([*common, "--out", tmp_path / "o"], capsys)  # (stderr is not a terminal: a log)
+    assert rc == 0, err
+    lines = [ln for ln in err.splitlines() if ln.startswith("axdf pack: ")]
+    total = 1 + tol.PACK_POLISH_ROUNDS
+    assert lines[0] == "axdf pack: the models of 2 muscles"
+    assert any("distance fields" in ln for ln in lines)
+    rounds = [ln.split(" done")[0] for ln in lines if " done: " in ln]  # (the polish ends early once done)
+    assert 1 <= len(rounds) <= total and rounds == [
+        f"axdf pack: round {k} of at most {total}" for k in range(1, len(rounds) + 1)], lines
+    rc, _, err = run_main([*common, "--out", tmp_path / "q", "-q"], capsys)
+    assert rc == 0 and err == "", err
