@@ -65,13 +65,15 @@ def main(argv: list[str] | None = None) -> int:
     hook = sys.unraisablehook
     if old:
         atomic.catch_interrupts_in_callbacks()  # a Ctrl-C while numba loads a kernel
-    rc = _main(argv, atomic)
-    if atomic.interrupted() and rc != 130:
-        print("axdf: interrupted", file=sys.stderr)
-        rc = 130
-    for sig, handler in old.items():  # (the entry point's own handlers: it keeps them until exit)
-        signal.signal(sig, handler)
-    sys.unraisablehook = hook
+    try:
+        rc = _main(argv, atomic)
+        if atomic.interrupted() and rc != 130:
+            print("axdf: interrupted", file=sys.stderr)
+            rc = 130
+    finally:
+        for sig, handler in old.items():  # (the entry point's own handlers: it keeps them until exit)
+            signal.signal(sig, handler)
+        sys.unraisablehook = hook
     return rc
 
 
