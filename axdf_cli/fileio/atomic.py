@@ -48,12 +48,19 @@ def _unraisable(hook):
     """``sys.unraisablehook``: a KeyboardInterrupt raised while Python code ran inside a C
     callback (llvmlite's object cache, loading a numba kernel) cannot propagate; Python would
     print it with a traceback and go on. Instead say nothing and send the signal again a
-    moment later, when the callback has returned."""
+    moment later, when the callback has returned: once, however many times the callback ran
+    into it (a second copy would land in the handling of the first)."""
+    def again(signum) -> None:
+        _state["resend"] = False
+        os.kill(os.getpid(), signum)
+
     def unraisable(args) -> None:
         if not isinstance(args.exc_value, KeyboardInterrupt) or _state["signum"] is None:
             return hook(args)
-        signum = _state["signum"]
-        timer = threading.Timer(0.05, os.kill, (os.getpid(), signum))
+        if _state.get("resend"):
+            return
+        _state["resend"] = True
+        timer = threading.Timer(0.05, again, (_state["signum"],))
         timer.daemon = True
         timer.start()
     unraisable.axdf = True
