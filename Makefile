@@ -1,7 +1,9 @@
 # axdf: two commands on a fresh machine.
-#   make demo   set up (.venv, packages, Mesa EGL if missing) and run the demo job into out/demo
-#   make test   set up and run the whole test suite (CI calls this through .ci/run); also
-#               creates .venv-blender (bpy) for the Blender check
+#   make demo   set up (.venv with axdf and the packages it runs on, Mesa EGL if missing) and run
+#               the demo jobs into out/ (no test tools installed)
+#   make test   set up, add the test tools (pytest, hypothesis, opensim, mujoco, ray, ...) and run
+#               the whole test suite (CI calls this through .ci/run); also creates .venv-blender
+#               (bpy) for the Blender check
 #   make test-fast  the unit tier only (TIER="integration" etc. picks another: unit, integration,
 #               judges, hostile; see tests/conftest.py TIERS)
 #   make dataset  set up and build a small gait2392 data set into out/gait2392_small
@@ -10,6 +12,8 @@ PY     ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
+# the test tools on top (the [test] extra): pytest, hypothesis, opensim, mujoco, myo-sim, ray, ...
+TEST_STAMP := $(VENV)/.installed-test
 # Blender as a Python module (bpy) for tests/test_blender.py, in its own environment: bpy 5
 # needs numpy<2 and axdf numpy 2. ~1.5 GB, about a minute; a failed install is a warning and
 # the test skips, saying why.
@@ -29,11 +33,13 @@ BVH    := $(DATA)/bvh/cmu_131_01_walk_scaled.bvh
 MYO    := out/myo-sim
 MJCF_MESHES := --max-faces 2000 --mesh-edge 0.004
 
-.PHONY: all setup sysdeps demo dataset test test-fast bench golden clean import import-mjcf pack pack-check lock blender
+.PHONY: all setup setup-test sysdeps demo dataset test test-fast bench golden clean import import-mjcf pack pack-check lock blender
 
 all: demo
 
 setup: $(STAMP)
+
+setup-test: $(TEST_STAMP)
 
 # Mesa's EGL (llvmpipe) for headless rendering without a GPU. Installed with apt-get
 # only when the libraries are missing and we are root; otherwise print the command.
@@ -61,11 +67,19 @@ $(STAMP): pyproject.toml $(CONSTRAINTS)
 	@$(PY) -m venv $(VENV)
 	@$(BIN)/python -m pip install -q --upgrade pip
 	@echo "set-up 3/3: axdf and its packages into $(VENV) (numpy, scipy, numba, moderngl, OpenEXR, ...; about a minute)"
-	@$(PIP_PINNED) -e '.[test]' || { echo "warning: the versions in $(CONSTRAINTS) could not be installed;" \
+	@$(PIP_PINNED) -e . || { echo "warning: the versions in $(CONSTRAINTS) could not be installed;" \
 	  "installing the newest that pyproject.toml allows (make pack-check may then differ)" >&2; \
-	  $(BIN)/python -m pip install -q -e '.[test]'; }
+	  $(BIN)/python -m pip install -q -e .; }
 	@touch $@
 	@echo "set-up done: $(BIN)/axdf"
+
+# The test tools (the [test] extra) for make test, test-fast, import-mjcf and lock; never for the demo.
+$(TEST_STAMP): $(STAMP)
+	@echo "set-up: the test tools into $(VENV) (pytest, hypothesis, opensim, mujoco, myo-sim, ray, ...; a few minutes)"
+	@$(PIP_PINNED) -e '.[test]' || { echo "warning: the versions in $(CONSTRAINTS) could not be installed;" \
+	  "installing the newest that pyproject.toml allows" >&2; \
+	  $(BIN)/python -m pip install -q -e '.[test]'; }
+	@touch $@
 
 blender: $(BLENDER_STAMP)
 
@@ -95,7 +109,7 @@ dataset: $(STAMP)
 	$(BIN)/axdf dataset build poses/datasets/gait2392_small.yaml --out out/gait2392_small --overwrite --jobs 2
 	@echo "data set in out/gait2392_small: index.parquet, dataset.json, seq_*/ (views/, labels.npz, amodal.json, meshes/)"
 
-test: $(STAMP) $(BLENDER_STAMP)
+test: $(TEST_STAMP) $(BLENDER_STAMP)
 	$(BIN)/python -m pytest -q tests
 	@echo "golden check: a fresh run of tests/golden_job.yaml against tests/golden"
 	$(BIN)/axdf run tests/golden_job.yaml --out out/golden-check --overwrite --quiet
@@ -104,7 +118,7 @@ test: $(STAMP) $(BLENDER_STAMP)
 # One tier of the suite, for development: the unit tier by default (about a minute once the
 # kernels are compiled; the first run compiles them, and says so).
 TIER ?= unit
-test-fast: $(STAMP)
+test-fast: $(TEST_STAMP)
 	$(BIN)/python -m pytest -q -m "$(TIER)" tests
 
 # Re-bless our own golden files from the current code, printing what changed.
@@ -178,9 +192,9 @@ pack-check: $(STAMP)
 
 # constraints.txt made again from the environment in $(VENV) (after a deliberate upgrade; then
 # make pack, and ship the library it makes with the new constraints).
-lock: $(STAMP)
+lock: $(TEST_STAMP)
 	@{ grep '^#' $(CONSTRAINTS); $(BIN)/python -m pip freeze --exclude-editable; } > $(CONSTRAINTS).new && mv $(CONSTRAINTS).new $(CONSTRAINTS)
-	@touch $(STAMP)  # the environment is the one the file was made from: no set-up again
+	@touch $(STAMP) $(TEST_STAMP)  # the environment is the one the file was made from: no set-up again
 	@echo "lock: $(CONSTRAINTS) made from $(VENV)"
 	@if [ -x $(BLENDER_VENV)/bin/python ]; then \
 	  { grep '^#' $(BLENDER_CONSTRAINTS); $(BLENDER_VENV)/bin/python -m pip freeze; } > $(BLENDER_CONSTRAINTS).new \
@@ -190,7 +204,7 @@ lock: $(STAMP)
 # The MyoSuite library (myo-sim, Apache-2.0): muscles/{myoarm,myobody}, poses/skeletons/{myoarm,myobody}.yaml
 # (+ meshes/), poses/myoarm_elbow.yaml (arm26's elbow flexion), poses/myobody_gait.yaml (MyoSuite's gait cycle),
 # and the CMU walk fitted onto myobody (poses/maps/cmu_to_myobody.yaml): poses/retargeted/cmu_131_01_walk_myobody/.
-import-mjcf: $(STAMP)
+import-mjcf: $(TEST_STAMP)
 	$(BIN)/python tools/myo_sim_xml.py myoarm $(MYO)/myoarm.xml
 	$(BIN)/python tools/myo_sim_xml.py myofullbody $(MYO)/myofullbody.xml
 	$(BIN)/python tools/myo_motion.py arm26 $(MYO)/myoarm.xml $(MYO)/myoarm_elbow.npz $(OSIM)/arm26/arm26_Kinematics_q.sto

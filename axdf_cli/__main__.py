@@ -1,5 +1,3 @@
-import sys
+from axdf_cli.cli.main import entry
 
-from axdf_cli.cli.main import main
-
-sys.exit(main())
+entry()

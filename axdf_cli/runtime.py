@@ -113,3 +113,78 @@ def use_threads() -> bool:
 
     return (os.getpid() == _STATE["home"] and os.environ.get(THREADS_VAR, "") != "1"
             and numba.config.NUMBA_NUM_THREADS > 1)
+
+
+# ----------------------------------------------------------------------------- the compile notice
+#: CPU seconds per kernel of a cold compile (measured: every kernel, an idle 2-core machine),
+#: for the minutes the compile notice announces.
+SECONDS_PER_KERNEL = 5.5
+#: Kernels only ``axdf pack`` runs (the other commands never compile them).
+PACK_ONLY = ("pack",)
+
+
+def cached_kernels(modules=None) -> list[str]:
+    """Every cached numba kernel under axdf_cli/model/ (a function decorated with
+    ``cache=True``) as numba names its cache entry, ``MODULE.NAME-LINE`` (the line of its first
+    decorator); ``modules``: a test on the module's stem (all when None)."""
+    import ast
+    from pathlib import Path
+
+    def cached(dec) -> bool:
+        return isinstance(dec, ast.Call) and any(
+            k.arg == "cache" and isinstance(k.value, ast.Constant) and k.value.value is True for k in dec.keywords)
+
+    out = []
+    for path in sorted((Path(__file__).resolve().parent / "model").rglob("*.py")):
+        if modules is not None and not modules(path.stem):
+            continue
+        for n in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(n, ast.FunctionDef) and any(cached(d) for d in n.decorator_list):
+                out.append(f"{path.stem}.{n.name}-{n.decorator_list[0].lineno}")
+    return out
+
+
+def missing_kernels(cache_dir: str | None, modules=None) -> tuple[list[str], int]:
+    """(the kernels with no entry in numba's cache folder ``cache_dir``, how many there are)."""
+    from pathlib import Path
+
+    kernels = cached_kernels(modules)
+    tag = f".py{sys.version_info[0]}{sys.version_info[1]}.nbi"
+    found = set()
+    if cache_dir and Path(cache_dir).is_dir():
+        found = {p.name[: -len(tag)] for p in Path(cache_dir).rglob(f"*{tag}")}
+    return [k for k in kernels if k not in found], len(kernels)
+
+
+def compile_line(missing: int, total: int, cache_dir: str | None) -> str:
+    minutes = max(1, round(missing * SECONDS_PER_KERNEL / 60))
+    return (f"axdf: compiling {missing} of {total} numba kernels once (about {minutes} min of CPU); "
+            f"later runs load them from {cache_dir or 'numba default cache'}")
+
+
+def compile_notice(command: str) -> str | None:
+    """The line to print before command ``command`` compiles numba's kernels into a cold
+    cache; None when its kernels are cached. A kernel called only from within other kernels
+    may never get a cache entry of its own, and one a command does not reach (contact's, with
+    contact off) is not compiled by it, so a command that has once finished against this cache
+    (:func:`mark_warm`) is not told again."""
+    from pathlib import Path
+
+    configure()
+    cache = os.environ.get("NUMBA_CACHE_DIR")
+    if cache and (Path(cache) / f".warm-{command}").exists():
+        return None
+    missing, total = missing_kernels(cache, None if command == "pack" else (lambda m: m not in PACK_ONLY))
+    return compile_line(len(missing), total, cache) if missing else None
+
+
+def mark_warm(command: str) -> None:
+    """Record that ``command`` finished against this kernel cache (its kernels are compiled)."""
+    from pathlib import Path
+
+    cache = os.environ.get("NUMBA_CACHE_DIR")
+    if cache and Path(cache).is_dir():
+        try:
+            (Path(cache) / f".warm-{command}").touch()
+        except OSError:  # a read-only cache: the notice comes again, nothing worse
+            pass

@@ -77,6 +77,7 @@ def _build(args) -> int:
     if args.dry_run:
         return _dry_run(args, shard, policy)
     ctx = build_context(args.dataset, args.seed, policy)
+    warn_ranges(ctx, args.quiet)
     out = Path(args.out or f"out/{ctx.spec.name}")
     mine = [s for s in ctx.sequences if s.index % shard[1] == shard[0]]
     views = len(ctx.spec.views)
@@ -95,6 +96,24 @@ def _build(args) -> int:
     if not args.quiet:
         print(summary_text(res, shard))
     return 0
+
+
+def warn_ranges(ctx, quiet: bool) -> None:
+    """A warning per named motion that poses the data set's muscles outside a coordinate's
+    range (as ``axdf run`` warns a run: every muscle the coordinate moves, path muscles too)."""
+    from axdf_cli.dataset.spec import load_motion, motion_frames
+    from axdf_cli.model.pose import muscle_range_warnings
+
+    if quiet:
+        return
+    for name, m in ctx.spec.motions.items():
+        warns = muscle_range_warnings(load_motion(ctx.spec, name), motion_frames(ctx.spec, name), ctx.muscles)
+        if warns:
+            fi, j, msg = warns[0]
+            frame = int(motion_frames(ctx.spec, name)[fi])
+            print(f"warning: motion {name} ({m.path}): {len(warns)} muscle-frame(s) posed outside a coordinate "
+                  f"range, first frame {frame} ({ctx.muscles[j].name}): "
+                  f"{msg.replace(' (--clamp-ranges holds it inside)', '')}", file=sys.stderr)
 
 
 def bulk_warning(res, ctx) -> str | None:
@@ -120,6 +139,7 @@ def _dry_run(args, shard, policy) -> int:
     from axdf_cli.dataset.worker import build_context
 
     ctx = build_context(args.dataset, args.seed, policy, listed=False)
+    warn_ranges(ctx, args.quiet)
     out = Path(args.out or f"out/{ctx.spec.name}")
     check_dry(out, resume=args.resume, overwrite=args.overwrite)
     if args.engine == "ray":

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import signal
 import sys
 
@@ -54,20 +55,65 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from axdf_cli import runtime
-
-    runtime.configure()  # threads and numba's cache, before a subcommand imports numba or numpy
+    """The command's exit code; an interrupt the signal handler recorded is 130 whatever the
+    command did after it (a library that catches KeyboardInterrupt or BaseException cannot
+    turn it into success or exit 70)."""
     from axdf_cli.fileio import atomic
 
-    old = {}
-    for sig in (signal.SIGINT, signal.SIGTERM):  # both end the run with 130, never mid-file
-        try:
-            old[sig] = signal.signal(sig, atomic.on_signal)
-        except ValueError:  # not the main thread (tests calling main in a thread)
-            pass
+    atomic.reset_interrupt()
+    old = _install(atomic.on_signal)  # before anything heavy is imported
     hook = sys.unraisablehook
     if old:
         atomic.catch_interrupts_in_callbacks()  # a Ctrl-C while numba loads a kernel
+    try:
+        rc = _main(argv, atomic)
+        if atomic.interrupted() and rc != 130:
+            print("axdf: interrupted", file=sys.stderr)
+            rc = 130
+    finally:
+        for sig, handler in old.items():  # (the entry point's own handlers: it keeps them until exit)
+            signal.signal(sig, handler)
+        sys.unraisablehook = hook
+    return rc
+
+
+def _install(handler) -> dict:
+    """``handler`` for SIGINT and SIGTERM: the previous handlers by signal (none where this is
+    not the main thread: tests calling main in a thread)."""
+    old = {}
+    for sig in (signal.SIGINT, signal.SIGTERM):  # both end the run with 130, never mid-file
+        try:
+            old[sig] = signal.signal(sig, handler)
+        except ValueError:
+            pass
+    return old
+
+
+#: Commands that run numba's kernels, and the actions of theirs that do: a note before a cold
+#: compile (runtime.compile_notice).
+KERNEL_COMMANDS = {"run": None, "pack": None, "dataset": ("build",)}
+
+
+def _notice(args) -> str | None:
+    """The command's key in the kernel cache when it will compile numba's kernels, after
+    printing the compile notice (unless --quiet) when they are not cached yet."""
+    if args.command not in KERNEL_COMMANDS:
+        return None
+    actions = KERNEL_COMMANDS[args.command]
+    if actions is not None and getattr(args, "action", None) not in actions:
+        return None
+    from axdf_cli import runtime
+
+    line = runtime.compile_notice(args.command)
+    if line and not args.quiet:
+        print(line, file=sys.stderr, flush=True)
+    return args.command
+
+
+def _main(argv, atomic) -> int:
+    from axdf_cli import runtime
+
+    runtime.configure()  # threads and numba's cache, before a subcommand imports numba or numpy
     args = None
     try:
         for a in sys.argv[1:] if argv is None else argv:
@@ -79,7 +125,11 @@ def main(argv: list[str] | None = None) -> int:
             args = parser.parse_args(argv)
         except SystemExit as e:
             return int(e.code or 0) if not isinstance(e.code, str) else 2
-        return int(args._module.run(args) or 0)
+        warm = _notice(args)
+        rc = int(args._module.run(args) or 0)
+        if rc == 0 and warm and not atomic.interrupted():
+            runtime.mark_warm(warm)
+        return rc
     except InputError as e:
         if args is not None and args.traceback:
             raise
@@ -104,19 +154,51 @@ def main(argv: list[str] | None = None) -> int:
         print("axdf: out of memory; use fewer frames per run or a lower resolution", file=sys.stderr)
         return 3
     except Exception as e:  # a bug: say so plainly, without a traceback unless asked
+        if atomic.interrupted():  # a library turned the interrupt into another exception
+            print("axdf: interrupted", file=sys.stderr)
+            return 130
         if args is not None and args.traceback:
             raise
         print(f"axdf: internal error: {type(e).__name__}: {e}\n"
               "rerun with --traceback and report it", file=sys.stderr)
         return 70
-    finally:
-        for sig, handler in old.items():
-            signal.signal(sig, handler)
-        sys.unraisablehook = hook
+
+
+def _late(signum, frame) -> None:
+    """SIGINT/SIGTERM once the command is over and its output flushed: exit 130 at once (the
+    interpreter's teardown would otherwise die of the signal with no word)."""
+    os.write(2, b"axdf: interrupted\n")
+    os._exit(130)
 
 
 def entry() -> None:
-    sys.exit(main())
+    """The ``axdf`` program: SIGINT and SIGTERM are handled from its first line to its exit,
+    130 with "axdf: interrupted" at any moment (a signal inherited blocked is let through once
+    the handlers are in place)."""
+    from axdf_cli.fileio import atomic
+
+    rc = None
+    try:
+        _install(atomic.on_signal)
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT, signal.SIGTERM})
+        rc = main()
+    except KeyboardInterrupt:  # in the instants outside main's own handling
+        rc = None
+    _install(_late)  # from here on a signal ends the process at once
+    if rc is None or (rc != 130 and atomic.interrupted()):
+        _late(None, None)
+    # The teardown is done here, under _late: the interpreter's own finalization puts the
+    # default handlers back first, and a signal then (or one sent again by the unraisable hook's
+    # timer) would kill the process with no word.
+    import atexit
+
+    atexit._run_exitfuncs()
+    try:
+        sys.stdout.flush()
+        sys.stderr.flush()
+    except OSError:  # a closed pipe: the exit code still says how the command ended
+        pass
+    os._exit(rc)
 
 
 if __name__ == "__main__":

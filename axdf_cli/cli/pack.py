@@ -15,6 +15,7 @@ import sys
 from pathlib import Path
 
 from axdf_cli.cli.importer import add_overwrite_arg
+from axdf_cli.cli.progress import Phases
 from axdf_cli.fileio.outputs import OutputSet, write_outputs
 
 
@@ -60,13 +61,21 @@ def run(args) -> int:
 
     rounds = args.rounds if args.rounds is not None else tol.PACK_ITERATIONS
 
+    # a bar of rounds on a terminal, a line per phase and round in a log (a pack takes minutes)
+    phases = Phases(args.quiet, "axdf pack", "round", rounds + tol.PACK_POLISH_ROUNDS, at_most=True)
+
     def progress(it, h):
+        what = "round" if it < rounds else "polish"
+        phases.step(f"inside another muscle {100 * h[0]:.2f}%, inside a bone {100 * h[1]:.2f}%")
         if args.verbose:
-            what = "round" if it < rounds else "polish"
             print(f"  {what} {it + 1}: inside another muscle {100 * h[0]:.2f}%, inside a bone {100 * h[1]:.2f}%, "
                   f"deepest {1000 * h[2]:.1f} mm, volume kept {h[3]:.3f}..{h[4]:.3f}", file=sys.stderr)
 
-    res = build_pack(files, Path(args.skeleton), policy, args.rounds, progress, args.pose, args.frames)
+    try:
+        res = build_pack(files, Path(args.skeleton), policy, args.rounds, progress, args.pose, args.frames,
+                         on_phase=phases.phase)
+    finally:
+        phases.close()
     for name, data in res.files.items():
         out.add(Path(args.out) / name, data, "output")
     write_outputs(out, inputs=res.inputs, overwrite=args.overwrite,

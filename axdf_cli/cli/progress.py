@@ -61,3 +61,35 @@ class Bar:
 def bar(quiet: bool, unit: str, **options) -> Bar | None:
     """A :class:`Bar` when one is :func:`wanted`, else None."""
     return Bar(unit, **options) if wanted(quiet) else None
+
+
+class Phases:
+    """Progress of a long command in phases and steps, on stderr unless ``quiet``: on a
+    terminal one bar of ``total`` steps whose label is the current phase; in a log (stderr not
+    a terminal) a line per phase and per step, flushed at once, so a log never stays silent for
+    long."""
+
+    def __init__(self, quiet: bool, name: str, unit: str, total: int, at_most: bool = False):
+        self.quiet, self.name, self.unit, self.total = quiet, name, unit, total
+        self.of = f"of at most {total}" if at_most else f"of {total}"  # at_most: the work may end early
+        self.bar = Bar(unit, total=total, desc=name) if wanted(quiet) else None
+        self.done = 0
+
+    def phase(self, text: str) -> None:
+        """A new phase starts (``text`` says what it does)."""
+        if self.bar is not None:
+            self.bar.bar.set_description_str(f"{self.name}: {text}")
+        elif not self.quiet:
+            print(f"{self.name}: {text}", file=sys.stderr, flush=True)
+
+    def step(self, text: str) -> None:
+        """One more step done (``text``: its result, in a few words)."""
+        self.done += 1
+        if self.bar is not None:
+            self.bar.tick(text)
+        elif not self.quiet:
+            print(f"{self.name}: {self.unit} {self.done} {self.of} done: {text}", file=sys.stderr, flush=True)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()

@@ -125,7 +125,7 @@ def summary(report: Report, verbose: bool = False, quiet: bool = False) -> str:
     lines: list[str] = []
     failing = [f for f in report.files if f.failed]
     if not quiet:
-        lines.append(f"axdf compare: {report.actual} vs golden {report.golden}")
+        lines.append(f"axdf compare: {report.actual} (actual) against {report.golden} (golden)")
     shown_files = failing if verbose else failing[:SUMMARY_MAX_FILES]
     for f in shown_files:
         lines.append(f"  {_LABEL[f.verdict]:<7} {f.path}")

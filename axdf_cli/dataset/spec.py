@@ -204,7 +204,9 @@ def load_dataset(path: Path | str, seed: int | None = None, policy: RefPolicy | 
     spec = DatasetSpec(name, str(path), file_seed if seed is None else int(seed), str(skel_path),
                        tuple(str(p) for p in files), motions, entries, coords, activation, rig, sphere, render,
                        passes, fmt, shards, tol, fps, policy, stages)
-    # every motion must load (and match the skeleton) before anything is written
+    # every motion must load (and match the skeleton) before anything is written; the frame
+    # selections are checked first, before any take is fitted
+    check_motion_frames(spec)
     for m in motions.values():
         load_motion(spec, m.name)
     return spec
@@ -515,6 +517,22 @@ def load_motion(spec: DatasetSpec, name: str) -> Pose:
         pose = motion_pose(Path(m.path), skel, name, m.fps)
     _MOTION_CACHE[key] = pose
     return pose
+
+
+def check_motion_frames(spec: DatasetSpec) -> None:
+    """Every motion's ``frames:`` selection checked against its length before any motion
+    capture is fitted (minutes for a long take): pose files and OpenSim and qpos motions
+    first (they load at once), then each take's frame count from its file alone."""
+    from axdf_cli.importers.mocap import read_motion
+    from axdf_cli.model.pose import parse_frames
+
+    for name, m in spec.motions.items():
+        if m.kind != "retarget":
+            motion_frames(spec, name)
+    for m in spec.motions.values():
+        if m.kind == "retarget" and m.frames is not None:
+            n = len(read_motion(Path(m.path), scale=m.scale, step=m.step).positions)
+            parse_frames(m.frames, m.mark, 0, max(0, n - 1))
 
 
 def motion_frames(spec: DatasetSpec, name: str):

@@ -32,16 +32,35 @@ def on_signal(signum=None, frame=None) -> None:
     raise KeyboardInterrupt
 
 
+def interrupted() -> bool:
+    """Whether :func:`on_signal` has run since :func:`reset_interrupt` (also where the
+    KeyboardInterrupt it raised was caught and dropped by a library)."""
+    return _state["signum"] is not None
+
+
+def reset_interrupt() -> None:
+    """Forget an earlier interrupt (the command line's start: ``main`` may be called again in
+    one process)."""
+    _state.update(pending=False, signum=None)
+
+
 def _unraisable(hook):
     """``sys.unraisablehook``: a KeyboardInterrupt raised while Python code ran inside a C
     callback (llvmlite's object cache, loading a numba kernel) cannot propagate; Python would
     print it with a traceback and go on. Instead say nothing and send the signal again a
-    moment later, when the callback has returned."""
+    moment later, when the callback has returned: once, however many times the callback ran
+    into it (a second copy would land in the handling of the first)."""
+    def again(signum) -> None:
+        _state["resend"] = False
+        os.kill(os.getpid(), signum)
+
     def unraisable(args) -> None:
         if not isinstance(args.exc_value, KeyboardInterrupt) or _state["signum"] is None:
             return hook(args)
-        signum = _state["signum"]
-        timer = threading.Timer(0.05, os.kill, (os.getpid(), signum))
+        if _state.get("resend"):
+            return
+        _state["resend"] = True
+        timer = threading.Timer(0.05, again, (_state["signum"],))
         timer.daemon = True
         timer.start()
     unraisable.axdf = True
@@ -61,6 +80,8 @@ def deferred_signals() -> Iterator[None]:
     if threading.current_thread() is not threading.main_thread():
         yield  # signals only ever interrupt the main thread: nothing to defer here
         return
+    if _state["depth"] == 0 and _state["signum"] is not None:
+        raise KeyboardInterrupt  # an interrupt a library swallowed: no further file is begun
     _state["depth"] += 1
     try:
         yield

@@ -100,14 +100,30 @@ def range_warnings(pose, frames: np.ndarray) -> list[tuple[int, str, str]]:
 
 def muscle_range_warnings(pose, frames: np.ndarray, muscles) -> list[tuple[int, int, str]]:
     """:func:`range_warnings` for the run's table: ``(index into frames, muscle index,
-    message)`` for each muscle with an axis point on a bone the coordinate moves."""
+    message)`` for each muscle the coordinate moves: one with an axis point, a path point or
+    a wrap surface (or its side point) on a bone the coordinate moves, or a path point that
+    moves with the coordinate or is active over a range of it."""
     warns = range_warnings(pose, frames)
     if not warns:
         return []
     moved = pose.skeleton.moved_bones()
     bi = pose.skeleton.bone_index
-    bones = [{bi[p.bone] for p in m.axis if p.bone in bi} for m in muscles]
-    return [(fi, j, msg) for fi, c, msg in warns for j, b in enumerate(bones) if b & moved[c]]
+    bones = [{bi[b] for b in muscle_bones(m) if b in bi} for m in muscles]
+    coords = [set() if m.path is None else m.path.coordinates for m in muscles]
+    return [(fi, j, msg) for fi, c, msg in warns for j, b in enumerate(bones) if b & moved[c] or c in coords[j]]
+
+
+def muscle_bones(muscle) -> set[str]:
+    """The names of the bones a muscle hangs on: its axis points', or its path points' and
+    wrap surfaces' (a ``path:`` muscle has no axis)."""
+    names = {p.bone for p in muscle.axis}
+    if muscle.path is not None:
+        names |= {p.bone for p in muscle.path.points}
+        for w in muscle.path.wraps:
+            names.add(w.bone)
+            if w.side is not None:
+                names.add(w.side[0])
+    return names
 
 
 def activation_problems(pose, muscle_names) -> tuple[list[str], list[str]]:

@@ -50,17 +50,46 @@ def _frame_key(frame, where: Mark, what: str, first: int, last: int) -> int:
 
 
 #: Motion files that are not poses → the command that turns them into one.
-MOTION_IMPORTS = {".bvh": "axdf import bvh FILE.bvh --out DIR",
+MOTION_IMPORTS = {".bvh": "axdf retarget FILE.bvh --map MAP.yaml --out DIR",
                   ".mot": "axdf import osim MODEL.osim --motion FILE --out DIR",
                   ".sto": "axdf import osim MODEL.osim --motion FILE --out DIR"}
+#: The retarget maps shipped with axdf (a clone's poses/maps/), for the hint of a BVH given as a pose.
+SHIPPED_MAPS = Path(__file__).resolve().parents[2] / "poses" / "maps"
+
+
+def motion_hint(path: Path) -> str:
+    """What to do with a motion file given where a pose belongs. A BVH is fitted onto the
+    muscles' skeleton by ``axdf retarget`` through a map (the shipped ones name the exact
+    command); ``axdf import bvh`` would make a pose of the BVH's own skeleton, whose bones no
+    muscle library uses."""
+    suffix = path.suffix.lower()
+    if suffix != ".bvh":
+        return f"import it first ({MOTION_IMPORTS[suffix]}) and pass the pose YAML it writes"
+    maps = sorted(SHIPPED_MAPS.glob("cmu_to_*.yaml")) if SHIPPED_MAPS.is_dir() else []
+    if not maps:
+        return ("fit it onto the muscles' skeleton first: axdf retarget FILE.bvh --onto SKELETON.yaml --map MAP.yaml "
+                "--out DIR (docs/FORMATS.md, 'Retarget map'), then pass DIR/NAME.yaml as the pose")
+    first = next((m for m in maps if m.stem == "cmu_to_gait2392"), maps[0])
+    onto = first.stem[len("cmu_to_"):]
+    name = f"{path.stem}_{onto}"
+    others = ", ".join(f"{_shown(m)} onto {m.stem[len('cmu_to_'):]}" for m in maps)
+    return (f"fit it onto the muscles' skeleton first, e.g. for {onto}'s muscles: axdf retarget {_shown(path)} "
+            f"--map {_shown(first)} --name {name} --out out/{name}, then --pose out/{name}/{name}.yaml "
+            f"(shipped maps for CMU-style takes: {others}; another take's joints need a map of their own, "
+            "docs/FORMATS.md 'Retarget map')")
+
+
+def _shown(p: Path) -> str:
+    """``p`` relative to the current folder where it lies under it, else absolute."""
+    rel = os.path.relpath(p.resolve())
+    return rel if not rel.startswith("..") else str(p.resolve())
 
 
 def load_pose(path: Path | str, policy: RefPolicy | None = None) -> Pose:
     policy = policy or RefPolicy()
     path = Path(path)
     if path.suffix.lower() in MOTION_IMPORTS:
-        raise InputError(Mark(str(path)), f"a {path.suffix} motion is not an axdf pose",
-                         f"import it first ({MOTION_IMPORTS[path.suffix.lower()]}) and pass the pose YAML it writes")
+        raise InputError(Mark(str(path)), f"a {path.suffix} motion is not an axdf pose", motion_hint(path))
     return pose_from_document(load_yaml(path), path, policy)
 
 

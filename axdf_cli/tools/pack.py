@@ -37,10 +37,12 @@ class PackOutputs:
 
 def build_pack(muscle_files: list[Path], skeleton_path: Path | str, policy: RefPolicy | None = None,
                rounds: int | None = None, progress=None, pose_path: Path | str | None = None,
-               frames: str | None = None) -> PackOutputs:
+               frames: str | None = None, on_phase=None) -> PackOutputs:
     """Pack every muscle of ``muscle_files`` (defined on the skeleton at ``skeleton_path``);
     with ``pose_path``, polished over that pose's ``frames`` as well (default: at most
-    tol.PACK_POSE_FRAMES of its frames, evenly spaced)."""
+    tol.PACK_POSE_FRAMES of its frames, evenly spaced). ``on_phase(text)`` is told as each
+    phase starts, ``progress(round, figures)`` as each round ends."""
+    on_phase = on_phase or (lambda text: None)
     skeleton_path = Path(skeleton_path)
     skel = load_skeleton(skeleton_path, policy)
     by_file, specs = [], []
@@ -50,12 +52,18 @@ def build_pack(muscle_files: list[Path], skeleton_path: Path | str, policy: RefP
     if not specs:
         raise InputError(None, "no muscles found", "give muscle YAML files")
     rest = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
+    on_phase(f"the models of {len(specs)} muscles")
     models = [MuscleModel(s, skel.bone_index, rest, skel) for s in specs]
     meshes = {i: load_bone_mesh(b.mesh, str(skeleton_path)) for i, b in enumerate(skel.bones) if b.mesh}
+    on_phase(f"the bones' distance fields ({len(meshes)} meshes) and the muscles' contact pairs")
     cm = contact.build(specs, models, rest, meshes, field_cache=fieldcache.cached)
     kw = {} if rounds is None else {"iterations": rounds}
+    if pose_path is not None:
+        on_phase(f"the frames of {Path(pose_path).name} to polish over")
     poses, pose_record, pose_inputs = (None, None, []) if pose_path is None else \
         _pose_frames(muscle_files, skel, Path(pose_path), frames, policy, [sp.name for sp in specs])
+    on_phase(f"{rounds or tol.PACK_ITERATIONS} rounds of territory, fit and growth, then at most "
+             f"{tol.PACK_POLISH_ROUNDS} of polish")
     res = pack.pack(specs, models, skel, rest, cm, progress=progress, poses=poses, threads=runtime.use_threads(), **kw)
 
     files: dict[str, bytes] = UniqueFiles()

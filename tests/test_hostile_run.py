@@ -1,0 +1,62 @@
+"""Hostile round on the command line's process (issue 37): a SIGINT or SIGTERM at any moment
+of a command, from its first instant to its teardown, ends it with exit 130 and "axdf:
+interrupted", no traceback and no partial output."""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from compare_helpers import make_run
+from conftest import REPO_ROOT
+
+
+def _held():
+    """The child starts with SIGINT and SIGTERM blocked, so a signal sent before the
+    interpreter itself is up (no program's handler can be in place then) waits for axdf's
+    entry point, which lets them through once its handlers are installed."""
+    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+
+
+def _exited(pid: int) -> bool:
+    """Whether the child has already ended (a zombie not yet waited for)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] == "Z"
+    except (OSError, IndexError):
+        return True
+
+
+def test_a_signal_at_any_moment_exits_130_with_no_partial_output(tmp_path):
+    golden = make_run(tmp_path / "golden", muscles=1, frames=2)
+    rng = np.random.default_rng(37)
+    delays = [0.0, *sorted(rng.uniform(0.0, 1.5, 7))]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO_ROOT), os.environ.get("PYTHONPATH", "")])}
+    landed = 0
+    for k, delay in enumerate(delays):
+        sig = (signal.SIGINT, signal.SIGTERM)[k % 2]
+        report = tmp_path / f"r{k}" / "report.json"
+        p = subprocess.Popen([sys.executable, "-m", "axdf_cli", "compare", golden, golden, "--report", report],
+                             cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                             preexec_fn=_held)
+        time.sleep(delay)
+        alive = not _exited(p.pid)
+        if alive:
+            p.send_signal(sig)
+        out, err = p.communicate(timeout=120)
+        case = (k, round(delay, 3), sig.name, p.returncode, err[-400:])
+        assert "Traceback" not in err and "Exception ignored" not in err, case
+        if alive:
+            landed += 1
+            assert p.returncode == 130 and err.rstrip().endswith("axdf: interrupted"), case
+        else:
+            assert p.returncode == 0, case
+        if report.exists():  # whole or absent, never a part
+            assert json.loads(report.read_text())["verdict"] == "same", case
+        assert not [f for f in tmp_path.rglob(".axdf-tmp-*")], case
+    assert landed >= len(delays) // 2  # most signals land while the command runs
