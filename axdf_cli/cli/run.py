@@ -137,7 +137,7 @@ def plan_from_args(args):
         settings = replace(settings, enabled=args.render)
     return pipeline.plan_run(job, muscle_args=args.muscles, pose_arg=args.pose, out_arg=args.out,
                            fmt_arg=args.format, frames_arg=args.frames, render=settings_from_args(settings, args),
-                           policy=policy, clamp_ranges=args.clamp_ranges,
+                           policy=policy, clamp_ranges=args.clamp_ranges or (job is not None and job.clamp_ranges),
                            stages={**job_switches(job), **stage_switches(args)},
                            mesh_files_arg=getattr(args, "mesh_files", None))
 

@@ -100,9 +100,11 @@ def range_warnings(pose, frames: np.ndarray) -> list[tuple[int, str, str]]:
 
 def muscle_range_warnings(pose, frames: np.ndarray, muscles) -> list[tuple[int, int, str]]:
     """:func:`range_warnings` for the run's table: ``(index into frames, muscle index,
-    message)`` for each muscle the coordinate moves: one with an axis point, a path point or
-    a wrap surface (or its side point) on a bone the coordinate moves, or a path point that
-    moves with the coordinate or is active over a range of it."""
+    message)`` for each muscle the coordinate changes: one with an axis point, a path point or
+    a wrap surface (or its side point) on a bone the coordinate moves while another of its
+    bones stays, or a path point that moves with the coordinate or is active over a range of
+    it. A coordinate that carries all of a muscle's bones (the root's place and heading in the
+    room) moves it rigidly and is not its range to check."""
     warns = range_warnings(pose, frames)
     if not warns:
         return []
@@ -110,7 +112,8 @@ def muscle_range_warnings(pose, frames: np.ndarray, muscles) -> list[tuple[int, 
     bi = pose.skeleton.bone_index
     bones = [{bi[b] for b in muscle_bones(m) if b in bi} for m in muscles]
     coords = [set() if m.path is None else m.path.coordinates for m in muscles]
-    return [(fi, j, msg) for fi, c, msg in warns for j, b in enumerate(bones) if b & moved[c] or c in coords[j]]
+    return [(fi, j, msg) for fi, c, msg in warns for j, b in enumerate(bones)
+            if (b & moved[c] and not b <= moved[c]) or c in coords[j]]
 
 
 def muscle_bones(muscle) -> set[str]:
