@@ -430,6 +430,8 @@ class Reader:
             raise InputError(m.mark, f"mesh {name!r} scale has a zero", "non-zero scale factors")
         refpos = _floats(m, "refpos", a, 3, np.zeros(3))
         refquat = _floats(m, "refquat", a, 4, np.array([1.0, 0, 0, 0]))
+        if np.linalg.norm(refquat) < 1e-12:
+            raise InputError(m.mark, f"mesh {name!r} refquat is zero", "a non-zero quaternion (w x y z)")
         return MeshAsset(name, base / f, scale, refpos, refquat / np.linalg.norm(refquat), m.mark)
 
     def _children(self, node: Node, body: str | None, fpos: np.ndarray, fquat: np.ndarray, cls: str) -> None:

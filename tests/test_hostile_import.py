@@ -1,0 +1,211 @@
+"""Issue 37's hostile round on the importers (``import mjcf``, ``import osim``, the motion
+readers): each test is a small hand-written model or file that once gave exit 70, a hang, a
+huge allocation, an output ``axdf validate`` refuses, or a refusal of what MuJoCo loads.
+
+Bad input: exit 2, ``FILE:LINE:COL`` (or ``FILE``) naming the value and what is allowed, and
+nothing written. Models are written here (no shipped data needed); the CLI runs in process.
+"""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from conftest import main_or_hang, run_main
+
+# ----------------------------------------------------------------------------- fixtures
+
+MJCF = """<mujoco>
+  <worldbody>
+    <body name="a" pos="0 0 1">
+      <joint name="j" type="hinge" axis="0 1 0" range="-30 30"/>
+      <site name="s1" pos="0 0 0.1"/><site name="s2" pos="0.1 0 0"/><site name="s3" pos="0.1 0 0"/>
+      {geom}
+      <body name="b" pos="0 0 -0.3">
+        <joint name="k" axis="0 1 0" range="-30 30"/><site name="s4" pos="0 0 -0.1"/>
+      </body>
+    </body>
+  </worldbody>
+  {asset}
+  <tendon><spatial name="t">{sites}</spatial></tendon>
+  <actuator><muscle name="m" tendon="t" {muscle}/></actuator>
+</mujoco>
+"""
+
+
+def mjcf(sites='<site site="s1"/><site site="s4"/>', muscle="", geom="", asset="") -> str:
+    return MJCF.format(sites=sites, muscle=muscle, geom=geom, asset=asset)
+
+
+OSIM = """<?xml version="1.0" encoding="UTF-8" ?>
+<OpenSimDocument Version="40000">
+<Model name="tiny">
+<Ground name="ground"/>
+<BodySet name="bodyset"><objects>
+<Body name="upper"><attached_geometry>{geom}</attached_geometry><mass>1</mass></Body>
+<Body name="lower"><mass>1</mass></Body>
+</objects></BodySet>
+<JointSet name="jointset"><objects>
+<WeldJoint name="base">
+<socket_parent_frame>ground_offset</socket_parent_frame><socket_child_frame>upper_offset</socket_child_frame>
+<frames>
+<PhysicalOffsetFrame name="ground_offset"><socket_parent>/ground</socket_parent><translation>0 1 0</translation><orientation>0 0 0</orientation></PhysicalOffsetFrame>
+<PhysicalOffsetFrame name="upper_offset"><socket_parent>/bodyset/upper</socket_parent><translation>0 0 0</translation><orientation>0 0 0</orientation></PhysicalOffsetFrame>
+</frames>
+</WeldJoint>
+<PinJoint name="knee">
+<socket_parent_frame>upper_knee</socket_parent_frame><socket_child_frame>lower_knee</socket_child_frame>
+<coordinates><Coordinate name="knee_angle"><default_value>0</default_value><range>-2 0</range></Coordinate></coordinates>
+<frames>
+<PhysicalOffsetFrame name="upper_knee"><socket_parent>/bodyset/upper</socket_parent><translation>0 -0.4 0</translation><orientation>0 0 0</orientation></PhysicalOffsetFrame>
+<PhysicalOffsetFrame name="lower_knee"><socket_parent>/bodyset/lower</socket_parent><translation>0 0 0</translation><orientation>0 0 0</orientation></PhysicalOffsetFrame>
+</frames>
+</PinJoint>
+</objects></JointSet>
+<ForceSet name="forceset"><objects>{forces}</objects></ForceSet>
+</Model>
+</OpenSimDocument>
+"""
+OSIM_MUSCLE = """<Thelen2003Muscle name="{name}"><GeometryPath name="geometrypath"><PathPointSet><objects>
+<PathPoint name="p1"><socket_parent_frame>/bodyset/upper</socket_parent_frame><location>{p1}</location></PathPoint>
+<PathPoint name="p2"><socket_parent_frame>/bodyset/{b2}</socket_parent_frame><location>{p2}</location></PathPoint>
+</objects></PathPointSet></GeometryPath>
+<max_isometric_force>500</max_isometric_force><optimal_fiber_length>0.1</optimal_fiber_length>
+<tendon_slack_length>0.2</tendon_slack_length></Thelen2003Muscle>"""
+OSIM_FUNCTION_PATH = """<Thelen2003Muscle name="fb"><FunctionBasedPath name="path"/>
+<max_isometric_force>500</max_isometric_force><optimal_fiber_length>0.1</optimal_fiber_length>
+<tendon_slack_length>0.2</tendon_slack_length></Thelen2003Muscle>"""
+OSIM_MESH = """<Mesh name="upper_geom"><scale_factors>{scale}</scale_factors><mesh_file>bone.vtp</mesh_file></Mesh>"""
+VTP = """<?xml version="1.0"?>
+<VTKFile type="PolyData" version="0.1">
+<PolyData><Piece NumberOfPoints="3" NumberOfPolys="1">
+<Points><DataArray type="Float32" NumberOfComponents="3" format="ascii">{points}</DataArray></Points>
+<Polys><DataArray type="Int32" Name="connectivity" format="ascii">0 1 2</DataArray>
+<DataArray type="Int32" Name="offsets" format="ascii">3</DataArray></Polys>
+</Piece></PolyData></VTKFile>
+"""
+GOOD_POINTS = "0 0 0 0.1 0 0 0 0.1 0"
+
+
+def osim_muscle(name="m", p1="0 -0.1 0.02", b2="lower", p2="0 -0.1 0.02") -> str:
+    return OSIM_MUSCLE.format(name=name, p1=p1, b2=b2, p2=p2)
+
+
+def osim(forces: str | None = None, geom: str = "") -> str:
+    return OSIM.format(forces=osim_muscle() if forces is None else forces, geom=geom)
+
+
+def write(folder: Path, files: dict) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    for name, data in files.items():
+        (folder / name).write_bytes(data if isinstance(data, bytes) else data.encode())
+    return folder
+
+
+def imported(tmp_path, capsys, kind: str, files: dict, *extra) -> tuple[int, str, Path]:
+    """``axdf import KIND`` of the first file of ``files`` (written in tmp/in): (exit, stderr, out)."""
+    d = write(tmp_path / "in", files)
+    out = tmp_path / "out"
+    rc, _, err = run_main(["import", kind, d / next(iter(files)), "--out", out, "-q", *extra], capsys)
+    assert "Traceback" not in err and "internal error" not in err, err
+    return rc, err, out
+
+
+def refused(tmp_path, capsys, kind: str, files: dict, *extra) -> str:
+    rc, err, out = imported(tmp_path, capsys, kind, files, *extra)
+    assert rc == 2, err
+    assert not out.exists(), "nothing is written on bad input"
+    return err
+
+
+def validates(capsys, out: Path) -> None:
+    """Every file the import wrote passes ``axdf validate``."""
+    files = sorted(str(p) for p in out.rglob("*") if p.suffix in (".yaml", ".ply"))
+    rc, o, err = run_main(["validate", *files], capsys)
+    assert rc == 0, o + err
+
+
+def position(err: str, name: str) -> tuple[int, int]:
+    m = re.search(re.escape(name) + r":(\d+):(\d+): ", err)
+    assert m, err
+    return int(m[1]), int(m[2])
+
+
+def line_of(text: str, needle: str) -> int:
+    return text[:text.index(needle)].count("\n") + 1
+
+
+# ----------------------------------------------------------------------------- exit 70 on small models
+
+
+@pytest.mark.parametrize("sites", ['<site site="s1"/><site site="s1"/>', '<site site="s2"/><site site="s3"/>'],
+                         ids=["one-site-twice", "coincident-sites"])
+def test_a_zero_length_tendon_is_skipped_with_a_warning_not_exit_70(tmp_path, capsys, sites):
+    """A tendon through one site twice, or through two sites at one place: ZeroDivisionError
+    (exit 70). The muscle cannot hold a belly: it is listed as not imported, with a warning at
+    its actuator, and the rest imports."""
+    text = mjcf(sites=sites)
+    rc, err, out = imported(tmp_path, capsys, "mjcf", {"m.xml": text})
+    assert rc == 0, err
+    assert position(err, "m.xml") == (line_of(text, "<muscle"), 13) and "muscle 'm' skipped" in err, err
+    assert not (out / "muscles").exists()
+    validates(capsys, out)
+
+
+def test_coincident_osim_path_points_are_skipped_with_a_warning(tmp_path, capsys):
+    text = osim(osim_muscle(b2="upper"))
+    rc, err, out = imported(tmp_path, capsys, "osim", {"m.osim": text})
+    assert rc == 0, err
+    assert position(err, "m.osim")[0] == line_of(text, "<Thelen2003Muscle") and "muscle 'm' skipped" in err, err
+    validates(capsys, out)
+
+
+def test_a_negative_muscle_scale_with_the_default_force_is_refused_at_the_actuator(tmp_path, capsys):
+    """`<muscle scale="-200">` (force -1, MuJoCo's default): a math domain error (exit 70)."""
+    text = mjcf(muscle='scale="-200"')
+    err = refused(tmp_path, capsys, "mjcf", {"m.xml": text})
+    assert position(err, "m.xml") == (line_of(text, "<muscle"), 13), err
+    assert "scale -200" in err and "a positive force" in err, err
+
+
+@pytest.mark.parametrize("forces", ["", OSIM_FUNCTION_PATH], ids=["empty-forceset", "function-based-path"])
+def test_an_osim_model_with_no_path_muscle_imports_its_skeleton_with_a_warning(tmp_path, capsys, forces):
+    """A user importing a skeleton-only model wants the skeleton: it is written, and the warning
+    says that no muscle was."""
+    rc, err, out = imported(tmp_path, capsys, "osim", {"m.osim": osim(forces)})
+    assert rc == 0, err
+    assert "no muscle with a path to import: only the skeleton is written" in err, err
+    validates(capsys, out)
+
+
+def _chain(n: int, poly: str) -> str:
+    bodies = "".join(f'<body name="b{i}" pos="0 0 -0.1"><joint name="j{i}" axis="0 1 0" range="-30 30"/>'
+                     for i in range(n + 1)) + "</body>" * (n + 1)
+    eq = "\n".join(f'  <joint joint1="j{i + 1}" joint2="j{i}" polycoef="{poly}"/>' for i in range(n))
+    return f"<mujoco>\n<worldbody>{bodies}</worldbody>\n<equality>\n{eq}\n</equality>\n</mujoco>\n"
+
+
+@pytest.mark.parametrize("n, poly, words", [
+    (10, "0 1 1 1 1", "coefficient of"),  # overflowed to NaN (exit 70)
+    (12, "0 0.5 0 0 0.1", "degree 256"),  # the degree grows as 4^n: hung
+])
+def test_a_long_chain_of_couplings_is_refused_at_the_coupling_and_never_hangs(tmp_path, capsys, n, poly, words):
+    from axdf_cli import tolerances as tol
+
+    text = _chain(n, poly)
+    d = write(tmp_path / "in", {"m.xml": text})
+    rc = main_or_hang(["import", "mjcf", d / "m.xml", "--out", tmp_path / "out", "-q"], timeout=120)
+    err = capsys.readouterr().err
+    assert rc == 2 and not (tmp_path / "out").exists(), err
+    line, _ = position(err, "m.xml")
+    assert text.splitlines()[line - 1].lstrip().startswith("<joint joint1="), err
+    assert words in err and (f"at most {tol.COUPLING_MAX_DEGREE}" in err or "within" in err), err
+
+
+def test_a_long_chain_of_linear_couplings_still_imports(tmp_path, capsys):
+    """The bound is on the composed degree: 20 linear links compose to a line."""
+    rc, err, out = imported(tmp_path, capsys, "mjcf", {"m.xml": _chain(20, "0.01 0.9 0 0 0")})
+    assert rc == 0, err
+    validates(capsys, out)
