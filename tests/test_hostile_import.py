@@ -122,7 +122,7 @@ def refused(tmp_path, capsys, kind: str, files: dict, *extra) -> str:
 
 def validates(capsys, out: Path) -> None:
     """Every file the import wrote passes ``axdf validate``."""
-    files = sorted(str(p) for p in out.rglob("*") if p.suffix in (".yaml", ".ply"))
+    files = sorted(str(p) for p in out.rglob("*") if p.suffix == ".yaml")  # a skeleton checks its meshes
     rc, o, err = run_main(["validate", *files], capsys)
     assert rc == 0, o + err
 
@@ -209,3 +209,97 @@ def test_a_long_chain_of_linear_couplings_still_imports(tmp_path, capsys):
     rc, err, out = imported(tmp_path, capsys, "mjcf", {"m.xml": _chain(20, "0.01 0.9 0 0 0")})
     assert rc == 0, err
     validates(capsys, out)
+
+
+# ----------------------------------------------------------------------------- bone meshes of NaN or inf
+
+OBJ = "v 0 0 0\nv {x} 0 0\nv 0 0.1 0\nf 1 2 3\n"
+
+
+@pytest.mark.parametrize("mesh_attrs, x, words", [
+    ('refquat="0 0 0 0"', "0.1", "refquat is zero"),
+    ("", "1e300", "vertex 1 has x = 1e+300"),  # inf once written as float32
+], ids=["zero-refquat", "obj-vertex-1e300"])
+def test_mjcf_bone_meshes_that_validate_refuses_are_refused_at_the_mesh(tmp_path, capsys, mesh_attrs, x, words):
+    """Exit 0 after writing a PLY of NaN (refquat 0 0 0 0) or inf (a vertex of 1e300)."""
+    text = mjcf(geom='<geom type="mesh" mesh="bone"/>',
+                asset=f'<asset><mesh name="bone" file="bone.obj" {mesh_attrs}/></asset>')
+    err = refused(tmp_path, capsys, "mjcf", {"m.xml": text, "bone.obj": OBJ.format(x=x)})
+    assert position(err, "m.xml") == (line_of(text, "<mesh "), 10), err
+    assert words in err and "'bone'" in err, err
+
+
+def test_an_osim_vtp_point_of_nan_is_refused_at_the_vtp_line(tmp_path, capsys):
+    vtp = VTP.format(points="0 0 0 0.1 0 0 nan 0.1 0")
+    err = refused(tmp_path, capsys, "osim", {"m.osim": osim(geom=OSIM_MESH.format(scale="1 1 1")), "bone.vtp": vtp})
+    assert position(err, "bone.vtp")[0] == line_of(vtp, "<DataArray"), err
+    assert "point 2 of Points has x = nan" in err and "finite" in err, err
+
+
+def test_osim_scale_factors_of_1e300_are_refused_at_the_mesh(tmp_path, capsys):
+    text = osim(geom=OSIM_MESH.format(scale="1e300 1 1"))
+    err = refused(tmp_path, capsys, "osim", {"m.osim": text, "bone.vtp": VTP.format(points=GOOD_POINTS)})
+    assert position(err, "m.osim")[0] == line_of(text, "<Mesh "), err
+    assert "<scale_factors> 1e+300 1 1" in err and "within ±1e+09 m" in err, err
+
+
+def test_good_bone_meshes_still_import_and_validate(tmp_path, capsys):
+    rc, err, out = imported(tmp_path, capsys, "osim", {"m.osim": osim(geom=OSIM_MESH.format(scale="2 2 2")),
+                                                       "bone.vtp": VTP.format(points=GOOD_POINTS)})
+    assert rc == 0, err
+    validates(capsys, out)
+
+
+# ----------------------------------------------------------------------------- npz motions that claim too much
+
+
+def _npz_claiming(member: str, dtype: np.dtype, shape: tuple, payload: bytes = b"") -> bytes:
+    """An .npz whose member's header claims ``shape`` of ``dtype`` and holds ``payload`` (deflated):
+    what a small file may claim, read by nothing that trusts it."""
+    import io
+    import zipfile
+
+    head = io.BytesIO()
+    np.lib.format.write_array_header_2_0(head, {"descr": np.lib.format.dtype_to_descr(np.dtype(dtype)),
+                                                "fortran_order": False, "shape": shape})
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
+        z.writestr(f"{member}.npy", head.getvalue() + payload)
+    return buf.getvalue()
+
+
+def test_a_qpos_npz_is_refused_by_its_header_before_its_data_is_read(tmp_path, capsys):
+    """A 3.1 MB npz whose qpos expanded to 3.3 GB was read whole before its shape was checked.
+    Here the header claims 10^9 frames with no data behind it: refused by shape, from the header."""
+    rng = np.random.default_rng(37)
+    payload = rng.bytes(64)
+    d = write(tmp_path / "in", {"m.xml": mjcf(), "q.npz": _npz_claiming("qpos", np.float64, (10 ** 9, 2), payload)})
+    rc, _, err = run_main(["import", "mjcf", d / "m.xml", "--motion", d / "q.npz", "--out", tmp_path / "out", "-q"],
+                          capsys)
+    assert rc == 2 and "q.npz: qpos has 1000000000 frames" in err, err
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_joints_npz_with_huge_name_strings_is_refused_from_its_header(tmp_path, capsys):
+    """`names` of dtype <U1000000 took 4.1 GB and exited 0."""
+    from axdf_cli.errors import InputError
+    from axdf_cli.importers.mocap import read_npz_joints
+
+    import io
+    import zipfile
+
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
+        for key, arr in (("joints", np.zeros((2, 1000, 3))), ):
+            b = io.BytesIO()
+            np.lib.format.write_array(b, arr)
+            z.writestr(f"{key}.npy", b.getvalue())
+    # names: 1000 strings claimed 1,000,000 characters wide (4 GB once read), almost no bytes stored
+    head = _npz_claiming("names", np.dtype("<U1000000"), (1000,))
+    with zipfile.ZipFile(io.BytesIO(head)) as src, zipfile.ZipFile(buf, "a", zipfile.ZIP_DEFLATED) as z:
+        z.writestr("names.npy", src.read("names.npy"))
+    p = tmp_path / "j.npz"
+    p.write_bytes(buf.getvalue())
+    with pytest.raises(InputError) as e:
+        read_npz_joints(p)
+    assert "j.npz: names" in str(e.value) and "<U1000000" in str(e.value) and "200 characters" in str(e.value)

@@ -62,7 +62,7 @@ def read_vtp(path: Path | str) -> tuple[np.ndarray, np.ndarray]:
         bad = ~np.isfinite(pts) | (np.abs(pts) > tol.MAX_ABS_NUMBER)
         if bad.any():
             i, k = (int(x) for x in np.argwhere(bad)[0])
-            raise InputError(pts_node.mark, f"point {i} of Points has {'xyz'[k]} = {pts[i, k]!r}",
+            raise InputError(pts_node.mark, f"point {i} of Points has {'xyz'[k]} = {float(pts[i, k])!r}",
                              f"finite coordinates within ±{tol.MAX_ABS_NUMBER:g}")
         local = []
         for cell in _cells(piece.find("Polys"), piece, "Polys"):
