@@ -303,3 +303,35 @@ def test_a_joints_npz_with_huge_name_strings_is_refused_from_its_header(tmp_path
     with pytest.raises(InputError) as e:
         read_npz_joints(p)
     assert "j.npz: names" in str(e.value) and "<U1000000" in str(e.value) and "200 characters" in str(e.value)
+
+
+# ----------------------------------------------------------------------------- include diamonds
+
+
+def test_an_include_diamond_parses_each_file_once(tmp_path, capsys, monkeypatch):
+    """5 levels of files each including the next 10 times took 51 s: every path to a file
+    parsed it afresh (111,111 parses). Each file is parsed once; cycles are still refused at
+    the include that closes them."""
+    from axdf_cli.importers import mjcf as reader
+
+    files = {"m.xml": '<mujoco>\n  <include file="l1.xml"/>\n  <worldbody><body name="a"><joint name="j"/>'
+                      "</body></worldbody>\n</mujoco>\n"}
+    for k in range(1, 5):
+        files[f"l{k}.xml"] = "<mujocoinclude>\n" + f'  <include file="l{k + 1}.xml"/>\n' * 10 + "</mujocoinclude>\n"
+    files["l5.xml"] = "<mujocoinclude>\n  <compiler angle=\"degree\"/>\n</mujocoinclude>\n"
+    parsed = []
+    real = reader.parse_xml
+    monkeypatch.setattr(reader, "parse_xml", lambda path: parsed.append(Path(path).name) or real(path))
+    rc, err, out = imported(tmp_path, capsys, "mjcf", files)
+    assert rc == 0, err
+    assert sorted(parsed) == sorted(files), parsed[:20]
+    validates(capsys, out)
+
+
+def test_a_cycle_below_a_diamond_is_still_refused_where_it_closes(tmp_path, capsys):
+    files = {"m.xml": '<mujoco>\n  <include file="a.xml"/>\n  <include file="b.xml"/>\n</mujoco>\n',
+             "a.xml": '<mujocoinclude>\n  <include file="c.xml"/>\n</mujocoinclude>\n',
+             "b.xml": '<mujocoinclude>\n  <include file="c.xml"/>\n</mujocoinclude>\n',
+             "c.xml": '<mujocoinclude>\n\n  <include file="a.xml"/>\n</mujocoinclude>\n'}
+    err = refused(tmp_path, capsys, "mjcf", files)
+    assert "c.xml:3:3: 'a.xml' includes itself" in err, err

@@ -232,6 +232,8 @@ class Reader:
         self.defaults: dict[str, dict[str, dict]] = {}  # class -> tag -> attributes (inherited)
         self.ignored: list[dict] = []
         self.includes: list[Path] = []
+        self._parsed: dict[Path, tuple[Node, frozenset]] = {}  # see _expand
+        self._reached: list[Path] = []  # the files expansions have reached, in order
 
     # ------------------------------------------------------------------ documents
     def load(self) -> Node:
@@ -242,7 +244,13 @@ class Reader:
         return root
 
     def _expand(self, node: Node, stack: list[Path]) -> None:
-        """Replace every <include file> below ``node`` by the included file's root children."""
+        """Replace every <include file> below ``node`` by the included file's root children.
+
+        Each file is parsed and expanded once (``self._parsed``: its resolved path → its
+        expanded root and every file its expansion reaches): a diamond of includes (files
+        included by several others) costs one parse per file, not one per path to it. A cached
+        file whose expansion reaches a file being expanded now is parsed afresh, so the cycle
+        is refused at the include that closes it, as without the cache."""
         out = []
         for c in node.children:
             if c.tag != "include":
@@ -257,12 +265,22 @@ class Reader:
             if target is None:
                 raise InputError(c.mark, f"included file {fname!r} not found",
                                  "a path relative to the model's folder")
-            if target.resolve() in stack:
+            key = target.resolve()
+            if key in stack:
                 raise InputError(c.mark, f"{fname!r} includes itself", "includes without a cycle")
-            sub = parse_xml(target)
-            self.includes.append(target)
-            self._expand(sub, stack + [target.resolve()])
-            out.extend(sub.children)
+            cached = self._parsed.get(key)
+            if cached is None or not cached[1].isdisjoint(stack):
+                sub = parse_xml(target)
+                if cached is None:
+                    self.includes.append(target)
+                before = len(self._reached)
+                self._reached.append(key)
+                self._expand(sub, stack + [key])
+                cached = (sub, frozenset(self._reached[before:]))
+                self._parsed[key] = cached
+            else:
+                self._reached.extend(cached[1])
+            out.extend(cached[0].children)
         node.children = out
 
     # ------------------------------------------------------------------ defaults
