@@ -335,3 +335,85 @@ def test_a_cycle_below_a_diamond_is_still_refused_where_it_closes(tmp_path, caps
              "c.xml": '<mujocoinclude>\n\n  <include file="a.xml"/>\n</mujocoinclude>\n'}
     err = refused(tmp_path, capsys, "mjcf", files)
     assert "c.xml:3:3: 'a.xml' includes itself" in err, err
+
+
+# ----------------------------------------------------------------------------- what MuJoCo loads
+
+
+#: MyoSuite's leg/myolegs.xml in its repository (MyoHub/myo_sim) includes the torso's and the
+#: legs' asset files, each with a top-level <default> holding nested classes: MuJoCo reads
+#: every top-level <default> as class main (xml_native_reader.cc, mjXReader::Default).
+MYOLEGS = {
+    "leg/myolegs.xml": """<mujoco model="legs">
+  <include file="../torso/assets/torso_assets.xml"/>
+  <include file="../leg/assets/legs_assets.xml"/>
+  <compiler angle="radian"/>
+  <worldbody>
+    <body name="pelvis" pos="0 0 1" childclass="torso">
+      <site name="s0" pos="0 0 0"/>
+      <body name="femur" pos="0 0 -0.1" childclass="legs">
+        <joint name="hip"/><geom type="sphere" size="0.05"/>
+        <site name="s1" pos="0 0 -0.3"/>
+      </body>
+    </body>
+  </worldbody>
+  <tendon><spatial name="t"><site site="s0"/><site site="s1"/></spatial></tendon>
+  <actuator><general name="m" tendon="t" class="leg_muscle" lengthrange="0.2 0.4"/></actuator>
+</mujoco>
+""",
+    "torso/assets/torso_assets.xml": """<mujocoinclude>
+  <default>
+    <default class="torso"><geom rgba="1 1 1 1"/></default>
+  </default>
+</mujocoinclude>
+""",
+    "leg/assets/legs_assets.xml": """<mujocoinclude>
+  <default>
+    <joint axis="1 0 0"/>
+    <default class="legs">
+      <joint limited="true" range="-1 1"/>
+      <default class="leg_muscle">
+        <general gaintype="muscle" biastype="muscle" dyntype="muscle" gainprm="0.75 1.05 300 200 0.5 1.6 1.5 1.3 1.2 0"
+                 biasprm="0.75 1.05 300 200 0.5 1.6 1.5 1.3 1.2 0"/>
+      </default>
+    </default>
+  </default>
+</mujocoinclude>
+""",
+}
+
+
+def test_top_level_defaults_in_several_included_files_are_all_class_main(tmp_path, capsys):
+    """"default class 'main' defined twice" refused MyoSuite's leg/myolegs.xml, which MuJoCo loads."""
+    import yaml
+
+    d = tmp_path / "in"
+    for name, text in MYOLEGS.items():
+        (d / name).parent.mkdir(parents=True, exist_ok=True)
+        (d / name).write_text(text)
+    out = tmp_path / "out"
+    rc, _, err = run_main(["import", "mjcf", d / "leg/myolegs.xml", "--out", out, "-q", "--name", "legs"], capsys)
+    assert rc == 0, err
+    skel = yaml.safe_load((out / "skeletons" / "legs.yaml").read_text())
+    hip = next(b for b in skel["bones"] if b["name"] == "femur")["dofs"][0]
+    assert hip["axis"] == [1.0, 0.0, 0.0], hip  # main's joint axis, from the second file's <default>
+    assert skel["coordinates"]["hip"]["range"] == pytest.approx([-57.29577951, 57.29577951]), skel["coordinates"]
+    assert (out / "muscles" / "m.yaml").is_file()
+    validates(capsys, out)
+    try:
+        import mujoco
+    except ImportError:
+        return
+    mujoco.MjModel.from_xml_path(str(d / "leg/myolegs.xml"))  # MuJoCo loads the same files
+
+
+def test_a_nested_default_class_defined_twice_is_still_refused(tmp_path, capsys):
+    files = dict(MYOLEGS)
+    files["torso/assets/torso_assets.xml"] = files["torso/assets/torso_assets.xml"].replace('class="torso"',
+                                                                                            'class="legs"')
+    d = tmp_path / "in"
+    for name, text in files.items():
+        (d / name).parent.mkdir(parents=True, exist_ok=True)
+        (d / name).write_text(text)
+    rc, _, err = run_main(["import", "mjcf", d / "leg/myolegs.xml", "--out", tmp_path / "out", "-q"], capsys)
+    assert rc == 2 and "legs_assets.xml:4:5: default class 'legs' defined twice" in err, err

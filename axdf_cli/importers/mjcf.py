@@ -285,12 +285,22 @@ class Reader:
 
     # ------------------------------------------------------------------ defaults
     def _read_defaults(self, node: Node, parent: str | None) -> None:
-        cls = node.attrib.get("class", "main" if parent is None else None)
-        if cls is None:
+        """One <default> and its nested classes, as MuJoCo reads them (xml_native_reader.cc,
+        ``mjXReader::Default``): every top-level <default> of the model, in each file an
+        <include> brings, is class ``main`` (a ``class`` other than main is refused) and adds
+        its attributes to it, later ones over earlier ones; a nested class is a copy of its
+        parent as it stands then, with its own attributes over it, and its name must be new."""
+        top = parent is None
+        cls = node.attrib.get("class", "main" if top else None)
+        if top and cls != "main":
+            raise InputError(node.mark, f"top-level default class {cls!r}", "main (MuJoCo's top-level class "
+                             "cannot be renamed)")
+        if not cls:
             raise InputError(node.mark, "a nested <default> without class", "<default class=\"NAME\">")
-        if cls in self.defaults:
+        if not top and cls in self.defaults:
             raise InputError(node.mark, f"default class {cls!r} defined twice", "unique class names")
-        inherited = {t: dict(a) for t, a in self.defaults.get(parent, {}).items()} if parent else {}
+        source = "main" if top else parent
+        inherited = {t: dict(a) for t, a in self.defaults.get(source, {}).items()}
         for c in node.children:
             if c.tag == "default":
                 continue
