@@ -417,3 +417,31 @@ def test_a_nested_default_class_defined_twice_is_still_refused(tmp_path, capsys)
         (d / name).write_text(text)
     rc, _, err = run_main(["import", "mjcf", d / "leg/myolegs.xml", "--out", tmp_path / "out", "-q"], capsys)
     assert rc == 2 and "legs_assets.xml:4:5: default class 'legs' defined twice" in err, err
+
+
+# ----------------------------------------------------------------------------- positions and sizes
+
+
+def test_a_muscle_that_cannot_be_sized_is_refused_at_its_actuator_not_at_generated_text(tmp_path, capsys):
+    """A force of 1e-300 N: the error named '<m>:8:23' (the generated muscle text) or was exit 70."""
+    text = mjcf(muscle='force="1e-300"')
+    err = refused(tmp_path, capsys, "mjcf", {"m.xml": text})
+    assert position(err, "m.xml") == (line_of(text, "<muscle"), 13) and "muscle 'm'" in err, err
+    assert "<m>" not in err, err
+
+
+def test_an_absurdly_large_imported_muscle_is_warned_at_its_position(tmp_path, capsys):
+    """A site 700 km away gave a 711 km belly without a word."""
+    from axdf_cli import tolerances as tol
+
+    text = mjcf(muscle='force="1e8" lengthrange="1 400000"').replace('name="s4" pos="0 0 -0.1"',
+                                                                     'name="s4" pos="0 0 -700000"')
+    rc, err, out = imported(tmp_path, capsys, "mjcf", {"m.xml": text})
+    assert rc == 0, err
+    assert position(err, "m.xml") == (line_of(text, "<muscle"), 13), err
+    assert "beyond any human or animal muscle" in err and f"paths up to {tol.IMPORT_PLAUSIBLE_PATH:g} m" in err, err
+
+
+def test_an_ordinary_muscle_is_not_warned_about_its_size(tmp_path, capsys):
+    rc, err, out = imported(tmp_path, capsys, "mjcf", {"m.xml": mjcf(muscle='force="500" lengthrange="0.2 0.4"')})
+    assert rc == 0 and "beyond any" not in err, err

@@ -458,7 +458,10 @@ def muscle_docs(model: ImportedModel, skel: Skeleton, world: np.ndarray, palette
     out = []
     for m in model.muscles:
         try:
-            sized = _sized_muscle(m, skel, world, palette, probe, rules)
+            with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # a non-finite result is refused below
+                sized = _sized_muscle(m, skel, world, palette, probe, rules)
+            if sized is not None and not all(math.isfinite(v) for v in sized[4].values() if isinstance(v, float)):
+                raise ValueError("a size is not finite")
         except InputError as e:  # a generated document: name the muscle in its model, not "<name>"
             raise InputError(m.mark, f"muscle {m.name!r}: the belly sized from the model's numbers would not pass "
                              f"axdf validate ({e})", "a path and Hill numbers of a real muscle") from None
