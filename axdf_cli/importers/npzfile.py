@@ -38,7 +38,8 @@ def open_archive(data: bytes, where: Mark, allowed: str) -> zipfile.ZipFile:
 
 
 def header(archive: zipfile.ZipFile, info: zipfile.ZipInfo, where: Mark | str, key: str) -> Header:
-    """The member's header, read without its data; an unreadable one is an InputError at ``where``."""
+    """The member's header, read without its data; an unreadable one is an InputError at
+    ``where`` (messages begin with the key unless ``where`` already ends with it)."""
     fmt = np.lib.format
     try:
         with archive.open(info) as f:
@@ -46,7 +47,7 @@ def header(archive: zipfile.ZipFile, info: zipfile.ZipInfo, where: Mark | str, k
             read = fmt.read_array_header_1_0 if version == (1, 0) else fmt.read_array_header_2_0
             shape, _, dtype = read(f)
     except (ValueError, OSError, zipfile.BadZipFile, EOFError, RuntimeError) as e:
-        raise InputError(where, f"{key} cannot be read ({e})", "an array written by np.savez") from None
+        raise InputError(where, f"{_said(where, key)}cannot be read ({e})", "an array written by np.savez") from None
     return Header(key, tuple(int(s) for s in shape), dtype, info)
 
 
@@ -54,15 +55,20 @@ def read(archive: zipfile.ZipFile, h: Header, where: Mark | str) -> np.ndarray:
     """The member's data, once its header is known to fit: objects (pickles) and arrays over
     NPZ_MAX_ARRAY_BYTES are refused first."""
     if h.dtype.hasobject:
-        raise InputError(where, f"{h.key} holds Python objects (pickled)", "numbers or fixed-width strings")
+        raise InputError(where, f"{_said(where, h.key)}holds Python objects (pickled)", "numbers or fixed-width strings")
     if h.nbytes > tol.NPZ_MAX_ARRAY_BYTES:
-        raise InputError(where, f"{h.key} has shape {h.shape} of {h.dtype} ({h.nbytes} bytes once read)",
+        raise InputError(where, f"{_said(where, h.key)}has shape {h.shape} of {h.dtype} ({h.nbytes} bytes once read)",
                          f"arrays of at most {tol.NPZ_MAX_ARRAY_BYTES} bytes")
     try:
         with archive.open(h.info) as f:
             return np.lib.format.read_array(f, allow_pickle=False)
     except (ValueError, OSError, zipfile.BadZipFile, EOFError, RuntimeError) as e:
-        raise InputError(where, f"{h.key} cannot be read ({e})", "an array written by np.savez") from None
+        raise InputError(where, f"{_said(where, h.key)}cannot be read ({e})", "an array written by np.savez") from None
+
+
+def _said(where: Mark | str, key: str) -> str:
+    """``KEY `` to begin a message with, or nothing when ``where`` names the key already."""
+    return "" if isinstance(where, str) and where.endswith(f": {key}") else f"{key} "
 
 
 def members(archive: zipfile.ZipFile) -> dict[str, zipfile.ZipInfo]:
