@@ -319,3 +319,23 @@ PACK_RAY_MIN = 0.15
 # of a two-segment axis lengthens it by sqrt(1 + 4 * 0.25^2) - 1 = 12%.
 JIGGLE_BOUND = 0.25
 JIGGLE_BOUND_KNEE = 0.75
+
+# ---------------------------------------------------------------- importers (hostile inputs)
+# A MuJoCo joint coupling is a polynomial of degree at most 4 (polycoef); a chain of couplings
+# composes them, so the degree multiplies along the chain (4^n). Chains whose composed degree
+# exceeds this are refused at the coupling that passes it: three quartics in a chain (64) are
+# more than any published model uses, and each further link would multiply the work and the
+# coefficients' size by 4 (a chain of 9-10 quartics overflows to NaN, 11 or more never ends).
+COUPLING_MAX_DEGREE = 64
+# An imported muscle whose path is shorter than this at rest (metres) holds no belly: a tendon
+# through one site twice, or through coincident sites. It is skipped, with a warning.
+IMPORT_MIN_PATH_LENGTH = 1e-4
+# Sizes of an imported muscle beyond these (metres) are warned: no human or animal muscle has
+# a path over 5 m (a giraffe's neck muscles are about 2-3 m) or a belly over 1 m across. Such
+# sizes come from a model in other units (millimetres read as metres) or a typing slip.
+IMPORT_PLAUSIBLE_PATH = 5.0
+IMPORT_PLAUSIBLE_BELLY = 1.0
+# Bytes one array of an .npz motion (a qpos motion, joint positions) may take once read: the
+# limit is checked from the array's header before any data is decompressed, so a small file
+# that claims a huge array costs nothing (a compressed archive can expand a thousandfold).
+NPZ_MAX_ARRAY_BYTES = 256 * 1024 * 1024

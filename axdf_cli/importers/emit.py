@@ -400,14 +400,30 @@ def pose_doc(motion: Motion, skeleton_ref: str) -> dict:
     return doc
 
 
-def body_ply(parts: list[tuple[np.ndarray, np.ndarray]]) -> bytes:
-    """One body's meshes (vertices, faces) merged into the bytes of one binary PLY."""
+def check_vertices(v: np.ndarray, where, what: str) -> None:
+    """Bone mesh vertices (metres) as a PLY may hold them: finite and within ±MAX_ABS_NUMBER
+    (a PLY stores float32: 1e300 would become inf, which ``axdf validate`` refuses).
+    ``where``: the mark of the mesh in its model; ``what`` names it."""
+    v = np.asarray(v, dtype=np.float64)
+    bad = ~np.isfinite(v) | (np.abs(v) > tol.MAX_ABS_NUMBER)
+    if bad.any():
+        i, k = (int(x) for x in np.argwhere(bad)[0])
+        raise InputError(where, f"{what}: vertex {i} has {'xyz'[k]} = {float(v[i, k]):g} m once placed",
+                         f"finite coordinates within ±{tol.MAX_ABS_NUMBER:g} m (check the mesh file, its scale "
+                         "and its frame)")
+
+
+def body_ply(parts: list[tuple[np.ndarray, np.ndarray]], where=None, what: str = "bone mesh") -> bytes:
+    """One body's meshes (vertices, faces) merged into the bytes of one binary PLY; vertices
+    are checked (:func:`check_vertices`) as a backstop of the readers' own checks."""
     vs, ts, base = [], [], 0
     for v, f in parts:
         vs.append(v)
         ts.append(f + base)
         base += len(v)
-    return PlyWriter(np.concatenate(ts)).encode(np.concatenate(vs))
+    verts = np.concatenate(vs)
+    check_vertices(verts, where, what)
+    return PlyWriter(np.concatenate(ts)).encode(verts)
 
 
 def motion_coordinates(skel: Skeleton, motion: Motion) -> np.ndarray:
@@ -441,15 +457,24 @@ def muscle_docs(model: ImportedModel, skel: Skeleton, world: np.ndarray, palette
     probe = probe_poses(skel, motion_q) if rules.probe_ranges else motion_poses(skel, motion_q)
     out = []
     for m in model.muscles:
-        path = [point_doc(p) for p in m.path]
-        wraps = [wrap_doc(w) for w in m.wraps]
-        hill = m.hill
-        if hill is None:  # fibres a share of the rest path, the rest of it tendon slack
-            rest = rest_path(m.name, path, wraps, skel, world)[1]
-            hill = Hill(m.force, m.fibre_share * rest, rest - m.fibre_share * rest)
-        axis = axis_points_for(m.name, path, wraps, skel, probe)
-        doc, row = belly_doc(m.name, path, wraps, hill, skel, world, palette, axis.n if axis.raised else 0,
-                             rules.min_slenderness, m.jiggle)
+        try:
+            with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # a non-finite result is refused below
+                sized = _sized_muscle(m, skel, world, palette, probe, rules)
+            if sized is not None and not all(math.isfinite(v) for v in sized[4].values() if isinstance(v, float)):
+                raise ValueError("a size is not finite")
+        except InputError as e:  # a generated document: name the muscle in its model, not "<name>"
+            raise InputError(m.mark, f"muscle {m.name!r}: the belly sized from the model's numbers would not pass "
+                             f"axdf validate ({e})", "a path and Hill numbers of a real muscle") from None
+        except (ArithmeticError, ValueError) as e:  # a number beyond what the belly law can size
+            raise InputError(m.mark, f"muscle {m.name!r}: its numbers cannot size a belly ({type(e).__name__}: {e})",
+                             "a path and Hill numbers of a real muscle") from None
+        if sized is None:
+            why = (f"its path is shorter than {tol.IMPORT_MIN_PATH_LENGTH * 1000:g} mm at rest (a path through one "
+                   "point twice, or through coincident points): no belly to build along it")
+            model.ignored.append({"kind": "muscle", "name": m.name, "where": str(m.mark or ""), "why": why})
+            model.warnings.append(f"{_where(m)}muscle {m.name!r} skipped: {why}")
+            continue
+        path, wraps, axis, doc, row = sized
         row.update(m.row)
         row.update({"path_points": len(path), "wraps": [w["name"] for w in wraps]})
         if rules.shortfall:
@@ -457,7 +482,42 @@ def muscle_docs(model: ImportedModel, skel: Skeleton, world: np.ndarray, palette
         if axis.raised:  # the worst shortfall over the poses at the default count and at the count written
             row["axis_points_raised"] = axis.row()
         out.append((m, doc, rounded(row)))
+        size = max(row["rest_path_length"], 2.0 * row["belly_radius"])
+        if size > min(tol.IMPORT_PLAUSIBLE_PATH, 2.0 * tol.IMPORT_PLAUSIBLE_BELLY) and (
+                row["rest_path_length"] > tol.IMPORT_PLAUSIBLE_PATH or 2.0 * row["belly_radius"] > tol.IMPORT_PLAUSIBLE_BELLY):
+            model.warnings.append(f"{_where(m)}muscle {m.name!r} is {row['rest_path_length']:.3g} m long with a belly "
+                                  f"{2.0 * row['belly_radius']:.3g} m across: beyond any human or animal muscle "
+                                  f"(paths up to {tol.IMPORT_PLAUSIBLE_PATH:g} m, bellies up to "
+                                  f"{tol.IMPORT_PLAUSIBLE_BELLY:g} m); is the model in other units than metres?")
+    if model.rules.report and not out:
+        model.warnings.append(f"{_where_model(model)}no muscle with a path to import: only the skeleton"
+                              + (" and its bone meshes are" if model.meshes else " is") + " written")
     return out
+
+
+def _where(m) -> str:
+    return f"{m.mark}: " if m.mark is not None else ""
+
+
+def _where_model(model: ImportedModel) -> str:
+    return f"{model.inputs[0]}: " if model.inputs else ""
+
+
+def _sized_muscle(m, skel: Skeleton, world: np.ndarray, palette: str, probe: np.ndarray, rules) -> tuple | None:
+    """(path, wraps, axis points, document, row) of one muscle, or None when its path is too
+    short at rest to hold a belly (then listed as not imported, with a warning)."""
+    path = [point_doc(p) for p in m.path]
+    wraps = [wrap_doc(w) for w in m.wraps]
+    rest = rest_path(m.name, path, wraps, skel, world)[1]
+    if not rest >= tol.IMPORT_MIN_PATH_LENGTH:
+        return None
+    hill = m.hill
+    if hill is None:  # fibres a share of the rest path, the rest of it tendon slack
+        hill = Hill(m.force, m.fibre_share * rest, rest - m.fibre_share * rest)
+    axis = axis_points_for(m.name, path, wraps, skel, probe)
+    doc, row = belly_doc(m.name, path, wraps, hill, skel, world, palette, axis.n if axis.raised else 0,
+                         rules.min_slenderness, m.jiggle)
+    return path, wraps, axis, doc, row
 
 
 def build_import(model: ImportedModel, outputs: Outputs, palette: str = "anatomical", files: dict | None = None) \

@@ -232,6 +232,8 @@ class Reader:
         self.defaults: dict[str, dict[str, dict]] = {}  # class -> tag -> attributes (inherited)
         self.ignored: list[dict] = []
         self.includes: list[Path] = []
+        self._parsed: dict[Path, tuple[Node, frozenset]] = {}  # see _expand
+        self._reached: list[Path] = []  # the files expansions have reached, in order
 
     # ------------------------------------------------------------------ documents
     def load(self) -> Node:
@@ -242,7 +244,13 @@ class Reader:
         return root
 
     def _expand(self, node: Node, stack: list[Path]) -> None:
-        """Replace every <include file> below ``node`` by the included file's root children."""
+        """Replace every <include file> below ``node`` by the included file's root children.
+
+        Each file is parsed and expanded once (``self._parsed``: its resolved path → its
+        expanded root and every file its expansion reaches): a diamond of includes (files
+        included by several others) costs one parse per file, not one per path to it. A cached
+        file whose expansion reaches a file being expanded now is parsed afresh, so the cycle
+        is refused at the include that closes it, as without the cache."""
         out = []
         for c in node.children:
             if c.tag != "include":
@@ -257,22 +265,42 @@ class Reader:
             if target is None:
                 raise InputError(c.mark, f"included file {fname!r} not found",
                                  "a path relative to the model's folder")
-            if target.resolve() in stack:
+            key = target.resolve()
+            if key in stack:
                 raise InputError(c.mark, f"{fname!r} includes itself", "includes without a cycle")
-            sub = parse_xml(target)
-            self.includes.append(target)
-            self._expand(sub, stack + [target.resolve()])
-            out.extend(sub.children)
+            cached = self._parsed.get(key)
+            if cached is None or not cached[1].isdisjoint(stack):
+                sub = parse_xml(target)
+                if cached is None:
+                    self.includes.append(target)
+                before = len(self._reached)
+                self._reached.append(key)
+                self._expand(sub, stack + [key])
+                cached = (sub, frozenset(self._reached[before:]))
+                self._parsed[key] = cached
+            else:
+                self._reached.extend(cached[1])
+            out.extend(cached[0].children)
         node.children = out
 
     # ------------------------------------------------------------------ defaults
     def _read_defaults(self, node: Node, parent: str | None) -> None:
-        cls = node.attrib.get("class", "main" if parent is None else None)
-        if cls is None:
+        """One <default> and its nested classes, as MuJoCo reads them (xml_native_reader.cc,
+        ``mjXReader::Default``): every top-level <default> of the model, in each file an
+        <include> brings, is class ``main`` (a ``class`` other than main is refused) and adds
+        its attributes to it, later ones over earlier ones; a nested class is a copy of its
+        parent as it stands then, with its own attributes over it, and its name must be new."""
+        top = parent is None
+        cls = node.attrib.get("class", "main" if top else None)
+        if top and cls != "main":
+            raise InputError(node.mark, f"top-level default class {cls!r}", "main (MuJoCo's top-level class "
+                             "cannot be renamed)")
+        if not cls:
             raise InputError(node.mark, "a nested <default> without class", "<default class=\"NAME\">")
-        if cls in self.defaults:
+        if not top and cls in self.defaults:
             raise InputError(node.mark, f"default class {cls!r} defined twice", "unique class names")
-        inherited = {t: dict(a) for t, a in self.defaults.get(parent, {}).items()} if parent else {}
+        source = "main" if top else parent
+        inherited = {t: dict(a) for t, a in self.defaults.get(source, {}).items()}
         for c in node.children:
             if c.tag == "default":
                 continue
@@ -430,6 +458,8 @@ class Reader:
             raise InputError(m.mark, f"mesh {name!r} scale has a zero", "non-zero scale factors")
         refpos = _floats(m, "refpos", a, 3, np.zeros(3))
         refquat = _floats(m, "refquat", a, 4, np.array([1.0, 0, 0, 0]))
+        if np.linalg.norm(refquat) < 1e-12:
+            raise InputError(m.mark, f"mesh {name!r} refquat is zero", "a non-zero quaternion (w x y z)")
         return MeshAsset(name, base / f, scale, refpos, refquat / np.linalg.norm(refquat), m.mark)
 
     def _children(self, node: Node, body: str | None, fpos: np.ndarray, fquat: np.ndarray, cls: str) -> None:

@@ -135,11 +135,31 @@ def coupling_polynomial(model: MjcfModel, joint: str, by: dict[str, Coupling],
     if joint in seen:
         raise InputError(by[joint].mark, f"joint couplings form a cycle through {joint!r}", "couplings without a cycle")
     c = by[joint]
-    own = P(c.polycoef)
+    own = P(np.trim_zeros(np.asarray(c.polycoef, dtype=np.float64), "b") if any(c.polycoef) else [0.0])
     if c.joint2 is None:
         return None, P([c.polycoef[0]])
     root, inner = coupling_polynomial(model, c.joint2, by, seen + (joint,))
-    return root, own(inner)
+    degree = own.degree() * inner.degree()
+    if degree > tol.COUPLING_MAX_DEGREE:
+        raise InputError(c.mark, f"joint {joint!r} follows a chain of couplings {' <- '.join((joint,) + _chain(c.joint2, by))}"
+                         f" whose composed polynomial has degree {degree}",
+                         f"chains whose polynomials compose to degree at most {tol.COUPLING_MAX_DEGREE} "
+                         "(couple the joints to the chain's first joint directly)")
+    composed = own(inner)
+    if not np.all(np.isfinite(composed.coef)) or np.max(np.abs(composed.coef)) > tol.MAX_ABS_NUMBER:
+        raise InputError(c.mark, f"joint {joint!r}: its chain of couplings composes to a polynomial with a "
+                         f"coefficient of {float(np.max(np.abs(composed.coef))):g}",
+                         f"coefficients within ±{tol.MAX_ABS_NUMBER:g} once the chain is composed")
+    return root, composed
+
+
+def _chain(joint: str, by: dict[str, Coupling]) -> tuple[str, ...]:
+    """The joints a coupled ``joint`` follows, itself first (for messages; cycles are refused before)."""
+    out = [joint]
+    while joint in by and by[joint].joint2 is not None and len(out) <= len(by):
+        joint = by[joint].joint2
+        out.append(joint)
+    return tuple(out)
 
 
 def dof_function(model: MjcfModel, j: Joint, by: dict[str, Coupling]) -> tuple[str | None, dict | None]:
@@ -300,6 +320,7 @@ def geom_meshes(model: MjcfModel, max_faces: int, report: dict, edge: float = 0.
                 v, f = _read_mesh(asset.file, asset.mark)
                 v = (v - asset.refpos) @ quat_matrix(asset.refquat)  # R^T (v - refpos), row vectors
                 v = v * asset.scale
+                emit.check_vertices(v, asset.mark, f"mesh {asset.name!r} ({asset.file.name}, scaled)")
                 if np.prod(np.sign(asset.scale)) < 0:
                     f = f[:, ::-1]
                 n0 = len(f)
@@ -308,8 +329,9 @@ def geom_meshes(model: MjcfModel, max_faces: int, report: dict, edge: float = 0.
                 rows.append({"mesh": asset.name, "file": asset.file.name, "faces": int(n0), "kept": int(len(f))})
             v, f = cache[asset.name]
             parts.append((v @ quat_matrix(g.quat).T + g.pos, f))
+            emit.check_vertices(parts[-1][0], g.mark, f"mesh geom {g.mesh!r} on body {body.name!r}")
         if parts:
-            out[body.name] = emit.body_ply(parts)
+            out[body.name] = emit.body_ply(parts, body.mark, f"the bone mesh of body {body.name!r}")
     report["meshes"] = rows
     return out
 
@@ -336,6 +358,10 @@ def hill_numbers(m: Muscle) -> tuple[Hill | None, float, list[str]]:
     else:
         force = m.scale * m.gear
         notes.append(f"force {m.force:g} (MuJoCo's scale / acc0, known only to its compiler): {m.scale:g} N assumed")
+        if not m.scale > 0:
+            raise InputError(m.mark, f"muscle {m.name!r} has force {m.force:g} and scale {m.scale:g}: no positive force "
+                             "to size its belly by", "a positive force, or a positive scale with force -1 (MuJoCo's "
+                             "default)")
     return (Hill(force, l0, lt) if l0 is not None else None), force, notes
 
 
@@ -463,7 +489,7 @@ def read_import(model_path: Path | str, *, name: str | None = None, motion: Path
             mname, path, wraps, hill, f"{mname}: imported from {model_path.name} (MuJoCo {m.kind} on tendon "
                                       f"{m.tendon}) by `axdf import mjcf`.",
             {"type": m.kind, "tendon": m.tendon, "sidesites": sum(w.side is not None for w in wraps), "force": force,
-             "lengthrange": m.lengthrange, "notes": notes}, fibre_share=FALLBACK_FIBRE_SHARE, force=force))
+             "lengthrange": m.lengthrange, "notes": notes}, fibre_share=FALLBACK_FIBRE_SHARE, force=force, mark=m.mark))
     if q is not None:
         out.motion = Motion(pname, fps, len(q), motion_keys(rows, q, str(motion)),
                             f"Imported from {Path(motion).name} by `axdf import mjcf`.", mark=Mark(str(motion)),

@@ -129,26 +129,28 @@ def _where(path: Path, array: str, index=None) -> str:
     return f"{path}: {array}[{', '.join(str(int(i)) for i in index)}]"
 
 
+#: The longest joint name an npz's ``names`` may hold (axdf names are at most 200 characters).
+NAME_MAX_CHARS = 200
+
+
 def _npz_array(archive: zipfile.ZipFile, info: zipfile.ZipInfo, path: Path, key: str) -> np.ndarray:
-    """One array of an npz: its header is read first (shape and dtype), so an object array or
-    one past NPZ_MAX_VALUES is refused before anything is decompressed into memory."""
-    fmt = np.lib.format
-    try:
-        with archive.open(info) as f:
-            version = fmt.read_magic(f)
-            header = fmt.read_array_header_1_0 if version == (1, 0) else fmt.read_array_header_2_0
-            shape, _, dtype = header(f)
-            if dtype.hasobject:
-                raise InputError(_where(path, key), "holds Python objects (pickled)",
-                                 "numbers (joints, fps) or fixed-width strings (names)")
-            if int(np.prod(shape, dtype=np.int64)) > NPZ_MAX_VALUES:
-                raise InputError(_where(path, key), f"has shape {tuple(shape)}", f"at most {NPZ_MAX_VALUES} values")
-        with archive.open(info) as f:
-            return fmt.read_array(f, allow_pickle=False)
-    except InputError:
-        raise
-    except (ValueError, OSError, zipfile.BadZipFile, EOFError) as e:
-        raise InputError(_where(path, key), f"cannot be read ({e})", "an array written by np.savez") from None
+    """One array of an npz: its header is read first (shape and dtype), so an object array, one
+    past NPZ_MAX_VALUES or NPZ_MAX_ARRAY_BYTES, or names wider than NAME_MAX_CHARS, is refused
+    before anything is decompressed into memory (:mod:`~axdf_cli.importers.npzfile`)."""
+    from axdf_cli.importers import npzfile
+
+    where = _where(path, key)
+    h = npzfile.header(archive, info, where, key)
+    if h.dtype.hasobject:
+        raise InputError(where, "holds Python objects (pickled)",
+                         "numbers (joints, fps) or fixed-width strings (names)")
+    if int(np.prod(h.shape, dtype=object)) > NPZ_MAX_VALUES:
+        raise InputError(where, f"has shape {h.shape}", f"at most {NPZ_MAX_VALUES} values")
+    chars = h.dtype.itemsize // (4 if h.dtype.kind == "U" else 1)
+    if h.dtype.kind in "US" and chars > NAME_MAX_CHARS:
+        raise InputError(where, f"is {h.dtype}: strings of {chars} characters",
+                         f"names of at most {NAME_MAX_CHARS} characters")
+    return npzfile.read(archive, h, where)
 
 
 def read_npz_joints(path: Path | str, *, scale: float = 1.0, step: int = 1, up: str = "z") -> Mocap:

@@ -115,6 +115,7 @@ class Muscle:
     jiggle: JiggleSpec | None = None
     fibre_share: float = 0.0
     force: float = 0.0
+    mark: Mark | None = None  # where the muscle is in its model (errors and warnings name it)
 
 
 @dataclass

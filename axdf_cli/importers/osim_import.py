@@ -431,7 +431,7 @@ def muscle(model: Model, m: OsimMuscle, source: str) -> Muscle:
     return Muscle(m.name, path, wraps, Hill(m.max_isometric_force, m.optimal_fiber_length, m.tendon_slack_length,
                                             m.pennation_angle),
                   f"{m.name}: imported from {source} ({m.type}) by `axdf import osim`.", row,
-                  JIGGLE.get(SIDE_SUFFIX.sub("", m.name)))
+                  JIGGLE.get(SIDE_SUFFIX.sub("", m.name)), mark=m.mark)
 
 
 # ----------------------------------------------------------------------------- meshes
@@ -462,8 +462,10 @@ def vtp_meshes(model: Model, model_path: Path, warnings: list[str], report: dict
                 continue
             v, t = read_vtp(p)
             parts.append((v * np.asarray(ref.scale), t))
+            emit.check_vertices(parts[-1][0], ref.mark, f"mesh {ref.file!r} scaled by <scale_factors> "
+                                f"{' '.join(f'{x:g}' for x in ref.scale)}")
         if parts:
-            out[body.name] = emit.body_ply(parts)
+            out[body.name] = emit.body_ply(parts, body.mark, f"the bone mesh of body {body.name!r}")
     for m in missing:
         warnings.append(f"{m['where']}: mesh {m['mesh_file']!r} of body {m['body']} "
                         f"{m.get('why', 'not found beside the model or in Geometry/')}; skipped")
@@ -538,7 +540,7 @@ def read_import(model_path: Path | str, *, name: str | None = None, motion: Path
     def complete(r: dict) -> None:
         rows = r["muscles"]
         r["counts"] = {"bodies": len(model.bodies), "joints": len(model.joints),
-                       "coordinates": len(model.coordinates), "muscles": len(model.muscles),
+                       "coordinates": len(model.coordinates), "muscles": len(rows),
                        "meshes": len(mesh_bytes), "path_points": sum(x["path_points"] for x in rows),
                        "conditional_path_points": sum(len(x["conditional"]) for x in rows),
                        "conditional_inactive_at_rest": sum(len(x["conditional_inactive_at_rest"]) for x in rows),

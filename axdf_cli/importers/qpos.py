@@ -83,35 +83,39 @@ def unwrap_degrees(a: np.ndarray) -> np.ndarray:
 
 
 def read_motion(path: Path, nq: int) -> tuple[np.ndarray, float]:
-    """``qpos`` (F, nq) float64 and fps of a motion npz; InputErrors name the array and index."""
-    import io
-    import zipfile
-
+    """``qpos`` (F, nq) float64 and fps of a motion npz; InputErrors name the array and index.
+    Each array's header (shape, dtype) is checked before its data is read
+    (:mod:`~axdf_cli.importers.npzfile`): a small file claiming a huge array costs nothing."""
     from axdf_cli.fileio.yamlio import read_input
+    from axdf_cli.importers import npzfile
 
     shown = str(path)
+    where = Mark(shown)
+    allowed = "np.savez(FILE, qpos=..., fps=...)"
     data = read_input(path, shown, "an existing .npz file")
-    try:
-        z = np.load(io.BytesIO(data), allow_pickle=False)
-    except (ValueError, OSError, zipfile.BadZipFile, EOFError) as e:
-        raise InputError(Mark(shown), f"not a numpy .npz archive ({e})", "np.savez(FILE, qpos=..., fps=...)") from None
-    if not hasattr(z, "files"):
-        raise InputError(Mark(shown), "a single .npy array, not an .npz archive", "np.savez(FILE, qpos=..., fps=...)")
-    if "qpos" not in z.files:
-        raise InputError(Mark(shown), "no array qpos (arrays: " + (", ".join(z.files) or "none") + ")",
-                         "qpos (frames × nq) and an optional fps")
-    try:
-        q = z["qpos"]
-    except ValueError as e:
-        raise InputError(Mark(shown), f"qpos cannot be read ({e})", "a numeric array (no pickled objects)") from None
-    if q.dtype.kind not in "fiu":
-        raise InputError(Mark(shown), f"qpos has dtype {q.dtype}", "a float or integer array")
-    if q.ndim == 1 and nq == len(q):
-        q = q[None]
-    if q.ndim != 2 or q.shape[1] != nq:
-        raise InputError(Mark(shown), f"qpos has shape {q.shape}", f"(frames, {nq}): the model's nq")
-    if len(q) == 0 or len(q) > MAX_MOTION_FRAMES:
-        raise InputError(Mark(shown), f"qpos has {len(q)} frames", f"1..{MAX_MOTION_FRAMES}")
+    if data.startswith(b"\x93NUMPY"):
+        raise InputError(where, "a single .npy array, not an .npz archive", allowed)
+    with npzfile.open_archive(data, where, allowed) as z:
+        arrays = npzfile.members(z)
+        if "qpos" not in arrays:
+            raise InputError(where, "no array qpos (arrays: " + (", ".join(arrays) or "none") + ")",
+                             "qpos (frames × nq) and an optional fps")
+        h = npzfile.header(z, arrays["qpos"], where, "qpos")
+        if h.dtype.hasobject or h.dtype.kind not in "fiu":
+            raise InputError(where, f"qpos has dtype {h.dtype}", "a float or integer array")
+        shape = (1,) + h.shape if len(h.shape) == 1 and h.shape[0] == nq else h.shape
+        if len(shape) != 2 or shape[1] != nq:
+            raise InputError(where, f"qpos has shape {h.shape}", f"(frames, {nq}): the model's nq")
+        if shape[0] == 0 or shape[0] > MAX_MOTION_FRAMES:
+            raise InputError(where, f"qpos has {shape[0]} frames", f"1..{MAX_MOTION_FRAMES}")
+        q = npzfile.read(z, h, where).reshape(shape)
+        fv = None
+        if "fps" in arrays:
+            hf = npzfile.header(z, arrays["fps"], where, "fps")
+            if hf.dtype.hasobject or hf.dtype.kind not in "fiu" or int(np.prod(hf.shape)) != 1:
+                raise InputError(where, f"fps = array of shape {hf.shape} and dtype {hf.dtype}",
+                                 "one number in (0, 10000]")
+            fv = npzfile.read(z, hf, where)
     q = q.astype(np.float64)
     bad = np.argwhere(~np.isfinite(q) | (np.abs(q) > tol.MAX_ABS_NUMBER))
     if len(bad):
@@ -119,14 +123,10 @@ def read_motion(path: Path, nq: int) -> tuple[np.ndarray, float]:
         raise InputError(Mark(shown), f"qpos[{f}, {k}] = {float(q[f, k]):g}",
                          f"finite numbers within ±{tol.MAX_ABS_NUMBER:g}")
     fps = DEFAULT_FPS
-    if "fps" in z.files:
-        try:
-            v = z["fps"]
-        except ValueError as e:
-            raise InputError(Mark(shown), f"fps cannot be read ({e})", "a number") from None
-        if v.dtype.kind not in "fiu" or v.size != 1 or not (0 < float(v.reshape(-1)[0]) <= 10000):
-            raise InputError(Mark(shown), f"fps = {v!r}", "one number in (0, 10000]")
-        fps = float(v.reshape(-1)[0])
+    if fv is not None:
+        if not (0 < float(fv.reshape(-1)[0]) <= 10000):
+            raise InputError(Mark(shown), f"fps = {fv!r}", "one number in (0, 10000]")
+        fps = float(fv.reshape(-1)[0])
     return q, fps
 
 

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError
 from axdf_cli.importers.xmltree import Node, parse_xml
 
@@ -58,6 +59,11 @@ def read_vtp(path: Path | str) -> tuple[np.ndarray, np.ndarray]:
         if pts.size % 3:
             raise InputError(pts_node.mark, f"Points has {pts.size} numbers", "a multiple of 3")
         pts = pts.reshape(-1, 3)
+        bad = ~np.isfinite(pts) | (np.abs(pts) > tol.MAX_ABS_NUMBER)
+        if bad.any():
+            i, k = (int(x) for x in np.argwhere(bad)[0])
+            raise InputError(pts_node.mark, f"point {i} of Points has {'xyz'[k]} = {float(pts[i, k])!r}",
+                             f"finite coordinates within ±{tol.MAX_ABS_NUMBER:g}")
         local = []
         for cell in _cells(piece.find("Polys"), piece, "Polys"):
             for k in range(1, len(cell) - 1):
