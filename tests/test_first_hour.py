@@ -58,16 +58,16 @@ def test_a_path_muscle_posed_outside_a_range_is_warned_and_refused_with_strict(t
 def test_the_roots_place_and_heading_are_no_muscles_range(tmp_path, capsys):
     """A retargeted take turns around: pelvis_rotation passes gait2392's +-90 (a range that
     exists because the model file needs one). It carries every bone of a muscle rigidly, so
-    no muscle is warned; the knee past its range still is."""
+    no muscle is warned; the knee past its range [-120, 10] still is."""
     pose = tmp_path / "turn.yaml"
     pose.write_text(f"pose: turn\nskeleton: {GAIT_SKELETON}\nfps: 30\nframes: [0, 1]\n"
                     "keys:\n  0: {pelvis_rotation: 0, knee_angle_r: 0}\n"
-                    "  1: {pelvis_rotation: 170, pelvis_tx: 40, knee_angle_r: -20}\n")
+                    "  1: {pelvis_rotation: 170, pelvis_tx: 40, knee_angle_r: 40}\n")
     argv = ["run", "--muscles", PACKED / "vas_lat_r.yaml", "--pose", pose, "--out", tmp_path / "o", "--no-render",
             "--allow-outside", "--dry-run", "--strict"]
     rc, _, err = run_main(argv, capsys)
-    assert rc == 2 and "knee_angle_r = -20 outside" in err and "pelvis_rotation" not in err, err
-    pose.write_text(pose.read_text().replace("knee_angle_r: -20", "knee_angle_r: 20"))
+    assert rc == 2 and "knee_angle_r = 40 outside" in err and "pelvis_rotation" not in err, err
+    pose.write_text(pose.read_text().replace("knee_angle_r: 40", "knee_angle_r: -20"))
     rc, _, err = run_main(argv, capsys)
     assert rc == 0 and "outside" not in err, err
 
