@@ -265,3 +265,16 @@ PACK_POSE_FRAMES = 16
 # A packed section's control points keep to their rays from its centre (star-shaped sections,
 # pack.Fit), each at least this share of the section's original mean radius from it.
 PACK_RAY_MIN = 0.15
+# Automatic framing (axdf_cli/render/framing.py): the camera frames the subject at no more than
+# FRAMING_SAMPLE frames of the pose, spread evenly (every frame of a shorter pose), so one frame
+# of a very long pose costs a bounded amount; at 30 fps 600 samples of a 20 s take lie one frame
+# apart, and FRAMING_PAD (model/pose.py) covers what a limb moves between samples of a longer one.
+FRAMING_SAMPLE = 600
+# The muscles alone are framed (a close-up) when their extent over the pose is under this share
+# of the whole subject's (bones and joints): a deltoid on a whole arm and trunk fills the image
+# instead of showing as a blob; a body's worth of muscles frames the body they are shown on.
+FRAMING_CLOSEUP = 0.5
+# A ground plate (a mesh on a root without DOFs) is drawn under the subject at least this many
+# metres beyond its footprint each way, or this share of the subject's height if that is more.
+GROUND_MARGIN = 0.3
+GROUND_MARGIN_FRACTION = 0.25

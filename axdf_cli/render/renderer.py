@@ -38,6 +38,7 @@ import numpy as np
 
 from axdf_cli.render.camera import Camera, sequence_cameras
 from axdf_cli.render.context import check_same_process
+from axdf_cli.render.framing import placed_plates
 from axdf_cli.specs.render import RenderSettings
 from axdf_cli.render.scene import FrameChunk, Scene, SceneBone
 
@@ -433,7 +434,7 @@ class Renderer:
             for c, f in enumerate(np.asarray(chunk.frames).tolist()):
                 if f not in cameras:
                     raise ValueError(f"frame {f} is not in Scene.frames")
-                bw = chunk.bone_world[c] if len(self.scene.bones) else None
+                bw = placed_plates(self.scene, chunk.bone_world[c]) if len(self.scene.bones) else None
                 yield self.render(f, [p[c] for p in chunk.positions], [n[c] for n in chunk.normals], bw, cameras[f])
 
     def release(self) -> None:
