@@ -44,7 +44,7 @@ from axdf_cli.render.scene import FrameChunk, Scene, SceneBone
 
 BONE_COLOR = (0.78, 0.75, 0.68)  # neutral ivory, linear RGB
 STICK_SIDES = 12  # a stick is a 12-sided cylinder with flat caps
-STICK_RADIUS_FRACTION = 0.006  # stick radius per metre of the subject's largest extent
+STICK_RADIUS_FRACTION = 0.01  # stick radius per metre of the subject's largest extent (a stick a few pixels wide when the skeleton is framed)
 STICK_MIN_RADIUS = 0.002  # metres
 WIRE_DARKEN = 0.55  # wire colour = albedo * this
 WIRE_DEPTH_BIAS = 2e-4  # NDC depth pulled towards the camera so edges win over their faces
