@@ -94,8 +94,7 @@ def test_sphere_cameras_keep_distance_elevation_and_look_at_the_target(tiny_spec
     np.testing.assert_allclose(subject[0, 4:12].min(0), world[0, 1, :3, 3] - BALL_R, atol=2e-3)
     target = 0.5 * (subject.reshape(-1, 3).min(0) + subject.reshape(-1, 3).max(0))
     for k in range(20):
-        K, w2c, clip = lab.view_cameras(ctx.spec, Sequence(k, "s", 0, 3), np.arange(3), subject, world,
-                                        skel.bone_index)
+        K, w2c, clip = lab.view_cameras(ctx.spec, Sequence(k, "s", 0, 3), np.arange(3), subject, world, skel)
         assert (w2c == w2c[:1]).all()  # per: sequence
         for v in range(sph.views):
             R, t = w2c[0, v, :3, :3], w2c[0, v, :3, 3]

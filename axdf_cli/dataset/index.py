@@ -1,5 +1,9 @@
 """The index: one Parquet table of every sample (sequence x frame x view), in sequence order.
 
+``visible_keypoints`` counts the keypoints visible in the sample (``labels.npz``'s ``visible``):
+0 marks a sample whose view shows none of them (the subject out of view or hidden), so a
+training loader can skip it (``index[index.visible_keypoints > 0]``).
+
 Parquet (pyarrow) rather than CSV: typed columns (integers stay integers, paths stay strings,
 no quoting rules), one line to open (``pd.read_parquet`` / ``pq.read_table``), a fraction of
 the size, and column reads without parsing the rest. pyarrow writes the same bytes for the
@@ -17,7 +21,7 @@ from axdf_cli.fileio import atomic
 from axdf_cli.errors import EnvironmentProblem
 
 COLUMNS = ("sample", "sequence", "sequence_index", "source", "frame", "frame_index", "view", "view_index",
-           "seed", "shard", "png", "exr", "labels", "amodal", "meshes", "mask", "depth")
+            "seed", "shard", "png", "exr", "labels", "amodal", "meshes", "mask", "depth", "visible_keypoints")
 
 
 def _pyarrow():
@@ -55,15 +59,25 @@ def index_rows(records: list[dict], seed: int, shards: int, passes) -> dict:
                 cols["meshes"].append(f"{name}/meshes")
                 for p in ("mask", "depth"):  # (views.VIEW_PNG_PASSES: <frame>.mask.png, .depth.png)
                     cols[p].append(f"{name}/views/{view}/{frame:04d}.{p}.png" if p in passes else None)
+                cols["visible_keypoints"].append(_count(rec.get("visible_keypoints"), fi, vi))
                 n += 1
     return cols
+
+
+def _count(counts, fi: int, vi: int) -> int | None:
+    """A record's visible keypoint count of frame ``fi``, view ``vi`` (None where it holds none)."""
+    try:
+        c = counts[fi][vi]
+    except (TypeError, IndexError, KeyError):
+        return None
+    return c if type(c) is int and 0 <= c < 2 ** 31 else None
 
 
 def index_bytes(records: list[dict], seed: int, shards: int, passes) -> bytes:
     pa, pq = _pyarrow()
     cols = index_rows(records, seed, shards, passes)
     types = {"sample": pa.int64(), "sequence_index": pa.int64(), "frame": pa.int64(), "frame_index": pa.int32(),
-             "view_index": pa.int32(), "seed": pa.uint64(), "shard": pa.int32()}
+             "view_index": pa.int32(), "seed": pa.uint64(), "shard": pa.int32(), "visible_keypoints": pa.int32()}
     table = pa.table({c: pa.array(cols[c], type=types.get(c, pa.string())) for c in COLUMNS})
     buf = io.BytesIO()
     pq.write_table(table, buf, compression="zstd")

@@ -3,7 +3,9 @@
 Conventions (those of ``camera.json``, OpenCV): camera x right, y down, z forward;
 ``world_to_camera`` (4, 4) maps world points (Z up, metres) to camera coordinates; ``K`` is
 in pixels, pixel (0, 0) is the top-left pixel with its centre at (0.5, 0.5), so a point
-projects to ``(u, v) = (K @ p_cam)[:2] / p_cam.z`` and lies in pixel ``(floor(u), floor(v))``.
+projects to ``(u, v) = (K @ p_cam)[:2] / p_cam.z`` and lies in pixel ``(floor(u), floor(v))``
+(OpenCV puts pixel centres at integers: ``cv2.projectPoints`` with ``K`` less 0.5 in ``cx``
+and ``cy`` gives the same pixels as OpenCV counts them).
 
 Joint centres: the joint of bone b is the origin of its joint frame, ``world_b @
 [post_offset_b, 1]`` (the bone's origin when it has no ``post_offset``); the root's joint is
@@ -15,7 +17,10 @@ hides it is farther in front.
 
 Sphere cameras aim at the subject: with ``target: auto`` the centre of the box around the
 moving bones' joint centres and mesh boxes (:func:`axdf_cli.render.framing.skeleton_points`), over the sequence
-(``per: sequence``) or at the frame (``per: frame``); near and far planes keep that box.
+(``per: sequence``, carried along with a subject that travels farther than it is tall:
+:func:`axdf_cli.render.framing.sequence_targets`) or at the frame (``per: frame``); a bone
+target is the bone's origin at each frame. ``per: sequence`` draws the direction and distance
+once, and the camera keeps them while its target moves. Near and far planes keep the box.
 """
 from __future__ import annotations
 
@@ -26,13 +31,14 @@ import numpy as np
 
 from axdf_cli.dataset.sampling import sphere_direction, sphere_draw
 from axdf_cli.dataset.spec import DatasetSpec, Sequence
+from axdf_cli.render.framing import sequence_targets
 
 FLESH_MARGIN = 0.3  # metres of flesh kept inside the clip range beyond the subject's box
 NEAR_MIN = 0.01  # metres
 
 
 def view_cameras(spec: DatasetSpec, seq: Sequence, frames: np.ndarray, subject: np.ndarray,
-                 world: np.ndarray, bone_index: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                 world: np.ndarray, skeleton) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Cameras of every view at every frame, from the skeleton only (never the muscles):
     ``subject`` (F, P, 3) are the points of :func:`axdf_cli.render.framing.skeleton_points`. Returns ``K`` (V, 3, 3),
     ``world_to_camera`` (F, V, 4, 4), ``clip`` (F, V, 2) near and far."""
@@ -46,9 +52,10 @@ def view_cameras(spec: DatasetSpec, seq: Sequence, frames: np.ndarray, subject: 
     up = np.array([0.0, 0.0, 1.0])
     if spec.rig is not None:
         K = np.stack([intrinsics(W, H, c.fov) for c in spec.rig])
-        w2c = np.stack([look_at(c.position, np.subtract(centre if c.target is None else c.target, c.position), c.up)
-                        for c in spec.rig])
-        w2c = np.broadcast_to(w2c, (nf,) + w2c.shape).copy()
+        auto = sequence_targets(skeleton, world, subject, "auto")  # (F, 3): follows a travelling subject
+        w2c = np.stack([np.stack([look_at(c.position, np.subtract(auto[fi] if c.target is None else c.target,
+                                                                  c.position), c.up) for c in spec.rig])
+                        for fi in range(nf)]) if nf else np.empty((0, len(spec.rig), 4, 4))
         dist = np.linalg.norm(np.array([c.position for c in spec.rig]) - centre, axis=1)
         dist = np.broadcast_to(dist, (nf, len(spec.rig)))
     else:
@@ -56,19 +63,14 @@ def view_cameras(spec: DatasetSpec, seq: Sequence, frames: np.ndarray, subject: 
         K = np.stack([intrinsics(W, H, sph.fov)] * sph.views)
         w2c = np.empty((nf, sph.views, 4, 4))
         dist = np.empty((nf, sph.views))
+        targets = sequence_targets(skeleton, world, subject, sph.target)  # (F, 3)
         for fi, f in enumerate(frames):
             key = int(f) if sph.per == "frame" else 0
-            if sph.target == "auto":
-                tgt = 0.5 * (subject[fi].min(0) + subject[fi].max(0)) if sph.per == "frame" else centre
-            elif isinstance(sph.target, tuple) and sph.target and sph.target[0] == "bone":
-                b = bone_index[sph.target[1]]
-                tgt = world[fi, b, :3, 3] if sph.per == "frame" else world[:, b, :3, 3].mean(0)
+            if sph.target == "auto" and sph.per == "frame":
+                tgt = 0.5 * (subject[fi].min(0) + subject[fi].max(0))
             else:
-                tgt = np.asarray(sph.target, float)
+                tgt = targets[fi]
             for v in range(sph.views):
-                if sph.per == "sequence" and fi > 0:
-                    w2c[fi, v], dist[fi, v] = w2c[0, v], dist[0, v]
-                    continue
                 az, el, d = sphere_draw(spec, seq, key, v)
                 pos = tgt + d * sphere_direction(np.array(az), np.array(el))
                 w2c[fi, v] = look_at(pos, tgt - pos, up)

@@ -128,7 +128,8 @@ def dataset_dict(ctx: Context) -> dict:
         "shards": spec.shards,
         "bones": {skel.bones[i].name: f"bones/{skel.bones[i].name}.ply" for i in sorted(ctx.bone_meshes)},
         "convention": ("world Z up, metres, degrees; cameras OpenCV (x right, y down, z forward), "
-                       "world_to_camera maps world to camera, K in pixels with pixel (0,0)'s centre at (0.5,0.5); "
+                       "world_to_camera maps world to camera, K in pixels with pixel (0,0)'s centre at (0.5,0.5) "
+                       "(OpenCV's is at (0,0): for cv2.projectPoints use K with cx - 0.5, cy - 0.5); "
                        "joints are named anatomical keypoints fixed in bones: a joint where a bone with DOFs "
                        "attaches to its parent (the origin of its joint frame), or an end point (head top, "
                        "fingertips, toe tips)"),
@@ -271,7 +272,7 @@ def _make_sequence(ctx: Context, seq: Sequence, folder: Path, resume: bool, timi
     world = forward_kinematics(ctx.skeleton, coords)
     joints = ctx.keypoints.positions(world)
     subject = skeleton_points(ctx.skeleton, world, ctx.bone_meshes)
-    K, w2c, clip = lab.view_cameras(spec, seq, frames, subject, world, ctx.skeleton.bone_index)
+    K, w2c, clip = lab.view_cameras(spec, seq, frames, subject, world, ctx.skeleton)
     uv, z = lab.project(K, w2c, joints)
     _check_finite(seq.name, K=K, world_to_camera=w2c, joints3d=joints, joints2d=uv, joints_depth=z)
     views = spec.views
@@ -331,7 +332,9 @@ def _make_sequence(ctx: Context, seq: Sequence, folder: Path, resume: bool, timi
     files.update(manifest.get("files", {}))
     files["manifest.json"] = atomic.sha256_file(folder / "manifest.json")
     rec = {"dataset": ctx.digest, "sequence": seq.name, "index": seq.index, "source": entry.label,
-           "frames": [int(f) for f in frames], "views": list(views), "files": dict(sorted(files.items()))}
+           "frames": [int(f) for f in frames], "views": list(views),
+           "visible_keypoints": visible.sum(axis=-1).astype(int).tolist(),  # (F, V): 0 marks a sample showing none
+           "files": dict(sorted(files.items()))}
     atomic.write_text(root.path(RECORD), json.dumps(rec, indent=1) + "\n")
     for rel in old_files:  # what the earlier record listed and this one does not (never anything else)
         if rel not in files and rel != RECORD:

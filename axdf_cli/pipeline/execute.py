@@ -29,7 +29,7 @@ from axdf_cli.pipeline.overlap import bulk_overlap, bulk_overlap_text, overlap_s
 from axdf_cli.pipeline.packed import SequenceFiles, file_relpath, sequence_formats, write_run_files
 from axdf_cli.pipeline.plan import RunPlan
 from axdf_cli.pipeline.stages import Scope, of_scope
-from axdf_cli.render.framing import framing_record, run_framing
+from axdf_cli.render.framing import framing_record, plan_framing
 from axdf_cli.pipeline.tables import NSTATS, STATS_COLUMNS, bones_csv, stats_csv
 from axdf_cli.workers import check_parent, process_map
 from axdf_cli.model.skeleton import matrix_to_quaternion
@@ -389,7 +389,7 @@ def _write_run(plan: RunPlan, session, prep: Prepass, progress, render_progress,
             writer.write(bone_mesh_relpath(bones[i].name), data)
         writer.write(STATS, stats_csv(plan, stats, warn_text))
         writer.write(BONES_CSV, bones_csv(plan, bone_rows))
-        frame_pts = run_framing(plan.pose, plan.models)
+        frame_pts = plan_framing(plan)
         extra = {"bounds": [[float(f"{x:.9g}") for x in lo], [float(f"{x:.9g}") for x in hi]],
                  "framing": framing_record(frame_pts, plan.pose.first)}
         if sequence_formats(plan.formats):

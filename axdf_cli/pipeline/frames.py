@@ -14,7 +14,7 @@ import numpy as np
 
 from axdf_cli.pipeline.evaluate import Prepass, evaluate_plan, finite_or_rest
 from axdf_cli.pipeline.plan import camera_targets
-from axdf_cli.render.framing import run_framing
+from axdf_cli.render.framing import plan_framing, scene_framing
 from axdf_cli.render.renderer import bone_layout
 from axdf_cli.render.scene import FrameChunk, Scene, SceneMuscle
 from axdf_cli.render.framefiles import RENDER_CHUNK, render_frames_of
@@ -26,18 +26,20 @@ def render_plan(plan, out_dir: Path, bounds, prep: Prepass, progress: Callable[[
     """Render a run plan's frames into ``out_dir`` (``axdf run --render``) over ``jobs``
     processes (:func:`render_frames_of`); ``frames``: those to draw now (default all of the
     plan's; the cameras and camera.json are always the whole sequence's). ``framing_points``:
-    what the automatic camera frames (default :func:`axdf_cli.render.framing.run_framing`); ``prep``:
+    what the automatic camera frames (a :class:`~axdf_cli.render.framing.Framing`; default
+    :func:`axdf_cli.render.framing.plan_framing`); ``prep``:
     the run's pre-pass (:func:`axdf_cli.pipeline.evaluate.prepare`)."""
     skel = plan.pose.skeleton
-    framing_points = run_framing(plan.pose, plan.models) if framing_points is None else framing_points
+    framing = plan_framing(plan) if framing_points is None else framing_points
     shown = skel.bones if plan.render.bones else ()
     layout = bone_layout([b.name for b in shown], skel.stick_parents() if shown else [],
                          {i: (v, f) for i, (v, f, _) in plan.bone_meshes.items() if shown},
-                         float(np.ptp(framing_points, axis=0).max()))
+                         float(np.ptp(framing.points, axis=0).max()))
     scene = Scene(
         muscles=tuple(SceneMuscle(s.name, s.color, m.faces) for s, m in zip(plan.muscles, plan.models)),
         bones=layout.bones, bounds=bounds, frames=tuple(int(f) for f in plan.frames),
-        framing=framing_points, first_frame=int(plan.pose.first), targets=camera_targets(plan))
+        first_frame=int(plan.pose.first), targets=camera_targets(plan),
+        **scene_framing(framing, plan.pose, plan.frames))
     todo = scene.frames if frames is None else frames
     return render_frames_of(scene, PlanFrames(plan, prep, layout), todo, plan.render, out_dir, jobs,
                             progress, on_frame)

@@ -133,11 +133,11 @@ def _append_chunk(items) -> None:
             w.append(positions, normals)
 
 
-def write_run_files(plan, writer, bone_rows: np.ndarray, bounds: np.ndarray, framing: np.ndarray) -> None:
+def write_run_files(plan, writer, bone_rows: np.ndarray, bounds: np.ndarray, framing) -> None:
     """Per-run files of the per-sequence formats, through ``writer`` (an OutputWriter: atomic,
     hashed, skipped on resume when unchanged): the point caches' rest meshes, and for USD
     ``usd/bones.usdc`` and the root stage ``scene.usda``. ``bone_rows``: (F, B, 7) x y z qw
-    qx qy qz; ``bounds``: (2, 3) of every vertex written; ``framing``: (N, 3) what the
+    qx qy qz; ``bounds``: (2, 3) of every vertex written; ``framing``: what the
     automatic camera frames (:func:`axdf_cli.render.framing.run_framing`), as ``--render`` frames it."""
     from axdf_cli.formats.ply import PlyWriter
 
@@ -171,12 +171,14 @@ def usd_camera(plan, bounds, framing) -> dict:
     camera ``axdf run --render`` uses (framed on ``framing``)."""
     from axdf_cli.pipeline.plan import camera_targets
     from axdf_cli.render.camera import sequence_cameras
+    from axdf_cli.render.framing import scene_framing
     from axdf_cli.specs.render import RenderSettings
     from axdf_cli.render.scene import Scene
 
     settings = plan.render if plan.render is not None else RenderSettings()
     scene = Scene((), (), np.asarray(bounds, np.float64), tuple(int(f) for f in plan.frames),
-                  framing=framing, first_frame=int(plan.pose.first), targets=camera_targets(plan))
+                  first_frame=int(plan.pose.first), targets=camera_targets(plan),
+                  **scene_framing(framing, plan.pose, plan.frames))
     cams = sequence_cameras(scene, settings)
     first = cams[0][0]
     return {"world_to_camera": np.stack([c[0].world_to_camera for c in cams]), "K": first.K,

@@ -9,18 +9,20 @@ World frame (fixed for axdf): Z up, metres, right-handed (as in Blender). A body
 - ``sheet`` front, side and top side by side in one image (each panel ``size``), like the
   paper's figures; all three panels share one camera distance, so they share one scale.
 
-Camera convention written to ``camera.json`` (OpenCV): camera axes x right, y down, z
-forward (the viewing direction); ``world_to_camera`` is the 4x4 matrix taking world points
-(metres) to camera coordinates; ``K`` is in pixels of the written image, pixel (0, 0) is
-the top-left pixel and its centre is at (0.5, 0.5); a world point P projects to
+Camera convention written to ``camera.json`` (:data:`CONVENTION`): OpenCV's camera axes, x
+right, y down, z forward (the viewing direction); ``world_to_camera`` is the 4x4 matrix taking
+world points (metres) to camera coordinates; ``K`` is in pixels of the written image, pixel
+(0, 0) is the top-left pixel and its centre is at (0.5, 0.5) (OpenCV's is at (0, 0): its
+``cv2.projectPoints`` wants ``K`` with ``cx - 0.5``, ``cy - 0.5``); a world point P projects to
 ``(u, v, 1) ~ K @ (world_to_camera @ [P, 1])[:3]`` and its camera depth is the z coordinate.
 For a sheet each panel has its own camera whose ``K`` already includes the panel's
 horizontal offset, so projected pixels are pixels of the whole sheet.
 
-Automatic framing frames ``Scene.framing`` (points whose hull holds the subject over *every*
-frame of the pose; what they are is :mod:`axdf_cli.render.framing`'s rule; ``Scene.bounds``
-when a scene has none): the camera never depends on which frames are written, so a
-``--frames`` subset leaves every frame's camera as it was. For a fixed view
+Automatic framing frames ``Scene.framing`` (points whose hull holds the subject over the
+pose; what they are is :mod:`axdf_cli.render.framing`'s rule; ``Scene.bounds`` when a scene
+has none): the camera never depends on which frames are written, so a ``--frames`` subset
+leaves every frame's camera as it was. A following camera (``Scene.follow``) is the fixed
+camera of the framing points carried by each frame's offset (:func:`follow_moves`). For a fixed view
 the fit is exact and centred: the distance is the least that shows every point inside the
 image less ``FRAME_MARGIN`` at each border, and the camera is shifted sideways so that the
 projected subject sits in the middle both ways (:func:`fit_distance_view`, :func:`centre_shift`). The panels of a sheet
@@ -37,6 +39,13 @@ import numpy as np
 from axdf_cli.render.framing import MIN_EXTENT, framing_points
 from axdf_cli.specs.render import RenderSettings
 
+#: camera.json's ``convention``: the axes are OpenCV's, the pixel centres are not.
+CONVENTION = ("camera axes as OpenCV: x right, y down, z forward; world_to_camera maps world (Z up, metres) "
+              "to camera; K in pixels of the written image with pixel centres at half-integers: pixel (i, j) "
+              "(column i, row j from the top-left) spans [i, i+1) x [j, j+1), its centre is (i+0.5, j+0.5), "
+              "and a point projecting to (u, v) lies in pixel (floor(u), floor(v)); OpenCV puts pixel centres "
+              "at integers, so for cv2.projectPoints use K with cx - 0.5 and cy - 0.5; depth Z = camera z in "
+              "metres (0 = background)")
 # Fraction of the image kept free at each border by automatic framing.
 FRAME_MARGIN = 0.04
 # Orbit angles (degrees apart) over a full turn whose fits give an orbit's one distance.
@@ -180,10 +189,11 @@ def sequence_cameras(scene, settings: RenderSettings) -> list[list[Camera]]:
     first = first if first is not None else (frames[0] if frames else 0)
     angles = [settings.orbit * (f - first) for f in frames]
     points = framing_points(scene)
+    moves = follow_moves(scene, len(frames))
     if settings.camera is not None:
         targets = bone_targets(scene, settings, len(frames))
         offset = follow_offset(settings, points) if settings.camera.follows else None
-        return [[_explicit(settings, points, a, t, offset)] for a, t in zip(angles, targets)]
+        return [[_explicit(settings, points + o, a, t, offset)] for a, t, o in zip(angles, targets, moves)]
 
     views = SHEET_VIEWS if settings.view == "sheet" else (settings.view,)
     fov = settings.fov
@@ -202,7 +212,7 @@ def sequence_cameras(scene, settings: RenderSettings) -> list[list[Camera]]:
             M[:3, 3] = -np.array([shift[0], shift[1], -dist])
             near, far = _clip_range(M, points)
             panel.append(Camera(v, intrinsics(W, H, fov, i * W), M, (i * W, 0, W, H), near, far))
-        return [list(panel) for _ in frames]
+        return [[_moved(c, o) for c in panel] for o in moves]
     # orbit: about the framing centre, one distance fitting every angle of a full turn
     target = 0.5 * (points.min(axis=0) + points.max(axis=0))
     dist = MIN_EXTENT
@@ -211,15 +221,36 @@ def sequence_cameras(scene, settings: RenderSettings) -> list[list[Camera]]:
             fwd, up = _view_axes(v, float(a))
             dist = max(dist, fit_distance(points - target, look_at(np.zeros(3), fwd, up)[:3, :3], tan_x, tan_y))
     out = []
-    for a in angles:
+    for a, o in zip(angles, moves):
         panel = []
         for i, v in enumerate(views):
             fwd, up = _view_axes(v, a)
-            M = look_at(target - dist * fwd, fwd, up)
-            near, far = _clip_range(M, points)
+            M = look_at(target + o - dist * fwd, fwd, up)
+            near, far = _clip_range(M, points + o)
             panel.append(Camera(v, intrinsics(W, H, fov, i * W), M, (i * W, 0, W, H), near, far))
         out.append(panel)
     return out
+
+
+def follow_moves(scene, n: int) -> np.ndarray:
+    """(F, 3) how far a following camera has moved at each of ``scene.frames``
+    (``scene.follow``; zeros for a fixed camera): the framing points are relative to it."""
+    follow = getattr(scene, "follow", None)
+    if follow is None:
+        return np.zeros((n, 3))
+    follow = np.asarray(follow, dtype=np.float64)
+    if follow.shape != (n, 3):
+        raise ValueError(f"Scene.follow must hold {n} offsets")
+    return follow
+
+
+def _moved(cam: Camera, offset: np.ndarray) -> Camera:
+    """``cam`` carried by ``offset`` (world, metres): same orientation, intrinsics and clip range."""
+    if not offset.any():
+        return cam
+    M = cam.world_to_camera.copy()
+    M[:3, 3] -= M[:3, :3] @ offset  # x_cam = R (x - offset) + t
+    return Camera(cam.view, cam.K, M, cam.viewport, cam.near, cam.far)
 
 
 def bone_targets(scene, settings: RenderSettings, n: int) -> list:
@@ -290,9 +321,7 @@ def camera_json(cameras: list[list[Camera]], frames, settings: RenderSettings, i
     W, H = settings.size
     n_panels = len(cameras[0]) if cameras else 1
     return {
-        "convention": ("OpenCV: camera x right, y down, z forward; world_to_camera maps world "
-                       "(Z up, metres) to camera; K in pixels, pixel (0,0) top-left with centre "
-                       "(0.5,0.5); depth Z = camera z in metres (0 = background)"),
+        "convention": CONVENTION,
         "width": W * n_panels,
         "height": H,
         "views": [c.view for c in cameras[0]] if cameras else [],

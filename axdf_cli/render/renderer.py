@@ -38,12 +38,13 @@ import numpy as np
 
 from axdf_cli.render.camera import Camera, sequence_cameras
 from axdf_cli.render.context import check_same_process
+from axdf_cli.render.framing import placed_plates
 from axdf_cli.specs.render import RenderSettings
 from axdf_cli.render.scene import FrameChunk, Scene, SceneBone
 
 BONE_COLOR = (0.78, 0.75, 0.68)  # neutral ivory, linear RGB
 STICK_SIDES = 12  # a stick is a 12-sided cylinder with flat caps
-STICK_RADIUS_FRACTION = 0.006  # stick radius per metre of the subject's largest extent
+STICK_RADIUS_FRACTION = 0.01  # stick radius per metre of the subject's largest extent (a stick a few pixels wide when the skeleton is framed)
 STICK_MIN_RADIUS = 0.002  # metres
 WIRE_DARKEN = 0.55  # wire colour = albedo * this
 WIRE_DEPTH_BIAS = 2e-4  # NDC depth pulled towards the camera so edges win over their faces
@@ -433,7 +434,7 @@ class Renderer:
             for c, f in enumerate(np.asarray(chunk.frames).tolist()):
                 if f not in cameras:
                     raise ValueError(f"frame {f} is not in Scene.frames")
-                bw = chunk.bone_world[c] if len(self.scene.bones) else None
+                bw = placed_plates(self.scene, chunk.bone_world[c]) if len(self.scene.bones) else None
                 yield self.render(f, [p[c] for p in chunk.positions], [n[c] for n in chunk.normals], bw, cameras[f])
 
     def release(self) -> None:

@@ -34,7 +34,7 @@ from axdf_cli.specs.render import RenderSettings, parse_render_settings
 from axdf_cli.fileio.runfolder import BONES_CSV, Manifest, frame_mesh_relpath, mesh_relpath, read_run_manifest
 from axdf_cli.fileio.runfolder import plain_relpath as _plain
 from axdf_cli.fileio.yamlio import NAME_ALLOWED, is_name
-from axdf_cli.render.framing import recorded_framing
+from axdf_cli.render.framing import follow_rows, recorded_follow, recorded_framing
 from axdf_cli.render.scene import FrameChunk, Scene, SceneMuscle
 
 def _color(c, where: Mark) -> tuple[float, float, float]:
@@ -225,6 +225,7 @@ def load_run_source(run_dir: Path, manifest: Manifest | None = None, frames=None
         if mesh:
             bone_meshes[i] = mesh
     framing, first_frame = recorded_framing(m)
+    follow_bone, ground, footprint = recorded_follow(m)
     settings = recorded_render_settings(m)
     selected = all_frames if frames is None else tuple(int(f) for f in frames)
 
@@ -263,8 +264,15 @@ def load_run_source(run_dir: Path, manifest: Manifest | None = None, frames=None
             raise InputError(where, f"the camera's target bone {name!r} is not a bone of this run",
                              "bones: " + ", ".join(bone_names))
         targets = _read_bones_csv(run_dir / BONES_CSV, all_frames, [name])[:, 0, :3, 3]
+    follow = None
+    if follow_bone is not None and framing is not None:
+        if follow_bone not in bone_names:
+            raise m.error(("framing", "follow"), f"{follow_bone!r} is not a bone of this run",
+                          "bones: " + ", ".join(bone_names))
+        follow = follow_rows(_read_bones_csv(run_dir / BONES_CSV, all_frames, [follow_bone])[:, 0, :3, 3])
     scene = Scene(tuple(muscles), layout.bones, bounds.astype(np.float64), all_frames,
-                  framing=framing, first_frame=first_frame, targets=targets)
+                  framing=framing, first_frame=first_frame, targets=targets, follow=follow,
+                  ground=ground, footprint=footprint)
 
     source = RunFrames(run_dir, names, formats, all_frames, fps, selected, bone_world, sources, mesh_files)
     return scene, source, settings

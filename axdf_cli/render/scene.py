@@ -34,6 +34,9 @@ class Scene:
     framing: np.ndarray | None = None  # (N, 3) points the automatic camera frames (render/framing.py)
     first_frame: int | None = None  # the pose's first frame: where an orbit's angle is 0
     targets: np.ndarray | None = None  # (F, 3) the camera's target bone's origin at each of `frames`
+    follow: np.ndarray | None = None  # (F, 3) a following camera's offset at each of `frames`; `framing` is relative to it
+    ground: tuple[str, ...] = ()  # names of `bones` drawn as a ground plate under the subject (render/framing.py)
+    footprint: np.ndarray | None = None  # (2, 2) the subject's horizontal box [lo, hi] a ground plate covers
 
 
 @dataclass(frozen=True)
