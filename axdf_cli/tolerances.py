@@ -306,6 +306,12 @@ PACK_POSE_FRAMES = 16
 # A packed section's control points keep to their rays from its centre (star-shaped sections,
 # pack.Fit), each at least this share of the section's original mean radius from it.
 PACK_RAY_MIN = 0.15
+# `axdf pack` holds about PACK_BYTES_PER_VERTEX of memory per muscle vertex at once (distance
+# queries, territories, fits); a pack of more than PACK_MAX_VERTICES vertices (about 6.4 GiB)
+# is refused before any work. gait2392's 92 muscles at the default 40x24 hold 88,320; a single
+# muscle at the spec's limit (1000x1000) would need about 27 GB.
+PACK_BYTES_PER_VERTEX = 27 * 1024
+PACK_MAX_VERTICES = 250_000
 
 # Jiggle's bound (axdf_cli/model/jiggle.py, `bounded`): the written offset of an axis control
 # point from where the bones put it is at most JIGGLE_BOUND of the muscle's axis length at

@@ -60,3 +60,21 @@ def test_a_signal_at_any_moment_exits_130_with_no_partial_output(tmp_path):
             assert json.loads(report.read_text())["verdict"] == "same", case
         assert not [f for f in tmp_path.rglob(".axdf-tmp-*")], case
     assert landed >= len(delays) // 2  # most signals land while the command runs
+
+
+def test_pack_refuses_muscles_too_fine_to_pack_before_any_work(tmp_path, capsys):
+    """A muscle at the spec's finest resolution would need tens of GB to pack: refused at
+    once (exit 2, the muscle named, nothing written), not after the memory is gone."""
+    from conftest import run_main
+
+    lib = tmp_path / "lib"
+    lib.mkdir()
+    src = (REPO_ROOT / "muscles" / "demo" / "biceps_brachii.yaml").read_text()
+    assert "resolution: [48, 24]" in src
+    (lib / "fine.yaml").write_text(src.replace("resolution: [48, 24]", "resolution: [1000, 1000]"))
+    out = tmp_path / "packed"
+    rc, _, err = run_main(["pack", lib, "--skeleton", REPO_ROOT / "poses" / "skeletons" / "human_r.yaml",
+                           "--out", out, "--allow-outside", "-q"], capsys)
+    assert rc == 2, err
+    assert "1,000,000 vertices" in err and "resolution 1000x1000" in err and "lower the muscles' resolution" in err
+    assert "Traceback" not in err and not out.exists()

@@ -14,7 +14,7 @@ import numpy as np
 
 from axdf_cli import runtime
 from axdf_cli import tolerances as tol
-from axdf_cli.errors import InputError
+from axdf_cli.errors import InputError, Mark
 from axdf_cli.fileio import fieldcache
 from axdf_cli.importers import emit
 from axdf_cli.tools.transfer import UniqueFiles, file_doc, load_muscle_files
@@ -51,6 +51,7 @@ def build_pack(muscle_files: list[Path], skeleton_path: Path | str, policy: RefP
         specs += file_specs
     if not specs:
         raise InputError(None, "no muscles found", "give muscle YAML files")
+    check_size(specs)
     rest = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
     on_phase(f"the models of {len(specs)} muscles")
     models = [MuscleModel(s, skel.bone_index, rest, skel) for s in specs]
@@ -84,13 +85,29 @@ def build_pack(muscle_files: list[Path], skeleton_path: Path | str, policy: RefP
     return PackOutputs(dict(files), report, [str(p) for p in inputs])
 
 
+def check_size(specs) -> None:
+    """Refuse, before any work, muscles too fine to pack in bounded memory: the packer holds
+    about tol.PACK_BYTES_PER_VERTEX for each vertex of every muscle at once."""
+    counts = [s.resolution[0] * s.resolution[1] for s in specs]
+    total = sum(counts)
+    if total <= tol.PACK_MAX_VERTICES:
+        return
+    big = max(range(len(specs)), key=counts.__getitem__)
+    s = specs[big]
+    raise InputError(Mark(s.source or s.name, 1, 1) if s.source else None,
+                     f"the muscles to pack hold {total:,} vertices (largest: {s.name}, resolution "
+                     f"{s.resolution[0]}x{s.resolution[1]}), about "
+                     f"{total * tol.PACK_BYTES_PER_VERTEX / 2 ** 30:.0f} GiB of memory to pack",
+                     f"at most {tol.PACK_MAX_VERTICES:,} vertices in one pack: lower the muscles' "
+                     "resolution, or pack fewer files at once")
+
+
 def _pose_frames(muscle_files, skel, pose_path: Path, frames: str | None, policy, names):
     """The frames of a pose to polish over: (``poses(specs, models)`` for
     :func:`axdf_cli.model.pack.pack`, the report's record, the files read). The muscles are
     evaluated as ``axdf run`` would, without any stage (contact is what the polish runs)."""
     from dataclasses import replace
 
-    from axdf_cli.errors import Mark
     from axdf_cli.pipeline.evaluate import evaluate_plan
     from axdf_cli.pipeline.stages import STAGES
 
