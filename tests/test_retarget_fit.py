@@ -185,3 +185,36 @@ def test_a_scale_far_from_the_model_is_warned(tmp_path, capsys):
     assert "the fitted scale 0.38" in err and "--units" in err, err
     assert math.isclose(json.loads((tmp_path / "out" / "retarget_report.json").read_text())["similarity"]["scale"],
                         0.4 * 0.9593, rel_tol=0.01)
+
+
+@needs_bvh
+def test_a_data_sets_retargeted_take_is_warned_as_retarget_warns(tmp_path, capsys):
+    """A data set that retargets a take prints the fit's warnings, as `axdf retarget` does."""
+    import yaml
+
+    from axdf_cli.cli.dataset import warn_ranges
+    from axdf_cli.dataset.spec import fit_warnings, load_dataset
+    from axdf_cli.specs import RefPolicy
+
+    def spec_with(map_path):
+        (tmp_path / "ds.yaml").write_text(yaml.safe_dump({
+            "dataset": "cmu", "skeleton": str(GAIT), "muscles": str(REPO / "muscles" / "gait2392" / "vas_int_r.yaml"),
+            "motions": {"walk": {"retarget": str(CMU_BVH), "map": str(map_path), "step": 40, "frames": "0:20:10"}},
+            "sequences": [{"motion": "walk"}], "cameras": {"sphere": {"views": 1, "distance": [3, 3.5]}}}))
+        return load_dataset(tmp_path / "ds.yaml", policy=RefPolicy(allow_outside=True))
+
+    good = tmp_path / "good.yaml"
+    good.write_text(CMU_MAP.read_text().replace("onto: ../skeletons/gait2392.yaml", f"onto: {GAIT}"))
+    assert fit_warnings(spec_with(good), "walk") == []
+    bad = _map_with(tmp_path, "tibia_r: RightKnee\n  tibia_l: LeftKnee", "tibia_r: LeftKnee\n  tibia_l: RightKnee")
+    spec = spec_with(bad)
+    warns = fit_warnings(spec, "walk")
+    assert warns and "the fit misses the motion" in warns[0]
+
+    class Ctx:
+        muscles = []
+    Ctx.spec = spec
+    capsys.readouterr()
+    warn_ranges(Ctx, quiet=False)
+    err = capsys.readouterr().err
+    assert "warning: motion walk (" in err and "): the fit misses the motion" in err, err

@@ -100,13 +100,16 @@ def _build(args) -> int:
 
 def warn_ranges(ctx, quiet: bool) -> None:
     """A warning per named motion that poses the data set's muscles outside a coordinate's
-    range (as ``axdf run`` warns a run: every muscle the coordinate moves, path muscles too)."""
-    from axdf_cli.dataset.spec import load_motion, motion_frames
+    range (as ``axdf run`` warns a run: every muscle the coordinate moves, path muscles too),
+    and a retargeted take's fit warnings (as ``axdf retarget`` prints them)."""
+    from axdf_cli.dataset.spec import fit_warnings, load_motion, motion_frames
     from axdf_cli.model.pose import muscle_range_warnings
 
     if quiet:
         return
     for name, m in ctx.spec.motions.items():
+        for w in fit_warnings(ctx.spec, name):  # a retargeted take's, as axdf retarget prints them
+            print(f"warning: motion {name} ({m.path}): {w}", file=sys.stderr)
         warns = muscle_range_warnings(load_motion(ctx.spec, name), motion_frames(ctx.spec, name), ctx.muscles)
         if warns:
             fi, j, msg = warns[0]

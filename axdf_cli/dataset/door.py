@@ -97,15 +97,19 @@ def qpos_pose(path: Path, skeleton, name: str, fps: float | None = None, where=N
 
 
 def retarget_pose(path: Path, map_path: Path, skeleton, name: str, step: int = 1, scale: float | None = None,
-                  policy=None) -> Pose:
+                  policy=None) -> tuple[Pose, list[str]]:
     """Motion capture (a BVH take, an npz of joints) as a Pose of ``skeleton``, fitted through
     the retarget map as ``axdf retarget`` fits it (the map's ``onto:`` gives way to the data
-    set's skeleton)."""
+    set's skeleton), and the warnings ``axdf retarget`` would print for it (the take's unit,
+    the fit's checks)."""
     from axdf_cli.importers.mocap import read_motion
     from axdf_cli.tools.retarget import as_pose, load_map, retarget
+    from axdf_cli.tools.retarget_checks import fit_warnings
 
     rmap = load_map(map_path, skeleton, policy)
-    return as_pose(retarget(rmap, read_motion(path, scale=scale, step=step)), name)
+    mocap = read_motion(path, scale=scale, step=step)
+    res = retarget(rmap, mocap)
+    return as_pose(res, name), list(mocap.warnings) + fit_warnings(res)
 
 
 def without_meshes(skeleton):

@@ -489,6 +489,22 @@ def expand_sequences(spec: DatasetSpec) -> list[Sequence]:
 
 
 _MOTION_CACHE: dict = {}  # motions by file, content and skeleton (a worker loads each once)
+_FIT_WARNINGS: dict = {}  # a retargeted motion's fit warnings, by the same key
+
+
+def _motion_key(spec: DatasetSpec, name: str) -> tuple:
+    from axdf_cli.fileio.atomic import sha256_file
+
+    m = spec.motions[name]
+    return (m.path, sha256_file(m.path), m.kind, m.fps, spec.skeleton_path, sha256_file(spec.skeleton_path),
+            m.map, None if m.map is None else sha256_file(m.map), m.step, m.scale)
+
+
+def fit_warnings(spec: DatasetSpec, name: str) -> list[str]:
+    """The warnings ``axdf retarget`` would print for the named motion (none unless it is
+    retargeted motion capture)."""
+    load_motion(spec, name)
+    return list(_FIT_WARNINGS.get(_motion_key(spec, name), []))
 
 
 def load_motion(spec: DatasetSpec, name: str) -> Pose:
@@ -496,11 +512,8 @@ def load_motion(spec: DatasetSpec, name: str) -> Pose:
     :func:`loaders.load_pose`; OpenSim motions go through the importer's reader and unit rules,
     MuJoCo qpos motions through ``axdf import mjcf``'s; motion capture is retargeted onto the
     skeleton through its map, as ``axdf retarget`` does)."""
-    from axdf_cli.fileio.atomic import sha256_file
-
     m = spec.motions[name]
-    key = (m.path, sha256_file(m.path), m.kind, m.fps, spec.skeleton_path, sha256_file(spec.skeleton_path),
-           m.map, None if m.map is None else sha256_file(m.map), m.step, m.scale)
+    key = _motion_key(spec, name)
     if key in _MOTION_CACHE:
         return _MOTION_CACHE[key]
     skel = load_skeleton(spec.skeleton_path, spec.policy)
@@ -510,7 +523,7 @@ def load_motion(spec: DatasetSpec, name: str) -> Pose:
             raise InputError(m.mark, f"pose {Path(m.path).name} uses skeleton {pose.skeleton_path}",
                              f"the data set's skeleton {spec.skeleton_path}")
     elif m.kind == "retarget":
-        pose = retarget_pose(Path(m.path), Path(m.map), skel, name, m.step, m.scale, spec.policy)
+        pose, _FIT_WARNINGS[key] = retarget_pose(Path(m.path), Path(m.map), skel, name, m.step, m.scale, spec.policy)
     elif Path(m.path).suffix.lower() == ".npz":
         pose = qpos_pose(Path(m.path), skel, name, m.fps, m.mark)
     else:
