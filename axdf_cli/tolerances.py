@@ -359,3 +359,6 @@ FRAMING_CLOSEUP = 0.5
 # metres beyond its footprint each way, or this share of the subject's height if that is more.
 GROUND_MARGIN = 0.3
 GROUND_MARGIN_FRACTION = 0.25
+# Only a flat mesh is a ground plate: its height at most this share of its width (gait2392's
+# ground is 2 cm thick and metres wide); a fixed prop on such a root (a rig's ball) stays put.
+GROUND_FLAT = 0.1

@@ -212,3 +212,28 @@ def test_a_damaged_count_is_left_empty(bad, column):
 
     recs = [{"sequence": "s0", "index": 0, "source": "x", "frames": [0], "views": ["a", "b"], "visible_keypoints": bad}]
     assert index_rows(recs, 1, 1, ("png",))["visible_keypoints"] == column
+
+
+def test_a_data_sets_ground_plate_lies_under_each_sequences_subject():
+    """A data set draws its ground plate as a run does: under the sequence's subject (here a
+    walker 10 m from the plate at the origin), not where the skeleton file puts it."""
+    from types import SimpleNamespace
+
+    from axdf_cli.dataset.worker import sequence_plates
+    from axdf_cli.render.framing import placed_plates
+    from axdf_cli.render.scene import Scene, SceneBone
+
+    plate = np.array([[x, y, z] for x in (-0.5, 0.5) for y in (-0.25, 0.25) for z in (-0.01, 0.0)])
+    bones = (SimpleNamespace(name="ground", parent=-1, dofs=(), mesh="ground.obj"),
+             SimpleNamespace(name="hips", parent=0, dofs=("tx",), mesh=None))
+    scene = Scene((), (SceneBone("ground", plate, np.zeros((0, 3), np.int32)),), np.zeros((2, 3)), ())
+    ctx = SimpleNamespace(skeleton=SimpleNamespace(bones=bones), scene=scene, scene_bones=[0])
+    rng = np.random.default_rng(37)
+    subject = rng.uniform([9.0, 1.8, 0.0], [11.0, 2.2, 1.8], size=(4, 20, 3))  # (F, P, 3)
+    placed = sequence_plates(ctx, subject)
+    moved = placed_plates(placed, np.eye(4)[None])[0]
+    v = plate @ moved[:3, :3].T + moved[:3, 3]
+    lo, hi = v.min(0), v.max(0)
+    assert (lo[:2] <= subject[..., :2].reshape(-1, 2).min(0)).all() and (hi[:2] >= subject[..., :2].reshape(-1, 2).max(0)).all()
+    np.testing.assert_allclose([lo[2], hi[2]], [-0.01, 0.0])
+    assert sequence_plates(SimpleNamespace(**{**vars(ctx), "scene_bones": []}), subject) is None

@@ -28,7 +28,7 @@ from axdf_cli.dataset import labels as lab
 from axdf_cli.dataset import door
 from axdf_cli.pipeline.plan import display_path, load_bone_mesh, load_muscle_specs
 from axdf_cli.pipeline.stages import build_stages, stages_record
-from axdf_cli.render.framing import skeleton_points
+from axdf_cli.render.framing import ground_bones, placed_plates, skeleton_points
 from axdf_cli.render.renderer import id_map
 from axdf_cli.specs.render import settings_to_dict
 from axdf_cli.errors import InputError
@@ -98,6 +98,17 @@ def build_context(path: Path | str, seed: int | None = None, policy=None, listed
     ctx.dataset_json = (json.dumps(dataset_dict(ctx), indent=1) + "\n").encode()
     ctx.digest = hashlib.sha256(ctx.dataset_json).hexdigest()
     return ctx
+
+
+def sequence_plates(ctx: Context, subject: np.ndarray):
+    """The scene with its ground plates (a run's rule: render.framing.placed_plates) under the
+    sequence's subject (``subject`` (F, P, 3): its points at each frame), or None when the
+    data set draws no plate."""
+    names = set(ground_bones(ctx.skeleton))
+    if not ctx.scene_bones or not names & {b.name for b in ctx.scene.bones}:
+        return None
+    xy = subject[..., :2].reshape(-1, 2)
+    return replace(ctx.scene, ground=tuple(sorted(names)), footprint=np.stack([xy.min(0), xy.max(0)]))
 
 
 def dataset_dict(ctx: Context) -> dict:
@@ -286,6 +297,7 @@ def _make_sequence(ctx: Context, seq: Sequence, folder: Path, resume: bool, timi
     t_read = t_render = 0.0
     t_write = time.perf_counter() - t1  # labels so far
     vr = view_renderer(ctx)  # once per process
+    plates = sequence_plates(ctx, subject)
     root = runfolder.Root(folder)  # never through a link (views, views/<view>)
     for fi, frame in enumerate(frames):
         ta = time.perf_counter()
@@ -293,6 +305,8 @@ def _make_sequence(ctx: Context, seq: Sequence, folder: Path, resume: bool, timi
         cams = [view_camera(views[v], K[v], w2c[fi, v], clip[fi, v, 0], clip[fi, v, 1], spec.render.size)
                 for v in range(nv)]
         bw = world[fi, ctx.scene_bones] if ctx.scene_bones else None
+        if plates is not None:
+            bw = placed_plates(plates, bw)
         tb = time.perf_counter()
         imgs = vr.render(int(frame), pos, nrm, bw, cams)
         masks = [vr.renderer.amodal(c) for c in cams] if amodal else []

@@ -33,7 +33,8 @@ import numpy as np
 from axdf_cli.model.pose import (FRAMING_CHUNK, FRAMING_DIRECTIONS, FRAMING_PAD, FRAMING_PAD_FRACTION, SCAN_FRAMES,
                                  hull_points, sample_coordinates, sphere_directions)
 from axdf_cli.model.skeleton import forward_kinematics
-from axdf_cli.tolerances import (FRAMING_CLOSEUP, FRAMING_SAMPLE, GROUND_MARGIN, GROUND_MARGIN_FRACTION)
+from axdf_cli.tolerances import (FRAMING_CLOSEUP, FRAMING_SAMPLE, GROUND_FLAT, GROUND_MARGIN,
+                                 GROUND_MARGIN_FRACTION)
 
 #: Smallest extent (metres) used for framing, so a point-like scene still frames.
 MIN_EXTENT = 1e-3
@@ -231,7 +232,8 @@ def recorded_follow(m) -> tuple[str | None, tuple[str, ...], np.ndarray | None]:
 
 def placed_plates(scene, bone_world: np.ndarray | None) -> np.ndarray | None:
     """``bone_world`` (n_scene_bones, 4, 4) with each ground plate of ``scene`` (``scene.ground``)
-    moved under the subject's footprint (``scene.footprint``) by :func:`plate_matrix`."""
+    moved under the subject's footprint (``scene.footprint``) by :func:`plate_matrix`; a mesh
+    on such a bone that is not flat (height over GROUND_FLAT of its width) stays where it is."""
     foot = getattr(scene, "footprint", None)
     names = set(getattr(scene, "ground", ()) or ())
     if bone_world is None or foot is None or not names:
@@ -241,7 +243,9 @@ def placed_plates(scene, bone_world: np.ndarray | None) -> np.ndarray | None:
     for j, b in enumerate(scene.bones):
         if b.name in names and len(b.vertices):
             v = np.asarray(b.vertices, np.float64) @ out[j, :3, :3].T + out[j, :3, 3]
-            out[j] = plate_matrix(v, 0.5 * (lo + hi), hi - lo) @ out[j]
+            size = np.ptp(v, axis=0)
+            if size[2] <= GROUND_FLAT * max(size[0], size[1]):  # a plate, not a fixed prop (a ball)
+                out[j] = plate_matrix(v, 0.5 * (lo + hi), hi - lo) @ out[j]
     return out
 
 
