@@ -123,11 +123,12 @@ SECONDS_PER_KERNEL = 5.5
 PACK_ONLY = ("pack",)
 
 
-def cached_kernels(modules=None) -> list[str]:
-    """Every cached numba kernel under axdf_cli/model/ (a function decorated with
-    ``cache=True``) as numba names its cache entry, ``MODULE.NAME-LINE`` (the line of its first
-    decorator); ``modules``: a test on the module's stem (all when None)."""
+def _kernels(modules=None) -> list[tuple[str, str]]:
+    """(numba's cache subfolder, entry name) of every cached kernel (see :func:`cached_kernels`).
+    numba keeps a source file's entries in ``<its folder's name>_<sha1 of the folder's absolute
+    path>`` (so a checkout elsewhere has entries of its own)."""
     import ast
+    import hashlib
     from pathlib import Path
 
     def cached(dec) -> bool:
@@ -138,22 +139,37 @@ def cached_kernels(modules=None) -> list[str]:
     for path in sorted((Path(__file__).resolve().parent / "model").rglob("*.py")):
         if modules is not None and not modules(path.stem):
             continue
+        sub = f"{path.parent.name}_{hashlib.sha1(str(path.parent).encode()).hexdigest()}"
         for n in ast.walk(ast.parse(path.read_text(), str(path))):
             if isinstance(n, ast.FunctionDef) and any(cached(d) for d in n.decorator_list):
-                out.append(f"{path.stem}.{n.name}-{n.decorator_list[0].lineno}")
+                out.append((sub, f"{path.stem}.{n.name}-{n.decorator_list[0].lineno}"))
     return out
 
 
+def cached_kernels(modules=None) -> list[str]:
+    """Every cached numba kernel under axdf_cli/model/ (a function decorated with
+    ``cache=True``) as numba names its cache entry, ``MODULE.NAME-LINE`` (the line of its first
+    decorator); ``modules``: a test on the module's stem (all when None)."""
+    return [name for _, name in _kernels(modules)]
+
+
+def cache_entry(kernel: str) -> str:
+    """The path of ``kernel``'s (a :func:`cached_kernels` name) index file in numba's cache
+    folder, relative to it."""
+    sub = dict((name, sub) for sub, name in _kernels())[kernel]
+    return f"{sub}/{kernel}.py{sys.version_info[0]}{sys.version_info[1]}.nbi"
+
+
 def missing_kernels(cache_dir: str | None, modules=None) -> tuple[list[str], int]:
-    """(the kernels with no entry in numba's cache folder ``cache_dir``, how many there are)."""
+    """(the kernels with no entry in numba's cache folder ``cache_dir`` for this checkout, how
+    many there are)."""
     from pathlib import Path
 
-    kernels = cached_kernels(modules)
+    kernels = _kernels(modules)
     tag = f".py{sys.version_info[0]}{sys.version_info[1]}.nbi"
-    found = set()
-    if cache_dir and Path(cache_dir).is_dir():
-        found = {p.name[: -len(tag)] for p in Path(cache_dir).rglob(f"*{tag}")}
-    return [k for k in kernels if k not in found], len(kernels)
+    if not cache_dir or not Path(cache_dir).is_dir():
+        return [name for _, name in kernels], len(kernels)
+    return [name for sub, name in kernels if not (Path(cache_dir) / sub / f"{name}{tag}").exists()], len(kernels)
 
 
 def compile_line(missing: int, total: int, cache_dir: str | None) -> str:
@@ -172,10 +188,19 @@ def compile_notice(command: str) -> str | None:
 
     configure()
     cache = os.environ.get("NUMBA_CACHE_DIR")
-    if cache and (Path(cache) / f".warm-{command}").exists():
+    if cache and (Path(cache) / _warm_name(command)).exists():
         return None
     missing, total = missing_kernels(cache, None if command == "pack" else (lambda m: m not in PACK_ONLY))
     return compile_line(len(missing), total, cache) if missing else None
+
+
+def _warm_name(command: str) -> str:
+    """The marker of ``command`` having finished against the cache, for this checkout (numba
+    keeps each checkout's entries apart: :func:`_kernels`)."""
+    import hashlib
+
+    here = os.path.dirname(os.path.abspath(__file__))
+    return f".warm-{command}-{hashlib.sha1(here.encode()).hexdigest()[:12]}"
 
 
 def mark_warm(command: str) -> None:
@@ -185,6 +210,6 @@ def mark_warm(command: str) -> None:
     cache = os.environ.get("NUMBA_CACHE_DIR")
     if cache and Path(cache).is_dir():
         try:
-            (Path(cache) / f".warm-{command}").touch()
+            (Path(cache) / _warm_name(command)).touch()
         except OSError:  # a read-only cache: the notice comes again, nothing worse
             pass

@@ -166,10 +166,12 @@ def test_the_compile_notice_counts_the_kernels_missing_from_the_cache(tmp_path, 
     assert line.endswith(f"min of CPU); later runs load them from {tmp_path}")
     assert len(runtime.cached_kernels()) > total  # pack's own kernels: only `axdf pack` compiles them
     assert f"of {len(runtime.cached_kernels())} numba" in runtime.compile_notice("pack")
-    tag = f".py{sys.version_info[0]}{sys.version_info[1]}.nbi"
     for k in runtime.cached_kernels()[:5]:
-        (tmp_path / f"{k}{tag}").touch()
+        (tmp_path / k).touch()  # an entry of another checkout's (its own subfolder) does not count
+        (tmp_path / runtime.cache_entry(k)).parent.mkdir(exist_ok=True)
+        (tmp_path / runtime.cache_entry(k)).touch()
     assert f"compiling {total - 5} of {total}" in runtime.compile_notice("run")
+    assert runtime.cache_entry(runtime.cached_kernels()[0]).endswith(f".py{sys.version_info[0]}{sys.version_info[1]}.nbi")
     runtime.mark_warm("run")  # the command finished once: its kernels are compiled
     assert runtime.compile_notice("run") is None and runtime.compile_notice("pack") is not None
 
