@@ -121,6 +121,10 @@ def use_threads() -> bool:
 SECONDS_PER_KERNEL = 5.5
 #: Kernels only ``axdf pack`` runs (the other commands never compile them).
 PACK_ONLY = ("pack",)
+#: The kernel modules a command compiles where it is not every one but pack's (measured from
+#: the cache a cold `axdf import osim` leaves: the muscle surface and the path kernels).
+COMMAND_MODULES = {"import": ("batch_kernels", "batch_surface", "kernels", "geometry", "mujoco_shapes",
+                              "opensim_shapes", "wrap")}
 
 
 def _kernels(modules=None) -> list[tuple[str, str]]:
@@ -190,7 +194,13 @@ def compile_notice(command: str) -> str | None:
     cache = os.environ.get("NUMBA_CACHE_DIR")
     if cache and (Path(cache) / _warm_name(command)).exists():
         return None
-    missing, total = missing_kernels(cache, None if command == "pack" else (lambda m: m not in PACK_ONLY))
+    if command == "pack":
+        modules = None
+    elif command in COMMAND_MODULES:
+        modules = COMMAND_MODULES[command].__contains__
+    else:
+        modules = lambda m: m not in PACK_ONLY  # noqa: E731
+    missing, total = missing_kernels(cache, modules)
     return compile_line(len(missing), total, cache) if missing else None
 
 

@@ -231,3 +231,20 @@ def test_pack_reports_each_phase_and_round_in_a_log_and_nothing_with_quiet(tmp_p
         f"axdf pack: round {k} of at most {total}" for k in range(1, len(rounds) + 1)], lines
     rc, _, err = run_main([*common, "--out", tmp_path / "q", "-q"], capsys)
     assert rc == 0 and err == "", err
+
+
+def test_the_compile_notice_covers_imports_that_compile(tmp_path, monkeypatch, capsys):
+    """`axdf import osim|mjcf` compile the surface and path kernels (a cold import of arm26
+    compiles 41): the notice counts those; `import bvh` compiles none and says nothing."""
+    from argparse import Namespace
+
+    from axdf_cli import runtime
+    from axdf_cli.cli.main import _notice
+
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    n = len(runtime.cached_kernels(runtime.COMMAND_MODULES["import"].__contains__))
+    assert 0 < n < len(runtime.cached_kernels(lambda m: m not in runtime.PACK_ONLY))
+    assert _notice(Namespace(command="import", source="osim", quiet=False)) == "import"
+    assert f"compiling {n} of {n} numba kernels" in capsys.readouterr().err
+    assert _notice(Namespace(command="import", source="bvh", quiet=False)) is None
+    assert capsys.readouterr().err == ""

@@ -91,7 +91,7 @@ def _install(handler) -> dict:
 
 #: Commands that run numba's kernels, and the actions of theirs that do: a note before a cold
 #: compile (runtime.compile_notice).
-KERNEL_COMMANDS = {"run": None, "pack": None, "dataset": ("build",)}
+KERNEL_COMMANDS = {"run": None, "pack": None, "dataset": ("build",), "import": ("osim", "mjcf"), "transfer": None}
 
 
 def _notice(args) -> str | None:
@@ -100,7 +100,7 @@ def _notice(args) -> str | None:
     if args.command not in KERNEL_COMMANDS:
         return None
     actions = KERNEL_COMMANDS[args.command]
-    if actions is not None and getattr(args, "action", None) not in actions:
+    if actions is not None and getattr(args, "action", getattr(args, "source", None)) not in actions:
         return None
     from axdf_cli import runtime
 
