@@ -341,6 +341,10 @@ IMPORT_MIN_PATH_LENGTH = 1e-4
 # sizes come from a model in other units (millimetres read as metres) or a typing slip.
 IMPORT_PLAUSIBLE_PATH = 5.0
 IMPORT_PLAUSIBLE_BELLY = 1.0
+# An imported bone mesh less than this across (metres) once scaled and placed has collapsed to
+# a point (a scale of 0, or one that underflows float32): refused. The smallest bones modelled
+# (ossicles, sesamoids) are millimetres across.
+IMPORT_MIN_MESH_SIZE = 1e-6
 # Bytes one array of an .npz motion (a qpos motion, joint positions) may take once read: the
 # limit is checked from the array's header before any data is decompressed, so a small file
 # that claims a huge array costs nothing (a compressed archive can expand a thousandfold).

@@ -243,6 +243,27 @@ def test_osim_scale_factors_of_1e300_are_refused_at_the_mesh(tmp_path, capsys):
     assert "<scale_factors> 1e+300 1 1" in err and "within ±1e+09 m" in err, err
 
 
+def test_bone_meshes_scaled_to_a_point_are_refused_at_the_mesh(tmp_path, capsys):
+    """An OSIM <scale_factors> of 0 and an MJCF mesh scale of 1e-300 (0 in float32) wrote bone
+    meshes collapsed to one point, with exit 0 (found by a fresh hostile round)."""
+    text = osim(geom=OSIM_MESH.format(scale="0 0 0"))
+    err = refused(tmp_path / "osim", capsys, "osim", {"m.osim": text, "bone.vtp": VTP.format(points=GOOD_POINTS)})
+    assert position(err, "m.osim")[0] == line_of(text, "<Mesh "), err
+    assert "0 m across once placed" in err and "at least 1e-06 m across" in err, err
+    text = mjcf(geom='<geom type="mesh" mesh="bone"/>',
+                asset='<asset><mesh name="bone" file="bone.obj" scale="1e-300 1e-300 1e-300"/></asset>')
+    err = refused(tmp_path / "mjcf", capsys, "mjcf", {"m.xml": text, "bone.obj": OBJ.format(x="0.1")})
+    assert position(err, "m.xml") == (line_of(text, "<mesh "), 10) and "0 m across once placed" in err, err
+
+
+def test_a_muscle_mujoco_refuses_for_its_lmin_and_lmax_is_refused(tmp_path, capsys):
+    """MuJoCo requires lmin < 1 < lmax of a muscle ("lmin<1<lmax required in muscle")."""
+    text = mjcf(muscle='lmin="2" lmax="1"')
+    err = refused(tmp_path, capsys, "mjcf", {"m.xml": text})
+    assert position(err, "m.xml") == (line_of(text, "<muscle"), 13), err
+    assert "lmin 2 lmax 1" in err and "lmin < 1 < lmax" in err, err
+
+
 def test_good_bone_meshes_still_import_and_validate(tmp_path, capsys):
     rc, err, out = imported(tmp_path, capsys, "osim", {"m.osim": osim(geom=OSIM_MESH.format(scale="2 2 2")),
                                                        "bone.vtp": VTP.format(points=GOOD_POINTS)})

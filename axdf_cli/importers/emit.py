@@ -402,7 +402,8 @@ def pose_doc(motion: Motion, skeleton_ref: str) -> dict:
 
 def check_vertices(v: np.ndarray, where, what: str) -> None:
     """Bone mesh vertices (metres) as a PLY may hold them: finite and within ±MAX_ABS_NUMBER
-    (a PLY stores float32: 1e300 would become inf, which ``axdf validate`` refuses).
+    (a PLY stores float32: 1e300 would become inf, which ``axdf validate`` refuses), and not
+    collapsed to a point (a scale of 0, or one that underflows float32).
     ``where``: the mark of the mesh in its model; ``what`` names it."""
     v = np.asarray(v, dtype=np.float64)
     bad = ~np.isfinite(v) | (np.abs(v) > tol.MAX_ABS_NUMBER)
@@ -411,6 +412,11 @@ def check_vertices(v: np.ndarray, where, what: str) -> None:
         raise InputError(where, f"{what}: vertex {i} has {'xyz'[k]} = {float(v[i, k]):g} m once placed",
                          f"finite coordinates within ±{tol.MAX_ABS_NUMBER:g} m (check the mesh file, its scale "
                          "and its frame)")
+    size = float(np.ptp(v.astype(np.float32), axis=0).max()) if len(v) > 1 else 0.0  # (as the PLY holds it)
+    if len(v) > 1 and size < tol.IMPORT_MIN_MESH_SIZE:
+        raise InputError(where, f"{what}: {size:g} m across once placed (scaled to a point)",
+                         f"a mesh at least {tol.IMPORT_MIN_MESH_SIZE:g} m across (check its scale: 0 or a "
+                         "vanishing scale collapses it)")
 
 
 def body_ply(parts: list[tuple[np.ndarray, np.ndarray]], where=None, what: str = "bone mesh") -> bytes:

@@ -46,7 +46,7 @@ JOINT_TYPES = ("hinge", "slide", "ball", "free")
 #: Geom types a spatial tendon may wrap over (MuJoCo allows these two only).
 WRAP_GEOMS = ("sphere", "cylinder")
 #: MuJoCo's defaults for a <muscle>: range, force, scale (the rest only shapes force).
-MUSCLE_DEFAULTS = {"range": (0.75, 1.05), "force": -1.0, "scale": 200.0}
+MUSCLE_DEFAULTS = {"range": (0.75, 1.05), "force": -1.0, "scale": 200.0, "lmin": 0.5, "lmax": 1.6}
 #: Elements of <default> whose attributes are kept per class (actuator shortcuts share one).
 ACTUATOR_TAGS = ("general", "motor", "position", "velocity", "intvelocity", "damper", "cylinder", "muscle",
                  "adhesion", "plugin")
@@ -638,6 +638,11 @@ class Reader:
                 rng = _floats(a_node, "range", a, 2, np.array(MUSCLE_DEFAULTS["range"]))
                 force = float(_floats(a_node, "force", a, 1, np.array([MUSCLE_DEFAULTS["force"]]))[0])
                 scale = float(_floats(a_node, "scale", a, 1, np.array([MUSCLE_DEFAULTS["scale"]]))[0])
+                lmin = float(_floats(a_node, "lmin", a, 1, np.array([MUSCLE_DEFAULTS["lmin"]]))[0])
+                lmax = float(_floats(a_node, "lmax", a, 1, np.array([MUSCLE_DEFAULTS["lmax"]]))[0])
+                if not lmin < 1.0 < lmax:  # MuJoCo refuses the model too
+                    raise InputError(a_node.mark, f"muscle {name!r} lmin {lmin:g} lmax {lmax:g}",
+                                     "lmin < 1 < lmax (lengths relative to the optimal fibre length), as MuJoCo requires")
             else:
                 g = _floats(a_node, "gainprm", a, None, np.zeros(10))
                 g = np.concatenate([g, np.zeros(max(0, 4 - len(g)))])
