@@ -341,9 +341,11 @@ def test_not_a_file_and_binary(tmp_path, capsys):
     assert not (tmp_path / "o").exists()
 
 
-@pytest.mark.parametrize("suffix,command", [(".bvh", "axdf import bvh"), (".mot", "axdf import osim"),
+@pytest.mark.parametrize("suffix,command", [(".bvh", "axdf retarget"), (".mot", "axdf import osim"),
                                             (".sto", "axdf import osim")])
 def test_pose_flag_names_the_import_command(tmp_path, capsys, suffix, command):
+    """A motion given as --pose names the command that makes a pose of it: a BVH take is fitted
+    onto the muscles' skeleton by `axdf retarget` (tests/test_first_hour.py follows that hint)."""
     from axdf_cli.cli.main import main
 
     motion = tmp_path / f"walk{suffix}"
