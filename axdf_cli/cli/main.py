@@ -91,7 +91,7 @@ def _install(handler) -> dict:
 
 #: Commands that run numba's kernels, and the actions of theirs that do: a note before a cold
 #: compile (runtime.compile_notice).
-KERNEL_COMMANDS = {"run": None, "pack": None, "dataset": ("build",), "import": ("osim", "mjcf"), "transfer": None}
+KERNEL_COMMANDS = {"run": None, "pack": None, "dataset": ("build",), "import": ("osim", "mjcf")}
 
 
 def _notice(args) -> str | None:
