@@ -2,7 +2,7 @@
 against the documented bounds (``tolerances.RETARGET_*``), each problem with its frames and the
 fix; and the room coordinates that left the model file's range.
 
-The error is measured against the *mapped body's height*: the vertical extent of the map's
+The error is compared with the *mapped body's height*: the vertical extent of the map's
 weighted points in the model's rest pose, times the fitted scale (the subject's metres), so a
 bound means the same for a child and an adult, and for a model in any unit. ``res`` is a
 :class:`axdf_cli.tools.retarget.Retargeted`.
