@@ -325,6 +325,15 @@ PACK_MAX_VERTICES = 250_000
 # of a two-segment axis lengthens it by sqrt(1 + 4 * 0.25^2) - 1 = 12%.
 JIGGLE_BOUND = 0.25
 JIGGLE_BOUND_KNEE = 0.75
+# Jiggle's memory (axdf_cli/pipeline/jiggle_stage.py): the pose's timeline is cut into
+# epochs (axdf_cli/pipeline/evaluate.py, TIME_EPOCH_BLOCKS); a muscle's oscillators for an
+# epoch start from the pre-roll steady state as many frames before it as make any start
+# state's difference decay to JIGGLE_WARMUP_EPS of itself (model/jiggle.py, warmup_frames),
+# so a frame costs at most an epoch and a warm-up, not the whole pose before it. At 1e-9 the
+# jump where two epochs meet is below a nanometre for a 1 m offset (float32 positions near
+# 1 m resolve 60 nm): no pop. A walk's slowest shipped muscle (8 Hz, damping 0.2) needs 2.1 s
+# of warm-up; an undamped muscle integrates from the pose's first frame.
+JIGGLE_WARMUP_EPS = 1e-9
 
 # ---------------------------------------------------------------- importers (hostile inputs)
 # A MuJoCo joint coupling is a polynomial of degree at most 4 (polycoef); a chain of couplings

@@ -166,7 +166,8 @@ def test_no_jiggle_equals_muscles_without_the_key(tmp_path, hinge_runs, capsys):
     # the manifest: the stage is recorded when it runs; off, the run is that of muscles without
     # jiggle but for the inputs' sha256 (the muscle files differ)
     on, off, plain_m = (json.loads((d / "manifest.json").read_text()) for d in (*hinge_runs, out))
-    assert on["settings"]["stages"][0] == {"name": "jiggle", "scope": "time", "bound": 0.25, "knee": 0.75}
+    assert on["settings"]["stages"][0] == {"name": "jiggle", "scope": "time", "bound": 0.25, "knee": 0.75,
+                                           "warmup_eps": 1e-9}
     assert [s["name"] for s in on["settings"]["stages"]] == ["jiggle", "contact"]  # (contact: on by default)
     assert [s["name"] for s in off["settings"]["stages"]] == ["contact"]
     for m in (off, plain_m):
@@ -314,3 +315,39 @@ def test_a_frequency_the_frames_cannot_show_is_noted(tmp_path, capsys):
     rc, _, err = run_main(["run", "--muscles", h / "muscles", "--pose", h / "bend.yaml", "--out", h / "o2",
                            "--frames", "0:3", "--no-render", "--verbose"], capsys)
     assert rc == 0 and "aliases" not in err
+
+
+def test_a_late_frame_costs_a_warm_up_not_the_pose_before_it(tmp_path, capsys, monkeypatch):
+    """Jiggle's memory is bounded (pipeline/evaluate.py, TIME_EPOCH_BLOCKS; jiggle_stage.py):
+    a frame of a later epoch is evaluated from a warm-up before its epoch, not from the pose's
+    first frame. What it writes equals the uninterrupted integration from frame 0 to 1e-6 m
+    (float32 positions near 1 m resolve 60 nm; JIGGLE_WARMUP_EPS leaves far less), and
+    subsets on either side of an epoch's start give the same bytes."""
+    from axdf_cli.model import jiggle
+    from axdf_cli.pipeline import evaluate
+
+    folder = hinge_folder(tmp_path / "long")
+    # the knee swings on for 9,000 frames (3 epochs at 120 fps): still moving at every epoch's start
+    write_pose(folder, "bend", {f: {"knee": 60.0 * ((f // 30) % 2)} for f in range(0, 9001, 30)}, [0, 9000],
+               skeleton="hinge.yaml", fps=120)
+    epoch = evaluate.TIME_EPOCH_BLOCKS * evaluate.TIME_BLOCK
+    assert epoch < 4100 < 2 * epoch < 8300 < 9000
+    walked = []
+    block = evaluate.time_block
+    monkeypatch.setattr(evaluate, "time_block", lambda plan, stages, state, b: (walked.append(b),
+                                                                               block(plan, stages, state, b))[1])
+    late = run(folder, "late", capsys, "--frames", "8300")
+    lead = int(np.ceil(jiggle.warmup_frames(jiggle.JiggleSpec(HZ, ZETA), 1 / 120) / evaluate.TIME_BLOCK))
+    assert 0 < lead and len(walked) <= lead + 8300 // evaluate.TIME_BLOCK - 2 * evaluate.TIME_EPOCH_BLOCKS + 1
+    assert min(walked) == 2 * evaluate.TIME_EPOCH_BLOCKS - lead  # the warm-up, not frame 0
+    near = run(folder, "near", capsys, "--frames", "4090:4101,8300")
+    assert outputs(near)["meshes/front/front_8300.ply"] == outputs(late)["meshes/front/front_8300.ply"]
+    monkeypatch.setattr(evaluate, "TIME_EPOCH_BLOCKS", 10 ** 9)  # one epoch: from frame 0
+    whole = run(folder, "whole", capsys, "--frames", "4090:4101,8300")
+    read = FORMATS["ply"].reader
+    for name in ("front/front_4090", "front/front_4100", "back/back_8300"):
+        a, b = (read((o / "meshes" / f"{name}.ply").read_bytes()).vertices.astype(np.float64) for o in (near, whole))
+        assert np.abs(a - b).max() <= 1e-6, name
+    still = run(folder, "still", capsys, "--frames", "4100", "--no-jiggle")  # (the jiggle moves it)
+    assert np.abs(read((still / "meshes/front/front_4100.ply").read_bytes()).vertices
+                  - read((near / "meshes/front/front_4100.ply").read_bytes()).vertices).max() > 1e-4

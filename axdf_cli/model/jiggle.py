@@ -59,6 +59,7 @@ the ``tensed`` one, and so does zeta.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -87,6 +88,24 @@ def parameters(spec: JiggleSpec, tension: np.ndarray) -> tuple[np.ndarray, np.nd
     omega = 2.0 * np.pi * np.sqrt((1.0 - e) * spec.frequency ** 2 + e * f1 ** 2)
     zeta = (1.0 - e) * spec.damping_ratio + e * z1
     return omega, zeta
+
+
+def decay_rate(spec: JiggleSpec, samples: int = 65) -> float:
+    """The slowest rate (1/s) at which a free offset dies out, over effective tensions 0..1
+    (``samples`` of them): zeta omega when under- or critically damped, the slow root
+    omega / (zeta + sqrt(zeta^2 - 1)) when over-damped; 0 for a muscle that rings for ever."""
+    omega, zeta = parameters(spec, np.linspace(0.0, 1.0, samples))
+    slow = omega / (zeta + np.sqrt(np.maximum(zeta * zeta - 1.0, 0.0)))
+    return float(np.where(zeta <= 1.0, zeta * omega, slow).min())
+
+
+def warmup_frames(spec: JiggleSpec, h: float, eps: float = tol.JIGGLE_WARMUP_EPS) -> float:
+    """Frames of length h after which a difference of start state has fallen to ``eps`` of
+    itself (``exp(-rate t) = eps``, :func:`decay_rate`): how long before a frame the
+    oscillators must start for that frame not to depend on how they started. inf for an
+    undamped muscle (its start is never forgotten)."""
+    rate = decay_rate(spec)
+    return math.inf if rate <= 0.0 else math.log(1.0 / eps) / (rate * h)
 
 
 def greville(n: int) -> np.ndarray:

@@ -7,8 +7,9 @@ indexed by muscle. In order:
 1a. **axis** (the model, :meth:`MuscleModel.axis_points`): each muscle's axis control points in
     the world, ``chunk.axis[j]`` (C, n_j, 3), from the bones' world transforms and paths;
 2.  **TIME stages** (scope ``time``): across time, on ``chunk.axis``. A TIME stage carries its
-    state from the pose's first frame through every frame in order (secondary motion: damped
-    oscillators on the axis control points);
+    state through consecutive frames in order, from the pose's first frame or from a warm-up
+    before an epoch of the timeline (secondary motion: damped oscillators on the axis
+    control points);
 1b. **surface** (the model, :meth:`MuscleModel.surface`): RMF, binding, twist, tension, volume,
     surface and normals from ``chunk.axis``, into ``chunk.results[j]``;
 3.  **FRAME stages** (scope ``frame``): across muscles, on ``chunk.results`` (contact between
@@ -21,12 +22,16 @@ What a stage declares decides how a run is split and resumed, never a special ca
 runner (:func:`axdf_cli.pipeline.execute.execute`):
 
 - no stage: each frame is evaluated alone; ``--jobs`` splits the muscles over workers;
-- a TIME stage: its chunks are always the same blocks of the pose's timeline (every frame
-  from the pose's first, :data:`axdf_cli.pipeline.evaluate.TIME_BLOCK` at a time, all muscles),
-  called in order from :meth:`Stage.start`'s state. A pre-pass keeps the states at the
-  blocks' starts, so that any ``--frames`` subset, ``--resume``, mesh workers and render
-  workers see exactly the axis a whole run computes (same bytes). Contract: the stage acts
-  on ``chunk.axis`` (and its state) only, and for muscle j only from muscle j's history;
+- a TIME stage: its chunks are always the same blocks of the pose's timeline
+  (:data:`axdf_cli.pipeline.evaluate.TIME_BLOCK` frames from the pose's first, all muscles).
+  The timeline is cut into epochs of :data:`~axdf_cli.pipeline.evaluate.TIME_EPOCH_BLOCKS`
+  blocks; an epoch's blocks are called in order from ``start(plan, epoch_frame, TIME_BLOCK)``'s
+  state (``start(plan)`` for the first epoch), whose ``first`` says from which block the walk
+  to the epoch begins (the stage's warm-up). A pre-pass keeps the states at the blocks'
+  starts, so that any ``--frames`` subset, ``--resume``, mesh workers and render workers see
+  exactly the axis a whole run computes (same bytes), and a frame costs at most a warm-up and
+  an epoch. Contract: the stage acts on ``chunk.axis`` (and its state) only, and for muscle j
+  only from muscle j's history and law;
 - a FRAME stage: all muscles of a frame are evaluated together (``chunk.muscles`` is every
   muscle), so ``--jobs`` splits the frames, not the muscles; per-muscle packed sequences
   still come out in frame order, byte-identical. Contract: a frame's output depends on that
