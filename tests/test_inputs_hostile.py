@@ -382,3 +382,17 @@ def test_alias_bomb_and_deep_nesting_are_refused_by_the_reader():
             parse_yaml(deep, "t.yaml")
     with pytest.raises(InputError, match="nested too deeply"):
         parse_yaml("".join("  " * i + f"k{i}:\n" for i in range(200)) + "  " * 200 + "v: 1\n", "t.yaml")
+
+
+def test_the_value_cap_is_for_aliases_a_plain_document_is_bounded_by_its_size(monkeypatch):
+    """YAML_MAX_NODES bounds what aliases expand to; a document without one is as many values
+    as it has nodes, bounded by YAML_MAX_BYTES (a 14.7 MiB pose under the 16 MiB limit was
+    refused as "an alias bomb")."""
+    monkeypatch.setattr(tol, "YAML_MAX_NODES", 1000)
+    plain = "keys:\n" + "".join(f"  {i}: {{a: {i}.5, b: x{i}}}\n" for i in range(2000))
+    doc = parse_yaml(plain, "t.yaml")
+    assert len(doc["keys"]) == 2000 and doc["keys"][1999] == {"a": 1999.5, "b": "x1999"}
+    assert str(doc["keys"][1999].value_marks["b"]) == "t.yaml:2001:24"
+    aliased = "x: &x [1, 2, 3, 4, 5, 6, 7, 8, 9, 10]\n" + "".join(f"k{i}: *x\n" for i in range(200))
+    with pytest.raises(InputError, match="more than 1000 values"):
+        parse_yaml(aliased, "t.yaml")

@@ -744,3 +744,30 @@ def test_any_frame_subset_gets_the_same_twist_branch(chain, interpolation):
     for frames in ("2600", "150,305,1999:2003", "0:2600:97", "2401"):
         plan = _plan(pose, frames)
         np.testing.assert_array_equal(evaluate.twist_references(plan), full[plan.frames])
+
+
+@pytest.mark.parametrize("interpolation", ["linear", "cubic"])
+def test_a_key_every_frame_is_unwrapped_on_a_coarser_grid_with_the_same_branches(chain, monkeypatch, interpolation):
+    """A key every frame (motion capture): whole-frame intervals merge while the rotations'
+    summed change stays under TWIST_STEP_DEG, so the twist is unwrapped on a fraction of the
+    frames, and every frame keeps the branch of unwrapping at every key (1e-9 rad: the same
+    branch; the arithmetic of np.unwrap against the nearest-branch rule may differ in the last bit)."""
+    from axdf_cli.pipeline import evaluate
+
+    rng = np.random.default_rng(7)
+    roll = np.cumsum(rng.normal(1.2, 0.8, 3001))  # about 3,600 degrees: ten turns, never stopping
+    pose = chain("mocap", {f: {"roll": float(roll[f]), "bend": float(20 * np.sin(f / 50))} for f in range(3001)},
+                 [0, 3000], interpolation)
+    plan = _plan(pose, "0:3000")
+    grid = evaluate.twist_grid(plan.pose, 3000)
+    assert len(grid) < 3001 / 3
+    got = evaluate.twist_references(plan)
+    merged = evaluate.twist_grid
+    monkeypatch.setattr(evaluate, "twist_grid", lambda p, upto: np.arange(0, upto + 1))  # every key
+    every = evaluate.twist_references(plan)
+    monkeypatch.setattr(evaluate, "twist_grid", merged)
+    np.testing.assert_allclose(got, every, rtol=0, atol=1e-9)
+    assert abs(np.degrees(got[-1, 0] - got[0, 0]) - (roll[-1] - roll[0])) < 5.0  # the turns are kept
+    for frames in ("2999", "17,1500:1503"):  # a subset: the same grid, the same bytes
+        sub = _plan(pose, frames)
+        np.testing.assert_array_equal(evaluate.twist_references(sub), got[sub.frames])

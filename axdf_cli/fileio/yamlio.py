@@ -231,10 +231,34 @@ def _check_depth(text: str, display: str) -> None:
         loader.dispose()
 
 
+_NESTING_LIMITED: bool | None = None
+
+
+def _loader_limits_nesting() -> bool:
+    """Whether the YAML loader refuses deep nesting itself while scanning (libyaml through
+    PyYAML 6.0.4 stops at 1,000 levels): then composing cannot recurse too deep and the
+    event pass of :func:`_check_depth` is not needed (:data:`tol.YAML_MAX_DEPTH` is still
+    enforced while converting). Asked once per process, on a 2,000-deep document."""
+    global _NESTING_LIMITED
+    if _NESTING_LIMITED is None:
+        loader = _LOADER("[" * 2000 + "]" * 2000)
+        try:
+            loader.get_single_node()
+            _NESTING_LIMITED = False
+        except yaml.YAMLError as e:
+            _NESTING_LIMITED = "nesting depth" in str(e)
+        except RecursionError:
+            _NESTING_LIMITED = False
+        finally:
+            loader.dispose()
+    return _NESTING_LIMITED
+
+
 def parse_yaml(text: str, display: str) -> Any:
     loader = _LOADER(text)
     try:
-        _check_depth(text, display)
+        if not _loader_limits_nesting():
+            _check_depth(text, display)
         node = loader.get_single_node()
     except yaml.MarkedYAMLError as e:
         m = e.problem_mark or e.context_mark
@@ -249,10 +273,14 @@ def parse_yaml(text: str, display: str) -> Any:
         raise InputError(Mark(display), "document nested too deeply", f"at most {tol.YAML_MAX_DEPTH} levels") from None
     if node is None:
         return None
-    _check_expanded_size(node, display)
-    conv = _Converter(loader, display)
+    # Without an alias (no "*" anywhere) a document is as many values as it has nodes, bounded
+    # by the file's size (YAML_MAX_BYTES); only aliases can expand it past that.
+    aliases = "*" in text
+    if aliases:
+        _check_expanded_size(node, display)
+    conv = _Converter(loader, display, tol.YAML_MAX_NODES if aliases else None)
     try:
-        return conv.convert(node, 0)
+        return conv.convert(node, 0, _mark(display, node.start_mark))
     finally:
         loader.dispose()
 
@@ -288,17 +316,40 @@ def _check_expanded_size(root, display: str) -> None:
                              "values (an alias bomb?)", "use fewer aliases")
 
 
+_INT_TAG, _FLOAT_TAG, _STR_TAG = "tag:yaml.org,2002:int", "tag:yaml.org,2002:float", "tag:yaml.org,2002:str"
+_PLAIN_INT = re.compile(r"[-+]?(?:0|[1-9][0-9]*)\Z")
+
+
+def _plain_scalar(node) -> tuple[bool, Any]:
+    """(True, value) for the common scalars, read as PyYAML's constructors read them but
+    without their per-node cost: a string, a decimal integer without a leading zero, a
+    float without ``_`` or ``:`` (Python's float() reads those as YAML 1.1 does); (False,
+    None) for the rest (octal, hex, sexagesimal, .inf, booleans, null: the constructors)."""
+    tag, v = node.tag, node.value
+    if tag == _STR_TAG:
+        return True, v
+    if tag == _FLOAT_TAG and "_" not in v and ":" not in v:
+        try:
+            return True, float(v)
+        except ValueError:
+            return False, None
+    if tag == _INT_TAG and _PLAIN_INT.match(v):
+        return True, int(v)  # (ValueError past Python's 4,300 digits: the caller's message)
+    return False, None
+
+
 class _Converter:
-    def __init__(self, loader: yaml.SafeLoader, file: str):
+    def __init__(self, loader: yaml.SafeLoader, file: str, max_values: int | None = tol.YAML_MAX_NODES):
         self.loader = loader
         self.file = file
         self.count = 0
+        self.max_values = max_values  # None: no aliases, the document is its own size
 
-    def convert(self, node, depth: int):
+    def convert(self, node, depth: int, where: Mark):
+        """The value of ``node`` (at ``where``), with positions."""
         self.count += 1
-        where = _mark(self.file, node.start_mark)
-        if self.count > tol.YAML_MAX_NODES:
-            raise InputError(where, f"document expands to more than {tol.YAML_MAX_NODES} values "
+        if self.max_values is not None and self.count > self.max_values:
+            raise InputError(where, f"document expands to more than {self.max_values} values "
                              "(an alias bomb?)", "use fewer aliases")
         if depth > tol.YAML_MAX_DEPTH:
             raise InputError(where, "document nested too deeply", f"at most {tol.YAML_MAX_DEPTH} levels")
@@ -307,7 +358,9 @@ class _Converter:
                 raise InputError(where, f"tag {node.tag!r} is not allowed",
                                  "plain strings, numbers, booleans and null only")
             try:
-                value = self.loader.construct_object(node, deep=True)
+                done, value = _plain_scalar(node)
+                if not done:
+                    value = self.loader.construct_object(node, deep=True)
             except yaml.YAMLError as e:
                 raise InputError(where, f"bad value: {getattr(e, 'problem', e)}") from None
             except ValueError:  # an integer of more digits than Python converts (4300)
@@ -323,8 +376,9 @@ class _Converter:
             out.mark = where
             out.item_marks = []
             for item in node.value:
-                out.item_marks.append(_mark(self.file, item.start_mark))
-                out.append(self.convert(item, depth + 1))
+                m = _mark(self.file, item.start_mark)
+                out.item_marks.append(m)
+                out.append(self.convert(item, depth + 1, m))
             return out
         if isinstance(node, yaml.MappingNode):
             if node.tag != _MAP_TAG:
@@ -337,7 +391,7 @@ class _Converter:
                 kmark = _mark(self.file, knode.start_mark)
                 if not isinstance(knode, yaml.ScalarNode):
                     raise InputError(kmark, "mapping key is not a plain value", "keys are names or numbers")
-                key = self.convert(knode, depth + 1)
+                key = self.convert(knode, depth + 1, kmark)
                 if isinstance(key, (list, dict)):
                     raise InputError(kmark, "mapping key is not a plain value", "keys are names or numbers")
                 if key in out:
@@ -345,8 +399,8 @@ class _Converter:
                     raise InputError(kmark, f"duplicate key {key!r} (first at line {first.line})",
                                      "each key once")
                 out.key_marks[key] = kmark
-                out.value_marks[key] = _mark(self.file, vnode.start_mark)
-                out[key] = self.convert(vnode, depth + 1)
+                vmark = out.value_marks[key] = _mark(self.file, vnode.start_mark)
+                out[key] = self.convert(vnode, depth + 1, vmark)
             return out
         raise InputError(where, "unsupported YAML node")
 

@@ -43,21 +43,45 @@ def sphere_directions(n: int) -> np.ndarray:
     return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
 
 
-def interpolate(frames: np.ndarray, key_frames, key_values, mode: str) -> np.ndarray:
-    """One curve at ``frames`` (F,) from keys → (F,) float64."""
+#: Curves whose arrays (and cubic interpolant) are kept between calls, keyed by the identity
+#: of their key tuples: a pose keeps its keys as tuples, and converting 200,000 keys to
+#: arrays on every sampled chunk made a late frame of a long keyed pose cost the keys times
+#: the chunks before it. At most CURVE_CACHE curves are kept (the oldest go first).
+CURVE_CACHE = 512
+_CURVES: dict = {}
+
+
+def _curve(key_frames, key_values, mode: str):
+    """(kf, kv, interpolant or None) of a curve, made once for the same key tuples."""
+    key = (id(key_frames), id(key_values), mode)
+    hit = _CURVES.get(key)
+    if hit is not None and hit[0] is key_frames and hit[1] is key_values:
+        return hit[2:]
     kf = np.asarray(key_frames, dtype=np.float64)
     kv = np.asarray(key_values, dtype=np.float64)
+    cubic = None
+    if mode == "cubic" and len(kf) >= 3:
+        from scipy.interpolate import PchipInterpolator
+
+        cubic = PchipInterpolator(kf, kv)
+    if isinstance(key_frames, tuple) and isinstance(key_values, tuple):  # (immutable: safe to keep)
+        while len(_CURVES) >= CURVE_CACHE:
+            del _CURVES[next(iter(_CURVES))]
+        _CURVES[key] = (key_frames, key_values, kf, kv, cubic)
+    return kf, kv, cubic
+
+
+def interpolate(frames: np.ndarray, key_frames, key_values, mode: str) -> np.ndarray:
+    """One curve at ``frames`` (F,) from keys → (F,) float64."""
+    kf, kv, cubic = _curve(key_frames, key_values, mode)
     x = np.asarray(frames, dtype=np.float64)
     if len(kf) == 1:
         return np.full(x.shape, kv[0])
     if mode == "step":
         i = np.clip(np.searchsorted(kf, x, side="right") - 1, 0, len(kf) - 1)
         return kv[i]
-    if mode == "cubic" and len(kf) >= 3:
-        from scipy.interpolate import PchipInterpolator
-
-        xc = np.clip(x, kf[0], kf[-1])
-        return PchipInterpolator(kf, kv)(xc)
+    if cubic is not None:
+        return cubic(np.clip(x, kf[0], kf[-1]))
     return np.interp(x, kf, kv)
 
 

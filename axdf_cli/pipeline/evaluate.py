@@ -51,7 +51,8 @@ def twist_grid(pose, upto: int) -> np.ndarray:
     frame included) is sampled at ``min(length, max(TWIST_MIN_STEPS, change / TWIST_STEP_DEG))``
     evenly spaced whole frames, where change is the largest rotation-coordinate difference
     (degrees) across it; an interval where nothing moves (and ``step`` interpolation, which
-    holds each key) needs only its ends. Short intervals are therefore sampled at every frame."""
+    holds each key) needs only its ends. Runs of whole-frame intervals (a key every frame)
+    keep a knot each time the rotations' summed change passes another TWIST_STEP_DEG."""
     knots = {pose.first, pose.last}
     for kf, _ in pose.keys.values():
         knots.update(k for k in kf if pose.first < k < pose.last)
@@ -66,8 +67,24 @@ def twist_grid(pose, upto: int) -> np.ndarray:
     length = np.diff(knots)
     steps = np.minimum(length, np.maximum(TWIST_MIN_STEPS, np.ceil(change / TWIST_STEP_DEG))).astype(np.int64)
     steps[(moved.max(axis=1) == 0) | (pose.interpolation == "step")] = 1
-    pieces = [a + (np.arange(n) * (b - a)) // n for a, b, n in zip(knots[:-1], knots[1:], steps)]
-    grid = np.unique(np.concatenate(pieces + [knots[-1:]]))
+    # Densely keyed motion (a key every frame): consecutive whole intervals merge while the
+    # rotations' total movement since the last kept knot stays under TWIST_STEP_DEG (a
+    # coordinate is monotone inside each interval, so its summed changes bound how far it
+    # moves across several): a step moves at most TWIST_STEP_DEG plus one interval's change.
+    # A subdivided interval keeps both of its ends.
+    if pose.interpolation != "step":
+        total = np.concatenate([[0.0], np.cumsum(change)])
+        keep = np.ones(len(knots), dtype=bool)
+        keep[1:] = np.floor(total[1:] / TWIST_STEP_DEG) != np.floor(total[:-1] / TWIST_STEP_DEG)
+        keep[1:][steps > 1] = keep[:-1][steps > 1] = True
+        keep[0] = True
+        keep[-1] |= knots[-1] == pose.last  # (the same knots whatever ``upto`` cuts the list at)
+        ends = np.flatnonzero(keep)
+        pieces = [knots[ends]] + [a + (np.arange(n) * (b - a)) // n
+                                  for a, b, n in zip(knots[:-1][steps > 1], knots[1:][steps > 1], steps[steps > 1])]
+    else:
+        pieces = [knots]
+    grid = np.unique(np.concatenate(pieces))
     return grid[grid <= upto]
 
 
@@ -164,7 +181,7 @@ def time_states(plan: RunPlan) -> dict:
     """{timeline block: the TIME stages' states at its start} for the blocks holding selected
     frames (empty without TIME stages). Per epoch (:data:`TIME_EPOCH_BLOCKS` blocks) that
     holds one: the stages start (the first epoch: at the pose's first frame; a later one: a
-    warm-up before it, from the block the stages' ``first`` frame is in), then run over its
+    warm-up before it, from the block of the earliest frame their ``restart`` asks for), then run over its
     blocks in order, all muscles, up to its last such block. Kept states are copies, so a
     stage that changes its state in place cannot change them."""
     stages = of_scope(plan.stages, Scope.TIME)
@@ -176,11 +193,13 @@ def time_states(plan: RunPlan) -> dict:
     for e in sorted({b // TIME_EPOCH_BLOCKS for b in need}):
         e0 = e * TIME_EPOCH_BLOCKS
         if e == 0:
-            state = tuple(s.start(plan) for s in stages)
-        else:
-            state = tuple(s.start(plan, first + e0 * TIME_BLOCK, TIME_BLOCK) for s in stages)
+            state, walk = tuple(s.start(plan) for s in stages), first
+        else:  # a stage without ``restart`` walks from the pose's first frame
+            pairs = [s.restart(plan, first + e0 * TIME_BLOCK, TIME_BLOCK) if hasattr(s, "restart")
+                     else (s.start(plan), first) for s in stages]
+            state, walk = tuple(p[0] for p in pairs), min(p[1] for p in pairs)
         last = max(b for b in need if b // TIME_EPOCH_BLOCKS == e)
-        for b in range(min(e0, (min(st.first for st in state) - first) // TIME_BLOCK), last + 1):
+        for b in range(min(e0, (walk - first) // TIME_BLOCK), last + 1):
             if b >= e0 and b in need:  # (a warm-up block belongs to the epoch before)
                 out[b] = copy.deepcopy(state)
             if b < last:

@@ -81,10 +81,20 @@ class JiggleStage:
         """Whether the stage acts on any of these muscles (a run without one leaves it out)."""
         return any(s.jiggle is not None for s in specs)
 
-    def start(self, plan, epoch: int | None = None, block: int = 1) -> JiggleState:
-        """The state before the walk that leads to pose frame ``epoch`` (None: the pose's
-        first frame): each muscle starts whole ``block``s of frames before it, enough for its
-        warm-up (:func:`axdf_cli.model.jiggle.warmup_frames`), never before the pose's first."""
+    def start(self, plan) -> JiggleState:
+        """The state before the pose's first frame: every muscle starts there."""
+        return self._state(plan, None, 1)
+
+    def restart(self, plan, epoch: int, block: int) -> tuple[JiggleState, int]:
+        """The state before the warm-up walk that leads to pose frame ``epoch``, and the frame
+        that walk starts at (the earliest muscle's start): each muscle starts whole ``block``s
+        of frames before it, enough for its warm-up (:func:`axdf_cli.model.jiggle.warmup_frames`),
+        never before the pose's first frame."""
+        state = self._state(plan, epoch, block)
+        return state, state.first
+
+    @staticmethod
+    def _state(plan, epoch: int | None, block: int) -> JiggleState:
         first, dt = int(plan.pose.first), 1.0 / float(plan.pose.fps)
         at = first if epoch is None else int(epoch)
 

@@ -25,9 +25,10 @@ runner (:func:`axdf_cli.pipeline.execute.execute`):
 - a TIME stage: its chunks are always the same blocks of the pose's timeline
   (:data:`axdf_cli.pipeline.evaluate.TIME_BLOCK` frames from the pose's first, all muscles).
   The timeline is cut into epochs of :data:`~axdf_cli.pipeline.evaluate.TIME_EPOCH_BLOCKS`
-  blocks; an epoch's blocks are called in order from ``start(plan, epoch_frame, TIME_BLOCK)``'s
-  state (``start(plan)`` for the first epoch), whose ``first`` says from which block the walk
-  to the epoch begins (the stage's warm-up). A pre-pass keeps the states at the blocks'
+  blocks; an epoch's blocks are called in order from ``start(plan)``'s state for the first
+  epoch, and for a later one from ``restart(plan, epoch_frame, TIME_BLOCK)``'s, which returns
+  the state and the frame its warm-up walk begins at (a stage without ``restart`` is walked
+  from the pose's first frame). A pre-pass keeps the states at the blocks'
   starts, so that any ``--frames`` subset, ``--resume``, mesh workers and render workers see
   exactly the axis a whole run computes (same bytes), and a frame costs at most a warm-up and
   an epoch. Contract: the stage acts on ``chunk.axis`` (and its state) only, and for muscle j
