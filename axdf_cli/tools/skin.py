@@ -125,10 +125,16 @@ class Family:
     landmarks: dict  # landmark -> skeleton bone (its origin at rest is the landmark)
     bind: dict  # part -> skeleton bone
     up: tuple | None = None  # (bone, axis in its frame): the trunk's direction without shoulders
+    points: dict = field(default_factory=dict)  # landmark -> (bone, point in its frame): joints it lacks
 
 
 _LEGS_OSIM = {"hip": "femur_{s}", "knee": "tibia_{s}", "ankle": "talus_{s}", "toe": "toes_{s}"}
 _BIND_LEGS_OSIM = {"thigh": "femur_{s}", "shank": "tibia_{s}", "foot": "calcn_{s}", "toes": "toes_{s}"}
+
+#: gait2392's torso has no arms: its shoulder joints are where Rajagopal et al. (2016), whose
+#: torso is the same body, put them (the acromial joints' location in the torso's frame).
+GAIT2392_SHOULDERS = {"shoulder_l": ("torso", (0.003155, 0.3715, -0.17)),
+                      "shoulder_r": ("torso", (0.003155, 0.3715, 0.17))}
 
 #: The joint map per skeleton family (docs/SKIN.md). The first whose bones a skeleton all has is used.
 FAMILIES = (
@@ -141,7 +147,7 @@ FAMILIES = (
     Family("gait2392", _sided(_LEGS_OSIM),
            _sided({"pelvis": "pelvis", "abdomen": "torso", "chest": "torso", "neck": "torso", "head": "torso",
                    **_BIND_LEGS_OSIM, "upperarm": "torso", "forearm": "torso", "hand": "torso"}),
-           up=("torso", (0.0, 1.0, 0.0))),
+           points=GAIT2392_SHOULDERS),
     Family("CMU", _sided({"hip": "{side}Hip", "knee": "{side}Knee", "ankle": "{side}Ankle", "toe": "{side}Toe",
                           "shoulder": "{side}Shoulder", "elbow": "{side}Elbow", "wrist": "{side}Wrist"}),
            _sided({"pelvis": "Hips", "abdomen": "lowerback", "chest": "Chest2", "neck": "Neck", "head": "Head",
@@ -154,7 +160,8 @@ def family_of(skel: Skeleton, where: Mark) -> Family:
     """The first family whose every bone the skeleton has; refused (exit 2) when none fits."""
     have = set(skel.bone_index)
     for fam in FAMILIES:
-        need = set(fam.landmarks.values()) | set(fam.bind.values()) | ({fam.up[0]} if fam.up else set())
+        need = set(fam.landmarks.values()) | set(fam.bind.values()) | {b for b, _ in fam.points.values()} | \
+            ({fam.up[0]} if fam.up else set())
         if need <= have:
             return fam
     raise InputError(where, f"skeleton {skel.name!r} is of no family axdf skin knows",
@@ -206,6 +213,8 @@ def skeleton_landmarks(skel: Skeleton, fam: Family) -> tuple[dict, np.ndarray]:
     world = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
     bi = skel.bone_index
     lm = {k: world[bi[b], :3, 3].copy() for k, b in fam.landmarks.items()}
+    lm.update({k: world[bi[b], :3, :3] @ np.asarray(p, dtype=np.float64) + world[bi[b], :3, 3]
+               for k, (b, p) in fam.points.items()})
     lm["hip_c"] = (lm["hip_l"] + lm["hip_r"]) / 2
     if "shoulder_l" in lm:
         lm["shoulder_c"] = (lm["shoulder_l"] + lm["shoulder_r"]) / 2
@@ -257,7 +266,7 @@ def _maps(mh: dict, sk: dict, s: float, up: np.ndarray | None, turn: bool) -> di
             pa, pt = maps[parent]
             u, _, vt = np.linalg.svd(pa)
             A = (u @ vt) * s
-            anchor = pa @ mh[prox] + pt
+            anchor = sk[prox] if turn and prox in sk else pa @ mh[prox] + pt
         maps[seg] = (A, anchor - A @ mh[prox])
     return maps
 
@@ -309,3 +318,90 @@ def fit_body(skel: Skeleton, body: Body, where: Mark) -> Fit:
     height = float(standing[:, 2].max() - standing[:, 2].min())
     return Fit(fam.name, rest, standing, body.faces, bones, w, parts, pw.argmax(axis=1), S, height,
                float(rest[:, 2].max() - rest[:, 2].min()), s)
+
+
+# ----------------------------------------------------------------------------- fat
+
+FAT_SOURCE = ("Stoerchle et al. 2017, Ultrasound Med Biol 43(2):427-438 (doi:10.1016/j.ultrasmedbio.2016.09.014): "
+              "the eight standardised ultrasound sites of subcutaneous adipose tissue; representative values for a "
+              "normal-weight adult within the 3-10 mm range of eight-site means of Stoerchle et al. 2018, Sci Rep "
+              "8:16268; regions without a site are marked assumed (docs/SKIN.md)")
+
+#: Subcutaneous fat thickness per body region (millimetres) and where it comes from: the site
+#: of the eight-site ultrasound standard (UA/LA upper/lower abdomen, ES erector spinae, DT distal
+#: triceps, BR brachioradialis, LT/FT lateral/front thigh, MC medial calf) or "assumed".
+FAT_MM = {
+    "head": (4.0, "assumed"), "neck": (4.0, "assumed"), "chest": (6.0, "assumed"),
+    "upper_back": (6.0, "assumed"), "abdomen": (12.0, "UA, LA"), "lower_back": (7.0, "ES"),
+    "pelvis": (10.0, "assumed"), "upperarm": (6.0, "DT"), "forearm": (3.0, "BR"), "hand": (2.0, "assumed"),
+    "thigh": (7.0, "LT, FT"), "shank": (5.0, "MC"), "foot": (3.0, "assumed"),
+}
+REGIONS = tuple(FAT_MM)
+
+
+def _neighbour_mean(faces: np.ndarray, n: int):
+    """The averaging over each vertex and its edge neighbours, as a sparse (n, n) matrix."""
+    from scipy import sparse
+
+    i = np.concatenate([faces[:, 0], faces[:, 1], faces[:, 2], np.arange(n)])
+    j = np.concatenate([faces[:, 1], faces[:, 2], faces[:, 0], np.arange(n)])
+    m = sparse.coo_matrix((np.ones(len(i)), (i, j)), shape=(n, n)).tocsr()
+    m = ((m + m.T) > 0).astype(np.float64)
+    return sparse.diags(1.0 / np.asarray(m.sum(axis=1)).ravel()) @ m
+
+
+def fat_map(body: Body, fit: Fit) -> tuple[np.ndarray, np.ndarray]:
+    """Every vertex's region (index into REGIONS) and fat thickness (metres), from its part
+    and, on the trunk, whether it faces forward (MakeHuman's own normals: the body faces -Y)."""
+    import trimesh
+
+    normals = trimesh.Trimesh(body.vertices, body.faces, process=False).vertex_normals
+    front = normals[:, 1] < 0
+    part = np.array([p.rsplit("_", 1)[0] if p.endswith(("_l", "_r")) else p for p in fit.parts])[fit.part_of]
+    part = np.where(part == "toes", "foot", part)
+    part = np.where(part == "abdomen", np.where(front, "abdomen", "lower_back"), part)
+    part = np.where(part == "chest", np.where(front, "chest", "upper_back"), part)
+    region = np.array([REGIONS.index(str(p)) for p in part], dtype=np.int8)
+    fat = np.array([FAT_MM[r][0] for r in REGIONS])[region] / 1000.0
+    avg = _neighbour_mean(fit.faces, len(fat))
+    for _ in range(tol.SKIN_FAT_SMOOTHING):
+        fat = avg @ fat
+    return region, fat * fit.scale
+
+
+# ----------------------------------------------------------------------------- the files
+
+MESH_FILE, WEIGHTS_FILE, FAT_FILE, SKIN_FILE = "skin_rest.ply", "skin_weights.npz", "skin_fat.npz", "skin.yaml"
+
+
+def _npz(**arrays) -> bytes:
+    import io
+
+    buf = io.BytesIO()
+    np.savez_compressed(buf, **arrays)
+    return buf.getvalue()
+
+
+def skin_files(fit: Fit, skel: Skeleton, region: np.ndarray, fat: np.ndarray, report: dict) -> dict:
+    """name -> bytes of the skin file and the three it names (docs/SKIN.md, the format)."""
+    from axdf_cli.formats import PlyWriter
+    from axdf_cli.importers import emit
+
+    vi, bi = np.nonzero(fit.weights)
+    files = {
+        MESH_FILE: PlyWriter(fit.faces).encode(fit.vertices.astype(np.float32)),
+        WEIGHTS_FILE: _npz(vertex_count=np.array(len(fit.vertices)), bones=np.array(fit.bones),
+                           vertex=vi.astype(np.int32), bone=bi.astype(np.int16),
+                           weight=fit.weights[vi, bi].astype(np.float32)),
+        FAT_FILE: _npz(vertex_count=np.array(len(fit.vertices)), fat=fat.astype(np.float32),
+                       region=region, regions=np.array(REGIONS)),
+    }
+    doc = {"skin": f"makehuman_{skel.name}", "skeleton": skel.name, "family": fit.family,
+           "mesh": MESH_FILE, "weights": WEIGHTS_FILE, "fat": FAT_FILE,
+           "stature": round(fit.stature, 4), "height": round(fit.height, 4),
+           "fat_source": FAT_SOURCE,
+           "regions": {r: {"fat_mm": FAT_MM[r][0], "site": FAT_MM[r][1]} for r in REGIONS}}
+    header = (f"A skin for {skel.name}: MakeHuman's CC0 body fitted by `axdf skin` (docs/SKIN.md). "
+              f"{report.get('summary', '')}").strip()
+    files[SKIN_FILE] = emit.dump_yaml(doc, header=header).encode()
+    return files
