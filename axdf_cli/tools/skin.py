@@ -128,6 +128,7 @@ class Family:
     bind: dict  # part -> skeleton bone
     up: tuple | None = None  # (bone, axis in its frame): the trunk's direction without shoulders
     points: dict = field(default_factory=dict)  # landmark -> (bone, point in its frame): joints it lacks
+    back: float = 0.0  # metres the trunk sits behind where its hip centre puts it (the spine's depth)
 
 
 _LEGS_OSIM = {"hip": "femur_{s}", "knee": "tibia_{s}", "ankle": "talus_{s}", "toe": "toes_{s}"}
@@ -142,14 +143,14 @@ GAIT2392_SHOULDERS = {"shoulder_l": ("torso", (0.003155, 0.3715, -0.17)),
 FAMILIES = (
     Family("myobody", _sided({**_LEGS_OSIM, "shoulder": "humerus_{s}", "elbow": "ulna_{s}", "wrist": "lunate_{s}"}),
            _sided({"pelvis": "pelvis", "abdomen": "lumbar3", "chest": "torso", "neck": "neck", "head": "head",
-                   **_BIND_LEGS_OSIM, "upperarm": "humerus_{s}", "forearm": "radius_{s}", "hand": "capitate_{s}"})),
+                   **_BIND_LEGS_OSIM, "upperarm": "humerus_{s}", "forearm": "radius_{s}", "hand": "capitate_{s}"}), back=0.05),
     Family("Rajagopal2016", _sided({**_LEGS_OSIM, "shoulder": "humerus_{s}", "elbow": "ulna_{s}", "wrist": "hand_{s}"}),
            _sided({"pelvis": "pelvis", "abdomen": "torso", "chest": "torso", "neck": "torso", "head": "torso",
-                   **_BIND_LEGS_OSIM, "upperarm": "humerus_{s}", "forearm": "radius_{s}", "hand": "hand_{s}"})),
+                   **_BIND_LEGS_OSIM, "upperarm": "humerus_{s}", "forearm": "radius_{s}", "hand": "hand_{s}"}), points={}, back=0.03),
     Family("gait2392", _sided(_LEGS_OSIM),
            _sided({"pelvis": "pelvis", "abdomen": "torso", "chest": "torso", "neck": "torso", "head": "torso",
                    **_BIND_LEGS_OSIM, "upperarm": "torso", "forearm": "torso", "hand": "torso"}),
-           points=GAIT2392_SHOULDERS),
+           points=GAIT2392_SHOULDERS, back=0.03),
     Family("CMU", _sided({"hip": "{side}Hip", "knee": "{side}Knee", "ankle": "{side}Ankle", "toe": "{side}Toe",
                           "shoulder": "{side}Shoulder", "elbow": "{side}Elbow", "wrist": "{side}Wrist"}),
            _sided({"pelvis": "Hips", "abdomen": "lowerback", "chest": "Chest2", "neck": "Neck", "head": "Head",
@@ -238,7 +239,7 @@ def stature(lm: dict) -> float:
     return (leg + trunk) / (1.0 - tol.SKIN_ANKLE_FRACTION - tol.SKIN_ABOVE_SHOULDER_FRACTION)
 
 
-def _maps(mh: dict, sk: dict, s: float, up: np.ndarray | None, turn: bool) -> dict:
+def _maps(mh: dict, sk: dict, s: float, up: np.ndarray | None, turn: bool, back: float = 0.0) -> dict:
     """segment -> (A, t), x -> A x + t. ``turn`` False: the same scaling with no turn (the body
     standing as MakeHuman stands), every segment hung from its parent."""
     ref_mh = np.array([1.0, 0.0, 0.0])  # MakeHuman's left
@@ -255,7 +256,8 @@ def _maps(mh: dict, sk: dict, s: float, up: np.ndarray | None, turn: bool) -> di
             F_mh = _frame(axis_mh, ref_mh)
             F_sk = _frame(axis_sk, ref_sk) if turn else F_mh
             A = F_sk @ np.diag([k, s, s]) @ F_mh.T
-            anchor = sk[prox] if turn else mh[prox]
+            behind = np.cross(F_sk[:, 0], F_sk[:, 1])  # up x left: backward
+            anchor = sk[prox] + back * behind if turn else mh[prox]
         elif fitted:
             axis_mh, axis_sk = mh[dist] - mh[prox], sk[dist] - sk[prox]
             k = np.linalg.norm(axis_sk) / np.linalg.norm(axis_mh)
@@ -309,7 +311,7 @@ def fit_body(skel: Skeleton, body: Body, where: Mark) -> Fit:
         b, axis = fam.up
         up = world[skel.bone_index[b], :3, :3] @ np.asarray(axis, dtype=np.float64)
     parts, pw = _part_weights(body)
-    rest = blend(_maps(mh, sk, s, up, True), parts, pw, body.vertices)
+    rest = blend(_maps(mh, sk, s, up, True, fam.back), parts, pw, body.vertices)
     standing = blend(_maps(mh, sk, s, up, False), parts, pw, body.vertices)
     bones = sorted({fam.bind[p] for p in parts}, key=lambda b: skel.bone_index[b])
     m = np.zeros((len(parts), len(bones)))
@@ -341,7 +343,7 @@ FAT_MM = {
 REGIONS = tuple(FAT_MM)
 
 
-def _neighbour_mean(faces: np.ndarray, n: int):
+def neighbour_mean(faces: np.ndarray, n: int):
     """The averaging over each vertex and its edge neighbours, as a sparse (n, n) matrix."""
     from scipy import sparse
 
@@ -365,7 +367,7 @@ def fat_map(body: Body, fit: Fit) -> tuple[np.ndarray, np.ndarray]:
     part = np.where(part == "chest", np.where(front, "chest", "upper_back"), part)
     region = np.array([REGIONS.index(str(p)) for p in part], dtype=np.int8)
     fat = np.array([FAT_MM[r][0] for r in REGIONS])[region] / 1000.0
-    avg = _neighbour_mean(fit.faces, len(fat))
+    avg = neighbour_mean(fit.faces, len(fat))
     for _ in range(tol.SKIN_FAT_SMOOTHING):
         fat = avg @ fat
     return region, fat * fit.scale

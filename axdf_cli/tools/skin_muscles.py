@@ -61,11 +61,11 @@ def push_out(vertices: np.ndarray, faces: np.ndarray, points: np.ndarray) -> np.
     import igl
     import trimesh
 
-    from axdf_cli.tools.skin import _neighbour_mean
+    from axdf_cli.tools.skin import neighbour_mean
 
     v = np.array(vertices, dtype=np.float64)
     f64 = np.ascontiguousarray(faces, dtype=np.int64)
-    avg = _neighbour_mean(faces, len(v))
+    avg = neighbour_mean(faces, len(v))
     for _ in range(tol.SKIN_PUSH_ROUNDS):
         out = outside(v, faces, points)
         if not out.any():
