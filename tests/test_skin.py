@@ -47,6 +47,14 @@ def test_gait2392_skin_round_trip(gait_skin):
                                                      "skin_fat.npz", "skin_report.json", "manifest.json"}
 
 
+def test_same_bytes_twice(gait_skin, tmp_path):
+    from axdf_cli.cli.main import main
+
+    assert main(["skin", "--skeleton", str(SKELETONS / "gait2392.yaml"), "--out", str(tmp_path / "again"), "--quiet"]) == 0
+    for name in ("skin.yaml", "skin_rest.ply", "skin_weights.npz", "skin_fat.npz"):
+        assert (tmp_path / "again" / name).read_bytes() == (gait_skin / name).read_bytes(), name
+
+
 def test_cmu_skin_with_muscles_pushed_inside(tmp_path, capsys):
     out = tmp_path / "cmu"
     rc, stdout, err = run_main(["skin", "--skeleton", SKELETONS / "cmu_131_01.yaml", "--muscles",
