@@ -71,6 +71,16 @@ def test_cmu_skin_with_muscles_pushed_inside(tmp_path, capsys):
     assert "LeftKnee" in skin.bones and "lhand" in skin.bones
 
 
+def test_validate_reads_a_skin_file(gait_skin, tmp_path, capsys):
+    rc, out, err = run_main(["validate", gait_skin / "skin.yaml"], capsys)
+    assert rc == 0 and "skin makehuman_gait2392: 13380 vertices on 10 bones of gait2392" in out, err
+    path = _copy(gait_skin, tmp_path / "s")
+    path.write_text(path.read_text().replace("mesh: skin_rest.ply", "mesh: skin_gone.ply"))
+    rc, out, err = run_main(["validate", path], capsys)
+    line = 1 + next(i for i, l in enumerate(path.read_text().splitlines()) if l.startswith("mesh:"))
+    assert rc == 2 and f"{path}:{line}:7: mesh file skin_gone.ply not found" in err
+
+
 def _copy(src: Path, dst: Path) -> Path:
     shutil.copytree(src, dst)
     return dst / "skin.yaml"
