@@ -96,12 +96,18 @@ SEGMENTS = {
     "head": ("trunk", "neck", None),
 }
 
-#: MakeHuman's landmarks: name -> rig bones whose heads' mean it is.
+#: Segments turned onto the skeleton's bone but kept at MakeHuman's length (the overall scale):
+#: the foot's ankle-to-ball landmarks are too close together to scale its heel and toes by.
+KEEP_LENGTH = {"foot_l", "foot_r"}
+
+#: MakeHuman's landmarks: name -> rig bones whose heads' mean it is. The ball of the foot is the
+#: second toe's joint, where OpenSim's and MuJoCo's toes bones have their origin (the foot's
+#: bones then lie inside its skin: gait2392's toes 612 of 958 vertices outside -> 52).
 MH_LANDMARKS = {
     "neck": ("neck01",),
     **{k: v for s, S in (("l", "L"), ("r", "R")) for k, v in (
         (f"hip_{s}", (f"upperleg01.{S}",)), (f"knee_{s}", (f"lowerleg01.{S}",)), (f"ankle_{s}", (f"foot.{S}",)),
-        (f"toe_{s}", tuple(f"toe{i}-1.{S}" for i in range(1, 6))), (f"shoulder_{s}", (f"upperarm01.{S}",)),
+        (f"toe_{s}", (f"toe2-1.{S}",)), (f"shoulder_{s}", (f"upperarm01.{S}",)),
         (f"elbow_{s}", (f"lowerarm01.{S}",)), (f"wrist_{s}", (f"wrist.{S}",)))},
 }
 
@@ -260,7 +266,7 @@ def _maps(mh: dict, sk: dict, s: float, up: np.ndarray | None, turn: bool, back:
             anchor = sk[prox] + back * behind if turn else mh[prox]
         elif fitted:
             axis_mh, axis_sk = mh[dist] - mh[prox], sk[dist] - sk[prox]
-            k = np.linalg.norm(axis_sk) / np.linalg.norm(axis_mh)
+            k = s if seg in KEEP_LENGTH else np.linalg.norm(axis_sk) / np.linalg.norm(axis_mh)
             F_mh = _frame(axis_mh, ref_mh)
             F_sk = _frame(axis_sk, ref_sk) if turn else F_mh
             A = F_sk @ np.diag([k, s, s]) @ F_mh.T
