@@ -113,7 +113,8 @@ MH_LANDMARKS = {
 
 
 def _sided(table: dict) -> dict:
-    """``{"hip": "femur_{s}"}`` -> hip_l, hip_r (every key but the trunk's and head's parts) with {s}/{S}/{side}/{c} filled in (l, L, Left, l)."""
+    """``{"hip": "femur_{s}"}`` -> hip_l, hip_r: every key but the trunk's and head's parts is
+    made once per side, {s}/{S}/{side}/{c} filled in (l, L, Left, l; r, R, Right, r)."""
     out = {}
     for k, v in table.items():
         if k in ("pelvis", "abdomen", "chest", "neck", "head"):
