@@ -375,3 +375,26 @@ GROUND_MARGIN_FRACTION = 0.25
 # Only a flat mesh is a ground plate: its height at most this share of its width (gait2392's
 # ground is 2 cm thick and metres wide); a fixed prop on such a root (a rig's ball) stays put.
 GROUND_FLAT = 0.1
+
+# `axdf skin` (axdf_cli/tools/skin.py, docs/SKIN.md). The skeleton's stature is estimated from
+# its joints with the segment fractions of body height H of Drillis & Contini (1966), as Winter
+# tabulates them (Biomechanics and Motor Control of Human Movement, 4th ed., 2009, Fig. 4.1):
+# thigh 0.245 H + shank 0.246 H; sole to ankle 0.039 H; shoulder joint to head top 1 - 0.818 H.
+SKIN_LEG_FRACTION = 0.491
+SKIN_ANKLE_FRACTION = 0.039
+SKIN_ABOVE_SHOULDER_FRACTION = 0.182
+# The fitted body's height (head top to sole) and the skeleton's stature may differ by this
+# share before `axdf skin` warns (the issue's bound).
+SKIN_HEIGHT_TOLERANCE = 0.03
+# Weights a skeleton bone gets on a vertex below this are dropped (and the rest renormalised):
+# under 1e-3 of a bone's motion moves a vertex of a body-sized mesh by under a millimetre.
+SKIN_WEIGHT_MIN = 1e-3
+# Passes of neighbour averaging that soften the fat map's steps between regions (each pass
+# spreads a step over about one edge, ~1-2 cm on the body).
+SKIN_FAT_SMOOTHING = 6
+# --push: rounds of moving the rest skin outward over muscle vertices that lie outside it, the
+# clearance they are given (metres: the skin ends at least this far outside the muscle), and
+# passes of neighbour averaging that spread each push over the skin around it (no dents or spikes).
+SKIN_PUSH_ROUNDS = 8
+SKIN_PUSH_CLEARANCE = 0.002
+SKIN_PUSH_SMOOTHING = 4

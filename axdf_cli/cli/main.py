@@ -27,6 +27,7 @@ COMMANDS = {
     "pack": ("axdf_cli.cli.pack", "make a body's muscles share space at the rest pose (section outlines)"),
     "retarget": ("axdf_cli.cli.retarget", "fit a muscle model's skeleton to motion capture (BVH, 3D joints)"),
     "dataset": ("axdf_cli.cli.dataset", "build data sets: sampled poses, several views, labels, one index"),
+    "skin": ("axdf_cli.cli.skin", "fit a CC0 body (MakeHuman) to a skeleton at rest: a skin file"),
 }
 
 

