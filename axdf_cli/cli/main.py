@@ -92,7 +92,7 @@ def _install(handler) -> dict:
 
 #: Commands that run numba's kernels, and the actions of theirs that do: a note before a cold
 #: compile (runtime.compile_notice).
-KERNEL_COMMANDS = {"run": None, "pack": None, "dataset": ("build",), "import": ("osim", "mjcf")}
+KERNEL_COMMANDS = {"run": None, "pack": None, "dataset": ("build",), "import": ("osim", "mjcf"), "skin": None}
 
 
 def _notice(args) -> str | None:
