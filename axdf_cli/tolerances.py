@@ -366,3 +366,56 @@ GROUND_MARGIN_FRACTION = 0.25
 # Only a flat mesh is a ground plate: its height at most this share of its width (gait2392's
 # ground is 2 cm thick and metres wide); a fixed prop on such a root (a rig's ball) stays put.
 GROUND_FLAT = 0.1
+
+# `axdf fit` (axdf_cli/tools/fit.py, fit_sections.py): a closed muscle mesh → an AxDf muscle.
+# Sections by default: measured on the Visible Human atlas (docs/FIT.md), 16 sections follow
+# the muscles' bellies to IoU 0.9+ where 8 leave a few points of overlap; the bounds keep the
+# spec's limit (64 sections) and a surface that tapers (at least 3 sections between poles).
+FIT_SECTIONS_DEFAULT = 16
+FIT_SECTIONS_MIN = 3
+FIT_SECTIONS_MAX = 64
+# Surface samples a fit reads the mesh by (area-uniform, seeded: the same mesh gives the same
+# file): 6,000 put a sample every ~2 mm on a gluteus maximus' ~600 cm^2 of surface.
+FIT_SAMPLES = 6000
+FIT_SEED = 0
+# The medial axis: slabs of samples per round and rounds of slabs perpendicular to the current
+# curve (2 settle a curved sartorius; more change it by well under a millimetre); the dense
+# polyline a sample finds its nearest curve point on; the share of the length at each end whose
+# samples' centroid places the tip (the surface's pole).
+FIT_AXIS_SLABS = 24
+FIT_AXIS_ROUNDS = 3
+FIT_AXIS_DENSE = 400
+FIT_TIP_SHARE = 0.03
+# Cut outlines: rays per cut (from the axis, the farthest crossing), points per outline around
+# the surface (4 per control point), cutting planes per section (plus 2 sections' worth beyond
+# the ends), the phase search's steps (over half a control point's spacing each way).
+FIT_RAYS = 96
+FIT_AROUND = 32
+FIT_PLANES_PER_SECTION = 4
+FIT_PHASE_STEPS = 17
+# Rounds of closest-point refinement after the cut outlines (each both ways: surface to mesh,
+# mesh to surface), and the smoothing of control points along the muscle (second differences,
+# relative to the data's weight): enough to keep rows near the tips, where cuts are tiny and
+# few, from folding, small enough to change an IoU by < 0.005.
+FIT_REFINE_ROUNDS = 3
+FIT_SMOOTH = 1e-3
+# The written surface's resolution: rows along per section (+ 8, at least FIT_ALONG_MIN) and
+# vertices around, fine enough that the tessellation of the fitted surface changes its
+# measured IoU by < 0.01.
+FIT_ALONG_PER_SECTION = 4
+FIT_ALONG_MIN = 40
+FIT_OUTPUT_AROUND = 32
+# Tendons: the sections at each end thinner than this share of the widest section's area make
+# the tendon (its radial size kept when the muscle stretches); at most FIT_TENDON_MAX of the
+# length in all (the spec allows < 0.95: a belly must remain).
+FIT_TENDON_AREA_SHARE = 0.1
+FIT_TENDON_MAX = 0.6
+# A mesh encloses no volume below this share of its bounding box (a flat or degenerate
+# surface), or below this many m^3 (a point).
+FIT_MIN_VOLUME_SHARE = 1e-6
+FIT_MIN_VOLUME = 1e-15
+# The fit's measures: the IoU grid's spacing (metres; coarser only to stay within the point
+# budget), surface samples for the distances.
+FIT_IOU_SPACING = 0.002
+FIT_IOU_MAX_POINTS = 4_000_000
+FIT_MEASURE_SAMPLES = 20000
