@@ -76,10 +76,11 @@ def read_mesh(path: Path, scale: float):
         open_edges = int((edges == 1).sum())
         raise InputError(where, "mesh is not closed (not watertight" +
                          (f": {open_edges} edges bound one triangle" if open_edges else "") + ")", MESH_ALLOWED)
-    vol = float(mesh.volume)
+    with np.errstate(all="ignore"):  # (trimesh divides by the volume for the centre of mass)
+        vol = float(mesh.volume)
     box = float(np.prod(np.maximum(mesh.extents, 1e-300)))
     if not abs(vol) > tol.FIT_MIN_VOLUME_SHARE * box or not abs(vol) > tol.FIT_MIN_VOLUME:
-        raise InputError(where, f"mesh encloses no volume ({abs(vol):.3g} m^3 in its units scaled to metres)",
+        raise InputError(where, f"mesh encloses no volume ({abs(vol) * 1e6:.3g} cm^3)",
                          "a closed surface around a muscle's body")
     if vol < 0:  # inside out: face outwards
         mesh.invert()
