@@ -162,7 +162,7 @@ def fit_one(mesh, name: str, n_sections: int, skel: Skeleton, rest: np.ndarray, 
     """One mesh (metres) → (the muscle's YAML text, its report entry without the measures)."""
     import trimesh
 
-    samples, _ = trimesh.sample.sample_surface(mesh, tol.FIT_SAMPLES, seed=tol.FIT_SEED)
+    samples, face = trimesh.sample.sample_surface(mesh, tol.FIT_SAMPLES, seed=tol.FIT_SEED)
     ctrl = fs.medial_axis(samples)
     bones = nearest_bones(ctrl, geometry)
     axis = tuple(AxisPoint(skel.bones[b].name, tuple(float(x) for x in rest[b, :3, :3].T @ (p - rest[b, :3, 3])))
@@ -178,7 +178,7 @@ def fit_one(mesh, name: str, n_sections: int, skel: Skeleton, rest: np.ndarray, 
     c, r, s = frames(sec_t)
     poles = fs.curve_points(ctrl, np.array([0.0, 1.0]))
     rows = fs.RowFit(c, r, s, poles)
-    xy = fs.fit_rows(mesh, rows, frames, samples)
+    xy = fs.fit_rows(mesh, rows, frames, samples, np.asarray(mesh.face_normals)[face])
     areas = np.abs([outline_area(o) for o in xy])
     arc = np.interp(sec_t, model.ts, model.arc)
     tendons = tendon_fractions(areas, arc)

@@ -226,15 +226,21 @@ class RowFit:
         return (a @ sol).reshape(-1, 3) + fixed
 
     def solve(self, blocks: list) -> np.ndarray:
-        """Least squares over blocks [(u, v, targets (P, 3), weight)] with a little smoothing of
-        each control point along the muscle (tol.FIT_SMOOTH): in-plane coordinates (N, 8, 2)."""
+        """Least squares over blocks [(u, v, targets (P, 3), weight, normals (P, 3) or None)]
+        (with normals, only the offsets along them count: point to plane), with a little
+        smoothing of each control point along the muscle (tol.FIT_SMOOTH): in-plane
+        coordinates (N, 8, 2)."""
         ata = 0.0
         atb = 0.0
-        for u, v, target, weight in blocks:
+        for u, v, target, weight, normals in blocks:
             a, fixed = self.design(u, v)
+            b = (target - fixed).ravel()
+            if normals is not None:
+                a = np.einsum("pc,pck->pk", normals, a.reshape(len(u), 3, -1))
+                b = np.einsum("pc,pc->p", normals, target - fixed)
             wt = weight / max(len(u), 1)
             ata = ata + wt * (a.T @ a)
-            atb = atb + wt * (a.T @ (target - fixed).ravel())
+            atb = atb + wt * (a.T @ b)
         q = self.n * OCT
         scale = float(np.trace(ata)) / (2 * q)
         if self.n >= 3:
@@ -255,10 +261,11 @@ def greville(n_sections: int) -> np.ndarray:
     return 0.5 * (k[1:-2] + k[2:-1])[1:-1]
 
 
-def fit_rows(mesh, rows: RowFit, frames, samples: np.ndarray) -> np.ndarray:
+def fit_rows(mesh, rows: RowFit, frames, samples: np.ndarray, normals: np.ndarray) -> np.ndarray:
     """In-plane control points (N, 8, 2) of the sections of ``rows`` fitted to ``mesh``:
     cut outlines first, then closest-point refinement. ``frames(t)`` → (c, r, s) (M, 3)
-    each, the rest axis' frame at parameters t; ``samples`` (S, 3) the mesh's surface."""
+    each, the rest axis' frame at parameters t; ``samples`` (S, 3) the mesh's surface and
+    ``normals`` (S, 3) its normals there."""
     import igl
     from scipy.spatial import cKDTree
 
@@ -270,16 +277,19 @@ def fit_rows(mesh, rows: RowFit, frames, samples: np.ndarray) -> np.ndarray:
     targets, ok = plane_targets(mesh, c, r, s, around)
     uu = np.repeat(u[ok], around)
     vv = np.tile(np.arange(around) / around, int(ok.sum()))
-    xy = rows.solve([(uu, vv, targets[ok].reshape(-1, 3), 1.0)])
+    xy = rows.solve([(uu, vv, targets[ok].reshape(-1, 3), 1.0, None)])
     V = np.ascontiguousarray(mesh.vertices, dtype=np.float64)
     F = np.ascontiguousarray(mesh.faces, dtype=np.int64)
+    fn = np.asarray(mesh.face_normals, dtype=np.float64)
     gu = np.repeat((np.arange(2 * m) + 0.5) / (2 * m), 2 * around)
     gv = np.tile(np.arange(2 * around) / (2 * around), 2 * m)
     for _ in range(tol.FIT_REFINE_ROUNDS):
         g = rows.evaluate(xy, gu, gv)
-        _, _, near = igl.point_mesh_squared_distance(g, V, F)
+        _, face, near = igl.point_mesh_squared_distance(g, V, F)
         _, idx = cKDTree(g).query(samples)
-        xy = rows.solve([(gu, gv, near, 1.0), (gu[idx], gv[idx], samples, 1.0)])
+        pw = tol.FIT_POINT_WEIGHT
+        xy = rows.solve([(gu, gv, near, 1.0, fn[face]), (gu[idx], gv[idx], samples, 1.0, normals),
+                         (gu, gv, near, pw, None), (gu[idx], gv[idx], samples, pw, None)])
     return xy
 
 
