@@ -196,31 +196,34 @@ class RowFit:
     parameter v is sum_k Bu_k(u) sum_l Bv_l(v) P_kl over the rows [pole0, sections, pole1],
     P_kl = c_k + x_kl r_k + y_kl s_k; it is linear in (x, y).
 
-    c, r, s: (N, 3) each, the sections' axis points and plane axes; poles: (2, 3)."""
+    c, r, s: (N, 3) each, the sections' axis points and plane axes; poles: (2, 3); ``around``:
+    control points per section (the file format's 8; more only to measure what they would buy,
+    docs/FIT.md)."""
 
-    def __init__(self, c: np.ndarray, r: np.ndarray, s: np.ndarray, poles: np.ndarray):
+    def __init__(self, c: np.ndarray, r: np.ndarray, s: np.ndarray, poles: np.ndarray, around: int = OCT):
         self.c, self.r, self.s, self.poles = c, r, s, poles
         self.n = len(c)
+        self.k = around
         self.knots = bspline.clamped_knots(self.n + 2, 2)
 
     def bases(self, u: np.ndarray, v: np.ndarray):
-        """Along (P, N+2) and around (P, 8) bases at the points' parameters (P,) each."""
-        return (bspline.basis_matrix(self.knots, 2, u), bspline.periodic_quadratic_basis(OCT, v % 1.0))
+        """Along (P, N+2) and around (P, k) bases at the points' parameters (P,) each."""
+        return (bspline.basis_matrix(self.knots, 2, u), bspline.periodic_quadratic_basis(self.k, v % 1.0))
 
     def design(self, u: np.ndarray, v: np.ndarray):
-        """(A (3P, 2 N 8), fixed (P, 3)): the surface at (u, v) is A @ [x, y] + fixed."""
+        """(A (3P, 2 N k), fixed (P, 3)): the surface at (u, v) is A @ [x, y] + fixed."""
         bu, bv = self.bases(u, v)
         inner = bu[:, 1:-1]
         fixed = np.outer(bu[:, 0], self.poles[0]) + np.outer(bu[:, -1], self.poles[1]) + \
             (inner * bv.sum(axis=1, keepdims=True)) @ self.c
-        w = (inner[:, :, None] * bv[:, None, :]).reshape(len(u), -1)  # (P, N*8)
-        ax = w[:, :, None] * np.repeat(self.r, OCT, axis=0)[None]  # (P, N*8, 3)
-        ay = w[:, :, None] * np.repeat(self.s, OCT, axis=0)[None]
+        w = (inner[:, :, None] * bv[:, None, :]).reshape(len(u), -1)  # (P, N*k)
+        ax = w[:, :, None] * np.repeat(self.r, self.k, axis=0)[None]  # (P, N*k, 3)
+        ay = w[:, :, None] * np.repeat(self.s, self.k, axis=0)[None]
         a = np.concatenate([ax, ay], axis=1).transpose(0, 2, 1).reshape(3 * len(u), -1)
         return a, fixed
 
     def evaluate(self, xy: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """Surface points (P, 3) for in-plane coordinates xy (N, 8, 2)."""
+        """Surface points (P, 3) for in-plane coordinates xy (N, k, 2)."""
         a, fixed = self.design(u, v)
         sol = np.concatenate([xy[..., 0].ravel(), xy[..., 1].ravel()])
         return (a @ sol).reshape(-1, 3) + fixed
@@ -229,7 +232,7 @@ class RowFit:
         """Least squares over blocks [(u, v, targets (P, 3), weight, normals (P, 3) or None)]
         (with normals, only the offsets along them count: point to plane), with a little
         smoothing of each control point along the muscle (tol.FIT_SMOOTH): in-plane
-        coordinates (N, 8, 2)."""
+        coordinates (N, k, 2)."""
         ata = 0.0
         atb = 0.0
         for u, v, target, weight, normals in blocks:
@@ -241,17 +244,17 @@ class RowFit:
             wt = weight / max(len(u), 1)
             ata = ata + wt * (a.T @ a)
             atb = atb + wt * (a.T @ b)
-        q = self.n * OCT
+        q = self.n * self.k
         scale = float(np.trace(ata)) / (2 * q)
         if self.n >= 3:
             d = np.zeros((self.n - 2, self.n))
             for k in range(self.n - 2):
                 d[k, k:k + 3] = (1.0, -2.0, 1.0)
-            lap = np.kron(d.T @ d, np.eye(OCT))
+            lap = np.kron(d.T @ d, np.eye(self.k))
             ata = ata + tol.FIT_SMOOTH * scale * np.kron(np.eye(2), lap)
         ata = ata + 1e-9 * scale * np.eye(2 * q)
         sol = np.linalg.solve(ata, atb)
-        return np.stack([sol[:q], sol[q:]], axis=1).reshape(self.n, OCT, 2)
+        return np.stack([sol[:q], sol[q:]], axis=1).reshape(self.n, self.k, 2)
 
 
 def greville(n_sections: int) -> np.ndarray:
