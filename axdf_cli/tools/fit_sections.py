@@ -231,8 +231,8 @@ class RowFit:
     def solve(self, blocks: list) -> np.ndarray:
         """Least squares over blocks [(u, v, targets (P, 3), weight, normals (P, 3) or None)]
         (with normals, only the offsets along them count: point to plane), with a little
-        smoothing of each control point along the muscle (tol.FIT_SMOOTH): in-plane
-        coordinates (N, k, 2)."""
+        smoothing of each control point along the muscle (tol.FIT_SMOOTH) and round each
+        section (tol.FIT_SMOOTH_AROUND): in-plane coordinates (N, k, 2)."""
         ata = 0.0
         atb = 0.0
         for u, v, target, weight, normals in blocks:
@@ -252,6 +252,13 @@ class RowFit:
                 d[k, k:k + 3] = (1.0, -2.0, 1.0)
             lap = np.kron(d.T @ d, np.eye(self.k))
             ata = ata + tol.FIT_SMOOTH * scale * np.kron(np.eye(2), lap)
+        # and around each section (second differences round the loop), the more the less the
+        # data sees the section (near a pole the surface is mostly the pole's), so that such a
+        # row stays a smooth loop instead of crumpling
+        seen = np.diag(ata).reshape(2, self.n, self.k).mean(axis=(0, 2))
+        weight = scale * tol.FIT_SMOOTH_AROUND * seen.max() / np.maximum(seen, 1e-12 * seen.max())
+        ring = np.eye(self.k) * -2.0 + np.roll(np.eye(self.k), 1, axis=1) + np.roll(np.eye(self.k), -1, axis=1)
+        ata = ata + np.kron(np.diag(np.tile(weight, 2)), ring.T @ ring)
         ata = ata + 1e-9 * scale * np.eye(2 * q)
         sol = np.linalg.solve(ata, atb)
         return np.stack([sol[:q], sol[q:]], axis=1).reshape(self.n, self.k, 2)
