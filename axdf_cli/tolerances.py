@@ -404,7 +404,7 @@ FIT_PHASE_STEPS = 17
 # folding; small enough to change an IoU by < 0.005. The smoothing round each section (second
 # differences round its loop, relative to the data's weight, raised where the data sees the
 # section less): at 1e-3 the tip sections of soleus, vastus lateralis and gluteus maximus stop
-# crumpling (control polygons with 3+ concave corners: 14 of 48 sections → 5) for an IoU
+# crumpling (control polygons with 3+ concave corners: 12 of 48 sections at 1e-4, 5) for an IoU
 # 0.001-0.003 lower; 1e-2 costs 0.015.
 FIT_REFINE_ROUNDS = 8
 FIT_SMOOTH = 1e-3
