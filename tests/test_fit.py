@@ -188,6 +188,21 @@ def test_zero_volume_mesh_is_refused(tube_fit, capsys):
     assert "flat.obj: mesh encloses no volume" in err
 
 
+def test_a_shape_the_model_cannot_follow_is_warned_of(tmp_path, capsys):
+    """A ring (a torus) is closed and has volume, but no axis runs through it: written, warned."""
+    import trimesh
+
+    (tmp_path / "leg.yaml").write_text(SKELETON)
+    t = trimesh.creation.torus(0.06, 0.015)
+    t.apply_translation([0, 0, 0.7])
+    t.export(tmp_path / "ring.stl")
+    capsys.readouterr()
+    assert run_cli(tmp_path, "fit", "ring.stl", "--skeleton", "leg.yaml", "--out", "out", "--sections", "4",
+                   "--quiet") == 0
+    assert "axdf: warning: ring.stl: the fitted muscle overlaps its mesh by IoU" in capsys.readouterr().err
+    assert (tmp_path / "out" / "muscles" / "ring.yaml").is_file()
+
+
 @pytest.mark.skipif(not ATLAS.is_dir(), reason=f"the Visible Human atlas not found at {ATLAS}")
 def test_atlas_muscle_fits(tmp_path):
     src = next(ATLAS.glob("*Muscle_TibialisAnterior_*.ply"))

@@ -32,6 +32,8 @@ def add_args(p) -> None:
 
 
 def run(args) -> int:
+    from axdf_cli import tolerances as tol
+    from axdf_cli.model.muscle import OCT
     from axdf_cli.specs import RefPolicy
     from axdf_cli.tools.fit import SUMMARY, build_fit, unit_scale
 
@@ -49,6 +51,11 @@ def run(args) -> int:
     for rel, data in res.files.items():
         out.add(Path(args.out) / rel, data, "output")
     write_outputs(out, inputs=res.inputs, overwrite=args.overwrite)
+    for m in res.report["muscles"]:
+        if m["iou"] < tol.FIT_WARN_IOU:
+            print(f"axdf: warning: {m['mesh']}: the fitted muscle overlaps its mesh by IoU {m['iou']:.2f} only "
+                  f"(volume ratio {m['volume_ratio']:.2f}): an axis and {OCT}-point sections do not follow "
+                  "its shape (docs/FIT.md)", file=sys.stderr)
     if not args.quiet:
         ms = res.report["muscles"]
         worst = min(ms, key=lambda m: m["iou"])
