@@ -398,3 +398,70 @@ SKIN_FAT_SMOOTHING = 6
 SKIN_PUSH_ROUNDS = 8
 SKIN_PUSH_CLEARANCE = 0.002
 SKIN_PUSH_SMOOTHING = 4
+# `axdf fit` (axdf_cli/tools/fit.py, fit_sections.py): a closed muscle mesh → an AxDf muscle.
+# Sections by default: measured on the Visible Human atlas (docs/FIT.md), 16 sections follow
+# the muscles' bellies to IoU 0.9+ where 8 leave a few points of overlap; the bounds keep the
+# spec's limit (64 sections) and a surface that tapers (at least 3 sections between poles).
+FIT_SECTIONS_DEFAULT = 16
+FIT_SECTIONS_MIN = 3
+FIT_SECTIONS_MAX = 64
+# Surface samples a fit reads the mesh by (area-uniform, seeded: the same mesh gives the same
+# file): 6,000 put a sample every ~2 mm on a gluteus maximus' ~600 cm^2 of surface.
+FIT_SAMPLES = 6000
+FIT_SEED = 0
+# The medial axis: slabs of samples per round and rounds of slabs perpendicular to the current
+# curve (2 settle a curved sartorius; more change it by well under a millimetre); the dense
+# polyline a sample finds its nearest curve point on; the share of the length at each end whose
+# samples' centroid places the tip (the surface's pole).
+FIT_AXIS_SLABS = 24
+FIT_AXIS_ROUNDS = 3
+FIT_AXIS_DENSE = 400
+FIT_TIP_SHARE = 0.03
+# Cut outlines: rays per cut (from the axis, the farthest crossing), points per outline around
+# the surface (4 per control point), cutting planes per section (plus 2 sections' worth beyond
+# the ends), the phase search's steps (over half a control point's spacing each way).
+FIT_RAYS = 96
+FIT_AROUND = 32
+FIT_PLANES_PER_SECTION = 4
+FIT_PHASE_STEPS = 17
+# Rounds of closest-point refinement after the cut outlines (each both ways: the surface's
+# samples to their closest mesh points, the mesh's samples to the surface's nearest sample),
+# point to plane (along the mesh's normal, so the surface may slide along it) with a small
+# weight of point to point that keeps the net from drifting where the plane terms say nothing.
+# Measured on 7 atlas muscles at 16 sections: point to point alone needs 20+ rounds for IoU
+# 0.92-0.94; point to plane reaches 0.95-0.97 in 8 (weight 0.1: 0.94; 0.02: 0.95; 0.005: 0.955
+# on vastus lateralis). The smoothing of control points along the muscle (second differences,
+# relative to the data's weight) keeps rows near the tips, where cuts are tiny and few, from
+# folding; small enough to change an IoU by < 0.005. The smoothing round each section (second
+# differences round its loop, relative to the data's weight, raised where the data sees the
+# section less): at 1e-3 the tip sections of soleus, vastus lateralis and gluteus maximus stop
+# crumpling (control polygons with 3+ concave corners: 12 of 48 sections at 1e-4, 5) for an IoU
+# 0.001-0.003 lower; 1e-2 costs 0.015.
+FIT_REFINE_ROUNDS = 8
+FIT_SMOOTH = 1e-3
+FIT_POINT_WEIGHT = 0.005
+FIT_SMOOTH_AROUND = 1e-3
+# The written surface's resolution: rows along per section (+ 8, at least FIT_ALONG_MIN) and
+# vertices around, fine enough that the tessellation of the fitted surface changes its
+# measured IoU by < 0.01.
+FIT_ALONG_PER_SECTION = 4
+FIT_ALONG_MIN = 40
+FIT_OUTPUT_AROUND = 32
+# Tendons: the sections at each end thinner than this share of the widest section's area make
+# the tendon (its radial size kept when the muscle stretches); at most FIT_TENDON_MAX of the
+# length in all (the spec allows < 0.95: a belly must remain).
+FIT_TENDON_AREA_SHARE = 0.1
+FIT_TENDON_MAX = 0.6
+# A mesh encloses no volume below this share of its bounding box (a flat or degenerate
+# surface), or below this many m^3 (a point).
+FIT_MIN_VOLUME_SHARE = 1e-6
+FIT_MIN_VOLUME = 1e-15
+# The fit's measures: the IoU grid's spacing (metres; coarser only to stay within the point
+# budget), surface samples for the distances.
+FIT_IOU_SPACING = 0.002
+FIT_IOU_MAX_POINTS = 4_000_000
+FIT_MEASURE_SAMPLES = 20000
+# A fit whose IoU with its mesh is below this is warned of (the issue's bound for the worst
+# muscle of a library; the atlas' leg fits at 0.87+ with 8 sections): the mesh is not one belly
+# along one axis (a ring, a branching or C-shaped muscle; docs/FIT.md).
+FIT_WARN_IOU = 0.75

@@ -25,6 +25,7 @@ COMMANDS = {
     "import": ("axdf_cli.cli.importer", "import OpenSim models and motions, or BVH motion capture, as axdf files"),
     "transfer": ("axdf_cli.cli.transfer", "move muscles onto another skeleton through a bone map"),
     "pack": ("axdf_cli.cli.pack", "make a body's muscles share space at the rest pose (section outlines)"),
+    "fit": ("axdf_cli.cli.fit", "fit closed muscle meshes (STL, PLY, OBJ) as AxDf muscle files"),
     "retarget": ("axdf_cli.cli.retarget", "fit a muscle model's skeleton to motion capture (BVH, 3D joints)"),
     "dataset": ("axdf_cli.cli.dataset", "build data sets: sampled poses, several views, labels, one index"),
     "skin": ("axdf_cli.cli.skin", "fit a CC0 body (MakeHuman) to a skeleton at rest: a skin file"),

@@ -1,0 +1,216 @@
+"""`axdf fit` (axdf_cli/tools/fit.py, cli/fit.py): closed muscle meshes → AxDf muscle files.
+
+Through the real CLI in process: a bent tube of elliptic section (known volume) is fitted to
+IoU ≥ 0.9 and its volume within 5%; the written file loads through the muscle spec and runs
+through `axdf run` at the rest pose; an atlas muscle (Visible Human, where ../shared/data has
+it) fits at IoU ≥ 0.85; a mesh that is open or without volume, a missing mesh and an unknown
+unit are refused by name with exit 2 and nothing written."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cli_in_folder import run_cli
+from osim_common import DATA
+
+ATLAS = DATA / "atlas" / "visible_human_female" / "Right"
+
+# a thigh: hip, knee and ankle on a straight line down z (metres)
+SKELETON = """\
+skeleton: leg
+coordinates:
+  hip: {type: rotation, range: [-30, 120]}
+  knee: {type: rotation, range: [0, 150]}
+bones:
+  - name: pelvis
+    offset: [0, 0, 1.0]
+  - name: femur
+    parent: pelvis
+    offset: [0, 0, -0.05]
+    dofs:
+      - {coord: hip, type: rotation, axis: [1, 0, 0]}
+  - name: tibia
+    parent: femur
+    offset: [0, 0, -0.42]
+    dofs:
+      - {coord: knee, type: rotation, axis: [1, 0, 0]}
+"""
+
+# the atlas' right leg in its own frame (metres): hip, knee and ankle from its cartilages
+ATLAS_SKELETON = """\
+skeleton: atlas_right
+coordinates:
+  hip_r: {type: rotation, range: [-30, 120]}
+  knee_r: {type: rotation, range: [0, 150]}
+  ankle_r: {type: rotation, range: [-30, 50]}
+bones:
+  - name: pelvis
+    offset: [0.55, 0.50, 0.95]
+  - name: femur_r
+    parent: pelvis
+    offset: [0.081, -0.048, -0.062]
+    dofs:
+      - {coord: hip_r, type: rotation, axis: [1, 0, 0]}
+  - name: tibia_r
+    parent: femur_r
+    offset: [-0.025, -0.02, -0.40]
+    dofs:
+      - {coord: knee_r, type: rotation, axis: [1, 0, 0]}
+  - name: foot_r
+    parent: tibia_r
+    offset: [-0.016, -0.024, -0.328]
+    dofs:
+      - {coord: ankle_r, type: rotation, axis: [1, 0, 0]}
+"""
+
+
+def bent_tube(length=0.30, a=0.03, b=0.015, bend=0.04, rows=60, around=48):
+    """A closed tube along z from 0.92 to 0.62 m, bent by ``bend`` in x, of elliptic section
+    (semi-axes a in x, b in y) tapering as sin(pi s)^0.5 to its capped tips: (vertices, faces)."""
+    import trimesh
+
+    s = np.linspace(0.0, 1.0, rows)[1:-1]
+    k = np.sin(np.pi * s) ** 0.5
+    th = np.arange(around) * 2 * np.pi / around
+    cx = bend * np.sin(np.pi * s)
+    z = 0.92 - length * s
+    ring = np.stack([cx[:, None] + a * k[:, None] * np.cos(th), b * k[:, None] * np.sin(th),
+                     np.broadcast_to(z[:, None], (len(s), around))], axis=-1).reshape(-1, 3)
+    v = np.concatenate([[[0.0, 0.0, 0.92]], ring, [[0.0, 0.0, 0.92 - length]]])
+    n = len(s)
+    f = [[0, 1 + (j + 1) % around, 1 + j] for j in range(around)]
+    for i in range(n - 1):
+        for j in range(around):
+            p, q = 1 + i * around + j, 1 + i * around + (j + 1) % around
+            f += [[p, q, p + around], [p + around, q, q + around]]
+    last = len(v) - 1
+    base = 1 + (n - 1) * around
+    f += [[base + j, base + (j + 1) % around, last] for j in range(around)]
+    mesh = trimesh.Trimesh(v, np.array(f), process=True)
+    if mesh.volume < 0:
+        mesh.invert()
+    return mesh
+
+
+@pytest.fixture(scope="module")
+def tube_fit(tmp_path_factory):
+    d = tmp_path_factory.mktemp("fit")
+    (d / "leg.yaml").write_text(SKELETON)
+    mesh = bent_tube()
+    mesh.apply_scale(1000.0)  # written in millimetres
+    mesh.export(d / "tube.stl")
+    rc = run_cli(d, "fit", "tube.stl", "--skeleton", "leg.yaml", "--out", "out", "--units", "mm", "--sections", "12",
+                 "--quiet")
+    return d, rc, mesh
+
+
+def test_tube_fits_and_keeps_its_volume(tube_fit):
+    d, rc, mesh = tube_fit
+    assert rc == 0
+    rep = json.loads((d / "out" / "fit_report.json").read_text())
+    (m,) = rep["muscles"]
+    assert m["muscle"] == "tube" and m["file"] == "muscles/tube.yaml"
+    assert m["iou"] >= 0.9, m
+    assert abs(m["volume_ratio"] - 1.0) <= 0.05, m
+    assert m["distance_median_mm"] <= 1.0, m
+    assert abs(m["mesh_volume_cm3"] - mesh.volume / 1000.0) < 1e-6 * mesh.volume
+    assert set(m["bones"]) <= {"pelvis", "femur", "tibia"} and "femur" in m["bones"]
+    assert "| tube |" in (d / "out" / "FIT.md").read_text()
+
+
+def test_written_file_is_an_ordinary_muscle(tube_fit):
+    """It loads through the muscle spec (an axis of 5 bound points, outlines of 8), and the model
+    at the rest pose has the mesh's volume: `axdf run` at rest writes it."""
+    from axdf_cli.model.muscle import MuscleModel
+    from axdf_cli.model.skeleton import forward_kinematics
+    from axdf_cli.specs import RefPolicy, load_muscle_file, load_skeleton
+
+    d, rc, mesh = tube_fit
+    assert rc == 0
+    (spec,) = load_muscle_file(d / "out" / "muscles" / "tube.yaml")
+    assert len(spec.axis) == 5 and len(spec.sections) == 12
+    assert all(len(s.outline) == 8 for s in spec.sections)
+    skel = load_skeleton(d / "leg.yaml", RefPolicy(allow_outside=True))
+    rest = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
+    model = MuscleModel(spec, skel.bone_index, rest, skel)
+    assert abs(model.v0 / (mesh.volume * 1e-9) - 1.0) <= 0.05
+    (d / "rest.yaml").write_text("pose: rest\nskeleton: leg.yaml\nfps: 30\nframes: [0, 1]\n"
+                                 "keys:\n  0: {hip: 0, knee: 0}\n")
+    assert run_cli(d, "validate", "out/muscles/tube.yaml") == 0
+    assert run_cli(d, "run", "--muscles", "out/muscles", "--pose", "rest.yaml", "--out", "run", "--quiet") == 0
+    assert (d / "run" / "stats.csv").is_file()
+
+
+def test_same_input_same_bytes(tube_fit, tmp_path):
+    d, rc, _ = tube_fit
+    assert rc == 0
+    assert run_cli(d, "fit", "tube.stl", "--skeleton", "leg.yaml", "--out", str(tmp_path / "again"), "--units", "mm",
+                   "--sections", "12", "--quiet", "--allow-outside") == 0
+    assert (tmp_path / "again" / "muscles" / "tube.yaml").read_bytes() == \
+        (d / "out" / "muscles" / "tube.yaml").read_bytes()
+
+
+def _refused(d: Path, capsys, *argv) -> str:
+    capsys.readouterr()
+    rc = run_cli(d, "fit", *argv, "--skeleton", "leg.yaml", "--out", "bad", "--quiet")
+    err = capsys.readouterr().err
+    assert rc == 2, err
+    assert "Traceback" not in err
+    assert not (d / "bad").exists()
+    return err
+
+
+def test_refusals_write_nothing(tube_fit, capsys):
+    import trimesh
+
+    d, _, mesh = tube_fit
+    trimesh.Trimesh(mesh.vertices, mesh.faces[:-5], process=False).export(d / "open.ply")
+    err = _refused(d, capsys, "tube.stl", "open.ply", "--units", "mm")
+    assert "open.ply: mesh is not closed" in err
+    err = _refused(d, capsys, "tube.stl", "--units", "furlong")
+    assert "furlong" in err and "mm, cm or m" in err
+    err = _refused(d, capsys, "missing.stl")
+    assert "missing.stl: mesh file not found" in err
+    err = _refused(d, capsys, "leg.yaml")
+    assert "leg.yaml: .yaml is not a mesh format" in err
+
+
+def test_zero_volume_mesh_is_refused(tube_fit, capsys):
+    """A closed surface without volume: a triangle and its back face (every edge bounds two)."""
+    import trimesh
+
+    d, _, _ = tube_fit
+    trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2], [0, 2, 1]], process=False).export(d / "flat.obj")
+    err = _refused(d, capsys, "tube.stl", "flat.obj", "--units", "mm")
+    assert "flat.obj: mesh encloses no volume" in err
+
+
+def test_a_shape_the_model_cannot_follow_is_warned_of(tmp_path, capsys):
+    """A ring (a torus) is closed and has volume, but no axis runs through it: written, warned."""
+    import trimesh
+
+    (tmp_path / "leg.yaml").write_text(SKELETON)
+    t = trimesh.creation.torus(0.06, 0.015)
+    t.apply_translation([0, 0, 0.7])
+    t.export(tmp_path / "ring.stl")
+    capsys.readouterr()
+    assert run_cli(tmp_path, "fit", "ring.stl", "--skeleton", "leg.yaml", "--out", "out", "--sections", "4",
+                   "--quiet") == 0
+    assert "axdf: warning: ring.stl: the fitted muscle overlaps its mesh by IoU" in capsys.readouterr().err
+    assert (tmp_path / "out" / "muscles" / "ring.yaml").is_file()
+
+
+@pytest.mark.skipif(not ATLAS.is_dir(), reason=f"the Visible Human atlas not found at {ATLAS}")
+def test_atlas_muscle_fits(tmp_path):
+    src = next(ATLAS.glob("*Muscle_TibialisAnterior_*.ply"))
+    (tmp_path / "atlas.yaml").write_text(ATLAS_SKELETON)
+    rc = run_cli(tmp_path, "fit", str(src), "--skeleton", "atlas.yaml", "--out", "out", "--units", "mm",
+                 "--sections", "8", "--quiet", "--allow-outside")
+    assert rc == 0
+    (m,) = json.loads((tmp_path / "out" / "fit_report.json").read_text())["muscles"]
+    assert m["iou"] >= 0.85, m
+    assert abs(m["volume_ratio"] - 1.0) <= 0.05, m
+    assert set(m["bones"]) == {"tibia_r"}
