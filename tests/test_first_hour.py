@@ -192,6 +192,22 @@ def test_the_cli_says_so_before_a_cold_compile_once_and_not_for_validate(tmp_pat
     assert rc == 0 and "compiling" not in err, err
 
 
+def test_the_notice_comes_for_fit_and_for_skin_only_with_muscles(tmp_path, capsys, monkeypatch):
+    """`axdf skin` evaluates muscles (numba's kernels) only with --muscles: without, a cold
+    cache gets no notice of minutes of compiling that will not happen; `axdf fit` always does."""
+    from types import SimpleNamespace
+
+    from axdf_cli.cli.main import _notice
+
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    assert _notice(SimpleNamespace(command="skin", muscles=None, quiet=False)) is None
+    assert "compiling" not in capsys.readouterr().err
+    assert _notice(SimpleNamespace(command="skin", muscles="muscles/gait2392", quiet=False)) == "skin"
+    assert capsys.readouterr().err.startswith("axdf: compiling ")
+    assert _notice(SimpleNamespace(command="fit", quiet=False)) == "fit"
+    assert capsys.readouterr().err.startswith("axdf: compiling ")
+
+
 # ----------------------------------------------------------------------------- make demo installs no test tools
 def test_make_demo_installs_no_test_tools_and_make_test_adds_them(tmp_path):
     import subprocess

@@ -91,9 +91,11 @@ def _install(handler) -> dict:
     return old
 
 
-#: Commands that run numba's kernels, and the actions of theirs that do: a note before a cold
-#: compile (runtime.compile_notice).
-KERNEL_COMMANDS = {"run": None, "pack": None, "dataset": ("build",), "import": ("osim", "mjcf"), "skin": None}
+#: Commands that run numba's kernels, and the actions of theirs that do (or a test of the
+#: arguments: ``skin`` evaluates muscles only with ``--muscles``): a note before a cold compile
+#: (runtime.compile_notice).
+KERNEL_COMMANDS = {"run": None, "pack": None, "dataset": ("build",), "import": ("osim", "mjcf"), "fit": None,
+                   "skin": lambda args: args.muscles is not None}
 
 
 def _notice(args) -> str | None:
@@ -102,7 +104,10 @@ def _notice(args) -> str | None:
     if args.command not in KERNEL_COMMANDS:
         return None
     actions = KERNEL_COMMANDS[args.command]
-    if actions is not None and getattr(args, "action", getattr(args, "source", None)) not in actions:
+    if callable(actions):
+        if not actions(args):
+            return None
+    elif actions is not None and getattr(args, "action", getattr(args, "source", None)) not in actions:
         return None
     from axdf_cli import runtime
 
