@@ -456,6 +456,14 @@ FIT_TENDON_MAX = 0.6
 # surface), or below this many m^3 (a point).
 FIT_MIN_VOLUME_SHARE = 1e-6
 FIT_MIN_VOLUME = 1e-15
+# A fitted mesh's size, read in --units: its longest extent within [FIT_MIN_SIZE, FIT_MAX_SIZE]
+# metres and no vertex farther than FIT_MAX_REACH from the skeleton's origin. Muscles run from a
+# few millimetres (the hand's lumbricals, 5 mm across) to half a metre (sartorius); a mesh in
+# millimetres read as metres is a thousand times too large, one in metres read as millimetres
+# a thousand times too small, so the refusal names --units.
+FIT_MIN_SIZE = 0.002
+FIT_MAX_SIZE = 3.0
+FIT_MAX_REACH = 10.0
 # The fit's measures: the IoU grid's spacing (metres; coarser only to stay within the point
 # budget), surface samples for the distances.
 FIT_IOU_SPACING = 0.002

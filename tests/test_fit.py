@@ -178,12 +178,34 @@ def test_refusals_write_nothing(tube_fit, capsys):
     assert "leg.yaml: .yaml is not a mesh format" in err
 
 
+def test_meshes_that_are_not_one_finite_muscle_of_a_muscle_size_are_refused_by_name(tube_fit, capsys):
+    """A NaN vertex (trimesh would drop it and the mesh read "not closed"), a vertex at 1e300,
+    two separate pieces in one file, and the tube read in the wrong unit (metres as mm: a
+    thousand times too small; mm as metres: too large): each refused by name, --units named."""
+    import trimesh
+
+    d, _, mesh = tube_fit
+    v = mesh.vertices.copy()
+    v[3] = np.nan
+    trimesh.Trimesh(v, mesh.faces, process=False).export(d / "nan.ply")
+    v[3] = 1e300
+    trimesh.Trimesh(v, mesh.faces, process=False).export(d / "far.obj")
+    trimesh.util.concatenate([mesh, mesh.copy().apply_translation([300.0, 0, 0])]).export(d / "two.stl")
+    assert "nan.ply: has non-finite vertex coordinates" in _refused(d, capsys, "nan.ply", "--units", "mm")
+    assert "far.obj: mesh is 1e+297 m across" in _refused(d, capsys, "far.obj", "--units", "mm")
+    assert "two.stl: mesh is 2 separate closed pieces" in _refused(d, capsys, "two.stl", "--units", "mm")
+    err = _refused(d, capsys, "tube.stl", "--units", "m")  # the tube is in millimetres: read as metres, too large
+    assert "read in m;" in err and "check --units" in err
+    trimesh.Trimesh(mesh.vertices / 1000.0, mesh.faces).export(d / "metres.stl")
+    assert "check --units" in _refused(d, capsys, "metres.stl", "--units", "mm")
+
+
 def test_zero_volume_mesh_is_refused(tube_fit, capsys):
     """A closed surface without volume: a triangle and its back face (every edge bounds two)."""
     import trimesh
 
     d, _, _ = tube_fit
-    trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2], [0, 2, 1]], process=False).export(d / "flat.obj")
+    trimesh.Trimesh([[0, 0, 0], [10, 0, 0], [0, 10, 0]], [[0, 1, 2], [0, 2, 1]], process=False).export(d / "flat.obj")
     err = _refused(d, capsys, "tube.stl", "flat.obj", "--units", "mm")
     assert "flat.obj: mesh encloses no volume" in err
 

@@ -51,6 +51,11 @@ def unit_scale(units: str) -> float:
     return UNITS[units]
 
 
+def unit_name(scale: float) -> str:
+    """The ``--units`` word of a scale (metres per unit)."""
+    return next((u for u, k in UNITS.items() if k == scale), f"{scale:g} m")
+
+
 def read_mesh(path: Path, scale: float):
     """A closed muscle surface in metres (a trimesh.Trimesh, outward-facing); refused by name
     when missing, unreadable, open or without volume."""
@@ -62,14 +67,23 @@ def read_mesh(path: Path, scale: float):
     if path.suffix.lower() not in MESH_SUFFIXES:
         raise InputError(where, f"{path.suffix or 'no suffix'} is not a mesh format axdf fit reads", MESH_ALLOWED)
     try:
-        mesh = trimesh.load(str(path), force="mesh", process=True)
+        mesh = trimesh.load(str(path), force="mesh", process=False)
     except Exception as e:  # trimesh raises many kinds on a bad file
         raise InputError(where, f"cannot be read as a mesh ({type(e).__name__}: {e})", MESH_ALLOWED) from None
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
         raise InputError(where, "holds no triangles", MESH_ALLOWED)
+    # checked before trimesh merges vertices: it drops a NaN vertex (the mesh then reads "not
+    # closed") and casts an overflowing one to int
     if not np.isfinite(mesh.vertices).all():
         raise InputError(where, "has non-finite vertex coordinates", "finite numbers only")
+    size = float(np.ptp(mesh.vertices, axis=0).max()) * scale
+    far = float(np.abs(mesh.vertices).max()) * scale
+    if not tol.FIT_MIN_SIZE <= size <= tol.FIT_MAX_SIZE or far > tol.FIT_MAX_REACH:
+        raise InputError(where, f"mesh is {size:.3g} m across, {far:.3g} m from the origin at most, read in "
+                         f"{unit_name(scale)}", f"a muscle {tol.FIT_MIN_SIZE * 1000:g} mm to {tol.FIT_MAX_SIZE:g} m "
+                         f"long within {tol.FIT_MAX_REACH:g} m of the skeleton's origin: check --units (mm, cm or m)")
     mesh.apply_scale(scale)
+    mesh.process(validate=False)
     if not mesh.is_watertight:
         edges = np.bincount(mesh.faces_unique_edges.ravel(), minlength=len(mesh.edges_unique)) \
             if hasattr(mesh, "faces_unique_edges") else np.zeros(0)
@@ -82,6 +96,9 @@ def read_mesh(path: Path, scale: float):
     if not abs(vol) > tol.FIT_MIN_VOLUME_SHARE * box or not abs(vol) > tol.FIT_MIN_VOLUME:
         raise InputError(where, f"mesh encloses no volume ({abs(vol) * 1e6:.3g} cm^3)",
                          "a closed surface around a muscle's body")
+    if mesh.body_count > 1:
+        raise InputError(where, f"mesh is {mesh.body_count} separate closed pieces",
+                         "one muscle per mesh file: split the pieces into files of their own")
     if vol < 0:  # inside out: face outwards
         mesh.invert()
     return mesh
