@@ -136,6 +136,11 @@ def test_refusals_write_nothing(tmp_path, capsys, monkeypatch):
     assert rc == 2 and "no family" in err and not out.exists()
     rc, _, err = run_main(["skin", "--skeleton", SKELETONS / "gait2392.yaml", "--push", "--out", out], capsys)
     assert rc == 2 and "--push needs --muscles" in err and not out.exists()
+    # a gait2392 whose right heel bone is renamed: the nearest family and the bone it lacks are named
+    text = (SKELETONS / "gait2392.yaml").read_text().replace("calcn_r", "heel_r")
+    (tmp_path / "g.yaml").write_text(text.replace("mesh: meshes/", f"mesh: {SKELETONS / 'meshes'}/"))
+    rc, _, err = run_main(["skin", "--skeleton", tmp_path / "g.yaml", "--out", out, "--allow-outside"], capsys)
+    assert rc == 2 and "(the nearest, gait2392, needs bone calcn_r)" in err and not out.exists(), err
     monkeypatch.setattr(sk, "BODY_FILE", tmp_path / "nowhere" / "body.npz")
     rc, _, err = run_main(["skin", "--skeleton", SKELETONS / "gait2392.yaml", "--out", out], capsys)
     assert rc == 2 and "the body assets are missing" in err and "extract_makehuman" in err and not out.exists()

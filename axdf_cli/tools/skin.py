@@ -169,12 +169,17 @@ FAMILIES = (
 def family_of(skel: Skeleton, where: Mark) -> Family:
     """The first family whose every bone the skeleton has; refused (exit 2) when none fits."""
     have = set(skel.bone_index)
+    missing = []
     for fam in FAMILIES:
         need = set(fam.landmarks.values()) | set(fam.bind.values()) | {b for b, _ in fam.points.values()} | \
             ({fam.up[0]} if fam.up else set())
         if need <= have:
             return fam
-    raise InputError(where, f"skeleton {skel.name!r} is of no family axdf skin knows",
+        missing.append((len(need - have), sorted(need - have), fam.name))
+    n, lack, near = min(missing)
+    shown = ", ".join(lack[:6]) + (f" and {n - 6} more" if n > 6 else "")
+    raise InputError(where, f"skeleton {skel.name!r} is of no family axdf skin knows (the nearest, {near}, "
+                     f"needs bone{'s' if n > 1 else ''} {shown})",
                      "a skeleton of " + ", ".join(f.name for f in FAMILIES) + " (docs/SKIN.md, the joint map)")
 
 
