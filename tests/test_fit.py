@@ -236,3 +236,29 @@ def test_atlas_muscle_fits(tmp_path):
     assert m["iou"] >= 0.85, m
     assert abs(m["volume_ratio"] - 1.0) <= 0.05, m
     assert set(m["bones"]) == {"tibia_r"}
+
+
+def test_paths_bind_a_muscle_to_the_bones_its_path_crosses(tube_fit, capsys):
+    """--paths: the tube (hip to above the knee) fitted with a model's path from the pelvis to
+    the tibia hangs only on those two bones, both sides of the hip and knee (nearest, it
+    hangs on the femur); a mesh with no muscle file of its name there is refused."""
+    d, rc, _ = tube_fit
+    assert rc == 0
+    from axdf_cli.specs import load_muscle_file
+
+    assert "femur" in {p.bone for p in load_muscle_file(d / "out" / "muscles" / "tube.yaml")[0].axis}
+    (d / "model").mkdir(exist_ok=True)
+    (d / "model" / "tube.yaml").write_text("muscle: tube\npath:\n  - {bone: pelvis, at: [0, 0, -0.02]}\n"
+                                           "  - {bone: tibia, at: [0, 0, 0.05]}\nsections:\n"
+                                           "  - {t: 0.3, radii: [0.02, 0.02], angle: 0}\n"
+                                           "  - {t: 0.7, radii: [0.02, 0.02], angle: 0}\n")
+    assert run_cli(d, "fit", "tube.stl", "--skeleton", "leg.yaml", "--out", "paths", "--units", "mm",
+                   "--sections", "6", "--paths", "model", "--quiet") == 0
+    (spec,) = load_muscle_file(d / "paths" / "muscles" / "tube.yaml")
+    bones = [p.bone for p in spec.axis]
+    assert set(bones) == {"pelvis", "tibia"} and bones[0] == "pelvis" and bones[-1] == "tibia", bones
+    manifest = json.loads((d / "paths" / "manifest.json").read_text())
+    assert "model/tube.yaml" in [i["file"] for i in manifest["inputs"]], manifest["inputs"]
+    (d / "other.stl").write_bytes((d / "tube.stl").read_bytes())
+    err = _refused(d, capsys, "other.stl", "--units", "mm", "--paths", "model")
+    assert "no muscle file other.yaml in --paths model" in err

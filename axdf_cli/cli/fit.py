@@ -26,6 +26,9 @@ def add_args(p) -> None:
     p.add_argument("--units", default="m", metavar="UNIT", help="the meshes' unit: mm, cm or m (default m)")
     p.add_argument("--sections", type=int, default=None, metavar="N",
                    help="sections per muscle (default 16, chosen by measurement: docs/FIT.md)")
+    p.add_argument("--paths", default=None, metavar="DIR",
+                   help="the model's muscle files: a mesh binds only to the bones of the file of its name there "
+                        "(its path's), so a muscle across two joints hangs on both sides")
     p.add_argument("--allow-outside", action="store_true",
                    help="allow paths inside YAML files to leave the project folder tree")
     add_overwrite_arg(p)
@@ -40,17 +43,19 @@ def run(args) -> int:
     unit_scale(args.units)  # an unknown unit is refused before anything is read
     policy = RefPolicy.for_command([args.skeleton] + list(args.meshes), args.allow_outside)
     out = OutputSet(args.out, "fit")
-    check_outputs(out, inputs=[args.skeleton, *args.meshes], overwrite=args.overwrite)
+    dirs = [args.paths] if args.paths else []
+    check_outputs(out, inputs=[args.skeleton, *args.meshes], overwrite=args.overwrite, input_dirs=dirs)
 
     def told(name, e):
         if args.verbose:
             print(f"  {name}: IoU {e['iou']:.3f}, mean distance {e['distance_mean_mm']:.2f} mm, "
                   f"volume ratio {e['volume_ratio']:.3f}", file=sys.stderr)
 
-    res = build_fit([Path(m) for m in args.meshes], Path(args.skeleton), args.units, args.sections, policy, told)
+    res = build_fit([Path(m) for m in args.meshes], Path(args.skeleton), args.units, args.sections, policy, told,
+                    paths=None if args.paths is None else Path(args.paths))
     for rel, data in res.files.items():
         out.add(Path(args.out) / rel, data, "output")
-    write_outputs(out, inputs=res.inputs, overwrite=args.overwrite)
+    write_outputs(out, inputs=res.inputs, overwrite=args.overwrite, input_dirs=dirs)
     for m in res.report["muscles"]:
         if m["iou"] < tol.FIT_WARN_IOU:
             print(f"axdf: warning: {m['mesh']}: the fitted muscle overlaps its mesh by IoU {m['iou']:.2f} only "

@@ -22,8 +22,9 @@ from axdf_cli.errors import InputError, Mark
 from axdf_cli.fileio.yamlio import NAME_ALLOWED, is_name
 from axdf_cli.importers import emit
 from axdf_cli.model.muscle import OCT, AxisPoint, MuscleModel, MuscleSpec, Section, outline_area
+from axdf_cli.model.pose import muscle_bones
 from axdf_cli.model.skeleton import Skeleton, forward_kinematics
-from axdf_cli.specs import RefPolicy, load_skeleton
+from axdf_cli.specs import RefPolicy, load_muscle_file, load_skeleton
 from axdf_cli.specs.muscle import default_color, parse_muscle_text
 from axdf_cli.tools import fit_sections as fs
 
@@ -115,13 +116,13 @@ def muscle_name(path: Path) -> str:
 # ----------------------------------------------------------------------------- bones
 
 
-def bone_geometry(skel: Skeleton, rest: np.ndarray, skeleton_path: Path) -> list:
+def bone_geometry(skel: Skeleton, rest: np.ndarray, skeleton_path: Path, meshes: bool = True) -> list:
     """Per bone what a point is bound to by nearness: ('mesh', world vertices, faces) where the
-    skeleton has bone meshes (only those bones then), else ('segments', (k, 2, 3)) from its
-    origin to each child's origin (a leaf: its origin)."""
+    skeleton has bone meshes (only those bones then; ``meshes`` False: never), else
+    ('segments', (k, 2, 3)) from its origin to each child's origin (a leaf: its origin)."""
     from axdf_cli.pipeline.plan import load_bone_mesh
 
-    if any(b.mesh for b in skel.bones):
+    if meshes and any(b.mesh for b in skel.bones):
         out = []
         for i, b in enumerate(skel.bones):
             if not b.mesh:
@@ -158,6 +159,27 @@ def nearest_bones(points: np.ndarray, geometry: list) -> np.ndarray:
     return np.argmin(dist, axis=1)
 
 
+def model_bones(folder: Path, name: str, skel: Skeleton, rest: np.ndarray) -> tuple[set[int], np.ndarray]:
+    """The bones (indices) of the muscle file ``folder/NAME.yaml`` of a model (its path's
+    points and wraps, or its axis): the only bones a fit of mesh NAME binds to, so that a
+    muscle that crosses two joints hangs on the bones on both sides; and its origin (its first
+    path or axis point) in the world at rest, which the fitted axis starts at. Refused when
+    the file is missing or names a bone the skeleton lacks."""
+    path = Path(folder) / f"{name}.yaml"
+    if not path.is_file():
+        raise InputError(Mark(str(path)), f"no muscle file {name}.yaml in --paths {folder}",
+                         "a muscle file of the model per mesh, named as the mesh's stem")
+    specs = load_muscle_file(path)
+    bones = set().union(*(muscle_bones(spec) for spec in specs))  # (every head of a group)
+    lack = sorted(bones - set(skel.bone_index))
+    if lack:
+        raise InputError(Mark(str(path)), f"muscle file {path.name} hangs on bone {lack[0]!r}, which the skeleton "
+                         "lacks", f"a muscle of the skeleton {skel.name}")
+    first = specs[0].path.points[0] if specs[0].path is not None else specs[0].axis[0]
+    b = skel.bone_index[first.bone]
+    return {skel.bone_index[n] for n in bones}, rest[b, :3, :3] @ np.asarray(first.at, dtype=np.float64) + rest[b, :3, 3]
+
+
 # ----------------------------------------------------------------------------- one muscle
 
 
@@ -175,12 +197,16 @@ def tendon_fractions(areas: np.ndarray, arc: np.ndarray) -> tuple[float, float]:
     return round(a0, 4), round(a1, 4)
 
 
-def fit_one(mesh, name: str, n_sections: int, skel: Skeleton, rest: np.ndarray, geometry: list):
-    """One mesh (metres) → (the muscle's YAML text, its report entry without the measures)."""
+def fit_one(mesh, name: str, n_sections: int, skel: Skeleton, rest: np.ndarray, geometry: list,
+            origin: np.ndarray | None = None):
+    """One mesh (metres) → (the muscle's YAML text, its report entry without the measures).
+    ``origin``: a world point the axis starts at the end nearer to (a model's origin)."""
     import trimesh
 
     samples, face = trimesh.sample.sample_surface(mesh, tol.FIT_SAMPLES, seed=tol.FIT_SEED)
     ctrl = fs.medial_axis(samples)
+    if origin is not None and np.linalg.norm(ctrl[-1] - origin) < np.linalg.norm(ctrl[0] - origin):
+        ctrl = ctrl[::-1].copy()  # (the same curve, run from the model's origin)
     bones = nearest_bones(ctrl, geometry)
     axis = tuple(AxisPoint(skel.bones[b].name, tuple(float(x) for x in rest[b, :3, :3].T @ (p - rest[b, :3, 3])))
                  for p, b in zip(ctrl, bones))
@@ -224,10 +250,11 @@ def measure_file(text: str, path: str, mesh, skel: Skeleton, rest: np.ndarray) -
 
 
 def build_fit(mesh_paths: list[Path], skeleton_path: Path | str, units: str = "m", sections: int | None = None,
-              policy: RefPolicy | None = None, on_muscle=None) -> FitOutputs:
+              policy: RefPolicy | None = None, on_muscle=None, paths: Path | None = None) -> FitOutputs:
     """Fit every mesh; the bytes of ``muscles/STEM.yaml`` per mesh, the report's two files.
     Every mesh is read and checked before any is fitted. ``on_muscle(name, entry)`` is told
-    as each fit is measured."""
+    as each fit is measured. ``paths``: a folder of the model's muscle files; each mesh binds
+    only to the bones of the file of its name there (:func:`model_bones`)."""
     scale = unit_scale(units)
     n = tol.FIT_SECTIONS_DEFAULT if sections is None else sections
     if not tol.FIT_SECTIONS_MIN <= n <= tol.FIT_SECTIONS_MAX:
@@ -245,11 +272,18 @@ def build_fit(mesh_paths: list[Path], skeleton_path: Path | str, units: str = "m
         names[name] = p
         meshes.append((p, name, read_mesh(p, scale)))
     rest = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
+    allowed = {name: model_bones(paths, name, skel, rest) for _, name, _ in meshes} if paths is not None else {}
     geometry = bone_geometry(skel, rest, skeleton_path)
     files: dict[str, bytes] = {}
     entries = []
     for p, name, mesh in meshes:
-        text, entry = fit_one(mesh, name, n, skel, rest, geometry)
+        own, origin = geometry, None
+        if name in allowed:
+            keep, origin = allowed[name]
+            own = [g if i in keep else None for i, g in enumerate(geometry)]
+            if all(g is None for g in own):  # the path's bones have no meshes: their segments then
+                own = [g if i in keep else None for i, g in enumerate(bone_geometry(skel, rest, skeleton_path, False))]
+        text, entry = fit_one(mesh, name, n, skel, rest, own, origin)
         rel = f"muscles/{name}.yaml"
         entry.update({"file": rel, "mesh": p.name})
         entry.update(measure_file(text, rel, mesh, skel, rest))
@@ -260,7 +294,8 @@ def build_fit(mesh_paths: list[Path], skeleton_path: Path | str, units: str = "m
     report = {"skeleton": skeleton_path.name, "units": units, "sections": n, "muscles": entries}
     files[REPORT] = (json.dumps(report, indent=1, sort_keys=True) + "\n").encode()
     files[SUMMARY] = summary(report).encode()
-    inputs = [skeleton_path] + [Path(b.mesh) for b in skel.bones if b.mesh] + [p for p, _, _ in meshes]
+    inputs = [skeleton_path] + [Path(b.mesh) for b in skel.bones if b.mesh] + [p for p, _, _ in meshes] + \
+        [Path(paths) / f"{name}.yaml" for name in allowed]
     return FitOutputs(files, report, [str(p) for p in inputs])
 
 
