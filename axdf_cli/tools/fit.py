@@ -242,7 +242,7 @@ def fit_one(mesh, name: str, n_sections: int, skel: Skeleton, rest: np.ndarray, 
 
 def measure_file(text: str, path: str, mesh, skel: Skeleton, rest: np.ndarray) -> dict:
     """The written file read back by the muscle spec loader and evaluated at the rest pose by
-    the muscle model, measured against its mesh."""
+    the muscle model, compared with its mesh."""
     spec = parse_muscle_text(text, path)[0]
     model = MuscleModel(spec, skel.bone_index, rest, skel)
     return fs.measure(np.asarray(mesh.vertices), np.asarray(mesh.faces), model.rest_vertices.astype(np.float64),
@@ -302,7 +302,7 @@ def build_fit(mesh_paths: list[Path], skeleton_path: Path | str, units: str = "m
 def summary(report: dict) -> str:
     lines = [f"# Muscles fitted on {report['skeleton']}", "",
              f"`axdf fit` ({report['sections']} sections of {OCT} outline points; docs/FIT.md). Each muscle file",
-             "is read back and evaluated by the muscle model at the rest pose, then measured against its mesh:",
+             "is read back and evaluated by the muscle model at the rest pose, then compared with its mesh:",
              "IoU of the insides on a grid, surface distance both ways, volume fitted / mesh.", "",
              "| muscle | IoU | mean distance | median distance | volume ratio | tendons | bones |",
              "|---|---|---|---|---|---|---|"]
