@@ -306,3 +306,54 @@ def test_an_import_names_the_pack_command_that_runs(tmp_path, capsys, monkeypatc
     # -q: no summary, no next step
     assert main(["import", "osim", str(ARM), "--out", "imp2", "-q"]) == 0
     assert "next:" not in capsys.readouterr().out
+
+
+@needs_data
+def test_handsfield_volumes_size_the_lower_limb_by_height_and_mass(tmp_path, capsys):
+    """--volumes handsfield: each lower limb muscle's rest volume is the regression's
+    (Handsfield 2014: b1 x (47 h m + 1285) + b2 cm^3), a paper muscle of several model muscles
+    (gluteus maximus: glut_max1..3) is split by max force and sums to it, a muscle the paper did
+    not measure (erector spinae) keeps the PCSA law's volume, and IMPORT.md says which law."""
+    from axdf_cli.importers.volumes import HANDSFIELD, Subject
+
+    rc, base = run_import(tmp_path, GAIT, out="pcsa")
+    assert rc == 0
+    rc, hf = run_import(tmp_path, GAIT, "--volumes", "handsfield", "--height", "1.80", "--mass", "75", out="hf")
+    assert rc == 0
+    pcsa = {m["muscle"]: m for m in json.loads((base / "import_report.json").read_text())["muscles"]}
+    rows = {m["muscle"]: m for m in json.loads((hf / "import_report.json").read_text())["muscles"]}
+    coef = {name: (b1, b2) for name, b1, b2, *_ in HANDSFIELD}
+    total = Subject(1.80, 75.0).total_cm3
+    assert total == pytest.approx(7630.0)
+
+    def expected(group):
+        b1, b2 = coef[group]
+        return (b1 * total + b2) * 1e-6
+
+    for side in "rl":
+        vl = rows[f"vas_lat_{side}"]
+        assert vl["volume_law"] == "handsfield2014" and vl["volume_group"] == "vastus lateralis"
+        assert vl["rest_volume_m3"] == pytest.approx(expected("vastus lateralis"), rel=0.02)  # the mesh holds it
+        glut = [rows[f"glut_max{k}_{side}"] for k in (1, 2, 3)]
+        assert sum(g["volume_m3"] for g in glut) == pytest.approx(expected("gluteus maximus"), rel=1e-6)
+        forces = [pcsa[f"glut_max{k}_{side}"]["pcsa_m2"] for k in (1, 2, 3)]
+        assert [g["volume_share"] for g in glut] == pytest.approx([f / sum(forces) for f in forces], rel=1e-6)
+        assert rows[f"ercspn_{side}"]["volume_law"] == "pcsa"
+        assert rows[f"ercspn_{side}"]["volume_m3"] == pytest.approx(pcsa[f"ercspn_{side}"]["volume_m3"], rel=1e-9)
+    # the issue's example: vastus lateralis was 0.29x its prediction, the short head 2.1x
+    assert pcsa["vas_lat_r"]["volume_m3"] < 0.35 * rows["vas_lat_r"]["volume_m3"]
+    assert pcsa["bifemsh_r"]["volume_m3"] > 2.0 * rows["bifemsh_r"]["volume_m3"]
+    assert "Handsfield et al. (2014)" in (hf / "IMPORT.md").read_text()
+    assert "volume_law" not in pcsa["vas_lat_r"]  # the default import's report is as it was
+
+
+@pytest.mark.parametrize("extra,expect", [
+    (["--volumes", "handsfield", "--height", "1.8"], "--volumes handsfield without --mass"),
+    (["--volumes", "handsfield", "--height", "18", "--mass", "75"], "--height 18"),
+    (["--mass", "75"], "--mass without --volumes handsfield"),
+])
+def test_handsfield_volumes_need_a_plausible_subject(tmp_path, capsys, extra, expect):
+    rc, out = run_import(tmp_path, ARM, *extra)
+    err = capsys.readouterr().err
+    assert rc == 2 and expect in err and "Traceback" not in err, err
+    assert not out.exists()

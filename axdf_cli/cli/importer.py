@@ -114,6 +114,40 @@ def _add_model_options(p, decimate: bool = False) -> None:
                        help="decimate each bone mesh to triangles of about this edge length in metres (default 0: off)")
     p.add_argument("--palette", choices=("anatomical", "hashed"), default="anatomical",
                    help="muscle colours: muscle reds varied per muscle (default), or any hue from the name's hash")
+    p.add_argument("--volumes", choices=("pcsa", "handsfield"), default="pcsa",
+                   help="belly volumes: PCSA x optimal fibre length from the model's numbers (default), or the lower "
+                        "limb muscles by the regression of Handsfield et al. 2014 on the subject's --height and "
+                        "--mass (docs/IMPORTERS.md, 'Belly volumes')")
+    p.add_argument("--height", type=float, metavar="M", help="the subject's height in metres (--volumes handsfield)")
+    p.add_argument("--mass", type=float, metavar="KG", help="the subject's body mass in kg (--volumes handsfield)")
+
+
+def _volume_settings(args) -> dict:
+    """The manifest's record of a regression import (nothing with the default law, so the
+    manifests of PCSA imports stay as they were)."""
+    return {} if args.volumes == "pcsa" else {"volumes": args.volumes, "height": args.height, "mass": args.mass}
+
+
+def subject_of(args):
+    """The subject ``--volumes handsfield`` sizes muscles for (None with ``--volumes pcsa``);
+    --height and --mass are needed by it and refused without it."""
+    from axdf_cli.errors import UsageError
+    from axdf_cli.importers.volumes import HEIGHT_RANGE, MASS_RANGE, Subject
+
+    if args.volumes != "handsfield":
+        for flag in ("height", "mass"):
+            if getattr(args, flag) is not None:
+                raise UsageError(f"--{flag} without --volumes handsfield",
+                                 "--volumes handsfield --height M --mass KG (the subject the regression sizes)")
+        return None
+    for flag, unit, (lo, hi) in (("height", "m", HEIGHT_RANGE), ("mass", "kg", MASS_RANGE)):
+        v = getattr(args, flag)
+        if v is None:
+            raise UsageError(f"--volumes handsfield without --{flag}",
+                             f"the subject's {flag} in {unit} ({lo:g}..{hi:g}): e.g. --height 1.80 --mass 75")
+        if not lo <= v <= hi:
+            raise UsageError(f"--{flag} {v:g}", f"a {flag} in {unit} in [{lo:g}, {hi:g}]")
+    return Subject(args.height, args.mass)
 
 
 def add_units_args(p, scale_help: str) -> None:
@@ -188,17 +222,18 @@ def run(args) -> int:
 
     if args.fps is not None and not (0 < args.fps <= 10000):
         raise UsageError(f"--fps {args.fps}", "a frame rate in (0, 10000]")
+    subject = subject_of(args)
     tick, close = progress_bar(("read", "check", "write"), args.quiet, f"import {args.model.name}")
     try:
         model = read_import(args.model, name=args.name, motion=args.motion, controls=args.controls,
                             pose_name=args.pose_name, fps=args.fps, meshes=not args.no_meshes)
-        res = build_import(model, _outputs(args), args.palette)
+        res = build_import(model, _outputs(args), args.palette, subject=subject)
         tick("read")
         files = OutputSet(args.out, "import osim")
         for path, data in res.files.items():
             files.add(path, data, output_role(path, args))
         files.settings = {"name": args.name, "fps": args.fps, "pose_name": args.pose_name,
-                          "meshes": not args.no_meshes, "palette": args.palette}
+                          "meshes": not args.no_meshes, "palette": args.palette, **_volume_settings(args)}
         write_imported(files, res.inputs, args.overwrite, args.model, tick)
     finally:
         close()
@@ -248,18 +283,19 @@ def run_mjcf(args) -> int:
         raise UsageError(f"--max-faces {args.max_faces}", "a whole number in 0..10000000 (0: keep every triangle)")
     if not 0 <= args.mesh_edge <= 1:
         raise UsageError(f"--mesh-edge {args.mesh_edge}", "metres in [0, 1] (0: off)")
+    subject = subject_of(args)
     tick, close = progress_bar(("read", "check", "write"), args.quiet, f"import {args.model.name}")
     try:
         model = read_import(args.model, name=args.name, motion=args.motion, pose_name=args.pose_name, fps=args.fps,
                             meshes=not args.no_meshes, max_faces=args.max_faces, mesh_edge=args.mesh_edge)
-        res = build_import(model, _outputs(args), args.palette)
+        res = build_import(model, _outputs(args), args.palette, subject=subject)
         tick("read")
         files = OutputSet(args.out, "import mjcf")
         for path, data in res.files.items():
             files.add(path, data, output_role(path, args))
         files.settings = {"name": args.name, "fps": args.fps, "pose_name": args.pose_name,
                           "meshes": not args.no_meshes, "max_faces": args.max_faces, "mesh_edge": args.mesh_edge,
-                          "palette": args.palette}
+                          "palette": args.palette, **_volume_settings(args)}
         write_imported(files, res.inputs, args.overwrite, args.model, tick, assets=res.assets)
     finally:
         close()

@@ -31,6 +31,7 @@ from axdf_cli.errors import InputError, Mark
 from axdf_cli.fileio.outputs import UniqueFiles
 from axdf_cli.formats.ply import PlyWriter
 from axdf_cli.importers.model import Hill, ImportedModel, Motion, Outputs
+from axdf_cli.importers.volumes import Sized, Subject, regression_volumes
 from axdf_cli.importers.result import SIDE_SUFFIX, ImportResult, import_markdown, relative_ref, strip_dirs, yaml_number
 from axdf_cli.model.jiggle import JiggleSpec
 from axdf_cli.model.skeleton import Constant, Linear, Multiplier, Polynomial, Skeleton, Spline, forward_kinematics
@@ -239,14 +240,15 @@ def motion_poses(skel: Skeleton, motion_q: np.ndarray | None) -> np.ndarray:
 
 def belly_doc(name: str, path: list, wraps: list, hill: Hill, skel: Skeleton, world: np.ndarray,
               palette: str = "anatomical", axis_points: int = 0, min_slenderness: float = 0.0,
-              jiggle: JiggleSpec | None = None) -> tuple[dict, dict]:
+              jiggle: JiggleSpec | None = None, volume: float | None = None) -> tuple[dict, dict]:
     """A path muscle's YAML document sized by its model's own numbers, and its summary row
     (unrounded): the path and wrap documents ``path``, ``wraps``, and the muscle's Hill numbers.
 
     The belly law (docs/IMPORTERS.md), from the model's own numbers:
 
     - volume V = PCSA × optimal fibre length, PCSA = F_max / SPECIFIC_TENSION (a pennate
-      muscle's fibres are short, but there are many of them side by side: V holds);
+      muscle's fibres are short, but there are many of them side by side: V holds), unless
+      ``volume`` (m³) is given (the subject's regression, :mod:`axdf_cli.importers.volumes`);
     - free tendon = FREE_TENDON_SHARE × tendon slack length, but no longer than what leaves the
       belly its fibres' projection (optimal fibre length × cos pennation) and at most
       MAX_TENDON_FRACTION of the path; split ORIGIN_TENDON_SHARE : rest between origin and
@@ -274,7 +276,7 @@ def belly_doc(name: str, path: list, wraps: list, hill: Hill, skel: Skeleton, wo
     rest_ctrl, path_length = rest_path(name, path, wraps, skel, world, axis_points)
     t_of, axis_length = _arc_parameter_of(rest_ctrl)
     pcsa = max_force / SPECIFIC_TENSION
-    volume = pcsa * fibre_length
+    volume = pcsa * fibre_length if volume is None else volume
     fibres = fibre_length * math.cos(pennation)
     free = min(max(min(FREE_TENDON_SHARE * tendon_slack, path_length - fibres), 0.0),
                MAX_TENDON_FRACTION * path_length)
@@ -457,15 +459,20 @@ def probe_poses(skel: Skeleton, motion_q: np.ndarray | None = None) -> np.ndarra
 
 
 def muscle_docs(model: ImportedModel, skel: Skeleton, world: np.ndarray, palette: str,
-                motion_q: np.ndarray | None) -> list[tuple]:
-    """(muscle, document, rounded report row) of every muscle, sized by :func:`belly_doc`."""
+                motion_q: np.ndarray | None, subject: Subject | None = None) -> list[tuple]:
+    """(muscle, document, rounded report row) of every muscle, sized by :func:`belly_doc`;
+    with a ``subject``, the lower limb muscles' volumes by its regression
+    (:func:`~axdf_cli.importers.volumes.regression_volumes`)."""
     rules = model.rules
     probe = probe_poses(skel, motion_q) if rules.probe_ranges else motion_poses(skel, motion_q)
+    by_regression = {} if subject is None else regression_volumes(
+        [(m.name, m.hill.max_force if m.hill is not None else m.force) for m in model.muscles], subject)
     out = []
     for m in model.muscles:
+        given = by_regression.get(m.name)
         try:
             with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # a non-finite result is refused below
-                sized = _sized_muscle(m, skel, world, palette, probe, rules)
+                sized = _sized_muscle(m, skel, world, palette, probe, rules, given)
             if sized is not None and not all(math.isfinite(v) for v in sized[4].values() if isinstance(v, float)):
                 raise ValueError("a size is not finite")
         except InputError as e:  # a generated document: name the muscle in its model, not "<name>"
@@ -481,6 +488,11 @@ def muscle_docs(model: ImportedModel, skel: Skeleton, world: np.ndarray, palette
             model.warnings.append(f"{_where(m)}muscle {m.name!r} skipped: {why}")
             continue
         path, wraps, axis, doc, row = sized
+        if given is not None:
+            row.update({"volume_law": "handsfield2014", "volume_group": given.group, "volume_share": given.share,
+                        "pcsa_volume_m3": row["pcsa_m2"] * row["optimal_fiber_length"]})
+        elif subject is not None:
+            row["volume_law"] = "pcsa"
         row.update(m.row)
         row.update({"path_points": len(path), "wraps": [w["name"] for w in wraps]})
         if rules.shortfall:
@@ -509,7 +521,8 @@ def _where_model(model: ImportedModel) -> str:
     return f"{model.inputs[0]}: " if model.inputs else ""
 
 
-def _sized_muscle(m, skel: Skeleton, world: np.ndarray, palette: str, probe: np.ndarray, rules) -> tuple | None:
+def _sized_muscle(m, skel: Skeleton, world: np.ndarray, palette: str, probe: np.ndarray, rules,
+                  given: Sized | None = None) -> tuple | None:
     """(path, wraps, axis points, document, row) of one muscle, or None when its path is too
     short at rest to hold a belly (then listed as not imported, with a warning)."""
     path = [point_doc(p) for p in m.path]
@@ -522,19 +535,21 @@ def _sized_muscle(m, skel: Skeleton, world: np.ndarray, palette: str, probe: np.
         hill = Hill(m.force, m.fibre_share * rest, rest - m.fibre_share * rest)
     axis = axis_points_for(m.name, path, wraps, skel, probe)
     doc, row = belly_doc(m.name, path, wraps, hill, skel, world, palette, axis.n if axis.raised else 0,
-                         rules.min_slenderness, m.jiggle)
+                         rules.min_slenderness, m.jiggle, None if given is None else given.volume)
     return path, wraps, axis, doc, row
 
 
-def build_import(model: ImportedModel, outputs: Outputs, palette: str = "anatomical", files: dict | None = None) \
-        -> ImportResult:
+def build_import(model: ImportedModel, outputs: Outputs, palette: str = "anatomical", files: dict | None = None,
+                 subject: Subject | None = None) -> ImportResult:
     """Every output file's bytes of an imported model (nothing is written here).
 
     Layout (defaults under ``outputs.out``): ``skeletons/NAME.yaml``, ``skeletons/meshes/NAME/*.ply``,
     ``muscles/MUSCLE.yaml``, ``POSE.yaml`` (with a motion), and with the rules' report
     ``import_report.json`` and ``IMPORT.md``. Paths written inside the files are relative to
     the file holding them. ``palette``: muscle colours, a key of :data:`PALETTES`. ``files``:
-    the mapping the files go into (default: one that refuses a path twice).
+    the mapping the files go into (default: one that refuses a path twice). ``subject``: size
+    the lower limb muscles by its height and mass (:mod:`axdf_cli.importers.volumes`; None:
+    every muscle by PCSA × optimal fibre length).
     """
     out_dir = Path(outputs.out)
     motion = model.motion
@@ -572,11 +587,14 @@ def build_import(model: ImportedModel, outputs: Outputs, palette: str = "anatomi
     world = rest_world(skel)
     motion_q = motion_coordinates(skel, motion) if motion is not None else None
     rows = []
-    for m, doc, row in muscle_docs(model, skel, world, palette, motion_q):
+    for m, doc, row in muscle_docs(model, skel, world, palette, motion_q, subject):
         rows.append(row)
         files[str(mus_dir / f"{m.name}.yaml")] = dump_yaml(doc, m.header).encode()
     report["muscles"] = rows
     report.setdefault("settings", {})["palette"] = palette
+    if subject is not None:
+        report["settings"]["volumes"] = {"law": "handsfield2014", "height_m": subject.height, "mass_kg": subject.mass,
+                                         "lower_limb_total_cm3": round(subject.total_cm3, 3)}
     model.complete(report)
     report["ignored"] = [dict(i, where=strip_dirs(i["where"], model.strip)) for i in model.ignored]
     report["warnings"] = [strip_dirs(w, model.strip) for w in model.warnings]

@@ -121,6 +121,19 @@ def belly_note(muscle: str) -> str | None:
     return None
 
 
+def _volume_law(st: dict, ms: list[dict]) -> list[str]:
+    """The volume law's line when the import sized muscles by a subject's regression."""
+    v = st.get("volumes")
+    if not v:
+        return []
+    n = sum(m.get("volume_law") == "handsfield2014" for m in ms)
+    return ["", f"Volumes of {n} of {len(ms)} muscles (`volume_law` in import_report.json) by the regression of "
+            f"Handsfield et al. (2014) on height and mass, for a {v['height_m']:g} m, {v['mass_kg']:g} kg subject "
+            f"(one lower limb's muscles: {v['lower_limb_total_cm3']:.0f} cm³; a paper muscle made of several model "
+            "muscles is split by their max forces); the others by PCSA × optimal fibre length (docs/IMPORTERS.md, "
+            "\"Belly volumes\")."]
+
+
 def belly_markdown(r: dict, fibre_words: str = "optimal fibre length") -> list[str]:
     """IMPORT.md's "Bellies" section: the law (its optimal fibre length named ``fibre_words``),
     the library's slenderness, and every short or squat belly with its numbers and reason."""
@@ -135,7 +148,7 @@ def belly_markdown(r: dict, fibre_words: str = "optimal fibre length") -> list[s
              f"{st['free_tendon_share']:g} × tendon slack length (the rest of it is aponeurosis, inside the belly), "
              "shortened where the belly would not hold its fibres (optimal fibre length × cos pennation); "
              "belly length = rest path − free tendon; tendon Ø from max force at "
-             f"{st['tendon_stress_Pa'] / 1e6:g} MPa. Colours: {st['palette']} palette.", "",
+             f"{st['tendon_stress_Pa'] / 1e6:g} MPa. Colours: {st['palette']} palette.", *_volume_law(st, ms), "",
              f"Slenderness at rest (length where the cross-section is at least half its widest, over the widest "
              f"diameter; `axdf_cli/model/measure.py`): min {min(sl):.2f}, median {float(np.median(sl)):.2f}, "
              f"below 1.2: {sum(x < 1.2 for x in sl)}, below {SQUAT_BELLY:g}: {sum(x < SQUAT_BELLY for x in sl)} "
