@@ -357,3 +357,19 @@ def test_handsfield_volumes_need_a_plausible_subject(tmp_path, capsys, extra, ex
     err = capsys.readouterr().err
     assert rc == 2 and expect in err and "Traceback" not in err, err
     assert not out.exists()
+
+
+def test_handsfield_groups_cover_the_rajagopal_and_myosuite_legs(repo_root):
+    """Every leg muscle of MyoSuite's myobody (Rajagopal 2016's names) belongs to one of the
+    paper's muscles, and the four adductor magnus heads share its volume by force."""
+    from axdf_cli.importers.volumes import Subject, regression_volumes
+
+    legs = sorted(p.stem for p in (repo_root / "muscles" / "myobody").glob("*_r.yaml")
+                  if re.match(r"(add|bf|e[dh]l|f[dh]l|gas|gl|grac|iliacus|per|piri|psoas|recfem|sart|semi|soleus|tfl|tib|vas)",
+                              p.stem))
+    assert len(legs) == 40
+    sized = regression_volumes([(n, 100.0 * (k + 1)) for k, n in enumerate(legs)], Subject(1.70, 70.0))
+    assert sorted(sized) == legs
+    heads = [sized[n] for n in legs if n.startswith("addmag")]
+    assert len(heads) == 4 and {h.group for h in heads} == {"adductor magnus"}
+    assert sum(h.share for h in heads) == pytest.approx(1.0)
