@@ -178,3 +178,64 @@ def test_missing_egl_library_is_an_environment_problem():
 def test_benchmark_reports_fps(tmp_path):
     r = benchmark_fps(size=(64, 64), n_muscles=2, verts=200, frames=2, out_dir=tmp_path)
     assert r["frames"] == 2 and r["render_fps"] > 0 and r["write_fps"] > 0
+
+
+def _with_skin(scene, chunks, radius: float = 0.2):
+    """The synthetic scene inside a sphere of ``radius`` (its 'skin')."""
+    from axdf_cli.render.scene import SceneSkin
+    from axdf_cli.render.synthetic import uv_sphere
+
+    unit, faces = uv_sphere(16, 32)
+    pos = (unit * radius).astype(np.float32)[None]
+    nrm = unit.astype(np.float32)[None]
+    skinned = replace(scene, skin=SceneSkin(faces, (0.75, 0.41, 0.31)),
+                      bounds=np.array([[-radius] * 3, [radius] * 3]))
+    return skinned, [replace(c, skin=(pos, nrm)) for c in chunks]
+
+
+def test_a_skin_is_drawn_opaque_see_through_or_not_at_all():
+    """Opaque: the id pass sees the skin (its id after the bones) and no muscle; see-through:
+    the data passes are exactly those without a skin and the picture is the muscles' tinted by
+    it (every muscle pixel changes, and keeps more of its colour than the opaque skin leaves);
+    off: byte-identical to no skin at all. camera.json's ids name the skin when it is opaque."""
+    from axdf_cli.render.renderer import id_map, skin_id
+
+    scene, chunks = synthetic_scene(n_muscles=3, verts=400, n_frames=1)
+    skinned, skin_chunks = _with_skin(scene, chunks)
+    cam = CameraSpec((0.0, -0.9, 0.1), (0.0, 0.0, 0.0), fov=40.0)
+    base = replace(SMALL, camera=cam)
+    ctx = create_gl_context()
+    try:
+        def one(sc, ch, view):
+            return list(render_frames(ctx, sc, ch, replace(base, skin=view)))[0]
+
+        bare = one(scene, chunks, "see-through")
+        off, see, opaque = (one(skinned, skin_chunks, v) for v in ("off", "see-through", "opaque"))
+        assert ctx.error == "GL_NO_ERROR"
+    finally:
+        ctx.release()
+    muscle = (bare.ids >= 1) & (bare.ids <= 3)
+    assert muscle.sum() > 500
+    assert np.array_equal(off.rgba, bare.rgba) and np.array_equal(off.ids, bare.ids)
+    assert np.array_equal(see.ids, bare.ids) and np.array_equal(see.depth, bare.depth)
+    sid = skin_id(skinned)
+    assert sid == 5 and np.all(opaque.ids[muscle] == sid)  # 3 muscles, 1 bone, then the skin
+    assert not np.isin(opaque.ids, [1, 2, 3]).any()
+    d_see = np.abs(see.rgba[..., :3] - bare.rgba[..., :3]).sum(-1)[muscle]
+    d_opaque = np.abs(opaque.rgba[..., :3] - bare.rgba[..., :3]).sum(-1)[muscle]
+    assert np.all(d_see > 1e-3) and np.median(d_see) < 0.6 * np.median(d_opaque)
+    assert id_map(skinned, True, "opaque")[str(sid)] == {"kind": "skin", "name": "skin"}
+    assert str(sid) not in id_map(skinned, True, "see-through")
+
+
+def test_renderers_one_after_another_in_one_context_leave_no_gl_error():
+    """A renderer releases its framebuffers with the default one bound: the next renderer in
+    the same context (a data set renders scene after scene) makes its own without a GL error."""
+    scene, chunks = synthetic_scene(n_muscles=2, verts=300, n_frames=1)
+    ctx = create_gl_context()
+    try:
+        for _ in range(3):
+            list(render_frames(ctx, scene, chunks, SMALL))
+            assert ctx.error == "GL_NO_ERROR"
+    finally:
+        ctx.release()

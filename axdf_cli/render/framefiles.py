@@ -74,7 +74,7 @@ def _write_frames(vr, chunks, cameras: dict, root: Root, progress=None, on_frame
 
 
 def _write_camera(root: Root, scene: Scene, settings: RenderSettings, cameras) -> str:
-    cam = camera_json(cameras, scene.frames, settings, id_map(scene, settings.bones))
+    cam = camera_json(cameras, scene.frames, settings, id_map(scene, settings.bones, settings.skin))
     return atomic.write_text(root.path(CAMERA), json.dumps(cam, indent=1, sort_keys=True) + "\n")
 
 

@@ -12,7 +12,14 @@ Per frame and per panel (view) two passes are drawn:
    camera depth (RGBA float32) and the object id (R float32 holding exact integers below
    2^24). Background: id 0, depth 0, normal 0.
 
-Ids: 0 = background, ``1 .. M`` = ``Scene.muscles`` in order, ``M+1 .. M+B`` = bones.
+Ids: 0 = background, ``1 .. M`` = ``Scene.muscles`` in order, ``M+1 .. M+B`` = bones,
+``M+B+1`` = the skin when it is drawn opaque.
+
+The **skin** (``Scene.skin``, a run with ``--skin``) is drawn as ``RenderSettings.skin`` says:
+``opaque`` like any surface, in both passes (the data passes see the body); ``see-through``
+after everything else in the beauty pass only, blended over what lies behind it with its
+front faces alone, more opaque where it turns away from the eye (its outline stays), so the
+data passes see the muscles under it; ``off``: not drawn.
 
 An optional **amodal** pass (:meth:`Renderer.amodal`, data sets) gives each muscle's full
 extent in the image, occluders ignored: every muscle is drawn without depth test into its
@@ -49,6 +56,8 @@ STICK_MIN_RADIUS = 0.002  # metres
 WIRE_DARKEN = 0.55  # wire colour = albedo * this
 WIRE_DEPTH_BIAS = 2e-4  # NDC depth pulled towards the camera so edges win over their faces
 BACKGROUND_ID = 0
+SKIN_ALPHA = 0.22  # see-through skin: its opacity facing the eye ...
+SKIN_RIM_ALPHA = 0.8  # ... and where it turns away (its outline)
 MASK_TARGETS = 4  # RGBA8 colour attachments of the amodal pass: 16 muscles per round
 
 _MASK_VERT = """
@@ -95,6 +104,8 @@ _BEAUTY_FRAG = """
 uniform mat4 u_view;
 uniform vec3 u_albedo;
 uniform int u_wire;
+uniform float u_alpha;  // 1: opaque; below: see-through, rising to u_rim at grazing angles
+uniform float u_rim;
 in vec3 v_nrm;
 in vec3 v_cam;
 out vec4 f_color;
@@ -115,7 +126,8 @@ void main() {
     vec3 h = normalize(key + e);
     float spec = 0.18 * pow(max(dot(n, h), 0.0), 40.0);
     vec3 c = u_albedo * (ambient + vec3(d)) + vec3(spec);
-    f_color = vec4(min(c, vec3(1.0)), 1.0);
+    float a = u_alpha >= 1.0 ? 1.0 : mix(u_alpha, u_rim, pow(1.0 - abs(dot(n, e)), 2.0));
+    f_color = vec4(min(c, vec3(1.0)) * a, a);  // premultiplied
 }
 """ % {"wire": WIRE_DARKEN}
 
@@ -249,14 +261,22 @@ def downsample(img: np.ndarray, s: int) -> np.ndarray:
     return out
 
 
-def id_map(scene: Scene, bones: bool) -> dict:
-    """``camera.json``'s id table: id (as a string key) -> {kind, name}."""
+def skin_id(scene: Scene) -> int:
+    """The opaque skin's id in the ``id`` pass (after every muscle and scene bone)."""
+    return 1 + len(scene.muscles) + len(scene.bones)
+
+
+def id_map(scene: Scene, bones: bool, skin: str = "off") -> dict:
+    """``camera.json``'s id table: id (as a string key) -> {kind, name}; ``skin``: how the
+    skin is drawn (it has an id when opaque)."""
     out = {str(BACKGROUND_ID): {"kind": "background", "name": None}}
     for i, m in enumerate(scene.muscles):
         out[str(1 + i)] = {"kind": "muscle", "name": m.name}
     if bones:
         for j, b in enumerate(scene.bones):
             out[str(1 + len(scene.muscles) + j)] = {"kind": "bone", "name": b.name}
+    if scene.skin is not None and skin == "opaque":
+        out[str(skin_id(scene))] = {"kind": "skin", "name": "skin"}
     return out
 
 
@@ -307,6 +327,17 @@ class Renderer:
                 dvao = ctx.vertex_array(self.dprog, [(vbo, "3f 3f", "in_pos", "in_nrm")],
                                         index_buffer=ibo, index_element_size=4)
                 self.bones.append((j, vao, dvao, float(1 + len(scene.muscles) + j)))
+        self.skin = None  # (positions, normals, vao, data vao): the skin when it is drawn
+        if scene.skin is not None and settings.skin != "off" and len(scene.skin.faces):
+            nv = int(scene.skin.faces.max()) + 1
+            ibo = ctx.buffer(np.ascontiguousarray(scene.skin.faces, dtype=np.int32).tobytes())
+            vpos = ctx.buffer(reserve=nv * 12, dynamic=True)
+            vnrm = ctx.buffer(reserve=nv * 12, dynamic=True)
+            vao = ctx.vertex_array(self.prog, [(vpos, "3f", "in_pos"), (vnrm, "3f", "in_nrm")],
+                                   index_buffer=ibo, index_element_size=4)
+            dvao = ctx.vertex_array(self.dprog, [(vpos, "3f", "in_pos"), (vnrm, "3f", "in_nrm")],
+                                    index_buffer=ibo, index_element_size=4)
+            self.skin = (vpos, vnrm, vao, dvao)
         self._ident = np.eye(4, dtype="f4").T.tobytes()
         self._mask = None  # the amodal pass's program, targets and vertex arrays: made on first use
 
@@ -330,13 +361,42 @@ class Renderer:
                 prog["u_albedo"].value = BONE_COLOR
                 prog["u_wire"].value = int(wire)
                 vao.render()
+        if self.skin is not None and self.settings.skin == "opaque":
+            prog["u_model"].write(self._ident)
+            if data:
+                prog["u_id"].value = float(skin_id(self.scene))
+                self.skin[3].render()
+            else:
+                prog["u_albedo"].value = self.scene.skin.color
+                prog["u_wire"].value = int(wire)
+                self.skin[2].render()
+
+    def _draw_see_through_skin(self) -> None:
+        """The see-through skin over what the beauty target holds: front faces only, blended
+        (premultiplied alpha), leaving the depth buffer as the surfaces under it left it."""
+        ctx, prog = self.ctx, self.prog
+        prog["u_model"].write(self._ident)
+        prog["u_albedo"].value = self.scene.skin.color
+        prog["u_wire"].value = 0
+        prog["u_alpha"].value = SKIN_ALPHA
+        prog["u_rim"].value = SKIN_RIM_ALPHA
+        ctx.enable_only(ctx.DEPTH_TEST | ctx.BLEND | ctx.CULL_FACE)
+        ctx.blend_func = ctx.ONE, ctx.ONE_MINUS_SRC_ALPHA
+        self.color_fbo.depth_mask = False
+        try:
+            self.skin[2].render()
+        finally:
+            self.color_fbo.depth_mask = True
+            ctx.enable_only(ctx.DEPTH_TEST)
+            prog["u_alpha"].value = 1.0
 
     def render(self, frame: int, positions, normals, bone_world: np.ndarray | None,
-               cameras: list[Camera]) -> FrameImages:
+               cameras: list[Camera], skin: tuple | None = None) -> FrameImages:
         """Draw one frame.
 
         ``positions`` / ``normals``: per muscle (V_m, 3) float32 world arrays;
-        ``bone_world``: (n_bones, 4, 4) float64; ``cameras``: one per panel.
+        ``bone_world``: (n_bones, 4, 4) float64; ``cameras``: one per panel; ``skin``: the
+        skin's (V, 3) positions and normals (a scene with a skin).
         """
         ctx = self.ctx
         check_same_process(ctx)
@@ -344,6 +404,12 @@ class Renderer:
         for (vpos, vnrm, *_), p, n in zip(self.muscles, positions, normals):
             vpos.write(np.ascontiguousarray(p, dtype=np.float32).tobytes())
             vnrm.write(np.ascontiguousarray(n, dtype=np.float32).tobytes())
+        if self.skin is not None:
+            if skin is None:
+                raise ValueError(f"frame {frame}: the scene has a skin and the frame none")
+            self.skin[0].write(np.ascontiguousarray(skin[0], dtype=np.float32).tobytes())
+            self.skin[1].write(np.ascontiguousarray(skin[1], dtype=np.float32).tobytes())
+        self.prog["u_alpha"].value = 1.0
         ctx.enable_only(ctx.DEPTH_TEST)
         bg = self.settings.background
         Wt, Ht = self.size
@@ -363,6 +429,9 @@ class Renderer:
                 self.prog["u_bias"].value = WIRE_DEPTH_BIAS
                 self._draw_all(self.prog, False, bone_world, wire=True)
                 ctx.wireframe = False
+            if self.skin is not None and self.settings.skin == "see-through":
+                self.prog["u_bias"].value = 0.0
+                self._draw_see_through_skin()
         raw = self.color_fbo.read(components=4, dtype="f4", viewport=(0, 0, Wt * s, Ht * s))
         hi = np.frombuffer(raw, dtype=np.float32).reshape(Ht * s, Wt * s, 4)[::-1]
         rgba = downsample(hi, s)
@@ -435,11 +504,18 @@ class Renderer:
                 if f not in cameras:
                     raise ValueError(f"frame {f} is not in Scene.frames")
                 bw = placed_plates(self.scene, chunk.bone_world[c]) if len(self.scene.bones) else None
-                yield self.render(f, [p[c] for p in chunk.positions], [n[c] for n in chunk.normals], bw, cameras[f])
+                skin = (chunk.skin[0][c], chunk.skin[1][c]) if chunk.skin is not None else None
+                yield self.render(f, [p[c] for p in chunk.positions], [n[c] for n in chunk.normals], bw, cameras[f],
+                                  skin)
 
     def release(self) -> None:
-        for obj in (self.color_fbo, self.data_fbo, self.color_tex, self.data_tex, self.id_tex,
-                    self.prog, self.dprog):
+        # bind the default framebuffer first: moderngl re-binds the framebuffer last used when it
+        # makes one, and a deleted name there is GL_INVALID_OPERATION for the next renderer
+        (self.ctx.screen or self.ctx.detect_framebuffer(0)).use()
+        meshes = [obj for vpos, vnrm, vao, dvao, *_ in self.muscles for obj in (vao, dvao, vpos, vnrm)]
+        meshes += [obj for _, vao, dvao, _ in self.bones for obj in (vao, dvao)]
+        for obj in (*meshes, *(self.skin or ()), self.color_fbo, self.data_fbo, self.color_tex, self.data_tex,
+                    self.id_tex, self.prog, self.dprog):
             obj.release()
         if self._mask is not None:
             prog, texs, fbo, vaos = self._mask

@@ -35,7 +35,12 @@ from axdf_cli.fileio.runfolder import BONES_CSV, Manifest, frame_mesh_relpath, m
 from axdf_cli.fileio.runfolder import plain_relpath as _plain
 from axdf_cli.fileio.yamlio import NAME_ALLOWED, is_name
 from axdf_cli.render.framing import follow_rows, recorded_follow, recorded_framing
-from axdf_cli.render.scene import FrameChunk, Scene, SceneMuscle
+from axdf_cli.render.scene import FrameChunk, Scene, SceneMuscle, SceneSkin
+
+#: The skin's mesh name in a run folder (``meshes/skin/skin_<frame>.<fmt>``, ``axdf run --skin``)
+#: and its colour (linear RGB of sRGB #e0ac96, a light skin tone).
+SKIN_MESH = "skin"
+SKIN_COLOR = (0.745, 0.413, 0.305)
 
 def _color(c, where: Mark) -> tuple[float, float, float]:
     if isinstance(c, str) and len(c) == 7 and c.startswith("#"):
@@ -270,12 +275,30 @@ def load_run_source(run_dir: Path, manifest: Manifest | None = None, frames=None
             raise m.error(("framing", "follow"), f"{follow_bone!r} is not a bone of this run",
                           "bones: " + ", ".join(bone_names))
         follow = follow_rows(_read_bones_csv(run_dir / BONES_CSV, all_frames, [follow_bone])[:, 0, :3, 3])
+    skin_source = _skin_source(run_dir, m, formats, all_frames)
+    skin = None
+    if skin_source is not None:
+        pos, _, faces = skin_source.read(all_frames[0])
+        skin = SceneSkin(faces, SKIN_COLOR)
     scene = Scene(tuple(muscles), layout.bones, bounds.astype(np.float64), all_frames,
                   framing=framing, first_frame=first_frame, targets=targets, follow=follow,
-                  ground=ground, footprint=footprint)
+                  ground=ground, footprint=footprint, skin=skin)
 
-    source = RunFrames(run_dir, names, formats, all_frames, fps, selected, bone_world, sources, mesh_files)
+    source = RunFrames(run_dir, names, formats, all_frames, fps, selected, bone_world, sources, mesh_files,
+                       skin=skin_source.fmt if skin_source is not None else None)
     return scene, source, settings
+
+
+def _skin_source(run_dir: Path, m: Manifest, formats, all_frames) -> "_FrameFiles | None":
+    """The run's skin meshes, one file per frame of a per-frame format (a run with ``--skin``
+    lists them in its manifest), or None."""
+    files = m.data.get("files") if isinstance(m.data, dict) else None
+    if not isinstance(files, dict) or not all_frames:
+        return None
+    for fmt in formats:
+        if FORMATS[fmt].layout == "frame" and mesh_relpath(SKIN_MESH, all_frames[0], fmt) in files:
+            return _FrameFiles(run_dir, SKIN_MESH, fmt)
+    return None
 
 
 def per_frame_sources(run_dir: Path, names, formats, all_frames, fps, mesh_files: str = "muscle") -> list:
@@ -295,9 +318,10 @@ class RunFrames:
     the format has none; the bones' transforms of the ``selected`` frames."""
 
     def __init__(self, run_dir: Path, names, formats, all_frames, fps, selected, bone_world, sources=None,
-                 mesh_files: str = "muscle"):
+                 mesh_files: str = "muscle", skin: str | None = None):
         self.run_dir, self.names, self.formats, self.all_frames, self.fps = run_dir, names, formats, all_frames, fps
         self.mesh_files = mesh_files
+        self.skin = skin  # the format of the run's skin meshes (None: no skin): each chunk carries it
         self.selected = tuple(selected)
         self.bone_world = bone_world  # (len(selected), n_scene_bones, 4, 4)
         self._sources = sources
@@ -320,7 +344,14 @@ class RunFrames:
                     nrm = vertex_normals(pos, faces)
                 ps.append(pos[None])
                 ns.append(nrm[None])
-            yield FrameChunk(np.array([f]), tuple(ps), tuple(ns), self.bone_world[row[f]:row[f] + 1])
+            skin = None
+            if self.skin is not None:
+                pos, nrm, faces = _FrameFiles(self.run_dir, SKIN_MESH, self.skin).read(f)
+                if nrm is None:
+                    from axdf_cli.render.renderer import vertex_normals
+                    nrm = vertex_normals(pos, faces)
+                skin = (pos[None], nrm[None])
+            yield FrameChunk(np.array([f]), tuple(ps), tuple(ns), self.bone_world[row[f]:row[f] + 1], skin)
 
 
 def recorded_render_settings(m: Manifest) -> RenderSettings:

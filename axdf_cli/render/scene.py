@@ -26,6 +26,14 @@ class SceneBone:
 
 
 @dataclass(frozen=True)
+class SceneSkin:
+    """The body's skin over the muscles (``axdf run --skin``): one closed triangle mesh."""
+
+    faces: np.ndarray  # (T, 3) int32, counter-clockwise seen from outside
+    color: tuple[float, float, float]  # linear RGB in [0, 1]
+
+
+@dataclass(frozen=True)
 class Scene:
     muscles: tuple[SceneMuscle, ...]
     bones: tuple[SceneBone, ...]  # bones drawn: their meshes, or sticks (render.renderer.BoneLayout)
@@ -37,6 +45,7 @@ class Scene:
     follow: np.ndarray | None = None  # (F, 3) a following camera's offset at each of `frames`; `framing` is relative to it
     ground: tuple[str, ...] = ()  # names of `bones` drawn as a ground plate under the subject (render/framing.py)
     footprint: np.ndarray | None = None  # (2, 2) the subject's horizontal box [lo, hi] a ground plate covers
+    skin: SceneSkin | None = None  # drawn as RenderSettings.skin says
 
 
 @dataclass(frozen=True)
@@ -45,3 +54,4 @@ class FrameChunk:
     positions: tuple[np.ndarray, ...]  # per muscle: (C, V_m, 3) float32 world positions
     normals: tuple[np.ndarray, ...]  # per muscle: (C, V_m, 3) float32 unit outward normals
     bone_world: np.ndarray  # (C, n_scene_bones, 4, 4) float64 world transform of each Scene bone
+    skin: tuple[np.ndarray, np.ndarray] | None = None  # (C, V, 3) float32 positions and normals of Scene.skin

@@ -44,6 +44,9 @@ from axdf_cli.errors import InputError, Mark
 from axdf_cli.fileio.yamlio import NAME_ALLOWED, Fields, check_number, check_vector, is_name, parse_yaml
 
 VIEWS = ("auto", "front", "side", "top", "sheet")
+#: How a run's skin (``axdf run --skin``) is drawn: over the muscles at SKIN_ALPHA (the data
+#: passes see the muscles), as an opaque body (the passes see the skin), or not at all.
+SKIN_VIEWS = ("see-through", "opaque", "off")
 
 #: The one table of ranges, for the ``render:`` block and the flags: key -> (lo, hi).
 RANGES = {
@@ -88,6 +91,7 @@ class RenderSettings:
     bones: bool = True
     supersample: int = 3
     device: int | None = None  # EGL device index; None = default
+    skin: str = "see-through"  # one of SKIN_VIEWS; only a run with a skin has one to draw
     egl_library: str | None = None  # command line only (--egl-library); None = find libEGL
 
     @property
@@ -222,7 +226,7 @@ def parse_render_settings(value, where: Mark) -> RenderSettings:
     if value is None:
         return RenderSettings()
     f = Fields(value, where, "render", keys=("enabled", "size", "view", "fov", "camera", "orbit", "wireframe",
-                                             "background", "bones", "supersample", "device"))
+                                             "background", "bones", "supersample", "device", "skin"))
     d = RenderSettings()
     enabled = f.boolean("enabled", default=True)
     size = parse_size(f.raw("size"), f.vmark("size")) if f.has("size") else d.size
@@ -242,10 +246,11 @@ def parse_render_settings(value, where: Mark) -> RenderSettings:
     supersample = int(_ranged("supersample", f.raw("supersample"), f.vmark("supersample"), integer=True)) \
         if f.has("supersample") else d.supersample
     device = parse_device(f.raw("device"), f.vmark("device")) if f.has("device") else d.device
+    skin = f.choice("skin", SKIN_VIEWS, default=d.skin)
     f.done()
     return RenderSettings(enabled=enabled, size=size, view=view, fov=fov, camera=camera, orbit=orbit,
                           wireframe=wireframe, background=background, bones=bones,
-                          supersample=supersample, device=device)
+                          supersample=supersample, device=device, skin=skin)
 
 
 # ----------------------------------------------------------------------------- command line
@@ -272,6 +277,9 @@ def add_render_args(parser: argparse.ArgumentParser) -> None:
                    help="edge overlay")
     g.add_argument("--bones", action=argparse.BooleanOptionalAction, default=None,
                    help="draw bone meshes (sticks for bones without one)")
+    g.add_argument("--skin-view", choices=SKIN_VIEWS,
+                   help="a run with a skin (axdf run --skin): draw it over the muscles (see-through, default), "
+                        "as an opaque body, or not at all")
     g.add_argument("--background", metavar="R,G,B[,A]|transparent",
                    help="background colour (linear 0..1) or 'transparent'")
     g.add_argument("--supersample", metavar="N", help=f"anti-aliasing factor {rng('supersample')}")
@@ -325,6 +333,8 @@ def settings_from_args(settings: RenderSettings, args: argparse.Namespace) -> Re
         s = replace(s, wireframe=bool(args.wireframe))
     if getattr(args, "bones", None) is not None:
         s = replace(s, bones=bool(args.bones))
+    if getattr(args, "skin_view", None) is not None:
+        s = replace(s, skin=args.skin_view)
     v, w = _flag(args, "background")
     if w:
         s = replace(s, background=parse_background(v, w))
@@ -373,6 +383,8 @@ def settings_to_dict(s: RenderSettings) -> dict:
     d = {"enabled": s.enabled, "size": list(s.size), "fov": s.fov, "orbit": s.orbit,
          "wireframe": s.wireframe, "background": list(s.background), "bones": s.bones,
          "supersample": s.supersample}
+    if s.skin != RenderSettings.skin:  # (the default is not written: manifests of runs before skins read the same)
+        d["skin"] = s.skin
     if s.camera is not None:
         c = s.camera
         d["camera"] = {k: v for k, v in (
