@@ -398,6 +398,11 @@ SKIN_FAT_SMOOTHING = 6
 SKIN_PUSH_ROUNDS = 8
 SKIN_PUSH_CLEARANCE = 0.002
 SKIN_PUSH_SMOOTHING = 4
+# The muscle-under-skin pass (render/under.py) names a muscle only within this distance of the
+# skin (metres): subcutaneous fat is at most a few centimetres where muscles lie under it
+# (Störchle 2018's thickest site, the lower abdomen, about 4 cm at BMI 30); farther, as over the
+# head or gait2392's arms, no muscle lies beneath and the pixel reads 0.
+SKIN_UNDER_MAX_DEPTH = 0.06
 # `axdf fit` (axdf_cli/tools/fit.py, fit_sections.py): a closed muscle mesh → an AxDf muscle.
 # Sections by default: measured on the Visible Human atlas (docs/FIT.md), 16 sections follow
 # the muscles' bellies to IoU 0.9+ where 8 leave a few points of overlap; the bounds keep the

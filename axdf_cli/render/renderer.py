@@ -38,7 +38,7 @@ read back once.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Iterable, Iterator
 
 import numpy as np
@@ -155,6 +155,7 @@ class FrameImages:
     normals: np.ndarray  # (H, W, 3) float32 world unit normals, 0 = background
     ids: np.ndarray  # (H, W) uint32, 0 = background, 1..M muscles, M+1.. bones
     cameras: tuple[Camera, ...]
+    under: tuple[np.ndarray, np.ndarray] | None = None  # an opaque skin's under_id, under_depth (render/under.py)
 
 
 def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -505,8 +506,30 @@ class Renderer:
                     raise ValueError(f"frame {f} is not in Scene.frames")
                 bw = placed_plates(self.scene, chunk.bone_world[c]) if len(self.scene.bones) else None
                 skin = (chunk.skin[0][c], chunk.skin[1][c]) if chunk.skin is not None else None
-                yield self.render(f, [p[c] for p in chunk.positions], [n[c] for n in chunk.normals], bw, cameras[f],
+                img = self.render(f, [p[c] for p in chunk.positions], [n[c] for n in chunk.normals], bw, cameras[f],
                                   skin)
+                if self.skin is not None and self.settings.skin == "opaque":
+                    img = replace(img, under=self.under(img, [(p[c], m.faces) for p, m in
+                                                              zip(chunk.positions, self.scene.muscles)]))
+                yield img
+
+    def under(self, img: FrameImages, meshes: list) -> tuple[np.ndarray, np.ndarray]:
+        """The muscle-under-skin pass of a frame drawn with an opaque skin, panel by panel
+        (:func:`axdf_cli.render.under.under_skin`); ``meshes``: each muscle's (V, 3) world
+        vertices and faces."""
+        from axdf_cli.render.under import under_skin
+
+        uid = np.zeros(img.ids.shape, np.uint16)
+        depth = np.zeros(img.ids.shape, np.float32)
+        for cam in img.cameras:
+            x0, y0, w, h = cam.viewport
+            K = np.array(cam.K, dtype=np.float64)
+            K[0, 2] -= x0
+            K[1, 2] -= y0
+            panel = (slice(y0, y0 + h), slice(x0, x0 + w))
+            uid[panel], depth[panel] = under_skin(img.depth[panel], img.ids[panel], skin_id(self.scene), K,
+                                                  cam.world_to_camera, meshes)
+        return uid, depth
 
     def release(self) -> None:
         # bind the default framebuffer first: moderngl re-binds the framebuffer last used when it

@@ -6,10 +6,14 @@ is nearest to that point, and its **depth under the skin** the distance to that 
 (metres). Nearest, not along the inward normal: the normal of a skin point can miss every
 muscle beside a joint, while the nearest surface is always defined. The distance is exact to
 the triangles (libigl's AABB tree, ``point_mesh_squared_distance``), not to the vertices.
+A skin pixel with no muscle within ``tolerances.SKIN_UNDER_MAX_DEPTH`` (the head, an arm without
+muscles) has none beneath it: id :data:`NO_MUSCLE`, depth 0.
 """
 from __future__ import annotations
 
 import numpy as np
+
+from axdf_cli import tolerances as tol
 
 #: ``under_id`` of a pixel that is not skin.
 NO_MUSCLE = 0
@@ -31,7 +35,7 @@ def under_skin(depth: np.ndarray, ids: np.ndarray, skin: int, K: np.ndarray, wor
     its id, ``K`` (3, 3) and ``world_to_camera`` (4, 4) its camera, ``meshes`` each muscle's
     (V, 3) world vertices and (T, 3) faces in id order (muscle k has id k + 1). Returns
     ``under_id`` (H, W) uint16 (the muscle's id; :data:`NO_MUSCLE` off the skin) and
-    ``under_depth`` (H, W) float32 (metres; 0 off the skin)."""
+    ``under_depth`` (H, W) float32 (metres; 0 off the skin and where no muscle is near)."""
     import igl
 
     H, W = ids.shape
@@ -45,6 +49,8 @@ def under_skin(depth: np.ndarray, ids: np.ndarray, skin: int, K: np.ndarray, wor
     F = np.concatenate([np.asarray(f, np.int64) + o for (_, f), o in zip(meshes, offsets[:-1])])
     owner = np.repeat(np.arange(1, len(meshes) + 1), [len(f) for _, f in meshes])
     sq, face, _ = igl.point_mesh_squared_distance(unproject(depth, mask, K, world_to_camera), V, F)
-    under_id[mask] = owner[np.asarray(face, np.int64)]
-    under_depth[mask] = np.sqrt(np.maximum(sq, 0.0))
+    d = np.sqrt(np.maximum(sq, 0.0))
+    near = d <= tol.SKIN_UNDER_MAX_DEPTH
+    under_id[mask] = np.where(near, owner[np.asarray(face, np.int64)], NO_MUSCLE)
+    under_depth[mask] = np.where(near, d, 0.0)
     return under_id, under_depth
