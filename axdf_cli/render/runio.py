@@ -31,16 +31,12 @@ import numpy as np
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.formats import FORMATS, MESH_FILES, MeshReadError, load_triangles, read_preference, read_sequence
 from axdf_cli.specs.render import RenderSettings, parse_render_settings
-from axdf_cli.fileio.runfolder import BONES_CSV, Manifest, frame_mesh_relpath, mesh_relpath, read_run_manifest
+from axdf_cli.fileio.runfolder import (BONES_CSV, SKIN_MESH, Manifest, frame_mesh_relpath, mesh_relpath,
+                                      read_run_manifest)
 from axdf_cli.fileio.runfolder import plain_relpath as _plain
 from axdf_cli.fileio.yamlio import NAME_ALLOWED, is_name
 from axdf_cli.render.framing import follow_rows, recorded_follow, recorded_framing
-from axdf_cli.render.scene import FrameChunk, Scene, SceneMuscle, SceneSkin
-
-#: The skin's mesh name in a run folder (``meshes/skin/skin_<frame>.<fmt>``, ``axdf run --skin``)
-#: and its colour (linear RGB of sRGB #e0ac96, a light skin tone).
-SKIN_MESH = "skin"
-SKIN_COLOR = (0.745, 0.413, 0.305)
+from axdf_cli.render.scene import SKIN_COLOR, FrameChunk, Scene, SceneMuscle, SceneSkin
 
 def _color(c, where: Mark) -> tuple[float, float, float]:
     if isinstance(c, str) and len(c) == 7 and c.startswith("#"):

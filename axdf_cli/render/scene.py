@@ -25,6 +25,10 @@ class SceneBone:
     faces: np.ndarray  # (T, 3) int32
 
 
+#: The skin's colour: linear RGB of sRGB #e0ac96, a light skin tone.
+SKIN_COLOR = (0.745, 0.413, 0.305)
+
+
 @dataclass(frozen=True)
 class SceneSkin:
     """The body's skin over the muscles (``axdf run --skin``): one closed triangle mesh."""
