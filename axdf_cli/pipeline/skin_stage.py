@@ -8,8 +8,9 @@ Each frame, in order:
 2. **push**: every candidate point (a muscle or bone mesh vertex within ``tol.SKIN_REACH`` of
    the rest skin, built once by :meth:`SkinStage.start`) is measured against the nearest of
    its ``tol.SKIN_CANDIDATES`` nearest rest skin vertices, along that vertex's skinned normal;
-   where it lies less deep under the skin than its target (its local fat thickness, or its
-   depth at rest where that is shallower: the rest skin is worn as fitted, never inflated),
+   where it lies less deep under the skin than its target (its local fat thickness; for a muscle
+   vertex, its depth at rest where that is shallower: the rest skin is worn as fitted; a bone
+   vertex, at least inside),
    the skin vertex is pushed outward by the difference, and so is its ring of neighbours (a
    point lies under the triangles around its nearest vertex, not under the vertex alone);
 3. **relax**: ``tol.SKIN_RELAX_ITERATIONS`` passes of uniform Laplacian smoothing of the
@@ -37,7 +38,8 @@ from axdf_cli.pipeline.stages import Scope
 
 #: The skin's name among a run's meshes (``meshes/skin/``, ``skin.csv``); no muscle may have it.
 SKIN_NAME = "skin"
-#: skin.csv's numeric columns: the skin's volume (m^3) and its ratio to the rest skin's; the
+#: skin.csv's numeric columns: the skin's volume (m^3) and its ratio to the skin's as the stage
+#: wears it at the rest pose (the rest mesh pushed over the bones' vertices outside it); the
 #: share of every muscle vertex that lies outside the skin (measured along the skinned normal of
 #: its nearest candidate skin vertex, after the push); the largest outward push (m).
 SKIN_COLUMNS = ("volume", "volume_ratio", "outside", "push")
@@ -108,7 +110,7 @@ def build(skin, plan) -> SkinModel:
     v = np.ascontiguousarray(skin.vertices, dtype=np.float64)
     ptr, idx = ring(faces, len(v))
     normals = np.empty_like(v)
-    volume = kernels.normals_volume(v, faces, normals)
+    kernels.normals_volume(v, faces, normals)
     tree = cKDTree(v)
     k = min(tol.SKIN_CANDIDATES, len(v))
 
@@ -133,10 +135,14 @@ def build(skin, plan) -> SkinModel:
     cand = np.asarray(tree.query(p, k=k)[1], dtype=np.int64).reshape(len(p), k) if len(p) else np.zeros((0, k), np.int64)
     nearest, height = np.empty(len(p), np.int64), np.empty(len(p))
     kernels.nearest_heights(p, v, normals, cand, nearest, height)
-    target = np.minimum(skin.fat[nearest], -height)
-    return SkinModel(v, faces, np.ascontiguousarray(skin.weights, dtype=np.float64), bones,
-                     np.linalg.inv(rest_world[bones]), ptr, idx, muscle_points, bone_points, cand, target,
-                     int(len(muscle)), volume)
+    target = np.minimum(skin.fat[nearest], -height)  # the fat, or the rest depth where shallower
+    nm = len(muscle_points)  # bones at least inside: the rest skin is pushed out over muscles only,
+    target[nm:] = np.maximum(target[nm:], 0.0)  # and leaves a skull or a heel partly outside it (docs/SKIN.md)
+    model = SkinModel(v, faces, np.ascontiguousarray(skin.weights, dtype=np.float64), bones,
+                      np.linalg.inv(rest_world[bones]), ptr, idx, muscle_points, bone_points, cand, target,
+                      int(len(muscle)), 1.0)
+    model.rest_volume = float(skin_frame(model, rest_world, p)[2][0])  # the skin as worn at rest
+    return model
 
 
 def skin_frame(model: SkinModel, world: np.ndarray, points: np.ndarray) -> tuple:
