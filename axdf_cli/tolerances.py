@@ -403,6 +403,20 @@ SKIN_PUSH_SMOOTHING = 4
 # (Störchle 2018's thickest site, the lower abdomen, about 4 cm at BMI 30); farther, as over the
 # head or gait2392's arms, no muscle lies beneath and the pixel reads 0.
 SKIN_UNDER_MAX_DEPTH = 0.06
+# The skin stage of `axdf run --skin` (axdf_cli/pipeline/skin_stage.py, docs/SKIN.md). Muscle and
+# bone vertices within SKIN_REACH metres of the rest skin are its candidates (deeper ones stay
+# under it: a walk slides muscles a few cm under the skin at most); each is measured, every
+# frame, against the nearest of its SKIN_CANDIDATES nearest rest skin vertices (their spacing
+# is ~1-2 cm, so 8 cover the ~3 cm a muscle slides under the skin at a joint).
+SKIN_REACH = 0.05
+SKIN_CANDIDATES = 8
+# A candidate is kept at least its local fat thickness under the skin, or as deep as the rest
+# skin holds it where that is shallower (the fitted rest skin clears the muscles by
+# SKIN_PUSH_CLEARANCE only; asking for the full fat there would inflate it at rest).
+# Relaxation after the push: passes of neighbour averaging of the outward offsets, each offset
+# held at least at its push (sticky); about one edge (~1-2 cm) of spread per pass, so a push
+# becomes a smooth bulge, not a spike.
+SKIN_RELAX_ITERATIONS = 6
 # `axdf fit` (axdf_cli/tools/fit.py, fit_sections.py): a closed muscle mesh → an AxDf muscle.
 # Sections by default: measured on the Visible Human atlas (docs/FIT.md), 16 sections follow
 # the muscles' bellies to IoU 0.9+ where 8 leave a few points of overlap; the bounds keep the

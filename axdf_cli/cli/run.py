@@ -33,6 +33,9 @@ def add_args(p) -> None:
     p.add_argument("--strict", action="store_true", help="fail (exit 2) on any per-muscle, per-frame warning")
     p.add_argument("--clamp-ranges", action="store_true",
                    help="hold coordinates inside their skeleton ranges (default: warn per frame)")
+    p.add_argument("--skin", metavar="FILE",
+                   help="wear this skin (a skin file written by axdf skin, docs/SKIN.md) over the muscles: "
+                        "meshes/skin/ and skin.csv (overrides the job's skin)")
     p.add_argument("--allow-outside", action="store_true",
                    help="allow paths inside YAML files to leave the project folder tree")
     add_stage_args(p)
@@ -130,7 +133,8 @@ def plan_from_args(args):
     from axdf_cli import pipeline
     from axdf_cli.specs.render import settings_from_args
 
-    policy = RefPolicy.for_command([args.job, args.pose] + list(args.muscles or []), args.allow_outside)
+    policy = RefPolicy.for_command([args.job, args.pose, getattr(args, "skin", None)] + list(args.muscles or []),
+                                   args.allow_outside)
     job = load_job(args.job, policy) if args.job else None
     settings = pipeline.job_render_settings(job)
     if args.render is not None:
@@ -139,7 +143,7 @@ def plan_from_args(args):
                            fmt_arg=args.format, frames_arg=args.frames, render=settings_from_args(settings, args),
                            policy=policy, clamp_ranges=args.clamp_ranges or (job is not None and job.clamp_ranges),
                            stages={**job_switches(job), **stage_switches(args)},
-                           mesh_files_arg=getattr(args, "mesh_files", None))
+                           mesh_files_arg=getattr(args, "mesh_files", None), skin_arg=getattr(args, "skin", None))
 
 
 def job_switches(job) -> dict:

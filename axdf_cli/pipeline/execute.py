@@ -28,6 +28,7 @@ from axdf_cli.pipeline.manifest import check_resume, manifest_dict
 from axdf_cli.pipeline.overlap import bulk_overlap, bulk_overlap_text, overlap_share, with_pack_command
 from axdf_cli.pipeline.packed import SequenceFiles, file_relpath, sequence_formats, write_run_files
 from axdf_cli.pipeline.plan import RunPlan
+from axdf_cli.pipeline.skin_stage import SKIN_CSV, SKIN_COLUMNS, SKIN_NAME, skin_csv, skin_of
 from axdf_cli.pipeline.stages import Scope, of_scope
 from axdf_cli.render.framing import framing_record, plan_framing
 from axdf_cli.pipeline.tables import NSTATS, STATS_COLUMNS, bones_csv, stats_csv
@@ -45,6 +46,8 @@ def run_dirs(plan: RunPlan) -> list[str]:
     dirs += sorted({PurePosixPath(file_relpath(n, f)).parent.as_posix() for f in sequence_formats(plan.formats)
                     for n in plan.names})
     dirs += [PurePosixPath(bone_mesh_relpath("b")).parent.as_posix()]
+    if skin_of(plan) is not None:
+        dirs += [PurePosixPath(mesh_relpath(SKIN_NAME, 0, f)).parent.as_posix() for f in plan.formats if f in WRITERS][:1]
     if plan.rendering:
         dirs.append(PurePosixPath(frame_relpath(0, "png")).parent.as_posix())
     return dirs
@@ -69,6 +72,7 @@ class MeshPassResult:
     skipped: int = 0
     bone_rows: np.ndarray | None = None  # (R, B, 7) x y z qw qx qy qz, when asked for
     spill: str | None = None  # the raw meshes of these frames, for the packed files (see Spill)
+    skin: np.ndarray | None = None  # (R, len(SKIN_COLUMNS)) the skin's measures, when the run has a skin
 
 
 def split_of(plan: RunPlan) -> str:
@@ -128,6 +132,9 @@ def mesh_pass(plan: RunPlan, prep: Prepass, writer: OutputWriter, muscles: list[
                    for f in frame_formats}
     col = {j: k for k, j in enumerate(muscles)}
     stats = np.zeros((n_rows, len(muscles), NSTATS))
+    skin = skin_of(plan)
+    skin_rows = np.zeros((n_rows, len(SKIN_COLUMNS))) if skin is not None else None
+    skin_writers = {f: WRITERS[f](skin.faces, SKIN_NAME) for f in frame_formats} if skin is not None else {}
     bone_rows = np.zeros((n_rows, len(plan.pose.skeleton.bones), 7)) if bones else None
     warns: list = []
     lo = np.full(3, np.inf)
@@ -175,6 +182,12 @@ def mesh_pass(plan: RunPlan, prep: Prepass, writer: OutputWriter, muscles: list[
                     for i, frame in enumerate(frames):
                         writer.write(frame_mesh_relpath(int(frame), f),
                                      writers[f].encode([p[i] for p, _ in meshes], [n[i] for _, n in meshes]))
+            if chunk.skin is not None:  # (the skin stage ran while the results were handed out)
+                skin_rows[here] = chunk.skin.stats
+                for f in frame_formats:
+                    for i, frame in enumerate(frames):
+                        writer.write(mesh_relpath(SKIN_NAME, int(frame), f),
+                                     skin_writers[f].encode(chunk.skin.positions[i], chunk.skin.normals[i]))
             if seq is not None:
                 seq.end_chunk()
             if on_chunk:
@@ -193,7 +206,7 @@ def mesh_pass(plan: RunPlan, prep: Prepass, writer: OutputWriter, muscles: list[
             Path(spill).unlink(missing_ok=True)
         raise
     return MeshPassResult(muscles, rows, writer.files, stats, warns, lo, hi, writer.skipped, bone_rows,
-                          str(spill) if raw is not None else None)
+                          str(spill) if raw is not None else None, skin_rows)
 
 
 def _mesh_worker(shared: dict, task) -> MeshPassResult:
@@ -370,11 +383,14 @@ def _write_run(plan: RunPlan, session, prep: Prepass, progress, render_progress,
         all_warns = list(plan.frame_warnings)
         writer.skipped = sum(p.skipped for p in parts)  # (one pass in this process: its writer is ours)
         bone_rows = np.zeros((nf, len(bones), 7))
+        skin_rows = np.zeros((nf, len(SKIN_COLUMNS)))
         for part in parts:
             writer.files.update(part.files)
             stats[part.rows, part.muscles] = part.stats
             if part.bone_rows is not None:
                 bone_rows[part.rows] = part.bone_rows
+            if part.skin is not None:
+                skin_rows[part.rows] = part.skin
             all_warns += part.warnings
         warnings: list[str] = list(plan.warnings)
         share = overlap_share(plan, stats[..., STATS_COLUMNS.index("inside_muscle")])
@@ -389,6 +405,8 @@ def _write_run(plan: RunPlan, session, prep: Prepass, progress, render_progress,
             writer.write(bone_mesh_relpath(bones[i].name), data)
         writer.write(STATS, stats_csv(plan, stats, warn_text))
         writer.write(BONES_CSV, bones_csv(plan, bone_rows))
+        if skin_of(plan) is not None:
+            writer.write(SKIN_CSV, skin_csv(plan.frames, skin_rows))
         frame_pts = plan_framing(plan)
         extra = {"bounds": [[float(f"{x:.9g}") for x in lo], [float(f"{x:.9g}") for x in hi]],
                  "framing": framing_record(frame_pts, plan.pose.first)}

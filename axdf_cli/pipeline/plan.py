@@ -91,7 +91,7 @@ def load_muscle_specs(files) -> list[MuscleSpec]:
 
 def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, fmt_arg=None,
              frames_arg=None, render=None, policy: RefPolicy | None = None, clamp_ranges: bool = False,
-             stages=None, mesh_files_arg=None) -> RunPlan:
+             stages=None, mesh_files_arg=None, skin_arg=None) -> RunPlan:
     """Load and check every input; build the muscle models. Writes nothing.
 
     ``render``: the RenderSettings to use (None: the job's ``render:``); ``policy``: where
@@ -99,7 +99,7 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
     their ranges (as the pose's ``clamp_ranges``); ``stages``: stage name -> on, from the
     command line and the job (:func:`axdf_cli.pipeline.stages.build_stages`; default every
     registered stage); ``mesh_files_arg``: ``--mesh-files`` (None: the job's ``mesh_files:``,
-    else ``muscle``)."""
+    else ``muscle``); ``skin_arg``: ``--skin FILE`` (None: the job's ``skin:``, else no skin)."""
     policy = policy or (job.policy if job is not None else RefPolicy())
     if pose_arg is not None:
         pose_path, pose_mark = Path(pose_arg), Mark(str(pose_arg))
@@ -167,11 +167,40 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
         if Path(s).is_file():
             inputs[display_path(Path(s))] = atomic.sha256_file(s)
     built = build_stages(stages, specs)
+    skin = plan_skin(job, skin_arg, skel, policy, specs)
+    if skin is not None:
+        from axdf_cli.pipeline.skin_stage import SkinStage
+
+        built = built + (SkinStage(skin),)
+        for s in skin.files:
+            inputs[display_path(Path(s))] = atomic.sha256_file(s)
     if any(st.name == "jiggle" for st in built):
         notes += jiggle_notes(pose, specs)
     return RunPlan(pose, specs, models, frames, formats, out, inputs, render=render, warnings=warnings,
                    bone_meshes=bone_meshes, notes=notes, frame_warnings=muscle_range_warnings(pose, frames, specs),
                    stages=built, mesh_files=mesh_files)
+
+
+def plan_skin(job: Job | None, arg, skeleton, policy: RefPolicy, specs):
+    """The run's skin (:func:`axdf_cli.specs.skin.load_skin`, checked against the run's
+    skeleton: its bones must be the skeleton's), from ``--skin`` else the job's ``skin:``; None
+    without one. No muscle may be named as the skin's meshes are (``meshes/skin/``)."""
+    from axdf_cli.pipeline.skin_stage import SKIN_NAME
+    from axdf_cli.specs.skin import load_skin
+
+    if arg is not None:
+        path, mark = Path(arg), Mark("--skin")
+    elif job is not None and job.skin is not None:
+        path, mark = job.skin
+    else:
+        return None
+    if not path.is_file():
+        raise InputError(mark, f"skin file {str(path)!r} not found", "a skin file written by axdf skin (docs/SKIN.md)")
+    clash = [s for s in specs if s.name == SKIN_NAME]
+    if clash:
+        raise InputError(Mark(str(clash[0].source)), f"a muscle is named {SKIN_NAME!r}, as the run's skin meshes are",
+                         "rename the muscle, or run without a skin")
+    return load_skin(path, skeleton, policy)
 
 
 def plan_mesh_files(job: Job | None, arg, formats) -> str:

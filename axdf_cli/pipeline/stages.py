@@ -44,6 +44,9 @@ its factory to :data:`STAGES`. ``axdf run --no-<name>`` comes from the table
 :mod:`axdf_cli.specs.job` and reaches :func:`build_stages` through ``plan_run(stages=...)``.
 The stages a run used (names and each one's ``settings``) are recorded in its manifest's
 ``settings.stages``, so ``--resume`` refuses a change.
+
+The skin stage (:mod:`axdf_cli.pipeline.skin_stage`, FRAME, last) is not in the table: the
+plan adds it when the run has a skin (``--skin FILE``, a job's ``skin:``), since it needs one.
 """
 from __future__ import annotations
 
@@ -90,6 +93,7 @@ class Chunk:
     results: dict[int, FrameResult] = field(default_factory=dict)  # muscle -> surfaces (after 1b, then FRAME)
     twist: np.ndarray | None = None  # (C, M) unwrapped twist references (radians) of the selected frames
     notes: dict[int, list] = field(default_factory=dict)  # muscle -> step 1a's [(frame index, warning)]
+    skin: object = None  # the skin stage's SkinFrames (axdf_cli.pipeline.skin_stage), when the run has a skin
 
 
 class Stage(Protocol):

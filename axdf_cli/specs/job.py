@@ -1,5 +1,5 @@
 """Job files (``muscles:``, ``pose:``, ``out:``, ``format:``, ``mesh_files:``, ``frames:``,
-``clamp_ranges:``, ``render:``) → a frozen :class:`Job`."""
+``clamp_ranges:``, ``render:``, ``skin:``) → a frozen :class:`Job`."""
 from __future__ import annotations
 
 import os
@@ -16,7 +16,7 @@ from axdf_cli.fileio.yamlio import Fields, item_marks, load_yaml
 #: Job keys that switch a stage of the pipeline on or off (axdf_cli.pipeline.stages.STAGES; a
 #: test checks the two agree): `jiggle: false`, as --no-jiggle; `contact: false`, as --no-contact.
 STAGE_KEYS = ("jiggle", "contact", "penetration")
-JOB_KEYS = ("muscles", "pose", "out", "format", "mesh_files", "frames", "clamp_ranges", "render") + STAGE_KEYS
+JOB_KEYS = ("muscles", "pose", "out", "format", "mesh_files", "frames", "clamp_ranges", "render", "skin") + STAGE_KEYS
 
 
 @dataclass(frozen=True)
@@ -33,6 +33,7 @@ class Job:
     stages: tuple = ()  # ((stage, True | False), ...): what the job's STAGE_KEYS say, in that order; unsaid: absent
     mesh_files: tuple | None = None  # (one of formats.MESH_FILES, Mark) or None: the job's `mesh_files:`
     clamp_ranges: bool = False  # `clamp_ranges: true`, as --clamp-ranges: coordinates held inside their ranges
+    skin: tuple | None = None  # (Path, Mark): the job's `skin:` file (docs/SKIN.md), resolved against its folder
 
 
 def load_job(path: Path | str, policy: RefPolicy | None = None) -> Job:
@@ -64,6 +65,10 @@ def load_job(path: Path | str, policy: RefPolicy | None = None) -> Job:
     render = parse_render_settings(f.raw("render"), f.vmark("render") if f.has("render") else top)
     stages = tuple((k, f.boolean(k)) for k in STAGE_KEYS if f.has(k))
     clamp = f.boolean("clamp_ranges", default=False)
+    skin = None
+    if f.has("skin"):
+        ref = f.string("skin", required=True)
+        skin = (policy.resolve(path, ref, f.vmark("skin"), "skin"), f.vmark("skin"))
     f.done()
     return Job(str(path), tuple(muscles), pose, out, fmt, frames, frames_mark, render, policy, stages, mesh_files,
-               clamp)
+               clamp, skin)

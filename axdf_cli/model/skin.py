@@ -1,0 +1,140 @@
+"""The skin stage's kernels (:mod:`axdf_cli.pipeline.skin_stage`): one frame of a skin mesh
+skinned by its bones, its normals and volume, and the push of the points under it.
+
+Each kernel is a plain loop in a fixed order (no ``parallel``, no ``fastmath``), so the same
+inputs give the same bytes whichever frames a process computes. Compiled once and cached.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+try:
+    from numba import njit
+except ImportError as e:  # a dependency: make setup installs it
+    raise ImportError(f"axdf needs numba for its skin kernels ({e}); run `make setup` or "
+                      "`pip install numba`") from None
+
+
+@njit(cache=True)
+def blend(weights, rel, rest, out):
+    """Linear blend skinning: ``out[v] = sum_k weights[v, k] * rel[k] @ (rest[v], 1)``;
+    weights (V, K), rel (K, 3, 4) each bone's world transform relative to rest, rest (V, 3)."""
+    nv, nk = weights.shape
+    for v in range(nv):
+        x = rest[v, 0]
+        y = rest[v, 1]
+        z = rest[v, 2]
+        for c in range(3):
+            acc = 0.0
+            for k in range(nk):
+                w = weights[v, k]
+                if w != 0.0:
+                    acc += w * (rel[k, c, 0] * x + rel[k, c, 1] * y + rel[k, c, 2] * z + rel[k, c, 3])
+            out[v, c] = acc
+
+
+@njit(cache=True)
+def normals_volume(v, faces, out):
+    """Area-weighted unit vertex normals of the triangle mesh (v, faces) into ``out`` (V, 3);
+    returns its signed volume (positive when wound outward)."""
+    out[:] = 0.0
+    vol = 0.0
+    for f in range(faces.shape[0]):
+        a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
+        e1x, e1y, e1z = v[b, 0] - v[a, 0], v[b, 1] - v[a, 1], v[b, 2] - v[a, 2]
+        e2x, e2y, e2z = v[c, 0] - v[a, 0], v[c, 1] - v[a, 1], v[c, 2] - v[a, 2]
+        nx = e1y * e2z - e1z * e2y
+        ny = e1z * e2x - e1x * e2z
+        nz = e1x * e2y - e1y * e2x
+        for i in (a, b, c):
+            out[i, 0] += nx
+            out[i, 1] += ny
+            out[i, 2] += nz
+        # a . (b x c) / 6 per face
+        vol += (v[a, 0] * (v[b, 1] * v[c, 2] - v[b, 2] * v[c, 1])
+                + v[a, 1] * (v[b, 2] * v[c, 0] - v[b, 0] * v[c, 2])
+                + v[a, 2] * (v[b, 0] * v[c, 1] - v[b, 1] * v[c, 0]))
+    for i in range(v.shape[0]):
+        r = np.sqrt(out[i, 0] ** 2 + out[i, 1] ** 2 + out[i, 2] ** 2)
+        if r > 0.0:
+            out[i, 0] /= r
+            out[i, 1] /= r
+            out[i, 2] /= r
+    return vol / 6.0
+
+
+@njit(cache=True)
+def nearest_heights(points, x, n, candidates, nearest, height):
+    """For each point, the nearest of its candidate skin vertices (``nearest``) and how far the
+    point lies above the skin there, along that vertex's normal (``height``: > 0 outside)."""
+    for p in range(points.shape[0]):
+        best = -1
+        bd = np.inf
+        for j in range(candidates.shape[1]):
+            s = candidates[p, j]
+            d = (points[p, 0] - x[s, 0]) ** 2 + (points[p, 1] - x[s, 1]) ** 2 + (points[p, 2] - x[s, 2]) ** 2
+            if d < bd:
+                bd = d
+                best = s
+        if best < 0:  # a non-finite point: it pushes nothing
+            best = candidates[p, 0]
+            nearest[p] = best
+            height[p] = -np.inf
+            continue
+        nearest[p] = best
+        height[p] = (n[best, 0] * (points[p, 0] - x[best, 0]) + n[best, 1] * (points[p, 1] - x[best, 1])
+                     + n[best, 2] * (points[p, 2] - x[best, 2]))
+
+
+@njit(cache=True)
+def push_need(nearest, height, target, ring_ptr, ring_idx, need):
+    """How far each skin vertex must move outward (``need``, zeroed here): over every point
+    less deep than its ``target``, the shortfall, at its nearest vertex and that vertex's ring
+    of neighbours (a point lies under the triangles around its nearest vertex)."""
+    need[:] = 0.0
+    for p in range(nearest.shape[0]):
+        d = height[p] + target[p]
+        if d > 0.0:
+            s = nearest[p]
+            if d > need[s]:
+                need[s] = d
+    spread = need.copy()
+    for s in range(need.shape[0]):
+        d = need[s]
+        if d > 0.0:
+            for k in range(ring_ptr[s], ring_ptr[s + 1]):
+                t = ring_idx[k]
+                if d > spread[t]:
+                    spread[t] = d
+    need[:] = spread
+
+
+@njit(cache=True)
+def relax(need, ring_ptr, ring_idx, iterations, out):
+    """Uniform Laplacian smoothing of the outward offsets, each held at least at ``need``
+    (sticky): ``iterations`` passes of ``out = max(need, mean of the neighbours' out)``."""
+    out[:] = need
+    tmp = need.copy()
+    for _ in range(iterations):
+        for s in range(need.shape[0]):
+            a, b = ring_ptr[s], ring_ptr[s + 1]
+            acc = 0.0
+            for k in range(a, b):
+                acc += out[ring_idx[k]]
+            m = acc / (b - a) if b > a else 0.0
+            tmp[s] = need[s] if need[s] > m else m
+        out[:] = tmp
+
+
+@njit(cache=True)
+def count_outside(points, y, n, nearest, allowed):
+    """How many points lie above the skin ``y`` (along their nearest vertex's normal ``n``)
+    by more than ``allowed``."""
+    c = 0
+    for p in range(points.shape[0]):
+        s = nearest[p]
+        h = (n[s, 0] * (points[p, 0] - y[s, 0]) + n[s, 1] * (points[p, 1] - y[s, 1])
+             + n[s, 2] * (points[p, 2] - y[s, 2]))
+        if h > allowed[p]:
+            c += 1
+    return c

@@ -1,0 +1,208 @@
+"""The skin stage (scope FRAME, after contact): the run's skin (``axdf run --skin``, a job's
+``skin:``; :mod:`axdf_cli.specs.skin`) worn over the muscles and bones, frame by frame.
+
+Each frame, in order:
+
+1. **skinning**: linear blend of the skin's rest mesh by its bones' world transforms relative
+   to rest (the bones :func:`~axdf_cli.model.skeleton.forward_kinematics` gives the chunk);
+2. **push**: every candidate point (a muscle or bone mesh vertex within ``tol.SKIN_REACH`` of
+   the rest skin, built once by :meth:`SkinStage.start`) is measured against the nearest of
+   its ``tol.SKIN_CANDIDATES`` nearest rest skin vertices, along that vertex's skinned normal;
+   where it lies less deep under the skin than its target (its local fat thickness; for a muscle
+   vertex, its depth at rest where that is shallower: the rest skin is worn as fitted; a bone
+   vertex, at least inside),
+   the skin vertex is pushed outward by the difference, and so is its ring of neighbours (a
+   point lies under the triangles around its nearest vertex, not under the vertex alone);
+3. **relax**: ``tol.SKIN_RELAX_ITERATIONS`` passes of uniform Laplacian smoothing of the
+   outward offsets, each offset held at least at its push (sticky), so that the pushes become
+   smooth bulges and the rest of the skin slides with them.
+
+The kernels are :mod:`axdf_cli.model.skin`'s. Each frame is computed alone (a loop over the
+chunk's frames; the kernels loop over vertices in a fixed order), so a frame's skin is the same bytes whichever frames
+share its chunk: ``--jobs``, ``--resume`` and ``--frames`` subsets agree. The stage leaves
+``chunk.skin`` (:class:`SkinFrames`: positions, normals and per-frame measures) for the sinks
+(``meshes/skin/``, ``skin.csv``); it changes no muscle.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.spatial import cKDTree
+
+from axdf_cli import tolerances as tol
+from axdf_cli.model import skin as kernels
+from axdf_cli.model.skeleton import forward_kinematics
+from axdf_cli.pipeline.stages import Scope
+
+#: The skin's name among a run's meshes (``meshes/skin/``, ``skin.csv``); no muscle may have it.
+SKIN_NAME = "skin"
+#: skin.csv's numeric columns: the skin's volume (m^3) and its ratio to the skin's as the stage
+#: wears it at the rest pose (the rest mesh pushed over the bones' vertices outside it); the
+#: share of every muscle vertex that lies outside the skin (measured along the skinned normal of
+#: its nearest candidate skin vertex, after the push); the largest outward push (m).
+SKIN_COLUMNS = ("volume", "volume_ratio", "outside", "push")
+#: The run's table of the skin's measures: a row per frame.
+SKIN_CSV = "skin.csv"
+
+
+def skin_of(plan):
+    """The run's skin (:class:`~axdf_cli.specs.skin.Skin`), or None when it has none."""
+    return next((s.skin for s in plan.stages if isinstance(s, SkinStage)), None)
+
+
+def skin_csv(frames, rows: np.ndarray) -> bytes:
+    """skin.csv: a row per frame, numbers to 9 significant digits (-0 written 0)."""
+    fmt = "%d" + ",%.9g" * len(SKIN_COLUMNS) + "\n"
+    out = [",".join(("frame",) + SKIN_COLUMNS) + "\n"]
+    out += [fmt % (f, *r) for f, r in zip(np.asarray(frames).tolist(), (rows + 0.0).tolist())]
+    return "".join(out).encode()
+
+
+@dataclass
+class SkinFrames:
+    """The skin over a chunk's frames: positions and normals (C, V, 3) float32, measures (C,
+    len(SKIN_COLUMNS)) float64."""
+
+    positions: np.ndarray
+    normals: np.ndarray
+    stats: np.ndarray
+
+
+@dataclass
+class SkinModel:
+    """What the stage computes once (:meth:`SkinStage.start`): the skin's rest mesh and
+    weights, its 1-ring, and the candidate points with their skin vertices and targets."""
+
+    rest: np.ndarray  # (V, 3) rest vertices
+    faces: np.ndarray  # (F, 3)
+    weights: np.ndarray  # (V, K) dense
+    bones: np.ndarray  # (K,) skeleton bone index of each weight column
+    inv_rest: np.ndarray  # (K, 4, 4) the bones' rest world transforms, inverted
+    ring_ptr: np.ndarray  # CSR of the 1-ring: neighbours of vertex v are ring_idx[ring_ptr[v]:ring_ptr[v+1]]
+    ring_idx: np.ndarray
+    muscle_points: np.ndarray  # (Nm,) candidate muscle vertices, indices into the muscles' vertices concatenated
+    bone_points: list  # [(bone index, (Nb, 3) local vertices)] candidate bone vertices
+    candidates: np.ndarray  # (Nm + sum Nb, k) skin vertices each candidate is measured against
+    target: np.ndarray  # (Nm + sum Nb,) required depth under the skin (m; < 0: above it, as at rest)
+    n_muscle_vertices: int
+    rest_volume: float
+
+
+def ring(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The mesh's 1-ring as CSR (indptr, indices), neighbours sorted."""
+    i = np.concatenate([faces[:, 0], faces[:, 1], faces[:, 2], faces[:, 1], faces[:, 2], faces[:, 0]])
+    j = np.concatenate([faces[:, 1], faces[:, 2], faces[:, 0], faces[:, 0], faces[:, 1], faces[:, 2]])
+    adj = sp.csr_matrix((np.ones(len(i)), (i, j)), shape=(n, n))
+    adj.sum_duplicates()
+    adj.sort_indices()
+    return adj.indptr.astype(np.int64), adj.indices.astype(np.int64)
+
+
+def build(skin, plan) -> SkinModel:
+    """The stage's model: the skin's 1-ring, and the candidate points (muscle and bone
+    vertices near the rest skin) with their nearest rest skin vertices and target depths."""
+    skel = plan.pose.skeleton
+    rest_world = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
+    bones = np.array([skel.bone_index[b] for b in skin.bones], dtype=np.int64)
+    faces = np.ascontiguousarray(skin.faces, dtype=np.int64)
+    v = np.ascontiguousarray(skin.vertices, dtype=np.float64)
+    ptr, idx = ring(faces, len(v))
+    normals = np.empty_like(v)
+    kernels.normals_volume(v, faces, normals)
+    tree = cKDTree(v)
+    k = min(tol.SKIN_CANDIDATES, len(v))
+
+    muscle = np.concatenate([m.rest_vertices.astype(np.float64) for m in plan.models]) if plan.models \
+        else np.zeros((0, 3))
+    reach = tol.SKIN_REACH + float(skin.fat.max(initial=0.0))
+    near = np.isfinite(tree.query(muscle, k=1, distance_upper_bound=reach)[0]) if len(muscle) else \
+        np.zeros(0, bool)
+    muscle_points = np.flatnonzero(near)
+    pts = [muscle[muscle_points]]
+    bone_points = []
+    weighed = set(bones.tolist())  # a bone the skin does not wear (gait2392's ground) is left out
+    for b, (bv, _, _) in sorted(plan.bone_meshes.items()):
+        if b not in weighed:
+            continue
+        world = np.asarray(bv, dtype=np.float64) @ rest_world[b, :3, :3].T + rest_world[b, :3, 3]
+        keep = np.isfinite(tree.query(world, k=1, distance_upper_bound=reach)[0])
+        if keep.any():
+            bone_points.append((int(b), np.asarray(bv, dtype=np.float64)[keep]))
+            pts.append(world[keep])
+    p = np.ascontiguousarray(np.concatenate(pts))
+    cand = np.asarray(tree.query(p, k=k)[1], dtype=np.int64).reshape(len(p), k) if len(p) else np.zeros((0, k), np.int64)
+    nearest, height = np.empty(len(p), np.int64), np.empty(len(p))
+    kernels.nearest_heights(p, v, normals, cand, nearest, height)
+    target = np.minimum(skin.fat[nearest], -height)  # the fat, or the rest depth where shallower
+    nm = len(muscle_points)  # bones at least inside: the rest skin is pushed out over muscles only,
+    target[nm:] = np.maximum(target[nm:], 0.0)  # and leaves a skull or a heel partly outside it (docs/SKIN.md)
+    model = SkinModel(v, faces, np.ascontiguousarray(skin.weights, dtype=np.float64), bones,
+                      np.linalg.inv(rest_world[bones]), ptr, idx, muscle_points, bone_points, cand, target,
+                      int(len(muscle)), 1.0)
+    model.rest_volume = float(skin_frame(model, rest_world, p)[2][0])  # the skin as worn at rest
+    return model
+
+
+def skin_frame(model: SkinModel, world: np.ndarray, points: np.ndarray) -> tuple:
+    """One frame: the skin skinned by ``world`` (B, 4, 4), pushed over ``points`` (the
+    candidates' world positions, (N, 3)) and relaxed → (positions (V, 3), normals (V, 3),
+    measures (len(SKIN_COLUMNS),) with the outside share still to divide)."""
+    rel = np.ascontiguousarray((world[model.bones] @ model.inv_rest)[:, :3, :])  # (K, 3, 4)
+    nv = len(model.rest)
+    x, n = np.empty((nv, 3)), np.empty((nv, 3))
+    kernels.blend(model.weights, rel, model.rest, x)
+    kernels.normals_volume(x, model.faces, n)
+    nearest, height = np.empty(len(points), np.int64), np.empty(len(points))
+    kernels.nearest_heights(points, x, n, model.candidates, nearest, height)
+    need, offset = np.empty(nv), np.empty(nv)
+    kernels.push_need(nearest, height, model.target, model.ring_ptr, model.ring_idx, need)
+    kernels.relax(need, model.ring_ptr, model.ring_idx, tol.SKIN_RELAX_ITERATIONS, offset)
+    y = x + n * offset[:, None]
+    ny = np.empty_like(y)
+    vol = kernels.normals_volume(y, model.faces, ny)
+    nm = len(model.muscle_points)
+    allowed = np.maximum(-model.target[:nm], 0.0)
+    outside = kernels.count_outside(points[:nm], y, n, nearest[:nm], allowed)
+    return y, ny, np.array([vol, vol / model.rest_volume, float(outside), float(offset.max(initial=0.0))])
+
+
+class SkinStage:
+    """The skin stage (module doc): built by the plan when the run has a skin (it is not one
+    of :data:`~axdf_cli.pipeline.stages.STAGES`, which are switched on and off by name)."""
+
+    name = "skin"
+    scope = Scope.FRAME
+
+    def __init__(self, skin):
+        self.skin = skin
+
+    @property
+    def settings(self) -> dict:
+        return {"skin": self.skin.name, "skeleton": self.skin.skeleton, "vertices": int(len(self.skin.vertices)),
+                "reach": tol.SKIN_REACH, "candidates": tol.SKIN_CANDIDATES,
+                "relax": tol.SKIN_RELAX_ITERATIONS}
+
+    def start(self, plan) -> SkinModel:
+        return build(self.skin, plan)
+
+    def __call__(self, state: SkinModel, chunk):
+        nf = len(chunk.frames)
+        nv = len(state.rest)
+        pos = np.empty((nf, nv, 3), np.float32)
+        nrm = np.empty((nf, nv, 3), np.float32)
+        stats = np.zeros((nf, len(SKIN_COLUMNS)))
+        js = sorted(chunk.results)
+        for i in range(nf):
+            everything = np.concatenate([chunk.results[j].vertices[i] for j in js]) if js else np.zeros((0, 3))
+            pts = [everything[state.muscle_points]]
+            for b, local in state.bone_points:
+                w = chunk.world[i, b]
+                pts.append(local @ w[:3, :3].T + w[:3, 3])
+            y, ny, st = skin_frame(state, chunk.world[i], np.ascontiguousarray(np.concatenate(pts)))
+            pos[i], nrm[i] = y, ny
+            st[2] /= max(state.n_muscle_vertices, 1)
+            stats[i] = st
+        chunk.skin = SkinFrames(pos, nrm, stats)
+        return state, chunk

@@ -1,0 +1,141 @@
+"""The skin stage of ``axdf run --skin`` (issue 36, part 3), in process, on the shipped walk
+with a few muscles of the packed gait2392 library round the left knee (frames 20..25: the
+knee flexed ~60°) and a skin made by ``axdf skin --push``: the run writes meshes/skin and
+skin.csv; the muscle vertices lie inside the skin (libigl's winding number) and its volume
+stays near the rest skin's; ``--frames`` subsets and ``--jobs 2`` give the same bytes; a bad
+``skin:`` key, a skin whose bones the skeleton lacks, and ``--resume`` with a changed skin file
+are refused (exit 2, with the position)."""
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from axdf_cli.formats import load_triangles_and_bytes
+from conftest import REPO_ROOT, all_files, run_main
+
+POSE = REPO_ROOT / "poses" / "gait2392_walk.yaml"
+PACKED = REPO_ROOT / "muscles" / "gait2392_packed"
+KNEE = ("rect_fem_l", "vas_lat_l", "vas_med_l", "vas_int_l", "med_gas_l", "lat_gas_l", "bifemlh_l", "semiten_l")
+FRAMES = "20:25"
+
+
+def muscles() -> list[str]:
+    return [str(PACKED / f"{m}.yaml") for m in KNEE]
+
+
+@pytest.fixture(scope="module")
+def skin(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("skin") / "gait2392"
+    from axdf_cli.cli.main import main
+
+    assert main(["skin", "--skeleton", str(REPO_ROOT / "poses" / "skeletons" / "gait2392.yaml"), "--muscles",
+                 str(PACKED), "--push", "--out", str(out), "--quiet"]) == 0
+    return out / "skin.yaml"
+
+
+def run(out: Path, skin: Path, *extra, frames: str = FRAMES) -> list:
+    return ["run", "--pose", POSE, "--muscles", *muscles(), "--skin", skin, "--frames", frames, "--out", out,
+            "--quiet", *extra]
+
+
+@pytest.fixture(scope="module")
+def whole(skin, tmp_path_factory) -> Path:
+    from axdf_cli.cli.main import main
+
+    out = tmp_path_factory.mktemp("run") / "whole"
+    assert main([str(a) for a in run(out, skin)]) == 0
+    return out
+
+
+def test_the_run_writes_the_skin(whole, skin):
+    from axdf_cli.specs.skin import load_skin
+
+    manifest = json.loads((whole / "manifest.json").read_text())
+    for f in range(20, 26):
+        rel = f"meshes/skin/skin_{f:04d}.ply"
+        assert rel in manifest["files"] and (whole / rel).is_file()
+    (v, _, faces), _ = load_triangles_and_bytes(whole / "meshes/skin/skin_0023.ply")
+    rest = load_skin(skin)
+    assert v.shape == rest.vertices.shape and np.array_equal(faces, rest.faces)
+    assert any(k.endswith("skin.yaml") for k in manifest["inputs"])
+    assert any(k.endswith("skin_weights.npz") for k in manifest["inputs"])
+    assert [s["name"] for s in manifest["settings"]["stages"]][-1] == "skin"
+    rows = (whole / "skin.csv").read_text().splitlines()
+    assert rows[0] == "frame,volume,volume_ratio,outside,push" and len(rows) == 7
+    assert "skin.csv" in manifest["files"]
+
+
+def test_muscles_inside_the_skin_and_volume_kept(whole, skin):
+    import igl
+
+    rows = np.loadtxt(whole / "skin.csv", delimiter=",", skiprows=1)  # frame, volume, ratio, outside, push
+    for k, f in enumerate(range(20, 26)):
+        (v, _, faces), _ = load_triangles_and_bytes(whole / f"meshes/skin/skin_{f:04d}.ply")
+        v = v.astype(np.float64)
+        pts = np.concatenate([load_triangles_and_bytes(whole / f"meshes/{m}/{m}_{f:04d}.ply")[0][0] for m in KNEE])
+        w = igl.fast_winding_number(v, faces.astype(np.int64), pts.astype(np.float64))
+        assert (w < 0.5).mean() <= 0.005, f"frame {f}: {(w < 0.5).mean():.2%} of the muscle vertices outside the skin"
+        assert rows[k, 0] == f and _volume(v, faces) == pytest.approx(rows[k, 1], rel=1e-5)
+    assert np.all(np.abs(rows[:, 2] - 1) < 0.03) and np.all(rows[:, 3] <= 0.005)
+    assert (rows[:, 4] > 0).all()  # the flexed knee's muscles push the skin out
+
+
+def test_same_bytes_for_a_subset_and_jobs(whole, skin, tmp_path, capsys):
+    rc, _, err = run_main(run(tmp_path / "sub", skin, frames="23:25"), capsys)
+    assert rc == 0, err
+    a, b = all_files(whole), all_files(tmp_path / "sub")
+    for f in (23, 24, 25):
+        rel = f"meshes/skin/skin_{f:04d}.ply"
+        assert a[rel] == b[rel], rel
+    rc, _, err = run_main(run(tmp_path / "jobs", skin, "--jobs", "2"), capsys)
+    assert rc == 0, err
+    c = all_files(tmp_path / "jobs")
+    assert {k: v for k, v in c.items() if k != "manifest.json"} == {k: v for k, v in a.items() if k != "manifest.json"}
+
+
+def _volume(v, f) -> float:
+    a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
+    return float(np.einsum("ij,ij->", a, np.cross(b, c)) / 6.0)
+
+
+def _copy_skin(skin: Path, to: Path) -> Path:
+    shutil.copytree(skin.parent, to)
+    return to / "skin.yaml"
+
+
+def test_a_bad_skin_key_is_refused_with_its_position(skin, tmp_path, capsys):
+    job = tmp_path / "job.yaml"
+    job.write_text(f"muscles: {muscles()[0]}\npose: {POSE}\nout: out\nskin: nothing_here.yaml\n")
+    rc, _, err = run_main(["run", job, "--allow-outside"], capsys)
+    assert rc == 2 and f"{job}:4:7:" in err and "nothing_here.yaml" in err and "Traceback" not in err
+    assert not (tmp_path / "out").exists()
+    job.write_text(f"muscles: {muscles()[0]}\npose: {POSE}\nout: out\nskin: [1, 2]\n")
+    rc, _, err = run_main(["run", job, "--allow-outside"], capsys)
+    assert rc == 2 and f"{job}:4:7:" in err and "skin" in err
+
+
+def test_a_skin_on_bones_the_skeleton_lacks_is_refused(skin, tmp_path, capsys):
+    path = _copy_skin(skin, tmp_path / "s")
+    w = dict(np.load(path.parent / "skin_weights.npz"))
+    w["bones"] = np.array([("toes_x" if b == "toes_l" else str(b)) for b in w["bones"]])
+    np.savez(path.parent / "skin_weights.npz", **w)
+    rc, _, err = run_main(run(tmp_path / "out", path), capsys)
+    line = 1 + next(i for i, t in enumerate(path.read_text().splitlines()) if t.startswith("weights:"))
+    assert rc == 2 and f"{path}:{line}:" in err and "toes_x" in err, err
+    assert not (tmp_path / "out").exists()
+
+
+def test_resume_refuses_a_changed_skin(skin, tmp_path, capsys):
+    path = _copy_skin(skin, tmp_path / "s")
+    out = tmp_path / "out"
+    rc, _, err = run_main(run(out, path, frames="20:21"), capsys)
+    assert rc == 0, err
+    fat = dict(np.load(path.parent / "skin_fat.npz"))
+    fat["fat"] = fat["fat"] * 1.5
+    np.savez(path.parent / "skin_fat.npz", **fat)
+    rc, _, err = run_main(run(out, path, "--resume", frames="20:21"), capsys)
+    assert rc == 2 and "skin_fat.npz" in err and "--resume would mix two runs" in err, err
