@@ -59,3 +59,40 @@ def test_bad_flag_exits_2(tmp_path, axdf, capsys):
     assert axdf(["render", str(tmp_path), "--size", "big"]) == 2
     assert "--size" in capsys.readouterr().err
     assert axdf(["render", str(tmp_path / "nope")]) == 2
+
+
+def test_a_run_with_a_skin_renders_it_and_its_under_skin_pass(tmp_path, capsys):
+    """``axdf run --skin ... --render --skin-view opaque``: the frames' id pass holds the skin
+    (camera.json names its id) and the EXR carries under.id / under.Z naming muscles of the run
+    under it; ``axdf render RUN --skin-view see-through`` reads the skin back from meshes/skin/
+    and draws the muscles' ids under it (no under pass); ``--skin-view off`` is the picture of
+    the same run drawn as if it had no skin."""
+    from conftest import REPO_ROOT, run_main
+
+    skel = REPO_ROOT / "poses" / "skeletons" / "gait2392.yaml"
+    packed = REPO_ROOT / "muscles" / "gait2392_packed"
+    knee = [str(packed / f"{m}_l.yaml") for m in ("rect_fem", "vas_lat", "vas_med", "med_gas", "bifemlh")]
+    assert run_main(["skin", "--skeleton", str(skel), "--out", str(tmp_path / "skin"), "-q"], capsys)[0] == 0
+    run = tmp_path / "run"
+    rc, _, err = run_main(["run", "--pose", str(REPO_ROOT / "poses" / "gait2392_walk.yaml"), "--muscles", *knee,
+                           "--skin", str(tmp_path / "skin" / "skin.yaml"), "--frames", "22", "--out", str(run),
+                           "--render", "--size", "96x128", "--view", "front", "--skin-view", "opaque", "-q"], capsys)
+    assert rc == 0, err
+    cam = json.loads((run / "camera.json").read_text())
+    skin_ids = [int(k) for k, v in cam["ids"].items() if v["kind"] == "skin"]
+    muscle_ids = {int(k) for k, v in cam["ids"].items() if v["kind"] == "muscle"}
+    assert len(skin_ids) == 1 and len(muscle_ids) == 5
+    exr = read_exr(run / "frames" / "0022.exr")
+    skin = exr["id"] == skin_ids[0]
+    assert skin.sum() > 1000
+    named = exr["under.id"][skin]
+    assert set(np.unique(named[named > 0]).tolist()) <= muscle_ids and (named > 0).sum() > 100
+    assert np.all(exr["under.id"][~skin] == 0) and np.all(exr["under.Z"][skin][named > 0] > 0)
+    see = tmp_path / "see"
+    assert run_main(["render", str(run), "--out", str(see), "--skin-view", "see-through", "-q"], capsys)[0] == 0
+    ex2 = read_exr(see / "frames" / "0022.exr")
+    assert "under.id" not in ex2 and not np.isin(ex2["id"], skin_ids).any() and np.isin(ex2["id"], list(muscle_ids)).any()
+    off = tmp_path / "off"
+    assert run_main(["render", str(run), "--out", str(off), "--skin-view", "off", "-q"], capsys)[0] == 0
+    ex3 = read_exr(off / "frames" / "0022.exr")
+    assert np.array_equal(ex3["id"], ex2["id"]) and not np.array_equal(ex3["R"], ex2["R"])
