@@ -41,9 +41,12 @@ so figures are noisy and only ratios taken in the same run are compared with tar
 12. jiggle: ``evaluate_plan`` of the gait2392 walk (92 muscles, the whole trial; 54 jiggle)
    with and without the jiggle stage (timed in turn, medians of 5), µs per muscle-frame, and
    the stage alone; and a ``--frames`` subset's extra cost (frames not selected are advanced too).
+13. skin: the skin stage (``axdf run --skin``) over the gait2392 walk and the CMU walk onto
+   gait2392 (packed muscles, contact on): its ms per frame against the muscles plus contact,
+   measured side by side, the skin's volume against rest, muscle vertices outside it.
 
 ``--only retarget`` prints just the retargeting rows, ``--only jiggle`` the jiggle rows,
-``--only contact`` the contact rows,
+``--only contact`` the contact rows, ``--only skin`` the skin stage's,
 ``--only compiled`` the compiled pass's (a whole run of the walk stretched to 1051 frames
 at 48x24 into npz against tofile of the same bytes; 92 muscles x 1 frame; a chunk's outputs
 into fresh memory against steady state; numba's first-run compile cost).
@@ -1294,6 +1297,64 @@ def contact_rows(table: "Table", quick: bool, tmp: Path | None = None) -> None:
                   f"{(step1[1:] > POP_RATIO * step0[1:] + 5e-4).mean() * 100:.2f}%", f"none {_mark(pops == 0)}")
 
 
+def skin_pass(plan) -> tuple[float, np.ndarray]:
+    """Evaluate every frame of ``plan`` with its stages: wall time (s) and, where the plan has
+    a skin, its measures per frame (F, len(SKIN_COLUMNS)); zeros without one."""
+    from axdf_cli.pipeline.evaluate import evaluate_plan
+    from axdf_cli.pipeline.skin_stage import SKIN_COLUMNS
+
+    out = np.zeros((len(plan.frames), len(SKIN_COLUMNS)))
+    t0 = time.perf_counter()
+    for chunk, results in evaluate_plan(plan):
+        for _ in results:
+            pass
+        if chunk.skin is not None:
+            out[np.arange(len(plan.frames))[chunk.rows]] = chunk.skin.stats
+    return time.perf_counter() - t0, out
+
+
+def skin_rows(table: "Table", quick: bool, tmp: Path) -> None:
+    """The skin stage (``axdf run --skin``) over the shipped gait2392 walk and the CMU walk
+    retargeted onto gait2392 (packed muscles, contact on), the skin made by ``axdf skin --push``
+    against those muscles: its cost per frame against the muscles' evaluation plus contact,
+    measured side by side, and per frame the skin's volume against its rest volume, the share
+    of muscle vertices outside it, and the largest push."""
+    from axdf_cli.cli.main import main as axdf_main
+    from axdf_cli.pipeline.plan import plan_run
+    from axdf_cli.pipeline.skin_stage import SKIN_COLUMNS
+    from axdf_cli.specs import load_job
+
+    skin_dir = tmp / "skin_gait2392"
+    if axdf_main(["skin", "--skeleton", str(ROOT / "poses" / "skeletons" / "gait2392.yaml"), "--muscles",
+                  str(ROOT / "muscles" / "gait2392_packed"), "--push", "--out", str(skin_dir), "-q"]) != 0:
+        table.section("skin stage: axdf skin failed (no rows)")
+        return
+    skin = str(skin_dir / "skin.yaml")
+    for label, job, frames in (("gait2392 walk", GAIT_JOB, "18:84:6" if quick else None),
+                               ("CMU walk retargeted onto gait2392", CMU_GAIT_JOB, "0:248:24" if quick else None)):
+        if not job.is_file():
+            continue
+        without = plan_run(load_job(job), frames_arg=frames)
+        with_skin = plan_run(load_job(job), frames_arg=frames, skin_arg=skin)
+        skin_pass(dataclasses.replace(with_skin, frames=with_skin.frames[:2]))  # compiled code and the start warm
+        t_base, _ = skin_pass(without)
+        t_skin, m = skin_pass(with_skin)
+        nf = len(without.frames)
+        ms = lambda t: t / nf * 1e3  # noqa: E731
+        cost = (t_skin - t_base) / t_base
+        table.section(f"skin stage ({label}, {nf} frames x {len(without.models)} packed muscles, contact on; "
+                      f"skin: MakeHuman's body fitted by axdf skin --push)")
+        table.add("skin stage per frame", f"{ms(t_skin - t_base):.1f} ms", f"muscles + contact {ms(t_base):.1f} ms",
+                  f"{cost:.2f}x", f"<= 1x {_mark(cost <= 1.0)}")
+        ratio = m[:, SKIN_COLUMNS.index("volume_ratio")]
+        table.add("skin volume against rest (worst frame)", f"{np.abs(ratio - 1).max() * 100:.2f}% off",
+                  f"range {ratio.min():.4f}..{ratio.max():.4f}", "", f"<= 3% {_mark(np.abs(ratio - 1).max() <= 0.03)}")
+        out = m[:, SKIN_COLUMNS.index("outside")]
+        table.add("muscle vertices outside the skin (worst frame)", f"{out.max() * 100:.2f}%",
+                  f"mean {out.mean() * 100:.2f}%", "", f"<= 0.5% {_mark(out.max() <= 0.005)}")
+        table.add("largest push", f"{m[:, SKIN_COLUMNS.index('push')].max() * 1000:.0f} mm")
+
+
 def _mark(ok: bool) -> str:
     return "✓" if ok else "✗"
 
@@ -1391,10 +1452,10 @@ def main(argv=None) -> int:
     ap.add_argument("--long", action="store_true", help=f"also {LONG_FRAMES} frames x all muscles: peak memory")
     ap.add_argument("--profile", action="store_true", help="print the top functions of the slow rows")
     ap.add_argument("--tmp", default=None, help="folder for the written files (default: a new temporary folder)")
-    ap.add_argument("--only", choices=("retarget", "jiggle", "compiled", "contact"), default=None,
+    ap.add_argument("--only", choices=("retarget", "jiggle", "compiled", "contact", "skin"), default=None,
                     help="print only these rows (retarget: the retargeting fit; jiggle: the jiggle stage; "
                          "compiled: the compiled pass, a whole run; contact: the walk and Rajagopal2016 with "
-                         "and without contact)")
+                         "and without contact; skin: the skin stage over the walks)")
     ap.add_argument("--dataset-samples", type=int, default=None, metavar="N",
                     help=f"samples of the data-set rows (default {DATASET_SAMPLES}, 100 with --quick; 0: skip them)")
     ap.add_argument("--markdown", default=None, metavar="PATH",
@@ -1440,6 +1501,14 @@ def main(argv=None) -> int:
         finally:
             shutil.rmtree(tmp, ignore_errors=True)
         return emit(table)
+    if args.only == "skin":
+        table = Table()
+        tmp = Path(tempfile.mkdtemp(prefix="axdf-bench-", dir=args.tmp))
+        try:
+            skin_rows(table, args.quick, tmp)
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)
+        return emit(table, unit=False)
     if args.only == "jiggle":
         table = Table()
         jiggle_rows(table, 3 if args.quick else 5)
@@ -1575,6 +1644,9 @@ def main(argv=None) -> int:
 
         # 11. jiggle
         jiggle_rows(table, 2 * reps - 1)
+
+        # 12. the skin stage
+        skin_rows(table, args.quick, tmp)
 
         # --long
         if args.long:

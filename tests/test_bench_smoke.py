@@ -209,3 +209,25 @@ def test_markdown_option_on_a_table(tmp_path, monkeypatch):
     text = path.read_text(encoding="utf-8")
     assert "`python -m benchmarks.bench --only retarget --quick`" in text
     assert "| fit | 10 fps |  |  |  |" in text
+
+
+def test_skin_pass(repo_root, tmp_path, capsys):
+    """The skin rows' helper on two walk frames of a few packed muscles: a plan with a skin
+    gives each frame's skin measures (volume, its ratio to rest near 1, the share outside),
+    one without gives zeros."""
+    from axdf_cli.pipeline.plan import plan_run
+    from axdf_cli.pipeline.skin_stage import SKIN_COLUMNS
+    from conftest import run_main
+
+    assert run_main(["skin", "--skeleton", str(repo_root / "poses" / "skeletons" / "gait2392.yaml"), "--out",
+                     str(tmp_path / "skin"), "-q"], capsys)[0] == 0
+    muscles = [str(repo_root / "muscles" / "gait2392_packed" / f"{m}.yaml") for m in ("vas_lat_r", "med_gas_r")]
+    pose = str(repo_root / "poses" / "gait2392_walk.yaml")
+    plain = plan_run(None, muscle_args=muscles, pose_arg=pose, out_arg=str(tmp_path / "o"), frames_arg="30:31")
+    skinned = plan_run(None, muscle_args=muscles, pose_arg=pose, out_arg=str(tmp_path / "o"), frames_arg="30:31",
+                       skin_arg=str(tmp_path / "skin" / "skin.yaml"))
+    t0, m0 = bench.skin_pass(plain)
+    t1, m1 = bench.skin_pass(skinned)
+    assert t0 > 0 and t1 > 0 and m1.shape == (2, len(SKIN_COLUMNS)) and not m0.any()
+    ratio = m1[:, SKIN_COLUMNS.index("volume_ratio")]
+    assert np.all(np.abs(ratio - 1) < 0.2) and np.all(m1[:, SKIN_COLUMNS.index("volume")] > 0.03)
