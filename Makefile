@@ -33,7 +33,7 @@ BVH    := $(DATA)/bvh/cmu_131_01_walk_scaled.bvh
 MYO    := out/myo-sim
 MJCF_MESHES := --max-faces 2000 --mesh-edge 0.004
 
-.PHONY: all setup setup-test sysdeps demo dataset test test-fast bench golden clean import import-mjcf pack pack-check lock blender
+.PHONY: all setup setup-test sysdeps demo dataset test test-fast bench golden clean import import-mjcf pack pack-check lock blender skin
 
 all: demo
 
@@ -156,6 +156,7 @@ import: $(STAMP)
 	  --pose-name gait2392_walk --palette anatomical --out muscles/gait2392 --muscles-out muscles/gait2392 \
 	  --skeleton-out poses/skeletons/gait2392.yaml --pose-out poses/gait2392_walk.yaml --overwrite
 	$(MAKE) --no-print-directory pack
+	$(MAKE) --no-print-directory skin
 	$(BIN)/axdf import bvh $(BVH) --name cmu_131_01 --pose-name cmu_131_01_walk --step 4 \
 	  --out poses/imports/cmu_131_01 --skeleton-out poses/skeletons/cmu_131_01.yaml \
 	  --pose-out poses/cmu_131_01_walk.yaml --overwrite
@@ -164,6 +165,12 @@ import: $(STAMP)
 	$(BIN)/axdf retarget $(BVH) --onto poses/skeletons/gait2392.yaml --map poses/maps/cmu_to_gait2392.yaml --step 4 \
 	  --name cmu_131_01_walk_gait2392 --out poses/retargeted/cmu_131_01_walk_gait2392 --overwrite
 	$(MAKE) --no-print-directory import-mjcf
+
+# MakeHuman's CC0 body fitted to gait2392 and pushed out over its packed muscles at rest:
+# skins/gait2392/ (the skin of poses/jobs/gait2392_walk_skin.yaml; docs/SKIN.md). Seconds.
+skin: $(STAMP)
+	$(BIN)/axdf skin --skeleton poses/skeletons/gait2392.yaml --muscles muscles/gait2392_packed --push \
+	  --out skins/gait2392 --overwrite
 
 # gait2392's muscles packed at the rest pose and polished over 16 frames of the walk (axdf pack
 # --pose: no overlap, volumes kept, section outlines): muscles/gait2392_packed/ (PACK.md), the

@@ -145,3 +145,28 @@ def test_refusals_write_nothing(tmp_path, capsys, monkeypatch):
     rc, _, err = run_main(["skin", "--skeleton", SKELETONS / "gait2392.yaml", "--out", out], capsys)
     assert rc == 2 and "the body assets are missing" in err and "extract_makehuman" in err and not out.exists()
     assert "Traceback" not in err
+
+
+def test_the_shipped_skin_and_its_walk_job_validate(capsys, tmp_path):
+    """skins/gait2392 (make skin) is a valid skin of gait2392; poses/jobs/gait2392_walk_skin.yaml
+    validates as a job (its skin: key names the skin it wears, not a skin file); the same job
+    with a skin: that does not exist is refused at the key's position."""
+    from conftest import REPO_ROOT, run_main
+
+    rc, out, err = run_main(["validate", str(REPO_ROOT / "skins" / "gait2392" / "skin.yaml")], capsys)
+    assert rc == 0 and "13380 vertices on 10 bones of gait2392" in out, err
+    job = REPO_ROOT / "poses" / "jobs" / "gait2392_walk_skin.yaml"
+    rc, out, err = run_main(["validate", str(job)], capsys)
+    assert rc == 0 and "(job: 92 muscles x 67 frames)" in out, err
+    text = job.read_text().replace("skin: ../../skins/gait2392/skin.yaml", "skin: ../../skins/nobody/skin.yaml")
+    jobs = tmp_path / "poses" / "jobs"  # the job's relative paths, beside copies of what they name
+    jobs.mkdir(parents=True)
+    (tmp_path / "muscles").mkdir()
+    shutil.copytree(REPO_ROOT / "muscles" / "gait2392_packed", tmp_path / "muscles" / "gait2392_packed")
+    shutil.copy(REPO_ROOT / "poses" / "gait2392_walk.yaml", tmp_path / "poses")
+    shutil.copytree(REPO_ROOT / "poses" / "skeletons", tmp_path / "poses" / "skeletons")
+    bad = jobs / "_test_missing_skin.yaml"
+    bad.write_text(text)
+    rc, out, err = run_main(["validate", str(bad), "--allow-outside"], capsys)
+    line = text.splitlines().index("skin: ../../skins/nobody/skin.yaml") + 1
+    assert rc == 2 and f"_test_missing_skin.yaml:{line}:" in err and "Traceback" not in err, err

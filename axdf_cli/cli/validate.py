@@ -54,7 +54,8 @@ def validate_file(path: Path, policy, args) -> tuple[str, str | None, list[str]]
         ctx = build_context(path, policy=policy)
         return (f"data set {ctx.spec.name}: {len(ctx.sequences)} sequences, {len(ctx.muscles)} muscles, "
                 f"{len(ctx.spec.views)} view(s)"), "dataset", []
-    if isinstance(doc, dict) and "skin" in doc:  # (it also names a skeleton: look first)
+    if isinstance(doc, dict) and "skin" in doc and kind != "job":  # (it also names a skeleton: look first;
+        # a job's skin: names the skin it wears)
         from axdf_cli.specs.skin import load_skin
 
         k = load_skin(path, policy=policy)
