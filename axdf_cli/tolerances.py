@@ -408,6 +408,11 @@ SKIN_CANDIDATES = 8
 # A candidate is kept at least its local fat thickness under the skin, or as deep as the rest
 # skin holds it where that is shallower (the fitted rest skin clears the muscles by
 # SKIN_PUSH_CLEARANCE only; asking for the full fat there would inflate it at rest).
+# A candidate more than SKIN_MAX_HEIGHT metres above its nearest skin vertex (along its normal)
+# pushes nothing: measured on the walk, the muscle vertices truly outside the skinned mesh
+# (winding number) lie at most 28 mm above it, while those 3-9 cm "above" lie in the crease
+# between the thighs, inside the body, their nearest vertex on the other leg.
+SKIN_MAX_HEIGHT = 0.035
 # Relaxation after the push: passes of neighbour averaging of the outward offsets, each offset
 # held at least at its push (sticky); about one edge (~1-2 cm) of spread per pass, so a push
 # becomes a smooth bulge, not a spike.

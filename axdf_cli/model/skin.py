@@ -87,14 +87,16 @@ def nearest_heights(points, x, n, candidates, nearest, height):
 
 
 @njit(cache=True)
-def push_need(nearest, height, target, ring_ptr, ring_idx, need):
+def push_need(nearest, height, target, max_height, ring_ptr, ring_idx, need):
     """How far each skin vertex must move outward (``need``, zeroed here): over every point
     less deep than its ``target``, the shortfall, at its nearest vertex and that vertex's ring
-    of neighbours (a point lies under the triangles around its nearest vertex)."""
+    of neighbours (a point lies under the triangles around its nearest vertex). A point higher
+    than ``max_height`` above its nearest vertex pushes nothing: it lies in a crease, where the
+    nearest vertex's normal does not say whether it is inside."""
     need[:] = 0.0
     for p in range(nearest.shape[0]):
         d = height[p] + target[p]
-        if d > 0.0:
+        if d > 0.0 and height[p] <= max_height:
             s = nearest[p]
             if d > need[s]:
                 need[s] = d

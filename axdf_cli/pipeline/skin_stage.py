@@ -12,7 +12,9 @@ Each frame, in order:
    vertex, its depth at rest where that is shallower: the rest skin is worn as fitted; a bone
    vertex, at least inside),
    the skin vertex is pushed outward by the difference, and so is its ring of neighbours (a
-   point lies under the triangles around its nearest vertex, not under the vertex alone);
+   point lies under the triangles around its nearest vertex, not under the vertex alone). A
+   point more than ``tol.SKIN_MAX_HEIGHT`` above its nearest vertex pushes nothing (a crease:
+   the adductors between the thighs, where the nearest vertex may be on the other leg);
 3. **relax**: ``tol.SKIN_RELAX_ITERATIONS`` passes of uniform Laplacian smoothing of the
    outward offsets, each offset held at least at its push (sticky), so that the pushes become
    smooth bulges and the rest of the skin slides with them.
@@ -157,7 +159,7 @@ def skin_frame(model: SkinModel, world: np.ndarray, points: np.ndarray) -> tuple
     nearest, height = np.empty(len(points), np.int64), np.empty(len(points))
     kernels.nearest_heights(points, x, n, model.candidates, nearest, height)
     need, offset = np.empty(nv), np.empty(nv)
-    kernels.push_need(nearest, height, model.target, model.ring_ptr, model.ring_idx, need)
+    kernels.push_need(nearest, height, model.target, tol.SKIN_MAX_HEIGHT, model.ring_ptr, model.ring_idx, need)
     kernels.relax(need, model.ring_ptr, model.ring_idx, tol.SKIN_RELAX_ITERATIONS, offset)
     y = x + n * offset[:, None]
     ny = np.empty_like(y)
@@ -182,7 +184,7 @@ class SkinStage:
     def settings(self) -> dict:
         return {"skin": self.skin.name, "skeleton": self.skin.skeleton, "vertices": int(len(self.skin.vertices)),
                 "reach": tol.SKIN_REACH, "candidates": tol.SKIN_CANDIDATES,
-                "relax": tol.SKIN_RELAX_ITERATIONS}
+                "max_height": tol.SKIN_MAX_HEIGHT, "relax": tol.SKIN_RELAX_ITERATIONS}
 
     def start(self, plan) -> SkinModel:
         return build(self.skin, plan)
