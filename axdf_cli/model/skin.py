@@ -87,41 +87,61 @@ def nearest_heights(points, x, n, candidates, nearest, height):
 
 
 @njit(cache=True)
-def push_need(nearest, height, target, ring_ptr, ring_idx, need):
-    """How far each skin vertex must move outward (``need``, zeroed here): over every point
-    less deep than its ``target``, the shortfall, at its nearest vertex and that vertex's ring
-    of neighbours (a point lies under the triangles around its nearest vertex)."""
-    need[:] = 0.0
+def push_need(nearest, height, target, rest_depth, max_height, ring_ptr, ring_idx, need):
+    """How far each skin vertex moves along its normal (``need``; NaN: it has no point under
+    it, and is free). Outward, over every point less deep than its ``target``, by the largest
+    shortfall, at its nearest vertex and that vertex's ring of neighbours (a point lies under the
+    triangles around its nearest vertex). Inward, where every point under a vertex lies deeper
+    than at rest (``rest_depth``), by the least of those excesses: the skin follows the muscles
+    in as well as out, and keeps its volume. A point higher than ``max_height`` above its
+    nearest vertex counts for nothing: it lies in a crease, where the nearest vertex's normal
+    does not say whether it is inside."""
+    nv = need.shape[0]
+    out = np.full(nv, -np.inf)
+    inward = np.full(nv, -np.inf)
     for p in range(nearest.shape[0]):
+        if height[p] > max_height:
+            continue
+        s = nearest[p]
         d = height[p] + target[p]
-        if d > 0.0:
-            s = nearest[p]
-            if d > need[s]:
-                need[s] = d
+        if d > out[s]:
+            out[s] = d
+        e = height[p] + rest_depth[p]
+        if e > inward[s]:
+            inward[s] = e
+    for s in range(nv):
+        if out[s] > 0.0:
+            need[s] = out[s]
+        elif inward[s] > -np.inf:
+            need[s] = min(inward[s], 0.0)
+        else:
+            need[s] = np.nan
     spread = need.copy()
-    for s in range(need.shape[0]):
-        d = need[s]
+    for s in range(nv):
+        d = out[s]
         if d > 0.0:
             for k in range(ring_ptr[s], ring_ptr[s + 1]):
                 t = ring_idx[k]
-                if d > spread[t]:
+                if not (spread[t] >= d):  # (NaN: free)
                     spread[t] = d
     need[:] = spread
 
 
 @njit(cache=True)
 def relax(need, ring_ptr, ring_idx, iterations, out):
-    """Uniform Laplacian smoothing of the outward offsets, each held at least at ``need``
-    (sticky): ``iterations`` passes of ``out = max(need, mean of the neighbours' out)``."""
-    out[:] = need
-    tmp = need.copy()
+    """Uniform Laplacian smoothing of the offsets, each held at least at ``need`` (sticky; NaN:
+    free): ``iterations`` passes of ``out = max(need, mean of the neighbours' out)``, from
+    ``need`` (free vertices from 0)."""
+    for s in range(need.shape[0]):
+        out[s] = 0.0 if np.isnan(need[s]) else need[s]
+    tmp = out.copy()
     for _ in range(iterations):
         for s in range(need.shape[0]):
             a, b = ring_ptr[s], ring_ptr[s + 1]
             acc = 0.0
             for k in range(a, b):
                 acc += out[ring_idx[k]]
-            m = acc / (b - a) if b > a else 0.0
+            m = acc / (b - a) if b > a else out[s]
             tmp[s] = need[s] if need[s] > m else m
         out[:] = tmp
 

@@ -12,9 +12,13 @@ Each frame, in order:
    vertex, its depth at rest where that is shallower: the rest skin is worn as fitted; a bone
    vertex, at least inside),
    the skin vertex is pushed outward by the difference, and so is its ring of neighbours (a
-   point lies under the triangles around its nearest vertex, not under the vertex alone);
+   point lies under the triangles around its nearest vertex, not under the vertex alone). A
+   point more than ``tol.SKIN_MAX_HEIGHT`` above its nearest vertex pushes nothing (a crease:
+   the adductors between the thighs, where the nearest vertex may be on the other leg);
+   where every point under a skin vertex lies deeper than at rest, the vertex comes in by the
+   least excess (the skin follows the muscles in as well as out);
 3. **relax**: ``tol.SKIN_RELAX_ITERATIONS`` passes of uniform Laplacian smoothing of the
-   outward offsets, each offset held at least at its push (sticky), so that the pushes become
+   offsets, each held at least at its push (sticky), so that the pushes become
    smooth bulges and the rest of the skin slides with them.
 
 The kernels are :mod:`axdf_cli.model.skin`'s. Each frame is computed alone (a loop over the
@@ -86,6 +90,7 @@ class SkinModel:
     bone_points: list  # [(bone index, (Nb, 3) local vertices)] candidate bone vertices
     candidates: np.ndarray  # (Nm + sum Nb, k) skin vertices each candidate is measured against
     target: np.ndarray  # (Nm + sum Nb,) required depth under the skin (m; < 0: above it, as at rest)
+    rest_depth: np.ndarray  # (Nm + sum Nb,) depth under the rest skin (m)
     n_muscle_vertices: int
     rest_volume: float
 
@@ -140,7 +145,7 @@ def build(skin, plan) -> SkinModel:
     target[nm:] = np.maximum(target[nm:], 0.0)  # and leaves a skull or a heel partly outside it (docs/SKIN.md)
     model = SkinModel(v, faces, np.ascontiguousarray(skin.weights, dtype=np.float64), bones,
                       np.linalg.inv(rest_world[bones]), ptr, idx, muscle_points, bone_points, cand, target,
-                      int(len(muscle)), 1.0)
+                      np.maximum(-height, target), int(len(muscle)), 1.0)
     model.rest_volume = float(skin_frame(model, rest_world, p)[2][0])  # the skin as worn at rest
     return model
 
@@ -157,7 +162,8 @@ def skin_frame(model: SkinModel, world: np.ndarray, points: np.ndarray) -> tuple
     nearest, height = np.empty(len(points), np.int64), np.empty(len(points))
     kernels.nearest_heights(points, x, n, model.candidates, nearest, height)
     need, offset = np.empty(nv), np.empty(nv)
-    kernels.push_need(nearest, height, model.target, model.ring_ptr, model.ring_idx, need)
+    kernels.push_need(nearest, height, model.target, model.rest_depth, tol.SKIN_MAX_HEIGHT, model.ring_ptr,
+                      model.ring_idx, need)
     kernels.relax(need, model.ring_ptr, model.ring_idx, tol.SKIN_RELAX_ITERATIONS, offset)
     y = x + n * offset[:, None]
     ny = np.empty_like(y)
@@ -182,7 +188,7 @@ class SkinStage:
     def settings(self) -> dict:
         return {"skin": self.skin.name, "skeleton": self.skin.skeleton, "vertices": int(len(self.skin.vertices)),
                 "reach": tol.SKIN_REACH, "candidates": tol.SKIN_CANDIDATES,
-                "relax": tol.SKIN_RELAX_ITERATIONS}
+                "max_height": tol.SKIN_MAX_HEIGHT, "relax": tol.SKIN_RELAX_ITERATIONS}
 
     def start(self, plan) -> SkinModel:
         return build(self.skin, plan)
