@@ -473,3 +473,20 @@ FIT_MEASURE_SAMPLES = 20000
 # muscle of a library; the atlas' leg fits at 0.87+ with 8 sections): the mesh is not one belly
 # along one axis (a ring, a branching or C-shaped muscle; docs/FIT.md).
 FIT_WARN_IOU = 0.75
+
+# --- the atlas registered onto a skeleton (axdf_cli/tools/atlas.py; docs/FIT.md "Atlas onto a skeleton")
+# samples per atlas bone for the warp's closest points: enough to follow a tibia's crest, few
+# enough that a thin-plate spline round solves in seconds
+ATLAS_BONE_SAMPLES = 400
+# rounds of closest points + thin-plate spline; the residual stops falling after about 4
+ATLAS_WARP_ROUNDS = 5
+# the thin-plate spline's smoothing (scipy's, in the displacement's units squared per point):
+# chosen by measurement (docs/FIT.md): exact interpolation (0) follows noisy closest points
+# into folds, much more leaves the bones centimetres apart
+ATLAS_WARP_SMOOTHING = 1e-4
+# points per evaluation of the warp (memory: chunk x centres x 8 bytes)
+ATLAS_WARP_CHUNK = 20000
+# the other hip's weight in the landmarks' similarity: it only turns the leg about its long
+# axis (hip, knee and ankle are nearly on a line); at full weight the atlas' narrower pelvis
+# pulls the leg's scale and leaves 2-3 cm at every joint
+ATLAS_OTHER_HIP_WEIGHT = 0.1
