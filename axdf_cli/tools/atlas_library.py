@@ -74,6 +74,7 @@ def split_parts(v: np.ndarray, f: np.ndarray, centres: np.ndarray, spacing: floa
     edges = np.concatenate([[-np.inf], cuts, [np.inf]])
     for k in range(len(centres)):
         field = np.maximum(0.5 - w, np.maximum(edges[k] - proj, proj - edges[k + 1]) / spacing * 0.5)
+        field[np.abs(field) < 1e-9] = 1e-9  # a corner exactly on the surface makes degenerate triangles
         V, F, _ = igl.marching_cubes(field, grid, int(n[0]), int(n[1]), int(n[2]), 0.0)
         parts.append((np.asarray(V, np.float64), np.asarray(F, np.int64)))
     return parts
