@@ -24,7 +24,7 @@ CREDIT = """# gait2392 muscles fitted to the Visible Human Female atlas
 Made by `make atlas` (tools/atlas_library.py; docs/FIT.md, "Atlas onto a skeleton"): the
 atlas' muscles of the {legs} registered onto gait2392's skeleton at rest (landmarks, then a
 thin-plate warp onto the model's bones) and fitted as axis muscles under gait2392's names
-(axdf_cli/data/atlas_gait2392.yaml). The muscles the atlas lacks ({kept}) are copied from
+(axdf_cli/data/atlas_gait2392.yaml). The muscles not fitted (the legs not registered, and what the atlas lacks: {kept}) are copied from
 muscles/gait2392. atlas_report.json holds the registration's residuals and each fit's error.
 
 ## Credit (CC BY 4.0)
@@ -33,7 +33,7 @@ The muscle shapes derive from the lower extremity geometry of the Visible Human 
 Center for Orthopaedic Biomechanics, University of Denver (CC BY 4.0,
 https://doi.org/10.56902/COB.vh.2022.0): Andreassen, T. E., Hume, D. R., Hamilton, L. D.,
 Walker, K. E., Higinbotham, S. E., & Shelburne, K. B. "Three-dimensional lower extremity
-musculoskeletal geometry of the Visible Human Female and Male." Scientific Data, 2022,
+musculoskeletal geometry of the Visible Human Female and Male." Scientific Data 10 (2023),
 https://doi.org/10.1038/s41597-022-01905-2. They were registered, split and refitted here
 (changes made). The data is provided "as is" (the atlas' LICENSE-README.txt).
 """
