@@ -63,7 +63,7 @@ def main() -> int:
         files, report = build_library(Path(args.data), Path(args.skeleton), Path(args.old),
                                       tuple(args.sides.split(",")), args.sections, muscle, phase)
     except InputError as e:
-        print(f"axdf: error: {e}", file=sys.stderr)
+        print(f"axdf: {e}" if e.where is None else str(e), file=sys.stderr)
         return 2
     legs = " and ".join({"r": "right leg", "l": "left leg"}[s] for s in args.sides.split(","))
     files["README.md"] = CREDIT.format(legs=legs, kept=", ".join(report["kept"])).encode()

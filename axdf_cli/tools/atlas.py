@@ -152,6 +152,7 @@ def register(root: Path, skel, rest: np.ndarray, bone_meshes: dict, side: str, r
     """Register the atlas' leg of ``side`` onto the skeleton at rest. ``bone_meshes``: model
     bone name -> (world vertices (V, 3), faces) at rest. ``rounds`` 0: the landmarks'
     similarity only (no warp)."""
+    import igl
     from scipy.interpolate import RBFInterpolator
     from scipy.spatial import cKDTree
 
@@ -183,8 +184,6 @@ def register(root: Path, skel, rest: np.ndarray, bone_meshes: dict, side: str, r
         xs, ys = [lm_y], [dst]
         for mb, x, both in groups:
             y = current(x)
-            import igl
-
             V, F = bone_meshes[mb]
             _, _, near = igl.point_mesh_squared_distance(y, V, F.astype(np.int64))
             if both:  # and the model's surface samples to the atlas' nearest (warped) sample:
