@@ -208,7 +208,7 @@ lock: $(TEST_STAMP)
 # muscles/gait2392_atlas: the Visible Human Female atlas (CC BY 4.0) registered onto gait2392
 # and fitted under its names (docs/FIT.md, "Atlas onto a skeleton"; a few minutes)
 ATLAS  ?= $(DATA)/atlas/visible_human_female
-ATLAS_SIDES ?= r
+ATLAS_SIDES ?= r,l
 atlas: $(STAMP)
 	$(BIN)/python tools/atlas_library.py --data $(ATLAS) --sides $(ATLAS_SIDES) --out muscles/gait2392_atlas
 

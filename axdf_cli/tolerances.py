@@ -496,3 +496,10 @@ ATLAS_BONE_MARGIN = 0.001
 # the grid spacing (m) on which an atlas muscle shared by a model group (gluteus maximus ->
 # glut_max1..3) is cut into closed parts (winding number, marching cubes)
 ATLAS_SPLIT_SPACING = 0.0015
+# an atlas muscle's fit is shipped only with at least this IoU with its mesh and its volume
+# within this factor of the mesh's; else the model's own muscle is kept (the left flexor
+# hallucis longus, whose tendon turns under the foot, fits at IoU 0.1 with 47x its volume;
+# the thin extensors that fit at 0.6-0.75 keep their volume within 25%; adductor magnus'
+# middle part, a C-shaped slab after the cut, fits at 0.6 with 0.62-0.63 of its volume)
+ATLAS_MIN_IOU = 0.5
+ATLAS_MAX_VOLUME_FACTOR = 1.5

@@ -89,6 +89,14 @@ def write_ply(path: Path, v: np.ndarray, f: np.ndarray) -> None:
     m.export(str(path))
 
 
+def fit_holds(entry: dict) -> bool:
+    """Whether a fit is kept: IoU with its mesh at least tol.ATLAS_MIN_IOU and its volume
+    within a factor tol.ATLAS_MAX_VOLUME_FACTOR of the mesh's (else the model's own muscle is
+    kept: the mesh was not one belly along one axis, e.g. a tendon turning round the ankle)."""
+    r = entry["volume_ratio"]
+    return entry["iou"] >= tol.ATLAS_MIN_IOU and 1.0 / tol.ATLAS_MAX_VOLUME_FACTOR <= r <= tol.ATLAS_MAX_VOLUME_FACTOR
+
+
 def build_library(data_root: Path, skeleton_path: Path, old: Path, sides=("r",), sections: int | None = None,
                   on_muscle=None, on_phase=None) -> tuple[dict, dict]:
     """The library's files (name -> bytes: one muscle file per model muscle, the report) and
@@ -111,7 +119,8 @@ def build_library(data_root: Path, skeleton_path: Path, old: Path, sides=("r",),
             v, fc, _ = load_bone_mesh(b.mesh, str(skeleton_path))
             bones[b.name] = (v.astype(np.float64) @ rest[i, :3, :3].T + rest[i, :3, 3], np.asarray(fc, np.int64))
     names = load_map()
-    report = {"atlas": str(data_root.name), "skeleton": skeleton_path.name, "sides": {}, "fitted": [], "kept": []}
+    report = {"atlas": str(data_root.name), "skeleton": skeleton_path.name, "sides": {}, "fitted": [], "failed": [],
+              "kept": []}
     files: dict[str, bytes] = {}
     with tempfile.TemporaryDirectory(prefix="axdf-atlas-") as tmp:
         meshes = []
@@ -146,10 +155,12 @@ def build_library(data_root: Path, skeleton_path: Path, old: Path, sides=("r",),
             report["sides"][side] = side_rep
         tell(f"fitting {len(meshes)} muscles")
         res = build_fit(meshes, skeleton_path, "m", sections, on_muscle=on_muscle, paths=old)
+    failed = {m["muscle"] for m in res.report["muscles"] if not fit_holds(m)}
     for rel, data in res.files.items():
-        if rel.startswith("muscles/"):
+        if rel.startswith("muscles/") and Path(rel).stem not in failed:
             files[rel[len("muscles/"):]] = data
-    report["fitted"] = res.report["muscles"]
+    report["fitted"] = [m for m in res.report["muscles"] if m["muscle"] not in failed]
+    report["failed"] = [m for m in res.report["muscles"] if m["muscle"] in failed]
     for p in sorted(old.glob("*.yaml")):
         if p.name not in files:
             files[p.name] = p.read_bytes()
