@@ -33,7 +33,7 @@ BVH    := $(DATA)/bvh/cmu_131_01_walk_scaled.bvh
 MYO    := out/myo-sim
 MJCF_MESHES := --max-faces 2000 --mesh-edge 0.004
 
-.PHONY: all setup setup-test sysdeps demo dataset test test-fast bench golden clean import import-mjcf pack pack-check lock blender skin
+.PHONY: all setup setup-test sysdeps demo dataset test test-fast bench golden clean import import-mjcf pack pack-check lock blender skin atlas
 
 all: demo
 
@@ -157,6 +157,7 @@ import: $(STAMP)
 	  --skeleton-out poses/skeletons/gait2392.yaml --pose-out poses/gait2392_walk.yaml --overwrite
 	$(MAKE) --no-print-directory pack
 	$(MAKE) --no-print-directory skin
+	$(MAKE) --no-print-directory atlas
 	$(BIN)/axdf import bvh $(BVH) --name cmu_131_01 --pose-name cmu_131_01_walk --step 4 \
 	  --out poses/imports/cmu_131_01 --skeleton-out poses/skeletons/cmu_131_01.yaml \
 	  --pose-out poses/cmu_131_01_walk.yaml --overwrite
@@ -211,6 +212,13 @@ lock: $(TEST_STAMP)
 # The MyoSuite library (myo-sim, Apache-2.0): muscles/{myoarm,myobody}, poses/skeletons/{myoarm,myobody}.yaml
 # (+ meshes/), poses/myoarm_elbow.yaml (arm26's elbow flexion), poses/myobody_gait.yaml (MyoSuite's gait cycle),
 # and the CMU walk fitted onto myobody (poses/maps/cmu_to_myobody.yaml): poses/retargeted/cmu_131_01_walk_myobody/.
+# muscles/gait2392_atlas: the Visible Human Female atlas (CC BY 4.0) registered onto gait2392
+# and fitted under its names (docs/FIT.md, "Atlas onto a skeleton"; a few minutes)
+ATLAS  ?= $(DATA)/atlas/visible_human_female
+ATLAS_SIDES ?= r,l
+atlas: $(STAMP)
+	$(BIN)/python tools/atlas_library.py --data $(ATLAS) --sides $(ATLAS_SIDES) --out muscles/gait2392_atlas
+
 import-mjcf: $(TEST_STAMP)
 	$(BIN)/python tools/myo_sim_xml.py myoarm $(MYO)/myoarm.xml
 	$(BIN)/python tools/myo_sim_xml.py myofullbody $(MYO)/myofullbody.xml

@@ -498,3 +498,33 @@ FIT_MEASURE_SAMPLES = 20000
 # muscle of a library; the atlas' leg fits at 0.87+ with 8 sections): the mesh is not one belly
 # along one axis (a ring, a branching or C-shaped muscle; docs/FIT.md).
 FIT_WARN_IOU = 0.75
+
+# --- the atlas registered onto a skeleton (axdf_cli/tools/atlas.py; docs/FIT.md "Atlas onto a skeleton")
+# samples per atlas bone for the warp's closest points: enough to follow a tibia's crest, few
+# enough that a thin-plate spline round solves in seconds
+ATLAS_BONE_SAMPLES = 400
+# rounds of closest points + thin-plate spline; the residual stops falling after about 4
+ATLAS_WARP_ROUNDS = 5
+# the thin-plate spline's smoothing (scipy's RBFInterpolator, per closest-point pair; the
+# landmarks have none): chosen by measurement (docs/FIT.md): 1e-6 leaves the bones' samples
+# 0.04-0.2 mm off the model's on average, 1e-4 0.7-1 mm, with no fold either way
+ATLAS_WARP_SMOOTHING = 1e-6
+# points per evaluation of the warp (memory: chunk x centres x 8 bytes)
+ATLAS_WARP_CHUNK = 20000
+# the other hip's weight in the landmarks' similarity: it only turns the leg about its long
+# axis (hip, knee and ankle are nearly on a line); at full weight the atlas' narrower pelvis
+# pulls the leg's scale and leaves 2-3 cm at every joint
+ATLAS_OTHER_HIP_WEIGHT = 0.1
+# how far beyond a bone's surface a warped atlas muscle vertex found inside the bone is put
+# (the warp leaves the model's coarse bones 1-3 mm off the atlas' where a muscle lies on them)
+ATLAS_BONE_MARGIN = 0.001
+# the grid spacing (m) on which an atlas muscle shared by a model group (gluteus maximus ->
+# glut_max1..3) is cut into closed parts (winding number, marching cubes)
+ATLAS_SPLIT_SPACING = 0.0015
+# an atlas muscle's fit is shipped only with at least this IoU with its mesh and its volume
+# within this factor of the mesh's; else the model's own muscle is kept (the left flexor
+# hallucis longus, whose tendon turns under the foot, fits at IoU 0.1 with 47x its volume;
+# the thin extensors that fit at 0.6-0.75 keep their volume within 25%; adductor magnus'
+# middle part, a C-shaped slab after the cut, fits at 0.6 with 0.62-0.63 of its volume)
+ATLAS_MIN_IOU = 0.5
+ATLAS_MAX_VOLUME_FACTOR = 1.5

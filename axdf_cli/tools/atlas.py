@@ -1,0 +1,247 @@
+"""An anatomical atlas (the Visible Human Female's lower limb, millimetres) registered onto a
+model's skeleton at rest (gait2392, metres), one leg at a time.
+
+1. **Landmarks** (:func:`atlas_landmarks`, :func:`model_landmarks`): the hip centres (a sphere
+   fitted to the femoral head cartilage, both sides, so that the pelvis' width fixes the turn
+   about the leg's long axis), the knee (a sphere fitted to the distal femur's cartilage: the
+   condyles' centre) and the ankle (a sphere fitted to the talar dome's cartilage), against
+   the skeleton's joint centres at rest (the femurs', the tibia's and the talus' origins).
+   A similarity transform (rotation, uniform scale, translation; Umeyama) maps one onto the
+   other by least squares.
+2. **Warp** (:func:`register`): the atlas' bones (tibia with fibula, talus, the hindfoot and
+   midfoot bones) are pulled onto the model's bone meshes by a few rounds of closest points
+   (the atlas' samples to the model's surface; for the tibia and talus also the model's
+   vertices to the atlas' nearest sample, so a bone is not squeezed onto part of its
+   partner), each round a thin-plate spline (scipy's RBFInterpolator, degree 1, smoothed)
+   from the landmark-registered atlas to its targets, with the landmarks held. The femur and
+   pelvis, which the atlas lacks, are held by their landmarks. The muscles are carried by the
+   last round's spline (:meth:`Registration.apply`).
+
+Nothing here reads the skeleton's file or writes anything: the caller passes the skeleton,
+its rest transforms and its bone meshes (world, metres) and the atlas folder.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from axdf_cli import tolerances as tol
+from axdf_cli.errors import InputError, Mark
+
+SIDES = {"r": "Right", "l": "Left"}
+#: atlas bones (file name part) -> the model bone they are pulled onto, and whether the model's
+#: mesh is that bone alone (then the correspondences run both ways) or holds more (the model's
+#: calcaneus is the whole hind- and midfoot: one way only)
+BONE_PAIRS = (
+    (("Tibia", "Fibula"), "tibia", True),
+    (("Talus",), "talus", True),
+    (("Calcaneous", "Cuboid", "Navicular", "MedialCuneiform", "IntermediateCuneiform", "LateralCuneiform"),
+     "calcn", False),
+)
+LANDMARKS = ("hip", "hip_other", "knee", "ankle")
+
+
+def atlas_path(root: Path, side: str, kind: str, name: str) -> Path:
+    """The atlas file of a structure (kind Bone, Cartilage, Muscle) on a side ('r', 'l')."""
+    s = SIDES[side]
+    return Path(root) / s / f"VHF_{s}_{kind}_{name}_smooth.ply"
+
+
+def read_atlas_mesh(path: Path):
+    """(vertices in metres, faces) of an atlas PLY (millimetres); refused by name when missing."""
+    import trimesh
+
+    if not Path(path).is_file():
+        raise InputError(Mark(str(path)), "atlas file not found",
+                         "the Visible Human Female folder (Left/, Right/ of VHF_<Side>_<Kind>_<Name>_smooth.ply)")
+    m = trimesh.load(str(path), force="mesh", process=False)
+    return np.asarray(m.vertices, dtype=np.float64) * 1e-3, np.asarray(m.faces, dtype=np.int64)
+
+
+def sphere_fit(points: np.ndarray) -> tuple[np.ndarray, float]:
+    """The least-squares sphere (centre, radius) through points (P, 3) (algebraic fit)."""
+    A = np.concatenate([2.0 * points, np.ones((len(points), 1))], axis=1)
+    b = (points * points).sum(axis=1)
+    sol, *_ = np.linalg.lstsq(A, b, rcond=None)
+    c = sol[:3]
+    return c, float(np.sqrt(max(sol[3] + c @ c, 0.0)))
+
+
+def atlas_landmarks(root: Path, side: str) -> dict[str, np.ndarray]:
+    """The atlas' joint centres (metres, the atlas' frame) for the leg of ``side``."""
+    other = "l" if side == "r" else "r"
+
+    def centre(s, name):
+        return sphere_fit(read_atlas_mesh(atlas_path(root, s, "Cartilage", name))[0])[0]
+
+    return {"hip": centre(side, "FemurHead"), "hip_other": centre(other, "FemurHead"),
+            "knee": centre(side, "FemurDistal"), "ankle": centre(side, "Talus")}
+
+
+def model_landmarks(skel, rest: np.ndarray, side: str) -> dict[str, np.ndarray]:
+    """The skeleton's joint centres at rest (world, metres) for the leg of ``side``: the femur's,
+    the other femur's, the tibia's and the talus' origins."""
+    other = "l" if side == "r" else "r"
+    names = {"hip": f"femur_{side}", "hip_other": f"femur_{other}", "knee": f"tibia_{side}", "ankle": f"talus_{side}"}
+    for n in names.values():
+        if n not in skel.bone_index:
+            raise InputError(Mark(skel.name), f"skeleton {skel.name} has no bone {n!r}",
+                             "a gait2392-like leg: femur_r/l, tibia_r/l, talus_r/l, calcn_r/l")
+    return {k: rest[skel.bone_index[n], :3, 3].astype(np.float64) for k, n in names.items()}
+
+
+def similarity(src: np.ndarray, dst: np.ndarray, weight: np.ndarray | None = None) -> tuple[float, np.ndarray, np.ndarray]:
+    """Scale s, rotation R (3, 3) and translation t with dst ~ s R src + t by weighted least
+    squares (Umeyama 1991, each point weighted)."""
+    w = np.ones(len(src)) if weight is None else np.asarray(weight, dtype=np.float64)
+    w = w / w.sum()
+    ms, md = w @ src, w @ dst
+    a, b = src - ms, dst - md
+    u, sv, vt = np.linalg.svd((b * w[:, None]).T @ a)
+    d = np.sign(np.linalg.det(u @ vt))
+    D = np.diag([1.0, 1.0, d])
+    R = u @ D @ vt
+    s = float((sv * np.diag(D)).sum() / (w @ (a * a).sum(axis=1)))
+    return s, R, md - s * R @ ms
+
+
+@dataclass
+class Registration:
+    """One leg's map from the atlas (metres, its frame) into the model's rest frame."""
+    side: str
+    scale: float
+    rotation: np.ndarray
+    shift: np.ndarray
+    landmarks_atlas: dict
+    landmarks_model: dict
+    warp: object | None = None  # RBFInterpolator of the displacement after the similarity
+    report: dict = field(default_factory=dict)
+
+    def rigid(self, points: np.ndarray) -> np.ndarray:
+        return self.scale * points @ self.rotation.T + self.shift
+
+    def apply(self, points: np.ndarray, warp: bool = True) -> np.ndarray:
+        """Atlas points (P, 3, metres) in the model's rest frame: the similarity, then the warp."""
+        y = self.rigid(points)
+        if warp and self.warp is not None:
+            out = np.empty_like(y)
+            for i in range(0, len(y), tol.ATLAS_WARP_CHUNK):
+                out[i:i + tol.ATLAS_WARP_CHUNK] = y[i:i + tol.ATLAS_WARP_CHUNK] + self.warp(y[i:i + tol.ATLAS_WARP_CHUNK])
+            return out
+        return y
+
+
+def _samples(v: np.ndarray, f: np.ndarray, n: int, seed: int) -> np.ndarray:
+    import trimesh
+
+    pts, _ = trimesh.sample.sample_surface_even(trimesh.Trimesh(v, f, process=False), n, seed=seed)
+    return np.asarray(pts, dtype=np.float64)
+
+
+def bone_distance(points: np.ndarray, mesh: tuple) -> np.ndarray:
+    """Distance (P,) of points to a triangle mesh (vertices, faces)."""
+    import igl
+
+    return np.sqrt(igl.point_mesh_squared_distance(points, mesh[0], mesh[1].astype(np.int64))[0])
+
+
+def register(root: Path, skel, rest: np.ndarray, bone_meshes: dict, side: str, rounds: int | None = None,
+             smoothing: float | None = None) -> Registration:
+    """Register the atlas' leg of ``side`` onto the skeleton at rest. ``bone_meshes``: model
+    bone name -> (world vertices (V, 3), faces) at rest. ``rounds`` 0: the landmarks'
+    similarity only (no warp)."""
+    import igl
+    from scipy.interpolate import RBFInterpolator
+    from scipy.spatial import cKDTree
+
+    rounds = tol.ATLAS_WARP_ROUNDS if rounds is None else rounds
+    smoothing = tol.ATLAS_WARP_SMOOTHING if smoothing is None else smoothing
+    la, lm = atlas_landmarks(root, side), model_landmarks(skel, rest, side)
+    src = np.array([la[k] for k in LANDMARKS])
+    dst = np.array([lm[k] for k in LANDMARKS])
+    s, R, t = similarity(src, dst, [tol.ATLAS_OTHER_HIP_WEIGHT if k == "hip_other" else 1.0 for k in LANDMARKS])
+    reg = Registration(side, s, R, t, la, lm)
+    lm_res = np.linalg.norm(reg.rigid(src) - dst, axis=1)
+    reg.report = {"side": side, "scale": s, "landmark_residual_mm": dict(zip(LANDMARKS, (lm_res * 1e3).round(2).tolist()))}
+    # the bones: samples in the similarity's frame, each with its model bone
+    groups = []
+    for k, (names, bone, both) in enumerate(BONE_PAIRS):
+        mb = f"{bone}_{side}"
+        if mb not in bone_meshes:
+            continue
+        pts = [_samples(*read_atlas_mesh(atlas_path(root, side, "Bone", n)), tol.ATLAS_BONE_SAMPLES, tol.FIT_SEED + k)
+               for n in names]
+        groups.append((mb, reg.rigid(np.concatenate(pts)), both))
+    reg.report["bones_before"] = _bone_residual(groups, bone_meshes, lambda p: p)
+    if rounds == 0:
+        return reg
+    lm_y = reg.rigid(src)
+    model_samples = {mb: _samples(*bone_meshes[mb], tol.ATLAS_BONE_SAMPLES, tol.FIT_SEED) for mb, _, both in groups if both}
+    for _ in range(rounds):
+        current = (lambda p: p) if reg.warp is None else (lambda p: p + reg.warp(p))
+        xs, ys = [lm_y], [dst]
+        for mb, x, both in groups:
+            y = current(x)
+            V, F = bone_meshes[mb]
+            _, _, near = igl.point_mesh_squared_distance(y, V, F.astype(np.int64))
+            if both:  # and the model's surface samples to the atlas' nearest (warped) sample:
+                # each atlas sample's target is the mean of its nearest model point and the model
+                # samples that chose it
+                ms = model_samples[mb]
+                _, j = cKDTree(y).query(ms)
+                count = 1.0 + np.bincount(j, minlength=len(x))
+                near = (near + np.stack([np.bincount(j, ms[:, c], minlength=len(x)) for c in range(3)], axis=1)) \
+                    / count[:, None]
+            xs.append(x)
+            ys.append(near)
+        X, Y = np.concatenate(xs), np.concatenate(ys)
+        smooth = np.full(len(X), smoothing)
+        smooth[:len(lm_y)] = 0.0  # the landmarks are held
+        reg.warp = RBFInterpolator(X, Y - X, kernel="thin_plate_spline", smoothing=smooth, degree=1)
+    reg.report["bones_after"] = _bone_residual(groups, bone_meshes, lambda p: p + reg.warp(p))
+    reg.report["landmarks_after_mm"] = dict(zip(LANDMARKS, (np.linalg.norm(lm_y + reg.warp(lm_y) - dst, axis=1)
+                                                             * 1e3).round(3).tolist()))
+    return reg
+
+
+def _bone_residual(groups, bone_meshes, move) -> dict:
+    """Per model bone: the mean and max distance (mm) of the moved atlas samples to its mesh."""
+    out = {}
+    for mb, x, _ in groups:
+        d = bone_distance(move(x), bone_meshes[mb]) * 1e3
+        out[mb] = {"mean_mm": round(float(d.mean()), 2), "max_mm": round(float(d.max()), 2)}
+    return out
+
+
+def inside_share(points: np.ndarray, mesh: tuple) -> float:
+    """The share of points inside a mesh (generalized winding number > 0.5)."""
+    import igl
+
+    w = igl.fast_winding_number(np.asarray(mesh[0], np.float64), np.asarray(mesh[1], np.int64),
+                                np.ascontiguousarray(points, dtype=np.float64))
+    return float((w > 0.5).mean())
+
+
+def push_out(points: np.ndarray, bone_meshes: dict, margin: float) -> tuple[np.ndarray, int]:
+    """Points inside any bone (winding number > 0.5) moved to their nearest point on that bone's
+    surface and ``margin`` beyond it; the moved points and how many moved."""
+    import igl
+
+    out = np.array(points, dtype=np.float64)
+    moved = 0
+    for V, F in bone_meshes.values():
+        V, F = np.asarray(V, np.float64), np.asarray(F, np.int64)
+        lo, hi = V.min(axis=0) - margin, V.max(axis=0) + margin
+        near = np.flatnonzero(((out >= lo) & (out <= hi)).all(axis=1))
+        if len(near) == 0:
+            continue
+        inside = near[igl.fast_winding_number(V, F, out[near]) > 0.5]
+        if len(inside) == 0:
+            continue
+        _, _, c = igl.point_mesh_squared_distance(out[inside], V, F)
+        d = c - out[inside]
+        out[inside] = c + margin * d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
+        moved += len(inside)
+    return out, moved
