@@ -36,12 +36,13 @@ import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
 from axdf_cli import tolerances as tol
+from axdf_cli.fileio.runfolder import SKIN_MESH
 from axdf_cli.model import skin as kernels
 from axdf_cli.model.skeleton import forward_kinematics
 from axdf_cli.pipeline.stages import Scope
 
-#: The skin's name among a run's meshes (``meshes/skin/``, ``skin.csv``); no muscle may have it.
-SKIN_NAME = "skin"
+#: The skin's name among a run's meshes (``meshes/skin/``); no muscle may have it.
+SKIN_NAME = SKIN_MESH
 #: skin.csv's numeric columns: the skin's volume (m^3) and its ratio to the skin's as the stage
 #: wears it at the rest pose (the rest mesh pushed over the bones' vertices outside it); the
 #: share of every muscle vertex that lies outside the skin (measured along the skinned normal of
