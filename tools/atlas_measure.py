@@ -25,18 +25,9 @@ sys.path.insert(0, str(ROOT))
 
 
 def rest_state(skeleton: Path):
-    from axdf_cli.model.skeleton import forward_kinematics
-    from axdf_cli.pipeline.plan import load_bone_mesh
-    from axdf_cli.specs import RefPolicy, load_skeleton
+    from axdf_cli.tools.atlas_library import rest_bones
 
-    skel = load_skeleton(skeleton, RefPolicy())
-    rest = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
-    bones = {}
-    for i, b in enumerate(skel.bones):
-        if b.mesh and b.parent is not None:
-            v, f, _ = load_bone_mesh(b.mesh, str(skeleton))
-            bones[b.name] = (v.astype(np.float64) @ rest[i, :3, :3].T + rest[i, :3, 3], np.asarray(f, np.int64))
-    return skel, rest, bones
+    return rest_bones(skeleton)
 
 
 def leg_muscles(folder: Path, skel, rest, side: str = "r") -> dict:

@@ -97,20 +97,14 @@ def fit_holds(entry: dict) -> bool:
     return entry["iou"] >= tol.ATLAS_MIN_IOU and 1.0 / tol.ATLAS_MAX_VOLUME_FACTOR <= r <= tol.ATLAS_MAX_VOLUME_FACTOR
 
 
-def build_library(data_root: Path, skeleton_path: Path, old: Path, sides=("r",), sections: int | None = None,
-                  on_muscle=None, on_phase=None) -> tuple[dict, dict]:
-    """The library's files (name -> bytes: one muscle file per model muscle, the report) and
-    the report. ``old``: the model's own muscle folder (paths, and the muscles the atlas lacks).
-    ``on_phase(text)`` is told as each phase starts; ``on_muscle(name, entry)`` as each fit ends."""
+
+def rest_bones(skeleton_path: Path) -> tuple:
+    """The skeleton, its bones' rest world transforms (B, 4, 4) and each moving bone's mesh in
+    the world at rest: name -> ((V, 3) float64, (T, 3) int64)."""
     from axdf_cli.model.skeleton import forward_kinematics
     from axdf_cli.pipeline.plan import load_bone_mesh
     from axdf_cli.specs import RefPolicy, load_skeleton
-    from axdf_cli.tools.fit import build_fit
 
-    tell = on_phase or (lambda text: None)
-    data_root, skeleton_path, old = Path(data_root), Path(skeleton_path), Path(old)
-    if not data_root.is_dir():
-        raise InputError(Mark(str(data_root)), "atlas folder not found", "the Visible Human Female folder (Left/, Right/)")
     skel = load_skeleton(skeleton_path, RefPolicy())
     rest = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
     bones = {}
@@ -118,6 +112,20 @@ def build_library(data_root: Path, skeleton_path: Path, old: Path, sides=("r",),
         if b.mesh and b.parent is not None:
             v, fc, _ = load_bone_mesh(b.mesh, str(skeleton_path))
             bones[b.name] = (v.astype(np.float64) @ rest[i, :3, :3].T + rest[i, :3, 3], np.asarray(fc, np.int64))
+    return skel, rest, bones
+
+def build_library(data_root: Path, skeleton_path: Path, old: Path, sides=("r",), sections: int | None = None,
+                  on_muscle=None, on_phase=None) -> tuple[dict, dict]:
+    """The library's files (name -> bytes: one muscle file per model muscle, the report) and
+    the report. ``old``: the model's own muscle folder (paths, and the muscles the atlas lacks).
+    ``on_phase(text)`` is told as each phase starts; ``on_muscle(name, entry)`` as each fit ends."""
+    from axdf_cli.tools.fit import build_fit
+
+    tell = on_phase or (lambda text: None)
+    data_root, skeleton_path, old = Path(data_root), Path(skeleton_path), Path(old)
+    if not data_root.is_dir():
+        raise InputError(Mark(str(data_root)), "atlas folder not found", "the Visible Human Female folder (Left/, Right/)")
+    skel, rest, bones = rest_bones(skeleton_path)
     names = load_map()
     report = {"atlas": str(data_root.name), "skeleton": skeleton_path.name, "sides": {}, "fitted": [], "failed": [],
               "kept": []}
