@@ -6,7 +6,7 @@ Each frame, in order:
 1. **skinning**: linear blend of the skin's rest mesh by its bones' world transforms relative
    to rest (the bones :func:`~axdf_cli.model.skeleton.forward_kinematics` gives the chunk);
 2. **push**: every candidate point (a muscle or bone mesh vertex within ``tol.SKIN_REACH`` of
-   the rest skin, built once by :meth:`SkinStage.start`) is measured against the nearest of
+   the rest skin, built once by :meth:`SkinStage.start`) is compared with the nearest of
    its ``tol.SKIN_CANDIDATES`` nearest rest skin vertices, along that vertex's skinned normal;
    where it lies less deep under the skin than its target (its local fat thickness; for a muscle
    vertex, its depth at rest where that is shallower: the rest skin is worn as fitted; a bone
@@ -89,7 +89,7 @@ class SkinModel:
     ring_idx: np.ndarray
     muscle_points: np.ndarray  # (Nm,) candidate muscle vertices, indices into the muscles' vertices concatenated
     bone_points: list  # [(bone index, (Nb, 3) local vertices)] candidate bone vertices
-    candidates: np.ndarray  # (Nm + sum Nb, k) skin vertices each candidate is measured against
+    candidates: np.ndarray  # (Nm + sum Nb, k) skin vertices each candidate is compared with
     target: np.ndarray  # (Nm + sum Nb,) required depth under the skin (m; < 0: above it, as at rest)
     rest_depth: np.ndarray  # (Nm + sum Nb,) depth under the rest skin (m)
     n_muscle_vertices: int
