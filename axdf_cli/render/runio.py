@@ -17,6 +17,8 @@ The layout and the manifest are :mod:`axdf_cli.fileio.runfolder`'s. What is read
   muscle a named part (OBJ ``o``, PLY ``muscle`` vertex property); in a run without a
   per-frame format, each muscle's per-sequence file (``npz/<m>.npz``, ``pc2/<m>.pc2`` with
   its rest mesh ``pc2/<m>.ply``, ``mdd/<m>.mdd``, ``usd/<m>.usdc``), read a frame at a time.
+- ``meshes/skin/skin_<frame:04d>.ply|obj``: a run with ``--skin`` (listed in its manifest),
+  drawn as ``settings.render.skin`` says.
 - ``bones.csv``: ``frame,bone,x,y,z,qw,qx,qy,qz`` world pose of each bone per frame.
 """
 from __future__ import annotations
@@ -274,8 +276,7 @@ def load_run_source(run_dir: Path, manifest: Manifest | None = None, frames=None
     skin_source = _skin_source(run_dir, m, formats, all_frames)
     skin = None
     if skin_source is not None:
-        pos, _, faces = skin_source.read(all_frames[0])
-        skin = SceneSkin(faces, SKIN_COLOR)
+        skin = SceneSkin(skin_source.read(all_frames[0])[2], SKIN_COLOR)
     scene = Scene(tuple(muscles), layout.bones, bounds.astype(np.float64), all_frames,
                   framing=framing, first_frame=first_frame, targets=targets, follow=follow,
                   ground=ground, footprint=footprint, skin=skin)
@@ -331,23 +332,26 @@ class RunFrames:
             self._sources = per_frame_sources(self.run_dir, self.names, self.formats, self.all_frames, self.fps,
                                               self.mesh_files)
         row = {f: k for k, f in enumerate(self.selected)}
+        skin_src = _FrameFiles(self.run_dir, SKIN_MESH, self.skin) if self.skin is not None else None
         for f in frames:
             ps, ns = [], []
             for src in self._sources:
-                pos, nrm, faces = src.read(f)
-                if nrm is None:
-                    from axdf_cli.render.renderer import vertex_normals
-                    nrm = vertex_normals(pos, faces)
+                pos, nrm = _with_normals(*src.read(f))
                 ps.append(pos[None])
                 ns.append(nrm[None])
             skin = None
-            if self.skin is not None:
-                pos, nrm, faces = _FrameFiles(self.run_dir, SKIN_MESH, self.skin).read(f)
-                if nrm is None:
-                    from axdf_cli.render.renderer import vertex_normals
-                    nrm = vertex_normals(pos, faces)
+            if skin_src is not None:
+                pos, nrm = _with_normals(*skin_src.read(f))
                 skin = (pos[None], nrm[None])
             yield FrameChunk(np.array([f]), tuple(ps), tuple(ns), self.bone_world[row[f]:row[f] + 1], skin)
+
+
+def _with_normals(pos: np.ndarray, nrm: np.ndarray | None, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A mesh read back, with its normals computed where the format has none."""
+    if nrm is None:
+        from axdf_cli.render.renderer import vertex_normals
+        nrm = vertex_normals(pos, faces)
+    return pos, nrm
 
 
 def recorded_render_settings(m: Manifest) -> RenderSettings:
