@@ -423,6 +423,15 @@ SKIN_MAX_HEIGHT = 0.035
 # bulge, not a spike. Each pass also widens the bulges: on the walk 6 passes gain the skin
 # +3.1..4.3% of its volume, 3 passes +2.4..3.5%.
 SKIN_RELAX_ITERATIONS = 3
+# The volume step after the relax holds the skin at its volume as worn at rest (soft tissue is
+# incompressible): the excess the pushes and the relax add is taken back from vertices with
+# room under them, each in by a common depth of at most SKIN_VOLUME_MAX_SHIFT metres (about the
+# thinnest fat, so a region with nothing under it does not cave in), the step's edge next to
+# vertices held at their floor tapered over SKIN_VOLUME_TAPER rings; SKIN_VOLUME_ROUNDS
+# rounds, each on the moved mesh (the first is a linear estimate).
+SKIN_VOLUME_MAX_SHIFT = 0.008
+SKIN_VOLUME_TAPER = 2
+SKIN_VOLUME_ROUNDS = 2
 # `axdf fit` (axdf_cli/tools/fit.py, fit_sections.py): a closed muscle mesh → an AxDf muscle.
 # Sections by default: measured on the Visible Human atlas (docs/FIT.md), 16 sections follow
 # the muscles' bellies to IoU 0.9+ where 8 leave a few points of overlap; the bounds keep the

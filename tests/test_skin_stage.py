@@ -80,7 +80,8 @@ def test_muscles_inside_the_skin_and_volume_kept(whole, skin):
         w = igl.fast_winding_number(v, faces.astype(np.int64), pts.astype(np.float64))
         assert (w < 0.5).mean() <= 0.005, f"frame {f}: {(w < 0.5).mean():.2%} of the muscle vertices outside the skin"
         assert rows[k, 0] == f and _volume(v, faces) == pytest.approx(rows[k, 1], rel=1e-5)
-    assert np.all(np.abs(rows[:, 2] - 1) < 0.03) and np.all(rows[:, 3] <= 0.005)
+    # the volume step holds the rest volume (without it the flexed knee's bulges gain ~1%)
+    assert np.all(np.abs(rows[:, 2] - 1) < 0.002) and np.all(rows[:, 3] <= 0.005)
     assert (rows[:, 4] > 0).all()  # the flexed knee's muscles push the skin out
 
 
@@ -139,3 +140,30 @@ def test_resume_refuses_a_changed_skin(skin, tmp_path, capsys):
     np.savez(path.parent / "skin_fat.npz", **fat)
     rc, _, err = run_main(run(out, path, "--resume", frames="20:21"), capsys)
     assert rc == 2 and "skin_fat.npz" in err and "--resume would mix two runs" in err, err
+
+
+def test_the_pushed_rest_skin_clears_the_bones(skin):
+    """``axdf skin --push`` pushes the rest skin out over the bones it wears as well as the
+    muscles, and moves the face out of gait2392's skull (which has no eye sockets): no skin
+    vertex lies inside a bone, and no bone vertex outside the skin, by the winding number."""
+    import igl
+
+    from axdf_cli.specs import load_skeleton
+    from axdf_cli.specs.skin import load_skin
+    from axdf_cli.tools.skin_muscles import rest_bones
+
+    rest = load_skin(skin)
+    skel_file = REPO_ROOT / "poses" / "skeletons" / "gait2392.yaml"
+    meshes, _ = rest_bones(load_skeleton(skel_file), str(skel_file), set(rest.bones))
+    v = np.asarray(rest.vertices, np.float64)
+    inside = np.zeros(len(v), bool)
+    for bv, bf in meshes:
+        inside |= np.abs(igl.winding_number(bv, bf, v)) > 0.5
+    # (a few where two bones overlap, the toes in the calcaneus: out of one is into the other)
+    assert inside.mean() <= 0.005, f"{inside.sum()} skin vertices inside a bone at rest"
+    pts = np.concatenate([bv for bv, _ in meshes])
+    w = igl.fast_winding_number(v, np.asarray(rest.faces, np.int64), pts)
+    # (the face smoothed out of the skull lets a few of the skull's vertices through)
+    assert (w < 0.5).mean() <= 0.005, f"{(w < 0.5).sum()} bone vertices outside the rest skin"
+    report = json.loads((skin.parent / "skin_report.json").read_text())["muscles"]
+    assert report["skin_vertices_out_of_bones"] > 100 and report["bone_points_outside_before"] > 1000

@@ -112,3 +112,19 @@ def test_outside_and_push():
     pushed = push_out(sphere.vertices, sphere.faces, pts)
     assert out.sum() > 50 and not outside(pushed, sphere.faces, pts).any()
     assert trimesh.Trimesh(pushed, sphere.faces, process=False).is_watertight
+
+
+def test_the_volume_steps_common_depth_takes_the_excess_exactly():
+    """uniform_depth: every vertex in by min(d, its slack) takes exactly the volume asked
+    (sum of area * min(d, slack)); where even the largest slack falls short, d is that slack."""
+    from axdf_cli.pipeline.skin_stage import uniform_depth
+
+    rng = np.random.default_rng(7)
+    area, slack = rng.uniform(1e-4, 4e-4, 500), rng.uniform(0.0, 0.008, 500)
+    slack[:100] = 0.0  # held at their floor
+    full = float(np.sum(area * slack))
+    for share in (0.05, 0.5, 0.95):
+        d = uniform_depth(area, slack, share * full)
+        assert np.sum(area * np.minimum(d, slack)) == pytest.approx(share * full, rel=1e-9)
+    assert uniform_depth(area, slack, 2 * full) == pytest.approx(slack.max())
+    assert uniform_depth(area, slack, 0.0) == 0.0

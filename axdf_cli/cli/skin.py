@@ -60,14 +60,22 @@ def run(args) -> int:
                         f"stature {fit.stature:.3f} m")
     inputs = [args.skeleton, str(sk.BODY_FILE)]
     if args.muscles:
-        from axdf_cli.tools.skin_muscles import outside, push_out, rest_muscle_vertices
+        from axdf_cli.tools.skin_muscles import (bone_points, clear_bones, outside, push_out, rest_bones,
+                                                 rest_muscle_vertices)
 
         pts, n_muscles, files = rest_muscle_vertices(Path(args.muscles), skel, policy)
         inputs += [str(p) for p in files]
         before = int(outside(fit.vertices, fit.faces, pts).sum())
         m = {"muscles": n_muscles, "vertices": len(pts), "outside_before": before}
-        if args.push:
-            pushed = push_out(fit.vertices, fit.faces, pts)
+        if args.push:  # over the bones' meshes too (a skull larger than the body's head)
+            meshes, bone_files = rest_bones(skel, args.skeleton, set(fit.bones))
+            bone_pts = bone_points(meshes)
+            inputs += [str(p) for p in bone_files]
+            m["bone_points"] = len(bone_pts)
+            m["bone_points_outside_before"] = int(outside(fit.vertices, fit.faces, bone_pts).sum())
+            pushed = push_out(fit.vertices, fit.faces, np.concatenate([pts, bone_pts]))
+            pushed, m["skin_vertices_out_of_bones"] = clear_bones(pushed, fit.faces, meshes)
+            m["bone_points_outside_after"] = int(outside(pushed, fit.faces, bone_pts).sum())
             m["outside_after"] = int(outside(pushed, fit.faces, pts).sum())
             m["push_max"] = round(float(np.linalg.norm(pushed - fit.vertices, axis=1).max()), 4)
             fit.vertices = pushed
@@ -91,5 +99,9 @@ def run(args) -> int:
             if args.push:
                 line += f" -> {m['outside_after']} after the push (at most {1000 * m['push_max']:.0f} mm)"
             print(line)
+            if args.push:
+                print(f"bone points outside the skin at rest: {m['bone_points_outside_before']} of {m['bone_points']} "
+                      f"-> {m['bone_points_outside_after']}; skin vertices moved out of bones: "
+                      f"{m['skin_vertices_out_of_bones']}")
         print(f"skin file: {Path(args.out) / sk.SKIN_FILE}")
     return 0

@@ -87,7 +87,7 @@ def nearest_heights(points, x, n, candidates, nearest, height):
 
 
 @njit(cache=True)
-def push_need(nearest, height, target, rest_depth, max_height, ring_ptr, ring_idx, need):
+def push_need(nearest, height, target, rest_depth, max_height, ring_ptr, ring_idx, need, floor):
     """How far each skin vertex moves along its normal (``need``; NaN: it has no point under
     it, and is free). Outward, over every point less deep than its ``target``, by the largest
     shortfall, at its nearest vertex and that vertex's ring of neighbours (a point lies under the
@@ -95,7 +95,11 @@ def push_need(nearest, height, target, rest_depth, max_height, ring_ptr, ring_id
     than at rest (``rest_depth``), by the least of those excesses: the skin follows the muscles
     in as well as out, and keeps its volume. A point higher than ``max_height`` above its
     nearest vertex counts for nothing: it lies in a crease, where the nearest vertex's normal
-    does not say whether it is inside."""
+    does not say whether it is inside.
+
+    ``floor``: the least offset each vertex may take and still hold every point under it at
+    its target depth (the largest shortfall, spread over the ring as the push is; NaN: free),
+    so ``floor <= need`` wherever both are set: what the volume step may take back."""
     nv = need.shape[0]
     out = np.full(nv, -np.inf)
     inward = np.full(nv, -np.inf)
@@ -116,6 +120,7 @@ def push_need(nearest, height, target, rest_depth, max_height, ring_ptr, ring_id
             need[s] = min(inward[s], 0.0)
         else:
             need[s] = np.nan
+        floor[s] = out[s] if out[s] > -np.inf else np.nan
     spread = need.copy()
     for s in range(nv):
         d = out[s]
@@ -124,6 +129,8 @@ def push_need(nearest, height, target, rest_depth, max_height, ring_ptr, ring_id
                 t = ring_idx[k]
                 if not (spread[t] >= d):  # (NaN: free)
                     spread[t] = d
+                if not (floor[t] >= d):
+                    floor[t] = d
     need[:] = spread
 
 
@@ -144,6 +151,23 @@ def relax(need, ring_ptr, ring_idx, iterations, out):
             m = acc / (b - a) if b > a else out[s]
             tmp[s] = need[s] if need[s] > m else m
         out[:] = tmp
+
+
+@njit(cache=True)
+def taper(shift, cap, ring_ptr, ring_idx, iterations):
+    """Smooth the edges of a volume shift in place: ``iterations`` passes of ``shift =
+    min(cap, mean of the neighbours' shift)`` (a vertex held at its floor keeps its neighbours'
+    shift from stepping beside it; where every neighbour takes the whole shift it stays)."""
+    tmp = shift.copy()
+    for _ in range(iterations):
+        for s in range(shift.shape[0]):
+            a, b = ring_ptr[s], ring_ptr[s + 1]
+            acc = 0.0
+            for k in range(a, b):
+                acc += shift[ring_idx[k]]
+            m = acc / (b - a) if b > a else shift[s]
+            tmp[s] = cap[s] if cap[s] < m else m
+        shift[:] = tmp
 
 
 @njit(cache=True)

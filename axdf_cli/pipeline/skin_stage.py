@@ -8,9 +8,8 @@ Each frame, in order:
 2. **push**: every candidate point (a muscle or bone mesh vertex within ``tol.SKIN_REACH`` of
    the rest skin, built once by :meth:`SkinStage.start`) is compared with the nearest of
    its ``tol.SKIN_CANDIDATES`` nearest rest skin vertices, along that vertex's skinned normal;
-   where it lies less deep under the skin than its target (its local fat thickness; for a muscle
-   vertex, its depth at rest where that is shallower: the rest skin is worn as fitted; a bone
-   vertex, at least inside),
+   where it lies less deep under the skin than its target (its local fat thickness, or its
+   depth at rest where that is shallower: the rest skin is worn as fitted),
    the skin vertex is pushed outward by the difference, and so is its ring of neighbours (a
    point lies under the triangles around its nearest vertex, not under the vertex alone). A
    point more than ``tol.SKIN_MAX_HEIGHT`` above its nearest vertex pushes nothing (a crease:
@@ -94,6 +93,7 @@ class SkinModel:
     rest_depth: np.ndarray  # (Nm + sum Nb,) depth under the rest skin (m)
     n_muscle_vertices: int
     rest_volume: float
+    room: np.ndarray | None = None  # (V,) how far each skin vertex may come in from where it is skinned (m)
 
 
 def ring(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -141,20 +141,75 @@ def build(skin, plan) -> SkinModel:
     cand = np.asarray(tree.query(p, k=k)[1], dtype=np.int64).reshape(len(p), k) if len(p) else np.zeros((0, k), np.int64)
     nearest, height = np.empty(len(p), np.int64), np.empty(len(p))
     kernels.nearest_heights(p, v, normals, cand, nearest, height)
-    target = np.minimum(skin.fat[nearest], -height)  # the fat, or the rest depth where shallower
-    nm = len(muscle_points)  # bones at least inside: the rest skin is pushed out over muscles only,
-    target[nm:] = np.maximum(target[nm:], 0.0)  # and leaves a skull or a heel partly outside it (docs/SKIN.md)
+    # the fat, or the rest depth where shallower: the rest skin is worn as fitted (axdf skin --push
+    # clears the muscles and the bones by the winding number; a point the normal test reads above
+    # a concave patch, the face over a skull, stays where it was)
+    target = np.minimum(skin.fat[nearest], -height)
     model = SkinModel(v, faces, np.ascontiguousarray(skin.weights, dtype=np.float64), bones,
                       np.linalg.inv(rest_world[bones]), ptr, idx, muscle_points, bone_points, cand, target,
                       np.maximum(-height, target), int(len(muscle)), 1.0)
-    model.rest_volume = float(skin_frame(model, rest_world, p)[2][0])  # the skin as worn at rest
+    # room: at rest, the distance from each skin vertex to the nearest candidate point, less its
+    # fat (a vertex with no point within reach: the volume step's cap). A vertex no point calls
+    # its nearest (free) still has a skull or a muscle under it somewhere.
+    dist = cKDTree(p).query(v, k=1, distance_upper_bound=reach)[0] if len(p) else np.full(len(v), np.inf)
+    model.room = np.minimum(np.maximum(dist - skin.fat, 0.0), tol.SKIN_VOLUME_MAX_SHIFT)
+    model.rest_volume = float(skin_frame(model, rest_world, p, keep=False)[2][0])  # the skin as worn at rest
     return model
 
 
-def skin_frame(model: SkinModel, world: np.ndarray, points: np.ndarray) -> tuple:
+def vertex_areas(x: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Each vertex's share of the mesh's area: a third of its triangles' (m^2)."""
+    a = 0.5 * np.linalg.norm(np.cross(x[faces[:, 1]] - x[faces[:, 0]], x[faces[:, 2]] - x[faces[:, 0]]), axis=1)
+    return np.bincount(faces.ravel(), weights=np.repeat(a / 3.0, 3), minlength=len(x))
+
+
+def uniform_depth(area: np.ndarray, slack: np.ndarray, volume: float) -> float:
+    """The depth ``d`` such that moving every vertex in by ``min(d, slack)`` takes ``volume``
+    (to first order: sum of area * min(d, slack)); the largest slack where even that is short."""
+    order = np.argsort(slack, kind="stable")
+    s, a = slack[order], area[order]
+    below = np.concatenate([[0.0], np.cumsum(a * s)])  # taken by the vertices whose slack is under s_k
+    rest = area.sum() - np.concatenate([[0.0], np.cumsum(a)])  # the area still taking d
+    taken = below[:-1] + s * rest[:-1]  # at d = s_k
+    k = int(np.searchsorted(taken, volume))
+    if k >= len(s):
+        return float(s[-1]) if len(s) else 0.0
+    return float((volume - below[k]) / rest[k]) if rest[k] > 0 else float(s[k])
+
+
+def keep_volume(model: SkinModel, x: np.ndarray, n: np.ndarray, offset: np.ndarray, floor: np.ndarray) -> None:
+    """Hold the skin's volume at its rest volume (in place on ``offset``). The pushes and the
+    relax only add volume (a bulge over a bending muscle, a crease filled); what is over is
+    taken back from the vertices with room under them: each comes in by a common depth, at most
+    its slack above ``floor`` (the points under it stay at their fat depth), at most its
+    ``room`` under where it is skinned (a point nearest another vertex is not crossed) and at most
+    ``tol.SKIN_VOLUME_MAX_SHIFT``, its edges tapered by ``tol.SKIN_VOLUME_TAPER`` passes. A
+    skin short of its volume (a collapse at a bending joint) comes out evenly, by at most the
+    same depth. ``tol.SKIN_VOLUME_ROUNDS`` rounds, each on the moved mesh."""
+    area = vertex_areas(x, model.faces)
+    cap = tol.SKIN_VOLUME_MAX_SHIFT
+    slack = np.minimum(np.minimum(offset - np.where(np.isnan(floor), -np.inf, floor), offset + model.room), cap)
+    slack = np.maximum(slack, 0.0)
+    out = 0.0
+    scratch = np.empty_like(x)
+    for _ in range(tol.SKIN_VOLUME_ROUNDS):
+        excess = kernels.normals_volume(x + n * offset[:, None], model.faces, scratch) - model.rest_volume
+        if excess > 0.0:
+            shift = np.minimum(uniform_depth(area, slack, excess), slack)
+            kernels.taper(shift, slack, model.ring_ptr, model.ring_idx, tol.SKIN_VOLUME_TAPER)
+            offset -= shift
+            slack -= shift
+        else:
+            d = min(-excess / area.sum(), cap - out)
+            offset += d
+            out += d
+
+
+def skin_frame(model: SkinModel, world: np.ndarray, points: np.ndarray, keep: bool = True) -> tuple:
     """One frame: the skin skinned by ``world`` (B, 4, 4), pushed over ``points`` (the
-    candidates' world positions, (N, 3)) and relaxed → (positions (V, 3), normals (V, 3),
-    measures (len(SKIN_COLUMNS),) with the outside share still to divide)."""
+    candidates' world positions, (N, 3)), relaxed and (``keep``) held at its rest volume →
+    (positions (V, 3), normals (V, 3), measures (len(SKIN_COLUMNS),) with the outside share
+    still to divide)."""
     rel = np.ascontiguousarray((world[model.bones] @ model.inv_rest)[:, :3, :])  # (K, 3, 4)
     nv = len(model.rest)
     x, n = np.empty((nv, 3)), np.empty((nv, 3))
@@ -162,10 +217,12 @@ def skin_frame(model: SkinModel, world: np.ndarray, points: np.ndarray) -> tuple
     kernels.normals_volume(x, model.faces, n)
     nearest, height = np.empty(len(points), np.int64), np.empty(len(points))
     kernels.nearest_heights(points, x, n, model.candidates, nearest, height)
-    need, offset = np.empty(nv), np.empty(nv)
+    need, offset, floor = np.empty(nv), np.empty(nv), np.empty(nv)
     kernels.push_need(nearest, height, model.target, model.rest_depth, tol.SKIN_MAX_HEIGHT, model.ring_ptr,
-                      model.ring_idx, need)
+                      model.ring_idx, need, floor)
     kernels.relax(need, model.ring_ptr, model.ring_idx, tol.SKIN_RELAX_ITERATIONS, offset)
+    if keep:
+        keep_volume(model, x, n, offset, floor)
     y = x + n * offset[:, None]
     ny = np.empty_like(y)
     vol = kernels.normals_volume(y, model.faces, ny)
@@ -189,7 +246,9 @@ class SkinStage:
     def settings(self) -> dict:
         return {"skin": self.skin.name, "skeleton": self.skin.skeleton, "vertices": int(len(self.skin.vertices)),
                 "reach": tol.SKIN_REACH, "candidates": tol.SKIN_CANDIDATES,
-                "max_height": tol.SKIN_MAX_HEIGHT, "relax": tol.SKIN_RELAX_ITERATIONS}
+                "max_height": tol.SKIN_MAX_HEIGHT, "relax": tol.SKIN_RELAX_ITERATIONS,
+                "volume": {"max_shift": tol.SKIN_VOLUME_MAX_SHIFT, "taper": tol.SKIN_VOLUME_TAPER,
+                           "rounds": tol.SKIN_VOLUME_ROUNDS}}
 
     def start(self, plan) -> SkinModel:
         return build(self.skin, plan)

@@ -46,6 +46,77 @@ def spec_bones(spec) -> set:
     return muscle_bones(spec)
 
 
+def rest_bones(skel: Skeleton, skeleton_file: str, worn) -> tuple[list, list]:
+    """The meshes of the bones the skin wears (``worn``: bone names) at the skeleton's rest
+    pose: [((V, 3) float64, (T, 3) int64)], and the mesh files read."""
+    from axdf_cli.model.skeleton import forward_kinematics
+    from axdf_cli.pipeline.plan import load_bone_mesh
+
+    world = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
+    meshes, files = [], []
+    for i, b in enumerate(skel.bones):
+        if not b.mesh or b.name not in worn:
+            continue
+        v, f, _ = load_bone_mesh(b.mesh, skeleton_file)
+        meshes.append((v.astype(np.float64) @ world[i, :3, :3].T + world[i, :3, 3], np.asarray(f, np.int64)))
+        files.append(Path(b.mesh))
+    return meshes, files
+
+
+def bone_points(meshes: list) -> np.ndarray:
+    """Points for the push over bones: every vertex and every triangle's centroid (a coarse
+    skull's triangles stick out between its vertices)."""
+    return np.concatenate([np.zeros((0, 3))] + [p for v, f in meshes for p in (v, v[f].mean(axis=1))])
+
+
+def clear_bones(vertices: np.ndarray, faces: np.ndarray, meshes: list) -> tuple[np.ndarray, int]:
+    """The skin with no vertex inside a bone mesh (winding number): MakeHuman's eye sockets and
+    lips dip into a skull that has none. Each vertex inside is moved out onto the bone's
+    surface (:func:`_snap_out`), then the skin around the moved ones is smoothed (its normals
+    must point out again for the skin stage's push) and the snap repeated,
+    ``tol.SKIN_PUSH_ROUNDS`` rounds at most; → (vertices, how many were inside at first)."""
+    from axdf_cli.tools.skin import neighbour_mean
+
+    avg = neighbour_mean(faces, len(vertices))
+    v, inside = _snap_out(np.array(vertices, dtype=np.float64), meshes)
+    first = int(inside.sum())
+    for _ in range(tol.SKIN_PUSH_ROUNDS):
+        if not inside.any():
+            break
+        near = inside.astype(np.float64)
+        for _ in range(tol.SKIN_PUSH_SMOOTHING):
+            near = np.maximum(near, avg @ near)
+        around = near > 0
+        v[around] = (avg @ v)[around]
+        v, inside = _snap_out(v, meshes)
+    return v, first
+
+
+def _snap_out(v: np.ndarray, meshes: list) -> tuple[np.ndarray, np.ndarray]:
+    """Every vertex of ``v`` inside a bone mesh put ``tol.SKIN_PUSH_CLEARANCE`` outside its
+    surface, along the nearest triangle's normal (in place) → (v, which were inside)."""
+    import igl
+
+    moved = np.zeros(len(v), bool)
+    for bv, bf in meshes:
+        lo, hi = bv.min(axis=0), bv.max(axis=0)
+        near = np.flatnonzero(np.all((v > lo) & (v < hi), axis=1))
+        if not len(near):
+            continue
+        w = igl.winding_number(bv, bf, v[near])
+        inside = near[np.abs(w) > 0.5]
+        if not len(inside):
+            continue
+        _, tri, closest = igl.point_mesh_squared_distance(v[inside], bv, bf)
+        a, b, c = bv[bf[tri, 0]], bv[bf[tri, 1]], bv[bf[tri, 2]]
+        n = np.cross(b - a, c - a)
+        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+        n *= np.sign(np.mean(w))  # (a mesh wound inward)
+        v[inside] = closest + n * tol.SKIN_PUSH_CLEARANCE
+        moved[inside] = True
+    return v, moved
+
+
 def outside(vertices: np.ndarray, faces: np.ndarray, points: np.ndarray) -> np.ndarray:
     """(N,) bool: the points that lie outside the closed surface (vertices, faces)."""
     import igl
