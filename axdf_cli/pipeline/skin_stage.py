@@ -5,7 +5,8 @@ Each frame, in order:
 
 1. **skinning**: linear blend of the skin's rest mesh by its bones' world transforms relative
    to rest (the bones :func:`~axdf_cli.model.skeleton.forward_kinematics` gives the chunk);
-2. **push**: every candidate point (a muscle or bone mesh vertex within ``tol.SKIN_REACH`` of
+2. **push**: every candidate point (a muscle or bone mesh vertex, or a bone triangle's
+   centroid, within ``tol.SKIN_REACH`` of
    the rest skin, built once by :meth:`SkinStage.start`) is compared with the nearest of
    its ``tol.SKIN_CANDIDATES`` nearest rest skin vertices, along that vertex's skinned normal;
    where it lies less deep under the skin than its target (its local fat thickness, or its
@@ -129,13 +130,15 @@ def build(skin, plan) -> SkinModel:
     pts = [muscle[muscle_points]]
     bone_points = []
     weighed = set(bones.tolist())  # a bone the skin does not wear (gait2392's ground) is left out
-    for b, (bv, _, _) in sorted(plan.bone_meshes.items()):
+    for b, (bv, bf, _) in sorted(plan.bone_meshes.items()):
         if b not in weighed:
             continue
-        world = np.asarray(bv, dtype=np.float64) @ rest_world[b, :3, :3].T + rest_world[b, :3, 3]
+        bv = np.asarray(bv, dtype=np.float64)  # its vertices and its triangles' centroids (a coarse
+        local = np.concatenate([bv, bv[np.asarray(bf, np.int64)].mean(axis=1)])  # mesh's faces bulge between them)
+        world = local @ rest_world[b, :3, :3].T + rest_world[b, :3, 3]
         keep = np.isfinite(tree.query(world, k=1, distance_upper_bound=reach)[0])
         if keep.any():
-            bone_points.append((int(b), np.asarray(bv, dtype=np.float64)[keep]))
+            bone_points.append((int(b), local[keep]))
             pts.append(world[keep])
     p = np.ascontiguousarray(np.concatenate(pts))
     cand = np.asarray(tree.query(p, k=k)[1], dtype=np.int64).reshape(len(p), k) if len(p) else np.zeros((0, k), np.int64)
@@ -221,6 +224,9 @@ def skin_frame(model: SkinModel, world: np.ndarray, points: np.ndarray, keep: bo
     kernels.push_need(nearest, height, model.target, model.rest_depth, tol.SKIN_MAX_HEIGHT, model.ring_ptr,
                       model.ring_idx, need, floor)
     kernels.relax(need, model.ring_ptr, model.ring_idx, tol.SKIN_RELAX_ITERATIONS, offset)
+    if model.room is not None:  # a free vertex relaxed inward no deeper than its room at rest
+        free = np.isnan(need)
+        offset[free] = np.maximum(offset[free], -model.room[free])
     if keep:
         keep_volume(model, x, n, offset, floor)
     y = x + n * offset[:, None]

@@ -48,7 +48,8 @@ def spec_bones(spec) -> set:
 
 def rest_bones(skel: Skeleton, skeleton_file: str, worn) -> tuple[list, list]:
     """The meshes of the bones the skin wears (``worn``: bone names) at the skeleton's rest
-    pose: [((V, 3) float64, (T, 3) int64)], and the mesh files read."""
+    pose, their holes capped (:func:`capped`): [((V, 3) float64, (T, 3) int64)], and the mesh
+    files read."""
     from axdf_cli.model.skeleton import forward_kinematics
     from axdf_cli.pipeline.plan import load_bone_mesh
 
@@ -58,9 +59,35 @@ def rest_bones(skel: Skeleton, skeleton_file: str, worn) -> tuple[list, list]:
         if not b.mesh or b.name not in worn:
             continue
         v, f, _ = load_bone_mesh(b.mesh, skeleton_file)
-        meshes.append((v.astype(np.float64) @ world[i, :3, :3].T + world[i, :3, 3], np.asarray(f, np.int64)))
+        meshes.append(capped(v.astype(np.float64) @ world[i, :3, :3].T + world[i, :3, 3], f))
         files.append(Path(b.mesh))
     return meshes, files
+
+
+def capped(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The mesh with every boundary loop closed by a fan to the loop's centroid, so that its
+    winding number says inside or outside everywhere (gait2392's torso is open at the neck, its
+    skull at the orbits and the foramen)."""
+    v, f = np.asarray(vertices, np.float64), np.asarray(faces, np.int64)
+    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    _, inv, cnt = np.unique(np.sort(e, axis=1), axis=0, return_inverse=True, return_counts=True)
+    nxt = {int(a): int(b) for a, b in e[cnt[inv.ravel()] == 1]}  # each boundary edge, as wound
+    seen, centres, fans = set(), [], []
+    for start in sorted(nxt):
+        if start in seen:
+            continue
+        loop, c = [start], nxt[start]
+        seen.add(start)
+        while c != start and c in nxt and c not in seen:
+            loop.append(c)
+            seen.add(c)
+            c = nxt[c]
+        centre = len(v) + len(centres)
+        centres.append(v[loop].mean(axis=0))
+        fans += [(loop[(k + 1) % len(loop)], loop[k], centre) for k in range(len(loop))]
+    if not centres:
+        return v, f
+    return np.concatenate([v, np.array(centres)]), np.concatenate([f, np.array(fans, np.int64)])
 
 
 def bone_points(meshes: list) -> np.ndarray:
@@ -94,7 +121,8 @@ def clear_bones(vertices: np.ndarray, faces: np.ndarray, meshes: list) -> tuple[
 
 def _snap_out(v: np.ndarray, meshes: list) -> tuple[np.ndarray, np.ndarray]:
     """Every vertex of ``v`` inside a bone mesh put ``tol.SKIN_PUSH_CLEARANCE`` outside its
-    surface, along the nearest triangle's normal (in place) → (v, which were inside)."""
+    surface, past the nearest surface point along the way there (in place) → (v, which were
+    inside)."""
     import igl
 
     moved = np.zeros(len(v), bool)
@@ -109,10 +137,12 @@ def _snap_out(v: np.ndarray, meshes: list) -> tuple[np.ndarray, np.ndarray]:
             continue
         _, tri, closest = igl.point_mesh_squared_distance(v[inside], bv, bf)
         a, b, c = bv[bf[tri, 0]], bv[bf[tri, 1]], bv[bf[tri, 2]]
-        n = np.cross(b - a, c - a)
-        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
-        n *= np.sign(np.mean(w))  # (a mesh wound inward)
-        v[inside] = closest + n * tol.SKIN_PUSH_CLEARANCE
+        n = np.cross(b - a, c - a) * np.sign(np.mean(w))  # (a mesh wound inward)
+        out = closest - v[inside]  # from inside to the nearest surface point: the way out
+        on = np.linalg.norm(out, axis=1) < 1e-9  # (on the surface: the triangle's normal)
+        out[on] = n[on]
+        out /= np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-300)
+        v[inside] = closest + out * tol.SKIN_PUSH_CLEARANCE
         moved[inside] = True
     return v, moved
 
