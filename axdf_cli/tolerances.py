@@ -418,6 +418,9 @@ SKIN_CANDIDATES = 8
 # (winding number) lie at most 28 mm above it, while those 3-9 cm "above" lie in the crease
 # between the thighs, inside the body, their nearest vertex on the other leg.
 SKIN_MAX_HEIGHT = 0.035
+# Above SKIN_SOFT_HEIGHT a candidate's push fades linearly to nothing at SKIN_MAX_HEIGHT: a point
+# rising through the limit would otherwise drop a push of ~35 mm between two frames (a pop).
+SKIN_SOFT_HEIGHT = 0.02
 # Relaxation after the push: passes of neighbour averaging of the offsets, each held at least
 # at its push (sticky); about one edge (~1-2 cm) of spread per pass, so a push becomes a smooth
 # bulge, not a spike. Each pass also widens the bulges: on the walk 6 passes gain the skin

@@ -128,3 +128,22 @@ def test_the_volume_steps_common_depth_takes_the_excess_exactly():
         assert np.sum(area * np.minimum(d, slack)) == pytest.approx(share * full, rel=1e-9)
     assert uniform_depth(area, slack, 2 * full) == pytest.approx(slack.max())
     assert uniform_depth(area, slack, 0.0) == 0.0
+
+
+def test_a_point_rising_through_the_height_limit_fades_its_push():
+    """push_need: a point's push falls to nothing as its height above the skin nears
+    SKIN_MAX_HEIGHT (a crease), continuously: no frame-to-frame drop of a whole push (a pop)."""
+    from axdf_cli import tolerances as tol
+    from axdf_cli.model import skin as kernels
+
+    ptr, idx = np.array([0, 1, 2], np.int64), np.array([1, 0], np.int64)  # two vertices, each the other's ring
+    needs = []
+    for h in np.linspace(0.0, tol.SKIN_MAX_HEIGHT + 0.005, 400):
+        need, floor = np.empty(2), np.empty(2)
+        kernels.push_need(np.array([0], np.int64), np.array([h]), np.array([0.005]), np.array([0.005]),
+                          tol.SKIN_SOFT_HEIGHT, tol.SKIN_MAX_HEIGHT, ptr, idx, need, floor)
+        needs.append(need[0])
+    needs = np.array(needs)
+    assert needs[0] == pytest.approx(0.005) and np.nanmax(needs) > tol.SKIN_SOFT_HEIGHT  # it pushes, fully below
+    steps = np.abs(np.diff(np.nan_to_num(needs, nan=0.0)))
+    assert steps.max() < 0.002  # 0.1 mm of height never moves the push by 2 mm (without the fade: ~40 mm)

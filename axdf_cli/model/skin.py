@@ -87,7 +87,7 @@ def nearest_heights(points, x, n, candidates, nearest, height):
 
 
 @njit(cache=True)
-def push_need(nearest, height, target, rest_depth, max_height, ring_ptr, ring_idx, need, floor):
+def push_need(nearest, height, target, rest_depth, soft_height, max_height, ring_ptr, ring_idx, need, floor):
     """How far each skin vertex moves along its normal (``need``; NaN: it has no point under
     it, and is free). Outward, over every point less deep than its ``target``, by the largest
     shortfall, at its nearest vertex and that vertex's ring of neighbours (a point lies under the
@@ -95,7 +95,9 @@ def push_need(nearest, height, target, rest_depth, max_height, ring_ptr, ring_id
     than at rest (``rest_depth``), by the least of those excesses: the skin follows the muscles
     in as well as out, and keeps its volume. A point higher than ``max_height`` above its
     nearest vertex counts for nothing: it lies in a crease, where the nearest vertex's normal
-    does not say whether it is inside.
+    does not say whether it is inside. Between ``soft_height`` and ``max_height`` its push
+    fades linearly to nothing, so that a point rising through the limit does not drop its
+    push from one frame to the next (a pop).
 
     ``floor``: the least offset each vertex may take and still hold every point under it at
     its target depth (the largest shortfall, spread over the ring as the push is; NaN: free),
@@ -108,6 +110,8 @@ def push_need(nearest, height, target, rest_depth, max_height, ring_ptr, ring_id
             continue
         s = nearest[p]
         d = height[p] + target[p]
+        if height[p] > soft_height and d > 0.0:
+            d *= (max_height - height[p]) / (max_height - soft_height)
         if d > out[s]:
             out[s] = d
         e = height[p] + rest_depth[p]

@@ -221,8 +221,8 @@ def skin_frame(model: SkinModel, world: np.ndarray, points: np.ndarray, keep: bo
     nearest, height = np.empty(len(points), np.int64), np.empty(len(points))
     kernels.nearest_heights(points, x, n, model.candidates, nearest, height)
     need, offset, floor = np.empty(nv), np.empty(nv), np.empty(nv)
-    kernels.push_need(nearest, height, model.target, model.rest_depth, tol.SKIN_MAX_HEIGHT, model.ring_ptr,
-                      model.ring_idx, need, floor)
+    kernels.push_need(nearest, height, model.target, model.rest_depth, tol.SKIN_SOFT_HEIGHT, tol.SKIN_MAX_HEIGHT,
+                      model.ring_ptr, model.ring_idx, need, floor)
     kernels.relax(need, model.ring_ptr, model.ring_idx, tol.SKIN_RELAX_ITERATIONS, offset)
     if model.room is not None:  # a free vertex relaxed inward no deeper than its room at rest
         free = np.isnan(need)
@@ -252,7 +252,7 @@ class SkinStage:
     def settings(self) -> dict:
         return {"skin": self.skin.name, "skeleton": self.skin.skeleton, "vertices": int(len(self.skin.vertices)),
                 "reach": tol.SKIN_REACH, "candidates": tol.SKIN_CANDIDATES,
-                "max_height": tol.SKIN_MAX_HEIGHT, "relax": tol.SKIN_RELAX_ITERATIONS,
+                "soft_height": tol.SKIN_SOFT_HEIGHT, "max_height": tol.SKIN_MAX_HEIGHT, "relax": tol.SKIN_RELAX_ITERATIONS,
                 "volume": {"max_shift": tol.SKIN_VOLUME_MAX_SHIFT, "taper": tol.SKIN_VOLUME_TAPER,
                            "rounds": tol.SKIN_VOLUME_ROUNDS}}
 
