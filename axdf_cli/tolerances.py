@@ -421,6 +421,11 @@ SKIN_MAX_HEIGHT = 0.035
 # Above SKIN_SOFT_HEIGHT a candidate's push fades linearly to nothing at SKIN_MAX_HEIGHT: a point
 # rising through the limit would otherwise drop a push of ~35 mm between two frames (a pop).
 SKIN_SOFT_HEIGHT = 0.02
+# Where every point under a skin vertex lies deeper than at rest, the vertex follows them in by
+# at most SKIN_MAX_INWARD metres: at the CMU walk's deepest hip flexion the groin's points sink
+# ~6 cm, and following them all the way made the skin jump between frames (the volume step
+# takes back what the bulges add elsewhere).
+SKIN_MAX_INWARD = 0.01
 # Relaxation after the push: passes of neighbour averaging of the offsets, each held at least
 # at its push (sticky); about one edge (~1-2 cm) of spread per pass, so a push becomes a smooth
 # bulge, not a spike. Each pass also widens the bulges: on the walk 6 passes gain the skin
