@@ -51,6 +51,16 @@ def written_meshes(plan: RunPlan, frame: int) -> tuple[list, list]:
     return pos, nrm
 
 
+def written_skin(plan: RunPlan, frame: int) -> tuple[np.ndarray, np.ndarray]:
+    """The skin of one frame as the run wrote it (``meshes/skin/``): (V, 3) float32 positions
+    and normals."""
+    from axdf_cli.formats import FORMATS
+    from axdf_cli.fileio.runfolder import SKIN_MESH, mesh_relpath
+
+    m = FORMATS[plan.fmt].reader((plan.out / mesh_relpath(SKIN_MESH, int(frame), plan.fmt)).read_bytes())
+    return m.vertices.astype(np.float32), m.normals.astype(np.float32)
+
+
 def build_models(specs, skeleton) -> list:
     """The muscle models at the skeleton's rest pose, as a run plan builds them."""
     from axdf_cli.model.muscle import MuscleModel

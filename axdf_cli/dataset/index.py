@@ -1,5 +1,9 @@
 """The index: one Parquet table of every sample (sequence x frame x view), in sequence order.
 
+``skin`` is the sample's skin mesh where the data set wears one (``skin:``), and
+``skin_passes`` names the EXR channels the skin adds (``under.id``, ``under.Z``, ``part.id``:
+an opaque skin's muscle-under-skin and body-part passes).
+
 ``visible_keypoints`` counts the keypoints visible in the sample (``labels.npz``'s ``visible``):
 0 marks a sample whose view shows none of them (the subject out of view or hidden), so a
 training loader can skip it (``index[index.visible_keypoints > 0]``).
@@ -21,7 +25,8 @@ from axdf_cli.fileio import atomic
 from axdf_cli.errors import EnvironmentProblem
 
 COLUMNS = ("sample", "sequence", "sequence_index", "source", "frame", "frame_index", "view", "view_index",
-            "seed", "shard", "png", "exr", "labels", "amodal", "meshes", "mask", "depth", "visible_keypoints")
+            "seed", "shard", "png", "exr", "labels", "amodal", "meshes", "mask", "depth", "visible_keypoints",
+            "skin", "skin_passes")
 
 
 def _pyarrow():
@@ -60,6 +65,10 @@ def index_rows(records: list[dict], seed: int, shards: int, passes) -> dict:
                 for p in ("mask", "depth"):  # (views.VIEW_PNG_PASSES: <frame>.mask.png, .depth.png)
                     cols[p].append(f"{name}/views/{view}/{frame:04d}.{p}.png" if p in passes else None)
                 cols["visible_keypoints"].append(_count(rec.get("visible_keypoints"), fi, vi))
+                skin = [k for k in rec.get("files", {}) if k.startswith(f"meshes/skin/skin_{frame:04d}.")]
+                cols["skin"].append(f"{name}/{skin[0]}" if skin else None)
+                sp = rec.get("skin_passes")
+                cols["skin_passes"].append(",".join(sp) if sp and "exr" in passes else None)
                 n += 1
     return cols
 

@@ -6,7 +6,7 @@ number of frames) from the file alone, so every worker and every shard sees the 
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from axdf_cli.dataset.door import motion_pose, qpos_pose, retarget_pose
@@ -36,7 +36,7 @@ MAX_SHARDS = 1_000_000
 DEFAULT_VISIBILITY_TOLERANCE = 0.1  # metres; see labels.visibility
 RENDER_KEYS_ELSEWHERE = ("enabled", "view", "camera", "orbit", "fov")
 DATASET_KEYS = ("dataset", "seed", "skeleton", "muscles", "fps", "coordinates", "motions", "sequences", "activation",
-                "cameras", "render", "format", "shards", "labels") + STAGE_KEYS
+                "cameras", "render", "format", "shards", "labels", "skin") + STAGE_KEYS
 
 
 @dataclass(frozen=True)
@@ -130,6 +130,7 @@ class DatasetSpec:
     fps: float
     policy: RefPolicy = field(default=RefPolicy(), compare=False)  # where referenced files may lie
     stages: tuple = ()  # ((stage, True | False), ...): the file's stage keys (`contact: true`), as a job's
+    skin: str | None = None  # the skin file every sequence wears (`skin:`, docs/SKIN.md), or None
 
     @property
     def views(self) -> tuple[str, ...]:
@@ -187,7 +188,11 @@ def load_dataset(path: Path | str, seed: int | None = None, policy: RefPolicy | 
                     for v, m in zip(seq_raw, item_marks(seq_raw, f.vmark("sequences"))))
     activation = _parse_activation(f.raw("activation"), f.vmark("activation"), muscle_names)
     rig, sphere = _parse_cameras(f.mapping("cameras", required=True), f.vmark("cameras"), skel)
-    render, passes = _parse_render(f.mapping("render", default=None), f.vmark("render"))
+    render_doc = f.mapping("render", default=None)
+    render, passes = _parse_render(render_doc, f.vmark("render"))
+    skin = _parse_skin(f, path, skel, policy)
+    if skin is not None and (render_doc is None or "skin" not in render_doc):
+        render = replace(render, skin="opaque")  # a data set's skin is the body its images show
     fmt = f.choice("format", tuple(WRITERS), default="ply")
     shards = int(f.number("shards", default=1, lo=1, hi=MAX_SHARDS, integer=True))
     lab = f.mapping("labels", default=None)
@@ -203,13 +208,30 @@ def load_dataset(path: Path | str, seed: int | None = None, policy: RefPolicy | 
         raise InputError(f.vmark("sequences"), f"{total} sequences", f"at most {MAX_SEQUENCES}")
     spec = DatasetSpec(name, str(path), file_seed if seed is None else int(seed), str(skel_path),
                        tuple(str(p) for p in files), motions, entries, coords, activation, rig, sphere, render,
-                       passes, fmt, shards, tol, fps, policy, stages)
+                       passes, fmt, shards, tol, fps, policy, stages, skin)
     # every motion must load (and match the skeleton) before anything is written; the frame
     # selections are checked first, before any take is fitted
     check_motion_frames(spec)
     for m in motions.values():
         load_motion(spec, m.name)
     return spec
+
+
+def _parse_skin(f, path: Path, skel, policy: RefPolicy) -> str | None:
+    """The ``skin:`` key: a skin file (``axdf skin``) relative to the dataset file, read and
+    checked against the data set's skeleton; its path, or None without the key."""
+    from axdf_cli.specs.skin import load_skin
+
+    if not f.has("skin"):
+        return None
+    ref = f.string("skin")
+    where = f.vmark("skin")
+    skin_path = policy.resolve(path, ref, where, "skin file")
+    if not skin_path.is_file():
+        raise InputError(where, f"skin file {ref!r} not found",
+                         "a skin file written by axdf skin, relative to the dataset file (docs/SKIN.md)")
+    load_skin(skin_path, skel, policy)
+    return str(skin_path)
 
 
 def _parse_coordinates(value, where: Mark, skel) -> dict:

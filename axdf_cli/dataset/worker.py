@@ -62,6 +62,8 @@ class Context:
     digest: str
     timing: dict = field(default_factory=dict)
     stages: tuple = ()  # the run's stages (axdf_cli.pipeline.stages), applied to every sequence
+    skin: object = None  # the skin every sequence wears (axdf_cli.specs.skin.Skin), or None
+    face_part: object = None  # (F,) each skin triangle's body part (index into skin.bones)
 
     @property
     def names(self) -> list[str]:
@@ -81,18 +83,30 @@ def build_context(path: Path | str, seed: int | None = None, policy=None, listed
     models = door.build_models(muscles, skel)
     bone_meshes = {i: load_bone_mesh(b.mesh, spec.skeleton_path) for i, b in enumerate(skel.bones) if b.mesh}
     srcs = [spec.source, spec.skeleton_path, *spec.muscle_files, *sorted({b.mesh for b in skel.bones if b.mesh})]
+    skin = skin_stage = scene_skin = face_part = None
+    if spec.skin is not None:
+        from axdf_cli.pipeline.skin_stage import SkinStage
+        from axdf_cli.render.scene import SKIN_COLOR, SceneSkin
+        from axdf_cli.render.under import face_parts
+        from axdf_cli.specs.skin import load_skin
+
+        skin = load_skin(spec.skin, skel, spec.policy)
+        srcs += list(skin.files)
+        skin_stage, scene_skin = SkinStage(skin), SceneSkin(skin.faces, SKIN_COLOR)
+        face_part = face_parts(skin.faces, skin.weights)
     inputs = {display_path(Path(s)): atomic.sha256_file(s) for s in srcs}
     motion_inputs = {m.name: {display_path(Path(p)): atomic.sha256_file(p) for p in (m.path, m.map) if p}
                      for m in spec.motions.values()}
     scene_bones = sorted(bone_meshes) if spec.render.bones else []
     scene = Scene(muscles=tuple(SceneMuscle(s.name, s.color, m.faces) for s, m in zip(muscles, models)),
                   bones=tuple(SceneBone(skel.bones[i].name, bone_meshes[i][0], bone_meshes[i][1]) for i in scene_bones),
-                  bounds=np.zeros((2, 3)), frames=())
+                  bounds=np.zeros((2, 3)), frames=(), skin=scene_skin)
     sequences = expand_sequences(spec) if listed else []
     keypoints = skeleton_keypoints(skel, {i: m[0] for i, m in bone_meshes.items()})
     ctx = Context(spec, sequences, skel, door.without_meshes(skel), muscles, models, bone_meshes, keypoints,
                   inputs, motion_inputs, scene, scene_bones, b"", "",
-                  stages=build_stages(dict(spec.stages), muscles=muscles))
+                  stages=build_stages(dict(spec.stages), muscles=muscles) + ((skin_stage,) if skin_stage else ()),
+                  skin=skin, face_part=face_part)
     if not listed:
         return ctx
     ctx.dataset_json = (json.dumps(dataset_dict(ctx), indent=1) + "\n").encode()
@@ -134,7 +148,8 @@ def dataset_dict(ctx: Context) -> dict:
         "views": list(spec.views),
         "image": {"width": W, "height": H, "passes": list(spec.passes)},
         "render": settings_to_dict(spec.render),
-        "ids": id_map(ctx.scene, spec.render.bones),
+        "ids": id_map(ctx.scene, spec.render.bones, spec.render.skin if ctx.skin is not None else "off"),
+        **({"skin": skin_dict(ctx)} if ctx.skin is not None else {}),
         "format": spec.format,
         "shards": spec.shards,
         "bones": {skel.bones[i].name: f"bones/{skel.bones[i].name}.ply" for i in sorted(ctx.bone_meshes)},
@@ -159,6 +174,22 @@ def dataset_dict(ctx: Context) -> dict:
         **{p: VIEW_PNG_NOTES[p] for p in VIEW_PNG_NOTES if p in spec.passes},
         "sequences": [{"name": s.name, "source": spec.entries[s.entry].label, "frames": s.n_frames}
                       for s in ctx.sequences],
+    }
+
+
+def skin_dict(ctx: Context) -> dict:
+    """``dataset.json``'s ``skin``: what the skin adds to each sequence and image."""
+    opaque = ctx.spec.render.skin == "opaque"
+    return {
+        "name": ctx.skin.name, "drawn": ctx.spec.render.skin,
+        "meshes": "<sequence>/meshes/skin/skin_<frame>.<format>: the skin worn over the muscles (docs/SKIN.md)",
+        "parts": list(ctx.skin.bones),
+        **({"passes": {
+            "under.id": "EXR channel: for each skin pixel the muscle nearest beneath it (the muscle's id; 0: none "
+                        "within the cap, or not skin)",
+            "under.Z": "EXR channel: the depth of that muscle's surface under the skin (m; 0: none)",
+            "part.id": "EXR channel: for each skin pixel 1 + its body part's index in parts (the bone that carries "
+                       "the skin there most, by its skinning weights); 0: not skin"}} if opaque else {}),
     }
 
 
@@ -302,13 +333,18 @@ def _make_sequence(ctx: Context, seq: Sequence, folder: Path, resume: bool, timi
     for fi, frame in enumerate(frames):
         ta = time.perf_counter()
         pos, nrm = door.written_meshes(plan, int(frame))
+        skin = door.written_skin(plan, int(frame)) if ctx.skin is not None else None
         cams = [view_camera(views[v], K[v], w2c[fi, v], clip[fi, v, 0], clip[fi, v, 1], spec.render.size)
                 for v in range(nv)]
         bw = world[fi, ctx.scene_bones] if ctx.scene_bones else None
         if plates is not None:
             bw = placed_plates(plates, bw)
         tb = time.perf_counter()
-        imgs = vr.render(int(frame), pos, nrm, bw, cams)
+        imgs = vr.render(int(frame), pos, nrm, bw, cams, skin)
+        if skin is not None and spec.render.skin == "opaque":
+            meshes = [(p, m.faces) for p, m in zip(pos, ctx.models)]
+            imgs = [replace(im, under=vr.renderer.under(im, meshes),
+                            parts=vr.renderer.parts(im, skin[0], ctx.skin.faces, ctx.face_part)) for im in imgs]
         masks = [vr.renderer.amodal(c) for c in cams] if amodal else []
         tc = time.perf_counter()
         depth = np.stack([im.depth for im in imgs])[None]  # (1, V, H, W)
@@ -338,6 +374,8 @@ def _make_sequence(ctx: Context, seq: Sequence, folder: Path, resume: bool, timi
         "joint_bones": ctx.keypoints.bones, "bone_names": np.array([b.name for b in ctx.skeleton.bones]),
         "muscle_names": np.array(ctx.names), "view_names": np.array(list(views)),
     }
+    if ctx.skin is not None:
+        arrays["skin_part_names"] = np.array(list(ctx.skin.bones))
     files[LABELS] = atomic.write_bytes(root.path(LABELS), lab.npz_bytes(arrays))
     if amodal:
         files[AMODAL] = atomic.write_text(root.path(AMODAL), json.dumps(
@@ -348,6 +386,8 @@ def _make_sequence(ctx: Context, seq: Sequence, folder: Path, resume: bool, timi
     rec = {"dataset": ctx.digest, "sequence": seq.name, "index": seq.index, "source": entry.label,
            "frames": [int(f) for f in frames], "views": list(views),
            "visible_keypoints": visible.sum(axis=-1).astype(int).tolist(),  # (F, V): 0 marks a sample showing none
+           **({"skin_passes": ["under.id", "under.Z", "part.id"]}
+              if ctx.skin is not None and spec.render.skin == "opaque" else {}),
            "files": dict(sorted(files.items()))}
     atomic.write_text(root.path(RECORD), json.dumps(rec, indent=1) + "\n")
     for rel in old_files:  # what the earlier record listed and this one does not (never anything else)

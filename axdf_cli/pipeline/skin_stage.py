@@ -131,7 +131,8 @@ def build(skin, plan) -> SkinModel:
     pts = [muscle[muscle_points]]
     bone_points = []
     weighed = set(bones.tolist())  # a bone the skin does not wear (gait2392's ground) is left out
-    for b, (bv, bf, _) in sorted(plan.bone_meshes.items()):
+    bone_meshes = plan.bone_meshes or getattr(plan, "collision_meshes", None) or {}  # (a data set's sequence)
+    for b, (bv, bf, _) in sorted(bone_meshes.items()):
         if b not in weighed:
             continue
         bv = np.asarray(bv, dtype=np.float64)  # its vertices and its triangles' centroids (a coarse

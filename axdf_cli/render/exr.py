@@ -24,13 +24,14 @@ from axdf_cli.errors import EnvironmentProblem
 
 CHANNEL_TYPES = {"R": np.float16, "G": np.float16, "B": np.float16, "A": np.float16,
                  "Z": np.float32, "N.X": np.float32, "N.Y": np.float32, "N.Z": np.float32,
-                 "id": np.uint32, "under.id": np.uint32, "under.Z": np.float32}
+                 "id": np.uint32, "under.id": np.uint32, "under.Z": np.float32, "part.id": np.uint32}
 
 
 def exr_channels(rgba: np.ndarray, depth: np.ndarray, normals: np.ndarray, ids: np.ndarray,
-                 under: tuple[np.ndarray, np.ndarray] | None = None) -> dict:
+                 under: tuple[np.ndarray, np.ndarray] | None = None, parts: np.ndarray | None = None) -> dict:
     """Name -> (H, W) array of the type in :data:`CHANNEL_TYPES`; ``under``: an opaque skin's
-    muscle-under-skin pass (``under.id``: the muscle's id, ``under.Z``: metres under the skin)."""
+    muscle-under-skin pass (``under.id``: the muscle's id, ``under.Z``: metres under the skin);
+    ``parts``: its body-part pass (``part.id``: 1 + the part's index, 0 off the skin)."""
     ch = {}
     for i, c in enumerate("RGBA"):
         ch[c] = np.ascontiguousarray(rgba[..., i], dtype=np.float16)
@@ -41,6 +42,8 @@ def exr_channels(rgba: np.ndarray, depth: np.ndarray, normals: np.ndarray, ids: 
     if under is not None:
         ch["under.id"] = np.ascontiguousarray(under[0], dtype=np.uint32)
         ch["under.Z"] = np.ascontiguousarray(under[1], dtype=np.float32)
+    if parts is not None:
+        ch["part.id"] = np.ascontiguousarray(parts, dtype=np.uint32)
     return ch
 
 

@@ -1,5 +1,6 @@
 """The image files of a rendered frame: one writer per pass, keyed by file extension
-(``png``: 8-bit sRGB RGBA; ``exr``: RGBA, Z, N and id, and with an opaque skin under.id and under.Z). Every frame gets one file of each."""
+(``png``: 8-bit sRGB RGBA; ``exr``: RGBA, Z, N and id, and with an opaque skin under.id and under.Z,
+and in a data set part.id). Every frame gets one file of each."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -15,7 +16,7 @@ def _write_png(path: Path, img: FrameImages) -> str:
 
 
 def _write_exr(path: Path, img: FrameImages) -> str:
-    return write_exr(path, exr_channels(img.rgba, img.depth, img.normals, img.ids, img.under))
+    return write_exr(path, exr_channels(img.rgba, img.depth, img.normals, img.ids, img.under, img.parts))
 
 
 #: file extension -> writer(path, FrameImages) -> sha256; every frame gets one file of each

@@ -156,6 +156,7 @@ class FrameImages:
     ids: np.ndarray  # (H, W) uint32, 0 = background, 1..M muscles, M+1.. bones
     cameras: tuple[Camera, ...]
     under: tuple[np.ndarray, np.ndarray] | None = None  # an opaque skin's under_id, under_depth (render/under.py)
+    parts: np.ndarray | None = None  # (H, W) an opaque skin's body-part ids (render/under.py body_parts)
 
 
 def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -530,6 +531,23 @@ class Renderer:
             uid[panel], depth[panel] = under_skin(img.depth[panel], img.ids[panel], skin_id(self.scene), K,
                                                   cam.world_to_camera, meshes)
         return uid, depth
+
+    def parts(self, img: FrameImages, vertices: np.ndarray, faces: np.ndarray, face_part: np.ndarray) -> np.ndarray:
+        """The body-part pass of a frame drawn with an opaque skin, panel by panel
+        (:func:`axdf_cli.render.under.body_parts`); ``vertices``: the skin's (V, 3) world
+        vertices that frame, ``faces`` its triangles, ``face_part`` (F,) each one's part."""
+        from axdf_cli.render.under import body_parts
+
+        out = np.zeros(img.ids.shape, np.uint16)
+        for cam in img.cameras:
+            x0, y0, w, h = cam.viewport
+            K = np.array(cam.K, dtype=np.float64)
+            K[0, 2] -= x0
+            K[1, 2] -= y0
+            panel = (slice(y0, y0 + h), slice(x0, x0 + w))
+            out[panel] = body_parts(img.depth[panel], img.ids[panel], skin_id(self.scene), K, cam.world_to_camera,
+                                    vertices, faces, face_part)
+        return out
 
     def release(self) -> None:
         # bind the default framebuffer first: moderngl re-binds the framebuffer last used when it

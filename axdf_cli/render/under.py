@@ -54,3 +54,28 @@ def under_skin(depth: np.ndarray, ids: np.ndarray, skin: int, K: np.ndarray, wor
     under_id[mask] = np.where(near, owner[np.asarray(face, np.int64)], NO_MUSCLE)
     under_depth[mask] = np.where(near, d, 0.0)
     return under_id, under_depth
+
+
+def face_parts(faces: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """(F,) each skin triangle's body part: the bone (a column of the skin's ``weights``
+    (V, K)) with the largest weight summed over its three corners."""
+    f = np.asarray(faces, np.int64)
+    w = np.asarray(weights, np.float64)
+    return np.argmax(w[f[:, 0]] + w[f[:, 1]] + w[f[:, 2]], axis=1)
+
+
+def body_parts(depth: np.ndarray, ids: np.ndarray, skin: int, K: np.ndarray, world_to_camera: np.ndarray,
+               vertices: np.ndarray, faces: np.ndarray, parts: np.ndarray) -> np.ndarray:
+    """The body-part pass for one view of an opaque skin: (H, W) uint16, 1 + the part
+    (``parts`` (F,), :func:`face_parts`) of the skin triangle each skin pixel's unprojected point
+    lies on (nearest, exact to the triangles), 0 off the skin."""
+    import igl
+
+    out = np.zeros(ids.shape, np.uint16)
+    mask = ids == skin
+    if not mask.any():
+        return out
+    _, face, _ = igl.point_mesh_squared_distance(unproject(depth, mask, K, world_to_camera),
+                                                 np.asarray(vertices, np.float64), np.asarray(faces, np.int64))
+    out[mask] = np.asarray(parts, np.int64)[np.asarray(face, np.int64)] + 1
+    return out
