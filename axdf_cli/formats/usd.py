@@ -170,14 +170,17 @@ def write_bones_layer(path: Path | str, bones) -> None:
     layer.Export(str(path))
 
 
-def write_stage(path: Path | str, frames, fps: float, muscles, bones, bone_rows: np.ndarray, camera=None) -> None:
+def write_stage(path: Path | str, frames, fps: float, muscles, bones, bone_rows: np.ndarray, camera=None,
+                skin=None) -> None:
     """The run's root stage (``scene.usda``); references are paths relative to its folder.
 
     muscles: [(name, layer)] (``usd/<m>.usdc``); bones: [(name, layer or None)]: a bone with
     a mesh references ``/bones/<bone>`` in that layer (``usd/bones.usdc``);
     bone_rows: (F, B, 7) x y z qw qx qy qz, each bone's frame in the world per frame;
     camera: None or a dict with ``world_to_camera`` (F, 4, 4) OpenCV axes (x right, y down,
-    z forward), ``K`` (3, 3) pixels, ``size`` (W, H), ``near``, ``far``."""
+    z forward), ``K`` (3, 3) pixels, ``size`` (W, H), ``near``, ``far``;
+    skin: None or (name, layer): the run's skin (``usd/skin.usdc``), a mesh under the root
+    next to the muscles."""
     Sdf, Usd, UsdGeom, Vt, Gf, _ = pxr()
     layer = Sdf.Layer.CreateNew(str(path))  # at its own path: the relative references resolve
     stage = Usd.Stage.Open(layer)
@@ -188,6 +191,8 @@ def write_stage(path: Path | str, frames, fps: float, muscles, bones, bone_rows:
     for prim, (_, ref) in zip(prim_names(n for n, _ in muscles), muscles):
         p = stage.DefinePrim(f"{ROOT}/muscles/{prim}")
         p.GetReferences().AddReference("./" + ref)
+    if skin is not None:
+        stage.DefinePrim(f"{ROOT}/{prim_names([skin[0]])[0]}").GetReferences().AddReference("./" + skin[1])
     UsdGeom.Scope.Define(stage, f"{ROOT}/bones")
     for b, (prim, (_, ref)) in enumerate(zip(prim_names(n for n, _ in bones), bones)):
         x = UsdGeom.Xform.Define(stage, f"{ROOT}/bones/{prim}")

@@ -26,7 +26,7 @@ from axdf_cli.formats import FORMATS, WRITERS
 from axdf_cli.pipeline.evaluate import Prepass, chunk_frames, evaluate_plan, finite_or_rest, prepare
 from axdf_cli.pipeline.manifest import check_resume, manifest_dict
 from axdf_cli.pipeline.overlap import bulk_overlap, bulk_overlap_text, overlap_share, with_pack_command
-from axdf_cli.pipeline.packed import SequenceFiles, file_relpath, sequence_formats, write_run_files
+from axdf_cli.pipeline.packed import SequenceFiles, file_relpath, part_sizes, parts_of, sequence_formats, write_run_files
 from axdf_cli.pipeline.plan import RunPlan
 from axdf_cli.pipeline.skin_stage import SKIN_CSV, SKIN_COLUMNS, SKIN_NAME, skin_csv, skin_of
 from axdf_cli.pipeline.stages import Scope, of_scope
@@ -44,7 +44,7 @@ def run_dirs(plan: RunPlan) -> list[str]:
         dirs = [PurePosixPath(mesh_relpath(n, 0, f)).parent.as_posix() for f in plan.formats if f in WRITERS
                 for n in plan.names]
     dirs += sorted({PurePosixPath(file_relpath(n, f)).parent.as_posix() for f in sequence_formats(plan.formats)
-                    for n in plan.names})
+                    for n in plan.names + ([SKIN_NAME] if skin_of(plan) is not None else [])})
     dirs += [PurePosixPath(bone_mesh_relpath("b")).parent.as_posix()]
     if skin_of(plan) is not None:
         dirs += [PurePosixPath(mesh_relpath(SKIN_NAME, 0, f)).parent.as_posix() for f in plan.formats if f in WRITERS][:1]
@@ -82,13 +82,14 @@ def split_of(plan: RunPlan) -> str:
 
 
 class Spill:
-    """Every muscle's positions and normals over a block of R frames, raw float32 in one
+    """Every part's (muscles', then the skin's: :func:`parts_of`) positions and normals over a
+    block of R frames, raw float32 in one
     ``.npy`` (2, R, sum V, 3) at a temporary name in OUT (so that a killed run's is removed
     as any temporary): a frames worker's share of the packed files, streamed in frame order
     by :func:`_sequence_worker`."""
 
     def __init__(self, path: Path, plan: RunPlan, n_rows: int):
-        sizes = [m.n_vertices for m in plan.models]
+        sizes = part_sizes(plan)
         self.offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
         self.path = path
         try:
@@ -140,7 +141,8 @@ def mesh_pass(plan: RunPlan, prep: Prepass, writer: OutputWriter, muscles: list[
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
     packed = bool(sequence_formats(plan.formats))
-    seq = SequenceFiles(plan, muscles, writer) if packed and spill is None else None
+    seq_parts = muscles + ([nm] if skin is not None else [])  # (the skin: part nm, see parts_of)
+    seq = SequenceFiles(plan, seq_parts, writer) if packed and spill is None else None
     raw = None
     try:
         raw = Spill(spill, plan, n_rows) if packed and spill is not None else None
@@ -188,6 +190,10 @@ def mesh_pass(plan: RunPlan, prep: Prepass, writer: OutputWriter, muscles: list[
                     for i, frame in enumerate(frames):
                         writer.write(mesh_relpath(SKIN_NAME, int(frame), f),
                                      skin_writers[f].encode(chunk.skin.positions[i], chunk.skin.normals[i]))
+                if seq is not None:
+                    seq.append(nm, chunk.skin.positions, chunk.skin.normals)
+                if raw is not None:
+                    raw.put(nm, here, chunk.skin.positions, chunk.skin.normals)
             if seq is not None:
                 seq.end_chunk()
             if on_chunk:
@@ -220,14 +226,15 @@ def _mesh_worker(shared: dict, task) -> MeshPassResult:
 
 
 def _sequence_worker(shared: dict, muscles: list[int]) -> tuple[dict, int]:
-    """Stream ``muscles``' packed files from the spilled blocks, in frame order."""
+    """Stream the packed files of ``muscles`` (parts: the skin is part ``len(plan.models)``)
+    from the spilled blocks, in frame order."""
     plan = shared["plan"]
     writer = OutputWriter(shared["root"], shared["previous"])
     seq = SequenceFiles(plan, muscles, writer)
     try:
         for path in shared["spills"]:
             data = np.load(path, mmap_mode="r")
-            offsets = np.concatenate([[0], np.cumsum([m.n_vertices for m in plan.models])])
+            offsets = np.concatenate([[0], np.cumsum(part_sizes(plan))])
             for j in muscles:
                 a, b = offsets[j], offsets[j + 1]
                 seq.append(j, data[0, :, a:b], data[1, :, a:b])
@@ -264,7 +271,8 @@ def _parallel_mesh_pass(plan: RunPlan, root: Path, jobs: int, prep: Prepass, pre
         parts = process_map(_mesh_worker, tasks, shared, jobs=jobs, on_result=on_result)
         if packed:
             shared["spills"] = [p.spill for p in parts]
-            groups = [g for g in (list(range(k, nm, jobs)) for k in range(jobs)) if g]
+            npart = parts_of(plan)
+            groups = [g for g in (list(range(k, npart, jobs)) for k in range(jobs)) if g]
             for files, skipped in process_map(_sequence_worker, groups, shared):
                 parts[0].files.update(files)
                 parts[0].skipped += skipped

@@ -2,7 +2,8 @@
 every frame (each format's folder, faces and rest mesh: its ``FORMATS`` entry).
 
 The mesh pass evaluates all its muscles chunk by chunk; :class:`SequenceFiles` streams each
-chunk into every selected per-sequence format on its own background thread (so writing
+chunk of every part (the muscles, and a run's skin: :func:`parts_of`) into every selected
+per-sequence format on its own background thread (so writing
 overlaps evaluation, as the per-frame writer's thread does) and completes the files when
 the pass ends. Every file is written under a temporary name and renamed when whole; its
 sha256 goes into the manifest. On ``--resume`` a file is written again (a killed run leaves
@@ -11,7 +12,7 @@ entry, the old one is kept and counted as skipped.
 
 After the mesh pass, :func:`write_run_files` writes what belongs to the run rather than to
 one muscle: the USD root stage (``scene.usda``) with the bones and camera, ``usd/bones.usdc``,
-and the rest meshes the point caches apply to.
+and the rest meshes the point caches apply to (the skin's too).
 """
 from __future__ import annotations
 
@@ -23,7 +24,7 @@ import numpy as np
 from axdf_cli.fileio import atomic
 from axdf_cli.formats import FORMATS, of_layout
 from axdf_cli.formats.packed import SequenceInfo
-from axdf_cli.fileio.runfolder import USD_BONES, USD_STAGE, is_file_with, rest_mesh_relpath, sequence_relpath
+from axdf_cli.fileio.runfolder import SKIN_MESH, USD_BONES, USD_STAGE, is_file_with, rest_mesh_relpath, sequence_relpath
 
 MAX_PENDING_CHUNKS = 2  # chunks (every muscle's frames of one) queued for the sequence thread (bounds memory)
 CLOSE_THREADS = 2  # files completed (headers, sha256 read back) at once at the end; USD layers one at a time
@@ -32,6 +33,38 @@ CLOSE_THREADS = 2  # files completed (headers, sha256 read back) at once at the 
 def sequence_formats(formats) -> list[str]:
     """The per-sequence formats among ``formats``, in that order."""
     return of_layout("sequence", formats)
+
+
+def parts_of(plan) -> int:
+    """How many parts have per-sequence files: the muscles (part j: muscle j), then the run's
+    skin when it has one (part ``len(plan.models)``, named SKIN_NAME)."""
+    from axdf_cli.pipeline.skin_stage import skin_of
+
+    return len(plan.models) + (skin_of(plan) is not None)
+
+
+def part_sizes(plan) -> list[int]:
+    """Every part's vertex count, in part order."""
+    from axdf_cli.pipeline.skin_stage import skin_of
+
+    skin = skin_of(plan)
+    return [m.n_vertices for m in plan.models] + ([len(skin.vertices)] if skin is not None else [])
+
+
+def part_of(plan, j: int) -> tuple:
+    """Part j's (name, colour, faces (T, 3), vertex count, rest vertices, rest normals)."""
+    if j < len(plan.models):
+        spec, m = plan.muscles[j], plan.models[j]
+        return spec.name, tuple(spec.color), m.faces, m.n_vertices, m.rest_vertices, m.rest_normals
+    from axdf_cli.model.skin import normals_volume
+    from axdf_cli.pipeline.skin_stage import SKIN_NAME, skin_of
+    from axdf_cli.render.scene import SKIN_COLOR
+
+    skin = skin_of(plan)
+    v = np.ascontiguousarray(skin.vertices, np.float64)
+    normals = np.zeros_like(v)
+    normals_volume(v, np.ascontiguousarray(skin.faces, np.int64), normals)
+    return SKIN_NAME, SKIN_COLOR, skin.faces, len(v), v, normals
 
 
 def file_relpath(muscle: str, fmt: str) -> str:
@@ -47,9 +80,10 @@ def unchanged(previous: dict, path: Path, rel: str, sha: str) -> bool:
 
 
 class SequenceFiles:
-    """The per-sequence files of some muscles, fed chunk by chunk on a background thread.
+    """The per-sequence files of some parts (:func:`parts_of`: muscles, the skin), fed chunk by
+    chunk on a background thread.
 
-    ``append(j, positions, normals)`` queues muscle ``j``'s next chunk ((C, V, 3) float32,
+    ``append(j, positions, normals)`` queues part ``j``'s next chunk ((C, V, 3) float32,
     frame order); :meth:`finish` completes every file and returns ``({relpath: sha256},
     skipped)``; :meth:`abort` removes every temporary (the files stay absent)."""
 
@@ -59,13 +93,12 @@ class SequenceFiles:
         self.writers = {}
         try:
             for j in muscles:
-                spec, model = plan.muscles[j], plan.models[j]
-                info = SequenceInfo(np.asarray(plan.frames), fps, spec.name, tuple(spec.color))
+                name, color, faces, n_vertices = part_of(plan, j)[:4]
+                info = SequenceInfo(np.asarray(plan.frames), fps, name, color)
                 for fmt in sequence_formats(plan.formats):
-                    rel = file_relpath(spec.name, fmt)
+                    rel = file_relpath(name, fmt)
                     path = writer.root.path(rel)  # (the way there checked for links)
-                    self.writers[(j, fmt)] = (rel, path, FORMATS[fmt].writer(path, info, model.faces,
-                                                                             model.n_vertices))
+                    self.writers[(j, fmt)] = (rel, path, FORMATS[fmt].writer(path, info, faces, n_vertices))
         except BaseException:
             self.abort()
             raise
@@ -77,7 +110,7 @@ class SequenceFiles:
         self._chunk: list = []
 
     def append(self, j: int, positions: np.ndarray, normals: np.ndarray) -> None:
-        """Muscle j's next frames; handed to the thread with the rest of the chunk at
+        """Part j's next frames; handed to the thread with the rest of the chunk at
         :meth:`end_chunk` (one hand-over per chunk, not per muscle: each costs a thread switch)."""
         self._chunk.append((self._by_muscle.get(j, []), positions, normals))
 
@@ -143,9 +176,10 @@ def write_run_files(plan, writer, bone_rows: np.ndarray, bounds: np.ndarray, fra
 
     for fmt in sequence_formats(plan.formats):
         if not FORMATS[fmt].faces:  # a point cache: the rest mesh it applies to, beside it
-            for spec, m in zip(plan.muscles, plan.models):
-                writer.write(rest_mesh_relpath(spec.name, FORMATS[fmt].folder),
-                             PlyWriter(m.faces, spec.name).encode(m.rest_vertices, m.rest_normals))
+            for j in range(parts_of(plan)):
+                name, _, faces, _, rest, normals = part_of(plan, j)
+                writer.write(rest_mesh_relpath(name, FORMATS[fmt].folder),
+                             PlyWriter(faces, name).encode(rest, normals))
     if "usd" in plan.formats:
         writer.flush()
         _write_usd_stage(plan, writer, bone_rows, bounds, framing)
@@ -161,9 +195,10 @@ def _write_usd_stage(plan, writer, bone_rows, bounds, framing) -> None:
     with_mesh = {i for i in plan.bone_meshes}
     muscles = [(s.name, file_relpath(s.name, "usd")) for s in plan.muscles]
     bone_refs = [(b.name, USD_BONES if i in with_mesh else None) for i, b in enumerate(bones)]
+    skin = None if parts_of(plan) == len(plan.models) else (SKIN_MESH, file_relpath(SKIN_MESH, "usd"))
     camera = usd_camera(plan, bounds, framing)
     _write_with(writer, USD_STAGE, lambda tmp: write_stage(tmp, plan.frames, float(plan.pose.fps), muscles,
-                                                           bone_refs, bone_rows, camera))
+                                                           bone_refs, bone_rows, camera, skin))
 
 
 def usd_camera(plan, bounds, framing) -> dict:
