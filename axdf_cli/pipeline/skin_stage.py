@@ -95,7 +95,6 @@ class SkinModel:
     n_muscle_vertices: int
     rest_volume: float
     room: np.ndarray | None = None  # (V,) how far each skin vertex may come in from where it is skinned (m)
-    rest_normals: np.ndarray | None = None  # (V, 3) the rest mesh's vertex normals
 
 
 def ring(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -158,7 +157,6 @@ def build(skin, plan) -> SkinModel:
     # its nearest (free) still has a skull or a muscle under it somewhere.
     dist = cKDTree(p).query(v, k=1, distance_upper_bound=reach)[0] if len(p) else np.full(len(v), np.inf)
     model.room = np.minimum(np.maximum(dist - skin.fat, 0.0), tol.SKIN_VOLUME_MAX_SHIFT)
-    model.rest_normals = normals
     model.rest_volume = float(skin_frame(model, rest_world, p, keep=False)[2][0])  # the skin as worn at rest
     return model
 
@@ -220,13 +218,7 @@ def skin_frame(model: SkinModel, world: np.ndarray, points: np.ndarray, keep: bo
     nv = len(model.rest)
     x, n = np.empty((nv, 3)), np.empty((nv, 3))
     kernels.blend(model.weights, rel, model.rest, x)
-    if model.rest_normals is not None:  # the rest normals turned by the blended rotations
-        rot = rel.copy()
-        rot[:, :, 3] = 0.0
-        kernels.blend(model.weights, rot, model.rest_normals, n)
-        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
-    else:
-        kernels.normals_volume(x, model.faces, n)
+    kernels.normals_volume(x, model.faces, n)
     nearest, height = np.empty(len(points), np.int64), np.empty(len(points))
     kernels.nearest_heights(points, x, n, model.candidates, nearest, height)
     need, offset, floor = np.empty(nv), np.empty(nv), np.empty(nv)
