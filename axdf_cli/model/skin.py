@@ -139,6 +139,16 @@ def push_need(nearest, height, target, rest_depth, soft_height, max_height, ring
 
 
 @njit(cache=True)
+def ring_mean(values, ring_ptr, ring_idx, s):
+    """The mean of ``values`` over vertex ``s``'s ring (its own value where it has none)."""
+    a, b = ring_ptr[s], ring_ptr[s + 1]
+    acc = 0.0
+    for k in range(a, b):
+        acc += values[ring_idx[k]]
+    return acc / (b - a) if b > a else values[s]
+
+
+@njit(cache=True)
 def relax(need, ring_ptr, ring_idx, iterations, out):
     """Uniform Laplacian smoothing of the offsets, each held at least at ``need`` (sticky; NaN:
     free): ``iterations`` passes of ``out = max(need, mean of the neighbours' out)``, from
@@ -148,11 +158,7 @@ def relax(need, ring_ptr, ring_idx, iterations, out):
     tmp = out.copy()
     for _ in range(iterations):
         for s in range(need.shape[0]):
-            a, b = ring_ptr[s], ring_ptr[s + 1]
-            acc = 0.0
-            for k in range(a, b):
-                acc += out[ring_idx[k]]
-            m = acc / (b - a) if b > a else out[s]
+            m = ring_mean(out, ring_ptr, ring_idx, s)
             tmp[s] = need[s] if need[s] > m else m
         out[:] = tmp
 
@@ -165,11 +171,7 @@ def taper(shift, cap, ring_ptr, ring_idx, iterations):
     tmp = shift.copy()
     for _ in range(iterations):
         for s in range(shift.shape[0]):
-            a, b = ring_ptr[s], ring_ptr[s + 1]
-            acc = 0.0
-            for k in range(a, b):
-                acc += shift[ring_idx[k]]
-            m = acc / (b - a) if b > a else shift[s]
+            m = ring_mean(shift, ring_ptr, ring_idx, s)
             tmp[s] = cap[s] if cap[s] < m else m
         shift[:] = tmp
 

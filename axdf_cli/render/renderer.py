@@ -263,6 +263,17 @@ def downsample(img: np.ndarray, s: int) -> np.ndarray:
     return out
 
 
+def panels(img: "FrameImages"):
+    """Each panel of a frame: (its slice of the image, its camera's K within the panel, the
+    camera)."""
+    for cam in img.cameras:
+        x0, y0, w, h = cam.viewport
+        K = np.array(cam.K, dtype=np.float64)
+        K[0, 2] -= x0
+        K[1, 2] -= y0
+        yield (slice(y0, y0 + h), slice(x0, x0 + w)), K, cam
+
+
 def skin_id(scene: Scene) -> int:
     """The opaque skin's id in the ``id`` pass (after every muscle and scene bone)."""
     return 1 + len(scene.muscles) + len(scene.bones)
@@ -522,12 +533,7 @@ class Renderer:
 
         uid = np.zeros(img.ids.shape, np.uint16)
         depth = np.zeros(img.ids.shape, np.float32)
-        for cam in img.cameras:
-            x0, y0, w, h = cam.viewport
-            K = np.array(cam.K, dtype=np.float64)
-            K[0, 2] -= x0
-            K[1, 2] -= y0
-            panel = (slice(y0, y0 + h), slice(x0, x0 + w))
+        for panel, K, cam in panels(img):
             uid[panel], depth[panel] = under_skin(img.depth[panel], img.ids[panel], skin_id(self.scene), K,
                                                   cam.world_to_camera, meshes)
         return uid, depth
@@ -539,12 +545,7 @@ class Renderer:
         from axdf_cli.render.under import body_parts
 
         out = np.zeros(img.ids.shape, np.uint16)
-        for cam in img.cameras:
-            x0, y0, w, h = cam.viewport
-            K = np.array(cam.K, dtype=np.float64)
-            K[0, 2] -= x0
-            K[1, 2] -= y0
-            panel = (slice(y0, y0 + h), slice(x0, x0 + w))
+        for panel, K, cam in panels(img):
             out[panel] = body_parts(img.depth[panel], img.ids[panel], skin_id(self.scene), K, cam.world_to_camera,
                                     vertices, faces, face_part)
         return out
