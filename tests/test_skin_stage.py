@@ -167,3 +167,12 @@ def test_the_pushed_rest_skin_clears_the_bones(skin):
     assert (w < 0.5).mean() <= 0.005, f"{(w < 0.5).sum()} bone vertices outside the rest skin"
     report = json.loads((skin.parent / "skin_report.json").read_text())["muscles"]
     assert report["skin_vertices_out_of_bones"] > 100 and report["bone_points_outside_before"] > 1000
+
+
+def test_the_runs_bounds_hold_the_skin(whole):
+    """manifest.json's bounds (the render's and the USD camera's framing) hold every written
+    vertex, the skin's too: its head and arms reach past the knee's muscles."""
+    lo, hi = (np.array(b) for b in json.loads((whole / "manifest.json").read_text())["bounds"])
+    for f in range(20, 26):
+        (v, _, _), _ = load_triangles_and_bytes(whole / f"meshes/skin/skin_{f:04d}.ply")
+        assert (v >= lo - 1e-6).all() and (v <= hi + 1e-6).all()

@@ -186,6 +186,10 @@ def mesh_pass(plan: RunPlan, prep: Prepass, writer: OutputWriter, muscles: list[
                                      writers[f].encode([p[i] for p, _ in meshes], [n[i] for _, n in meshes]))
             if chunk.skin is not None:  # (the skin stage ran while the results were handed out)
                 skin_rows[here] = chunk.skin.stats
+                sp = chunk.skin.positions  # (the bounds of every written vertex hold the body too)
+                if np.isfinite(sp).all():
+                    lo = np.minimum(lo, sp.min(axis=(0, 1)))
+                    hi = np.maximum(hi, sp.max(axis=(0, 1)))
                 for f in frame_formats:
                     for i, frame in enumerate(frames):
                         writer.write(mesh_relpath(SKIN_NAME, int(frame), f),
