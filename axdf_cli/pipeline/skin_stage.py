@@ -14,12 +14,15 @@ Each frame, in order:
    the skin vertex is pushed outward by the difference, and so is its ring of neighbours (a
    point lies under the triangles around its nearest vertex, not under the vertex alone). A
    point more than ``tol.SKIN_MAX_HEIGHT`` above its nearest vertex pushes nothing (a crease:
-   the adductors between the thighs, where the nearest vertex may be on the other leg);
-   where every point under a skin vertex lies deeper than at rest, the vertex comes in by the
-   least excess (the skin follows the muscles in as well as out);
+   the adductors between the thighs, where the nearest vertex may be on the other leg), and
+   from ``tol.SKIN_SOFT_HEIGHT`` up its push fades to that; where every point under a skin
+   vertex lies deeper than at rest, the vertex comes in by the least excess, at most
+   ``tol.SKIN_MAX_INWARD`` (the skin follows the muscles in as well as out);
 3. **relax**: ``tol.SKIN_RELAX_ITERATIONS`` passes of uniform Laplacian smoothing of the
    offsets, each held at least at its push (sticky), so that the pushes become
-   smooth bulges and the rest of the skin slides with them.
+   smooth bulges and the rest of the skin slides with them;
+4. **volume**: the excess over the rest volume taken back from the vertices with room under
+   them (:func:`keep_volume`).
 
 The kernels are :mod:`axdf_cli.model.skin`'s. Each frame is computed alone (a loop over the
 chunk's frames; the kernels loop over vertices in a fixed order), so a frame's skin is the same bytes whichever frames
