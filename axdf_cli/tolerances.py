@@ -413,21 +413,20 @@ SKIN_CANDIDATES = 8
 # A candidate is kept at least its local fat thickness under the skin, or as deep as the rest
 # skin holds it where that is shallower (the fitted rest skin clears the muscles by
 # SKIN_PUSH_CLEARANCE only; asking for the full fat there would inflate it at rest).
-# A candidate more than SKIN_MAX_HEIGHT metres above its nearest skin vertex (along its normal)
-# pushes nothing: measured on the walk, the muscle vertices truly outside the skinned mesh
-# (winding number) lie at most 28 mm above it, while those 3-9 cm "above" lie in the crease
-# between the thighs, inside the body, their nearest vertex on the other leg.
+# A candidate more than SKIN_MAX_HEIGHT metres above a skin vertex (along its normal) pushes it
+# not at all: measured on the walk, the muscle vertices truly outside the skinned mesh (winding
+# number) lie at most 28 mm above it, while those 3-9 cm "above" lie in the crease between the
+# thighs, inside the body, the vertex on the other leg.
 SKIN_MAX_HEIGHT = 0.035
 # Above SKIN_SOFT_HEIGHT a candidate's push fades linearly to nothing at SKIN_MAX_HEIGHT: a point
 # rising through the limit would otherwise drop a push of ~35 mm between two frames (a pop).
-# Measured on the CMU walk's deepest hip flexion (frame 96), muscle vertices outside the skin
-# by the winding number: 0.26% without the fade, 0.31% fading from 30 mm, 0.58% from 20 mm.
 SKIN_SOFT_HEIGHT = 0.03
-# Where every point under a skin vertex lies deeper than at rest, the vertex follows them in by
-# at most SKIN_MAX_INWARD metres: at the CMU walk's deepest hip flexion the groin's points sink
-# ~6 cm, and following them all the way made the skin jump between frames (the volume step
-# takes back what the bulges add elsewhere).
-SKIN_MAX_INWARD = 0.01
+# A point pushes a skin vertex in full while it lies within SKIN_SPREAD_IN times the vertex's
+# longest edge of it across the vertex's normal (the triangles around the vertex), less and
+# less out to SKIN_SPREAD_OUT times that (a smoothstep), and not at all beyond: a point sliding
+# under the skin hands its push on without a jump.
+SKIN_SPREAD_IN = 1.0
+SKIN_SPREAD_OUT = 2.0
 # Relaxation after the push: passes of neighbour averaging of the offsets, each held at least
 # at its push (sticky); about one edge (~1-2 cm) of spread per pass, so a push becomes a smooth
 # bulge, not a spike. Each pass also widens the bulges: on the walk 6 passes gain the skin

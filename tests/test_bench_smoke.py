@@ -231,3 +231,26 @@ def test_skin_pass(repo_root, tmp_path, capsys):
     assert t0 > 0 and t1 > 0 and m1.shape == (2, len(SKIN_COLUMNS)) and not m0.any()
     ratio = m1[:, SKIN_COLUMNS.index("volume_ratio")]
     assert np.all(np.abs(ratio - 1) < 0.2) and np.all(m1[:, SKIN_COLUMNS.index("volume")] > 0.03)
+
+
+def test_skin_pops_tells_a_jump_from_a_fast_smooth_change(monkeypatch):
+    """skin_pops samples finer where the skin steps most: a smooth change, however fast, has
+    each finer step take about 1/POP_SUBSTEPS of the coarse step; a jump has one take it all."""
+    def offsets(jump):
+        def fake(plan, frames):
+            t = np.asarray(frames, np.float64)
+            smooth = 0.05 * t  # 50 mm a frame, continuous
+            step = np.where(t >= 3.3, 0.03, 0.0) if jump else np.zeros_like(t)
+            off = np.zeros((len(t), 2, 3))
+            off[:, 0, 0] = smooth
+            off[:, 1, 1] = step
+            return t, off
+        return fake
+
+    monkeypatch.setattr(bench, "skin_offsets", offsets(False))
+    smooth = bench.skin_pops(None, 0, 6)
+    assert smooth["substep"] == pytest.approx(0.05 / bench.POP_SUBSTEPS)
+    assert smooth["share"] == pytest.approx(1 / bench.POP_SUBSTEPS)
+    monkeypatch.setattr(bench, "skin_offsets", offsets(True))
+    jump = bench.skin_pops(None, 0, 6)
+    assert jump["substep"] == pytest.approx(0.03) and jump["share"] == pytest.approx(1.0)

@@ -130,20 +130,32 @@ def test_the_volume_steps_common_depth_takes_the_excess_exactly():
     assert uniform_depth(area, slack, 0.0) == 0.0
 
 
-def test_a_point_rising_through_the_height_limit_fades_its_push():
-    """push_need: a point's push falls to nothing as its height above the skin nears
-    SKIN_MAX_HEIGHT (a crease), continuously: no frame-to-frame drop of a whole push (a pop)."""
+def test_a_point_sliding_and_rising_moves_its_push_continuously():
+    """push_floor: a point's push is a continuous function of where it is. Sliding across a
+    flat patch of skin it hands its push from vertex to vertex without a jump (the vertex under
+    it pushed in full); rising through SKIN_MAX_HEIGHT (a crease) it lets go gradually. Without
+    either, 0.1 mm of motion dropped a whole push (~40 mm): a pop."""
     from axdf_cli import tolerances as tol
     from axdf_cli.model import skin as kernels
 
-    ptr, idx = np.array([0, 1, 2], np.int64), np.array([1, 0], np.int64)  # two vertices, each the other's ring
-    needs = []
-    for h in np.linspace(0.0, tol.SKIN_MAX_HEIGHT + 0.005, 400):
-        need, floor = np.empty(2), np.empty(2)
-        kernels.push_need(np.array([0], np.int64), np.array([h]), np.array([0.005]), np.array([0.005]),
-                          tol.SKIN_SOFT_HEIGHT, tol.SKIN_MAX_HEIGHT, ptr, idx, need, floor)
-        needs.append(need[0])
-    needs = np.array(needs)
-    assert needs[0] == pytest.approx(0.005) and np.nanmax(needs) > tol.SKIN_SOFT_HEIGHT  # it pushes, fully below
-    steps = np.abs(np.diff(np.nan_to_num(needs, nan=0.0)))
-    assert steps.max() < 0.002  # 0.1 mm of height never moves the push by 2 mm (without the fade: ~40 mm)
+    g = np.stack(np.meshgrid(np.arange(5.0), np.arange(5.0), indexing="ij"), -1).reshape(-1, 2) * 0.01
+    x = np.c_[g, np.zeros(len(g))]  # a 5 x 5 patch, 1 cm spacing, normals +z
+    n = np.tile([0.0, 0.0, 1.0], (len(x), 1))
+    cand = np.argsort(np.linalg.norm(x[:, None] - x[None], axis=2), axis=1)[12][None, :9].astype(np.int64)
+    spread_in, spread_out = np.full(len(x), 0.01), np.full(len(x), 0.02)
+    room = np.full(len(x), 0.004)
+    target = np.full(cand.shape, 0.005)
+
+    def floor_at(p):
+        out = np.empty(len(x))
+        kernels.push_floor(np.array([p]), x, n, cand, target, spread_in, spread_out, room,
+                           tol.SKIN_SOFT_HEIGHT, tol.SKIN_MAX_HEIGHT, out)
+        return out
+
+    slide = np.array([floor_at([0.015 + s, 0.02, 0.01]) for s in np.linspace(0.0, 0.01, 200)])
+    assert slide[0, 12] == pytest.approx(0.015) and slide[-1, 17] == pytest.approx(0.015)  # under it: in full
+    assert np.abs(np.diff(slide, axis=0)).max() < 0.001  # 0.05 mm of sliding never moves a push by 1 mm
+    rise = np.array([floor_at([0.02, 0.02, h]) for h in np.linspace(0.0, tol.SKIN_MAX_HEIGHT + 0.005, 400)])
+    assert rise[0, 12] == pytest.approx(0.005) and rise[:, 12].max() > tol.SKIN_SOFT_HEIGHT  # it pushes below
+    assert rise[-1, 12] == pytest.approx(-0.004)  # above the limit it asks nothing: the vertex's room
+    assert np.abs(np.diff(rise, axis=0)).max() < 0.002  # 0.1 mm of height never moves a push by 2 mm

@@ -87,55 +87,49 @@ def nearest_heights(points, x, n, candidates, nearest, height):
 
 
 @njit(cache=True)
-def push_need(nearest, height, target, rest_depth, soft_height, max_height, ring_ptr, ring_idx, need, floor):
-    """How far each skin vertex moves along its normal (``need``; NaN: it has no point under
-    it, and is free). Outward, over every point less deep than its ``target``, by the largest
-    shortfall, at its nearest vertex and that vertex's ring of neighbours (a point lies under the
-    triangles around its nearest vertex). Inward, where every point under a vertex lies deeper
-    than at rest (``rest_depth``), by the least of those excesses: the skin follows the muscles
-    in as well as out, and keeps its volume. A point higher than ``max_height`` above its
-    nearest vertex counts for nothing: it lies in a crease, where the nearest vertex's normal
-    does not say whether it is inside. Between ``soft_height`` and ``max_height`` its push
-    fades linearly to nothing, so that a point rising through the limit does not drop its
-    push from one frame to the next (a pop).
+def push_floor(points, x, n, pairs, target, spread_in, spread_out, room, soft_height, max_height, floor):
+    """The least offset each skin vertex may take along its normal ``n`` (``floor``, V) and
+    still hold every point under it at its target depth; where the floor is above 0 the vertex
+    is pushed out to it. Each point ``p`` is measured against each skin vertex ``u = pairs[p, j]``
+    it lies under (-1: none): ``h``, its height above ``u`` along ``n[u]``, and ``t``, its
+    distance from ``u`` across that normal. It asks ``u`` for ``h + target[p, j]``, weighed by ``w``:
+    1 within ``spread_in[u]`` across, falling smoothly to nothing at ``spread_out[u]``, and
+    fading linearly to nothing between ``soft_height`` and ``max_height`` above (a crease,
+    where the normal does not say whether the point is inside). Where ``w < 1`` the ask bends
+    towards ``-room[u]``, the floor of a vertex no point asks anything of (how far it may come
+    in at all).
 
-    ``floor``: the least offset each vertex may take and still hold every point under it at
-    its target depth (the largest shortfall, spread over the ring as the push is; NaN: free),
-    so ``floor <= need`` wherever both are set: what the volume step may take back."""
-    nv = need.shape[0]
-    out = np.full(nv, -np.inf)
-    inward = np.full(nv, -np.inf)
-    for p in range(nearest.shape[0]):
-        if height[p] > max_height:
-            continue
-        s = nearest[p]
-        d = height[p] + target[p]
-        if height[p] > soft_height and d > 0.0:
-            d *= (max_height - height[p]) / (max_height - soft_height)
-        if d > out[s]:
-            out[s] = d
-        e = height[p] + rest_depth[p]
-        if e > inward[s]:
-            inward[s] = e
-    for s in range(nv):
-        if out[s] > 0.0:
-            need[s] = out[s]
-        elif inward[s] > -np.inf:
-            need[s] = min(inward[s], 0.0)
-        else:
-            need[s] = np.nan
-        floor[s] = out[s] if out[s] > -np.inf else np.nan
-    spread = need.copy()
-    for s in range(nv):
-        d = out[s]
-        if d > 0.0:
-            for k in range(ring_ptr[s], ring_ptr[s + 1]):
-                t = ring_idx[k]
-                if not (spread[t] >= d):  # (NaN: free)
-                    spread[t] = d
-                if not (floor[t] >= d):
-                    floor[t] = d
-    need[:] = spread
+    The floor is the largest ask, and every ask is a continuous function of the positions: a
+    point sliding under the skin hands its push from vertex to vertex without a jump, and one
+    rising through the height limit lets go of it gradually, so the skin never pops between
+    frames (with a nearest vertex and its ring, a point changing its nearest vertex dropped
+    whole pushes from the ring's far side)."""
+    for u in range(floor.shape[0]):
+        floor[u] = -room[u]
+    for p in range(points.shape[0]):
+        px, py, pz = points[p, 0], points[p, 1], points[p, 2]
+        if not (np.isfinite(px) and np.isfinite(py) and np.isfinite(pz)):
+            continue  # a non-finite point pushes nothing
+        for j in range(pairs.shape[1]):
+            u = pairs[p, j]
+            if u < 0:
+                continue
+            dx, dy, dz = px - x[u, 0], py - x[u, 1], pz - x[u, 2]
+            h = n[u, 0] * dx + n[u, 1] * dy + n[u, 2] * dz
+            if h >= max_height:
+                continue
+            t = np.sqrt(max(dx * dx + dy * dy + dz * dz - h * h, 0.0))
+            if t >= spread_out[u]:
+                continue
+            w = 1.0
+            if t > spread_in[u]:
+                f = (t - spread_in[u]) / (spread_out[u] - spread_in[u])
+                w = 1.0 - f * f * (3.0 - 2.0 * f)
+            if h > soft_height:
+                w *= (max_height - h) / (max_height - soft_height)
+            c = w * (h + target[p, j]) - (1.0 - w) * room[u]
+            if c > floor[u]:
+                floor[u] = c
 
 
 @njit(cache=True)

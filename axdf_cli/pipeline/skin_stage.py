@@ -6,18 +6,17 @@ Each frame, in order:
 1. **skinning**: linear blend of the skin's rest mesh by its bones' world transforms relative
    to rest (the bones :func:`~axdf_cli.model.skeleton.forward_kinematics` gives the chunk);
 2. **push**: every candidate point (a muscle or bone mesh vertex, or a bone triangle's
-   centroid, within ``tol.SKIN_REACH`` of
-   the rest skin, built once by :meth:`SkinStage.start`) is compared with the nearest of
-   its ``tol.SKIN_CANDIDATES`` nearest rest skin vertices, along that vertex's skinned normal;
-   where it lies less deep under the skin than its target (its local fat thickness, or its
-   depth at rest where that is shallower: the rest skin is worn as fitted),
-   the skin vertex is pushed outward by the difference, and so is its ring of neighbours (a
-   point lies under the triangles around its nearest vertex, not under the vertex alone). A
-   point more than ``tol.SKIN_MAX_HEIGHT`` above its nearest vertex pushes nothing (a crease:
-   the adductors between the thighs, where the nearest vertex may be on the other leg), and
-   from ``tol.SKIN_SOFT_HEIGHT`` up its push fades to that; where every point under a skin
-   vertex lies deeper than at rest, the vertex comes in by the least excess, at most
-   ``tol.SKIN_MAX_INWARD`` (the skin follows the muscles in as well as out);
+   centroid, within ``tol.SKIN_REACH`` of the rest skin, built once by
+   :meth:`SkinStage.start`) is compared with each of its ``tol.SKIN_CANDIDATES`` nearest rest
+   skin vertices, along that vertex's skinned normal; where it lies less deep under the skin
+   than its target (its local fat thickness, or its depth at rest where that is shallower: the
+   rest skin is worn as fitted), the vertex is pushed outward by the difference, in full
+   within ``tol.SKIN_SPREAD_IN`` of the vertex's longest edge across its normal, fading
+   smoothly to nothing at ``tol.SKIN_SPREAD_OUT`` of it. A point more than
+   ``tol.SKIN_MAX_HEIGHT`` above a vertex pushes nothing (a crease: the adductors between the
+   thighs, where the vertex may be on the other leg), and from ``tol.SKIN_SOFT_HEIGHT`` up its
+   push fades to that (:func:`~axdf_cli.model.skin.push_floor`: every push is a continuous
+   function of the positions, so the skin does not pop);
 3. **relax**: ``tol.SKIN_RELAX_ITERATIONS`` passes of uniform Laplacian smoothing of the
    offsets, each held at least at its push (sticky), so that the pushes become
    smooth bulges and the rest of the skin slides with them;
@@ -92,12 +91,13 @@ class SkinModel:
     ring_idx: np.ndarray
     muscle_points: np.ndarray  # (Nm,) candidate muscle vertices, indices into the muscles' vertices concatenated
     bone_points: list  # [(bone index, (Nb, 3) local vertices)] candidate bone vertices
-    candidates: np.ndarray  # (Nm + sum Nb, k) skin vertices each candidate is compared with
-    target: np.ndarray  # (Nm + sum Nb,) required depth under the skin (m; < 0: above it, as at rest)
-    rest_depth: np.ndarray  # (Nm + sum Nb,) depth under the rest skin (m)
+    candidates: np.ndarray  # (Nm + sum Nb, k) each candidate's nearest rest skin vertices
+    pairs: np.ndarray  # (Nm + sum Nb, k) those it lies under at rest, the others -1
+    target: np.ndarray  # (Nm + sum Nb, k) required depth under each (m; < 0: above it, as at rest)
+    spread: np.ndarray  # (2, V) how far across its normal a point pushes each vertex in full, and at all (m)
     n_muscle_vertices: int
     rest_volume: float
-    room: np.ndarray | None = None  # (V,) how far each skin vertex may come in from where it is skinned (m)
+    room: np.ndarray  # (V,) how far each skin vertex may come in from where it is skinned (m)
 
 
 def ring(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -151,15 +151,21 @@ def build(skin, plan) -> SkinModel:
     # the fat, or the rest depth where shallower: the rest skin is worn as fitted (axdf skin --push
     # clears the muscles and the bones by the winding number; a point the normal test reads above
     # a concave patch, the face over a skull, stays where it was)
-    target = np.minimum(skin.fat[nearest], -height)
-    model = SkinModel(v, faces, np.ascontiguousarray(skin.weights, dtype=np.float64), bones,
-                      np.linalg.inv(rest_world[bones]), ptr, idx, muscle_points, bone_points, cand, target,
-                      np.maximum(-height, target), int(len(muscle)), 1.0)
+    # Each point is held under each of its candidate vertices it lies under at rest (its nearest,
+    # and those whose normal puts it below them: not the other thigh's skin across the crease).
+    h_rest = np.einsum("pkc,pkc->pk", p[:, None, :] - v[cand], normals[cand])
+    target = np.minimum(skin.fat[nearest][:, None], -h_rest)
+    pairs = np.where((h_rest <= 0.0) | (cand == nearest[:, None]), cand, -1)
+    edge = np.linalg.norm(v[np.repeat(np.arange(len(v)), np.diff(ptr))] - v[idx], axis=1)
+    longest = np.maximum.reduceat(edge, ptr[:-1]) if len(idx) else np.zeros(len(v))  # (every vertex has a ring)
+    spread = np.stack([tol.SKIN_SPREAD_IN * longest, tol.SKIN_SPREAD_OUT * longest])
     # room: at rest, the distance from each skin vertex to the nearest candidate point, less its
-    # fat (a vertex with no point within reach: the volume step's cap). A vertex no point calls
-    # its nearest (free) still has a skull or a muscle under it somewhere.
+    # fat (a vertex with no point within reach: the volume step's cap)
     dist = cKDTree(p).query(v, k=1, distance_upper_bound=reach)[0] if len(p) else np.full(len(v), np.inf)
-    model.room = np.minimum(np.maximum(dist - skin.fat, 0.0), tol.SKIN_VOLUME_MAX_SHIFT)
+    room = np.minimum(np.maximum(dist - skin.fat, 0.0), tol.SKIN_VOLUME_MAX_SHIFT)
+    model = SkinModel(v, faces, np.ascontiguousarray(skin.weights, dtype=np.float64), bones,
+                      np.linalg.inv(rest_world[bones]), ptr, idx, muscle_points, bone_points, cand, pairs,
+                      np.ascontiguousarray(target), np.ascontiguousarray(spread), int(len(muscle)), 1.0, room)
     model.rest_volume = float(skin_frame(model, rest_world, p, keep=False)[2][0])  # the skin as worn at rest
     return model
 
@@ -188,15 +194,14 @@ def keep_volume(model: SkinModel, x: np.ndarray, n: np.ndarray, offset: np.ndarr
     """Hold the skin's volume at its rest volume (in place on ``offset``). The pushes and the
     relax only add volume (a bulge over a bending muscle, a crease filled); what is over is
     taken back from the vertices with room under them: each comes in by a common depth, at most
-    its slack above ``floor`` (the points under it stay at their fat depth), at most its
-    ``room`` under where it is skinned (a point nearest another vertex is not crossed) and at most
+    its slack above ``floor`` (the points under it stay at their fat depth; a vertex with
+    none under it, its ``room`` under where it is skinned) and at most
     ``tol.SKIN_VOLUME_MAX_SHIFT``, its edges tapered by ``tol.SKIN_VOLUME_TAPER`` passes. A
     skin short of its volume (a collapse at a bending joint) comes out evenly, by at most the
     same depth. ``tol.SKIN_VOLUME_ROUNDS`` rounds, each on the moved mesh."""
     area = vertex_areas(x, model.faces)
     cap = tol.SKIN_VOLUME_MAX_SHIFT
-    slack = np.minimum(np.minimum(offset - np.where(np.isnan(floor), -np.inf, floor), offset + model.room), cap)
-    slack = np.maximum(slack, 0.0)
+    slack = np.maximum(np.minimum(offset - floor, cap), 0.0)
     out = 0.0
     scratch = np.empty_like(x)
     for _ in range(tol.SKIN_VOLUME_ROUNDS):
@@ -222,23 +227,21 @@ def skin_frame(model: SkinModel, world: np.ndarray, points: np.ndarray, keep: bo
     x, n = np.empty((nv, 3)), np.empty((nv, 3))
     kernels.blend(model.weights, rel, model.rest, x)
     kernels.normals_volume(x, model.faces, n)
-    nearest, height = np.empty(len(points), np.int64), np.empty(len(points))
-    kernels.nearest_heights(points, x, n, model.candidates, nearest, height)
-    need, offset, floor = np.empty(nv), np.empty(nv), np.empty(nv)
-    kernels.push_need(nearest, height, model.target, model.rest_depth, tol.SKIN_SOFT_HEIGHT, tol.SKIN_MAX_HEIGHT,
-                      model.ring_ptr, model.ring_idx, need, floor)
-    np.maximum(need, -tol.SKIN_MAX_INWARD, out=need)  # (NaN, free, stays NaN)
+    floor, offset = np.empty(nv), np.empty(nv)
+    kernels.push_floor(points, x, n, model.pairs, model.target, model.spread[0], model.spread[1], model.room,
+                       tol.SKIN_SOFT_HEIGHT, tol.SKIN_MAX_HEIGHT, floor)
+    need = np.where(floor > 0.0, floor, np.nan)  # pushed out; the rest free (NaN) for the relax
     kernels.relax(need, model.ring_ptr, model.ring_idx, tol.SKIN_RELAX_ITERATIONS, offset)
-    if model.room is not None:  # a free vertex relaxed inward no deeper than its room at rest
-        free = np.isnan(need)
-        offset[free] = np.maximum(offset[free], -model.room[free])
     if keep:
         keep_volume(model, x, n, offset, floor)
     y = x + n * offset[:, None]
     ny = np.empty_like(y)
     vol = kernels.normals_volume(y, model.faces, ny)
     nm = len(model.muscle_points)
-    allowed = np.maximum(-model.target[:nm], 0.0)
+    nearest, height = np.empty(nm, np.int64), np.empty(nm)
+    kernels.nearest_heights(points[:nm], x, n, model.candidates[:nm], nearest, height)
+    at = np.argmax(model.candidates[:nm] == nearest[:, None], axis=1)  # (the nearest is a candidate)
+    allowed = np.maximum(-model.target[np.arange(nm), at], 0.0)
     outside = kernels.count_outside(points[:nm], y, n, nearest[:nm], allowed)
     return y, ny, np.array([vol, vol / model.rest_volume, float(outside), float(offset.max(initial=0.0))])
 
@@ -258,7 +261,7 @@ class SkinStage:
         return {"skin": self.skin.name, "skeleton": self.skin.skeleton, "vertices": int(len(self.skin.vertices)),
                 "reach": tol.SKIN_REACH, "candidates": tol.SKIN_CANDIDATES,
                 "soft_height": tol.SKIN_SOFT_HEIGHT, "max_height": tol.SKIN_MAX_HEIGHT,
-                "max_inward": tol.SKIN_MAX_INWARD, "relax": tol.SKIN_RELAX_ITERATIONS,
+                "spread": [tol.SKIN_SPREAD_IN, tol.SKIN_SPREAD_OUT], "relax": tol.SKIN_RELAX_ITERATIONS,
                 "volume": {"max_shift": tol.SKIN_VOLUME_MAX_SHIFT, "taper": tol.SKIN_VOLUME_TAPER,
                            "rounds": tol.SKIN_VOLUME_ROUNDS}}
 

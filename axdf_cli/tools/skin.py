@@ -70,9 +70,12 @@ def load_body(path: Path | None = None) -> Body:
 #: The body's parts, each moved by one segment's map and bound to one skeleton bone per family.
 #: part -> (segment whose map moves it, MakeHuman rig bones that start it; their descendants
 #: belong to it too unless they start a part of their own).
+#: MakeHuman's lowest spine bone, spine05, weights the lower belly, the buttocks and the crotch:
+#: skin that moves with the pelvis (bound to the torso, the pelvis's bones poked 50 mm out of
+#: the lower belly at the CMU walk's hip flexion, and the push there flipped from frame to frame).
 PARTS = {
-    "pelvis": ("trunk", ("root", "pelvis.L", "pelvis.R")),
-    "abdomen": ("trunk", ("spine05", "spine04", "spine03")),
+    "pelvis": ("trunk", ("root", "pelvis.L", "pelvis.R", "spine05")),
+    "abdomen": ("trunk", ("spine04", "spine03")),
     "chest": ("trunk", ("spine02", "spine01", "clavicle.L", "clavicle.R", "breast.L", "breast.R")),
     "neck": ("head", ("neck01", "neck02", "neck03")),
     "head": ("head", ("head",)),
@@ -375,6 +378,9 @@ def fat_map(body: Body, fit: Fit) -> tuple[np.ndarray, np.ndarray]:
     front = normals[:, 1] < 0
     part = np.array([p.rsplit("_", 1)[0] if p.endswith(("_l", "_r")) else p for p in fit.parts])[fit.part_of]
     part = np.where(part == "toes", "foot", part)
+    # spine05's skin moves with the pelvis (PARTS) but is the lower abdomen and back for its fat
+    # (the ultrasound sites LA and ES lie on it)
+    part = np.where((part == "pelvis") & (body.weights[:, body.bones.index("spine05")] > 0.5), "abdomen", part)
     part = np.where(part == "abdomen", np.where(front, "abdomen", "lower_back"), part)
     part = np.where(part == "chest", np.where(front, "chest", "upper_back"), part)
     region = np.array([REGIONS.index(str(p)) for p in part], dtype=np.int8)
