@@ -277,6 +277,21 @@ def load_bone_mesh(path: str, skeleton_file: str):
     return np.ascontiguousarray(v, dtype=np.float32), f, data
 
 
+def rest_bone_meshes(skel, skeleton_file: str, keep) -> dict:
+    """The meshes of the skeleton's bones for which ``keep(bone)`` holds, placed in the world at
+    the rest pose: name -> ((V, 3) float64, (T, 3) int64, the mesh file)."""
+    from axdf_cli.model.skeleton import forward_kinematics
+
+    world = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
+    out = {}
+    for i, b in enumerate(skel.bones):
+        if b.mesh and keep(b):
+            v, f, _ = load_bone_mesh(b.mesh, skeleton_file)
+            out[b.name] = (v.astype(np.float64) @ world[i, :3, :3].T + world[i, :3, 3], np.asarray(f, np.int64),
+                           Path(b.mesh))
+    return out
+
+
 def camera_targets(plan: RunPlan, frames=None) -> np.ndarray | None:
     """(F, 3) the origin of the render camera's target bone at ``frames`` (default: the plan's),
     or None when the camera does not aim at a bone."""

@@ -102,17 +102,13 @@ def rest_bones(skeleton_path: Path) -> tuple:
     """The skeleton, its bones' rest world transforms (B, 4, 4) and each moving bone's mesh in
     the world at rest: name -> ((V, 3) float64, (T, 3) int64)."""
     from axdf_cli.model.skeleton import forward_kinematics
-    from axdf_cli.pipeline.plan import load_bone_mesh
+    from axdf_cli.pipeline.plan import rest_bone_meshes
     from axdf_cli.specs import RefPolicy, load_skeleton
 
     skel = load_skeleton(skeleton_path, RefPolicy())
     rest = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
-    bones = {}
-    for i, b in enumerate(skel.bones):
-        if b.mesh and b.parent is not None:
-            v, fc, _ = load_bone_mesh(b.mesh, str(skeleton_path))
-            bones[b.name] = (v.astype(np.float64) @ rest[i, :3, :3].T + rest[i, :3, 3], np.asarray(fc, np.int64))
-    return skel, rest, bones
+    meshes = rest_bone_meshes(skel, str(skeleton_path), lambda b: b.parent is not None)
+    return skel, rest, {name: (v, f) for name, (v, f, _) in meshes.items()}
 
 def build_library(data_root: Path, skeleton_path: Path, old: Path, sides=("r",), sections: int | None = None,
                   on_muscle=None, on_phase=None) -> tuple[dict, dict]:

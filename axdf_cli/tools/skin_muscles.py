@@ -50,18 +50,10 @@ def rest_bones(skel: Skeleton, skeleton_file: str, worn) -> tuple[list, list]:
     """The meshes of the bones the skin wears (``worn``: bone names) at the skeleton's rest
     pose, their holes capped (:func:`capped`): [((V, 3) float64, (T, 3) int64)], and the mesh
     files read."""
-    from axdf_cli.model.skeleton import forward_kinematics
-    from axdf_cli.pipeline.plan import load_bone_mesh
+    from axdf_cli.pipeline.plan import rest_bone_meshes
 
-    world = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
-    meshes, files = [], []
-    for i, b in enumerate(skel.bones):
-        if not b.mesh or b.name not in worn:
-            continue
-        v, f, _ = load_bone_mesh(b.mesh, skeleton_file)
-        meshes.append(capped(v.astype(np.float64) @ world[i, :3, :3].T + world[i, :3, 3], f))
-        files.append(Path(b.mesh))
-    return meshes, files
+    meshes = rest_bone_meshes(skel, skeleton_file, lambda b: b.name in worn).values()
+    return [capped(v, f) for v, f, _ in meshes], [path for _, _, path in meshes]
 
 
 def capped(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
