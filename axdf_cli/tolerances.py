@@ -427,6 +427,9 @@ SKIN_SOFT_HEIGHT = 0.03
 # under the skin hands its push on without a jump.
 SKIN_SPREAD_IN = 1.0
 SKIN_SPREAD_OUT = 2.0
+# A skin's jiggle (its file's `jiggle:`) remembers at most this many seconds of the bones' motion:
+# a spring whose ring takes longer to die away to a thousandth is cut there.
+SKIN_JIGGLE_MEMORY = 2.0
 # Relaxation after the push: passes of neighbour averaging of the offsets, each held at least
 # at its push (sticky); about one edge (~1-2 cm) of spread per pass, so a push becomes a smooth
 # bulge, not a spike. Each pass also widens the bulges: on the walk 6 passes gain the skin

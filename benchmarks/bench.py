@@ -1414,7 +1414,7 @@ def skin_rows(table: "Table", quick: bool, tmp: Path) -> None:
     of muscle vertices outside it, and the largest push."""
     from axdf_cli.cli.main import main as axdf_main
     from axdf_cli.pipeline.plan import plan_run
-    from axdf_cli.pipeline.skin_stage import SKIN_COLUMNS
+    from axdf_cli.pipeline.skin_stage import SKIN_COLUMNS, SkinStage
     from axdf_cli.specs import load_job
 
     skin_dir = tmp / "skin_gait2392"
@@ -1432,13 +1432,18 @@ def skin_rows(table: "Table", quick: bool, tmp: Path) -> None:
         skin_pass(dataclasses.replace(with_skin, frames=with_skin.frames[:2]))  # compiled code and the start warm
         t_base, _ = skin_pass(without)
         t_skin, m = skin_pass(with_skin)
+        stage = next(s for s in with_skin.stages if isinstance(s, SkinStage))
+        t0 = time.perf_counter()
+        stage.start(with_skin)  # once per run (its candidates and their rest skin vertices)
+        t_start = time.perf_counter() - t0
         nf = len(without.frames)
         ms = lambda t: t / nf * 1e3  # noqa: E731
-        cost = (t_skin - t_base) / t_base
+        cost = (t_skin - t_start - t_base) / t_base
         table.section(f"skin stage ({label}, {nf} frames x {len(without.models)} packed muscles, contact on; "
                       f"skin: MakeHuman's body fitted by axdf skin --push)")
-        table.add("skin stage per frame", f"{ms(t_skin - t_base):.1f} ms", f"muscles + contact {ms(t_base):.1f} ms",
-                  f"{cost:.2f}x", f"<= 1x {_mark(cost <= 1.0)}")
+        table.add("skin stage per frame", f"{ms(t_skin - t_start - t_base):.1f} ms",
+                  f"muscles + contact {ms(t_base):.1f} ms", f"{cost:.2f}x", f"<= 1x {_mark(cost <= 1.0)}")
+        table.add("skin stage start, once per run (and per worker)", f"{t_start * 1e3:.0f} ms")
         ratio = m[:, SKIN_COLUMNS.index("volume_ratio")]
         table.add("skin volume against rest (worst frame)", f"{np.abs(ratio - 1).max() * 100:.2f}% off",
                   f"range {ratio.min():.4f}..{ratio.max():.4f}", "", f"<= 3% {_mark(np.abs(ratio - 1).max() <= 0.03)}")

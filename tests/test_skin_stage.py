@@ -176,3 +176,61 @@ def test_the_runs_bounds_hold_the_skin(whole):
     for f in range(20, 26):
         (v, _, _), _ = load_triangles_and_bytes(whole / f"meshes/skin/skin_{f:04d}.ply")
         assert (v >= lo - 1e-6).all() and (v <= hi + 1e-6).all()
+
+
+def test_the_jiggle_filter_is_the_damped_spring():
+    """jiggle_coefficients against the spring it stands for: a point whose anchor moves by a
+    smooth step (0 to 5 cm in 0.2 s) lags as e'' + 2 z w e' + w^2 e = -x'' says (scipy's
+    solve_ivp, to 5% of the largest lag); then rings and dies away; nothing at a constant pose."""
+    from scipy.integrate import solve_ivp
+
+    from axdf_cli.pipeline.skin_stage import jiggle_coefficients
+    from axdf_cli.specs.skin import SkinJiggle
+
+    fps, spring = 120.0, SkinJiggle(4.0, 0.25, 1.0)
+    coef = jiggle_coefficients(spring, fps)
+    assert abs(coef.sum()) < 1e-9  # a still skeleton does not jiggle
+    t = np.arange(-len(coef), 240) / fps
+    s = np.clip(t / 0.2, 0.0, 1.0)
+    x = 0.05 * s * s * (3 - 2 * s)
+    lag = np.array([coef @ x[i - np.arange(len(coef))] for i in range(len(coef), len(t))])
+    w, z = 2 * np.pi * spring.frequency, spring.damping_ratio
+
+    def acc(tt):
+        ss = np.clip(tt / 0.2, 0.0, 1.0)
+        return 0.05 * (6 - 12 * ss) / 0.04 if 0.0 < tt < 0.2 else 0.0
+
+    ode = solve_ivp(lambda tt, y: [y[1], -acc(tt) - 2 * z * w * y[1] - w * w * y[0]], (0.0, t[-1]), [0.0, 0.0],
+                    t_eval=t[len(coef):][t[len(coef):] >= 0], max_step=1e-3, rtol=1e-8, atol=1e-10)
+    ours = lag[t[len(coef):] >= 0]
+    assert np.abs(ours).max() > 0.005  # it lags by centimetres
+    assert np.abs(ours - ode.y[0]).max() < 0.05 * np.abs(ode.y[0]).max()
+    assert np.abs(lag[-10:]).max() < 0.02 * np.abs(lag).max()  # rung out 1.8 s later
+
+
+def test_a_jiggling_skin_lags_frame_by_frame_alone(skin, tmp_path, capsys):
+    """A skin file's jiggle: the skin moves off where the skin without it is (by millimetres to
+    centimetres on the walk, most where the fat is thickest), and each frame is still computed
+    alone: a --frames subset gives the same bytes. A damping ratio that does not ring is refused
+    with its position."""
+    path = _copy_skin(skin, tmp_path / "s")
+    plain = path.read_text()
+    path.write_text(plain + "jiggle: {frequency: 5, damping_ratio: 0.3}\n")
+    rc, _, err = run_main(run(tmp_path / "a", path, frames="20:25"), capsys)
+    assert rc == 0, err
+    rc, _, err = run_main(run(tmp_path / "b", path, frames="24:25"), capsys)
+    assert rc == 0, err
+    rc, _, err = run_main(run(tmp_path / "c", skin, frames="24:25"), capsys)
+    assert rc == 0, err
+    a, b, c = all_files(tmp_path / "a"), all_files(tmp_path / "b"), all_files(tmp_path / "c")
+    for f in (24, 25):
+        rel = f"meshes/skin/skin_{f:04d}.ply"
+        assert a[rel] == b[rel], rel
+        moved = np.linalg.norm(load_triangles_and_bytes(tmp_path / "b" / rel)[0][0]
+                               - load_triangles_and_bytes(tmp_path / "c" / rel)[0][0], axis=1)
+        assert 0.002 < moved.max() < 0.05, moved.max()
+    path.write_text(plain + "jiggle: {frequency: 5, damping_ratio: 1.5}\n")
+    rc, _, err = run_main(run(tmp_path / "d", path, frames="24:25"), capsys)
+    line = len(plain.splitlines()) + 1
+    assert rc == 2 and f"{path}:{line}:" in err and "damping_ratio" in err and "Traceback" not in err, err
+    assert not (tmp_path / "d").exists()

@@ -5,6 +5,8 @@ Each frame, in order:
 
 1. **skinning**: linear blend of the skin's rest mesh by its bones' world transforms relative
    to rest (the bones :func:`~axdf_cli.model.skeleton.forward_kinematics` gives the chunk);
+   with the skin's ``jiggle:``, each vertex lags behind that as a damped spring would
+   (:func:`jiggle_coefficients`);
 2. **push**: every candidate point (a muscle or bone mesh vertex, or a bone triangle's
    centroid, within ``tol.SKIN_REACH`` of the rest skin, built once by
    :meth:`SkinStage.start`) is compared with each of its ``tol.SKIN_CANDIDATES`` nearest rest
@@ -98,6 +100,7 @@ class SkinModel:
     n_muscle_vertices: int
     rest_volume: float
     room: np.ndarray  # (V,) how far each skin vertex may come in from where it is skinned (m)
+    jiggle: tuple | None = None  # (coefficients (J,), each vertex's gain (V,), the pose) with a jiggle
 
 
 def ring(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -145,7 +148,7 @@ def build(skin, plan) -> SkinModel:
             bone_points.append((int(b), local[keep]))
             pts.append(world[keep])
     p = np.ascontiguousarray(np.concatenate(pts))
-    cand = np.asarray(tree.query(p, k=k)[1], dtype=np.int64).reshape(len(p), k) if len(p) else np.zeros((0, k), np.int64)
+    cand = np.asarray(tree.query(p, k=k, workers=-1)[1], dtype=np.int64).reshape(len(p), k) if len(p) else np.zeros((0, k), np.int64)
     nearest, height = np.empty(len(p), np.int64), np.empty(len(p))
     kernels.nearest_heights(p, v, normals, cand, nearest, height)
     # the fat, or the rest depth where shallower: the rest skin is worn as fitted (axdf skin --push
@@ -168,6 +171,45 @@ def build(skin, plan) -> SkinModel:
                       np.ascontiguousarray(target), np.ascontiguousarray(spread), int(len(muscle)), 1.0, room)
     model.rest_volume = float(skin_frame(model, rest_world, p, keep=False)[2][0])  # the skin as worn at rest
     return model
+
+
+def jiggle_coefficients(jiggle, fps: float) -> np.ndarray:
+    """The skin's jiggle as a filter over the bones' past: a vertex on a damped spring (natural
+    frequency ``f``, damping ratio ``z``) behind where skinning puts it, ``x``, lags by ``e`` with
+    ``e'' + 2 z w e' + w^2 e = -x''``: the convolution of ``-x''`` with the spring's impulse
+    response ``exp(-z w t) sin(w_d t) / w_d``. ``x`` is linear in the bones' transforms ``M``
+    (each relative to rest), and so is ``e``: ``e(f) = blend(sum_j c[j] M(f - j))`` with
+    ``c`` the response sampled at the frames and convolved with the central second difference
+    ``[1, -2, 1] / dt^2``. The response is cut after it has decayed to a thousandth, or after
+    ``tol.SKIN_JIGGLE_MEMORY`` seconds. Every frame is computed from the pose alone (frames
+    before the pose's first hold its first): the same bytes whichever frames a process
+    computes. Sum of ``c``: 0, so a skeleton at rest never jiggles."""
+    w = 2.0 * np.pi * jiggle.frequency
+    z = jiggle.damping_ratio
+    wd = w * np.sqrt(1.0 - z * z)
+    dt = 1.0 / fps
+    n = int(np.ceil(min(np.log(1000.0) / (z * w), tol.SKIN_JIGGLE_MEMORY) / dt)) + 1
+    t = np.arange(n) * dt
+    response = np.exp(-z * w * t) * np.sin(wd * t) / wd * dt  # (the integral's dt)
+    # x'' at frame f - k by the central difference: the response is 0 at k = 0, so x(f + 1)'s
+    # coefficient is 0 and the filter needs no frame after f
+    return (-np.convolve(response, [1.0, -2.0, 1.0]) / (dt * dt))[1:]
+
+
+def jiggle_lag(model: SkinModel, frames: np.ndarray) -> np.ndarray:
+    """Each skin vertex's lag at ``frames`` (C, V, 3): :func:`jiggle_coefficients` applied to
+    the bones' transforms at the frames before each (the pose sampled there)."""
+    from axdf_cli.model.pose import sample_coordinates
+
+    coef, gain, pose = model.jiggle
+    back = np.asarray(frames, np.float64)[:, None] - np.arange(len(coef))  # (C, J)
+    world = forward_kinematics(pose.skeleton, sample_coordinates(pose, back.ravel()))[:, model.bones]
+    rel = (world @ model.inv_rest)[:, :, :3, :].reshape(len(frames), len(coef), len(model.bones), 3, 4)
+    mix = np.ascontiguousarray(np.einsum("j,cjkab->ckab", coef, rel))
+    out = np.empty((len(frames), len(model.rest), 3))
+    for i in range(len(frames)):
+        kernels.blend(model.weights, mix[i], model.rest, out[i])
+    return out * gain[:, None]
 
 
 def vertex_areas(x: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -217,8 +259,9 @@ def keep_volume(model: SkinModel, x: np.ndarray, n: np.ndarray, offset: np.ndarr
             out += d
 
 
-def skin_frame(model: SkinModel, world: np.ndarray, points: np.ndarray, keep: bool = True) -> tuple:
-    """One frame: the skin skinned by ``world`` (B, 4, 4), pushed over ``points`` (the
+def skin_frame(model: SkinModel, world: np.ndarray, points: np.ndarray, keep: bool = True, lag=None) -> tuple:
+    """One frame: the skin skinned by ``world`` (B, 4, 4) (and moved by its jiggle's ``lag``,
+    (V, 3)), pushed over ``points`` (the
     candidates' world positions, (N, 3)), relaxed and (``keep``) held at its rest volume →
     (positions (V, 3), normals (V, 3), measures (len(SKIN_COLUMNS),) with the outside share
     still to divide)."""
@@ -226,6 +269,8 @@ def skin_frame(model: SkinModel, world: np.ndarray, points: np.ndarray, keep: bo
     nv = len(model.rest)
     x, n = np.empty((nv, 3)), np.empty((nv, 3))
     kernels.blend(model.weights, rel, model.rest, x)
+    if lag is not None:
+        x += lag
     kernels.normals_volume(x, model.faces, n)
     floor, offset = np.empty(nv), np.empty(nv)
     kernels.push_floor(points, x, n, model.pairs, model.target, model.spread[0], model.spread[1], model.room,
@@ -261,12 +306,18 @@ class SkinStage:
         return {"skin": self.skin.name, "skeleton": self.skin.skeleton, "vertices": int(len(self.skin.vertices)),
                 "reach": tol.SKIN_REACH, "candidates": tol.SKIN_CANDIDATES,
                 "soft_height": tol.SKIN_SOFT_HEIGHT, "max_height": tol.SKIN_MAX_HEIGHT,
-                "spread": [tol.SKIN_SPREAD_IN, tol.SKIN_SPREAD_OUT], "relax": tol.SKIN_RELAX_ITERATIONS,
+                "spread": [tol.SKIN_SPREAD_IN, tol.SKIN_SPREAD_OUT], "jiggle_memory": tol.SKIN_JIGGLE_MEMORY,
+                "relax": tol.SKIN_RELAX_ITERATIONS,
                 "volume": {"max_shift": tol.SKIN_VOLUME_MAX_SHIFT, "taper": tol.SKIN_VOLUME_TAPER,
                            "rounds": tol.SKIN_VOLUME_ROUNDS}}
 
     def start(self, plan) -> SkinModel:
-        return build(self.skin, plan)
+        model = build(self.skin, plan)
+        j = self.skin.jiggle
+        if j is not None:
+            gain = j.amount * self.skin.fat / max(float(self.skin.fat.max(initial=0.0)), 1e-12)
+            model.jiggle = (jiggle_coefficients(j, plan.pose.fps), gain, plan.pose)
+        return model
 
     def __call__(self, state: SkinModel, chunk):
         nf = len(chunk.frames)
@@ -275,13 +326,14 @@ class SkinStage:
         nrm = np.empty((nf, nv, 3), np.float32)
         stats = np.zeros((nf, len(SKIN_COLUMNS)))
         js = sorted(chunk.results)
+        lag = jiggle_lag(state, chunk.frames) if state.jiggle is not None else [None] * nf
         for i in range(nf):
             everything = np.concatenate([chunk.results[j].vertices[i] for j in js]) if js else np.zeros((0, 3))
             pts = [everything[state.muscle_points]]
             for b, local in state.bone_points:
                 w = chunk.world[i, b]
                 pts.append(local @ w[:3, :3].T + w[:3, 3])
-            y, ny, st = skin_frame(state, chunk.world[i], np.ascontiguousarray(np.concatenate(pts)))
+            y, ny, st = skin_frame(state, chunk.world[i], np.ascontiguousarray(np.concatenate(pts)), lag=lag[i])
             pos[i], nrm[i] = y, ny
             st[2] /= max(state.n_muscle_vertices, 1)
             stats[i] = st

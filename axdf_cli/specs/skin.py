@@ -5,6 +5,9 @@ and sparse per-vertex weights) and its fat map (NPZ: per-vertex thickness and re
 relative to the file. Every check reports ``FILE:LINE:COL: what; allowed``: unknown keys, bad
 values, missing or unreadable files, vertex counts that disagree with the mesh, weights that
 do not sum to one, regions the table lacks and, given the skeleton, bones it does not have.
+
+An optional ``jiggle: {frequency, damping_ratio, amount}`` gives the skin secondary motion
+(:mod:`axdf_cli.pipeline.skin_stage`): soft tissue lagging and ringing behind its bones.
 """
 from __future__ import annotations
 
@@ -17,7 +20,13 @@ from axdf_cli.errors import InputError, Mark
 from axdf_cli.fileio.yamlio import Fields, load_yaml
 from axdf_cli.specs.refs import RefPolicy
 
-SKIN_KEYS = ("skin", "skeleton", "family", "mesh", "weights", "fat", "stature", "height", "fat_source", "regions")
+SKIN_KEYS = ("skin", "skeleton", "family", "mesh", "weights", "fat", "stature", "height", "fat_source", "regions",
+             "jiggle")
+JIGGLE_KEYS = ("frequency", "damping_ratio", "amount")
+#: Bounds of a skin's ``jiggle:``: an underdamped spring (it rings, and its ring has died away
+#: within a few seconds of frames), at most 100 Hz (soft tissue wobbles at a few Hz to tens).
+SKIN_JIGGLE_DAMPING = (0.05, 1.0)
+SKIN_JIGGLE_MAX_HZ = 100.0
 REGION_KEYS = ("fat_mm", "site")
 WEIGHT_ARRAYS = ("vertex_count", "bones", "vertex", "bone", "weight")
 FAT_ARRAYS = ("vertex_count", "fat", "region", "regions")
@@ -40,6 +49,16 @@ class Skin:
     stature: float | None
     height: float | None
     files: tuple  # every file read (the skin file first)
+    jiggle: "SkinJiggle | None" = None
+
+
+@dataclass(frozen=True)
+class SkinJiggle:
+    """A skin's secondary motion: each vertex a damped spring behind where its bones put it."""
+
+    frequency: float  # Hz, the spring's undamped natural frequency
+    damping_ratio: float  # in SKIN_JIGGLE_DAMPING, [lo, hi)
+    amount: float  # scale of the lag, at the thickest fat (a vertex's share: its fat over the thickest)
 
 
 def _arrays(path: Path, where: Mark, names: tuple) -> dict:
@@ -86,6 +105,7 @@ def load_skin(path: Path | str, skeleton=None, policy: RefPolicy | None = None) 
         r.string("site")
         r.done()
     mesh_p, weights_p, fat_p = (_file(f, k, path, policy) for k in ("mesh", "weights", "fat"))
+    jiggle = _jiggle(f) if f.has("jiggle") else None
     f.done()
     (v, _, faces), _ = load_triangles_and_bytes(mesh_p)
     n = len(v)
@@ -135,4 +155,17 @@ def load_skin(path: Path | str, skeleton=None, policy: RefPolicy | None = None) 
                          "a fat_mm for every region of the fat map")
     return Skin(name, skel_name, family, np.asarray(v, dtype=np.float64), np.asarray(faces, dtype=np.int64),
                 bones, dense, fat, region.astype(np.int64), regions, stature, height,
-                (path, mesh_p, weights_p, fat_p))
+                (path, mesh_p, weights_p, fat_p), jiggle)
+
+
+def _jiggle(f: Fields) -> SkinJiggle:
+    jf = Fields(f.raw("jiggle"), f.vmark("jiggle"), "jiggle", keys=JIGGLE_KEYS)
+    freq = jf.number("frequency", required=True, lo=0.0, hi=SKIN_JIGGLE_MAX_HZ, lo_open=True)
+    lo, hi = SKIN_JIGGLE_DAMPING
+    zeta = jf.number("damping_ratio", required=True, lo=lo, hi=hi)
+    if zeta >= hi:
+        raise InputError(jf.vmark("damping_ratio"), f"damping_ratio {zeta:g} does not ring",
+                         f"an underdamped skin: {lo:g} <= damping_ratio < {hi:g}")
+    amount = jf.number("amount", default=1.0, lo=0.0, hi=10.0)
+    jf.done()
+    return SkinJiggle(float(freq), float(zeta), float(amount))
