@@ -90,6 +90,7 @@ from axdf_cli.model.skeleton import forward_kinematics
 
 ROOT = Path(__file__).resolve().parent.parent
 GAIT_MUSCLES = ROOT / "muscles" / "gait2392"
+ATLAS_MUSCLES = ROOT / "muscles" / "gait2392_atlas"
 GAIT_POSE = ROOT / "poses" / "gait2392_walk.yaml"
 GAIT_JOB = ROOT / "poses" / "jobs" / "gait2392_walk.yaml"
 CMU_GAIT_JOB = ROOT / "poses" / "jobs" / "gait2392_cmu_walk.yaml"
@@ -1219,7 +1220,9 @@ def pack_rows(table: "Table") -> None:
 
 
 def contact_rows(table: "Table", quick: bool, tmp: Path | None = None) -> None:
-    """The shipped gait2392 walk (every frame; every 6th with --quick), its CMU walk, arm26's
+    """The shipped gait2392 walk (every frame; every 6th with --quick; with the muscles as
+    imported, packed, and the atlas library, whose cost per muscle-frame is set beside the
+    others'), its CMU walk, arm26's
     elbow flexion (as imported and packed) and Rajagopal2016's running stride (muscles only:
     imported without bone meshes): evaluation without any stage, with the penetration stage
     alone (--penetration: measures only), and with contact;
@@ -1235,6 +1238,8 @@ def contact_rows(table: "Table", quick: bool, tmp: Path | None = None) -> None:
                                                                          muscle_args=[str(GAIT_MUSCLES)], stages=sw)),
              ("gait2392 walk, packed (axdf pack --pose: the job's muscles)",
               lambda sw: plan_run(load_job(GAIT_JOB), frames_arg=frames, stages=sw)),
+             ("gait2392 walk, the atlas library (muscles/gait2392_atlas: fitted to the Visible Human)",
+              lambda sw: plan_run(load_job(GAIT_JOB), frames_arg=frames, muscle_args=[str(ATLAS_MUSCLES)], stages=sw)),
              ("CMU walk retargeted onto gait2392, packed (not the motion packed over)",
               lambda sw: plan_run(load_job(CMU_GAIT_JOB), frames_arg="0:248:24" if quick else None, stages=sw)),
              ("arm26 elbow flexion, muscles as imported", lambda sw: plan_run(

@@ -13,8 +13,8 @@ Each frame, in order:
    skin vertices, along that vertex's skinned normal; where it lies less deep under the skin
    than its target (its local fat thickness, or its depth at rest where that is shallower: the
    rest skin is worn as fitted), the vertex is pushed outward by the difference, in full
-   within ``tol.SKIN_SPREAD_IN`` of the vertex's longest edge across its normal, fading
-   smoothly to nothing at ``tol.SKIN_SPREAD_OUT`` of it. A point more than
+   within ``tol.SKIN_SPREAD_IN`` times the vertex's longest edge across its normal, fading
+   smoothly to nothing at ``tol.SKIN_SPREAD_OUT`` times it. A point more than
    ``tol.SKIN_MAX_HEIGHT`` above a vertex pushes nothing (a crease: the adductors between the
    thighs, where the vertex may be on the other leg), and from ``tol.SKIN_SOFT_HEIGHT`` up its
    push fades to that (:func:`~axdf_cli.model.skin.push_floor`: every push is a continuous
