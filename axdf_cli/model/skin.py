@@ -90,7 +90,7 @@ def nearest_heights(points, x, n, candidates, nearest, height):
 def push_floor(points, x, n, pairs, target, spread_in, spread_out, room, soft_height, max_height, floor):
     """The least offset each skin vertex may take along its normal ``n`` (``floor``, V) and
     still hold every point under it at its target depth; where the floor is above 0 the vertex
-    is pushed out to it. Each point ``p`` is measured against each skin vertex ``u = pairs[p, j]``
+    is pushed out to it. Each point ``p`` is compared with each skin vertex ``u = pairs[p, j]``
     it lies under (-1: none): ``h``, its height above ``u`` along ``n[u]``, and ``t``, its
     distance from ``u`` across that normal. It asks ``u`` for ``h + target[p, j]``, weighed by ``w``:
     1 within ``spread_in[u]`` across, falling smoothly to nothing at ``spread_out[u]``, and
