@@ -124,3 +124,30 @@ def test_library_keeps_every_model_name():
         assert specs[0].name == Path(name).stem
         if specs[0].name in fitted:
             assert specs[0].axis and specs[0].sections[0].outline is not None
+
+
+@pytest.mark.skipif(not LIB.is_dir(), reason="muscles/gait2392_atlas not made (make atlas)")
+def test_library_lengths_are_the_models_paths():
+    """Every fitted muscle keeps gait2392's path as its line of action: over walk frames its
+    stats length is the imported muscle's (OpenSim's path, within 0.4-0.8% of getLength) to
+    the last digit, while its belly is the atlas's (its own axis, shorter and bound to bones)."""
+    from axdf_cli.model.muscle import MuscleModel
+    from axdf_cli.model.pose import sample_coordinates
+    from axdf_cli.model.skeleton import forward_kinematics
+    from axdf_cli.specs import RefPolicy, load_muscle_file, load_skeleton
+    from axdf_cli.specs.pose import load_pose
+
+    skel = load_skeleton(REPO / "poses" / "skeletons" / "gait2392.yaml", RefPolicy())
+    rest = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
+    pose = load_pose(REPO / "poses" / "gait2392_walk.yaml")
+    q = sample_coordinates(pose, np.arange(18, 84, 11))
+    world = forward_kinematics(skel, q)
+    fitted = {m["muscle"] for m in json.loads((LIB / "atlas_report.json").read_text())["fitted"]}
+    assert len(fitted) >= 70
+    for name in sorted(fitted):
+        (new,) = load_muscle_file(LIB / f"{name}.yaml")
+        (old,) = load_muscle_file(OLD / f"{name}.yaml")
+        assert new.axis and new.path is not None, name
+        line = MuscleModel(new, skel.bone_index, rest, skel).line_length(world, q)
+        np.testing.assert_allclose(line, MuscleModel(old, skel.bone_index, rest, skel).axis_length(world, q),
+                                   rtol=1e-12, err_msg=name)

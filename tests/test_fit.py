@@ -257,6 +257,16 @@ def test_paths_bind_a_muscle_to_the_bones_its_path_crosses(tube_fit, capsys):
     (spec,) = load_muscle_file(d / "paths" / "muscles" / "tube.yaml")
     bones = [p.bone for p in spec.axis]
     assert set(bones) == {"pelvis", "tibia"} and bones[0] == "pelvis" and bones[-1] == "tibia", bones
+    # the model's path is kept as the line of action: the run's length is the path's, not the axis's
+    assert spec.path is not None and [p.bone for p in spec.path.points] == ["pelvis", "tibia"]
+    (d / "bend.yaml").write_text("pose: bend\nskeleton: leg.yaml\nfps: 10\nframes: [0, 4]\nkeys:\n"
+                                 "  0: {knee: 0}\n  4: {knee: 90}\n")
+    for name, muscles in (("fitted", "paths/muscles/tube.yaml"), ("model", "model/tube.yaml")):
+        assert run_cli(d, "run", "--pose", "bend.yaml", "--muscles", muscles, "--out", f"run_{name}", "--quiet") == 0
+    lengths = {name: np.loadtxt(d / f"run_{name}" / "stats.csv", delimiter=",", skiprows=1, usecols=2)
+               for name in ("fitted", "model")}
+    assert np.ptp(lengths["model"]) > 0.01  # the knee's bend shortens the path
+    np.testing.assert_allclose(lengths["fitted"], lengths["model"], rtol=1e-12)
     manifest = json.loads((d / "paths" / "manifest.json").read_text())
     assert "model/tube.yaml" in [i["file"] for i in manifest["inputs"]], manifest["inputs"]
     (d / "other.stl").write_bytes((d / "tube.stl").read_bytes())

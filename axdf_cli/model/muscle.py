@@ -118,7 +118,7 @@ class MuscleSpec:
     weights: tuple[float, ...] | None = None
     source: str = ""
     group: str = ""  # the multi-head muscle this head belongs to ('' for single muscles)
-    path: PathSpec | None = None  # a path (points, wrap surfaces) instead of fixed axis points
+    path: PathSpec | None = None  # a path (points, wrap surfaces): the axis, or with an axis the line of action
     jiggle: JiggleSpec | None = None  # secondary motion of the axis (model/jiggle.py); None: none
     contact: ContactSpec = ContactSpec()  # the muscle file's ``contact:`` (axdf_cli/model/contact.py)
 
@@ -179,7 +179,7 @@ class FrameResult:
 
     vertices: np.ndarray  # (F, V, 3) float64
     normals: np.ndarray  # (F, V, 3) float64
-    length: np.ndarray  # (F,) axis arc length (m)
+    length: np.ndarray  # (F,) axis arc length (m); a muscle with a line of action, that line's
     volume: np.ndarray  # (F,) mesh volume (m^3)
     scale: np.ndarray  # (F,) volume factor s
     twist: np.ndarray  # (F,) insertion roll spread along the axis (degrees, unwrapped)
@@ -227,13 +227,22 @@ class MuscleModel:
     # -- preparation stages -------------------------------------------------------------
     def _stage_bones(self, bone_index: dict[str, int], skeleton) -> None:
         """Bone of every axis control point and the points in their bones; or the path model
-        that places the axis control points every frame."""
+        that places the axis control points every frame; or, a muscle with both, the axis's
+        bones and the path as its line of action (``self.line``: the path model and the bases
+        of its length)."""
         spec = self.spec
         self.rest_q = skeleton.rest_coordinates()[None] if skeleton is not None else None
+        self.line = None
         if spec.path is not None:
             from axdf_cli.model.paths.path import PathModel
 
-            self.path = PathModel(spec.path, bone_index, skeleton.coord_index if skeleton is not None else None)
+            path = PathModel(spec.path, bone_index, skeleton.coord_index if skeleton is not None else None)
+        if spec.path is not None and spec.axis:  # the path is the line of action only (line_length)
+            knots = bspline.clamped_knots(path.n, 2)
+            gt, gw = bspline.gauss_legendre_params(knots, 2, tol.LENGTH_GAUSS_POINTS)
+            self.line = (path, bspline.basis_matrix(knots, 2, gt, 1), gw)
+        elif spec.path is not None:
+            self.path = path
             self.n_axis = self.path.n
             self.origin_bone = self.path.origin_bone
             self.insertion_bone = self.path.insertion_bone
@@ -395,6 +404,16 @@ class MuscleModel:
         """The axis arc length (F,) for frames world (F, B, 4, 4) (and coordinates (F, C))."""
         return self._length(self._axis_points(world, coords))
 
+    def line_length(self, world: np.ndarray, coords: np.ndarray | None = None) -> np.ndarray | None:
+        """The length (F,) of the muscle's line of action, where it has one besides its axis (a
+        ``path:`` with an ``axis:``): the arc length of the quadratic B-spline through the
+        path's control points, as a path muscle's axis length is. None without one."""
+        if self.line is None:
+            return None
+        path, dbg, gw = self.line
+        p, _ = path.control_points(world, coords)
+        return np.linalg.norm(np.einsum("gi,fic->fgc", dbg, p), axis=-1) @ gw
+
     def _length(self, p: np.ndarray) -> np.ndarray:
         d = self._apply("dBg", p)
         return np.linalg.norm(d, axis=-1) @ self.gw
@@ -442,8 +461,12 @@ class MuscleModel:
         for the arguments, and ``coords`` (F, C) skeleton coordinates for paths with moving
         or conditional points."""
         p, warnings = self.axis_points(world, coords)
-        return self.surface(world, p, tension, twist_reference, rest_volume, warnings=warnings,
-                            control_points=control_points)
+        res = self.surface(world, p, tension, twist_reference, rest_volume, warnings=warnings,
+                           control_points=control_points)
+        line = self.line_length(world, coords)
+        if line is not None:
+            res.length = line
+        return res
 
     def surface(self, world: np.ndarray, points: np.ndarray, tension: np.ndarray,
                 twist_reference: np.ndarray | None = None, rest_volume: float | None | str = "model",

@@ -141,8 +141,8 @@ def muscle_range_warnings(pose, frames: np.ndarray, muscles) -> list[tuple[int, 
 
 
 def muscle_bones(muscle) -> set[str]:
-    """The names of the bones a muscle hangs on: its axis points', or its path points' and
-    wrap surfaces' (a ``path:`` muscle has no axis)."""
+    """The names of the bones a muscle hangs on: its axis points', and its path points' and
+    wrap surfaces' (a muscle with both: its belly and its line of action)."""
     names = {p.bone for p in muscle.axis}
     if muscle.path is not None:
         names |= {p.bone for p in muscle.path.points}

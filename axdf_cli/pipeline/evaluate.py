@@ -288,6 +288,10 @@ def _surfaces(plan, chunk: Chunk, stages, state: list) -> Iterator[tuple[int, Fr
     tension = effective_tension(tone, chunk.activation[:, js])  # (C, K)
     fields = batch.surfaces(chunk.world, batch.pack(chunk.axis, len(chunk.frames)), tension, chunk.twist[:, js], js,
                             notes=chunk.notes)
+    for j in js:  # a muscle with a line of action reports its length (as OpenSim's path)
+        line = plan.models[j].line_length(chunk.world, chunk.coords)
+        if line is not None:
+            fields[j]["length"] = line
     chunk.results = {j: FrameResult(**f) for j, f in fields.items()}
     for k, stage in enumerate(stages):
         state[k], chunk = stage(state[k], chunk)

@@ -55,9 +55,8 @@ def _parse_muscle(value, where: Mark, file: str, group: str = "") -> MuscleSpec:
     volume = f.choice("volume", VOLUME_MODES, default="exact")
     path = parse_muscle_path(f) if f.has("path") else None
     axis_seq = f.seq("axis", required=path is None, default=[])
-    if path is not None and axis_seq:
-        raise InputError(f.kmark("axis"), "muscle has both axis and path", "give one of them")
-    if path is None and len(axis_seq) < 3:
+    # both: the axis is the belly's shape, the path its line of action (the length, as OpenSim's)
+    if (path is None or axis_seq) and len(axis_seq) < 3:
         raise InputError(f.vmark("axis"), f"axis has {len(axis_seq)} control points",
                          "a quadratic B-spline axis needs at least 3 (default 5)")
     if len(axis_seq) > 64:

@@ -159,12 +159,13 @@ def nearest_bones(points: np.ndarray, geometry: list) -> np.ndarray:
     return np.argmin(dist, axis=1)
 
 
-def model_bones(folder: Path, name: str, skel: Skeleton, rest: np.ndarray) -> tuple[set[int], np.ndarray]:
+def model_bones(folder: Path, name: str, skel: Skeleton, rest: np.ndarray) -> tuple[set[int], np.ndarray, object]:
     """The bones (indices) of the muscle file ``folder/NAME.yaml`` of a model (its path's
     points and wraps, or its axis): the only bones a fit of mesh NAME binds to, so that a
-    muscle that crosses two joints hangs on the bones on both sides; and its origin (its first
-    path or axis point) in the world at rest, which the fitted axis starts at. Refused when
-    the file is missing or names a bone the skeleton lacks."""
+    muscle that crosses two joints hangs on the bones on both sides; its origin (its first
+    path or axis point) in the world at rest, which the fitted axis starts at; and its path
+    (a single muscle's, else None), which the fitted muscle keeps as its line of action.
+    Refused when the file is missing or names a bone the skeleton lacks."""
     path = Path(folder) / f"{name}.yaml"
     if not path.is_file():
         raise InputError(Mark(str(path)), f"no muscle file {name}.yaml in --paths {folder}",
@@ -177,7 +178,9 @@ def model_bones(folder: Path, name: str, skel: Skeleton, rest: np.ndarray) -> tu
                          "lacks", f"a muscle of the skeleton {skel.name}")
     first = specs[0].path.points[0] if specs[0].path is not None else specs[0].axis[0]
     b = skel.bone_index[first.bone]
-    return {skel.bone_index[n] for n in bones}, rest[b, :3, :3] @ np.asarray(first.at, dtype=np.float64) + rest[b, :3, 3]
+    line = specs[0].path if len(specs) == 1 else None
+    return ({skel.bone_index[n] for n in bones}, rest[b, :3, :3] @ np.asarray(first.at, dtype=np.float64) + rest[b, :3, 3],
+            line)
 
 
 # ----------------------------------------------------------------------------- one muscle
@@ -198,9 +201,11 @@ def tendon_fractions(areas: np.ndarray, arc: np.ndarray) -> tuple[float, float]:
 
 
 def fit_one(mesh, name: str, n_sections: int, skel: Skeleton, rest: np.ndarray, geometry: list,
-            origin: np.ndarray | None = None):
+            origin: np.ndarray | None = None, line=None):
     """One mesh (metres) → (the muscle's YAML text, its report entry without the measures).
-    ``origin``: a world point the axis starts at the end nearer to (a model's origin)."""
+    ``origin``: a world point the axis starts at the end nearer to (a model's origin);
+    ``line``: a model's path (:class:`~axdf_cli.model.paths.PathSpec`), written beside the
+    fitted axis as the muscle's line of action (its length, as the model's)."""
     import trimesh
 
     samples, face = trimesh.sample.sample_surface(mesh, tol.FIT_SAMPLES, seed=tol.FIT_SEED)
@@ -229,11 +234,13 @@ def fit_one(mesh, name: str, n_sections: int, skel: Skeleton, rest: np.ndarray, 
     spec = MuscleSpec(name, default_color(name), axis,
                       tuple(Section(float(t), None, 0.0, tuple((float(a), float(b)) for a, b in o))
                             for t, o in zip(sec_t, xy)),
-                      tendons=tendons, resolution=(along, tol.FIT_OUTPUT_AROUND))
+                      tendons=tendons, resolution=(along, tol.FIT_OUTPUT_AROUND), path=line)
     from axdf_cli.tools.transfer import muscle_doc
 
+    kept = "; its path, the model's line of action" if line is not None else ""
     text = emit.dump_yaml(emit.rounded(muscle_doc(spec)),
-                          header=f"{name}: fitted by `axdf fit` to its mesh ({n_sections} sections; report: {REPORT}).")
+                          header=f"{name}: fitted by `axdf fit` to its mesh ({n_sections} sections{kept}; "
+                                 f"report: {REPORT}).")
     entry = {"muscle": name, "sections": n_sections, "tendons": list(tendons),
              "bones": [skel.bones[b].name for b in bones], "length_m": float(model.l0),
              "mesh_volume_cm3": float(mesh.volume) * 1e6}
@@ -277,13 +284,13 @@ def build_fit(mesh_paths: list[Path], skeleton_path: Path | str, units: str = "m
     files: dict[str, bytes] = {}
     entries = []
     for p, name, mesh in meshes:
-        own, origin = geometry, None
+        own, origin, line = geometry, None, None
         if name in allowed:
-            keep, origin = allowed[name]
+            keep, origin, line = allowed[name]
             own = [g if i in keep else None for i, g in enumerate(geometry)]
             if all(g is None for g in own):  # the path's bones have no meshes: their segments then
                 own = [g if i in keep else None for i, g in enumerate(bone_geometry(skel, rest, skeleton_path, False))]
-        text, entry = fit_one(mesh, name, n, skel, rest, own, origin)
+        text, entry = fit_one(mesh, name, n, skel, rest, own, origin, line)
         rel = f"muscles/{name}.yaml"
         entry.update({"file": rel, "mesh": p.name})
         entry.update(measure_file(text, rel, mesh, skel, rest))

@@ -343,7 +343,9 @@ def transfer_spec(spec: MuscleSpec, tf: dict[str, PairTransform],
         points = tuple(_carry_point(p, tf[p.bone], i) for i, p in enumerate(spec.path.points))
         wraps = tuple(_carry_wrap(w, tf[w.bone], tf[w.side[0]] if w.side is not None else None)
                       for w in spec.path.wraps)
-        return replace(spec, path=replace(spec.path, points=points, wraps=wraps), sections=tuple(secs)), [], k
+        spec = replace(spec, path=replace(spec.path, points=points, wraps=wraps))
+        if not spec.axis:
+            return replace(spec, sections=tuple(secs)), [], k
     axis = []
     for p in spec.axis:
         t = tf[p.bone]
@@ -367,9 +369,9 @@ def muscle_doc(spec: MuscleSpec) -> dict:
     """One muscle's YAML document (docs/FORMATS.md, "Muscle"): every field written out."""
     d = {"muscle": spec.name, "color": _color(spec.color), "strength": spec.strength, "tension": spec.tension,
          "volume": spec.volume}
-    if spec.path is None:
+    if spec.axis:  # (with a path too: the belly's shape, the path its line of action)
         d["axis"] = [{"bone": p.bone, "at": list(p.at)} for p in spec.axis]
-    else:
+    if spec.path is not None:
         d["path"] = [emit.point_doc(p) for p in spec.path.points]
         if spec.path.wraps:
             d["wrap"] = [emit.wrap_doc(w) for w in spec.path.wraps]
