@@ -110,6 +110,30 @@ def test_push_out_moves_a_point_out_of_a_bone():
     assert out[1] == pytest.approx(pts[1])
 
 
+@needs_atlas
+@pytest.mark.skipif(not LIB.is_dir(), reason="muscles/gait2392_atlas not made (make atlas)")
+def test_registered_meshes_are_the_ones_the_library_was_fitted_to(rest):
+    """``registered_meshes`` (what tools/atlas_sheet.py draws beside the library) gives the
+    right leg's muscles the shipped library's report records: the same names, atlas files and
+    parts, and the same count of vertices pushed out of the bones; closed meshes that hold a
+    volume, each near its fitted muscle."""
+    import trimesh
+
+    from axdf_cli.tools.atlas_library import registered_meshes
+
+    skel, pose, bones = rest
+    meshes, sides = registered_meshes(ATLAS, skel, pose, bones, OLD, ("r",))
+    recorded = json.loads((LIB / "atlas_report.json").read_text())["sides"]["r"]["muscles"]
+    assert sides["r"]["muscles"] == recorded
+    assert sorted(name for name, _, _ in meshes) == sorted(recorded)
+    fitted = {m["muscle"]: m for m in json.loads((LIB / "atlas_report.json").read_text())["fitted"]}
+    for name, v, f in meshes:
+        m = trimesh.Trimesh(v, f, process=True)
+        assert abs(m.volume) > 1e-6, name
+        if name in fitted:
+            assert abs(m.volume) * 1e6 == pytest.approx(fitted[name]["mesh_volume_cm3"], rel=0.02), name
+
+
 @pytest.mark.skipif(not LIB.is_dir(), reason="muscles/gait2392_atlas not made (make atlas)")
 def test_library_keeps_every_model_name():
     from axdf_cli.specs import load_muscle_file

@@ -110,6 +110,45 @@ def rest_bones(skeleton_path: Path) -> tuple:
     meshes = rest_bone_meshes(skel, str(skeleton_path), lambda b: b.parent is not None)
     return skel, rest, {name: (v, f) for name, (v, f, _) in meshes.items()}
 
+def registered_meshes(data_root: Path, skel, rest, bones: dict, old: Path, sides=("r",), tell=None) -> tuple:
+    """The atlas' muscles carried onto the skeleton at rest, under the model's names: a list of
+    (name, (V, 3) float64 world metres, (F, 3) int64) and the report of each leg (the
+    registration's residuals, each muscle's source and how many of its vertices were pushed
+    out of the bones). ``old``: the model's own muscle folder (the paths that cut a shared
+    atlas muscle into the model's parts)."""
+    tell = tell or (lambda text: None)
+    names = load_map()
+    meshes, sides_rep = [], {}
+    for side in sides:
+        tell(f"registering the atlas' {at.SIDES[side].lower()} leg")
+        reg = at.register(data_root, skel, rest, bones, side)
+        side_rep = dict(reg.report, muscles={})
+        ta = find_atlas(data_root, side, ["TibialisAnterior"])
+        if ta is not None:
+            tv = at.read_atlas_mesh(ta)[0]
+            tib = bones[f"tibia_{side}"]
+            side_rep["tib_ant_inside_tibia"] = {"landmarks": at.inside_share(reg.apply(tv, warp=False), tib),
+                                                "warp": at.inside_share(reg.apply(tv), tib)}
+        jobs = [(m, [m], src) for m, src in names["muscles"].items()] + \
+               [(g, s["parts"], s["atlas"]) for g, s in names["split"].items()]
+        for key, parts, src in jobs:
+            p = find_atlas(data_root, side, src)
+            if p is None:
+                continue
+            v, fc = at.read_atlas_mesh(p)
+            w = reg.apply(v)
+            pieces = [(w, fc)] if len(parts) == 1 else split_parts(
+                w, fc, np.array([path_centroid(old, f"{q}_{side}", skel, rest) for q in parts]), tol.ATLAS_SPLIT_SPACING)
+            for q, (pv, pf) in zip(parts, pieces):
+                pv, moved = at.push_out(pv, bones, tol.ATLAS_BONE_MARGIN)
+                name = f"{q}_{side}"
+                meshes.append((name, pv, pf))
+                side_rep["muscles"][name] = {"atlas": p.name, "pushed_out_of_bones": moved,
+                                             "part": f"{parts.index(q) + 1}/{len(parts)}" if len(parts) > 1 else None}
+        sides_rep[side] = side_rep
+    return meshes, sides_rep
+
+
 def build_library(data_root: Path, skeleton_path: Path, old: Path, sides=("r",), sections: int | None = None,
                   on_muscle=None, on_phase=None) -> tuple[dict, dict]:
     """The library's files (name -> bytes: one muscle file per model muscle, the report) and
@@ -122,41 +161,16 @@ def build_library(data_root: Path, skeleton_path: Path, old: Path, sides=("r",),
     if not data_root.is_dir():
         raise InputError(Mark(str(data_root)), "atlas folder not found", "the Visible Human Female folder (Left/, Right/)")
     skel, rest, bones = rest_bones(skeleton_path)
-    names = load_map()
     report = {"atlas": str(data_root.name), "skeleton": skeleton_path.name, "sides": {}, "fitted": [], "failed": [],
               "kept": []}
     files: dict[str, bytes] = {}
     with tempfile.TemporaryDirectory(prefix="axdf-atlas-") as tmp:
+        carried, report["sides"] = registered_meshes(data_root, skel, rest, bones, old, sides, tell)
         meshes = []
-        for side in sides:
-            tell(f"registering the atlas' {at.SIDES[side].lower()} leg")
-            reg = at.register(data_root, skel, rest, bones, side)
-            side_rep = dict(reg.report, muscles={})
-            ta = find_atlas(data_root, side, ["TibialisAnterior"])
-            if ta is not None:
-                tv = at.read_atlas_mesh(ta)[0]
-                tib = bones[f"tibia_{side}"]
-                side_rep["tib_ant_inside_tibia"] = {"landmarks": at.inside_share(reg.apply(tv, warp=False), tib),
-                                                    "warp": at.inside_share(reg.apply(tv), tib)}
-            jobs = [(m, [m], src) for m, src in names["muscles"].items()] + \
-                   [(g, s["parts"], s["atlas"]) for g, s in names["split"].items()]
-            for key, parts, src in jobs:
-                p = find_atlas(data_root, side, src)
-                if p is None:
-                    continue
-                v, fc = at.read_atlas_mesh(p)
-                w = reg.apply(v)
-                pieces = [(w, fc)] if len(parts) == 1 else split_parts(
-                    w, fc, np.array([path_centroid(old, f"{q}_{side}", skel, rest) for q in parts]), tol.ATLAS_SPLIT_SPACING)
-                for q, (pv, pf) in zip(parts, pieces):
-                    pv, moved = at.push_out(pv, bones, tol.ATLAS_BONE_MARGIN)
-                    name = f"{q}_{side}"
-                    out = Path(tmp) / f"{name}.ply"
-                    write_ply(out, pv, pf)
-                    meshes.append(out)
-                    side_rep["muscles"][name] = {"atlas": p.name, "pushed_out_of_bones": moved,
-                                                 "part": f"{parts.index(q) + 1}/{len(parts)}" if len(parts) > 1 else None}
-            report["sides"][side] = side_rep
+        for name, pv, pf in carried:
+            out = Path(tmp) / f"{name}.ply"
+            write_ply(out, pv, pf)
+            meshes.append(out)
         tell(f"fitting {len(meshes)} muscles")
         res = build_fit(meshes, skeleton_path, "m", sections, on_muscle=on_muscle, paths=old)
     failed = {m["muscle"] for m in res.report["muscles"] if not fit_holds(m)}

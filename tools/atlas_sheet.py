@@ -1,0 +1,121 @@
+"""The old library, the atlas library and the atlas' meshes side by side (issue 35's pictures):
+
+    python tools/atlas_sheet.py SHEET.png [--old muscles/gait2392_packed] [--atlas muscles/gait2392_atlas]
+                                [--frame 62] [--size 240x320]
+
+Three rows: the right thigh from the front, the gluteal region from behind, the right calf
+from behind. Five columns: the old library and the atlas library at the skeleton's rest pose
+(poses/gait2392_rest.yaml), the atlas' own muscle meshes registered onto gait2392 at rest
+(axdf_cli/tools/atlas_library.py ``registered_meshes``: the meshes the library was fitted to;
+the muscles the atlas lacks are drawn from the atlas library), then both libraries at the
+walk's frame (poses/jobs/gait2392_walk.yaml, with its contact stage). Each panel is an
+``axdf render`` of an ``axdf run`` with an explicit camera aimed from the bones' positions in
+the run's bones.csv. docs/atlas_thigh_gluteal_calf.png (README, "OpenSim models") is made
+this way. Needs the atlas (../shared/data/atlas/visible_human_female).
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import shutil
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+from PIL import Image, ImageDraw, ImageFont
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from axdf_cli.cli.main import main as axdf  # noqa: E402
+
+# view -> (bone the camera aims between, the other bone, the share of the way, direction to
+# the camera (world: -y is the body's front, +z up), distance m, vertical field of view deg)
+VIEWS = {
+    "thigh, front": ("femur_r", "tibia_r", 0.5, (-0.15, -1.0, 0.0), 1.9, 24.0),
+    "gluteal, back": ("pelvis", "femur_r", 0.9, (0.0, 1.0, 0.05), 1.9, 22.0),
+    "calf, back": ("tibia_r", "calcn_r", 0.45, (0.1, 1.0, 0.0), 1.9, 22.0),
+}
+HEAD_H, LABEL_W = 18, 92
+
+
+def bone_positions(run: Path, frame: int) -> dict:
+    with open(run / "bones.csv") as fh:
+        return {r["bone"]: np.array([float(r["x"]), float(r["y"]), float(r["z"])])
+                for r in csv.DictReader(fh) if int(r["frame"]) == frame}
+
+
+def do(args: list[str]) -> None:
+    if axdf(args + ["-q"]):
+        raise SystemExit(f"axdf {' '.join(args)} failed")
+
+
+def atlas_run(atlas_rest: Path, out: Path, data: Path) -> None:
+    """A copy of the atlas library's rest run with each fitted muscle's mesh replaced by the
+    atlas mesh it was fitted to (a run folder reads any PLY per muscle and frame)."""
+    import trimesh
+
+    from axdf_cli.tools.atlas_library import registered_meshes, rest_bones
+
+    shutil.copytree(atlas_rest, out)
+    skel, rest, bones = rest_bones(ROOT / "poses/skeletons/gait2392.yaml")
+    carried, _ = registered_meshes(data, skel, rest, bones, ROOT / "muscles/gait2392", ("r", "l"),
+                                   lambda text: print(f"atlas_sheet: {text}", flush=True))
+    for name, v, f in carried:
+        target = out / "meshes" / name / f"{name}_0000.ply"
+        if target.is_file():
+            m = trimesh.Trimesh(v, f, process=True)
+            if m.volume < 0:
+                m.invert()
+            m.export(str(target))
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("sheet", type=Path)
+    ap.add_argument("--old", default="muscles/gait2392_packed")
+    ap.add_argument("--atlas", default="muscles/gait2392_atlas")
+    ap.add_argument("--data", type=Path, default=ROOT.parent / "shared/data/atlas/visible_human_female")
+    ap.add_argument("--frame", type=int, default=62)
+    ap.add_argument("--size", default="240x320")
+    args = ap.parse_args(argv)
+    w, h = (int(x) for x in args.size.split("x"))
+    with tempfile.TemporaryDirectory(prefix="axdf-sheet-") as tmp:
+        tmp = Path(tmp)
+        runs = []  # (label, run folder, frame)
+        for label, lib in (("old", args.old), ("atlas", args.atlas)):
+            do(["run", "--muscles", str(ROOT / lib), "--pose", str(ROOT / "poses/gait2392_rest.yaml"),
+                "--format", "ply", "--no-render", "--out", str(tmp / f"{label}_rest")])
+            runs.append((f"{label}, rest", tmp / f"{label}_rest", 0))
+        atlas_run(tmp / "atlas_rest", tmp / "meshes_rest", args.data)
+        runs.append(("atlas meshes, rest", tmp / "meshes_rest", 0))
+        for label, lib in (("old", args.old), ("atlas", args.atlas)):
+            do(["run", str(ROOT / "poses/jobs/gait2392_walk.yaml"), "--muscles", str(ROOT / lib), "--frames",
+                str(args.frame), "--format", "ply", "--no-render", "--out", str(tmp / f"{label}_walk")])
+            runs.append((f"{label}, frame {args.frame}", tmp / f"{label}_walk", args.frame))
+        sheet = Image.new("RGB", (LABEL_W + w * len(runs), HEAD_H + h * len(VIEWS)), (255, 255, 255))
+        draw = ImageDraw.Draw(sheet)
+        font = ImageFont.load_default()
+        for c, (label, _, _) in enumerate(runs):
+            draw.text((LABEL_W + c * w + 4, 3), label, fill=(0, 0, 0), font=font)
+        for r, (view, (a, b, t, towards, dist, fov)) in enumerate(VIEWS.items()):
+            draw.text((4, HEAD_H + r * h + h // 2 - 6), view, fill=(0, 0, 0), font=font)
+            for c, (label, run, frame) in enumerate(runs):
+                pos = bone_positions(run, frame)
+                target = (1 - t) * pos[a] + t * pos[b]
+                d = np.asarray(towards, float)
+                eye = target + dist * d / np.linalg.norm(d)
+                out = tmp / f"render_{r}_{c}"
+                do(["render", str(run), "--out", str(out), "--size", f"{w}x{h}", "--fov", str(fov),
+                    "--camera-position=" + ",".join(f"{x:.4f}" for x in eye),
+                    "--camera-target=" + ",".join(f"{x:.4f}" for x in target), "--background", "1,1,1"])
+                img = Image.open(next((out / "frames").glob("*.png"))).convert("RGB")
+                sheet.paste(img, (LABEL_W + c * w, HEAD_H + r * h))
+        sheet.save(args.sheet, optimize=True)
+    print(f"atlas_sheet: wrote {args.sheet}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
