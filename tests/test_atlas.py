@@ -175,3 +175,48 @@ def test_library_lengths_are_the_models_paths():
         line = MuscleModel(new, skel.bone_index, rest, skel).line_length(world, q)
         np.testing.assert_allclose(line, MuscleModel(old, skel.bone_index, rest, skel).axis_length(world, q),
                                    rtol=1e-12, err_msg=name)
+
+
+@pytest.mark.skipif(not LIB.is_dir(), reason="muscles/gait2392_atlas not made (make atlas)")
+def test_leg_muscles_stay_on_their_segment_over_the_walk():
+    """A fitted thigh muscle stays along the thigh and a calf muscle along the shank over the
+    walk: the 95th percentile of its vertices' distances from the segment's line (hip -> knee,
+    knee -> ankle) grows by at most 20 mm from rest. A belly hung on a bone it does not lie
+    along fails: gastrocnemius bound to the femur alone swung 162 mm from the shank in swing
+    (48 at rest), the hamstrings on the pelvis and tibia alone 110 mm (57)."""
+    from axdf_cli.model.muscle import MuscleModel
+    from axdf_cli.model.pose import sample_coordinates
+    from axdf_cli.model.skeleton import forward_kinematics
+    from axdf_cli.specs import RefPolicy, load_muscle_file, load_skeleton
+    from axdf_cli.specs.pose import load_pose
+
+    skel = load_skeleton(SKELETON, RefPolicy())
+    rest = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
+    pose = load_pose(REPO / "poses" / "gait2392_walk.yaml")
+    q = sample_coordinates(pose, np.arange(18, 84, 4))
+    world = forward_kinematics(skel, q)
+
+    def spread(v, w, a, b):
+        p0, p1 = w[a, :3, 3], w[b, :3, 3]
+        e = p1 - p0
+        lam = np.clip((v - p0) @ e / (e @ e), 0.0, 1.0)
+        return np.percentile(np.linalg.norm(v - (p0 + lam[:, None] * e), axis=1), 95)
+
+    fe, ti, ta = (skel.bone_index[n] for n in ("femur_r", "tibia_r", "talus_r"))
+    segments = {**{m: (fe, ti) for m in ("semimem", "semiten", "grac", "sar", "rect_fem", "vas_lat", "vas_med",
+                                        "bifemsh", "add_long", "add_mag1")},
+                **{m: (ti, ta) for m in ("med_gas", "lat_gas", "soleus", "tib_post", "tib_ant")}}
+    fitted = {m["muscle"] for m in json.loads((LIB / "atlas_report.json").read_text())["fitted"]}
+    checked = 0
+    for short, (a, b) in segments.items():
+        name = f"{short}_r"
+        if name not in fitted:
+            continue
+        (spec,) = load_muscle_file(LIB / f"{name}.yaml")
+        m = MuscleModel(spec, skel.bone_index, rest, skel)
+        at_rest = spread(m.rest_vertices.astype(np.float64), rest, a, b)
+        res = m.evaluate(world, np.zeros(len(q)), coords=q)
+        walk = max(spread(res.vertices[k], world[k], a, b) for k in range(len(q)))
+        assert walk <= at_rest + 0.020, (name, at_rest, walk, sorted({p.bone for p in spec.axis}))
+        checked += 1
+    assert checked >= 12

@@ -27,8 +27,8 @@ def add_args(p) -> None:
     p.add_argument("--sections", type=int, default=None, metavar="N",
                    help="sections per muscle (default 16, chosen by measurement: docs/FIT.md)")
     p.add_argument("--paths", default=None, metavar="DIR",
-                   help="the model's muscle files: a mesh binds only to the bones of the file of its name there "
-                        "(its path's), so a muscle across two joints hangs on both sides")
+                   help="the model's muscle files: a mesh binds only to the bones the file of its name there "
+                        "spans (its path's and those between), so a muscle across two joints hangs on each")
     p.add_argument("--allow-outside", action="store_true",
                    help="allow paths inside YAML files to leave the project folder tree")
     add_overwrite_arg(p)

@@ -159,10 +159,33 @@ def nearest_bones(points: np.ndarray, geometry: list) -> np.ndarray:
     return np.argmin(dist, axis=1)
 
 
+def bones_between(skel: Skeleton, bones: set[int]) -> set[int]:
+    """``bones`` and every bone on the skeleton's tree between two of them: a path from the
+    femur to the calcaneus crosses the tibia and the talus, where the calf's belly lies."""
+    def up(b: int) -> list[int]:
+        out = []
+        while b >= 0:
+            out.append(b)
+            b = skel.bones[b].parent
+        return out
+
+    full = set(bones)
+    for a in bones:
+        ua = up(a)
+        for b in bones:
+            ub = up(b)
+            common = next((x for x in ua if x in ub), None)
+            if common is not None:
+                full |= set(ua[:ua.index(common) + 1]) | set(ub[:ub.index(common) + 1])
+    return full
+
+
 def model_bones(folder: Path, name: str, skel: Skeleton, rest: np.ndarray) -> tuple[set[int], np.ndarray, object]:
     """The bones (indices) of the muscle file ``folder/NAME.yaml`` of a model (its path's
-    points and wraps, or its axis): the only bones a fit of mesh NAME binds to, so that a
-    muscle that crosses two joints hangs on the bones on both sides; its origin (its first
+    points and wraps, or its axis) and the bones between them (:func:`bones_between`): the
+    only bones a fit of mesh NAME binds to, each control point to the nearest, so that a
+    muscle that crosses two joints hangs on the bones it spans (gastrocnemius: the femur at
+    its heads, the tibia along its belly, not the femur down to the ankle); its origin (its first
     path or axis point) in the world at rest, which the fitted axis starts at; and its path
     (a single muscle's, else None), which the fitted muscle keeps as its line of action.
     Refused when the file is missing or names a bone the skeleton lacks."""
@@ -179,7 +202,7 @@ def model_bones(folder: Path, name: str, skel: Skeleton, rest: np.ndarray) -> tu
     first = specs[0].path.points[0] if specs[0].path is not None else specs[0].axis[0]
     b = skel.bone_index[first.bone]
     line = specs[0].path if len(specs) == 1 else None
-    return ({skel.bone_index[n] for n in bones}, rest[b, :3, :3] @ np.asarray(first.at, dtype=np.float64) + rest[b, :3, 3],
+    return (bones_between(skel, {skel.bone_index[n] for n in bones}), rest[b, :3, :3] @ np.asarray(first.at, dtype=np.float64) + rest[b, :3, 3],
             line)
 
 
