@@ -241,7 +241,8 @@ def test_atlas_muscle_fits(tmp_path):
 def test_paths_bind_a_muscle_to_the_bones_its_path_crosses(tube_fit, capsys):
     """--paths: the tube (hip to above the knee) fitted with a model's path from the pelvis to
     the tibia hangs only on the bones that path spans: those two and the femur between them
-    (the tube lies along the femur); with a path on the pelvis alone, only on the pelvis. A
+    (the tube lies along the femur), in the model muscle's colour; with a path on the pelvis
+    alone, only on the pelvis. A
     mesh with no muscle file of its name there is refused."""
     d, rc, _ = tube_fit
     assert rc == 0
@@ -249,7 +250,7 @@ def test_paths_bind_a_muscle_to_the_bones_its_path_crosses(tube_fit, capsys):
 
     assert "femur" in {p.bone for p in load_muscle_file(d / "out" / "muscles" / "tube.yaml")[0].axis}
     (d / "model").mkdir(exist_ok=True)
-    (d / "model" / "tube.yaml").write_text("muscle: tube\npath:\n  - {bone: pelvis, at: [0, 0, -0.02]}\n"
+    (d / "model" / "tube.yaml").write_text("muscle: tube\ncolor: '#4e0304'\npath:\n  - {bone: pelvis, at: [0, 0, -0.02]}\n"
                                            "  - {bone: tibia, at: [0, 0, 0.05]}\nsections:\n"
                                            "  - {t: 0.3, radii: [0.02, 0.02], angle: 0}\n"
                                            "  - {t: 0.7, radii: [0.02, 0.02], angle: 0}\n")
@@ -258,6 +259,7 @@ def test_paths_bind_a_muscle_to_the_bones_its_path_crosses(tube_fit, capsys):
     (spec,) = load_muscle_file(d / "paths" / "muscles" / "tube.yaml")
     bones = [p.bone for p in spec.axis]
     assert "femur" in bones and set(bones) <= {"pelvis", "femur", "tibia"}, bones
+    assert spec.color == load_muscle_file(d / "model" / "tube.yaml")[0].color  # the model's colour kept
     # the model's path is kept as the line of action: the run's length is the path's, not the axis's
     assert spec.path is not None and [p.bone for p in spec.path.points] == ["pelvis", "tibia"]
     (d / "bend.yaml").write_text("pose: bend\nskeleton: leg.yaml\nfps: 10\nframes: [0, 4]\nkeys:\n"

@@ -180,15 +180,15 @@ def bones_between(skel: Skeleton, bones: set[int]) -> set[int]:
     return full
 
 
-def model_bones(folder: Path, name: str, skel: Skeleton, rest: np.ndarray) -> tuple[set[int], np.ndarray, object]:
+def model_bones(folder: Path, name: str, skel: Skeleton, rest: np.ndarray) -> tuple:
     """The bones (indices) of the muscle file ``folder/NAME.yaml`` of a model (its path's
     points and wraps, or its axis) and the bones between them (:func:`bones_between`): the
     only bones a fit of mesh NAME binds to, each control point to the nearest, so that a
     muscle that crosses two joints hangs on the bones it spans (gastrocnemius: the femur at
     its heads, the tibia along its belly, not the femur down to the ankle); its origin (its first
-    path or axis point) in the world at rest, which the fitted axis starts at; and its path
-    (a single muscle's, else None), which the fitted muscle keeps as its line of action.
-    Refused when the file is missing or names a bone the skeleton lacks."""
+    path or axis point) in the world at rest, which the fitted axis starts at; its path (a
+    single muscle's, else None), which the fitted muscle keeps as its line of action; and its
+    colour, which it keeps too (a muscle looks the same in either library). Refused when the file is missing or names a bone the skeleton lacks."""
     path = Path(folder) / f"{name}.yaml"
     if not path.is_file():
         raise InputError(Mark(str(path)), f"no muscle file {name}.yaml in --paths {folder}",
@@ -203,7 +203,7 @@ def model_bones(folder: Path, name: str, skel: Skeleton, rest: np.ndarray) -> tu
     b = skel.bone_index[first.bone]
     line = specs[0].path if len(specs) == 1 else None
     return (bones_between(skel, {skel.bone_index[n] for n in bones}), rest[b, :3, :3] @ np.asarray(first.at, dtype=np.float64) + rest[b, :3, 3],
-            line)
+            line, specs[0].color)
 
 
 # ----------------------------------------------------------------------------- one muscle
@@ -224,11 +224,12 @@ def tendon_fractions(areas: np.ndarray, arc: np.ndarray) -> tuple[float, float]:
 
 
 def fit_one(mesh, name: str, n_sections: int, skel: Skeleton, rest: np.ndarray, geometry: list,
-            origin: np.ndarray | None = None, line=None):
+            origin: np.ndarray | None = None, line=None, color=None):
     """One mesh (metres) → (the muscle's YAML text, its report entry without the measures).
     ``origin``: a world point the axis starts at the end nearer to (a model's origin);
     ``line``: a model's path (:class:`~axdf_cli.model.paths.PathSpec`), written beside the
-    fitted axis as the muscle's line of action (its length, as the model's)."""
+    fitted axis as the muscle's line of action (its length, as the model's); ``color``: the
+    muscle's colour (default: :func:`default_color` of its name)."""
     import trimesh
 
     samples, face = trimesh.sample.sample_surface(mesh, tol.FIT_SAMPLES, seed=tol.FIT_SEED)
@@ -254,7 +255,7 @@ def fit_one(mesh, name: str, n_sections: int, skel: Skeleton, rest: np.ndarray, 
     arc = np.interp(sec_t, model.ts, model.arc)
     tendons = tendon_fractions(areas, arc)
     along = max(tol.FIT_ALONG_MIN, tol.FIT_ALONG_PER_SECTION * n_sections + 8)
-    spec = MuscleSpec(name, default_color(name), axis,
+    spec = MuscleSpec(name, default_color(name) if color is None else color, axis,
                       tuple(Section(float(t), None, 0.0, tuple((float(a), float(b)) for a, b in o))
                             for t, o in zip(sec_t, xy)),
                       tendons=tendons, resolution=(along, tol.FIT_OUTPUT_AROUND), path=line)
@@ -307,13 +308,13 @@ def build_fit(mesh_paths: list[Path], skeleton_path: Path | str, units: str = "m
     files: dict[str, bytes] = {}
     entries = []
     for p, name, mesh in meshes:
-        own, origin, line = geometry, None, None
+        own, origin, line, color = geometry, None, None, None
         if name in allowed:
-            keep, origin, line = allowed[name]
+            keep, origin, line, color = allowed[name]
             own = [g if i in keep else None for i, g in enumerate(geometry)]
             if all(g is None for g in own):  # the path's bones have no meshes: their segments then
                 own = [g if i in keep else None for i, g in enumerate(bone_geometry(skel, rest, skeleton_path, False))]
-        text, entry = fit_one(mesh, name, n, skel, rest, own, origin, line)
+        text, entry = fit_one(mesh, name, n, skel, rest, own, origin, line, color)
         rel = f"muscles/{name}.yaml"
         entry.update({"file": rel, "mesh": p.name})
         entry.update(measure_file(text, rel, mesh, skel, rest))
