@@ -1,16 +1,16 @@
-"""The old library, the atlas library and the atlas' meshes side by side (issue 35's pictures):
+"""The old library, the atlas library and the atlas' meshes side by side:
 
     python tools/atlas_sheet.py SHEET.png [--old muscles/gait2392_packed] [--atlas muscles/gait2392_atlas]
                                 [--frame 62] [--size 240x320]
 
-Three rows: the right thigh from the front, the gluteal region from behind, the right calf
+Three rows: the thighs from the front, the gluteal region from behind, the calves
 from behind. Five columns: the old library and the atlas library at the skeleton's rest pose
 (poses/gait2392_rest.yaml), the atlas' own muscle meshes registered onto gait2392 at rest
 (axdf_cli/tools/atlas_library.py ``registered_meshes``: the meshes the library was fitted to;
 the muscles the atlas lacks are drawn from the atlas library), then both libraries at the
 walk's frame (poses/jobs/gait2392_walk.yaml, with its contact stage). Each panel is an
 ``axdf render`` of an ``axdf run`` with an explicit camera aimed from the bones' positions in
-the run's bones.csv. docs/atlas_thigh_gluteal_calf.png (README, "OpenSim models") is made
+the run's bones.csv. docs/gait2392_atlas.png (README, "The shipped jobs"; docs/FIT.md) is made
 this way. Needs the atlas (../shared/data/atlas/visible_human_female).
 """
 from __future__ import annotations
