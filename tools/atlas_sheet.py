@@ -54,9 +54,7 @@ def do(args: list[str]) -> None:
 def atlas_run(atlas_rest: Path, out: Path, data: Path) -> None:
     """A copy of the atlas library's rest run with each fitted muscle's mesh replaced by the
     atlas mesh it was fitted to (a run folder reads any PLY per muscle and frame)."""
-    import trimesh
-
-    from axdf_cli.tools.atlas_library import registered_meshes, rest_bones
+    from axdf_cli.tools.atlas_library import registered_meshes, rest_bones, write_ply
 
     shutil.copytree(atlas_rest, out)
     skel, rest, bones = rest_bones(ROOT / "poses/skeletons/gait2392.yaml")
@@ -65,10 +63,7 @@ def atlas_run(atlas_rest: Path, out: Path, data: Path) -> None:
     for name, v, f in carried:
         target = out / "meshes" / name / f"{name}_0000.ply"
         if target.is_file():
-            m = trimesh.Trimesh(v, f, process=True)
-            if m.volume < 0:
-                m.invert()
-            m.export(str(target))
+            write_ply(target, v, f)
 
 
 def main(argv=None) -> int:

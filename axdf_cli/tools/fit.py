@@ -169,14 +169,14 @@ def bones_between(skel: Skeleton, bones: set[int]) -> set[int]:
             b = skel.bones[b].parent
         return out
 
-    full = set(bones)
-    for a in bones:
-        ua = up(a)
-        for b in bones:
-            ub = up(b)
-            common = next((x for x in ua if x in ub), None)
-            if common is not None:
-                full |= set(ua[:ua.index(common) + 1]) | set(ub[:ub.index(common) + 1])
+    chains = [up(b) for b in bones]
+    shared = set.intersection(*map(set, chains)) if chains else set()
+    full = set()
+    for chain in chains:  # each bone's way up to the bones' lowest common ancestor
+        for b in chain:
+            full.add(b)
+            if b in shared:
+                break
     return full
 
 
@@ -188,7 +188,8 @@ def model_bones(folder: Path, name: str, skel: Skeleton, rest: np.ndarray) -> tu
     its heads, the tibia along its belly, not the femur down to the ankle); its origin (its first
     path or axis point) in the world at rest, which the fitted axis starts at; its path (a
     single muscle's, else None), which the fitted muscle keeps as its line of action; and its
-    colour, which it keeps too (a muscle looks the same in either library). Refused when the file is missing or names a bone the skeleton lacks."""
+    colour, which it keeps too (a muscle looks the same in either library). Refused when the
+    file is missing or names a bone the skeleton lacks."""
     path = Path(folder) / f"{name}.yaml"
     if not path.is_file():
         raise InputError(Mark(str(path)), f"no muscle file {name}.yaml in --paths {folder}",
