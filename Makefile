@@ -1,6 +1,6 @@
 # axdf: two commands on a fresh machine.
-#   make demo   set up (.venv with axdf and the packages it runs on, Mesa EGL if missing) and run
-#               the demo jobs into out/ (no test tools installed)
+#   make demo   set up (.venv with axdf and the packages it runs on, Mesa EGL if missing), compile
+#               every command's kernels (make warm) and run the demo jobs into out/ (no test tools)
 #   make test   set up, add the test tools (pytest, hypothesis, opensim, mujoco, ray, ...) and run
 #               the whole test suite (CI calls this through .ci/run); also creates .venv-blender
 #               (bpy) for the Blender check
@@ -33,7 +33,7 @@ BVH    := $(DATA)/bvh/cmu_131_01_walk_scaled.bvh
 MYO    := out/myo-sim
 MJCF_MESHES := --max-faces 2000 --mesh-edge 0.004
 
-.PHONY: all setup setup-test sysdeps demo dataset test test-fast bench golden clean import import-mjcf pack pack-check lock blender skin atlas
+.PHONY: all setup setup-test sysdeps warm demo dataset test test-fast bench golden clean import import-mjcf pack pack-check lock blender skin atlas
 
 all: demo
 
@@ -66,10 +66,10 @@ $(STAMP): pyproject.toml $(CONSTRAINTS)
 	@echo "set-up 2/3: a virtual environment in $(VENV)"
 	@$(PY) -m venv $(VENV)
 	@$(BIN)/python -m pip install -q --upgrade pip
-	@echo "set-up 3/3: axdf and its packages into $(VENV) (numpy, scipy, numba, moderngl, OpenEXR, ...; about a minute)"
-	@$(PIP_PINNED) -e . || { echo "warning: the versions in $(CONSTRAINTS) could not be installed;" \
+	@echo "set-up 3/3: axdf and its packages into $(VENV) (numpy, scipy, numba, moderngl, OpenEXR, usd-core, pandas, ...; about a minute)"
+	@$(PIP_PINNED) -e '.[recipes]' || { echo "warning: the versions in $(CONSTRAINTS) could not be installed;" \
 	  "installing the newest that pyproject.toml allows (make pack-check may then differ)" >&2; \
-	  $(BIN)/python -m pip install -q -e .; }
+	  $(BIN)/python -m pip install -q -e '.[recipes]'; }
 	@touch $@
 	@echo "set-up done: $(BIN)/axdf"
 
@@ -96,7 +96,13 @@ DEMO_JOBS := $(DEMO):out/demo poses/jobs/gait2392_walk.yaml:out/gait2392_walk \
   poses/jobs/paper_gastrocnemius_gait2392.yaml:out/paper_gastrocnemius_gait2392 poses/jobs/cmu_walk.yaml:out/cmu_walk \
   poses/jobs/gait2392_cmu_walk.yaml:out/gait2392_cmu_walk
 
-demo: $(STAMP)
+# Every command's numba kernels compiled into the kernel cache, with progress (tools/warm_kernels.py
+# runs run, fit, skin and dataset build once on tiny inputs): after it no first command compiles.
+warm: $(STAMP)
+	@echo "warm: compiling every command's kernels once (run, fit, skin, dataset; minutes on a cold cache, seconds after)"
+	@$(BIN)/python tools/warm_kernels.py
+
+demo: $(STAMP) warm
 	@n=0; for jo in $(DEMO_JOBS); do n=$$((n + 1)); job=$${jo%%:*}; out=$${jo#*:}; \
 	  echo "demo $$n/6: axdf run $$job --out $$out (meshes, then rendered frames)"; \
 	  $(BIN)/axdf run $$job --out $$out --overwrite || exit $$?; done

@@ -184,16 +184,22 @@ def compile_line(missing: int, total: int, cache_dir: str | None) -> str:
 
 def compile_notice(command: str) -> str | None:
     """The line to print before command ``command`` compiles numba's kernels into a cold
-    cache; None when its kernels are cached. A kernel called only from within other kernels
-    may never get a cache entry of its own, and one a command does not reach (contact's, with
-    contact off) is not compiled by it, so a command that has once finished against this cache
-    (:func:`mark_warm`) is not told again."""
+    cache; None when its kernels are cached (:func:`cold_kernels`)."""
+    missing, total = cold_kernels(command)
+    return compile_line(missing, total, os.environ.get("NUMBA_CACHE_DIR")) if missing else None
+
+
+def cold_kernels(command: str) -> tuple[int, int]:
+    """(how many of command ``command``'s kernels have no entry in the cache yet, how many it
+    has). A kernel called only from within other kernels may never get a cache entry of its
+    own, and one a command does not reach (contact's, with contact off) is not compiled by it,
+    so a command that has once finished against this cache (:func:`mark_warm`) counts none."""
     from pathlib import Path
 
     configure()
     cache = os.environ.get("NUMBA_CACHE_DIR")
     if cache and (Path(cache) / _warm_name(command)).exists():
-        return None
+        return 0, 0
     if command == "pack":
         modules = None
     elif command in COMMAND_MODULES:
@@ -201,7 +207,7 @@ def compile_notice(command: str) -> str | None:
     else:
         modules = lambda m: m not in PACK_ONLY  # noqa: E731
     missing, total = missing_kernels(cache, modules)
-    return compile_line(len(missing), total, cache) if missing else None
+    return len(missing), total
 
 
 def _warm_name(command: str) -> str:
@@ -223,3 +229,43 @@ def mark_warm(command: str) -> None:
             (Path(cache) / _warm_name(command)).touch()
         except OSError:  # a read-only cache: the notice comes again, nothing worse
             pass
+
+
+#: Seconds between two progress lines while numba compiles into a cold cache.
+PROGRESS_EVERY_S = 15.0
+
+
+def compile_progress(total: int | None = None, stream=None):
+    """A context in which numba's compiles into a cold cache are reported on ``stream`` (stderr)
+    as they finish, at most every :data:`PROGRESS_EVERY_S` seconds, so that a first run that
+    compiles for minutes is not silent; ``total``: the kernels expected, when known. numba
+    sends its compile event on a cache miss only, so a cached kernel reports nothing; a kernel
+    compiled from within another's compile is counted, and reported with the outer one."""
+    import time
+
+    from numba.core import event
+
+    out = stream or sys.stderr
+
+    class Progress(event.Listener):
+        def __init__(self):
+            self.depth, self.done = 0, 0  # compiles open now, compiles finished
+            self.t0 = self.last = time.perf_counter()
+
+        def on_start(self, ev):
+            self.depth += 1
+
+        def on_end(self, ev):
+            self.depth -= 1
+            self.done += 1
+            if self.depth:  # (a kernel another one calls: reported with it)
+                return
+            now = time.perf_counter()
+            if now - self.last >= PROGRESS_EVERY_S:
+                self.last = now
+                of = f" of about {total}" if total else ""
+                name = getattr(getattr(ev.data.get("dispatcher"), "py_func", None), "__qualname__", "a kernel")
+                print(f"axdf: compiled {self.done}{of} kernels ({now - self.t0:.0f} s; last: {name})", file=out,
+                      flush=True)
+
+    return event.install_listener("numba:compile", Progress())

@@ -208,6 +208,58 @@ def test_the_notice_comes_for_fit_and_for_skin_only_with_muscles(tmp_path, capsy
     assert capsys.readouterr().err.startswith("axdf: compiling ")
 
 
+def test_a_cold_compile_reports_its_progress_as_kernels_finish(monkeypatch):
+    """A first run that compiles for minutes is not silent: numba's compile events (sent on a
+    cache miss only) are counted, a kernel another calls with it, and reported."""
+    import io
+
+    from numba import njit
+
+    from axdf_cli import runtime
+
+    @njit
+    def inner(x):
+        return x + 1.0
+
+    @njit
+    def outer(x):
+        return inner(x) * 2.0
+
+    monkeypatch.setattr(runtime, "PROGRESS_EVERY_S", 0.0)
+    out = io.StringIO()
+    with runtime.compile_progress(7, out):
+        assert outer(1.0) == 4.0
+        assert outer(2.0) == 6.0  # compiled already: no event
+    lines = out.getvalue().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("axdf: compiled 2 of about 7 kernels ("), lines
+    assert lines[0].endswith("last: test_a_cold_compile_reports_its_progress_as_kernels_finish.<locals>.outer)")
+
+
+def test_make_demo_compiles_every_command_that_compiles_first(tmp_path):
+    """make demo warms the kernel cache before its jobs, by running every command that compiles
+    kernels (but pack and import, which make demo never runs) on tiny inputs."""
+    import importlib.util
+    import subprocess
+
+    from axdf_cli.cli.main import KERNEL_COMMANDS
+
+    spec = importlib.util.spec_from_file_location("warm_kernels", REPO_ROOT / "tools" / "warm_kernels.py")
+    warm = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(warm)
+    commands = {argv[0] for _, argv in warm.steps(tmp_path)}
+    assert commands == set(KERNEL_COMMANDS) - {"pack", "import"}, commands
+    again = tmp_path / "again"
+    again.mkdir()
+    for _, argv in warm.steps(again):
+        for a in argv:  # every input named exists (the outputs go under tmp_path)
+            if a.startswith(str(REPO_ROOT)):
+                assert (REPO_ROOT / a[len(str(REPO_ROOT)) + 1:]).exists(), a
+    if shutil.which("make") is None:
+        pytest.skip("no make here")
+    plan = subprocess.run(["make", "-n", "demo"], cwd=REPO_ROOT, capture_output=True, text=True, check=True).stdout
+    assert plan.index("tools/warm_kernels.py") < plan.index("axdf run"), plan
+
+
 # ----------------------------------------------------------------------------- make demo installs no test tools
 def test_make_demo_installs_no_test_tools_and_make_test_adds_them(tmp_path):
     import subprocess

@@ -111,9 +111,10 @@ def _notice(args) -> str | None:
         return None
     from axdf_cli import runtime
 
-    line = runtime.compile_notice(args.command)
-    if line and not args.quiet:
-        print(line, file=sys.stderr, flush=True)
+    missing, total = runtime.cold_kernels(args.command)
+    if missing and not args.quiet:
+        print(runtime.compile_line(missing, total, os.environ.get("NUMBA_CACHE_DIR")), file=sys.stderr, flush=True)
+        args.compiling = missing
     return args.command
 
 
@@ -133,7 +134,11 @@ def _main(argv, atomic) -> int:
         except SystemExit as e:
             return int(e.code or 0) if not isinstance(e.code, str) else 2
         warm = _notice(args)
-        rc = int(args._module.run(args) or 0)
+        if getattr(args, "compiling", 0):  # a cold cache: progress while numba compiles
+            with runtime.compile_progress(args.compiling):
+                rc = int(args._module.run(args) or 0)
+        else:
+            rc = int(args._module.run(args) or 0)
         if rc == 0 and warm and not atomic.interrupted():
             runtime.mark_warm(warm)
         return rc
