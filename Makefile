@@ -105,14 +105,14 @@ warm: $(STAMP)
 demo: $(STAMP) warm
 	@n=0; for jo in $(DEMO_JOBS); do n=$$((n + 1)); job=$${jo%%:*}; out=$${jo#*:}; \
 	  echo "demo $$n/6: axdf run $$job --out $$out (meshes, then rendered frames)"; \
-	  $(BIN)/axdf run $$job --out $$out --overwrite || exit $$?; done
+	  AXDF_LOG_PROGRESS=20 $(BIN)/axdf run $$job --out $$out --overwrite || exit $$?; done
 	@echo "demo results in out/: demo, gait2392_walk, paper_deltoid_arm26, paper_gastrocnemius_gait2392, cmu_walk, gait2392_cmu_walk"
 	@echo "  each with meshes/, frames/ (PNG + EXR), camera.json, stats.csv, bones.csv, manifest.json"
 
 # A small data set: gait2392's 92 muscles (see poses/datasets/gait2392_small.yaml).
 dataset: $(STAMP)
 	@echo "dataset: axdf dataset build poses/datasets/gait2392_small.yaml --out out/gait2392_small --jobs 2"
-	$(BIN)/axdf dataset build poses/datasets/gait2392_small.yaml --out out/gait2392_small --overwrite --jobs 2
+	AXDF_LOG_PROGRESS=20 $(BIN)/axdf dataset build poses/datasets/gait2392_small.yaml --out out/gait2392_small --overwrite --jobs 2
 	@echo "data set in out/gait2392_small: index.parquet, dataset.json, seq_*/ (views/, labels.npz, amodal.json, meshes/)"
 
 test: $(TEST_STAMP) $(BLENDER_STAMP)

@@ -235,6 +235,23 @@ def test_a_cold_compile_reports_its_progress_as_kernels_finish(monkeypatch):
     assert lines[0].endswith("last: test_a_cold_compile_reports_its_progress_as_kernels_finish.<locals>.outer)")
 
 
+def test_a_log_gets_progress_lines_only_when_it_asks(monkeypatch, capsys):
+    """stderr not a terminal (a log): no bar, and no progress unless AXDF_LOG_PROGRESS asks for
+    a line at most every so many seconds (make demo's jobs are never silent for long)."""
+    from axdf_cli.cli import progress
+
+    monkeypatch.delenv(progress.LOG_PROGRESS_VAR, raising=False)
+    assert progress.bar(False, "mesh", total=4) is None
+    monkeypatch.setenv(progress.LOG_PROGRESS_VAR, "20")
+    assert progress.bar(True, "mesh", total=4) is None  # -q: nothing
+    b = progress.bar(False, "mesh", total=4, desc="meshes")
+    b.update(1)
+    assert capsys.readouterr().err == ""  # not yet 20 s
+    b.last -= 20.0
+    b.update(2)
+    assert capsys.readouterr().err.startswith("axdf: meshes: 3 of 4 meshes (")
+
+
 def test_make_demo_compiles_every_command_that_compiles_first(tmp_path):
     """make demo warms the kernel cache before its jobs, by running every command that compiles
     kernels (but pack and import, which make demo never runs) on tiny inputs."""

@@ -58,9 +58,62 @@ class Bar:
             self.bar.close()
 
 
-def bar(quiet: bool, unit: str, **options) -> Bar | None:
-    """A :class:`Bar` when one is :func:`wanted`, else None."""
-    return Bar(unit, **options) if wanted(quiet) else None
+#: In a log (stderr not a terminal), ``AXDF_LOG_PROGRESS=SECONDS`` asks for a progress line at
+#: most every SECONDS instead of no bar (``make demo`` sets 20, so that a job is never silent for
+#: long in its log); unset, a log gets none, and a command's stderr is only its messages.
+LOG_PROGRESS_VAR = "AXDF_LOG_PROGRESS"
+
+
+class LogLines:
+    """A bar's counts as a line on stderr at most every ``every`` seconds (a log's progress)."""
+
+    def __init__(self, unit: str, every: float, *, total: int | None = None, desc: str | None = None, **_):
+        import time
+
+        self.units = unit + ("es" if unit.endswith(("s", "sh", "x")) else "s")
+        self.every, self.total, self.desc, self.n = every, total, desc or self.units, 0
+        self.t0 = self.last = time.perf_counter()
+
+    def _say(self) -> None:
+        import time
+
+        now = time.perf_counter()
+        if now - self.last >= self.every:
+            self.last = now
+            of = f" of {self.total}" if self.total else ""
+            print(f"axdf: {self.desc}: {self.n}{of} {self.units} ({now - self.t0:.0f} s)", file=sys.stderr, flush=True)
+
+    def update(self, n: int = 1) -> None:
+        self.n += n
+        self._say()
+
+    __call__ = update
+
+    def tick(self, step: str) -> None:
+        self.update(1)
+
+    def show(self, done: int, total: int) -> None:
+        self.n, self.total = done, total
+        self._say()
+
+    def close(self) -> None:
+        pass
+
+
+def bar(quiet: bool, unit: str, **options) -> Bar | LogLines | None:
+    """A :class:`Bar` when one is :func:`wanted`; in a log that asks for it
+    (:data:`LOG_PROGRESS_VAR`, not ``quiet``), :class:`LogLines`; else None."""
+    import os
+
+    if wanted(quiet):
+        return Bar(unit, **options)
+    every = os.environ.get(LOG_PROGRESS_VAR, "")
+    if quiet or not every:
+        return None
+    try:
+        return LogLines(unit, max(1.0, float(every)), **options)
+    except ValueError:
+        return None
 
 
 class Phases:
