@@ -235,10 +235,10 @@ def mark_warm(command: str) -> None:
 PROGRESS_EVERY_S = 15.0
 
 
-def compile_progress(total: int | None = None, stream=None):
+def compile_progress(stream=None):
     """A context in which numba's compiles into a cold cache are reported on ``stream`` (stderr)
     as they finish, at most every :data:`PROGRESS_EVERY_S` seconds, so that a first run that
-    compiles for minutes is not silent; ``total``: the kernels expected, when known. numba
+    compiles for minutes is not silent. numba
     sends its compile event on a cache miss only, so a cached kernel reports nothing; a kernel
     compiled from within another's compile is counted, and reported with the outer one."""
     import time
@@ -263,9 +263,8 @@ def compile_progress(total: int | None = None, stream=None):
             now = time.perf_counter()
             if now - self.last >= PROGRESS_EVERY_S:
                 self.last = now
-                of = f" of about {total}" if total else ""
                 name = getattr(getattr(ev.data.get("dispatcher"), "py_func", None), "__qualname__", "a kernel")
-                print(f"axdf: compiled {self.done}{of} kernels ({now - self.t0:.0f} s; last: {name})", file=out,
+                print(f"axdf: {self.done} kernels compiled ({now - self.t0:.0f} s; last: {name})", file=out,
                       flush=True)
 
     return event.install_listener("numba:compile", Progress())

@@ -32,6 +32,7 @@ from axdf_cli.pipeline.skin_stage import SKIN_CSV, SKIN_COLUMNS, SKIN_NAME, skin
 from axdf_cli.pipeline.stages import Scope, of_scope
 from axdf_cli.render.framing import framing_record, plan_framing
 from axdf_cli.pipeline.tables import NSTATS, STATS_COLUMNS, bones_csv, stats_csv
+from axdf_cli.pipeline.volume import volume_breaches
 from axdf_cli.workers import check_parent, process_map
 from axdf_cli.model.skeleton import matrix_to_quaternion
 
@@ -409,6 +410,10 @@ def _write_run(plan: RunPlan, session, prep: Prepass, progress, render_progress,
         bulk = bulk_overlap_text(share, f"{nf} frame(s)")
         warnings += [bulk] if bulk else []
         run_warnings = [with_pack_command(plan, bulk)] if bulk else []
+        breaches = volume_breaches(plan.names, [m.volume_mode.value for m in plan.models], plan.frames,
+                                   stats[..., STATS_COLUMNS.index("volume_ratio")])
+        warnings += breaches
+        run_warnings += breaches
         for fi, j, msg in sorted(all_warns, key=lambda w: (w[0], w[1])):
             warn_text[fi][j] = (warn_text[fi][j] + "; " if warn_text[fi][j] else "") + msg
             warnings.append(f"{plan.names[j]} frame {int(plan.frames[fi])}: {msg}")
