@@ -60,7 +60,8 @@ for the smoke test (``tests/test_bench_smoke.py``), which runs them on a tiny ca
 ``--markdown PATH`` also writes the sections measured into a generated Markdown page (``make
 bench`` writes docs/BENCH.md, which the docs link to instead of pasting figures): each section
 between its markers, with the command, the commit and the machine it was measured on and its
-own time; the page's other sections stay as they were (:mod:`benchmarks.page`).
+own time; the page's other sections stay as they were (:mod:`benchmarks.page`). A section
+that fails stops the run, and the sections measured before it are still written.
 """
 from __future__ import annotations
 
@@ -121,7 +122,8 @@ def main(argv=None) -> int:
                                  epilog="sections (--only), in the page's order:\n"
                                         + "\n".join(f"  {n:12s} {HELP.get(n, SECTIONS[n])}" for n in SECTIONS))
     ap.add_argument("--quick", action="store_true", help="fewer frames and repeats (about a minute)")
-    ap.add_argument("--long", action="store_true", help="also the section long: 10000 frames x all muscles, peak memory")
+    ap.add_argument("--long", action="store_true",
+                    help="also the section long: 10000 frames x all muscles, peak memory")
     ap.add_argument("--profile", action="store_true", help="print the top functions of the slow rows")
     ap.add_argument("--tmp", default=None, help="folder for the written files (default: a new temporary folder)")
     ap.add_argument("--only", type=names, default=None, metavar="NAME[,NAME...]",
@@ -142,11 +144,14 @@ def main(argv=None) -> int:
     t_start = time.perf_counter()
     measured: list[tuple[str, Table, float]] = []
     profiles: list[str] = []
+    failed: BaseException | None = None
     try:
         for name in picked:
             table, t0 = Table(), time.perf_counter()
             profiles += section(name).rows(table, run) or []
             measured.append((name, table, time.perf_counter() - t0))
+    except BaseException as e:  # the sections measured before it are still printed and written
+        failed = e
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     seconds = time.perf_counter() - t_start
@@ -164,7 +169,10 @@ def main(argv=None) -> int:
         machine = machine_line()
         page.write(Path(args.markdown), {name: page.block(name, table.markdown(), command, machine, secs, seconds)
                                          for name, table, secs in measured})
-        print(f"(sections {', '.join(n for n, _, _ in measured)} written to {args.markdown})", file=sys.stderr)
+        print(f"(sections {', '.join(n for n, _, _ in measured) or '(none)'} written to {args.markdown})",
+              file=sys.stderr)
+    if failed is not None:
+        raise failed
     return 0
 
 

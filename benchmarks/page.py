@@ -6,7 +6,8 @@ others byte for byte.
     <!-- section: contact -->
     ## contact and axdf pack (`--only contact`)
 
-    Measured by `python -m benchmarks.bench --only contact` on: commit ...; ... Section time 812 s (the whole run: 812 s).
+    Measured by `python -m benchmarks.bench --only contact` on: commit ...; ... Section time 812 s (the whole
+    run: 812 s).
 
     ### contact (gait2392 walk, ...)
     | measure | figure | ... |

@@ -49,7 +49,8 @@ def test_sections_keep_their_order_and_a_new_one_goes_in_its_place(three):
     for n in ("evaluation", "contact", "skin"):
         assert between(new, n) == between(three, n)
     # the blocks measured in any order land in the page's
-    assert page.merge(three, {"writers": a_block("writers", "1 µs/mf"), "jiggle": a_block("jiggle", "5 µs/mf")}) == new
+    swapped = {"writers": a_block("writers", "1 µs/mf"), "jiggle": a_block("jiggle", "5 µs/mf")}
+    assert page.merge(three, swapped) == new
 
 
 def test_the_header_says_what_is_not_measured_yet(three):
@@ -137,3 +138,24 @@ def test_main_rewrites_only_its_section(tmp_path, monkeypatch, capsys):
     assert new.index(page.BEGIN.format("contact")) < new.index(page.BEGIN.format("retarget")) \
         < new.index(page.BEGIN.format("skin"))
     assert "fit      10 fps" in capsys.readouterr().out  # the table printed too
+
+
+def test_a_failing_section_keeps_those_measured_before_it(tmp_path, monkeypatch):
+    """--only retarget,jiggle where jiggle fails: retarget's block is written, the error raised."""
+    from benchmarks.sections import jiggle
+
+    def rows(table, run):
+        table.section("retargeting")
+        table.add("fit", "10 fps")
+        return []
+
+    def broken(table, run):
+        raise RuntimeError("jiggle broke")
+
+    monkeypatch.setattr(retarget, "rows", rows)
+    monkeypatch.setattr(jiggle, "rows", broken)
+    path = tmp_path / "BENCH.md"
+    with pytest.raises(RuntimeError, match="jiggle broke"):
+        bench.main(["--only", "jiggle,retarget", "--markdown", str(path)])
+    blocks = page.blocks_of(path.read_text(encoding="utf-8"))
+    assert list(blocks) == ["retarget"] and "`python -m benchmarks.bench --only jiggle,retarget`" in blocks["retarget"]

@@ -14,7 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.common import (ARM_JOB, ARM_MUSCLES, ATLAS_MUSCLES, CMU_GAIT_JOB, GAIT_JOB, GAIT_MUSCLES, ROOT, Table, mark)
+from benchmarks.common import (ARM_JOB, ARM_MUSCLES, ATLAS_MUSCLES, CMU_GAIT_JOB, GAIT_JOB, GAIT_MUSCLES, ROOT, Table,
+                               mark)
 from benchmarks.settings import Run
 
 UNIT = True
