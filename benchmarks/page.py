@@ -4,7 +4,7 @@ time; ``make bench BENCH_ARGS="--only NAME"`` regenerates only NAME's block and 
 others byte for byte.
 
     <!-- section: contact -->
-    ## contact and axdf pack (`--only contact`)
+    ## contact and axdf pack: `--only contact`
 
     Measured by `python -m benchmarks.bench --only contact` on: commit ...; ... Section time 812 s (the whole
     run: 812 s).
@@ -50,7 +50,7 @@ def block(name: str, markdown: str, command: str, machine: str, seconds: float |
     heading = (headings or SECTIONS)[name]
     took = (f"Section time {seconds:.0f} s (the whole run: {total:.0f} s)." if seconds is not None else
             f"Section time {total:.0f} s (the whole run's: it measured this section alone).")
-    return f"## {heading} (`--only {name}`)\n\nMeasured by `{command}` on: {machine}. {took}\n\n{markdown.strip()}\n\n"
+    return f"## {heading}: `--only {name}`\n\nMeasured by `{command}` on: {machine}. {took}\n\n{markdown.strip()}\n\n"
 
 
 def blocks_of(text: str, headings: dict | None = None) -> dict[str, str]:

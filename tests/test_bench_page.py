@@ -91,7 +91,7 @@ def test_a_page_from_before_the_markers_holds_what_it_says():
     blocks = page.blocks_of(LEGACY)
     assert list(blocks) == ["skin"]
     skin = blocks["skin"]
-    assert skin.startswith(f"## {SECTIONS['skin']} (`--only skin`)\n\nMeasured by "
+    assert skin.startswith(f"## {SECTIONS['skin']}: `--only skin`\n\nMeasured by "
                            "`python -m benchmarks.bench --only skin --quick` on: commit c057da871ae7; Intel(R) Xeon(R)")
     assert "numpy 2.4.6. Section time 142 s (the whole run's: it measured this section alone)." in skin
     assert skin.endswith("| skin stage per frame | 53.0 ms | muscles + contact 132.0 ms | 0.40x | <= 1x ✓ |\n\n")
