@@ -166,7 +166,7 @@ def main(argv=None) -> int:
         print()
         print(t)
     if args.markdown:
-        machine = machine_line()
+        machine = machine_line(Path(args.markdown))
         page.write(Path(args.markdown), {name: page.block(name, table.markdown(), command, machine, secs, seconds)
                                          for name, table, secs in measured})
         print(f"(sections {', '.join(n for n, _, _ in measured) or '(none)'} written to {args.markdown})",

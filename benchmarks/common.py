@@ -121,8 +121,10 @@ class Table:
         return "\n".join(out).strip() + "\n"
 
 
-def machine_line() -> str:
-    """The machine and commit a table was measured on, for the generated file's header."""
+def machine_line(page: Path | None = None) -> str:
+    """The machine and commit a table was measured on, for the generated file's header; changes
+    to ``page`` itself (the page being written, from an earlier --only run) do not count as
+    uncommitted."""
     import platform
 
     cpu_name = platform.processor() or platform.machine()
@@ -136,7 +138,9 @@ def machine_line() -> str:
     try:
         commit = subprocess.run(["git", "rev-parse", "--short=12", "HEAD"], cwd=ROOT, capture_output=True,
                                 text=True, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=ROOT,
+        inside = page is not None and Path(page).resolve().is_relative_to(ROOT)
+        spec = ["--", ".", f":(exclude){Path(page).resolve().relative_to(ROOT)}"] if inside else []
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", *spec], cwd=ROOT,
                                capture_output=True, text=True, check=True).stdout.strip()
         commit += " (with uncommitted changes)" if dirty else ""
     except (OSError, subprocess.CalledProcessError):

@@ -159,3 +159,23 @@ def test_a_failing_section_keeps_those_measured_before_it(tmp_path, monkeypatch)
         bench.main(["--only", "jiggle,retarget", "--markdown", str(path)])
     blocks = page.blocks_of(path.read_text(encoding="utf-8"))
     assert list(blocks) == ["retarget"] and "`python -m benchmarks.bench --only jiggle,retarget`" in blocks["retarget"]
+
+
+def test_the_page_itself_is_no_uncommitted_change(tmp_path, monkeypatch):
+    """machine_line(page): git status leaves out the page being written (an earlier --only run
+    changed it), and only that; a page outside the checkout changes nothing."""
+    import subprocess
+
+    from benchmarks import common
+
+    calls = []
+
+    def fake(cmd, **kw):
+        calls.append(cmd)
+        return subprocess.CompletedProcess(cmd, 0, stdout="abc123\n" if "rev-parse" in cmd else "", stderr="")
+
+    monkeypatch.setattr(common.subprocess, "run", fake)
+    assert common.machine_line(common.ROOT / "docs" / "BENCH.md").startswith("commit abc123; ")
+    assert calls[-1][-3:] == ["--", ".", ":(exclude)docs/BENCH.md"]
+    common.machine_line(tmp_path / "b.md")
+    assert calls[-1][-1] == "--untracked-files=no"
