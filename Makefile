@@ -7,7 +7,7 @@
 #   make test-fast  the unit tier only (TIER="integration" etc. picks another: unit, integration,
 #               judges, hostile; see tests/conftest.py TIERS)
 #   make dataset  set up and build a small gait2392 data set into out/gait2392_small
-#   make bench  set up, print the benchmark table and write it to docs/BENCH.md (BENCH_ARGS="--quick", "--long")
+#   make bench  set up, print the benchmark tables and write them to docs/BENCH.md (BENCH_ARGS="--quick", "--long", "--only NAME[,NAME]": those sections only, the page keeps the others)
 PY     ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin

@@ -6,7 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from benchmarks import bench
+from benchmarks import bench, common, page
+from benchmarks import case as casemod
+from benchmarks.sections import compiled, contact, evaluation, jiggle, packed, retarget, skin, writers
 
 
 def microseconds(x: float) -> bool:
@@ -16,12 +18,12 @@ def microseconds(x: float) -> bool:
 
 @pytest.fixture(scope="module")
 def case():
-    return bench.load_case(n_frames=5, n_muscles=1)
+    return casemod.load_case(n_frames=5, n_muscles=1)
 
 
 @pytest.fixture(scope="module")
 def synthetic():
-    return bench.load_case(n_frames=5, n_muscles=7, prefer_gait=False)
+    return casemod.load_case(n_frames=5, n_muscles=7, prefer_gait=False)
 
 
 def test_case_shapes(case, synthetic):
@@ -33,17 +35,17 @@ def test_case_shapes(case, synthetic):
 
 def test_evaluation_limit_and_peer(case):
     models = case.models(1, (8, 6))
-    assert microseconds(bench.time_evaluation(models, case.world, case.tension, repeats=1, chunk=2))
-    assert microseconds(bench.time_limit(5, models[0].n_vertices, repeats=1))
+    assert microseconds(evaluation.time_evaluation(models, case.world, case.tension, repeats=1, chunk=2))
+    assert microseconds(evaluation.time_limit(5, models[0].n_vertices, repeats=1))
     pytest.importorskip("geomdl")
-    us, err = bench.time_geomdl(models[0], case.rest, n_frames=1)
+    us, err = evaluation.time_geomdl(models[0], case.rest, n_frames=1)
     assert microseconds(us)
     assert err < 1e-6  # geomdl tessellates the same surface (rest vertices are float32)
 
 
 def test_writers(case, tmp_path):
     model = case.models(1, (8, 6))[0]
-    out = bench.time_writers(model, case.world, case.tension, tmp_path, n_files=5, repeats=1)
+    out = writers.time_writers(model, case.world, case.tension, tmp_path, n_files=5, repeats=1)
     # binary PLY: at least 3 float32 per vertex, a count byte and 3 int32 per face
     assert out["ply"]["bytes"] > model.n_vertices * 12 + len(model.faces) * 13
     assert out["obj"]["bytes"] > out["ply"]["bytes"]  # the same mesh as text
@@ -54,29 +56,29 @@ def test_writers(case, tmp_path):
 def test_long_pose_stretch_and_table():
     from axdf_cli.specs import load_pose
 
-    pose = load_pose(bench.DEMO_POSE)
-    long = bench.stretched_pose(pose, 1000)
+    pose = load_pose(common.DEMO_POSE)
+    long = casemod.stretched_pose(pose, 1000)
     assert (long.first, long.last) == (0, 999)
     key = next(iter(pose.keys))
     assert long.keys[key][1] == pose.keys[key][1]
-    t = bench.Table()
+    t = common.Table()
     t.section("s")
     t.add("a", "1 µs", "x", "2x", "✓")
     assert "a" in t.text() and "[s]" in t.text()
-    skipped = bench.Table()
+    skipped = common.Table()
     skipped.section("retargeting: skipped")  # a section whose rows were skipped: printed, not a crash
     assert skipped.text().splitlines()[-1] == "[retargeting: skipped]"
     assert skipped.markdown() == "### retargeting: skipped\n"  # a heading, no empty table
-    assert np.isfinite(bench.median_time(lambda: None, 3))
+    assert np.isfinite(common.median_time(lambda: None, 3))
 
 
 def test_wrapping_rows():
-    wc, nc = bench.load_wrap_case(8, True), bench.load_wrap_case(8, False)
+    wc, nc = casemod.load_wrap_case(8, True), casemod.load_wrap_case(8, False)
     if wc is None:
         pytest.skip("arm26 library not shipped")
     assert any(s.path.wraps for s in wc.specs) and not any(s.path.wraps for s in nc.specs)
     for c in (wc, nc):
-        assert microseconds(bench.time_evaluation(c.models(2, (8, 6)), c.world, c.tension, repeats=1, chunk=4,
+        assert microseconds(evaluation.time_evaluation(c.models(2, (8, 6)), c.world, c.tension, repeats=1, chunk=4,
                                                   coords=c.coords))
 
 
@@ -85,8 +87,8 @@ def test_packed_writers(case, tmp_path):
     written (and removed) and every figure positive."""
     pytest.importorskip("pxr")
     models = case.models(1, (8, 6))
-    out = bench.time_sequence_writers(models, case.world, case.tension, tmp_path / "w", n_muscles=3, repeats=1)
-    assert set(out) == set(bench.PACKED_FORMATS)
+    out = packed.time_sequence_writers(models, case.world, case.tension, tmp_path / "w", n_muscles=3, repeats=1)
+    assert set(out) == set(packed.PACKED_FORMATS)
     for fmt, d in out.items():
         assert d["bytes"] > 0 and d["tofile_bytes"] > 0
         assert all(d[k] > 0 for k in ("write", "sha256", "tofile")), fmt
@@ -99,17 +101,17 @@ def test_jiggle_rows_helpers(repo_root):
     from axdf_cli.pipeline.plan import plan_run
     from axdf_cli.specs import load_job
 
-    plan = plan_run(load_job(bench.DEMO_JOB), frames_arg="0:5")
+    plan = plan_run(load_job(common.DEMO_JOB), frames_arg="0:5")
     plan = dataclasses.replace(plan, models=plan.models[-2:], muscles=plan.muscles[-2:])  # the gastrocnemius heads (jiggle)
-    assert bench.time_chunks(plan, repeats=1) > 0
-    seconds, n = bench.time_jiggle_stage(plan, repeats=1)
+    assert jiggle.time_chunks(plan, repeats=1) > 0
+    seconds, n = jiggle.time_jiggle_stage(plan, repeats=1)
     assert seconds > 0 and n == 2
 
 
 def test_retarget_jacobian_timing():
     from axdf_cli.tools.retarget import load_map
 
-    a, b, diff = bench.jacobian_times(load_map(bench.CMU_MAP), repeats=1)
+    a, b, diff = retarget.jacobian_times(load_map(retarget.CMU_MAP), repeats=1)
     assert a > 0 and b > 0
     assert diff < 1e-6  # the analytic Jacobian is the finite differences' limit
 
@@ -117,11 +119,11 @@ def test_retarget_jacobian_timing():
 def test_compiled_pass_rows(tmp_path):
     """The compiled pass's helpers: a whole run in a subprocess (the demo job, 3 frames, 8x6),
     tofile of its bytes, step 1b into fresh memory and in steady state."""
-    r = bench.whole_run(bench.DEMO_JOB, 3, "npz", tmp_path / "run", resolution="8x6")
+    r = compiled.whole_run(common.DEMO_JOB, 3, "npz", tmp_path / "run", resolution="8x6")
     assert r["muscle_frames"] == 3 * 7 and r["bytes"] > 0 and r["seconds"] > 0 and r["startup"] > 0
     assert not (tmp_path / "run").exists()
-    assert bench.tofile_seconds(r["bytes"], tmp_path) > 0
-    cold, warm, nf = bench.first_touch(bench.DEMO_JOB, repeats=1)
+    assert compiled.tofile_seconds(r["bytes"], tmp_path) > 0
+    cold, warm, nf = compiled.first_touch(common.DEMO_JOB, repeats=1)
     assert cold > 0 and warm > 0 and nf >= 1
 
 
@@ -133,15 +135,15 @@ def test_contact_pass(repo_root):
     from axdf_cli.specs import load_job
 
     job = load_job(repo_root / "poses" / "jobs" / "demo.yaml")
-    t0, m0, s0, v0 = bench.contact_pass(plan_run(job, frames_arg="68:71", stages={"contact": False, "penetration": False}))
-    t1, m1, s1, v1 = bench.contact_pass(plan_run(job, frames_arg="68:71", stages={"contact": True}))
+    t0, m0, s0, v0 = contact.contact_pass(plan_run(job, frames_arg="68:71", stages={"contact": False, "penetration": False}))
+    t1, m1, s1, v1 = contact.contact_pass(plan_run(job, frames_arg="68:71", stages={"contact": True}))
     assert t0 > 0 and t1 > 0
     nf, nm = v1.shape
     assert nf >= 3 and m1.shape == (nf, nm, 3) and s1.shape == (nf, nm)
     assert not m0.any() and (m1[..., 1] > 0).any()  # no stage measured, then contact's measures
     assert (s0[0] == 0).all() and (s0[1:] > 0).all()
     np.testing.assert_allclose(v1, v0, rtol=1e-9)
-    assert (s1[1:] <= bench.POP_RATIO * s0[1:]).all()
+    assert (s1[1:] <= contact.POP_RATIO * s0[1:]).all()
 
 
 def test_bones_by_libigl_counts_what_winding_numbers_count(repo_root):
@@ -157,7 +159,7 @@ def test_bones_by_libigl_counts_what_winding_numbers_count(repo_root):
 
     plan = plan_run(load_job(repo_root / "poses" / "jobs" / "demo.yaml"), frames_arg="60:76:5",
                     stages={"contact": False, "penetration": True})
-    exact, field, deep, nf = bench.bones_by_libigl(plan)
+    exact, field, deep, nf = contact.bones_by_libigl(plan)
     assert nf == len(plan.frames) == 4
     inside = n = 0.0
     measured = 0.0
@@ -179,18 +181,22 @@ def test_bones_by_libigl_counts_what_winding_numbers_count(repo_root):
 
 
 def test_markdown_file_is_written(tmp_path):
-    """``--markdown PATH`` (make bench: docs/BENCH.md) writes the table as a generated page: a
-    header naming `make bench`, the commit and the machine, then one Markdown table per section."""
-    t = bench.Table()
+    """``--markdown PATH`` (make bench: docs/BENCH.md) writes the sections as a generated page: a
+    header naming `make bench`, then each section between its markers, saying the command, the
+    commit, the machine and its time, with one Markdown table per sub-section."""
+    t = common.Table()
     t.section("evaluation")
     t.add("evaluate 48x24", "1.0 µs/mf", "fill 0.5 µs/mf", "2.0x", "<= 3x ✓")
     t.add("a | b", "2")
     path = tmp_path / "BENCH.md"
-    bench.write_markdown(path, t, ["--quick"], 12.0)
+    page.write(path, {"evaluation": page.block("evaluation", t.markdown(), "python -m benchmarks.bench --quick",
+                                               common.machine_line(), 10.0, 12.0)})
     text = path.read_text(encoding="utf-8")
     assert text.startswith("# Benchmark tables\n")
-    assert "Generated by `make bench` (`python -m benchmarks.bench --quick`)" in text
-    assert "commit " in text and "logical CPUs" in text and "Total bench time 12 s" in text
+    assert "Generated by `make bench`" in text
+    assert "<!-- section: evaluation -->\n## evaluation" in text and text.endswith("<!-- /section: evaluation -->\n")
+    assert "Measured by `python -m benchmarks.bench --quick` on: commit " in text and "logical CPUs" in text
+    assert "Section time 10 s (the whole run: 12 s)" in text
     assert "### evaluation\n\n| measure | figure | reference (same run) | ratio | target |\n|---|---|---|---|---|\n" in text
     assert "| evaluate 48x24 | 1.0 µs/mf | fill 0.5 µs/mf | 2.0x | <= 3x ✓ |" in text
     assert "| a \\| b | 2 |  |  |  |" in text
@@ -198,11 +204,12 @@ def test_markdown_file_is_written(tmp_path):
 
 def test_markdown_option_on_a_table(tmp_path, monkeypatch):
     """main(--markdown) writes the file for a rows subset too (retarget rows stubbed)."""
-    def rows(table, quick):
+    def rows(table, run):
         table.section("retargeting")
         table.add("fit", "10 fps")
+        return []
 
-    monkeypatch.setattr(bench, "retarget_rows", rows)
+    monkeypatch.setattr(retarget, "rows", rows)
     path = tmp_path / "out" / "BENCH.md"
     path.parent.mkdir()
     assert bench.main(["--only", "retarget", "--quick", "--markdown", str(path)]) == 0
@@ -226,8 +233,8 @@ def test_skin_pass(repo_root, tmp_path, capsys):
     plain = plan_run(None, muscle_args=muscles, pose_arg=pose, out_arg=str(tmp_path / "o"), frames_arg="30:31")
     skinned = plan_run(None, muscle_args=muscles, pose_arg=pose, out_arg=str(tmp_path / "o"), frames_arg="30:31",
                        skin_arg=str(tmp_path / "skin" / "skin.yaml"))
-    t0, m0 = bench.skin_pass(plain)
-    t1, m1 = bench.skin_pass(skinned)
+    t0, m0 = skin.skin_pass(plain)
+    t1, m1 = skin.skin_pass(skinned)
     assert t0 > 0 and t1 > 0 and m1.shape == (2, len(SKIN_COLUMNS)) and not m0.any()
     ratio = m1[:, SKIN_COLUMNS.index("volume_ratio")]
     assert np.all(np.abs(ratio - 1) < 0.2) and np.all(m1[:, SKIN_COLUMNS.index("volume")] > 0.03)
@@ -247,10 +254,10 @@ def test_skin_pops_tells_a_jump_from_a_fast_smooth_change(monkeypatch):
             return t, off
         return fake
 
-    monkeypatch.setattr(bench, "skin_offsets", offsets(False))
-    smooth = bench.skin_pops(None, 0, 6)
-    assert smooth["substep"] == pytest.approx(0.05 / bench.POP_SUBSTEPS)
-    assert smooth["share"] == pytest.approx(1 / bench.POP_SUBSTEPS)
-    monkeypatch.setattr(bench, "skin_offsets", offsets(True))
-    jump = bench.skin_pops(None, 0, 6)
+    monkeypatch.setattr(skin, "skin_offsets", offsets(False))
+    smooth = skin.skin_pops(None, 0, 6)
+    assert smooth["substep"] == pytest.approx(0.05 / skin.POP_SUBSTEPS)
+    assert smooth["share"] == pytest.approx(1 / skin.POP_SUBSTEPS)
+    monkeypatch.setattr(skin, "skin_offsets", offsets(True))
+    jump = skin.skin_pops(None, 0, 6)
     assert jump["substep"] == pytest.approx(0.03) and jump["share"] == pytest.approx(1.0)

@@ -1,5 +1,6 @@
 """The house rules of the package, enforced on its source (an ast walk over axdf_cli, every
-import counted, those inside functions too):
+import counted, those inside functions too; the size and coupling rules, and no import cycle,
+hold for the bench, benchmarks/, too):
 
 - the rooms, bottom to top, written down here once (:data:`ROOMS`): a module imports only its
   own room and the rooms below it (so there is no import cycle between rooms);
@@ -132,12 +133,13 @@ def _is_module(dotted: str) -> bool:
     return rel.with_suffix(".py").is_file() or (rel / "__init__.py").is_file()
 
 
-def _private_uses(tree: ast.AST) -> list[str]:
+def _private_uses(tree: ast.AST, roots: tuple[str, ...] = ("axdf_cli",)) -> list[str]:
     """Another axdf module's ``_private`` names used here: ``from axdf_cli.m import _x``, or
-    ``m._x`` where ``m`` names an axdf module imported into this one."""
+    ``m._x`` where ``m`` names an axdf module imported into this one (``roots``: the packages
+    whose modules count; the bench's checks add ``benchmarks``)."""
     found, modules = [], set()
     for n in ast.walk(tree):
-        if isinstance(n, ast.ImportFrom) and n.level == 0 and n.module and n.module.split(".")[0] == "axdf_cli":
+        if isinstance(n, ast.ImportFrom) and n.level == 0 and n.module and n.module.split(".")[0] in roots:
             for a in n.names:
                 if a.name.startswith("_") and not a.name.startswith("__"):
                     found.append(f"line {n.lineno}: from {n.module} import {a.name}")
@@ -145,7 +147,7 @@ def _private_uses(tree: ast.AST) -> list[str]:
                     modules.add(a.asname or a.name)
         elif isinstance(n, ast.Import):
             for a in n.names:
-                if a.name.split(".")[0] == "axdf_cli" and a.asname:
+                if a.name.split(".")[0] in roots and a.asname:
                     modules.add(a.asname)
     for n in ast.walk(tree):
         if isinstance(n, ast.Attribute) and isinstance(n.value, ast.Name) and n.value.id in modules \
@@ -197,3 +199,75 @@ def test_the_size_and_coupling_rules_catch_what_they_forbid():
     assert _private_uses(tree) == ["line 3: from axdf_cli.model.kernels import _x", "line 6: contact._y",
                                    "line 6: pk._z"]
     assert _model_touches(tree) == ["line 8: os.environ", "line 8: open()", "line 8: getpid()"]
+
+
+# --- the bench (benchmarks/): one module per section, under the same size and coupling rules ---
+
+BENCH = REPO_ROOT / "benchmarks"
+BENCH_MODULES = sorted(BENCH.rglob("*.py"))
+
+
+def _bench_name(path: Path) -> str:
+    rel = path.relative_to(REPO_ROOT).with_suffix("")
+    return ".".join(rel.parts[:-1] if rel.name == "__init__" else rel.parts)
+
+
+def _bench_imports(tree: ast.AST) -> set[str]:
+    """The benchmarks modules this one imports (``from benchmarks.sections import x`` counts as
+    ``benchmarks.sections.x`` where that is a module)."""
+    out = set()
+    for n in ast.walk(tree):
+        if isinstance(n, ast.ImportFrom) and n.level == 0 and n.module and n.module.split(".")[0] == "benchmarks":
+            subs = [f"{n.module}.{a.name}" for a in n.names if _is_module(f"{n.module}.{a.name}")]
+            out |= set(subs) if len(subs) == len(n.names) else {n.module, *subs}
+        elif isinstance(n, ast.Import):
+            out |= {a.name for a in n.names if a.name.split(".")[0] == "benchmarks"}
+    return out
+
+
+def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Every import cycle, as the modules along it (a package's own __init__ is left out of the
+    edges from its submodules: Python imports it first anyway)."""
+    found, state = [], {}
+
+    def visit(m, path):
+        state[m] = 1
+        for d in sorted(graph.get(m, ())):
+            if state.get(d) == 1:
+                found.append(path[path.index(d):] + [d])
+            elif d not in state:
+                visit(d, path + [d])
+        state[m] = 2
+
+    for m in sorted(graph):
+        if m not in state:
+            visit(m, [m])
+    return found
+
+
+def test_the_bench_has_no_import_cycle():
+    graph = {_bench_name(p): {d for d in _bench_imports(ast.parse(p.read_text(), str(p)))
+                              if not _bench_name(p).startswith(d + ".")} for p in BENCH_MODULES}
+    assert "benchmarks.bench" in graph and "benchmarks.sections.skin" in graph
+    assert not _cycles(graph), _cycles(graph)
+
+
+@pytest.mark.parametrize("path", BENCH_MODULES, ids=lambda p: p.relative_to(BENCH).as_posix())
+def test_a_bench_module_stays_small_and_keeps_its_insides(path):
+    text = path.read_text()
+    tree = ast.parse(text, str(path))
+    lines = text.count("\n")
+    found = [f"{lines} lines (at most {MAX_LINES})"] if lines > MAX_LINES else []
+    found += _too_many_params(tree) + _private_uses(tree, ("axdf_cli", "benchmarks"))
+    assert not found, "\n".join(found)
+
+
+def test_the_bench_rules_catch_what_they_forbid():
+    tree = ast.parse("from benchmarks.sections import writers, render\nfrom benchmarks.common import _x, Table\n"
+                     "import benchmarks.page as pg\ndef f():\n    return writers._y + pg._z\n")
+    assert _bench_imports(tree) == {"benchmarks.sections.writers", "benchmarks.sections.render",
+                                    "benchmarks.common", "benchmarks.page"}
+    assert _private_uses(tree, ("axdf_cli", "benchmarks")) == ["line 2: from benchmarks.common import _x",
+                                                               "line 5: writers._y", "line 5: pg._z"]
+    assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c", "a"]]
+    assert _cycles({"a": {"b"}, "b": {"c"}, "d": {"a", "c"}}) == []

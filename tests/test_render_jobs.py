@@ -146,8 +146,9 @@ def test_frame_blocks_cover_every_frame_once():
 
 
 def test_bench_render_jobs_helper(tmp_path):
-    from benchmarks import bench
+    from benchmarks import common
+    from benchmarks.sections import render_jobs
 
-    r = bench.run_jobs(bench.DEMO_JOB, tmp_path / "o", 2, frames="0:3")
+    r = render_jobs.run_jobs(common.DEMO_JOB, tmp_path / "o", 2, frames="0:3")
     assert r["rc"] == 0 and r["wall"] > 0 and r["load"] >= 0
     assert len(list((tmp_path / "o" / "frames").glob("*.png"))) == 4
