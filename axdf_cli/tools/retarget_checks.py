@@ -1,5 +1,5 @@
 """Whether a retarget fit holds: its error and the coordinates it held at a range's end
-against the documented bounds (``tolerances.RETARGET_*``), each problem with its frames and the
+against the documented bounds (``tools.constants.RETARGET_*``), each problem with its frames and the
 fix; and the room coordinates that left the model file's range.
 
 The error is compared with the *mapped body's height*: the vertical extent of the map's
@@ -11,20 +11,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from axdf_cli import tolerances as tol
+from axdf_cli.tools import constants as tol
 from axdf_cli.model.ik import pose_points
+from axdf_cli.model.pose import frame_spans  # (the run reports its ranges' frames the same way)
 
-
-
-def frame_spans(frames, shown: int = 6) -> str:
-    """Frame numbers as runs: ``36-42, 178-190`` (the first ``shown`` runs, then how many more)."""
-    frames = np.asarray(frames, int)
-    if len(frames) == 0:
-        return "none"
-    cut = np.nonzero(np.diff(frames) > 1)[0]
-    starts, ends = np.r_[frames[0], frames[cut + 1]], np.r_[frames[cut], frames[-1]]
-    runs = [f"{a}" if a == b else f"{a}-{b}" for a, b in zip(starts, ends)]
-    return ", ".join(runs[:shown]) + (f" and {len(runs) - shown} more runs" if len(runs) > shown else "")
 
 
 def body_size(res) -> float:
@@ -37,7 +27,7 @@ def body_size(res) -> float:
 
 
 def fit_bounds(res) -> dict:
-    """The documented bounds (tolerances.RETARGET_*) in the subject's metres."""
+    """The documented bounds (tools.constants.RETARGET_*) in the subject's metres."""
     size = body_size(res)
     return {"body_height_m": size, "take_rms_m": tol.RETARGET_RMS_SHARE * size,
             "frame_rms_m": tol.RETARGET_FRAME_SHARE * size, "point_m": tol.RETARGET_POINT_SHARE * size,
