@@ -39,17 +39,19 @@ RETARGET_MAX_POINTS = 256
 RETARGET_SEGMENT_OUTLIER = 2.0
 RETARGET_SCALE_BAND = (0.5, 2.0)
 # A fit is warned on (axdf retarget; --strict refuses it) when its error exceeds these shares of
-# the mapped body's height (the vertical extent of the map's weighted points in the model's rest
-# pose, times the scale; for a map from the toes to the head, a leg from hip to ankle is ~0.6 of
-# it): the take's RMS over every weighted point beyond RETARGET_RMS_SHARE (1.8%: 3% of the leg),
-# a frame's RMS beyond RETARGET_FRAME_SHARE (4.5%: 7.5% of the leg; the shipped CMU walk's worst,
-# its crouch with the knee at its 120 deg limit, is 3.3%), or one point's error in a frame beyond
-# RETARGET_POINT_SHARE (12%: 20% of the leg; the walk's worst 8%). A coordinate of the root bone
+# the subject's height (head top to sole: axdf_cli.model.measure.stature of the motion's own
+# skeleton, or of the model's times the scale; the leg from hip to ankle is 0.491 of it): the
+# take's RMS over every weighted point beyond RETARGET_RMS_SHARE (1.5%: 3% of the leg), a frame's
+# RMS beyond RETARGET_FRAME_SHARE (3.7%: 7.5% of the leg; the shipped CMU walk's worst, its crouch
+# with the knee at its 120 deg limit, is 2.9% of the subject's 1.54 m), or one point's error in a
+# frame beyond RETARGET_POINT_SHARE (9.8%: 20% of the leg; the walk's worst 7%). (Until the one
+# height, these were shares of the map's points' vertical extent, 1.33 m for the walk: 1.8%,
+# 4.5% and 12%, the same millimetres within 4%.) A coordinate of the root bone
 # at a range's end in any frame, or any other coordinate in more than RETARGET_PINNED_SHARE of
 # the frames (the walk's subtalar joints: 18%), is warned too.
-RETARGET_RMS_SHARE = 0.018
-RETARGET_FRAME_SHARE = 0.045
-RETARGET_POINT_SHARE = 0.12
+RETARGET_RMS_SHARE = 0.015
+RETARGET_FRAME_SHARE = 0.037
+RETARGET_POINT_SHARE = 0.098
 RETARGET_PINNED_SHARE = 0.25
 
 # ----------------------------------------------------------------------------- axdf pack
