@@ -172,7 +172,7 @@ def test_resume_refuses_a_change_to_a_stage_s_own_sources(proj, capsys, monkeypa
     assert manifest(out)["identity"]["stages"] == {"contact": {"pipeline/stages.py": mf.source_sha("pipeline/stages.py")}}
     real = mf.source_sha
     with monkeypatch.context() as m:  # the file's bytes change
-        m.setattr(mf, "source_sha", lambda rel: "0" * 64 if rel == "pipeline/stages.py" else real(rel))
+        m.setattr(mf, "source_sha", lambda rel, path=None: "0" * 64 if rel == "pipeline/stages.py" else real(rel, path))
         rc, _, err = run_main(run_args(proj, out, "--resume"), capsys)
         assert rc == 2 and "the contact stage's source pipeline/stages.py changed" in err, err
     with monkeypatch.context() as m:  # the stage names another source

@@ -62,23 +62,32 @@ def tolerance_values() -> dict:
             if name.isupper() and _numeric(v)}
 
 
+def stage_source_files(stage) -> dict[str, Path]:
+    """A stage's own source files, name -> path: the module that defines its class and any it
+    names in ``sources`` (a tuple of paths relative to the package). A file of the package is
+    named by its path relative to the package (``pipeline/skin_stage.py``), a module outside it
+    (a test's or a plug-in's stage) by its file's name: no absolute path goes into a manifest."""
+    root = Path(axdf_cli.__file__).parent.resolve()
+    path = Path(sys.modules[type(stage).__module__].__file__).resolve()
+    own = path.relative_to(root).as_posix() if path.is_relative_to(root) else path.name
+    return dict(sorted({own: path, **{rel: root / rel for rel in getattr(stage, "sources", ())}}.items()))
+
+
 def stage_sources(stage) -> list[str]:
-    """A stage's own source files, relative to the package (``pipeline/skin_stage.py``): the
-    module that defines its class and any it names in ``sources`` (a tuple of such paths)."""
-    root = Path(axdf_cli.__file__).parent
-    own = Path(sys.modules[type(stage).__module__].__file__).resolve().relative_to(root.resolve()).as_posix()
-    return sorted({own, *getattr(stage, "sources", ())})
+    """The names of :func:`stage_source_files`, sorted."""
+    return list(stage_source_files(stage))
 
 
-def source_sha(rel: str) -> str:
-    """sha256 of one of the package's source files, by its path relative to the package."""
-    return hashlib.sha256(Path(axdf_cli.__file__).parent.joinpath(rel).read_bytes()).hexdigest()
+def source_sha(name: str, path: Path | None = None) -> str:
+    """sha256 of a source file (``path``; default the package's file ``name``)."""
+    path = Path(axdf_cli.__file__).parent / name if path is None else path
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
 def stages_identity(stages) -> dict:
-    """Each stage's sources (:func:`stage_sources`): name -> {file: sha256} (read now: the
-    files are few and small)."""
-    return {s.name: {rel: source_sha(rel) for rel in stage_sources(s)} for s in stages}
+    """Each stage's sources (:func:`stage_source_files`): name -> {file: sha256} (read now:
+    the files are few and small)."""
+    return {s.name: {n: source_sha(n, p) for n, p in stage_source_files(s).items()} for s in stages}
 
 
 def run_identity(plan: RunPlan | None = None) -> dict:
