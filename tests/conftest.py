@@ -42,7 +42,7 @@ TIERS = {
                     "meshes", "mjcf_import", "osim_cli", "outputs", "pack", "packed", "rajagopal", "render_cli",
                     "render_jobs", "render_output", "retarget", "retarget_myobody", "stages", "transfer",
                     "transfer_paths", "retarget_fit", "first_hour", "framing", "outputs_per_frame", "fit", "skin", "skin_stage", "atlas",
-                    "skin_outputs", "dataset_skin", "volume_twist"),
+                    "skin_outputs", "dataset_skin", "volume_twist", "run_identity", "one_height"),
     "judges": ("blender", "mjcf_judge", "opensim_judge", "osim_fk", "osim_muscles"),
     "hostile": ("compare_hostile", "fuzz_yaml", "hostile", "inputs_hostile", "robustness", "safety", "hostile_import",
                 "hostile_run"),

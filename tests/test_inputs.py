@@ -89,7 +89,7 @@ def test_coordinate_outside_its_dof_range_warns_per_frame(proj, capsys):
     assert "bend = -400" in rows[4]["warning"]
     manifest = json.loads((proj / "o" / "manifest.json").read_text())
     assert sum("bend = " in w for w in manifest["warnings"]) == 3
-    assert "outside a coordinate range" in err
+    assert "warning: bend is outside its range [-140, 0] in 3 of 5 frames: 2-4 (keyed -400 to -200" in err, err
     rc, _, err = run_main(["run", "--muscles", "m", "--pose", "p.yaml", "--out", "o2", "--no-render", "--strict"],
                           capsys)
     assert rc == 2 and "bend = -200" in err and not (proj / "o2").exists()

@@ -35,7 +35,7 @@ def add_args(p) -> None:
 
 
 def run(args) -> int:
-    from axdf_cli import tolerances as tol
+    from axdf_cli.tools import constants as tol
     from axdf_cli.model.muscle import OCT
     from axdf_cli.specs import RefPolicy
     from axdf_cli.tools.fit import SUMMARY, build_fit, unit_scale

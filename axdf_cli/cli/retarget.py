@@ -87,6 +87,10 @@ def summary(rep: dict, verbose: bool = False) -> list[str]:
              f"scale {sim['scale']:.4f} ({sim['scale_from']}), turned {sim['yaw_deg']:.1f} deg; "
              f"joint-centre error RMS {err['rms_m'] * 1000:.1f} mm, max {err['max_m'] * 1000:.1f} mm "
              f"(frame {err['worst_frame']})"]
+    b = rep["checks"]["bounds"]
+    lines.append(f"  subject {b['body_height_m']:.3f} m tall, head top to sole ("
+                 + {"motion": "its own skeleton's stature", "model": f"{rep['skeleton']}'s stature x the scale",
+                    "points": "the map's points' extent x the scale"}[b["body_height_from"]] + ")")
     points = sorted(rep["points"].items(), key=lambda kv: -kv[1]["rms_m"])
     shown = points if verbose else points[:3]
     lines.append("  " + ", ".join(f"{k} {v['rms_m'] * 1000:.1f} mm RMS" for k, v in shown)

@@ -85,10 +85,9 @@ def run(args) -> int:
             print(f"note: {n}", file=sys.stderr)
     for w in plan.warnings:
         print(f"warning: {w}", file=sys.stderr)
-    if plan.frame_warnings and not args.quiet:
-        first = plan.frame_warnings[0]
-        print(f"warning: {len(plan.frame_warnings)} muscle-frame(s) posed outside a coordinate range, first "
-              f"frame {int(plan.frames[first[0]])}: {first[2]}", file=sys.stderr)
+    if not args.quiet:  # a line per coordinate outside its range (stats.csv: per muscle and frame)
+        for o in plan.outside:
+            print(f"{'note' if o.clamped else 'warning'}: {o.text(len(plan.frames))}", file=sys.stderr)
     if args.strict:
         refuse_warnings(plan)
     total = len(plan.frames) * len(plan.models)

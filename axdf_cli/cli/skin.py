@@ -35,7 +35,7 @@ def add_args(p) -> None:
 def run(args) -> int:
     import numpy as np
 
-    from axdf_cli import tolerances as tol
+    from axdf_cli.tools import constants as tol
     from axdf_cli.errors import InputError, Mark, UsageError
     from axdf_cli.fileio.outputs import OutputSet, check_outputs, write_outputs
     from axdf_cli.specs import RefPolicy, load_skeleton

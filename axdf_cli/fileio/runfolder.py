@@ -64,7 +64,7 @@ LAYOUT_DIRS = ("meshes", "bones", "frames")
 
 # the manifest's keys, in the one order every writer uses (unknown keys follow, sorted)
 MANIFEST_KEYS = ("tool", "version", "command", "complete", "inputs", "settings", "identity", "frames", "muscles", "bones",
-                 "warnings", "files", "outside", "outside_previous", "outside_earlier", "bounds", "gl")
+                 "warnings", "ranges", "files", "outside", "outside_previous", "outside_earlier", "bounds", "gl")
 #: The command that wrote a folder (``command`` in its manifest; a run's manifest has none).
 RUN_COMMAND = "run"
 

@@ -433,9 +433,14 @@ class UnitChoice:
     def stature(self) -> float:
         return stature(self.span, self.scale)
 
-    def notes(self) -> list[str]:
-        """The lines that say which unit was taken and the person's height."""
+    def notes(self, person: bool = True) -> list[str]:
+        """The lines that say which unit was taken and the person's height (``person`` False:
+        the unit alone, for a command that states the subject's height by
+        :func:`axdf_cli.model.measure.stature`, as ``axdf retarget`` does)."""
         word = UNIT_WORDS[self.unit] if self.unit else f"{self.scale:g} m per unit"
+        if not person and self.how != "typical":
+            return [f"BVH unit: {word} ({'given' if self.how == 'given' else 'its rest joint span fits a person'}; "
+                    f"--units or --scale to override)"]
         person = (f"rest joint span {self.span:.4g} units = {self.span * self.scale:.3g} m: a {self.stature:.2f} m "
                   f"person (span / {tol.STATURE_SPAN_RATIO:g})")
         if self.how == "given":

@@ -58,6 +58,7 @@ class Mocap:
     fps: float
     notes: tuple[str, ...] = ()  # lines for the user (the unit guess)
     warnings: tuple[str, ...] = ()  # what the user should check (a BVH scaled to a typical height)
+    skeleton: object = None  # the motion's own rest skeleton (a BVH's, metres), None for points alone
 
     @property
     def index(self) -> dict[str, int]:
@@ -102,7 +103,7 @@ def read_bvh_joints(path: Path | str, *, scale: float | None = None, step: int =
 
     bvh = read_bvh(path)
     units = choose_unit(bvh, scale)
-    scale, notes = units.scale, units.notes()
+    scale, notes = units.scale, units.notes(person=False)  # (the subject's height: axdf retarget's, one definition)
     skel = bvh_skeleton(bvh, scale)
     names = bone_names(bvh)
     rows = bvh.data[::step]
@@ -116,7 +117,7 @@ def read_bvh_joints(path: Path | str, *, scale: float | None = None, step: int =
         world = forward_kinematics(skel, q[s:s + FK_CHUNK])  # (chunk, 1 + J, 4, 4): ground first
         positions[s:s + FK_CHUNK] = world[:, 1:, :3, 3]
     fps = frame_rate(bvh.frame_time, bvh.frame_time_text) / step
-    return Mocap(str(path), "bvh", tuple(names), positions, float(fps), tuple(notes), tuple(units.warnings()))
+    return Mocap(str(path), "bvh", tuple(names), positions, float(fps), tuple(notes), tuple(units.warnings()), skel)
 
 
 # ----------------------------------------------------------------------------- npz

@@ -13,6 +13,8 @@ outside it is either held at the range's end (the pose's ``clamp_ranges: true`` 
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from axdf_cli.errors import InputError, Mark
@@ -99,6 +101,75 @@ def sample_coordinates(pose, frames: np.ndarray, clamp: bool | None = None) -> n
         if clamp and rng is not None:
             np.clip(q[:, i], rng[0], rng[1], out=q[:, i])
     return skel.couple(q)
+
+
+@dataclass(frozen=True)
+class OutsideRange:
+    """A keyed coordinate that the pose takes outside its range at some of a run's frames."""
+
+    coordinate: str
+    range: tuple[float, float]  # (lo, hi) in axdf units (degrees, metres)
+    frames: tuple[int, ...]  # the frame numbers where the keyed value lies outside, in order
+    low: float  # the keyed value's extremes over those frames
+    high: float
+    clamped: bool  # held at the range's ends (``clamp_ranges``) rather than posed as keyed
+
+    def record(self) -> dict:
+        """The run manifest's ``ranges`` entry (frames as compact runs, :func:`frame_spans`)."""
+        return {"coordinate": self.coordinate, "range": [float(self.range[0]), float(self.range[1])],
+                "frames": frame_spans(self.frames, shown=None), "count": len(self.frames),
+                "keyed": [float(f"{self.low:.9g}"), float(f"{self.high:.9g}")], "clamped": self.clamped}
+
+    def text(self, of: int) -> str:
+        """One line for the terminal (``of``: the run's frame count)."""
+        lo, hi = self.range
+        span = f"{self.low:.6g}" if self.low == self.high else f"{self.low:.6g} to {self.high:.6g}"
+        if self.clamped:
+            return (f"{self.coordinate} was clamped to its range [{lo:g}, {hi:g}] in {len(self.frames)} of {of} "
+                    f"frames: {frame_spans(self.frames)} (keyed {span})")
+        return (f"{self.coordinate} is outside its range [{lo:g}, {hi:g}] in {len(self.frames)} of {of} frames: "
+                f"{frame_spans(self.frames)} (keyed {span}; --clamp-ranges holds it inside)")
+
+
+def frame_spans(frames, shown: int | None = 6) -> str:
+    """Frame numbers as runs: ``36-42, 178-190`` (the first ``shown`` runs, then how many more;
+    ``shown`` None: every run)."""
+    frames = np.asarray(frames, int)
+    if len(frames) == 0:
+        return "none"
+    cut = np.nonzero(np.diff(frames) != 1)[0]
+    starts, ends = np.r_[frames[0], frames[cut + 1]], np.r_[frames[cut], frames[-1]]
+    runs = [f"{a}" if a == b else f"{a}-{b}" for a, b in zip(starts.tolist(), ends.tolist())]
+    if shown is None or len(runs) <= shown:
+        return ", ".join(runs)
+    return ", ".join(runs[:shown]) + f" and {len(runs) - shown} more runs"
+
+
+def outside_ranges(pose, frames: np.ndarray) -> list[OutsideRange]:
+    """Every keyed coordinate with a range that the pose's keys take outside it at ``frames``
+    (a run's selected frames), in the skeleton's coordinate order: where, and how far, whether
+    the pose clamps (``clamped``) or not. Every coordinate counts, those that carry the whole
+    body (the root's place and heading in the room) too."""
+    skel = pose.skeleton
+    frames = np.asarray(frames)
+    out = []
+    for c in sorted(pose.keys, key=lambda name: skel.coord_index[name]):
+        rng = skel.coordinates[skel.coord_index[c]].range
+        if rng is None:
+            continue
+        lo, hi = rng
+        kf, kv = pose.keys[c]
+        found, low, high = [], np.inf, -np.inf
+        for s in range(0, len(frames), SCAN_FRAMES):
+            fr = frames[s:s + SCAN_FRAMES]
+            v = interpolate(fr, kf, kv, pose.interpolation)
+            bad = (v < lo) | (v > hi)
+            if bad.any():
+                found += [int(f) for f in fr[bad]]
+                low, high = min(low, float(v[bad].min())), max(high, float(v[bad].max()))
+        if found:
+            out.append(OutsideRange(c, (float(lo), float(hi)), tuple(found), low, high, bool(pose.clamp_ranges)))
+    return out
 
 
 def range_warnings(pose, frames: np.ndarray) -> list[tuple[int, str, str]]:

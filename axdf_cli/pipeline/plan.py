@@ -13,7 +13,7 @@ from axdf_cli.errors import InputError, Mark
 from axdf_cli.formats import parse_formats
 from axdf_cli.specs import Job, Pose, RefPolicy, expand_muscle_paths, load_muscle_file, load_pose
 from axdf_cli.model.muscle import MuscleModel, MuscleSpec
-from axdf_cli.model.pose import activation_problems, muscle_range_warnings, parse_frames
+from axdf_cli.model.pose import activation_problems, muscle_range_warnings, outside_ranges, parse_frames
 from axdf_cli.model.skeleton import forward_kinematics
 from axdf_cli.pipeline.stages import build_stages
 
@@ -37,6 +37,8 @@ class RunPlan:
     stages: tuple = ()  # the run's stages (axdf_cli.pipeline.stages: build_stages), in order within each scope
     collision_meshes: dict | None = None  # bone meshes contact uses where the run stores none (a data set's sequences)
     mesh_files: str = "muscle"  # formats.MESH_FILES: per-frame formats one file per muscle per frame, or per frame
+    outside: tuple = ()  # model.pose.OutsideRange per coordinate the pose takes outside its range at frames
+    base: Path | None = None  # the folder the manifest names inputs from (input_base); None: the current folder
 
     @property
     def names(self) -> list[str]:
@@ -52,9 +54,18 @@ class RunPlan:
         return self.render is not None and self.render.enabled
 
 
-def display_path(p: Path) -> str:
-    """A path for the manifest: relative to the current folder when below it."""
-    return _display_path(str(p), os.getcwd())
+def display_path(p: Path, base: Path | None = None) -> str:
+    """A path for the manifest: relative to ``base`` (a run's :func:`input_base`), else to the
+    current folder, when below it."""
+    return _display_path(str(p), os.getcwd() if base is None else str(base))
+
+
+def input_base(paths) -> Path:
+    """The deepest folder that holds every one of ``paths`` (their real locations): the folder
+    a run's manifest names its inputs from, so that the same inputs are named the same, with the
+    same bytes, from whatever folder the run is started (the shipped jobs: the project's root)."""
+    folders = [str(Path(p).resolve().parent) for p in paths]
+    return Path(os.path.commonpath(folders)) if folders else Path(os.getcwd()).resolve()
 
 
 @functools.lru_cache(maxsize=4096)
@@ -160,25 +171,23 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
 
     bone_meshes = {i: load_bone_mesh(b.mesh, pose.skeleton_path) for i, b in enumerate(skel.bones) if b.mesh}
 
-    inputs = {}
     srcs = ([job.source] if job is not None else []) + [pose.source, pose.skeleton_path] + [str(f) for f in files]
     srcs += sorted({b.mesh for b in skel.bones if b.mesh})
-    for s in srcs:
-        if Path(s).is_file():
-            inputs[display_path(Path(s))] = atomic.sha256_file(s)
     built = build_stages(stages, specs)
     skin = plan_skin(job, skin_arg, skel, policy, specs)
     if skin is not None:
         from axdf_cli.pipeline.skin_stage import SkinStage
 
         built = built + (SkinStage(skin),)
-        for s in skin.files:
-            inputs[display_path(Path(s))] = atomic.sha256_file(s)
+        srcs += [str(s) for s in skin.files]
+    srcs = [s for s in srcs if Path(s).is_file()]
+    base = input_base(srcs)
+    inputs = {display_path(Path(s), base): atomic.sha256_file(s) for s in srcs}
     if any(st.name == "jiggle" for st in built):
         notes += jiggle_notes(pose, specs)
     return RunPlan(pose, specs, models, frames, formats, out, inputs, render=render, warnings=warnings,
                    bone_meshes=bone_meshes, notes=notes, frame_warnings=muscle_range_warnings(pose, frames, specs),
-                   stages=built, mesh_files=mesh_files)
+                   stages=built, mesh_files=mesh_files, outside=tuple(outside_ranges(pose, frames)), base=base)
 
 
 def plan_skin(job: Job | None, arg, skeleton, policy: RefPolicy, specs):

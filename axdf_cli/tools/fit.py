@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from axdf_cli import tolerances as tol
+from axdf_cli.tools import constants as tol
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.fileio.yamlio import NAME_ALLOWED, is_name
 from axdf_cli.importers import emit

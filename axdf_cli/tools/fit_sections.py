@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from axdf_cli import tolerances as tol
+from axdf_cli.tools import constants as tol
 from axdf_cli.model import bspline
 from axdf_cli.model.muscle import OCT
 

@@ -14,6 +14,7 @@ import numpy as np
 
 from axdf_cli import runtime
 from axdf_cli import tolerances as tol
+from axdf_cli.tools import constants as tc
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.fileio import fieldcache
 from axdf_cli.importers import emit
@@ -40,7 +41,7 @@ def build_pack(muscle_files: list[Path], skeleton_path: Path | str, policy: RefP
                frames: str | None = None, on_phase=None) -> PackOutputs:
     """Pack every muscle of ``muscle_files`` (defined on the skeleton at ``skeleton_path``);
     with ``pose_path``, polished over that pose's ``frames`` as well (default: at most
-    tol.PACK_POSE_FRAMES of its frames, evenly spaced). ``on_phase(text)`` is told as each
+    tc.PACK_POSE_FRAMES of its frames, evenly spaced). ``on_phase(text)`` is told as each
     phase starts, ``progress(round, figures)`` as each round ends."""
     on_phase = on_phase or (lambda text: None)
     skeleton_path = Path(skeleton_path)
@@ -87,18 +88,18 @@ def build_pack(muscle_files: list[Path], skeleton_path: Path | str, policy: RefP
 
 def check_size(specs) -> None:
     """Refuse, before any work, muscles too fine to pack in bounded memory: the packer holds
-    about tol.PACK_BYTES_PER_VERTEX for each vertex of every muscle at once."""
+    about tc.PACK_BYTES_PER_VERTEX for each vertex of every muscle at once."""
     counts = [s.resolution[0] * s.resolution[1] for s in specs]
     total = sum(counts)
-    if total <= tol.PACK_MAX_VERTICES:
+    if total <= tc.PACK_MAX_VERTICES:
         return
     big = max(range(len(specs)), key=counts.__getitem__)
     s = specs[big]
     raise InputError(Mark(s.source or s.name, 1, 1) if s.source else None,
                      f"the muscles to pack hold {total:,} vertices (largest: {s.name}, resolution "
                      f"{s.resolution[0]}x{s.resolution[1]}), about "
-                     f"{total * tol.PACK_BYTES_PER_VERTEX / 2 ** 30:.0f} GiB of memory to pack",
-                     f"at most {tol.PACK_MAX_VERTICES:,} vertices in one pack: lower the muscles' "
+                     f"{total * tc.PACK_BYTES_PER_VERTEX / 2 ** 30:.0f} GiB of memory to pack",
+                     f"at most {tc.PACK_MAX_VERTICES:,} vertices in one pack: lower the muscles' "
                      "resolution, or pack fewer files at once")
 
 
@@ -122,8 +123,8 @@ def _pose_frames(muscle_files, skel, pose_path: Path, frames: str | None, policy
                     policy=policy or RefPolicy(), stages={name: False for name in STAGES})
     if plan.names != names:  # (the same files, read the same way)
         raise InputError(Mark(str(pose_path)), "the pose's run reads other muscles than the pack", "the same muscle files")
-    if frames is None and len(plan.frames) > tol.PACK_POSE_FRAMES:
-        pick = np.unique(np.round(np.linspace(0, len(plan.frames) - 1, tol.PACK_POSE_FRAMES)).astype(np.int64))
+    if frames is None and len(plan.frames) > tc.PACK_POSE_FRAMES:
+        pick = np.unique(np.round(np.linspace(0, len(plan.frames) - 1, tc.PACK_POSE_FRAMES)).astype(np.int64))
         plan = replace(plan, frames=plan.frames[pick])
 
     def poses(specs, models):

@@ -36,7 +36,7 @@ onto the muscle model's own skeleton, where every muscle keeps its path:
    from the previous frame. Coordinates the map ``hold``\\ s stay at their value; the others
    that move no point stay at their rest value.
 5. **Checks** (:func:`fit_warnings`): a fit whose error, or whose coordinates held at a range's
-   end, exceed the bounds of ``tolerances.RETARGET_*`` is warned with its frames and the fix
+   end, exceed the bounds of ``tools.constants.RETARGET_*`` is warned with its frames and the fix
    (``--strict`` refuses it); a segment whose ratio is far off the others' (a point's ``at``
    in the wrong unit) is refused, naming the point, and a fitted scale outside
    ``RETARGET_SCALE_BAND`` is warned (a motion in the wrong unit). A map holds at most
@@ -56,6 +56,7 @@ from pathlib import Path
 import numpy as np
 
 from axdf_cli import tolerances as tol
+from axdf_cli.tools import constants as tc
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.fileio.atomic import sha256_file
 from axdf_cli.fileio.yamlio import Fields, YMap, check_name, check_number, did_you_mean, mark_of
@@ -121,9 +122,9 @@ def load_map(path: Path | str, skeleton: Skeleton | None = None, policy: RefPoli
     ranges = _ranges(f.mapping("ranges", default=None), skeleton, hold)
     joints = f.mapping("joints", required=True)
     f.done()
-    if len(joints) > tol.RETARGET_MAX_POINTS:
+    if len(joints) > tc.RETARGET_MAX_POINTS:
         raise InputError(f.vmark("joints"), f"{len(joints)} points",
-                         f"at most {tol.RETARGET_MAX_POINTS} (the scale's segments are pairs of points)")
+                         f"at most {tc.RETARGET_MAX_POINTS} (the scale's segments are pairs of points)")
     points = tuple(_point(key, joints[key], joints, skeleton) for key in joints)
     if not points or sum(p.weight > 0 for p in points) < 2:
         raise InputError(f.vmark("joints"), f"{sum(p.weight > 0 for p in points)} points with a positive weight",
@@ -227,7 +228,7 @@ def _check_reach(points, skel: Skeleton) -> None:
     from axdf_cli.model.skeleton import forward_kinematics
 
     origins = forward_kinematics(skel, skel.rest_coordinates()[None])[0, :, :3, 3]
-    extent = max(float(np.linalg.norm(np.ptp(origins, axis=0))), tol.SEGMENT_MIN_LENGTH)
+    extent = max(float(np.linalg.norm(np.ptp(origins, axis=0))), tc.SEGMENT_MIN_LENGTH)
     for p in points:
         if p.at is not None and float(np.linalg.norm(p.at)) > extent:
             raise InputError(p.mark, f"joints entry {p.name}: at {list(p.at)} lies {np.linalg.norm(p.at):.4g} m "
@@ -338,16 +339,16 @@ def model_points(rmap: RetargetMap) -> ModelPoints:
     w = forward_kinematics(skel, samples)
     pts = pose_points(skel, samples, bones, local)  # (S, P, 3)
     rel = np.einsum("sji,spj->spi", w[:, root_bone, :3, :3], pts - w[:, root_bone, None, :3, 3])
-    rigid = np.ptp(rel, axis=0).max(axis=1) < tol.ROOT_RIGID
+    rigid = np.ptp(rel, axis=0).max(axis=1) < tc.ROOT_RIGID
     root_points = np.nonzero(rigid & (weights > 0))[0]
     return ModelPoints(bones, local, weights, free, q0, root, root_points, samples)
 
 
 def _samples(skel: Skeleton, q0: np.ndarray, coords) -> np.ndarray:
-    """(S, C): the rest pose and tol.SEGMENT_SAMPLES - 1 poses drawn (seeded) in the
+    """(S, C): the rest pose and tc.SEGMENT_SAMPLES - 1 poses drawn (seeded) in the
     coordinates' ranges (without a range: ± SAMPLE_SPAN_* around the rest value)."""
     rng = np.random.default_rng(20)
-    out = np.broadcast_to(q0, (tol.SEGMENT_SAMPLES, len(q0))).copy()
+    out = np.broadcast_to(q0, (tc.SEGMENT_SAMPLES, len(q0))).copy()
     for c in coords:
         coord = skel.coordinates[c]
         if coord.range is not None:
@@ -355,7 +356,7 @@ def _samples(skel: Skeleton, q0: np.ndarray, coords) -> np.ndarray:
         else:
             span = SAMPLE_SPAN_ROTATION if coord.type == "rotation" else SAMPLE_SPAN_TRANSLATION
             lo, hi = q0[c] - span, q0[c] + span
-        out[1:, c] = rng.uniform(lo, hi, tol.SEGMENT_SAMPLES - 1)
+        out[1:, c] = rng.uniform(lo, hi, tc.SEGMENT_SAMPLES - 1)
     return out
 
 
@@ -392,15 +393,15 @@ def segments(mp: ModelPoints, rmap: RetargetMap, targets: np.ndarray) -> list[Se
     ii, jj = idx[ii], idx[jj]
     d = np.linalg.norm(pts[:, ii] - pts[:, jj], axis=2)  # (S, pairs)
     mean = d.mean(axis=0)
-    rigid = (mean >= tol.SEGMENT_MIN_LENGTH) & (np.ptp(d, axis=0) <= tol.SEGMENT_MODEL_RIGIDITY * mean)
+    rigid = (mean >= tc.SEGMENT_MIN_LENGTH) & (np.ptp(d, axis=0) <= tc.SEGMENT_MODEL_RIGIDITY * mean)
     ii, jj, d0 = ii[rigid], jj[rigid], d[0, rigid]
-    rows = np.unique(np.linspace(0, len(targets) - 1, min(len(targets), tol.SEGMENT_MAX_FRAMES)).round().astype(int))
+    rows = np.unique(np.linspace(0, len(targets) - 1, min(len(targets), tc.SEGMENT_MAX_FRAMES)).round().astype(int))
     y = targets[rows]
     out = []
     for s in range(0, len(ii), 1024):  # bounded memory: (frames, 1024) lengths at a time
         m = np.linalg.norm(y[:, ii[s:s + 1024]] - y[:, jj[s:s + 1024]], axis=2)  # (F', chunk)
         p10, med, p90 = np.percentile(m, [10, 50, 90], axis=0)
-        for k in np.nonzero((med >= tol.SEGMENT_MIN_LENGTH) & (p90 - p10 <= tol.SEGMENT_MOCAP_RIGIDITY * med))[0]:
+        for k in np.nonzero((med >= tc.SEGMENT_MIN_LENGTH) & (p90 - p10 <= tc.SEGMENT_MOCAP_RIGIDITY * med))[0]:
             out.append(Segment(rmap.points[ii[s + k]].name, rmap.points[jj[s + k]].name, float(d0[s + k]),
                                float(med[k]), float((p90[k] - p10[k]) / med[k])))
     return out
@@ -413,7 +414,7 @@ def check_segments(segs: list[Segment], rmap: RetargetMap) -> None:
     if len(segs) < 2:
         return
     ratio = np.array([g.subject / g.model for g in segs])
-    off = np.abs(np.log(ratio / np.median(ratio))) > math.log(tol.RETARGET_SEGMENT_OUTLIER)
+    off = np.abs(np.log(ratio / np.median(ratio))) > math.log(tc.RETARGET_SEGMENT_OUTLIER)
     if not off.any():
         return
     bad = {p.name: 0 for p in rmap.points}
@@ -428,7 +429,7 @@ def check_segments(segs: list[Segment], rmap: RetargetMap) -> None:
     raise InputError(point.mark, f"joints entry {name}: {name} to {other} is {g.model:.4g} m in the model but "
                      f"{g.subject:.4g} m in the motion, {g.subject / g.model / np.median(ratio):.3g} times the "
                      f"other segments' ratio (median {np.median(ratio):.3g})",
-                     f"a point within a factor {tol.RETARGET_SEGMENT_OUTLIER:g} of the body's proportions: `at:` in "
+                     f"a point within a factor {tc.RETARGET_SEGMENT_OUTLIER:g} of the body's proportions: `at:` in "
                      "metres in the bone's frame, and the motion joint (from:) that sits there")
 
 
@@ -473,7 +474,7 @@ def align_world(mp: ModelPoints, rmap: RetargetMap, targets: np.ndarray, scale: 
     rest = pose_points(rmap.skeleton, mp.q_start[None], mp.bones, mp.local)[0]  # (P, 3)
     use = mp.root_points
     spread = np.ptp(rest[use, :2], axis=0).max() if len(use) >= 2 else 0.0
-    if len(use) < 2 or spread < tol.SEGMENT_MIN_LENGTH:
+    if len(use) < 2 or spread < tc.SEGMENT_MIN_LENGTH:
         use = np.nonzero(mp.weights > 0)[0]
     w = mp.weights[use]
     turn = np.unwrap(heading(rest[use, :2], targets[:, use, :2], w))

@@ -1,45 +1,47 @@
 """Whether a retarget fit holds: its error and the coordinates it held at a range's end
-against the documented bounds (``tolerances.RETARGET_*``), each problem with its frames and the
+against the documented bounds (``tools.constants.RETARGET_*``), each problem with its frames and the
 fix; and the room coordinates that left the model file's range.
 
-The error is compared with the *mapped body's height*: the vertical extent of the map's
-weighted points in the model's rest pose, times the fitted scale (the subject's metres), so a
-bound means the same for a child and an adult, and for a model in any unit. ``res`` is a
+The error is compared with the *subject's height* (:func:`subject_height`: head top to sole,
+:func:`axdf_cli.model.measure.stature`, in the subject's metres), so a bound means the same
+for a child and an adult, and for a model in any unit. ``res`` is a
 :class:`axdf_cli.tools.retarget.Retargeted`.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from axdf_cli import tolerances as tol
+from axdf_cli.tools import constants as tol
 from axdf_cli.model.ik import pose_points
+from axdf_cli.model.pose import frame_spans  # (the run reports its ranges' frames the same way)
 
 
 
-def frame_spans(frames, shown: int = 6) -> str:
-    """Frame numbers as runs: ``36-42, 178-190`` (the first ``shown`` runs, then how many more)."""
-    frames = np.asarray(frames, int)
-    if len(frames) == 0:
-        return "none"
-    cut = np.nonzero(np.diff(frames) > 1)[0]
-    starts, ends = np.r_[frames[0], frames[cut + 1]], np.r_[frames[cut], frames[-1]]
-    runs = [f"{a}" if a == b else f"{a}-{b}" for a, b in zip(starts, ends)]
-    return ", ".join(runs[:shown]) + (f" and {len(runs) - shown} more runs" if len(runs) > shown else "")
+def subject_height(res) -> tuple[float, str]:
+    """The subject's height, head top to sole, in the subject's metres, and where it comes from:
+    :func:`axdf_cli.model.measure.stature` (the one height every command states) of the motion's
+    own skeleton at rest (a BVH's: ``"motion"``), else of the model's times the fitted scale
+    (``"model"``), else, for a skeleton of no family, the vertical extent of the map's weighted
+    points in the model's rest pose times the scale (``"points"``)."""
+    from axdf_cli.tools.skin import skeleton_stature
 
-
-def body_size(res) -> float:
-    """The mapped body's height in the subject's metres: the vertical extent of the weighted
-    points in the model's rest pose (with the holds), times the scale."""
+    own = skeleton_stature(res.mocap.skeleton) if res.mocap.skeleton is not None else None
+    if own is not None:
+        return own, "motion"
+    model = skeleton_stature(res.rmap.skeleton)
+    if model is not None:
+        return model * res.world.scale, "model"
     mp = res.points
     use = mp.weights > 0
     rest = pose_points(res.rmap.skeleton, mp.q_start[None], mp.bones[use], mp.local[use])[0]
-    return float(np.ptp(rest[:, 2])) * res.world.scale
+    return float(np.ptp(rest[:, 2])) * res.world.scale, "points"
 
 
 def fit_bounds(res) -> dict:
-    """The documented bounds (tolerances.RETARGET_*) in the subject's metres."""
-    size = body_size(res)
-    return {"body_height_m": size, "take_rms_m": tol.RETARGET_RMS_SHARE * size,
+    """The documented bounds (tools.constants.RETARGET_*) in the subject's metres, with the
+    subject's height they are shares of (:func:`subject_height`)."""
+    size, source = subject_height(res)
+    return {"body_height_m": size, "body_height_from": source, "take_rms_m": tol.RETARGET_RMS_SHARE * size,
             "frame_rms_m": tol.RETARGET_FRAME_SHARE * size, "point_m": tol.RETARGET_POINT_SHARE * size,
             "pinned_share": tol.RETARGET_PINNED_SHARE}
 
@@ -60,7 +62,7 @@ def fit_warnings(res) -> list[str]:
         w = int(np.argmax(frame_max))
         held = [skel.coordinates[c].name for c in res.points.free if at_end[bad, c].any()]
         out.append(f"the fit misses the motion: {rms * 1000:.0f} mm RMS over the take (bound {b['take_rms_m'] * 1000:.0f}"
-                   f" mm, {tol.RETARGET_RMS_SHARE:.1%} of the mapped body's {b['body_height_m']:.2f} m); "
+                   f" mm, {tol.RETARGET_RMS_SHARE:.1%} of the subject's {b['body_height_m']:.2f} m height); "
                    f"{len(bad)} frame(s) beyond {b['frame_rms_m'] * 1000:.0f} mm RMS or {b['point_m'] * 1000:.0f} mm "
                    f"at a point: {frame_spans(bad)}; worst frame {w}, {names[int(np.argmax(err[w]))]} "
                    f"{frame_max[w] * 1000:.0f} mm"

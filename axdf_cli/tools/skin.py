@@ -17,9 +17,10 @@ from pathlib import Path
 
 import numpy as np
 
-from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError, Mark
+from axdf_cli.model.measure import stature
 from axdf_cli.model.skeleton import Skeleton, forward_kinematics
+from axdf_cli.tools import constants as tol
 
 ASSETS = Path(__file__).resolve().parent.parent / "data" / "makehuman"
 BODY_FILE = ASSETS / "body.npz"
@@ -169,13 +170,17 @@ FAMILIES = (
 )
 
 
+def _needed_bones(fam: Family) -> set:
+    return set(fam.landmarks.values()) | set(fam.bind.values()) | {b for b, _ in fam.points.values()} | \
+        ({fam.up[0]} if fam.up else set())
+
+
 def family_of(skel: Skeleton, where: Mark) -> Family:
     """The first family whose every bone the skeleton has; refused (exit 2) when none fits."""
     have = set(skel.bone_index)
     missing = []
     for fam in FAMILIES:
-        need = set(fam.landmarks.values()) | set(fam.bind.values()) | {b for b, _ in fam.points.values()} | \
-            ({fam.up[0]} if fam.up else set())
+        need = _needed_bones(fam)
         if need <= have:
             return fam
         missing.append((len(need - have), sorted(need - have), fam.name))
@@ -239,19 +244,12 @@ def skeleton_landmarks(skel: Skeleton, fam: Family) -> tuple[dict, np.ndarray]:
     return lm, world
 
 
-def _mean_len(lm: dict, a: str, b: str) -> float:
-    return float(np.mean([np.linalg.norm(lm[f"{b}_{s}"] - lm[f"{a}_{s}"]) for s in "lr"]))
-
-
-def stature(lm: dict) -> float:
-    """The skeleton's stature from its joints (tolerances.py SKIN_*_FRACTION, Winter 2009): with
-    shoulders, ankle height + shank + thigh + hip-to-shoulder + shoulder-to-head-top, the two
-    ends as fractions of the stature; without, the leg's length over its share of it."""
-    leg = _mean_len(lm, "hip", "knee") + _mean_len(lm, "knee", "ankle")
-    if "shoulder_c" not in lm:
-        return leg / tol.SKIN_LEG_FRACTION
-    trunk = float(np.linalg.norm(lm["shoulder_c"] - lm["hip_c"]))
-    return (leg + trunk) / (1.0 - tol.SKIN_ANKLE_FRACTION - tol.SKIN_ABOVE_SHOULDER_FRACTION)
+def skeleton_stature(skel: Skeleton) -> float | None:
+    """The skeleton's stature (:func:`axdf_cli.model.measure.stature`, head top to sole) from its
+    family's joints at rest: the one height every command states (``axdf skin``, ``axdf
+    retarget``); None for a skeleton of no family (no joints named hip, knee and ankle)."""
+    fam = next((f for f in FAMILIES if _needed_bones(f) <= set(skel.bone_index)), None)
+    return None if fam is None else stature(skeleton_landmarks(skel, fam)[0])
 
 
 def _maps(mh: dict, sk: dict, s: float, up: np.ndarray | None, turn: bool, back: float = 0.0) -> dict:

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from axdf_cli import tolerances as tol
+from axdf_cli.tools import constants as tol
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.model.muscle import MuscleModel
 from axdf_cli.model.skeleton import Skeleton, forward_kinematics
