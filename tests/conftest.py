@@ -41,7 +41,7 @@ TIERS = {
                     "dataset", "dataset_amodal", "dataset_bench", "dataset_labels", "gait2392", "jiggle_run",
                     "meshes", "mjcf_import", "osim_cli", "outputs", "pack", "packed", "rajagopal", "render_cli",
                     "render_jobs", "render_output", "retarget", "retarget_myobody", "stages", "transfer",
-                    "transfer_paths", "retarget_fit", "first_hour", "framing", "outputs_per_frame", "fit", "skin", "skin_stage", "atlas",
+                    "transfer_paths", "retarget_fit", "first_hour", "first_hour_two", "framing", "outputs_per_frame", "fit", "skin", "skin_stage", "atlas",
                     "skin_outputs", "dataset_skin"),
     "judges": ("blender", "mjcf_judge", "opensim_judge", "osim_fk", "osim_muscles"),
     "hostile": ("compare_hostile", "fuzz_yaml", "hostile", "inputs_hostile", "robustness", "safety", "hostile_import",
