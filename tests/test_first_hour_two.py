@@ -97,3 +97,60 @@ def test_a_camera_file_must_fit_the_run(tmp_path, capsys):
     (tmp_path / "bad.json").write_text("{}")
     rc, _, err = run_main([*base[:3], tmp_path / "bad.json", *base[4:]], capsys)
     assert rc == 2 and "bad.json" in err and "frames" in err, err
+
+
+# ----------------------------------------------------------------------------- framing by what is drawn
+def _subject_box(png):
+    """(x0, y0, x1, y1) of the pixels that are not the background, and the image's (W, H)."""
+    from PIL import Image
+
+    img = np.asarray(Image.open(png).convert("RGB")).astype(int)
+    bg = img[0, 0]
+    ys, xs = np.nonzero(np.abs(img - bg).max(axis=2) > 8)
+    return (xs.min(), ys.min(), xs.max() + 1, ys.max() + 1), (img.shape[1], img.shape[0])
+
+
+def test_a_two_muscle_close_up_with_bones_frames_the_bones_too_centred(tmp_path, capsys):
+    out = tmp_path / "closeup"
+    rc, _, err = run_main(["run", GOLDEN_JOB, "--bones", "--frames", "104", "--size", "96x96", "--supersample", "1",
+                           "--out", out, "--quiet"], capsys)
+    assert rc == 0, err
+    (x0, y0, x1, y1), (w, h) = _subject_box(out / "frames" / "0104.png")
+    assert x0 > 0 and y0 > 0 and x1 < w and y1 < h, (x0, y0, x1, y1)  # nothing cut off (the thorax was)
+    # centred: the framing is of the whole pose, so a frame's own box may sit off by a few pixels
+    assert abs((x0 + x1) / 2 - w / 2) <= 0.1 * w and abs((y0 + y1) / 2 - h / 2) <= 0.1 * h, (x0, y0, x1, y1)
+    assert max((x1 - x0) / w, (y1 - y0) / h) > 0.7
+
+
+def test_myoarm_draws_no_stick_for_a_frame_without_a_mesh():
+    from axdf_cli.specs import load_skeleton
+
+    skel = load_skeleton(REPO_ROOT / "poses" / "skeletons" / "myoarm.yaml")
+    meshless = [b.name for b in skel.bones if not b.mesh]
+    assert "Arm_attachment" in meshless
+    assert skel.stick_parents() == [-1] * len(skel.bones)  # drawn: the bone meshes, nothing more
+
+
+# ----------------------------------------------------------------------------- a data set's size before it is made
+def test_a_dry_run_says_the_size_a_build_makes(tmp_path, capsys):
+    src = (REPO_ROOT / "poses" / "datasets" / "demo_small.yaml").read_text()
+    src = src.replace("../skeletons/", f"{REPO_ROOT}/poses/skeletons/").replace("../../muscles/", f"{REPO_ROOT}/muscles/")
+    src = src.replace("../demo.yaml", f"{REPO_ROOT}/poses/demo.yaml")
+    src = re.sub(r"sequences:\n(  - .*\n)+", "sequences:\n  - {sample: uniform, count: 2, frames: 1}\n"
+                 "  - {motion: calf}\n", src)
+    (tmp_path / "tiny.yaml").write_text(src)
+    argv = ["dataset", "build", tmp_path / "tiny.yaml", "--out", tmp_path / "ds", "--allow-outside"]
+    rc, out, err = run_main([*argv, "--dry-run"], capsys)
+    assert rc == 0, err
+    m = re.search(r"would make 3 of 3 sequences \((\d+) frames x 2 view\(s\) = (\d+) samples\)", out)
+    assert m and int(m.group(1)) == 2 + 4 and int(m.group(2)) == 12, out
+    size = re.search(r"size: about ([0-9.]+) (kB|MB) and (\d+) (s|min) with --jobs 1; estimated from 4 samples", out)
+    assert size, out
+    assert not (tmp_path / "ds").exists()
+    rc, out, err = run_main([*argv, "--quiet"], capsys)
+    assert rc == 0, err
+    made = [p for p in (tmp_path / "ds").rglob("*.png")]
+    assert len(made) == 12  # one PNG a sample, as the dry run said
+    written = sum(p.stat().st_size for p in (tmp_path / "ds").rglob("*") if p.is_file())
+    estimate = float(size.group(1)) * (1e3 if size.group(2) == "kB" else 1e6)
+    assert 0.5 * written < estimate < 2 * written, (estimate, written)
