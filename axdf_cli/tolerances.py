@@ -313,10 +313,6 @@ NPZ_MAX_ARRAY_BYTES = 256 * 1024 * 1024
 # of a very long pose costs a bounded amount; at 30 fps 600 samples of a 20 s take lie one frame
 # apart, and FRAMING_PAD (model/pose.py) covers what a limb moves between samples of a longer one.
 FRAMING_SAMPLE = 600
-# The muscles alone are framed (a close-up) when their extent over the pose is under this share
-# of the whole subject's (bones and joints): a deltoid on a whole arm and trunk fills the image
-# instead of showing as a blob; a body's worth of muscles frames the body they are shown on.
-FRAMING_CLOSEUP = 0.5
 # A ground plate (a mesh on a root without DOFs) is drawn under the subject at least this many
 # metres beyond its footprint each way, or this share of the subject's height if that is more.
 GROUND_MARGIN = 0.3

@@ -98,16 +98,19 @@ def _build(args) -> int:
     return 0
 
 
-def warn_ranges(ctx, quiet: bool) -> None:
+def warn_ranges(ctx, quiet: bool, fit: bool = True) -> None:
     """A warning per named motion that poses the data set's muscles outside a coordinate's
     range (as ``axdf run`` warns a run: every muscle the coordinate moves, path muscles too),
-    and a retargeted take's fit warnings (as ``axdf retarget`` prints them)."""
+    and a retargeted take's fit warnings (as ``axdf retarget`` prints them); with ``fit`` False
+    (a dry run, which does not fit takes) a take is left to the build."""
     from axdf_cli.dataset.spec import fit_warnings, load_motion, motion_frames
     from axdf_cli.model.pose import muscle_range_warnings
 
     if quiet:
         return
     for name, m in ctx.spec.motions.items():
+        if not fit and m.kind == "retarget":
+            continue
         for w in fit_warnings(ctx.spec, name):  # a retargeted take's, as axdf retarget prints them
             print(f"warning: motion {name} ({m.path}): {w}", file=sys.stderr)
         warns = muscle_range_warnings(load_motion(ctx.spec, name), motion_frames(ctx.spec, name), ctx.muscles)
@@ -136,13 +139,17 @@ def bulk_warning(res, ctx) -> str | None:
 
 def _dry_run(args, shard, policy) -> int:
     """Check every input and what OUT holds; print what would be made (counted, not listed:
-    bounded memory and time for any number of sequences). Writes nothing."""
+    bounded memory and time for any number of sequences) and its size: samples, frames, bytes
+    and time, both estimated from one small sequence made and timed in a temporary folder
+    (removed after). Motion-capture takes are read, not fitted (the build fits them: a minute
+    or more a take), so their fit's warnings come with the build. Writes nothing in OUT."""
+    from axdf_cli.dataset.engine import probe
     from axdf_cli.dataset.folder import check_dry
     from axdf_cli.dataset.spec import count
     from axdf_cli.dataset.worker import build_context
 
-    ctx = build_context(args.dataset, args.seed, policy, listed=False)
-    warn_ranges(ctx, args.quiet)
+    ctx = build_context(args.dataset, args.seed, policy, listed=False, fit=False)
+    warn_ranges(ctx, args.quiet, fit=False)
     out = Path(args.out or f"out/{ctx.spec.name}")
     check_dry(out, resume=args.resume, overwrite=args.overwrite)
     if args.engine == "ray":
@@ -150,12 +157,40 @@ def _dry_run(args, shard, policy) -> int:
 
         import_ray()
         check_address(args.address)
-    n_all, n_mine, frames = count(ctx.spec, shard)
+    n_all, n_mine, frames = count(ctx.spec, shard, fit=False)
     views = len(ctx.spec.views)
-    print(f"would make {n_mine} of {n_all} sequences ({frames * views} samples: frames x {views} "
-          f"view(s)) in {out}, {len(ctx.muscles)} muscles, {ctx.spec.format} meshes, "
+    samples = frames * views
+    takes = [n for n, m in ctx.spec.motions.items() if m.kind == "retarget"]
+    print(f"would make {n_mine} of {n_all} sequences ({frames} frames x {views} view(s) = {samples} samples) "
+          f"in {out}, {len(ctx.muscles)} muscles, {ctx.spec.format} meshes, "
           f"{'+'.join(ctx.spec.passes)} images {ctx.spec.render.size[0]}x{ctx.spec.render.size[1]}")
+    if takes and not args.quiet:
+        print(f"motion capture fitted by the build, not now: {', '.join(takes)} (its fit's warnings come then; "
+              "axdf retarget shows them alone)")
+    p = probe(ctx, args.dataset)
+    jobs = max(1, args.jobs)
+    seconds = samples * p.per_sample / min(jobs, max(1, n_mine))
+    print(f"size: about {_bytes(samples * p.bytes_per_sample)} and {_duration(seconds)} with --jobs {jobs}"
+          + (f" (plus fitting {len(takes)} take(s))" if takes else "")
+          + f"; estimated from {p.samples} samples made now: {p.per_sample:.2f} s and "
+          f"{_bytes(p.bytes_per_sample)} per sample (run {p.timing['run'] / max(1, p.samples):.2f} s, "
+          f"render {p.timing['render'] / max(1, p.samples):.2f} s a sample)")
     return 0
+
+
+def _bytes(n: float) -> str:
+    for unit, k in (("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if n >= k:
+            return f"{n / k:.1f} {unit}"
+    return f"{n:.0f} B"
+
+
+def _duration(s: float) -> str:
+    if s >= 3600:
+        return f"{s / 3600:.1f} h"
+    if s >= 60:
+        return f"{s / 60:.0f} min"
+    return f"{s:.0f} s"
 
 
 def summary_text(res, shard) -> str:

@@ -19,7 +19,7 @@ from pathlib import Path
 from axdf_cli.cli import progress
 from axdf_cli.cli.run import positive
 from axdf_cli.errors import InputError, Mark, UsageError
-from axdf_cli.specs.render import add_render_args, settings_from_args, settings_to_dict
+from axdf_cli.specs.render import add_render_args, check_pinned, settings_from_args, settings_to_dict
 from axdf_cli.fileio.runfolder import (RUN_COMMAND, command_of, CAMERA, FRAME_EXTENSIONS, MANIFEST_INTERVAL_S, Root, Session, Target,
                                 check_dirs, describe_differences, frame_relpath, gl_record, is_file_with, prepare,
                                 read_run_manifest, try_write_manifest, write_manifest)
@@ -77,6 +77,7 @@ def run(args: argparse.Namespace) -> int:
     all_frames = run_manifest.frames()
     chosen = all_frames if args.frames is None else _select(args.frames, all_frames)
     settings = settings_from_args(recorded_render_settings(run_manifest), args)
+    check_pinned(settings, chosen)
 
     # every check before the first byte: the folder, the frames there, the settings, EGL
     out = Path(args.out) if args.out else run_dir

@@ -130,7 +130,7 @@ def plan_from_args(args):
     from dataclasses import replace
 
     from axdf_cli import pipeline
-    from axdf_cli.specs.render import settings_from_args
+    from axdf_cli.specs.render import check_pinned, settings_from_args
 
     policy = RefPolicy.for_command([args.job, args.pose, getattr(args, "skin", None)] + list(args.muscles or []),
                                    args.allow_outside)
@@ -138,11 +138,14 @@ def plan_from_args(args):
     settings = pipeline.job_render_settings(job)
     if args.render is not None:
         settings = replace(settings, enabled=args.render)
-    return pipeline.plan_run(job, muscle_args=args.muscles, pose_arg=args.pose, out_arg=args.out,
+    plan = pipeline.plan_run(job, muscle_args=args.muscles, pose_arg=args.pose, out_arg=args.out,
                            fmt_arg=args.format, frames_arg=args.frames, render=settings_from_args(settings, args),
                            policy=policy, clamp_ranges=args.clamp_ranges or (job is not None and job.clamp_ranges),
                            stages={**job_switches(job), **stage_switches(args)},
                            mesh_files_arg=getattr(args, "mesh_files", None), skin_arg=getattr(args, "skin", None))
+    if plan.render is not None:
+        check_pinned(plan.render, plan.frames)
+    return plan
 
 
 def job_switches(job) -> dict:

@@ -17,6 +17,7 @@ from typing import Callable, Iterable
 
 from axdf_cli.fileio.atomic import write_bytes
 from axdf_cli.compare.files import list_files, nested, read_compared
+from axdf_cli.compare.parts import differing_parts, pixel_parts
 from axdf_cli.compare.result import ERROR, EXTRA, FAIL, MISSING, PASS, FileResult, Outcome, Report, read_side
 from axdf_cli.compare.thresholds import FileTol, Tolerances, as_dict
 from axdf_cli.errors import AxdfError, UsageError
@@ -125,7 +126,9 @@ def compare_paths(actual: Path | str, golden: Path | str, tolerances: Tolerances
         results.append(r)
         if progress is not None:
             progress(i + 1, len(pairs))
-    return Report(str(actual), str(golden), tuple(results), tuple(causes), time.perf_counter() - t0)
+    parts, bordering = differing_parts(results)
+    return Report(str(actual), str(golden), tuple(results), tuple(causes), time.perf_counter() - t0,
+                  tuple((k, tuple(v)) for k, v in parts.items()), tuple(bordering.items()))
 
 
 def compare_pair(rel: str, a: Path | None, g: Path | None, tolerances: Tolerances,
@@ -158,6 +161,7 @@ def compare_pair(rel: str, a: Path | None, g: Path | None, tolerances: Tolerance
             return FileResult(rel, kind, PASS, (), (), {"identical": True}, tol_dict,
                               seconds=time.perf_counter() - t0)
         out = _compare_kind(kind, a, g, ab, gb, t)
+        by_part = pixel_parts(out.mask, rel, roots) if out.mask is not None else None
         picture = None
         if out.picture is not None and diff_dir is not None:
             from axdf_cli.fileio.runfolder import check_dirs
@@ -175,7 +179,7 @@ def compare_pair(rel: str, a: Path | None, g: Path | None, tolerances: Tolerance
         raise
     except Exception as e:  # noqa: BLE001 - the last resort: this file's verdict, not the run's
         return error(f"could not be compared ({type(e).__name__}: {e}); please report this file")
-    metrics = {"identical": ab == gb} | out.metrics
+    metrics = {"identical": ab == gb} | out.metrics | ({"failing_pixels_by_part": by_part} if by_part else {})
     return FileResult(rel, kind, PASS if out.ok else FAIL, out.reasons, out.notes, metrics, tol_dict,
                       picture, time.perf_counter() - t0)
 

@@ -206,7 +206,7 @@ def compare_png(a_bytes: bytes, g_bytes: bytes, tol: PngTol) -> Outcome:
         metrics["flip_mean"] = flip_mean(_rgb(a), _rgb(g), srgb=True)  # the perceptual metric, for failures
         ratio = diff / tol.threshold if tol.threshold > 0 else np.where(diff > 0, np.inf, 0.0)
         picture = side_by_side(_display(a, False), _display(g, False), heat_map(ratio))
-    return Outcome(not reasons, tuple(reasons), metrics, picture=picture)
+    return Outcome(not reasons, tuple(reasons), metrics, picture=picture, mask=failing if reasons else None)
 
 
 def _judge(failing: np.ndarray, fail_fraction: float, tol_text: str, detail: str) -> list[str]:
@@ -311,7 +311,7 @@ def compare_exr(a_bytes: bytes, g_bytes: bytes, tol: ExrTol) -> Outcome:
     picture = None
     if reasons:
         picture = side_by_side(_exr_display(a, names), _exr_display(g, names), heat_map(ratio_max))
-    return Outcome(not reasons, tuple(reasons), metrics, tuple(notes), picture)
+    return Outcome(not reasons, tuple(reasons), metrics, tuple(notes), picture, failing if reasons else None)
 
 
 def _exr_display(ch: dict, names: list[str]) -> np.ndarray:

@@ -59,6 +59,8 @@ def to_json(report: Report, tolerance_file: str | None = None) -> str:
         "verdict": "same" if report.passed else "different",
         "counts": report.counts(),
         "likely_causes": list(report.likely_causes),
+        "differing_parts": {name: list(what) for name, what in report.parts},
+        "pixels_on_unchanged_parts": dict(report.bordering),
         "seconds": round(report.seconds, 3),
         "files": [
             {"path": f.path, "kind": f.kind, "verdict": f.verdict, "reasons": list(f.reasons),
@@ -143,6 +145,12 @@ def summary(report: Report, verbose: bool = False, quiet: bool = False) -> str:
                 if not f.failed:
                     lines.append(f"  ok      {f.path}  {_brief(f.metrics)}")
         lines += _per_kind(report)
+        if report.parts:
+            lines.append("parts that differ (muscles, bones, skin by name):")
+            lines += [f"  {name}: {'; '.join(what)}" for name, what in report.parts]
+        if report.bordering:
+            lines.append("  failing pixels also on parts whose meshes are the same (silhouettes they share): "
+                         + ", ".join(f"{name} {n}" for name, n in report.bordering))
         if report.likely_causes:
             lines.append("likely causes (the manifests' inputs or settings differ):")
             lines += [f"  {n}" for n in report.likely_causes[: SUMMARY_MAX_FILES if not verbose else None]]

@@ -27,6 +27,7 @@ class Outcome:
     metrics: dict = field(default_factory=dict)  # JSON-able numbers
     notes: tuple[str, ...] = ()  # worth saying, not a failure (manifest differences)
     picture: object = None  # (H, 3W, 3) uint8 actual | golden | heat map, for failing images
+    mask: object = None  # (H, W) bool the failing pixels of a failing image (whose parts they show)
 
 
 @dataclass(frozen=True)
@@ -53,6 +54,8 @@ class Report:
     files: tuple[FileResult, ...]
     likely_causes: tuple[str, ...] = ()  # manifest input/settings differences
     seconds: float = 0.0
+    parts: tuple[tuple[str, tuple[str, ...]], ...] = ()  # (part name, what of it differs): compare.parts
+    bordering: tuple[tuple[str, int], ...] = ()  # (part whose meshes are the same, failing pixels on it)
 
     @property
     def passed(self) -> bool:

@@ -13,6 +13,8 @@ from axdf_cli.compare.result import Outcome, Unreadable, read_side
 from axdf_cli.compare.thresholds import MAX_LISTED, NumTol
 
 # ----------------------------------------------------------------------------- CSV
+#: columns that name a row's part (stats.csv's muscle, bones.csv's bone): the report says whose rows differ
+NAME_COLUMNS = ("muscle", "bone", "part")
 
 
 def read_csv(data: bytes) -> list[list[str]]:
@@ -62,6 +64,7 @@ def compare_csv(a_bytes: bytes, g_bytes: bytes, tol: NumTol) -> Outcome:
     ca = list(zip(*a[1:])) if len(a) > 1 else [()] * len(header)
     cg = list(zip(*g[1:])) if len(g) > 1 else [()] * len(header)
     bad_cells: list[tuple[int, int, str]] = []  # (row, col, text), at most MAX_LISTED per column
+    bad_rows = np.zeros(len(g) - 1, bool)  # (R,) rows with a differing cell
     n_bad = 0
     max_abs: dict = {}
     for j, name in enumerate(header):
@@ -77,11 +80,16 @@ def compare_csv(a_bytes: bytes, g_bytes: bytes, tol: NumTol) -> Outcome:
         if numeric.any():
             max_abs[name] = float(d[numeric].max())
         bad = np.flatnonzero(over | text_diff)
+        bad_rows[bad] = True
         n_bad += len(bad)
         for i in bad[:MAX_LISTED]:
             bad_cells.append((int(i), j, f"{ca[j][i]} vs golden {cg[j][i]}"))
     metrics["max_abs_difference"] = max_abs
     metrics["differing_cells"] = n_bad
+    named = next((j for j, name in enumerate(header) if name in NAME_COLUMNS), None)
+    if named is not None and bad_rows.any():  # whose rows differ: {muscle or bone: rows}
+        names = [g[i + 1][named] for i in np.flatnonzero(bad_rows)]
+        metrics["differing_names"] = {n: names.count(n) for n in sorted(set(names))}
     reasons: list[str] = []
     if bad_cells:
         bad_cells.sort()

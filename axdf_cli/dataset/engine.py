@@ -15,7 +15,7 @@ import json
 import os
 import shutil
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from axdf_cli import runtime
@@ -393,3 +393,46 @@ def merge(out: Path | str) -> tuple[Path, int]:
                          f"({missing[0][0]}: {missing[0][1]})",
                          "finish every shard (rerun it with --resume), then merge")
     return idx, rows
+
+
+# ----------------------------------------------------------------------------- a dry run's estimate
+#: frames of the one sampled sequence a dry run makes and times (its samples: frames x views)
+PROBE_FRAMES = 2
+
+
+@dataclass
+class Probe:
+    """What one small sequence of a data set cost to make (``axdf dataset build --dry-run``)."""
+
+    samples: int  # samples made (PROBE_FRAMES x views)
+    seconds: float  # wall time of the whole probe build (process set-up, GL context included)
+    per_sample: float  # seconds per sample, summed over its phases (run, read, render, write)
+    bytes_per_sample: float  # bytes written per sample (meshes, images, labels, the sequence's files)
+    timing: dict  # the phases' seconds (Outcome.timing)
+
+
+def probe(ctx: wk.Context, path) -> Probe:
+    """Make and time one sampled sequence of PROBE_FRAMES frames (a uniform pose sample, the
+    data set's muscles, stages, views, render size and passes) in a temporary folder that is
+    removed after: what each sample of the data set costs on this machine (the inputs' own
+    motions are not made: a take's fit is not measured)."""
+    import tempfile
+
+    from axdf_cli.dataset.spec import Entry, expand_sequences
+
+    spec = replace(ctx.spec, entries=(Entry("uniform", 1, None, PROBE_FRAMES, None, {}),), shards=1)
+    small = replace(ctx, spec=spec, sequences=expand_sequences(spec))
+    small.dataset_json = (json.dumps(wk.dataset_dict(small), indent=1) + "\n").encode()
+    small.digest = hashlib.sha256(small.dataset_json).hexdigest()
+    tmp = Path(tempfile.mkdtemp(prefix="axdf-dry-run-"))
+    try:
+        t0 = time.perf_counter()
+        res = build(path, tmp / "probe", ctx=small, policy=ctx.spec.policy)
+        wall = time.perf_counter() - t0
+        seq = tmp / "probe" / small.sequences[0].name
+        size = sum(f.stat().st_size for f in seq.rglob("*") if f.is_file())
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    n = max(1, res.built_samples)
+    per = sum(v for k, v in res.timing.items() if k in ("run", "read", "render", "write")) / n
+    return Probe(res.built_samples, wall, per, size / n, dict(res.timing))

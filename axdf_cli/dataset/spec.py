@@ -9,6 +9,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+import numpy as np
+
 from axdf_cli.dataset.door import motion_pose, qpos_pose, retarget_pose
 from axdf_cli.pipeline.plan import load_muscle_specs
 from axdf_cli.render.passes import FRAME_WRITERS
@@ -149,9 +151,12 @@ class Sequence:
     n_frames: int
 
 
-def load_dataset(path: Path | str, seed: int | None = None, policy: RefPolicy | None = None) -> DatasetSpec:
+def load_dataset(path: Path | str, seed: int | None = None, policy: RefPolicy | None = None,
+                 fit: bool = True) -> DatasetSpec:
     """Read and check a dataset file (and the skeleton, muscles and motions it names).
-    ``seed`` overrides the file's seed (``--seed``); ``policy``: where referenced files may lie."""
+    ``seed`` overrides the file's seed (``--seed``); ``policy``: where referenced files may lie;
+    ``fit`` False (``--dry-run``): a motion-capture take is read and its map checked, but not
+    fitted (the fit takes a minute or more a take; the build makes it)."""
     path = Path(path)
     policy = policy or RefPolicy()
     doc = load_yaml(path)
@@ -213,7 +218,10 @@ def load_dataset(path: Path | str, seed: int | None = None, policy: RefPolicy | 
     # selections are checked first, before any take is fitted
     check_motion_frames(spec)
     for m in motions.values():
-        load_motion(spec, m.name)
+        if fit or m.kind != "retarget":
+            load_motion(spec, m.name)
+        else:
+            check_take(spec, m.name)
     return spec
 
 
@@ -473,15 +481,16 @@ def _parse_render(value, where: Mark):
 # ----------------------------------------------------------------------------- sequences
 
 
-def entry_frames(spec: DatasetSpec, k: int) -> int:
-    """Frames of each sequence of entry ``k``."""
+def entry_frames(spec: DatasetSpec, k: int, fit: bool = True) -> int:
+    """Frames of each sequence of entry ``k`` (``fit`` False: a take's counted, not fitted)."""
     e = spec.entries[k]
-    return e.frames if e.kind == "uniform" else len(motion_frames(spec, e.motion))
+    return e.frames if e.kind == "uniform" else len(motion_frames(spec, e.motion, fit))
 
 
-def count(spec: DatasetSpec, shard=(0, 1)) -> tuple[int, int, int]:
+def count(spec: DatasetSpec, shard=(0, 1), fit: bool = True) -> tuple[int, int, int]:
     """(sequences of the data set, sequences of shard K/N, their frames), counted without
-    listing them: ``--dry-run`` stays small and fast for any number of sequences."""
+    listing them: ``--dry-run`` stays small and fast for any number of sequences (and with
+    ``fit`` False, without fitting a motion-capture take: its frames are the file's)."""
     k, n = shard
     start = total = mine = frames = 0
     for i, e in enumerate(spec.entries):
@@ -489,7 +498,7 @@ def count(spec: DatasetSpec, shard=(0, 1)) -> tuple[int, int, int]:
         first = start + (k - start) % n
         m = 0 if first >= start + e.count else (start + e.count - 1 - first) // n + 1
         mine += m
-        frames += m * entry_frames(spec, i)
+        frames += m * entry_frames(spec, i, fit) if m else 0
         start += e.count
         total += e.count
     return total, mine, frames
@@ -512,6 +521,7 @@ def expand_sequences(spec: DatasetSpec) -> list[Sequence]:
 
 _MOTION_CACHE: dict = {}  # motions by file, content and skeleton (a worker loads each once)
 _FIT_WARNINGS: dict = {}  # a retargeted motion's fit warnings, by the same key
+_TAKE_FRAMES: dict = {}  # a take's frame count (read, not fitted), by the same key
 
 
 def _motion_key(spec: DatasetSpec, name: str) -> tuple:
@@ -570,11 +580,37 @@ def check_motion_frames(spec: DatasetSpec) -> None:
             parse_frames(m.frames, m.mark, 0, max(0, n - 1))
 
 
-def motion_frames(spec: DatasetSpec, name: str):
-    """The output frames of a named motion: its ``frames:`` selection, else all of them."""
+def take_frames(spec: DatasetSpec, name: str) -> int:
+    """How many frames the named motion-capture take gives (its file read at its ``step``,
+    not fitted): a fitted take has one pose frame per frame read."""
+    key = _motion_key(spec, name)
+    if key not in _TAKE_FRAMES:
+        from axdf_cli.importers.mocap import read_motion
+
+        m = spec.motions[name]
+        _TAKE_FRAMES[key] = len(read_motion(Path(m.path), scale=m.scale, step=m.step).positions)
+    return _TAKE_FRAMES[key]
+
+
+def check_take(spec: DatasetSpec, name: str) -> None:
+    """A motion-capture take checked without fitting it: its file reads, its map reads and
+    names the data set's skeleton's bones and coordinates."""
+    from axdf_cli.tools.retarget import load_map
+
+    m = spec.motions[name]
+    load_map(Path(m.map), load_skeleton(spec.skeleton_path, spec.policy), spec.policy)
+    take_frames(spec, name)
+
+
+def motion_frames(spec: DatasetSpec, name: str, fit: bool = True):
+    """The output frames of a named motion: its ``frames:`` selection, else all of them
+    (``fit`` False: a motion-capture take's from its file, not fitted)."""
     from axdf_cli.model.pose import parse_frames
 
     m = spec.motions[name]
+    if not fit and m.kind == "retarget":
+        n = take_frames(spec, name)
+        return np.arange(n) if m.frames is None else parse_frames(m.frames, m.mark, 0, max(0, n - 1))
     pose = load_motion(spec, name)
     if m.frames is None:
         return pose.frames

@@ -70,14 +70,16 @@ class Context:
         return [m.name for m in self.muscles]
 
 
-def build_context(path: Path | str, seed: int | None = None, policy=None, listed: bool = True) -> Context:
+def build_context(path: Path | str, seed: int | None = None, policy=None, listed: bool = True,
+                  fit: bool = True) -> Context:
     """Load and check everything (InputError on bad input); build the muscle models once.
     ``policy``: the command's :class:`~axdf_cli.specs.RefPolicy` (where referenced files may
     lie). ``listed`` False: the sequences are not listed and dataset.json not made (``--dry-run``:
-    memory and time independent of the number of sequences; :func:`spec.count` counts them)."""
+    memory and time independent of the number of sequences; :func:`spec.count` counts them);
+    ``fit`` False: motion-capture takes are read, not fitted (:func:`spec.load_dataset`)."""
     from axdf_cli.render.scene import Scene, SceneBone, SceneMuscle
 
-    spec = load_dataset(path, seed, policy)
+    spec = load_dataset(path, seed, policy, fit=fit)
     skel = load_skeleton(spec.skeleton_path, spec.policy)
     muscles = load_muscle_specs(spec.muscle_files)
     models = door.build_models(muscles, skel)

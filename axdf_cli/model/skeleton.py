@@ -271,7 +271,13 @@ class Skeleton:
         draws), else -1: for the root, for a bone a coordinate translates directly (a
         floating base such as a BVH's hips, whose "segment" to the world origin is no bone),
         and for a child of a root named ``world`` without a mesh (MuJoCo's world body, as
-        ``axdf import mjcf`` writes it: a body fixed in space is not a segment from the origin)."""
+        ``axdf import mjcf`` writes it: a body fixed in space is not a segment from the origin);
+        and for every bone of a skeleton whose bones carry meshes: there a bone without one is a
+        frame, not a segment (MuJoCo's attachment sites and phantom bodies, myoarm's
+        ``Arm_attachment`` 37 cm up the spine from the torso's origin), drawn as nothing, as
+        MuJoCo and OpenSim draw a body without geometry. Sticks are for mesh-less skeletons."""
+        if any(b.mesh for b in self.bones):
+            return [-1] * len(self.bones)
         out = []
         for bone in self.bones:
             free = any(d.type == "translation" and d.coord is not None and d.function is None for d in bone.dofs)

@@ -183,6 +183,8 @@ def sequence_cameras(scene, settings: RenderSettings) -> list[list[Camera]]:
     """Cameras for every frame of ``scene.frames``: ``[frame index][panel]``; fixed unless
     ``orbit`` is set (the angle counts from ``scene.first_frame``, the pose's first frame, so
     it too is the same for any subset of frames)."""
+    if settings.pinned is not None:
+        return pinned_cameras(settings.pinned, scene.frames)
     W, H = settings.size
     frames = [int(f) for f in scene.frames]
     first = getattr(scene, "first_frame", None)
@@ -229,6 +231,21 @@ def sequence_cameras(scene, settings: RenderSettings) -> list[list[Camera]]:
             near, far = _clip_range(M, points + o)
             panel.append(Camera(v, intrinsics(W, H, fov, i * W), M, (i * W, 0, W, H), near, far))
         out.append(panel)
+    return out
+
+
+def pinned_cameras(pinned, frames) -> list[list[Camera]]:
+    """The cameras of a camera file (``--camera``: :class:`~axdf_cli.specs.render.PinnedCameras`)
+    for each of ``frames``, exactly as the file holds them (each frame's own; a fixed camera's
+    for any frame). A frame the file has no camera for is a ValueError (checked earlier, as an
+    input error, by :func:`~axdf_cli.specs.render.check_pinned`)."""
+    out = []
+    for f in frames:
+        views = pinned.views_for(int(f))
+        if views is None:
+            raise ValueError(f"{pinned.source} has no camera for frame {int(f)}")
+        out.append([Camera(v.view, np.array(v.K, np.float64), np.array(v.world_to_camera, np.float64),
+                           tuple(v.viewport), float(v.near), float(v.far)) for v in views])
     return out
 
 

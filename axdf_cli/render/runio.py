@@ -359,6 +359,8 @@ def recorded_render_settings(m: Manifest) -> RenderSettings:
     not rendered), enabled."""
     m.get(("settings",), dict, "an object of the run's settings", required=False)
     raw = m.get(("settings", "render"), (dict, type(None)), "the render settings or null", required=False)
+    if raw is not None and "camera_file" in raw:  # a run pinned by --camera: rendered again, it is framed
+        raw = {k: v for k, v in raw.items() if k != "camera_file"}
     return replace(parse_render_settings(raw, m.mark(("settings", "render"))) if raw is not None
                    else RenderSettings(), enabled=True)
 

@@ -37,6 +37,7 @@ value is reported the same way (``--fov: fov is 200; fov must be in [1, 170]``).
 from __future__ import annotations
 
 import argparse
+import math
 import re
 from dataclasses import dataclass, field, replace
 
@@ -93,10 +94,118 @@ class RenderSettings:
     device: int | None = None  # EGL device index; None = default
     skin: str = "see-through"  # one of SKIN_VIEWS; only a run with a skin has one to draw
     egl_library: str | None = None  # command line only (--egl-library); None = find libEGL
+    pinned: "PinnedCameras | None" = None  # command line only (--camera FILE): cameras read from a camera.json
 
     @property
     def transparent(self) -> bool:
         return self.background[3] < 1.0
+
+
+@dataclass(frozen=True)
+class PinnedView:
+    """One panel's camera as a ``camera.json`` holds it (numbers as written there)."""
+
+    view: str
+    K: tuple  # 3 x 3 rows, pixels
+    world_to_camera: tuple  # 4 x 4 rows
+    viewport: tuple[int, int, int, int]
+    near: float
+    far: float
+
+
+@dataclass(frozen=True)
+class PinnedCameras:
+    """``axdf run --camera FILE``: the cameras of an earlier run's ``camera.json``, reused as
+    they are (a golden check renders through the golden's own cameras, so a change to one
+    muscle moves only that muscle's pixels, never the automatic framing of the rest)."""
+
+    source: str  # the file, as given
+    sha256: str  # of its bytes (recorded in the manifest)
+    width: int  # whole image (every panel), pixels
+    height: int
+    frames: tuple[tuple[int, tuple[PinnedView, ...]], ...]  # (frame, one camera per panel)
+
+    @property
+    def fixed(self) -> bool:
+        """Every frame holds the same cameras (a fixed camera: usable for any frame)."""
+        return len({views for _, views in self.frames}) == 1
+
+    def views_for(self, frame: int) -> tuple[PinnedView, ...] | None:
+        """The cameras of ``frame``: its own, or a fixed camera's; None when the file has none."""
+        for f, views in self.frames:
+            if f == int(frame):
+                return views
+        return self.frames[0][1] if self.fixed else None
+
+
+def _numbers(v, shape: tuple[int, ...]) -> tuple | None:
+    """``v`` as nested tuples of finite floats of ``shape``, or None."""
+    if len(shape) == 0:
+        ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+        return float(v) if ok else None
+    if not isinstance(v, list) or len(v) != shape[0]:
+        return None
+    out = tuple(_numbers(x, shape[1:]) for x in v)
+    return None if any(x is None for x in out) else out
+
+
+def read_pinned_cameras(path: str) -> PinnedCameras:
+    """A ``camera.json`` (as ``axdf run`` writes it) read for ``--camera``; anything else is an
+    InputError naming the file and what is wrong."""
+    import hashlib
+    import json
+
+    allowed = "a camera.json written by axdf run or axdf render (a golden run's own)"
+    try:
+        data = open(path, "rb").read()
+    except OSError as e:
+        raise InputError(Mark(path), f"cannot read the camera file ({e.strerror or e})", allowed) from None
+    try:
+        doc = json.loads(data)
+    except (ValueError, UnicodeDecodeError) as e:
+        raise InputError(Mark(path), f"is not JSON ({e})", allowed) from None
+    if not isinstance(doc, dict) or not isinstance(doc.get("frames"), list) or not doc["frames"]:
+        raise InputError(Mark(path), "has no 'frames' list of cameras", allowed)
+    w, h = doc.get("width"), doc.get("height")
+    if not all(isinstance(x, int) and not isinstance(x, bool) and x > 0 for x in (w, h)):
+        raise InputError(Mark(path), "has no positive whole 'width' and 'height'", allowed)
+    frames = []
+    for i, fr in enumerate(doc["frames"]):
+        cams = fr.get("cameras") if isinstance(fr, dict) else None
+        if not isinstance(fr, dict) or not isinstance(fr.get("frame"), int) or not isinstance(cams, list) or not cams:
+            raise InputError(Mark(path), f"frames[{i}] is not {{frame, cameras: [...]}}", allowed)
+        views = []
+        for j, c in enumerate(cams):
+            c = c if isinstance(c, dict) else {}
+            K, M = _numbers(c.get("K"), (3, 3)), _numbers(c.get("world_to_camera"), (4, 4))
+            vp, near, far = _numbers(c.get("viewport"), (4,)), _numbers(c.get("near"), ()), _numbers(c.get("far"), ())
+            if None in (K, M, vp, near, far) or not isinstance(c.get("view"), str) or not 0 < near < far:
+                raise InputError(Mark(path), f"frames[{i}].cameras[{j}] is not a camera "
+                                 "{view, K 3x3, world_to_camera 4x4, viewport [x, y, w, h], 0 < near < far}", allowed)
+            views.append(PinnedView(c["view"], K, M, tuple(int(x) for x in vp), near, far))
+        frames.append((int(fr["frame"]), tuple(views)))
+    if len({len(v) for _, v in frames}) != 1:
+        raise InputError(Mark(path), "its frames hold different numbers of panels", allowed)
+    return PinnedCameras(str(path), hashlib.sha256(data).hexdigest(), w, h, tuple(frames))
+
+
+def check_pinned(s: RenderSettings, frames) -> None:
+    """A run pinned to a camera file (``--camera``) renders at that file's size and every one
+    of its ``frames`` has a camera there (its own, or a fixed camera's); else an InputError."""
+    p = s.pinned
+    if p is None or not s.enabled:
+        return
+    panels = len(p.frames[0][1])
+    W, H = s.size
+    if (W * panels, H) != (p.width, p.height):
+        raise InputError(Mark(p.source), f"its cameras are for {p.width}x{p.height} images ({panels} panel(s)), "
+                         f"the run renders {W * panels}x{H}", f"--size {p.width // panels}x{p.height}, "
+                         "or the camera file of a run at this size")
+    missing = [int(f) for f in frames if p.views_for(int(f)) is None]
+    if missing:
+        raise InputError(Mark(p.source), f"has no camera for frame {missing[0]} ({len(missing)} frame(s) missing) "
+                         "and its camera moves between frames", "the frames it holds: "
+                         + ",".join(str(f) for f, _ in p.frames[:12]) + (" ..." if len(p.frames) > 12 else ""))
 
 
 # ----------------------------------------------------------------------------- one parser per setting
@@ -272,6 +381,9 @@ def add_render_args(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--camera-offset", metavar="X,Y,Z",
                    help="with --camera-target bone:NAME: the camera moves with the bone at this offset (world, m)")
     g.add_argument("--camera-up", metavar="X,Y,Z", help="explicit camera's up direction (default 0,0,1)")
+    g.add_argument("--camera", metavar="CAMERA.json", dest="camera_file",
+                   help="render through the cameras of this camera.json (an earlier run's, e.g. a golden's), "
+                        "frame by frame, instead of framing the subject (docs/COMPARE.md)")
     g.add_argument("--orbit", metavar="DEG", help=f"turntable: degrees per frame about +Z ({rng('orbit')})")
     g.add_argument("--wireframe", action=argparse.BooleanOptionalAction, default=None,
                    help="edge overlay")
@@ -346,6 +458,8 @@ def settings_from_args(settings: RenderSettings, args: argparse.Namespace) -> Re
         s = replace(s, device=parse_device(v, w))
     if getattr(args, "egl_library", None) is not None:
         s = replace(s, egl_library=args.egl_library)
+    if getattr(args, "camera_file", None) is not None:
+        s = replace(s, pinned=read_pinned_cameras(args.camera_file))
     return s
 
 
@@ -385,6 +499,8 @@ def settings_to_dict(s: RenderSettings) -> dict:
          "supersample": s.supersample}
     if s.skin != RenderSettings.skin:  # (the default is not written: manifests of runs before skins read the same)
         d["skin"] = s.skin
+    if s.pinned is not None:  # (not re-read: a render of the run frames it by its recorded framing)
+        d["camera_file"] = {"sha256": s.pinned.sha256}
     if s.camera is not None:
         c = s.camera
         d["camera"] = {k: v for k, v in (
