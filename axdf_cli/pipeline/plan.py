@@ -171,7 +171,10 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
     if skin is not None:
         from axdf_cli.pipeline.skin_stage import SkinStage
 
-        built = built + (SkinStage(skin),)
+        from axdf_cli.pipeline.stages import stage_default
+
+        # --no-jiggle (a job's jiggle: false) stills the skin's jiggle as well as the muscles'
+        built = built + (SkinStage(skin, jiggle=(stages or {}).get("jiggle", stage_default("jiggle"))),)
         for s in skin.files:
             inputs[display_path(Path(s))] = atomic.sha256_file(s)
     if any(st.name == "jiggle" for st in built):
