@@ -167,12 +167,12 @@ def check_rest_mesh(v: np.ndarray, faces: np.ndarray, where: Mark, name: str) ->
     c = np.asarray(v, np.float64) - np.asarray(v, np.float64).mean(axis=0)
     p, q, r = c[faces[:, 0]], c[faces[:, 1]], c[faces[:, 2]]
     volume = float(np.einsum("ij,ij->", p, np.cross(q, r)) / 6.0)  # a . (b x c) / 6 per triangle
-    if volume <= 0.0:
+    if abs(volume) < tol.SKIN_MIN_FILL * extent ** 3:
+        raise InputError(where, f"{name} encloses {abs(volume):.4g} m^3, under {tol.SKIN_MIN_FILL:g} of the cube of "
+                         f"its {extent:.3g} m extent: a flat or folded surface", allowed)
+    if volume < 0.0:
         raise InputError(where, f"{name} is inside out (its volume is {volume:.4g} m^3: its triangles are wound "
                          "inward)", allowed)
-    if volume < tol.SKIN_MIN_FILL * extent ** 3:
-        raise InputError(where, f"{name} encloses {volume:.4g} m^3, under {tol.SKIN_MIN_FILL:g} of the cube of its "
-                         f"{extent:.3g} m extent: a flat or folded surface", allowed)
     return volume
 
 
