@@ -355,6 +355,14 @@ SKIN_SPREAD_OUT = 3.0
 # A skin's jiggle (its file's `jiggle:`) remembers at most this many seconds of the bones' motion:
 # a spring whose ring takes longer to die away to a thousandth is cut there.
 SKIN_JIGGLE_MEMORY = 2.0
+# ...and samples that memory at most SKIN_JIGGLE_TAPS times (at the pose's frames while they
+# are fewer, else evenly between them: the pose is a function of time). The memory is then
+# bounded by the output, not by the pose's fps: a 100,000 fps pose asked 200,000 samples of
+# the skeleton per frame (29 s and 1.4 GB for two frames). The lightest damping allowed (0.05)
+# rings out to a thousandth in 22 periods (ln 1000 / (2 pi 0.05)), so 512 samples keep at least
+# 23 per period of the ring at any frequency: the lag changes by under 1% (measured against the
+# full filter in tests/test_skin_unit.py).
+SKIN_JIGGLE_TAPS = 512
 # Relaxation after the push: passes of neighbour averaging of the offsets, each held at least
 # at its push (sticky); about one edge (~1-2 cm) of spread per pass, so a push becomes a smooth
 # bulge, not a spike. Each pass also widens the bulges: on the walk 6 passes gain the skin
@@ -369,3 +377,27 @@ SKIN_RELAX_ITERATIONS = 3
 SKIN_VOLUME_MAX_SHIFT = 0.008
 SKIN_VOLUME_TAPER = 2
 SKIN_VOLUME_ROUNDS = 2
+# A skin file's rest mesh (axdf_cli/specs/skin.py) is a body: its largest extent (bounding box)
+# at least SKIN_MIN_EXTENT metres (a hand-sized figure; a mesh collapsed to a point has 0) and
+# at most SKIN_MAX_EXTENT (a vertex at 1e30 makes it astronomic), and its volume at least
+# SKIN_MIN_FILL of its extent cubed (a person fills ~1.3% of the cube of its height; a mesh
+# folded flat, closed but two-sided, has none).
+SKIN_MIN_EXTENT = 0.05
+SKIN_MAX_EXTENT = 10.0
+SKIN_MIN_FILL = 1e-3
+# A skin's weights name at most SKIN_MAX_BONES bones (more than any skeleton axdf reads: the
+# densest, myobody, has under 100) and names of at most SKIN_MAX_NAME characters: checked from
+# the NPZ's headers before anything is read (112 kB of NPZ can name 3 million bones, whose
+# dense weights would take hundreds of GB).
+SKIN_MAX_BONES = 1024
+SKIN_MAX_NAME = 256
+# A skin is worn only on a skeleton whose fitted segments (docs/SKIN.md: thigh, shank, foot,
+# trunk, arms, the skin file's `segments:`) are within SKIN_SEGMENT_TOLERANCE of the lengths it
+# was fitted to (or, for a skin file without `segments:`, whose estimated stature is): 5% of a
+# 40 cm thigh moves the knee's skin 2 cm, more than the fat over it.
+SKIN_SEGMENT_TOLERANCE = 0.05
+# A skin file without `segments:` (written before axdf skin recorded them, as skins/gait2392):
+# the skeleton's joints the skin wears lie inside its rest mesh, or at most SKIN_FIT_OUTSIDE
+# metres outside it (an unpushed myobody fit leaves its heels 5 mm and its head's origin 9 mm
+# out; gait2392 with 1.6 times longer shanks puts its feet's joints 23 cm out).
+SKIN_FIT_OUTSIDE = 0.03

@@ -88,7 +88,8 @@ def run(args) -> int:
     report["summary"] = (f"Stature {fit.stature:.3f} m (estimated), body {fit.height:.3f} m ({100 * off:+.1f}%).")
     for name, data in sk.skin_files(fit, skel, region, fat, report).items():
         out.add(Path(args.out) / name, data, "output")
-    out.add(Path(args.out) / REPORT, (json.dumps(report, indent=1, sort_keys=True) + "\n").encode(), "output")
+    text = json.dumps(report, indent=1, sort_keys=True, allow_nan=False)  # (the fit is finite: fit_body)
+    out.add(Path(args.out) / REPORT, (text + "\n").encode(), "output")
     write_outputs(out, inputs=inputs, overwrite=args.overwrite, input_dirs=[args.muscles] if args.muscles else [])
     if not args.quiet:
         print(f"skin for {skel.name} ({fit.family}): body {fit.height:.3f} m, skeleton's stature {fit.stature:.3f} m "

@@ -94,7 +94,10 @@ def build_context(path: Path | str, seed: int | None = None, policy=None, listed
 
         skin = load_skin(spec.skin, skel, spec.policy)
         srcs += list(skin.files)
-        skin_stage, scene_skin = SkinStage(skin), SceneSkin(skin.faces, SKIN_COLOR)
+        from axdf_cli.pipeline.stages import stage_default
+
+        skin_stage = SkinStage(skin, jiggle=dict(spec.stages).get("jiggle", stage_default("jiggle")))
+        scene_skin = SceneSkin(skin.faces, SKIN_COLOR)
         face_part = face_parts(skin.faces, skin.weights)
     inputs = {display_path(Path(s)): atomic.sha256_file(s) for s in srcs}
     motion_inputs = {m.name: {display_path(Path(p)): atomic.sha256_file(p) for p in (m.path, m.map) if p}

@@ -546,6 +546,25 @@ def prepare(out: Path, *, resume: bool = False, overwrite: bool = False, dirs=()
     return Target(out, previous, overwrite, tuple(dirs))
 
 
+def check_inputs_outside(target: Target, inputs) -> None:
+    """No input of a run is a file the run would replace (reads only): an input whose real path
+    lies in the output folder and that its earlier manifest lists, or below a folder the run
+    writes into (``target.dirs``), is refused, naming the file (``--skin OUT/meshes/skin/skin.yaml``
+    whose mesh is the run's own ``skin_0000.ply`` changed its own rest mesh on every run)."""
+    real_out = os.path.realpath(target.out)
+    listed = set(target.previous.files()) if target.previous is not None else set()
+    for i in inputs:
+        rel = os.path.relpath(os.path.realpath(i), real_out)
+        if rel == os.curdir or rel == os.pardir or rel.startswith(os.pardir + os.sep):
+            continue
+        rel = PurePosixPath(Path(rel).as_posix())
+        if str(rel) in listed or str(rel) == MANIFEST or any(
+                PurePosixPath(d) in rel.parents for d in (*target.dirs, *LAYOUT_DIRS)):
+            raise InputError(Mark(str(i)), f"this input lies in the output folder {target.out}, where the run "
+                             f"would replace it ({rel})",
+                             "inputs outside what a run writes: copy it elsewhere, or choose another --out")
+
+
 def remove_stale(out: Path, dirs=()) -> None:
     """Temporaries and staging folders in OUT's layout (and in ``dirs`` below it: the folders
     of a run's formats) whose process is gone (never a live one's, never below a link)."""

@@ -342,6 +342,7 @@ def check_output(plan: RunPlan, *, resume: bool = False, overwrite: bool = False
     """The output folder's checks (reads only): what OUT holds, and for --resume that it is
     the same run."""
     target = runfolder.prepare(plan.out, resume=resume, overwrite=overwrite, dirs=run_dirs(plan))
+    runfolder.check_inputs_outside(target, plan.inputs)
     if resume and target.previous is not None:
         check_resume(plan, target.previous)
     return target

@@ -178,7 +178,10 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
     if skin is not None:
         from axdf_cli.pipeline.skin_stage import SkinStage
 
-        built = built + (SkinStage(skin),)
+        from axdf_cli.pipeline.stages import stage_default
+
+        # --no-jiggle (a job's jiggle: false) stills the skin's jiggle as well as the muscles'
+        built = built + (SkinStage(skin, jiggle=(stages or {}).get("jiggle", stage_default("jiggle"))),)
         srcs += [str(s) for s in skin.files]
     srcs = [s for s in srcs if Path(s).is_file()]
     base = input_base(srcs)

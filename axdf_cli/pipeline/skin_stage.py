@@ -100,7 +100,7 @@ class SkinModel:
     n_muscle_vertices: int
     rest_volume: float
     room: np.ndarray  # (V,) how far each skin vertex may come in from where it is skinned (m)
-    jiggle: tuple | None = None  # (coefficients (J,), each vertex's gain (V,), the pose) with a jiggle
+    jiggle: tuple | None = None  # (coefficients (J,), their step in frames, each vertex's gain (V,), the pose)
 
 
 def ring(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -173,42 +173,58 @@ def build(skin, plan) -> SkinModel:
     return model
 
 
+def jiggle_span(jiggle, fps: float) -> tuple[float, float]:
+    """How far back the skin's jiggle remembers the bones (seconds: until the spring's response
+    has decayed to a thousandth, at most ``tol.SKIN_JIGGLE_MEMORY``) and the step (in frames)
+    it samples that span at: every frame while that is at most ``tol.SKIN_JIGGLE_TAPS``
+    samples, else ``tol.SKIN_JIGGLE_TAPS`` samples evenly over it (the pose sampled between its
+    frames), so that the filter's work and memory follow the output, not the pose's fps."""
+    w = 2.0 * np.pi * jiggle.frequency
+    span = min(np.log(1000.0) / (jiggle.damping_ratio * w), tol.SKIN_JIGGLE_MEMORY)
+    n = int(np.ceil(span * fps)) + 1
+    return span, (1.0 if n <= tol.SKIN_JIGGLE_TAPS else span * fps / (tol.SKIN_JIGGLE_TAPS - 1))
+
+
 def jiggle_coefficients(jiggle, fps: float) -> np.ndarray:
     """The skin's jiggle as a filter over the bones' past: a vertex on a damped spring (natural
     frequency ``f``, damping ratio ``z``) behind where skinning puts it, ``x``, lags by ``e`` with
     ``e'' + 2 z w e' + w^2 e = -x''``: the convolution of ``-x''`` with the spring's impulse
     response ``exp(-z w t) sin(w_d t) / w_d``. ``x`` is linear in the bones' transforms ``M``
-    (each relative to rest), and so is ``e``: ``e(f) = blend(sum_j c[j] M(f - j))`` with
-    ``c`` the response sampled at the frames and convolved with the central second difference
-    ``[1, -2, 1] / dt^2``. The response is cut after it has decayed to a thousandth, or after
-    ``tol.SKIN_JIGGLE_MEMORY`` seconds. Every frame is computed from the pose alone (frames
-    before the pose's first hold its first): the same bytes whichever frames a process
-    computes. Sum of ``c``: 0, so a skeleton at rest never jiggles."""
+    (each relative to rest), and so is ``e``: ``e(f) = blend(sum_j c[j] M(f - j h))`` with
+    ``c`` the response sampled every ``h`` frames (:func:`jiggle_span`: 1, or more for a pose of
+    very many frames per second) and convolved with the central second difference
+    ``[1, -2, 1] / dt^2``, ``dt = h / fps``. The response is cut after it has decayed to a
+    thousandth, or after ``tol.SKIN_JIGGLE_MEMORY`` seconds. Every frame is computed from the
+    pose alone (frames before the pose's first hold its first): the same bytes whichever frames
+    a process computes. Sum of ``c``: 0, so a skeleton at rest never jiggles."""
     w = 2.0 * np.pi * jiggle.frequency
     z = jiggle.damping_ratio
     wd = w * np.sqrt(1.0 - z * z)
-    dt = 1.0 / fps
-    n = int(np.ceil(min(np.log(1000.0) / (z * w), tol.SKIN_JIGGLE_MEMORY) / dt)) + 1
+    span, step = jiggle_span(jiggle, fps)
+    dt = step / fps
+    n = int(np.ceil(span / dt)) + 1
     t = np.arange(n) * dt
     response = np.exp(-z * w * t) * np.sin(wd * t) / wd * dt  # (the integral's dt)
-    # x'' at frame f - k by the central difference: the response is 0 at k = 0, so x(f + 1)'s
+    # x'' at frame f - k h by the central difference: the response is 0 at k = 0, so x(f + h)'s
     # coefficient is 0 and the filter needs no frame after f
     return (-np.convolve(response, [1.0, -2.0, 1.0]) / (dt * dt))[1:]
 
 
 def jiggle_lag(model: SkinModel, frames: np.ndarray) -> np.ndarray:
     """Each skin vertex's lag at ``frames`` (C, V, 3): :func:`jiggle_coefficients` applied to
-    the bones' transforms at the frames before each (the pose sampled there)."""
+    the bones' transforms at the samples before each (the pose sampled there), a frame at a
+    time (at most ``tol.SKIN_JIGGLE_TAPS + 1`` skeletons in memory)."""
     from axdf_cli.model.pose import sample_coordinates
 
-    coef, gain, pose = model.jiggle
-    back = np.asarray(frames, np.float64)[:, None] - np.arange(len(coef))  # (C, J)
-    world = forward_kinematics(pose.skeleton, sample_coordinates(pose, back.ravel()))[:, model.bones]
-    rel = (world @ model.inv_rest)[:, :, :3, :].reshape(len(frames), len(coef), len(model.bones), 3, 4)
-    mix = np.ascontiguousarray(np.einsum("j,cjkab->ckab", coef, rel))
+    coef, step, gain, pose = model.jiggle
     out = np.empty((len(frames), len(model.rest), 3))
-    for i in range(len(frames)):
-        kernels.blend(model.weights, mix[i], model.rest, out[i])
+    back = np.arange(len(coef)) * step  # (J,) frames back
+    for i, f in enumerate(np.asarray(frames, np.float64)):
+        world = forward_kinematics(pose.skeleton, sample_coordinates(pose, f - back))[:, model.bones]
+        rel = (world @ model.inv_rest)[:, :, :3, :]  # (J, K, 3, 4)
+        # mix[k,a,b] = sum_j coef[j] rel[j,k,a,b]
+        mix = np.ascontiguousarray(np.einsum("j,jkab->kab", coef, rel))
+        kernels.blend(model.weights, mix, model.rest, out[i])
     return out * gain[:, None]
 
 
@@ -298,25 +314,32 @@ class SkinStage:
     name = "skin"
     scope = Scope.FRAME
 
-    def __init__(self, skin):
+    def __init__(self, skin, jiggle: bool = True):
         self.skin = skin
+        self.jiggle = jiggle  # False: the run's --no-jiggle (a job's jiggle: false) stills the skin too
 
     @property
     def settings(self) -> dict:
-        return {"skin": self.skin.name, "skeleton": self.skin.skeleton, "vertices": int(len(self.skin.vertices)),
-                "reach": tol.SKIN_REACH, "candidates": tol.SKIN_CANDIDATES,
-                "soft_height": tol.SKIN_SOFT_HEIGHT, "max_height": tol.SKIN_MAX_HEIGHT,
-                "spread": [tol.SKIN_SPREAD_IN, tol.SKIN_SPREAD_OUT], "jiggle_memory": tol.SKIN_JIGGLE_MEMORY,
-                "relax": tol.SKIN_RELAX_ITERATIONS,
-                "volume": {"max_shift": tol.SKIN_VOLUME_MAX_SHIFT, "taper": tol.SKIN_VOLUME_TAPER,
-                           "rounds": tol.SKIN_VOLUME_ROUNDS}}
+        out = {"skin": self.skin.name, "skeleton": self.skin.skeleton, "vertices": int(len(self.skin.vertices)),
+               "reach": tol.SKIN_REACH, "candidates": tol.SKIN_CANDIDATES,
+               "soft_height": tol.SKIN_SOFT_HEIGHT, "max_height": tol.SKIN_MAX_HEIGHT,
+               "spread": [tol.SKIN_SPREAD_IN, tol.SKIN_SPREAD_OUT], "jiggle_memory": tol.SKIN_JIGGLE_MEMORY,
+               "relax": tol.SKIN_RELAX_ITERATIONS,
+               "volume": {"max_shift": tol.SKIN_VOLUME_MAX_SHIFT, "taper": tol.SKIN_VOLUME_TAPER,
+                          "rounds": tol.SKIN_VOLUME_ROUNDS}}
+        j = self.skin.jiggle
+        if j is not None:  # (a skin without one keeps its runs' settings as they were)
+            out["jiggle"] = {"frequency": j.frequency, "damping_ratio": j.damping_ratio, "amount": j.amount,
+                             "taps": tol.SKIN_JIGGLE_TAPS} if self.jiggle else False
+        return out
 
     def start(self, plan) -> SkinModel:
         model = build(self.skin, plan)
-        j = self.skin.jiggle
+        j = self.skin.jiggle if self.jiggle else None
         if j is not None:
             gain = j.amount * self.skin.fat / max(float(self.skin.fat.max(initial=0.0)), 1e-12)
-            model.jiggle = (jiggle_coefficients(j, plan.pose.fps), gain, plan.pose)
+            model.jiggle = (jiggle_coefficients(j, plan.pose.fps), jiggle_span(j, plan.pose.fps)[1], gain,
+                            plan.pose)
         return model
 
     def __call__(self, state: SkinModel, chunk):

@@ -8,6 +8,11 @@ fitting constant there would refuse the resume of every run. A constant that a r
 depend on belongs in :mod:`axdf_cli.tolerances` (tests/test_run_identity.py checks the split).
 """
 
+# ----------------------------------------------------------------------------- axdf skin
+# `axdf skin` refuses a skeleton with a fitted segment shorter than SKIN_MIN_SEGMENT metres (a
+# zero offset: the fit's map along it is undefined, and the body came out NaN).
+SKIN_MIN_SEGMENT = 0.01
+
 # ----------------------------------------------------------------------------- axdf retarget
 # Scaling the model to the subject (`scale: fit`): a pair of mapped points is a segment when its
 # distance changes by less than SEGMENT_MODEL_RIGIDITY (relative) over sampled poses of the model

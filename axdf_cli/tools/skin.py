@@ -221,6 +221,7 @@ class Fit:
     rest_height: float  # its extent along Z at the skeleton's rest pose (m)
     scale: float  # overall scale: stature / MakeHuman's height
     notes: list = field(default_factory=list)
+    segments: dict = field(default_factory=dict)  # the skin file's segments: (segment_record)
 
 
 def mh_landmarks(body: Body) -> dict:
@@ -310,10 +311,61 @@ def blend(maps: dict, parts: list, w: np.ndarray, v: np.ndarray) -> np.ndarray:
     return np.einsum("vp,pij,vj->vi", w, A, v) + w @ t
 
 
+def fitted_segments(fam: Family, sk: dict) -> dict:
+    """The segments the fit scales by, from one landmark to another: segment -> (proximal
+    landmark, distal landmark); the hips (right to left) turn every segment about its bone."""
+    out = {"hips": ("hip_r", "hip_l")}
+    out.update({seg: (prox, dist) for seg, (_, prox, dist) in SEGMENTS.items()
+                if dist is not None and prox in sk and dist in sk})
+    return out
+
+
+def bone_mark(skel: Skeleton, bone: str) -> Mark:
+    """Where ``bone``'s offset (else its entry) is in the skeleton's file."""
+    from axdf_cli.fileio.yamlio import load_yaml
+
+    where = Mark(skel.source or skel.name)
+    try:
+        doc = load_yaml(skel.source)
+    except InputError:
+        return where
+    for item in (doc.get("bones") or []) if isinstance(doc, dict) else []:
+        if isinstance(item, dict) and item.get("name") == bone:
+            return item.value_mark("offset") if "offset" in item else getattr(item, "mark", where)
+    return where
+
+
+def check_segments(skel: Skeleton, fam: Family, sk: dict) -> None:
+    """Every segment the fit scales by is at least ``tol.SKIN_MIN_SEGMENT`` long: a zero
+    offset (gait2392's talus_r at [0, 0, 0]) leaves the map along it undefined (the fit was all
+    NaN). Refused at the distal landmark's bone (its offset) in the skeleton file."""
+    for seg, (prox, dist) in fitted_segments(fam, sk).items():
+        length = float(np.linalg.norm(sk[dist] - sk[prox]))
+        if not length >= tol.SKIN_MIN_SEGMENT:
+            side = dist[:-2] + "_l" if dist.endswith("_c") else dist  # a centre: its left landmark
+            bone = fam.landmarks.get(side) or fam.points[side][0]
+            raise InputError(bone_mark(skel, bone), f"skeleton {skel.name!r}'s segment {seg} from {prox} to "
+                             f"{dist} is {1000 * length:.1f} mm long at rest (bone {bone})",
+                             f"segments of at least {1000 * tol.SKIN_MIN_SEGMENT:g} mm: the joints of a body "
+                             "(axdf skin scales the body along each)")
+
+
+def segment_record(fam: Family, sk: dict) -> dict:
+    """The skin file's ``segments:``: each fitted segment whose ends are two bones' origins,
+    with its length at rest (axdf_cli/specs/skin.py checks the skeleton a skin is worn on)."""
+    out = {}
+    for seg, (prox, dist) in fitted_segments(fam, sk).items():
+        if prox in fam.landmarks and dist in fam.landmarks:
+            out[seg] = {"from": fam.landmarks[prox], "to": fam.landmarks[dist],
+                        "length": round(float(np.linalg.norm(sk[dist] - sk[prox])), 4)}
+    return out
+
+
 def fit_body(skel: Skeleton, body: Body, where: Mark) -> Fit:
     """Fit ``body`` to ``skel`` at its rest pose (the module doc)."""
     fam = family_of(skel, where)
     sk, world = skeleton_landmarks(skel, fam)
+    check_segments(skel, fam, sk)
     mh = mh_landmarks(body)
     z = body.vertices[:, 2]
     mh_height = float(z.max() - z.min())
@@ -333,8 +385,11 @@ def fit_body(skel: Skeleton, body: Body, where: Mark) -> Fit:
     w[w < tol.SKIN_WEIGHT_MIN] = 0.0
     w /= w.sum(axis=1, keepdims=True)
     height = float(standing[:, 2].max() - standing[:, 2].min())
+    if not (np.isfinite(rest).all() and np.isfinite(w).all() and np.isfinite([S, height, s]).all() and s > 0):
+        raise InputError(where, f"the body fitted to skeleton {skel.name!r} is not finite (its joints at rest "
+                         "are degenerate)", "a skeleton whose joints at rest are those of a body (docs/SKIN.md)")
     return Fit(fam.name, rest, standing, body.faces, bones, w, parts, pw.argmax(axis=1), S, height,
-               float(rest[:, 2].max() - rest[:, 2].min()), s)
+               float(rest[:, 2].max() - rest[:, 2].min()), s, segments=segment_record(fam, sk))
 
 
 # ----------------------------------------------------------------------------- fat
@@ -418,7 +473,7 @@ def skin_files(fit: Fit, skel: Skeleton, region: np.ndarray, fat: np.ndarray, re
     }
     doc = {"skin": f"makehuman_{skel.name}", "skeleton": skel.name, "family": fit.family,
            "mesh": MESH_FILE, "weights": WEIGHTS_FILE, "fat": FAT_FILE,
-           "stature": round(fit.stature, 4), "height": round(fit.height, 4),
+           "stature": round(fit.stature, 4), "height": round(fit.height, 4), "segments": fit.segments,
            "fat_source": FAT_SOURCE,
            "regions": {r: {"fat_mm": FAT_MM[r][0], "site": FAT_MM[r][1]} for r in REGIONS}}
     header = (f"A skin for {skel.name}: MakeHuman's CC0 body fitted by `axdf skin` (docs/SKIN.md). "
