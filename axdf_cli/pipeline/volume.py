@@ -7,15 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from axdf_cli import tolerances as tol
-
-
-def frame_spans(frames) -> str:
-    """Frame numbers as a short text of spans: [3, 4, 5, 9, 12, 13] -> "3-5, 9, 12-13"."""
-    f = np.unique(np.asarray(frames, dtype=np.int64))
-    if f.size == 0:
-        return ""
-    cut = np.nonzero(np.diff(f) != 1)[0] + 1
-    return ", ".join(f"{s[0]}" if s.size == 1 else f"{s[0]}-{s[-1]}" for s in np.split(f, cut))
+from axdf_cli.model.pose import frame_spans
 
 
 def volume_breaches(names, modes, frames, ratio: np.ndarray) -> list[str]:
