@@ -140,7 +140,8 @@ def _pieces(mesh, where: Mark):
     label = trimesh.graph.connected_component_labels(mesh.face_adjacency, node_count=len(mesh.faces))
     faces = np.asarray(mesh.faces)
     parts = [faces[label == k] for k in range(int(label.max()) + 1)]
-    vols = np.array([abs(float(trimesh.Trimesh(mesh.vertices, f, process=False).volume)) for f in parts])
+    with np.errstate(all="ignore"):  # (a flat sliver has no centre of mass)
+        vols = np.array([abs(float(trimesh.Trimesh(mesh.vertices, f, process=False).volume)) for f in parts])
     share = vols / max(vols.sum(), 1e-300)
     keep = share >= tol.FIT_MIN_PIECE_SHARE
     if keep.sum() != 1:
