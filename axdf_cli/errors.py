@@ -49,6 +49,33 @@ class InputError(AxdfError):
         return InputError, (self.where, self.problem, self.allowed)
 
 
+class InputErrors(InputError):
+    """Several bad inputs found at once (a batch of files, each checked before any is used):
+    printed one ``FILE: what is wrong; what is allowed`` line each, the first one's place as
+    its own."""
+
+    def __init__(self, errors):
+        self.errors = list(errors)
+        first = self.errors[0]
+        super().__init__(first.where, first.problem, first.allowed)
+
+    def __str__(self) -> str:
+        return "\n".join(str(e) for e in self.errors)
+
+    def __reduce__(self):
+        return InputErrors, (self.errors,)
+
+
+def raise_all(errors) -> None:
+    """Raise the one error of ``errors``, or all of them as :class:`InputErrors`; nothing when
+    there are none."""
+    errors = list(errors)
+    if len(errors) == 1:
+        raise errors[0]
+    if errors:
+        raise InputErrors(errors)
+
+
 class UsageError(InputError):
     """Bad command-line usage (no file position)."""
 

@@ -46,7 +46,7 @@ TIERS = {
                     "one_height"),
     "judges": ("blender", "mjcf_judge", "opensim_judge", "osim_fk", "osim_muscles"),
     "hostile": ("compare_hostile", "fuzz_yaml", "hostile", "inputs_hostile", "robustness", "safety", "hostile_import",
-                "hostile_run", "hostile_skin"),
+                "hostile_run", "hostile_skin", "fit_hostile"),
 }
 TIER_OF = {f"test_{name}": tier for tier, names in TIERS.items() for name in names}
 

@@ -280,3 +280,91 @@ def test_paths_bind_a_muscle_to_the_bones_its_path_crosses(tube_fit, capsys):
     (d / "other.stl").write_bytes((d / "tube.stl").read_bytes())
     err = _refused(d, capsys, "other.stl", "--units", "mm", "--paths", "model")
     assert "no muscle file other.yaml in --paths model" in err
+
+
+# ----------------------------------------------------------------------------- issue 49
+
+
+def test_slivers_are_dropped_and_a_second_piece_is_refused_every_refusal_at_once(tube_fit, capsys):
+    """A piece under 5% of the volume (FIT_MIN_PIECE_SHARE) is dropped, said on stderr and in
+    the report; a second tube is a second muscle, refused; every refused mesh of the batch is
+    named in one error and nothing is written."""
+    import trimesh
+
+    d, _, mesh = tube_fit
+    blob = trimesh.creation.icosphere(2, 3.0)  # 113 mm^3 of a ~40,000 mm^3 tube
+    blob.apply_translation([200.0, 0, 800.0])
+    trimesh.util.concatenate([mesh, blob]).export(d / "sliver.stl")
+    capsys.readouterr()
+    assert run_cli(d, "fit", "sliver.stl", "--skeleton", "leg.yaml", "--out", "sliver", "--units", "mm",
+                   "--sections", "4", "--quiet") == 0
+    err = capsys.readouterr().err
+    assert "axdf: note: sliver.stl: 1 closed pieces under 5% of its volume dropped as slivers" in err, err
+    (m,) = json.loads((d / "sliver" / "fit_report.json").read_text())["muscles"]
+    share = blob.volume / (blob.volume + mesh.volume)
+    assert m["dropped_pieces"] == 1 and m["dropped_volume_share"] == pytest.approx(share, rel=1e-6)
+    assert m["mesh_volume_cm3"] == pytest.approx(mesh.volume / 1000.0, rel=1e-6)
+    assert "Slivers dropped" in (d / "sliver" / "FIT.md").read_text()
+    trimesh.util.concatenate([mesh, mesh.copy().apply_translation([100.0, 0, 0])]).export(d / "pair.stl")
+    trimesh.Trimesh(mesh.vertices, mesh.faces[:-5], process=False).export(d / "holed.ply")
+    capsys.readouterr()
+    assert run_cli(d, "fit", "tube.stl", "pair.stl", "holed.ply", "--skeleton", "leg.yaml", "--out", "batch",
+                   "--units", "mm", "--quiet") == 2
+    err = capsys.readouterr().err
+    assert "pair.stl: mesh is 2 separate closed pieces, 2 of them at least 5% of its volume (50.0%, 50.0%)" in err
+    assert "holed.ply: mesh is not closed" in err
+    assert len(err.strip().splitlines()) == 2 and "Traceback" not in err
+    assert not (d / "batch").exists()
+
+
+def test_a_mesh_far_from_every_bone_is_refused_and_a_transform_brings_it_home(tube_fit, capsys):
+    """The tube a metre off the skeleton: refused with the distance and the way out (--transform,
+    --units); a --transform file that moves it back fits it as the tube itself; a transform that
+    is not one is refused by position."""
+    d, _, mesh = tube_fit
+    mesh.copy().apply_translation([1000.0, 0, 0]).export(d / "away.stl")
+    err = _refused(d, capsys, "away.stl", "--units", "mm")
+    assert "away.stl: the mesh lies 0.9" in err and "from the nearest bone of leg at rest" in err
+    assert "--transform FILE" in err and "check --units" in err
+    (d / "home.yaml").write_text("matrix:\n  - [1, 0, 0, -1.0]\n  - [0, 1, 0, 0]\n  - [0, 0, 1, 0]\n  - [0, 0, 0, 1]\n")
+    assert run_cli(d, "fit", "away.stl", "--transform", "home.yaml", "--skeleton", "leg.yaml", "--out", "home",
+                   "--units", "mm", "--sections", "12", "--quiet") == 0
+    (m,) = json.loads((d / "home" / "fit_report.json").read_text())["muscles"]
+    assert m["iou"] >= 0.9 and abs(m["volume_ratio"] - 1.0) <= 0.05, m
+    assert json.loads((d / "home" / "fit_report.json").read_text())["transform"] == "home.yaml"
+    (d / "flat.yaml").write_text("matrix:\n  - [1, 0, 0, 0]\n  - [0, 1, 0, 0]\n  - [0, 0, 0, 0]\n  - [0, 0, 0, 1]\n")
+    assert "flat.yaml:2:3: the matrix's 3x3 part is singular" in _refused(d, capsys, "tube.stl", "--units", "mm",
+                                                                         "--transform", "flat.yaml")
+    (d / "row.yaml").write_text("matrix:\n  - [1, 0, 0, 0]\n  - [0, 1, 0, 0]\n  - [0, 0, 1, 0]\n  - [0, 0, 1, 1]\n")
+    assert "row.yaml:5:5: the last row is [0.0, 0.0, 1.0, 1.0]" in _refused(d, capsys, "tube.stl", "--units", "mm",
+                                                                            "--transform", "row.yaml")
+
+
+@pytest.mark.skipif(not ATLAS.is_dir(), reason=f"the Visible Human atlas not found at {ATLAS}")
+def test_atlas_meshes_in_their_scan_frame_are_refused_until_registered(tmp_path, capsys):
+    """The Visible Human's meshes in their scan frame (mm) given to gait2392: refused, each named,
+    with the route (they lay 0.39 m and more from every bone and were bound to torso, pelvis and
+    femur_l). Registered by the atlas' own landmark similarity (tools/atlas_library.py
+    --transform), soleus and vastus lateralis hang on the right tibia and femur."""
+    from conftest import REPO_ROOT
+
+    from axdf_cli.tools.atlas_library import landmark_transform
+
+    skel = REPO_ROOT / "poses" / "skeletons" / "gait2392.yaml"
+    meshes = [str(next(ATLAS.glob(f"*Muscle_{n}_*.ply"))) for n in ("Soleus", "VastusLateralis")]
+    capsys.readouterr()
+    assert run_cli(tmp_path, "fit", *meshes, "--skeleton", str(skel), "--out", "scan", "--units", "mm",
+                   "--quiet", "--allow-outside") == 2
+    err = capsys.readouterr().err
+    for m in meshes:
+        assert f"{m}: the mesh lies 0." in err
+    assert err.count("register the meshes onto the skeleton first (--transform FILE") == 2
+    assert "tools/atlas_library.py --transform FILE" in err
+    assert not (tmp_path / "scan").exists()
+    (tmp_path / "vhf_r.yaml").write_text(landmark_transform(ATLAS.parent, skel, "r"))
+    assert run_cli(tmp_path, "fit", *meshes, "--skeleton", str(skel), "--out", "fit", "--units", "mm",
+                   "--transform", "vhf_r.yaml", "--sections", "6", "--quiet", "--allow-outside") == 0
+    soleus, vastus = json.loads((tmp_path / "fit" / "fit_report.json").read_text())["muscles"]
+    assert set(soleus["bones"]) == {"tibia_r"}, soleus["bones"]
+    assert set(vastus["bones"]) == {"femur_r"}, vastus["bones"]
+    assert soleus["iou"] >= 0.85 and vastus["iou"] >= 0.85

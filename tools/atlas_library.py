@@ -1,11 +1,16 @@
 """Make muscles/gait2392_atlas from the Visible Human Female atlas (`make atlas`).
 
     python tools/atlas_library.py [--data DIR] [--out muscles/gait2392_atlas] [--sides r,l] [--sections N]
+    python tools/atlas_library.py --transform FILE [--data DIR] [--sides r]
 
 DIR: the atlas folder (default ../shared/data/atlas/visible_human_female). The leg's atlas
 muscles are registered onto gait2392 at rest and fitted under gait2392's names
 (axdf_cli/tools/atlas_library.py; docs/FIT.md "Atlas onto a skeleton"); the muscles the atlas
 lacks are copied from muscles/gait2392. The folder is replaced as a whole.
+
+--transform FILE writes, instead, the registration's landmark similarity of one leg (the first of
+--sides) as an `axdf fit --transform` file: the route for fitting the atlas' meshes, in their
+scan frame and millimetres, onto the skeleton with `axdf fit --units mm --transform FILE`.
 """
 from __future__ import annotations
 
@@ -47,9 +52,23 @@ def main() -> int:
     ap.add_argument("--old", default=str(ROOT / "muscles/gait2392"))
     ap.add_argument("--sides", default="r")
     ap.add_argument("--sections", type=int, default=None)
+    ap.add_argument("--transform", default=None, metavar="FILE",
+                    help="write the leg's landmark similarity as an `axdf fit --transform` file, and nothing else")
     args = ap.parse_args()
     from axdf_cli.errors import InputError
-    from axdf_cli.tools.atlas_library import build_library
+    from axdf_cli.tools.atlas_library import build_library, landmark_transform
+
+    if args.transform:
+        try:
+            text = landmark_transform(Path(args.data), Path(args.skeleton), args.sides.split(",")[0])
+        except InputError as e:
+            print(f"axdf: {e}" if e.where is None else str(e), file=sys.stderr)
+            return 2
+        tmp = Path(args.transform + ".partial")
+        tmp.write_text(text)
+        os.replace(tmp, args.transform)
+        print(f"wrote {args.transform}")
+        return 0
 
     t0 = time.time()
 

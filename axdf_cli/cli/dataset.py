@@ -11,7 +11,7 @@ from axdf_cli.cli.run import positive
 from axdf_cli.errors import UsageError
 from axdf_cli.tolerances import MAX_SEED
 
-_SHARD_RE = re.compile(r"^(\d+)/(\d+)$")
+_SHARD_RE = re.compile(r"(\d+)/(\d+)")  # (fullmatch)
 
 
 def add_args(p) -> None:
@@ -48,7 +48,7 @@ def add_args(p) -> None:
 def parse_shard(text: str) -> tuple[int, int]:
     from axdf_cli.dataset.spec import MAX_SHARDS
 
-    m = _SHARD_RE.match(text or "")
+    m = _SHARD_RE.fullmatch(text or "")
     if not m or not (1 <= int(m.group(2)) <= MAX_SHARDS and 0 <= int(m.group(1)) < int(m.group(2))):
         raise UsageError(f"--shard {text!r}", f"K/N with 0 <= K < N <= {MAX_SHARDS}, e.g. --shard 3/16")
     return int(m.group(1)), int(m.group(2))

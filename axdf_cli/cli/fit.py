@@ -7,7 +7,10 @@ fitted so that the model's rest surface passes through the mesh, tendons where i
 thin (axdf_cli/tools/fit.py; docs/FIT.md). DIR also receives ``fit_report.json`` and ``FIT.md``
 (each fit's IoU, surface distance and volume ratio, measured on the written file) and
 ``manifest.json``: DIR is the command's own folder (``--overwrite`` replaces an earlier fit
-there; docs/OUTPUTS.md). A mesh that is missing, open or without volume writes nothing (exit 2).
+there; docs/OUTPUTS.md). ``--transform FILE`` carries meshes from another frame (an atlas' scan
+frame) into the skeleton's rest frame first. A mesh that is missing, open, inconsistently wound,
+without volume, of several pieces or far from every bone writes nothing (exit 2), and every such
+mesh of the batch is named at once; slivers of a mesh are dropped and said so on stderr.
 """
 from __future__ import annotations
 
@@ -26,6 +29,9 @@ def add_args(p) -> None:
     p.add_argument("--units", default="m", metavar="UNIT", help="the meshes' unit: mm, cm or m (default m)")
     p.add_argument("--sections", type=int, default=None, metavar="N",
                    help="sections per muscle (default 16, chosen by measurement: docs/FIT.md)")
+    p.add_argument("--transform", default=None, metavar="FILE",
+                   help="a YAML `matrix:` (4x4) from the meshes' frame, in metres after --units, into the skeleton's "
+                        "rest frame (docs/FIT.md, \"Meshes in another frame\")")
     p.add_argument("--paths", default=None, metavar="DIR",
                    help="the model's muscle files: a mesh binds only to the bones the file of its name there "
                         "spans (its path's and those between), so a muscle across two joints hangs on each")
@@ -41,10 +47,11 @@ def run(args) -> int:
     from axdf_cli.tools.fit import SUMMARY, build_fit, unit_scale
 
     unit_scale(args.units)  # an unknown unit is refused before anything is read
-    policy = RefPolicy.for_command([args.skeleton] + list(args.meshes), args.allow_outside)
+    policy = RefPolicy.for_command([args.skeleton, args.paths, args.transform] + list(args.meshes), args.allow_outside)
     out = OutputSet(args.out, "fit")
     dirs = [args.paths] if args.paths else []
-    check_outputs(out, inputs=[args.skeleton, *args.meshes], overwrite=args.overwrite, input_dirs=dirs)
+    named = [args.skeleton, *args.meshes] + ([args.transform] if args.transform else [])
+    check_outputs(out, inputs=named, overwrite=args.overwrite, input_dirs=dirs)
 
     def told(name, e):
         if args.verbose:
@@ -52,11 +59,16 @@ def run(args) -> int:
                   f"volume ratio {e['volume_ratio']:.3f}", file=sys.stderr)
 
     res = build_fit([Path(m) for m in args.meshes], Path(args.skeleton), args.units, args.sections, policy, told,
-                    paths=None if args.paths is None else Path(args.paths))
+                    paths=None if args.paths is None else Path(args.paths),
+                    transform=None if args.transform is None else Path(args.transform))
     for rel, data in res.files.items():
         out.add(Path(args.out) / rel, data, "output")
     write_outputs(out, inputs=res.inputs, overwrite=args.overwrite, input_dirs=dirs)
     for m in res.report["muscles"]:
+        if m.get("dropped_pieces"):
+            print(f"axdf: note: {m['mesh']}: {m['dropped_pieces']} closed pieces under "
+                  f"{100 * tol.FIT_MIN_PIECE_SHARE:g}% of its volume dropped as slivers "
+                  f"({100 * m['dropped_volume_share']:.2f}% of the volume in all; fit_report.json)", file=sys.stderr)
         if m["iou"] < tol.FIT_WARN_IOU:
             print(f"axdf: warning: {m['mesh']}: the fitted muscle overlaps its mesh by IoU {m['iou']:.2f} only "
                   f"(volume ratio {m['volume_ratio']:.2f}): an axis and {OCT}-point sections do not follow "

@@ -271,7 +271,7 @@ def is_file_with(path: Path, sha: str, size: int | None = None) -> bool:
 # ----------------------------------------------------------------------------- the manifest, read back
 
 _WS = re.compile(r"[ \t\n\r]*")
-_HEX64 = re.compile(r"^[0-9a-f]{64}$")
+_HEX64 = re.compile(r"[0-9a-f]{64}")  # (fullmatch)
 
 
 class Manifest:
@@ -352,7 +352,7 @@ class Manifest:
             if not plain_relpath(rel):
                 raise self.error(("files", rel), f"{rel!r} is not a plain relative path inside the folder",
                                  "relative paths without '..', '.', links or absolute parts")
-            if not isinstance(sha, str) or not _HEX64.match(sha):
+            if not isinstance(sha, str) or not _HEX64.fullmatch(sha):
                 raise self.error(("files", rel), f"sha256 {sha!r}", "64 lowercase hex digits")
         return dict(files)
 

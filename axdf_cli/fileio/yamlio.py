@@ -27,7 +27,7 @@ import yaml
 from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError, Mark, did_you_mean, nearest  # noqa: F401  (the suggestions every spec reader gives)
 
-NAME_RE = re.compile(r"^[A-Za-z0-9_.-]+$")
+NAME_RE = re.compile(r"[A-Za-z0-9_.-]+")  # whole names only: fullmatch (`$` would let "a\n" by)
 #: Longest name (characters = bytes: names are ASCII). Names become file names: the longest
 #: derived one is a temporary ``.axdf-tmp-<pid>-<muscle>_<frame>.ply`` (18 + name + 13 bytes
 #: for a frame up to 10,000,000), which must fit the usual 255-byte limit; 200 leaves room.
@@ -474,7 +474,7 @@ def unique_names(bases, taken=()) -> list[str]:
 def is_name(v) -> bool:
     """Whether ``v`` is an axdf name (a muscle, bone, sequence...: it becomes a file or folder
     name, so never ``.`` or ``..``)."""
-    return isinstance(v, str) and bool(NAME_RE.match(v)) and v not in (".", "..") and len(v) <= NAME_MAX
+    return isinstance(v, str) and bool(NAME_RE.fullmatch(v)) and v not in (".", "..") and len(v) <= NAME_MAX
 
 
 def check_name(v, where: Mark, what: str) -> str:

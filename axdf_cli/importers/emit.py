@@ -635,7 +635,7 @@ def rounded(doc, key=None):
         return round_number(doc, key)
     return doc
 
-_PLAIN = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\-/]*$")
+_PLAIN = re.compile(r"[A-Za-z_][A-Za-z0-9_.\-/]*")  # (fullmatch: "a\n" is no plain scalar)
 
 
 def _scalar(v) -> str:
@@ -671,7 +671,7 @@ def _plain_string(s: str) -> bool:
     resolvers read it back as this string (not ``true``, ``null``, ``on``, a number). The
     resolver's pattern match only: parsing every string as a document was most of an
     import's time."""
-    return bool(_PLAIN.match(s)) and _RESOLVER.resolve(yaml.ScalarNode, s, (True, False)) == _STR_TAG
+    return bool(_PLAIN.fullmatch(s)) and _RESOLVER.resolve(yaml.ScalarNode, s, (True, False)) == _STR_TAG
 
 
 def _flow(v) -> str:

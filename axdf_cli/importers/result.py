@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 #: Side suffixes: a muscle and its mirror image share their colour and their belly note.
-SIDE_SUFFIX = re.compile(r"_[lr]$")
+SIDE_SUFFIX = re.compile(r"_[lr]\Z")
 
 
 @dataclass

@@ -68,7 +68,7 @@ HANDSFIELD = (
 #: widened to what an adult model may be; outside it the flags are refused.
 HEIGHT_RANGE = (1.0, 2.5)
 MASS_RANGE = (20.0, 250.0)
-_SIDE = re.compile(r"^(?P<base>.+?)(?P<side>_[rl])?$")
+_SIDE = re.compile(r"(?P<base>.+?)(?P<side>_[rl])?", re.S)  # (fullmatch: the whole name)
 
 
 @dataclass(frozen=True)
@@ -107,7 +107,7 @@ def regression_volumes(muscles: list, subject: Subject) -> dict[str, Sized]:
     coef = {name: (b1, b2) for name, b1, b2, *_ in HANDSFIELD}
     groups: dict[tuple[str, str], list[tuple[str, float]]] = {}
     for name, force in muscles:
-        m = _SIDE.match(name)
+        m = _SIDE.fullmatch(name)
         group = _group_of(m["base"])
         if group is not None:
             groups.setdefault((group, m["side"] or ""), []).append((name, max(float(force), 0.0)))

@@ -245,6 +245,8 @@ class MuscleModel:
             knots = bspline.clamped_knots(path.n, 2)
             gt, gw = bspline.gauss_legendre_params(knots, 2, tol.LENGTH_GAUSS_POINTS)
             self.line = (path, bspline.basis_matrix(knots, 2, gt, 1), gw)
+            if skeleton is not None:
+                _check_axis_on_path(spec, bone_index, skeleton)
         elif spec.path is not None:
             self.path = path
             self.n_axis = self.path.n
@@ -510,6 +512,23 @@ class MuscleModel:
         state = dict(self.__dict__)
         state["_one"] = None  # (made again where needed: pickles stay small)
         return state
+
+
+def _check_axis_on_path(spec, bone_index: dict[str, int], skeleton) -> None:
+    """A muscle with both ``axis:`` and ``path:``: every axis point must hang on a bone its path
+    spans (the path's points' and wraps' bones and those between them on the skeleton's tree),
+    so that the belly moves with its line of action (an axis on femur_l under a path on femur_r
+    would not)."""
+    from axdf_cli.model.skeleton import bones_between
+
+    names = {p.bone for p in spec.path.points} | {w.bone for w in spec.path.wraps} | \
+        {w.side[0] for w in spec.path.wraps if w.side is not None}
+    span = bones_between(skeleton, {bone_of(bone_index, n, _spec_mark(spec)) for n in names})
+    for p in spec.axis:
+        if bone_of(bone_index, p.bone, p.mark) not in span:
+            spans = ", ".join(skeleton.bones[b].name for b in sorted(span))
+            raise InputError(p.mark or _spec_mark(spec), f"muscle {spec.name!r}: axis point on bone {p.bone!r}, which "
+                             "its path does not span", f"an axis on the bones of its path: {spans}")
 
 
 def _spec_mark(spec: MuscleSpec) -> Mark:

@@ -305,6 +305,27 @@ class Skeleton:
 # ----------------------------------------------------------------------------- rotations
 
 
+def bones_between(skel: "Skeleton", bones: set[int]) -> set[int]:
+    """``bones`` and every bone on the skeleton's tree between two of them: a path from the
+    femur to the calcaneus crosses the tibia and the talus, where the calf's belly lies."""
+    def up(b: int) -> list[int]:
+        out = []
+        while b >= 0:
+            out.append(b)
+            b = skel.bones[b].parent
+        return out
+
+    chains = [up(b) for b in bones]
+    shared = set.intersection(*map(set, chains)) if chains else set()
+    full = set()
+    for chain in chains:  # each bone's way up to the bones' lowest common ancestor
+        for b in chain:
+            full.add(b)
+            if b in shared:
+                break
+    return full
+
+
 def bone_of(index: dict[str, int], bone: str, mark) -> int:
     """The index of bone ``bone`` in a skeleton's ``bone_index``; an unknown name is an
     :class:`InputError` at ``mark`` naming the skeleton's bones."""

@@ -149,6 +149,25 @@ def registered_meshes(data_root: Path, skel, rest, bones: dict, old: Path, sides
     return meshes, sides_rep
 
 
+def landmark_transform(data_root: Path, skeleton_path: Path, side: str = "r") -> str:
+    """The ``axdf fit --transform`` file (text) of one leg's registration onto the skeleton at
+    rest: the landmarks' similarity (:func:`atlas.register` without the warp), from the atlas'
+    frame in metres (``--units mm``) into the skeleton's rest frame."""
+    from axdf_cli.tools.fit_mesh import transform_text
+
+    data_root, skeleton_path = Path(data_root), Path(skeleton_path)
+    if not data_root.is_dir():
+        raise InputError(Mark(str(data_root)), "atlas folder not found", "the Visible Human Female folder (Left/, Right/)")
+    skel, rest, bones = rest_bones(skeleton_path)
+    reg = at.register(data_root, skel, rest, bones, side, rounds=0)
+    res = ", ".join(f"{k} {v:g} mm" for k, v in reg.report["landmark_residual_mm"].items())
+    return transform_text(reg.scale, reg.rotation, reg.shift,
+                          f"The {at.SIDES[side].lower()} leg of the atlas {data_root.name} onto {skel.name} at rest: "
+                          f"the similarity of its joint centres\n(tools/atlas_library.py --transform; scale "
+                          f"{reg.scale:.4f}; residuals {res}).\nUse: axdf fit MESH ... --units mm --transform FILE "
+                          f"--skeleton {skeleton_path.name} (docs/FIT.md)")
+
+
 def build_library(data_root: Path, skeleton_path: Path, old: Path, sides=("r",), sections: int | None = None,
                   on_muscle=None, on_phase=None) -> tuple[dict, dict]:
     """The library's files (name -> bytes: one muscle file per model muscle, the report) and

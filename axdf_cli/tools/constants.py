@@ -128,6 +128,10 @@ FIT_PHASE_STEPS = 17
 # crumpling (control polygons with 3+ concave corners: 12 of 48 sections at 1e-4, 5) for an IoU
 # 0.001-0.003 lower; 1e-2 costs 0.015.
 FIT_REFINE_ROUNDS = 8
+# The rows' design matrix is dense up to this many bytes (16 sections: 57 MB, as fitted for the
+# shipped atlas library), sparse beyond (the same entries): dense, 64 sections took 196 s and
+# 2.95 GB on a 642-vertex mesh, the dense products growing as N^2.
+FIT_DENSE_DESIGN_BYTES = 64 * 2**20
 FIT_SMOOTH = 1e-3
 FIT_POINT_WEIGHT = 0.005
 FIT_SMOOTH_AROUND = 1e-3
@@ -154,10 +158,33 @@ FIT_MIN_VOLUME = 1e-15
 FIT_MIN_SIZE = 0.002
 FIT_MAX_SIZE = 3.0
 FIT_MAX_REACH = 10.0
+# A mesh lies in the skeleton's rest frame when some point of it comes within this distance
+# (metres) of a bone at rest (its mesh, or where the skeleton has none its segment to its
+# children): a muscle attaches to bones. Measured at rest on gait2392: the fitted atlas library's
+# and the OpenSim import's muscles come within 32 mm of a bone mesh at most (bifemlh_l), within
+# 92 mm of a bone segment (the obliques, from the torso's origin); the Visible Human's meshes in
+# their scan frame (mm) lie 389-681 mm from every bone, which is what this refuses.
+FIT_MAX_BONE_GAP = 0.15
+# A mesh's closed pieces under this share of its volume are segmentation slivers, dropped (and
+# reported); a second piece above it is a second muscle, refused. Measured on the atlases: the
+# slivers' largest share is 1.7% (BodyParts3D's internal oblique, 617 pieces; external oblique
+# 43 pieces, 0.02%), the real second pieces 13.6% and more (spinalis; flexor digitorum
+# superficialis 26%, latissimus dorsi 34%, extensor carpi ulnaris 38%).
+FIT_MIN_PIECE_SHARE = 0.05
+# A --transform's 3x3 part is refused as singular when its smallest singular value is below
+# this share of its largest (it would flatten the mesh).
+FIT_TRANSFORM_MIN_SINGULAR = 1e-6
 # The fit's measures: the IoU grid's spacing (metres; coarser only to stay within the point
 # budget), surface samples for the distances.
 FIT_IOU_SPACING = 0.002
 FIT_IOU_MAX_POINTS = 4_000_000
+# A small muscle's IoU grid: where the thinnest side of the box around the mesh and its fit holds
+# fewer than FIT_IOU_MIN_CELLS cells of FIT_IOU_SPACING, the grid has FIT_IOU_SMALL_CELLS cells
+# across that side instead (a 2 mm grid read a 3.3 mm muscle fitted to 0.001 mm as IoU 0.00).
+# Every fit of the shipped atlas library has 6.5+ cells of 2 mm across (flexor digitorum
+# longus, 13 mm), so its measures are unchanged.
+FIT_IOU_MIN_CELLS = 6
+FIT_IOU_SMALL_CELLS = 48
 FIT_MEASURE_SAMPLES = 20000
 # A fit whose IoU with its mesh is below this is warned of (the issue's bound for the worst
 # muscle of a library; the atlas' leg fits at 0.87+ with 8 sections): the mesh is not one belly

@@ -18,21 +18,20 @@ from pathlib import Path
 import numpy as np
 
 from axdf_cli.tools import constants as tol
-from axdf_cli.errors import InputError, Mark
+from axdf_cli.errors import InputError, Mark, raise_all
 from axdf_cli.fileio.yamlio import NAME_ALLOWED, is_name
 from axdf_cli.importers import emit
 from axdf_cli.model.muscle import OCT, AxisPoint, MuscleModel, MuscleSpec, Section, outline_area
 from axdf_cli.model.pose import muscle_bones
-from axdf_cli.model.skeleton import Skeleton, forward_kinematics
+from axdf_cli.model.skeleton import Skeleton, bones_between, forward_kinematics
 from axdf_cli.specs import RefPolicy, load_muscle_file, load_skeleton
 from axdf_cli.specs.muscle import default_color, parse_muscle_text
 from axdf_cli.tools import fit_sections as fs
+from axdf_cli.tools.fit_mesh import UNITS, load_transform, read_mesh, unit_name, unit_scale
 
 REPORT = "fit_report.json"
 SUMMARY = "FIT.md"
-UNITS = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
-MESH_SUFFIXES = (".stl", ".ply", ".obj")
-MESH_ALLOWED = "a closed (watertight) triangle surface in STL, PLY or OBJ"
+__all__ = ["UNITS", "unit_scale", "unit_name", "build_fit", "read_mesh"]  # (the reading: tools/fit_mesh.py)
 
 
 @dataclass
@@ -45,69 +44,9 @@ class FitOutputs:
 # ----------------------------------------------------------------------------- reading
 
 
-def unit_scale(units: str) -> float:
-    """Metres per mesh unit; an unknown unit is refused."""
-    if units not in UNITS:
-        raise InputError(Mark("--units"), f"unit {units!r} is unknown", "--units mm, cm or m (the meshes' unit)")
-    return UNITS[units]
-
-
-def unit_name(scale: float) -> str:
-    """The ``--units`` word of a scale (metres per unit)."""
-    return next((u for u, k in UNITS.items() if k == scale), f"{scale:g} m")
-
-
-def read_mesh(path: Path, scale: float):
-    """A closed muscle surface in metres (a trimesh.Trimesh, outward-facing); refused by name
-    when missing, unreadable, open or without volume."""
-    import trimesh
-
-    where = Mark(str(path))
-    if not path.is_file():
-        raise InputError(where, "mesh file not found", MESH_ALLOWED)
-    if path.suffix.lower() not in MESH_SUFFIXES:
-        raise InputError(where, f"{path.suffix or 'no suffix'} is not a mesh format axdf fit reads", MESH_ALLOWED)
-    try:
-        mesh = trimesh.load(str(path), force="mesh", process=False)
-    except Exception as e:  # trimesh raises many kinds on a bad file
-        raise InputError(where, f"cannot be read as a mesh ({type(e).__name__}: {e})", MESH_ALLOWED) from None
-    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
-        raise InputError(where, "holds no triangles", MESH_ALLOWED)
-    # checked before trimesh merges vertices: it drops a NaN vertex (the mesh then reads "not
-    # closed") and casts an overflowing one to int
-    if not np.isfinite(mesh.vertices).all():
-        raise InputError(where, "has non-finite vertex coordinates", "finite numbers only")
-    size = float(np.ptp(mesh.vertices, axis=0).max()) * scale
-    far = float(np.abs(mesh.vertices).max()) * scale
-    if not tol.FIT_MIN_SIZE <= size <= tol.FIT_MAX_SIZE or far > tol.FIT_MAX_REACH:
-        raise InputError(where, f"mesh is {size:.3g} m across, {far:.3g} m from the origin at most, read in "
-                         f"{unit_name(scale)}", f"a muscle {tol.FIT_MIN_SIZE * 1000:g} mm to {tol.FIT_MAX_SIZE:g} m "
-                         f"long within {tol.FIT_MAX_REACH:g} m of the skeleton's origin: check --units (mm, cm or m)")
-    mesh.apply_scale(scale)
-    mesh.process(validate=False)
-    if not mesh.is_watertight:
-        edges = np.bincount(mesh.faces_unique_edges.ravel(), minlength=len(mesh.edges_unique)) \
-            if hasattr(mesh, "faces_unique_edges") else np.zeros(0)
-        open_edges = int((edges == 1).sum())
-        raise InputError(where, "mesh is not closed (not watertight" +
-                         (f": {open_edges} edges bound one triangle" if open_edges else "") + ")", MESH_ALLOWED)
-    with np.errstate(all="ignore"):  # (trimesh divides by the volume for the centre of mass)
-        vol = float(mesh.volume)
-    box = float(np.prod(np.maximum(mesh.extents, 1e-300)))
-    if not abs(vol) > tol.FIT_MIN_VOLUME_SHARE * box or not abs(vol) > tol.FIT_MIN_VOLUME:
-        raise InputError(where, f"mesh encloses no volume ({abs(vol) * 1e6:.3g} cm^3)",
-                         "a closed surface around a muscle's body")
-    if mesh.body_count > 1:
-        raise InputError(where, f"mesh is {mesh.body_count} separate closed pieces",
-                         "one muscle per mesh file: split the pieces into files of their own")
-    if vol < 0:  # inside out: face outwards
-        mesh.invert()
-    return mesh
-
-
 def muscle_name(path: Path) -> str:
     stem = path.stem
-    if not is_name(stem):
+    if not is_name(stem):  # (a stem ending in a newline too: is_name matches the whole)
         raise InputError(Mark(str(path)), f"the file's stem {stem!r} cannot name a muscle",
                          f"rename the file: {NAME_ALLOWED}")
     return stem
@@ -159,28 +98,7 @@ def nearest_bones(points: np.ndarray, geometry: list) -> np.ndarray:
     return np.argmin(dist, axis=1)
 
 
-def bones_between(skel: Skeleton, bones: set[int]) -> set[int]:
-    """``bones`` and every bone on the skeleton's tree between two of them: a path from the
-    femur to the calcaneus crosses the tibia and the talus, where the calf's belly lies."""
-    def up(b: int) -> list[int]:
-        out = []
-        while b >= 0:
-            out.append(b)
-            b = skel.bones[b].parent
-        return out
-
-    chains = [up(b) for b in bones]
-    shared = set.intersection(*map(set, chains)) if chains else set()
-    full = set()
-    for chain in chains:  # each bone's way up to the bones' lowest common ancestor
-        for b in chain:
-            full.add(b)
-            if b in shared:
-                break
-    return full
-
-
-def model_bones(folder: Path, name: str, skel: Skeleton, rest: np.ndarray) -> tuple:
+def model_bones(folder: Path, name: str, skel: Skeleton, rest: np.ndarray, policy: RefPolicy | None = None) -> tuple:
     """The bones (indices) of the muscle file ``folder/NAME.yaml`` of a model (its path's
     points and wraps, or its axis) and the bones between them (:func:`bones_between`): the
     only bones a fit of mesh NAME binds to, each control point to the nearest, so that a
@@ -189,11 +107,14 @@ def model_bones(folder: Path, name: str, skel: Skeleton, rest: np.ndarray) -> tu
     path or axis point) in the world at rest, which the fitted axis starts at; its path (a
     single muscle's, else None), which the fitted muscle keeps as its line of action; and its
     colour, which it keeps too (a muscle looks the same in either library). Refused when the
-    file is missing or names a bone the skeleton lacks."""
+    file is missing, names a bone the skeleton lacks, or (``policy``) is a link out of the
+    project folder tree, as ``axdf run --muscles`` refuses it."""
     path = Path(folder) / f"{name}.yaml"
     if not path.is_file():
         raise InputError(Mark(str(path)), f"no muscle file {name}.yaml in --paths {folder}",
                          "a muscle file of the model per mesh, named as the mesh's stem")
+    if policy is not None:
+        policy.check(path, Mark(str(path)), Path(folder), "muscle file")
     specs = load_muscle_file(path)
     bones = set().union(*(muscle_bones(spec) for spec in specs))  # (every head of a group)
     lack = sorted(bones - set(skel.bone_index))
@@ -281,34 +202,81 @@ def measure_file(text: str, path: str, mesh, skel: Skeleton, rest: np.ndarray) -
                       np.asarray(model.faces, dtype=np.int64), seed=tol.FIT_SEED)
 
 
+def bone_gap(points: np.ndarray, geometry: list) -> tuple[float, int]:
+    """The distance (metres) from points (P, 3) to the nearest bone of ``geometry``
+    (:func:`bone_geometry`) and that bone's index."""
+    import igl
+
+    best, which = np.inf, -1
+    for b, g in enumerate(geometry):
+        if g is None:
+            continue
+        if g[0] == "mesh":
+            d = float(igl.point_mesh_squared_distance(points, g[1], g[2])[0].min())
+        else:
+            a, e = g[1][:, 0], g[1][:, 1] - g[1][:, 0]
+            rel = points[:, None] - a[None]
+            lam = np.clip(np.einsum("pkc,kc->pk", rel, e) / np.maximum((e * e).sum(axis=1), 1e-300), 0.0, 1.0)
+            d = float((np.linalg.norm(rel - lam[..., None] * e[None], axis=-1) ** 2).min())
+        if d < best:
+            best, which = d, b
+    return float(np.sqrt(best)), which
+
+
+def _read_all(mesh_paths, scale, transform, skel, rest, geometry, paths, policy, units) -> tuple:
+    """Every mesh read and checked (with its muscle name and, under ``paths``, its model's
+    bones) before any is fitted; every refusal of the batch at once."""
+    meshes, names, errors, allowed = [], {}, [], {}
+    for p in map(Path, mesh_paths):
+        try:
+            name = muscle_name(p)
+            if name in names:
+                raise InputError(Mark(str(p)), f"muscle {name!r} is also fitted from {names[name]}",
+                                 "mesh files with distinct stems (each names a muscle file)")
+            names[name] = p
+            got = read_mesh(p, scale, transform)
+            gap, bone = bone_gap(np.asarray(got.mesh.vertices, dtype=np.float64), geometry)
+            if gap > tol.FIT_MAX_BONE_GAP:
+                how = "carried by --transform" if transform is not None else f"read in {unit_name(scale)}"
+                raise InputError(Mark(str(p)), f"the mesh lies {gap:.3f} m from the nearest bone of {skel.name} at "
+                                 f"rest ({skel.bones[bone].name}), {how}: it is not in the skeleton's rest frame",
+                                 f"a muscle within {tol.FIT_MAX_BONE_GAP:g} m of a bone: register the meshes onto the "
+                                 "skeleton first (--transform FILE, a 4x4 matrix into the rest frame; for the Visible "
+                                 "Human atlas `python tools/atlas_library.py --transform FILE`; docs/FIT.md, "
+                                 f"\"Meshes in another frame\") or check --units (now {units})")
+            if paths is not None:
+                allowed[name] = model_bones(paths, name, skel, rest, policy)
+            meshes.append((p, name, got))
+        except InputError as e:
+            errors.append(e)
+    raise_all(errors)
+    return meshes, allowed
+
+
 def build_fit(mesh_paths: list[Path], skeleton_path: Path | str, units: str = "m", sections: int | None = None,
-              policy: RefPolicy | None = None, on_muscle=None, paths: Path | None = None) -> FitOutputs:
+              policy: RefPolicy | None = None, on_muscle=None, paths: Path | None = None,
+              transform: Path | None = None) -> FitOutputs:
     """Fit every mesh; the bytes of ``muscles/STEM.yaml`` per mesh, the report's two files.
-    Every mesh is read and checked before any is fitted. ``on_muscle(name, entry)`` is told
-    as each fit is measured. ``paths``: a folder of the model's muscle files; each mesh binds
-    only to the bones of the file of its name there (:func:`model_bones`)."""
+    Every mesh is read and checked before any is fitted, and every refusal is raised at once
+    (one :class:`~axdf_cli.errors.InputErrors`). ``on_muscle(name, entry)`` is told as each fit
+    is measured. ``paths``: a folder of the model's muscle files; each mesh binds only to the
+    bones of the file of its name there (:func:`model_bones`). ``transform``: a ``--transform``
+    file, the map from the meshes' frame (metres after ``units``) into the rest frame."""
     scale = unit_scale(units)
     n = tol.FIT_SECTIONS_DEFAULT if sections is None else sections
     if not tol.FIT_SECTIONS_MIN <= n <= tol.FIT_SECTIONS_MAX:
         raise InputError(Mark("--sections"), f"--sections {n}",
                          f"{tol.FIT_SECTIONS_MIN}..{tol.FIT_SECTIONS_MAX} sections")
+    matrix = None if transform is None else load_transform(transform)
     skeleton_path = Path(skeleton_path)
     skel = load_skeleton(skeleton_path, policy or RefPolicy())
-    meshes, names = [], {}
-    for p in mesh_paths:
-        p = Path(p)
-        name = muscle_name(p)
-        if name in names:
-            raise InputError(Mark(str(p)), f"muscle {name!r} is also fitted from {names[name]}",
-                             "mesh files with distinct stems (each names a muscle file)")
-        names[name] = p
-        meshes.append((p, name, read_mesh(p, scale)))
     rest = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
-    allowed = {name: model_bones(paths, name, skel, rest) for _, name, _ in meshes} if paths is not None else {}
     geometry = bone_geometry(skel, rest, skeleton_path)
+    meshes, allowed = _read_all(mesh_paths, scale, matrix, skel, rest, geometry, paths, policy, units)
     files: dict[str, bytes] = {}
     entries = []
-    for p, name, mesh in meshes:
+    for p, name, got in meshes:
+        mesh = got.mesh
         own, origin, line, color = geometry, None, None, None
         if name in allowed:
             keep, origin, line, color = allowed[name]
@@ -318,16 +286,20 @@ def build_fit(mesh_paths: list[Path], skeleton_path: Path | str, units: str = "m
         text, entry = fit_one(mesh, name, n, skel, rest, own, origin, line, color)
         rel = f"muscles/{name}.yaml"
         entry.update({"file": rel, "mesh": p.name})
+        if got.dropped:
+            entry.update({"dropped_pieces": got.dropped, "dropped_volume_share": got.dropped_share})
         entry.update(measure_file(text, rel, mesh, skel, rest))
         files[rel] = text.encode()
         entries.append(entry)
         if on_muscle is not None:
             on_muscle(name, entry)
     report = {"skeleton": skeleton_path.name, "units": units, "sections": n, "muscles": entries}
+    if transform is not None:
+        report["transform"] = Path(transform).name
     files[REPORT] = (json.dumps(report, indent=1, sort_keys=True) + "\n").encode()
     files[SUMMARY] = summary(report).encode()
     inputs = [skeleton_path] + [Path(b.mesh) for b in skel.bones if b.mesh] + [p for p, _, _ in meshes] + \
-        [Path(paths) / f"{name}.yaml" for name in allowed]
+        [Path(paths) / f"{name}.yaml" for name in allowed] + ([Path(transform)] if transform is not None else [])
     return FitOutputs(files, report, [str(p) for p in inputs])
 
 
@@ -342,4 +314,9 @@ def summary(report: dict) -> str:
         lines.append(f"| {m['muscle']} | {m['iou']:.3f} | {m['distance_mean_mm']:.2f} mm | "
                      f"{m['distance_median_mm']:.2f} mm | {m['volume_ratio']:.3f} | "
                      f"{m['tendons'][0]:g}, {m['tendons'][1]:g} | {', '.join(dict.fromkeys(m['bones']))} |")
+    dropped = [m for m in report["muscles"] if m.get("dropped_pieces")]
+    if dropped:
+        lines += ["", f"Slivers dropped (closed pieces under {100 * tol.FIT_MIN_PIECE_SHARE:g}% of a mesh's volume): " +
+                  "; ".join(f"{m['mesh']}: {m['dropped_pieces']} pieces, {100 * m['dropped_volume_share']:.2f}%"
+                            for m in dropped) + "."]
     return "\n".join(lines) + "\n"

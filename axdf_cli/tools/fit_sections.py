@@ -211,16 +211,43 @@ class RowFit:
         return (bspline.basis_matrix(self.knots, 2, u), bspline.periodic_quadratic_basis(self.k, v % 1.0))
 
     def design(self, u: np.ndarray, v: np.ndarray):
-        """(A (3P, 2 N k), fixed (P, 3)): the surface at (u, v) is A @ [x, y] + fixed."""
+        """(A (3P, 2 N k), fixed (P, 3)): the surface at (u, v) is A @ [x, y] + fixed. A is
+        dense while it takes at most tol.FIT_DENSE_DESIGN_BYTES, else a sparse CSR matrix of
+        the same entries (each point sees 3 rows along and 3 control points around: 18 of its
+        2 N k columns), so that many sections cost memory and time in proportion to N."""
         bu, bv = self.bases(u, v)
         inner = bu[:, 1:-1]
         fixed = np.outer(bu[:, 0], self.poles[0]) + np.outer(bu[:, -1], self.poles[1]) + \
             (inner * bv.sum(axis=1, keepdims=True)) @ self.c
+        if 3 * len(u) * 2 * self.n * self.k * 8 > tol.FIT_DENSE_DESIGN_BYTES:
+            return self._sparse_design(inner, bv), fixed
         w = (inner[:, :, None] * bv[:, None, :]).reshape(len(u), -1)  # (P, N*k)
         ax = w[:, :, None] * np.repeat(self.r, self.k, axis=0)[None]  # (P, N*k, 3)
         ay = w[:, :, None] * np.repeat(self.s, self.k, axis=0)[None]
         a = np.concatenate([ax, ay], axis=1).transpose(0, 2, 1).reshape(3 * len(u), -1)
         return a, fixed
+
+    def _sparse_design(self, inner: np.ndarray, bv: np.ndarray):
+        """The design matrix of :meth:`design` as CSR from the bases along (P, N) and around
+        (P, k), each with at most 3 non-zeros a row (quadratic B-splines)."""
+        from scipy import sparse
+
+        P, n, k = len(inner), self.n, self.k
+        ja = np.argpartition(-np.abs(inner), min(2, n - 1), axis=1)[:, :min(3, n)]  # (P, 3) rows along
+        jb = np.argpartition(-np.abs(bv), min(2, k - 1), axis=1)[:, :min(3, k)]  # (P, 3) points around
+        p = np.arange(P)[:, None, None]
+        # W[p, j k + l] = inner[p, j] bv[p, l] over the non-zeros: (P, 3, 3)
+        w = inner[p[:, :, 0], ja][:, :, None] * bv[p[:, :, 0], jb][:, None, :]
+        col = ja[:, :, None] * k + jb[:, None, :]
+        sec = np.broadcast_to(ja[:, :, None], col.shape)
+        rows, cols, vals = [], [], []
+        for c in range(3):  # A[3p + c, q] = W[p, q] r[q's section, c]; the y half with s
+            for half, axes in ((0, self.r), (n * k, self.s)):
+                rows.append(np.broadcast_to(3 * p + c, col.shape).ravel())
+                cols.append((col + half).ravel())
+                vals.append((w * axes[sec, c]).ravel())
+        return sparse.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                                 shape=(3 * P, 2 * n * k))
 
     def evaluate(self, xy: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Surface points (P, 3) for in-plane coordinates xy (N, k, 2)."""
@@ -238,11 +265,19 @@ class RowFit:
         for u, v, target, weight, normals in blocks:
             a, fixed = self.design(u, v)
             b = (target - fixed).ravel()
+            dense = isinstance(a, np.ndarray)
             if normals is not None:
-                a = np.einsum("pc,pck->pk", normals, a.reshape(len(u), 3, -1))
                 b = np.einsum("pc,pc->p", normals, target - fixed)
+                if dense:
+                    a = np.einsum("pc,pck->pk", normals, a.reshape(len(u), 3, -1))
+                else:  # row p: sum_c n[p, c] A[3p + c]
+                    from scipy import sparse
+
+                    pick = sparse.csr_matrix((normals.ravel(), (np.repeat(np.arange(len(u)), 3), np.arange(3 * len(u)))),
+                                             shape=(len(u), 3 * len(u)))
+                    a = pick @ a
             wt = weight / max(len(u), 1)
-            ata = ata + wt * (a.T @ a)
+            ata = ata + wt * (a.T @ a if dense else (a.T @ a).toarray())
             atb = atb + wt * (a.T @ b)
         q = self.n * self.k
         scale = float(np.trace(ata)) / (2 * q)
@@ -308,7 +343,9 @@ def fit_rows(mesh, rows: RowFit, frames, samples: np.ndarray, normals: np.ndarra
 
 def measure(mesh_v: np.ndarray, mesh_f: np.ndarray, fit_v: np.ndarray, fit_f: np.ndarray, seed: int = 0) -> dict:
     """How well a fitted surface reproduces a mesh (both closed, metres): the volumetric
-    overlap (IoU of the winding-number insides on a grid of at most tol.FIT_IOU_SPACING), the
+    overlap (IoU of the winding-number insides on a grid of at most tol.FIT_IOU_SPACING, finer
+    for a muscle too thin for tol.FIT_IOU_MIN_CELLS such cells: tol.FIT_IOU_SMALL_CELLS across
+    its box's thinnest side), the
     surface distance both ways (mean, median, mm) and the volume ratio fitted / mesh."""
     import igl
     import trimesh
@@ -317,7 +354,10 @@ def measure(mesh_v: np.ndarray, mesh_f: np.ndarray, fit_v: np.ndarray, fit_f: np
     b = trimesh.Trimesh(fit_v, fit_f, process=False)
     lo = np.minimum(a.bounds[0], b.bounds[0])
     hi = np.maximum(a.bounds[1], b.bounds[1])
-    h = max(tol.FIT_IOU_SPACING, float(np.prod(hi - lo) / tol.FIT_IOU_MAX_POINTS) ** (1.0 / 3.0))
+    h = tol.FIT_IOU_SPACING
+    if float((hi - lo).min()) < tol.FIT_IOU_MIN_CELLS * h:  # a small muscle: a grid of its own size
+        h = float((hi - lo).min()) / tol.FIT_IOU_SMALL_CELLS
+    h = max(h, float(np.prod(hi - lo) / tol.FIT_IOU_MAX_POINTS) ** (1.0 / 3.0))
     axes = [np.arange(lo[k] + 0.5 * h, hi[k], h) for k in range(3)]
     q = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
     ia = igl.fast_winding_number(np.asarray(mesh_v, np.float64), np.asarray(mesh_f, np.int64), q) > 0.5
