@@ -157,7 +157,7 @@ def test_many_sections_cost_in_proportion(leg):
     """64 sections: the refinement's solve (the size fit_rows gives it) stays within 300 MB
     (180 MB measured; the dense design took 830 MB, and its two halves 830 MB more), and the
     sparse design is the dense one's entries."""
-    from axdf_cli import tolerances as tol
+    from axdf_cli.tools import constants as tol
     from axdf_cli.tools import fit_sections as fs
 
     n = 64
