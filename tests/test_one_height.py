@@ -1,6 +1,6 @@
 """One person, one height (issue 49): ``axdf retarget`` (its printout and
 retarget_report.json) and ``axdf skin`` (its printout and skin_report.json) state the height
-that :func:`axdf_cli.model.measure.stature` defines, head top to sole from the skeleton's joints
+that :func:`axdf_cli.model.stature.stature` defines, head top to sole from the skeleton's joints
 at rest. The CLI in process."""
 from __future__ import annotations
 
@@ -39,7 +39,7 @@ def test_the_cmu_subject_has_one_height(tmp_path, capsys):
     and in axdf skin's on the skeleton imported from the same take (1.540 m; it was 1.59 m,
     1.33 m and 1.54 m)."""
     from axdf_cli.importers.mocap import read_motion
-    from axdf_cli.model.measure import stature
+    from axdf_cli.model.stature import stature
     from axdf_cli.tools.skin import family_of, skeleton_landmarks
 
     mocap = read_motion(CMU_BVH, step=30)

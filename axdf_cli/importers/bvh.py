@@ -436,7 +436,7 @@ class UnitChoice:
     def notes(self, person: bool = True) -> list[str]:
         """The lines that say which unit was taken and the person's height (``person`` False:
         the unit alone, for a command that states the subject's height by
-        :func:`axdf_cli.model.measure.stature`, as ``axdf retarget`` does)."""
+        :func:`axdf_cli.model.stature.stature`, as ``axdf retarget`` does)."""
         word = UNIT_WORDS[self.unit] if self.unit else f"{self.scale:g} m per unit"
         if not person and self.how != "typical":
             return [f"BVH unit: {word} ({'given' if self.how == 'given' else 'its rest joint span fits a person'}; "

@@ -44,7 +44,7 @@ RETARGET_MAX_POINTS = 256
 RETARGET_SEGMENT_OUTLIER = 2.0
 RETARGET_SCALE_BAND = (0.5, 2.0)
 # A fit is warned on (axdf retarget; --strict refuses it) when its error exceeds these shares of
-# the subject's height (head top to sole: axdf_cli.model.measure.stature of the motion's own
+# the subject's height (head top to sole: axdf_cli.model.stature.stature of the motion's own
 # skeleton, or of the model's times the scale; the leg from hip to ankle is 0.491 of it): the
 # take's RMS over every weighted point beyond RETARGET_RMS_SHARE (1.5%: 3% of the leg), a frame's
 # RMS beyond RETARGET_FRAME_SHARE (3.7%: 7.5% of the leg; the shipped CMU walk's worst, its crouch

@@ -3,7 +3,7 @@ against the documented bounds (``tools.constants.RETARGET_*``), each problem wit
 fix; and the room coordinates that left the model file's range.
 
 The error is compared with the *subject's height* (:func:`subject_height`: head top to sole,
-:func:`axdf_cli.model.measure.stature`, in the subject's metres), so a bound means the same
+:func:`axdf_cli.model.stature.stature`, in the subject's metres), so a bound means the same
 for a child and an adult, and for a model in any unit. ``res`` is a
 :class:`axdf_cli.tools.retarget.Retargeted`.
 """
@@ -19,7 +19,7 @@ from axdf_cli.model.pose import frame_spans  # (the run reports its ranges' fram
 
 def subject_height(res) -> tuple[float, str]:
     """The subject's height, head top to sole, in the subject's metres, and where it comes from:
-    :func:`axdf_cli.model.measure.stature` (the one height every command states) of the motion's
+    :func:`axdf_cli.model.stature.stature` (the one height every command states) of the motion's
     own skeleton at rest (a BVH's: ``"motion"``), else of the model's times the fitted scale
     (``"model"``), else, for a skeleton of no family, the vertical extent of the map's weighted
     points in the model's rest pose times the scale (``"points"``)."""

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from axdf_cli.errors import InputError, Mark
-from axdf_cli.model.measure import stature
+from axdf_cli.model.stature import stature
 from axdf_cli.model.skeleton import Skeleton, forward_kinematics
 from axdf_cli.tools import constants as tol
 
@@ -246,7 +246,7 @@ def skeleton_landmarks(skel: Skeleton, fam: Family) -> tuple[dict, np.ndarray]:
 
 
 def skeleton_stature(skel: Skeleton) -> float | None:
-    """The skeleton's stature (:func:`axdf_cli.model.measure.stature`, head top to sole) from its
+    """The skeleton's stature (:func:`axdf_cli.model.stature.stature`, head top to sole) from its
     family's joints at rest: the one height every command states (``axdf skin``, ``axdf
     retarget``); None for a skeleton of no family (no joints named hip, knee and ankle)."""
     fam = next((f for f in FAMILIES if _needed_bones(f) <= set(skel.bone_index)), None)
