@@ -235,17 +235,16 @@ def mark_warm(command: str) -> None:
 PROGRESS_EVERY_S = 15.0
 
 
-def compile_progress(stream=None):
-    """A context in which numba's compiles into a cold cache are reported on ``stream`` (stderr)
-    as they finish, at most every :data:`PROGRESS_EVERY_S` seconds, so that a first run that
+def compile_progress(say):
+    """A context in which numba's compiles into a cold cache are reported through ``say`` (a
+    line of text: the command line prints it on stderr) as they finish, at most every
+    :data:`PROGRESS_EVERY_S` seconds, so that a first run that
     compiles for minutes is not silent. numba
     sends its compile event on a cache miss only, so a cached kernel reports nothing; a kernel
     compiled from within another's compile is counted, and reported with the outer one."""
     import time
 
     from numba.core import event
-
-    out = stream or sys.stderr
 
     class Progress(event.Listener):
         def __init__(self):
@@ -264,7 +263,6 @@ def compile_progress(stream=None):
             if now - self.last >= PROGRESS_EVERY_S:
                 self.last = now
                 name = getattr(getattr(ev.data.get("dispatcher"), "py_func", None), "__qualname__", "a kernel")
-                print(f"axdf: {self.done} kernels compiled ({now - self.t0:.0f} s; last: {name})", file=out,
-                      flush=True)
+                say(f"axdf: {self.done} kernels compiled ({now - self.t0:.0f} s; last: {name})")
 
     return event.install_listener("numba:compile", Progress())

@@ -313,6 +313,10 @@ NPZ_MAX_ARRAY_BYTES = 256 * 1024 * 1024
 # of a very long pose costs a bounded amount; at 30 fps 600 samples of a 20 s take lie one frame
 # apart, and FRAMING_PAD (model/pose.py) covers what a limb moves between samples of a longer one.
 FRAMING_SAMPLE = 600
+# The muscles alone are framed (a close-up) when their extent over the pose is under this share
+# of the whole subject (bones and joints): a deltoid on a whole arm and trunk fills the image
+# instead of showing as a blob; a body's worth of muscles frames the body they are shown on.
+FRAMING_CLOSEUP = 0.5
 # A ground plate (a mesh on a root without DOFs) is drawn under the subject at least this many
 # metres beyond its footprint each way, or this share of the subject's height if that is more.
 GROUND_MARGIN = 0.3
@@ -356,12 +360,11 @@ SKIN_SPREAD_OUT = 3.0
 # a spring whose ring takes longer to die away to a thousandth is cut there.
 SKIN_JIGGLE_MEMORY = 2.0
 # ...and samples that memory at most SKIN_JIGGLE_TAPS times (at the pose's frames while they
-# are fewer, else evenly between them: the pose is a function of time). The memory is then
-# bounded by the output, not by the pose's fps: a 100,000 fps pose asked 200,000 samples of
-# the skeleton per frame (29 s and 1.4 GB for two frames). The lightest damping allowed (0.05)
-# rings out to a thousandth in 22 periods (ln 1000 / (2 pi 0.05)), so 512 samples keep at least
-# 23 per period of the ring at any frequency: the lag changes by under 1% (measured against the
-# full filter in tests/test_skin_unit.py).
+# are fewer, else evenly between them: the pose is a function of time), so the work and the
+# memory follow the output, not the pose's fps (every frame would ask fps x memory samples of
+# the skeleton). The lightest damping allowed (0.05) rings out to a thousandth in 22 periods
+# (ln 1000 / (2 pi 0.05)), so 512 samples keep at least 23 per period of the ring at any
+# frequency (tests/test_skin_unit.py holds the lag to the full filter's).
 SKIN_JIGGLE_TAPS = 512
 # Relaxation after the push: passes of neighbour averaging of the offsets, each held at least
 # at its push (sticky); about one edge (~1-2 cm) of spread per pass, so a push becomes a smooth

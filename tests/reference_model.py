@@ -29,15 +29,13 @@ def axis_frames(model, world: np.ndarray, p: np.ndarray, coarse: bool = False):
     """Samples x, unit tangents t and RMF reference vectors r (F, S, 3) of axis points p (F, n, 3)."""
     b, db = ("Bc", "dBc") if coarse else ("Bs", "dBs")
     x, t = _apply(model, b, p), _unit(_apply(model, db, p))
-    rot = world[:, model.origin_bone, :3, :3]
-    r0 = rmf.carried_perpendicular(rot @ model.r0_local, rot @ model.t0_local, t[:, 0])
+    r0 = rmf.perpendicular_unit(world[:, model.origin_bone, :3, :3] @ model.r0_local, t[:, 0])
     return x, t, rmf.propagate(x, t, r0)
 
 
 def roll(model, world, t_end, r_end):
     """Insertion roll (radians, wrapped) from the propagated r_end at t = 1: (F,)."""
-    rot = world[:, model.insertion_bone, :3, :3]
-    target = rmf.carried_perpendicular(rot @ model.rend_local, rot @ model.tend_local, t_end)
+    target = rmf.perpendicular_unit(world[:, model.insertion_bone, :3, :3] @ model.rend_local, t_end)
     return rmf.signed_angle(r_end, target, t_end)
 
 

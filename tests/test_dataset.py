@@ -193,7 +193,7 @@ def test_dead_worker_is_reported_and_resume_finishes(tiny, tmp_path):
 def test_dry_run_writes_nothing(tiny, monkeypatch, capsys):
     monkeypatch.chdir(tiny)
     rc, out, _ = run_main(["dataset", "build", "tiny.yaml", "--out", "dry", "--dry-run"], capsys)
-    assert rc == 0 and "6 of 6 sequences (24 samples" in out
+    assert rc == 0 and "6 of 6 sequences (12 frames x 2 view(s) = 24 samples)" in out, out
     assert not (tiny / "dry").exists()
 
 

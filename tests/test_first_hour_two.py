@@ -99,29 +99,7 @@ def test_a_camera_file_must_fit_the_run(tmp_path, capsys):
     assert rc == 2 and "bad.json" in err and "frames" in err, err
 
 
-# ----------------------------------------------------------------------------- framing by what is drawn
-def _subject_box(png):
-    """(x0, y0, x1, y1) of the pixels that are not the background, and the image's (W, H)."""
-    from PIL import Image
-
-    img = np.asarray(Image.open(png).convert("RGB")).astype(int)
-    bg = img[0, 0]
-    ys, xs = np.nonzero(np.abs(img - bg).max(axis=2) > 8)
-    return (xs.min(), ys.min(), xs.max() + 1, ys.max() + 1), (img.shape[1], img.shape[0])
-
-
-def test_a_two_muscle_close_up_with_bones_frames_the_bones_too_centred(tmp_path, capsys):
-    out = tmp_path / "closeup"
-    rc, _, err = run_main(["run", GOLDEN_JOB, "--bones", "--frames", "104", "--size", "96x96", "--supersample", "1",
-                           "--out", out, "--quiet"], capsys)
-    assert rc == 0, err
-    (x0, y0, x1, y1), (w, h) = _subject_box(out / "frames" / "0104.png")
-    assert x0 > 0 and y0 > 0 and x1 < w and y1 < h, (x0, y0, x1, y1)  # nothing cut off (the thorax was)
-    # centred: the framing is of the whole pose, so a frame's own box may sit off by a few pixels
-    assert abs((x0 + x1) / 2 - w / 2) <= 0.1 * w and abs((y0 + y1) / 2 - h / 2) <= 0.1 * h, (x0, y0, x1, y1)
-    assert max((x1 - x0) / w, (y1 - y0) / h) > 0.7
-
-
+# ----------------------------------------------------------------------------- sticks
 def test_myoarm_draws_no_stick_for_a_frame_without_a_mesh():
     from axdf_cli.specs import load_skeleton
 

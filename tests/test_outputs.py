@@ -485,7 +485,7 @@ def test_dry_run_is_bounded_for_ten_million_samples(ds):
             "print(p.returncode, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss); print(p.stdout)")
     out = subprocess.run([sys.executable, "-c", code], cwd=ds, capture_output=True, text=True, check=True).stdout
     rc, peak_kib = map(int, out.split("\n")[0].split())
-    assert rc == 0 and "would make 9999993 of 9999993 sequences (9999999 samples" in out, out
+    assert rc == 0 and "would make 9999993 of 9999993 sequences (9999999 frames x 1 view(s) = 9999999 samples)" in out, out
     assert peak_kib < 600 * 1024, f"peak {peak_kib / 1024:.0f} MiB"
 
 

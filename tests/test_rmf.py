@@ -198,8 +198,7 @@ def _model_frames(model, world, per_span):
     x = np.einsum("si,fic->fsc", b, p)
     d = np.einsum("si,fic->fsc", db, p)
     t = d / np.linalg.norm(d, axis=-1, keepdims=True)
-    rot = world[:, model.origin_bone, :3, :3]
-    r0 = rmf.carried_perpendicular(rot @ model.r0_local, rot @ model.t0_local, t[:, 0])
+    r0 = rmf.perpendicular_unit(world[:, model.origin_bone, :3, :3] @ model.r0_local, t[:, 0])
     return t, rmf.propagate(x, t, r0)
 
 

@@ -1,10 +1,12 @@
-"""Volume under any twist: the insertion roll (and the start vector) follow the end tangent's
-swing by the least rotation (rmf.carried_perpendicular), so a wide, fast hip motion gives no
-roll jump that wrings a flat muscle; a muscle that still leaves its volume promise is named with
-its frames."""
+"""A muscle kept at exact volume that leaves its promise is named on stderr and in the
+manifest with its frames, not only in the summary's worst figure. The sweep below is the wide,
+fast hip motion under which the atlas library's quadratus femoris, its roll taken by projection
+onto the tangent's plane, jumps over 100 degrees in a frame and is wrung to a few percent of its
+volume (docs/FIT.md, "Volume under twist")."""
 from __future__ import annotations
 
 import csv
+import re
 import shutil
 
 import numpy as np
@@ -45,28 +47,18 @@ def _sweep(tmp_path, capsys, muscles=("quad_fem_r", "glut_max1_r", "vas_lat_r"))
     return rows, out, err
 
 
-def test_volume_holds_and_the_roll_is_steady_under_a_wide_fast_hip_sweep(tmp_path, capsys):
-    rows, out, err = _sweep(tmp_path, capsys)
-    ratio = np.array([float(r["volume_ratio"]) for r in rows])
-    assert np.abs(ratio - 1.0).max() < 5e-3, (ratio.min(), ratio.max())
-    assert "worst volume error 0.0" in out and "volume off" not in err, (out, err)
-    qf = np.array([float(r["twist"]) for r in rows if r["muscle"] == "quad_fem_r"])
-    # frame 0 -> 1 is 11 degrees of flexion and 4 of rotation: the roll by projection jumped 90
-    assert abs(qf[1] - qf[0]) < 15.0, qf[:3]
-    assert np.abs(qf).max() < 270.0, np.abs(qf).max()
-
-
-def test_a_muscle_off_its_volume_promise_is_named_with_its_frames(tmp_path, capsys, monkeypatch):
-    from axdf_cli import tolerances as tol
+def test_a_muscle_off_its_volume_promise_is_named_with_its_frames(tmp_path, capsys):
     from axdf_cli.pipeline.volume import volume_breaches
 
     ratio = np.array([[1.0, 1.0], [0.9, 1.0], [0.95, 1.5], [1.0, 1.0]])
     lines = volume_breaches(["a", "b"], ["exact", "paper"], [10, 11, 12, 13], ratio)
     assert lines == ["a: volume off by up to 10.0% (kept within 0.5%) at 2 frame(s): 11-12"], lines
     assert volume_breaches(["a"], ["exact"], [0], np.array([[np.nan]]))[0].endswith("at 1 frame(s): 0")
-    monkeypatch.setattr(tol, "VOLUME_EXACT_PROMISE", -1.0)  # every exact muscle "breaks" it: the wiring
-    _, _, err = _sweep(tmp_path, capsys, muscles=("quad_fem_r",))
-    assert "warning: quad_fem_r: volume off by up to 0.0% (kept within -100%) at 61 frame(s): 0-60" in err, err
+    _, _, err = _sweep(tmp_path, capsys, muscles=("quad_fem_r", "vas_lat_r"))
+    line = [ln for ln in err.splitlines() if ln.startswith("warning: quad_fem_r: volume off by up to ")]
+    assert len(line) == 1 and "(kept within 0.5%) at " in line[0], err
+    assert re.search(r"at \d+ frame\(s\): \d+", line[0]), line
+    assert "vas_lat_r: volume off" not in err, err  # a muscle that keeps its volume is not named
     import json
 
     manifest = json.loads((tmp_path / "o" / "manifest.json").read_text())

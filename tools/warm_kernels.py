@@ -80,7 +80,7 @@ def main() -> int:
             print(f"warm {i}/{len(todo)}: {what}: " + (f"up to {missing} of {total} kernels to compile" if missing
                                                        else "cached"), file=sys.stderr, flush=True)
             t = time.perf_counter()
-            with runtime.compile_progress():
+            with runtime.compile_progress(lambda text: print(text, file=sys.stderr, flush=True)):
                 rc = axdf(argv)
             if rc != 0:
                 print(f"warm: {what} exited {rc} (argv: axdf {' '.join(argv)})", file=sys.stderr)

@@ -135,7 +135,7 @@ def _main(argv, atomic) -> int:
             return int(e.code or 0) if not isinstance(e.code, str) else 2
         warm = _notice(args)
         if getattr(args, "compiling", 0):  # a cold cache: progress while numba compiles
-            with runtime.compile_progress():
+            with runtime.compile_progress(lambda line: print(line, file=sys.stderr, flush=True)):
                 rc = int(args._module.run(args) or 0)
         else:
             rc = int(args._module.run(args) or 0)

@@ -110,8 +110,6 @@ class MuscleBatch:
         self.insertion = np.array([m.insertion_bone for m in models], dtype=np.int64)
         self.r0_local = np.array([m.r0_local for m in models], dtype=np.float64).reshape(-1, 3)
         self.rend_local = np.array([m.rend_local for m in models], dtype=np.float64).reshape(-1, 3)
-        self.t0_local = np.array([m.t0_local for m in models], dtype=np.float64).reshape(-1, 3)
-        self.tend_local = np.array([m.tend_local for m in models], dtype=np.float64).reshape(-1, 3)
         self.l0 = np.array([m.l0 for m in models], dtype=np.float64)
         self.v0 = np.array([getattr(m, "v0", np.nan) for m in models], dtype=np.float64)
         self.solve = np.array([m.volume_mode.value == "exact" for m in models], dtype=np.bool_)  # (VolumeMode)
@@ -125,8 +123,7 @@ class MuscleBatch:
         self.coarse = K.Basis(self.c_off, self.bc_idx, self.bc_w, self.dbc_idx, self.dbc_w)
         self.bound = K.Basis(self.q_off, self.bb_idx, self.bb_w, self.dbb_idx, self.dbb_w)
         self.gauss = K.Quadrature(self.g_off, self.dbg_idx, self.dbg_w, self.gw)
-        self.anchors = K.Anchors(self.origin, self.insertion, self.r0_local, self.rend_local, self.t0_local,
-                                 self.tend_local)
+        self.anchors = K.Anchors(self.origin, self.insertion, self.r0_local, self.rend_local)
         self.binding = S.Binding(self.q_off, self.lam, self.uvw, self.beta, self.bump)
         self.bases = S.SurfaceBases(self.m_off, self.u_off, self.u_idx, self.u_w, self.v_off, self.v_idx, self.v_w)
         self._pack_paths(models)

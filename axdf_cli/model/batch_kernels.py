@@ -47,7 +47,6 @@ from numba.extending import intrinsic
 from axdf_cli.model.paths import wrap as W
 
 _EPS = 1e-30  # the floor of axdf_cli.model.rmf's norms
-_SWING_FLOOR = 1e-9  # (axdf_cli.model.rmf.SWING_FLOOR) below it, 1 + cos of the swing: no turn, only the projection
 _TINY = 1e-300  # the unit tangent's floor (as axdf_cli.model.muscle normalises)
 LANES = 8  # frames made at once in the innermost loops (one AVX-512 vector of float64)
 _U = np.uint64  # loop indices the compiler can vectorize over (no negative-index wraparound)
@@ -77,8 +76,6 @@ class Anchors(NamedTuple):
     insertion: np.ndarray  # insertion bone (its reference for the roll)
     r0_local: np.ndarray  # (M, 3) the start vector in the origin bone
     rend_local: np.ndarray  # (M, 3) the insertion's rest reference in its bone
-    t0_local: np.ndarray  # (M, 3) the rest tangent at t = 0 in the origin bone (the swing the start vector follows)
-    tend_local: np.ndarray  # (M, 3) the rest tangent at t = 1 in the insertion bone (likewise for the roll)
 
 
 class FrameOut(NamedTuple):
@@ -276,34 +273,12 @@ def _samples(p, a0, idx, w, didx, dw, s0, ns, xs, ts):
 
 
 @njit(cache=True, error_model="numpy")
-def _start_vector(rot, local, tlocal, t0, t1, t2, out):
-    """:func:`axdf_cli.model.rmf.carried_perpendicular`: ``rot @ local`` turned by the least
-    rotation taking ``rot @ tlocal`` (the rest tangent, carried by the bone) onto the unit t,
-    then made ⟂ t and unit: out (3,)."""
+def _start_vector(rot, local, t0, t1, t2, out):
+    """:func:`axdf_cli.model.rmf.perpendicular_unit` of ``rot @ local`` against the unit t:
+    out (3,)."""
     v0 = _matvec_row(rot[0, 0], rot[0, 1], rot[0, 2], local[0], local[1], local[2])
     v1 = _matvec_row(rot[1, 0], rot[1, 1], rot[1, 2], local[0], local[1], local[2])
     v2 = _matvec_row(rot[2, 0], rot[2, 1], rot[2, 2], local[0], local[1], local[2])
-    a0 = _matvec_row(rot[0, 0], rot[0, 1], rot[0, 2], tlocal[0], tlocal[1], tlocal[2])
-    a1 = _matvec_row(rot[1, 0], rot[1, 1], rot[1, 2], tlocal[0], tlocal[1], tlocal[2])
-    a2 = _matvec_row(rot[2, 0], rot[2, 1], rot[2, 2], tlocal[0], tlocal[1], tlocal[2])
-    na = _floor(math.sqrt(_sumsq(a0, a1, a2)), _EPS)
-    a0, a1, a2 = a0 / na, a1 / na, a2 / na
-    # w = a x t, c = a . t: v + w x v + w x (w x v) / (1 + c) (Rodrigues' least rotation)
-    w0 = a1 * t2 - a2 * t1
-    w1 = a2 * t0 - a0 * t2
-    w2 = a0 * t1 - a1 * t0
-    c = _dot(a0, a1, a2, t0, t1, t2)
-    if 1.0 + c > _SWING_FLOOR:
-        x0 = w1 * v2 - w2 * v1
-        x1 = w2 * v0 - w0 * v2
-        x2 = w0 * v1 - w1 * v0
-        y0 = w1 * x2 - w2 * x1
-        y1 = w2 * x0 - w0 * x2
-        y2 = w0 * x1 - w1 * x0
-        k = 1.0 / (1.0 + c)
-        v0 = v0 + x0 + k * y0
-        v1 = v1 + x1 + k * y1
-        v2 = v2 + x2 + k * y2
     d = _dot(v0, v1, v2, t0, t1, t2)
     p0 = v0 - d * t0
     p1 = v1 - d * t1
@@ -387,11 +362,11 @@ def _finish(r0, r1, r2, t0, t1, t2, out):
 
 
 @njit(cache=True, error_model="numpy")
-def _roll_args(rot, local, tlocal, r_end, t_end, tgt, out):
+def _roll_args(rot, local, r_end, t_end, tgt, out):
     """The insertion roll's arctan2 arguments (y, x) (as :func:`axdf_cli.model.rmf.signed_angle`):
     the angle from the propagated r_end to the insertion bone's reference ``rot @ local`` made
-    carried onto t_end (:func:`_start_vector`; into tgt (3,), scratch)."""
-    _start_vector(rot, local, tlocal, t_end[0], t_end[1], t_end[2], tgt)
+    ⟂ t_end (into tgt (3,), scratch)."""
+    _start_vector(rot, local, t_end[0], t_end[1], t_end[2], tgt)
     a0, a1, a2 = r_end[0], r_end[1], r_end[2]
     c0 = a1 * tgt[2] - a2 * tgt[1]
     c1 = a2 * tgt[0] - a0 * tgt[2]
@@ -422,7 +397,7 @@ def frames_pass(js, p, world, a_off, samples, bound, bind_j, gauss, anchors, rto
     s_off, bs_idx, bs_w, dbs_idx, dbs_w = samples
     q_off, bb_idx, bb_w, dbb_idx, dbb_w = bound
     g_off, dbg_idx, dbg_w, gw = gauss
-    origin, insertion, r0_local, rend_local, t0_local, tend_local = anchors
+    origin, insertion, r0_local, rend_local = anchors
     out_q, out_ends, out_roll, out_length = out
     nf = p.shape[0]
     smax = 1
@@ -471,8 +446,7 @@ def frames_pass(js, p, world, a_off, samples, bound, bind_j, gauss, anchors, rto
                     smp[1, s, 1, f] = d1 / n
                     smp[1, s, 2, f] = d2 / n
             for f in range(nb):
-                _start_vector(world[fu + f, origin[j]], r0_local[j], t0_local[j], smp[1, 0, 0, f], smp[1, 0, 1, f],
-                              smp[1, 0, 2, f], r0)
+                _start_vector(world[fu + f, origin[j]], r0_local[j], smp[1, 0, 0, f], smp[1, 0, 1, f], smp[1, 0, 2, f], r0)
                 for c in range(3):
                     smp[2, 0, c, f] = r0[c]
             # the double-reflection recurrence (rmf.propagate), every frame of the block at once
@@ -519,7 +493,7 @@ def frames_pass(js, p, world, a_off, samples, bound, bind_j, gauss, anchors, rto
                     out_ends[j, fu + f, 1, c] = smp[1, e, c, f]
                     tj[c] = smp[1, e, c, f]
                 _finish(smp[2, e, 0, f], smp[2, e, 1, f], smp[2, e, 2, f], tj[0], tj[1], tj[2], rj)
-                _roll_args(world[fu + f, insertion[j]], rend_local[j], tend_local[j], rj, tj, tgt, out_roll[j, fu + f])
+                _roll_args(world[fu + f, insertion[j]], rend_local[j], rj, tj, tgt, out_roll[j, fu + f])
             # the bound points: C(t), its unit tangent, one double-reflection step from sample s
             for q in range(q_off[j], q_off[j + 1]):
                 s = bind_j[q]
@@ -614,7 +588,7 @@ def roll_pass(js, p, world, a_off, coarse, anchors, rtol2, out_roll):
     :class:`Basis` ``coarse`` (the twist references'): :func:`frames_pass` without the
     bound points."""
     s_off, bs_idx, bs_w, dbs_idx, dbs_w = coarse
-    origin, insertion, r0_local, rend_local, t0_local, tend_local = anchors
+    origin, insertion, r0_local, rend_local = anchors
     nf = p.shape[0]
     smax = 1
     for k in range(js.shape[0]):
@@ -630,7 +604,7 @@ def roll_pass(js, p, world, a_off, coarse, anchors, rtol2, out_roll):
         ns = s_off[j + 1] - s_off[j]
         for f in range(nf):
             _samples(p[f], a_off[j], bs_idx, bs_w, dbs_idx, dbs_w, s_off[j], ns, xs, ts)
-            _start_vector(world[f, origin[j]], r0_local[j], t0_local[j], ts[0, 0], ts[0, 1], ts[0, 2], r0)
+            _start_vector(world[f, origin[j]], r0_local[j], ts[0, 0], ts[0, 1], ts[0, 2], r0)
             _propagate(xs, ts, ns, r0, rs, rtol2)
             _finish(rs[ns - 1, 0], rs[ns - 1, 1], rs[ns - 1, 2], ts[ns - 1, 0], ts[ns - 1, 1], ts[ns - 1, 2], rj)
-            _roll_args(world[f, insertion[j]], rend_local[j], tend_local[j], rj, ts[ns - 1], r0, out_roll[j, f])
+            _roll_args(world[f, insertion[j]], rend_local[j], rj, ts[ns - 1], r0, out_roll[j, f])

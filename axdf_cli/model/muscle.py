@@ -11,11 +11,7 @@ new frame, rotated about T by the twist at t.
 Frames. The start vector R(0) is fixed in the origin bone (the bone of the first axis
 point), so a rigid motion of the skeleton moves the muscle rigidly. The insertion bone's
 roll is the signed angle at t = 1 between the propagated R(1) and the insertion bone's
-rest R(1) carried by that bone. Both bone vectors follow the end tangent's swing away from
-the bone by the least rotation (a swing-twist split, ``rmf.carried_perpendicular``), not by
-projection onto the plane of the tangent, which turns fast where the tangent swings towards
-the vector and made the roll jump (a flat muscle wrung to a few percent of its volume in one
-frame under wide hip motion). The roll is spread along the axis in proportion to rest arc
+rest R(1) carried by that bone; it is spread along the axis in proportion to rest arc
 length, and kept continuous over time (past 180 degrees) by unwrapping it against a coarse
 pass over the pose's whole frame range, so that any frame subset gives the same meshes.
 
@@ -291,12 +287,9 @@ class MuscleModel:
         # depend on where the skeleton stands in the world
         r_org = rest_world[self.origin_bone, :3, :3]
         self.r0_local = rmf.any_perpendicular(r_org.T @ t[0, 0])
-        self.t0_local = r_org.T @ t[0, 0]
         r0 = rmf.perpendicular_unit(r_org @ self.r0_local, t[:, 0])
         r = rmf.propagate(x, t, r0)
-        r_ins = rest_world[self.insertion_bone, :3, :3]
-        self.rend_local = r_ins.T @ r[0, -1]
-        self.tend_local = r_ins.T @ t[0, -1]
+        self.rend_local = rest_world[self.insertion_bone, :3, :3].T @ r[0, -1]
         # rest arc length along the dense samples, as a fraction
         seg = np.linalg.norm(np.diff(x[0], axis=0), axis=1)
         self.arc = np.concatenate([[0.0], np.cumsum(seg)]) / max(seg.sum(), 1e-300)

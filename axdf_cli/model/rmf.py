@@ -82,27 +82,6 @@ def perpendicular_unit(v: np.ndarray, t: np.ndarray) -> np.ndarray:
     return p / np.maximum(np.linalg.norm(p, axis=-1, keepdims=True), _EPS)
 
 
-#: Below it, 1 + cos of the swing (the angle from a bone's carried rest tangent to the tangent
-#: now): a swing this close to 180 degrees has no least rotation, and only the projection is left.
-SWING_FLOOR = 1e-9
-
-
-def carried_perpendicular(v: np.ndarray, a: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """A bone's reference v (..., 3), set ⟂ its rest tangent, carried to the tangent t now:
-    turned by the least rotation that takes the bone's carried rest tangent a (..., 3) onto
-    the unit t, then made ⟂ t and unit (the swing of a swing-twist split). Projecting v onto
-    the plane ⟂ t alone is ill-conditioned where the swing nears 90 degrees towards v (v and t
-    nearly parallel: the projection turns fast, and a muscle's roll jumps by up to 180 degrees
-    from one frame to the next); the least rotation is steady up to a swing of 180 degrees."""
-    a = a / np.maximum(np.linalg.norm(a, axis=-1, keepdims=True), _EPS)
-    w = np.cross(a, t)
-    c = _dot(a, t)
-    k = np.where(1.0 + c > SWING_FLOOR, 1.0 / np.maximum(1.0 + c, SWING_FLOOR), 0.0)[..., None]
-    wv = np.cross(w, v)
-    turned = np.where((1.0 + c > SWING_FLOOR)[..., None], v + wv + k * np.cross(w, wv), v)
-    return perpendicular_unit(turned, t)
-
-
 def any_perpendicular(t: np.ndarray) -> np.ndarray:
     """A unit vector ⟂ t (..., 3): the first of the X, Y, Z axes within 0.8 of orthogonal
     (|t . axis| < 0.8, one always is), made perpendicular. Free of ties (an argmin over

@@ -342,7 +342,8 @@ def check_output(plan: RunPlan, *, resume: bool = False, overwrite: bool = False
     """The output folder's checks (reads only): what OUT holds, and for --resume that it is
     the same run."""
     target = runfolder.prepare(plan.out, resume=resume, overwrite=overwrite, dirs=run_dirs(plan))
-    runfolder.check_inputs_outside(target, plan.inputs)
+    base = Path(os.getcwd()) if plan.base is None else Path(plan.base)
+    runfolder.check_inputs_outside(target, [base / name for name in plan.inputs])  # (named from base)
     if resume and target.previous is not None:
         check_resume(plan, target.previous)
     return target

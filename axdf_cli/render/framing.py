@@ -4,8 +4,9 @@
   draws (:func:`run_framing`): its muscles, each muscle's rest mesh riding rigidly on the bones
   of its two nearest anchors (:func:`anchored_points`), and, when bones are drawn, the moving
   bones' meshes and the joints of the sticks drawn (every moving joint of a skeleton without
-  meshes); never a joint or frame that is not drawn, and never the muscles alone (two muscles
-  on a drawn thorax show the thorax; ``--no-bones`` frames the muscles alone). The points are posed
+  meshes), never a joint or frame that is not drawn; the muscles alone when they span less
+  than ``FRAMING_CLOSEUP`` of the whole subject (a close-up: a deltoid on a whole arm and
+  trunk). The points are posed
   by forward kinematics at a bounded, even sample of the pose's frames
   (:func:`framing_frames`: every frame of a pose up to ``FRAMING_SAMPLE`` frames), so the
   camera depends on the pose, never on ``--frames``, and one frame of a very long pose costs
@@ -34,7 +35,8 @@ import numpy as np
 from axdf_cli.model.pose import (FRAMING_CHUNK, FRAMING_DIRECTIONS, FRAMING_PAD, FRAMING_PAD_FRACTION, SCAN_FRAMES,
                                  hull_points, sample_coordinates, sphere_directions)
 from axdf_cli.model.skeleton import forward_kinematics
-from axdf_cli.tolerances import FRAMING_SAMPLE, GROUND_FLAT, GROUND_MARGIN, GROUND_MARGIN_FRACTION
+from axdf_cli.tolerances import (FRAMING_CLOSEUP, FRAMING_SAMPLE, GROUND_FLAT, GROUND_MARGIN,
+                                 GROUND_MARGIN_FRACTION)
 
 #: Smallest extent (metres) used for framing, so a point-like scene still frames.
 MIN_EXTENT = 1e-3
@@ -152,7 +154,11 @@ def run_framing(pose, models, bone_meshes: dict | None = None, bones: bool = Tru
     path = np.concatenate(path)
     travel = float(np.linalg.norm(np.ptp(path[:, :2], axis=0))) if len(path) else 0.0
     follow = root is not None and travel > float(np.ptp(whole[:, 2]))
-    group = [g for g in groups if len(keep[g, False])]  # everything drawn
+    if len(keep["muscles", False]) and (not len(keep["skeleton", False]) or np.ptp(keep["muscles", False], axis=0).max()
+                                        < FRAMING_CLOSEUP * np.ptp(whole, axis=0).max()):
+        group = ["muscles"]  # a close-up: a few muscles on a whole skeleton
+    else:
+        group = [g for g in groups if len(keep[g, False])]  # everything drawn
     pts = hull_points(np.concatenate([keep[g, follow] for g in group])) if group else origin
     foot = np.round(np.stack([whole[:, :2].min(0), whole[:, :2].max(0)]), 6) + 0.0
     return Framing(np.round(_pad(pts), 6) + 0.0, skel.bones[root].name if follow else None, ground_bones(skel), foot)
