@@ -8,6 +8,7 @@ environment cannot do the work, 130 interrupted. No traceback reaches the user u
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import os
 import signal
@@ -134,10 +135,9 @@ def _main(argv, atomic) -> int:
         except SystemExit as e:
             return int(e.code or 0) if not isinstance(e.code, str) else 2
         warm = _notice(args)
-        if getattr(args, "compiling", 0):  # a cold cache: progress while numba compiles
-            with runtime.compile_progress(lambda line: print(line, file=sys.stderr, flush=True)):
-                rc = int(args._module.run(args) or 0)
-        else:
+        progress = (runtime.compile_progress(lambda line: print(line, file=sys.stderr, flush=True))
+                    if getattr(args, "compiling", 0) else contextlib.nullcontext())  # a cold cache: progress
+        with progress:
             rc = int(args._module.run(args) or 0)
         if rc == 0 and warm and not atomic.interrupted():
             runtime.mark_warm(warm)
