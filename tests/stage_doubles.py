@@ -6,6 +6,9 @@
 - :class:`PushByOthers` (FRAME) really depends on all muscles of a frame: each muscle moves by
   GAIN x the mean of the other muscles' centroids.
 - :class:`WarnFirst` (FRAME) adds a warning to the first muscle at every frame.
+- :class:`OffsetShell` (FRAME) adds a layer: one part of kind fat, ``shell``, the first
+  muscle's surface moved out by SHELL_OFFSET along its normals at every frame (what a fat
+  layer's stage would declare and make; no sink knows of it).
 
 :func:`register` puts them in the package's table (``axdf_cli.pipeline.stages.STAGES``), as a
 stage engineer's one-line change would; run as a script, this module registers the stages
@@ -15,13 +18,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from axdf_cli.pipeline.stages import Scope
+from axdf_cli.pipeline.stage import Scope, StageBase
 
 ALPHA = 0.25  # weight of the current frame in the smoothing
+SHELL_OFFSET = 0.004  # m: how far the shell lies outside the first muscle
 GAIN = 0.05  # share of the others' mean centroid a muscle is moved by
 
 
-class SmoothAxis:
+class SmoothAxis(StageBase):
     name = "smooth"
     scope = Scope.TIME
     settings = {"alpha": ALPHA}
@@ -43,7 +47,7 @@ class SmoothAxis:
         return state, chunk
 
 
-class PushByOthers:
+class PushByOthers(StageBase):
     name = "push"
     scope = Scope.FRAME
     settings = {"gain": GAIN}
@@ -62,7 +66,7 @@ class PushByOthers:
         return state, chunk
 
 
-class WarnFirst:
+class WarnFirst(StageBase):
     name = "warn"
     scope = Scope.FRAME
 
@@ -75,7 +79,31 @@ class WarnFirst:
         return state, chunk
 
 
-DOUBLES = {s.name: s for s in (SmoothAxis, PushByOthers, WarnFirst)}
+class OffsetShell(StageBase):
+    name = "shell"
+    scope = Scope.FRAME
+    settings = {"offset": SHELL_OFFSET}
+
+    def parts(self, plan):
+        from axdf_cli.parts import COLORS, Kind, Part
+
+        m = plan.models[0]
+        rest = np.asarray(m.rest_vertices, np.float64) + SHELL_OFFSET * np.asarray(m.rest_normals, np.float64)
+        return (Part("shell", Kind.FAT, m.faces, rest, np.asarray(m.rest_normals, np.float64), COLORS[Kind.FAT]),)
+
+    def start(self, plan):
+        return None
+
+    def __call__(self, state, chunk):
+        from axdf_cli.parts import PartFrames
+
+        r = chunk.results[chunk.muscles[0]]
+        chunk.parts["shell"] = PartFrames((r.vertices + SHELL_OFFSET * r.normals).astype(np.float32),
+                                          r.normals.astype(np.float32))
+        return state, chunk
+
+
+DOUBLES = {s.name: s for s in (SmoothAxis, PushByOthers, WarnFirst, OffsetShell)}
 
 
 def register(table: dict, names) -> None:

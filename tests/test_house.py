@@ -22,7 +22,7 @@ PACKAGE = REPO_ROOT / "axdf_cli"
 #: The rooms of axdf_cli, bottom to top: a room's modules import only rooms at its level or
 #: below. A room is a sub-package or a top-level module ("__init__" is the package's own).
 ROOMS = (
-    ("__init__", "errors", "tolerances"),  # the version, the error hierarchy, every numeric tolerance
+    ("__init__", "errors", "tolerances", "parts"),  # the version, the errors, every numeric tolerance, the part kinds
     ("fileio",),  # atomic writes, bounded reads, YAML with positions, the run folder's rules
     ("workers", "runtime"),  # process pools whose workers die with the parent; threads and kernel cache
     ("formats",),  # mesh formats: one entry per format in FORMATS

@@ -182,15 +182,16 @@ def test_benchmark_reports_fps(tmp_path):
 
 def _with_skin(scene, chunks, radius: float = 0.2):
     """The synthetic scene inside a sphere of ``radius`` (its 'skin')."""
-    from axdf_cli.render.scene import SceneSkin
+    from axdf_cli.parts import Kind
+    from axdf_cli.render.scene import SceneLayer
     from axdf_cli.render.synthetic import uv_sphere
 
     unit, faces = uv_sphere(16, 32)
     pos = (unit * radius).astype(np.float32)[None]
     nrm = unit.astype(np.float32)[None]
-    skinned = replace(scene, skin=SceneSkin(faces, (0.75, 0.41, 0.31)),
+    skinned = replace(scene, layers=(SceneLayer("skin", Kind.SKIN, faces, (0.75, 0.41, 0.31)),),
                       bounds=np.array([[-radius] * 3, [radius] * 3]))
-    return skinned, [replace(c, skin=(pos, nrm)) for c in chunks]
+    return skinned, [replace(c, layers=((pos, nrm),)) for c in chunks]
 
 
 def test_a_skin_is_drawn_opaque_see_through_or_not_at_all():
@@ -270,7 +271,7 @@ def test_the_muscle_under_skin_pass_names_the_nearest_muscle_beneath_each_skin_p
     skin = img.ids == sid
     assert skin.sum() > 5000 and np.all(uid[~skin] == NO_MUSCLE) and np.all(udepth[~skin] == 0)
     pts = unproject(img.depth, skin, K, w2c)
-    on_skin = igl.point_mesh_squared_distance(pts, skin_chunks[0].skin[0][0].astype(np.float64), skinned.skin.faces)[0]
+    on_skin = igl.point_mesh_squared_distance(pts, skin_chunks[0].layers[0][0][0].astype(np.float64), skinned.skin.faces)[0]
     assert np.sqrt(on_skin).max() < 1e-4  # the depth pass, unprojected, lies on the skin's triangles
     samples, owner = [], []
     for k, (v, f) in enumerate(meshes):

@@ -81,7 +81,7 @@ def test_pc2_holds_the_skin_with_its_rest_mesh(whole):
 def test_usd_stage_references_the_skin(whole):
     from pxr import Usd, UsdGeom
 
-    from axdf_cli.render.scene import SKIN_COLOR
+    from axdf_cli.parts import COLORS, Kind
 
     stage = Usd.Stage.Open(str(whole / "scene.usda"))
     prim = stage.GetPrimAtPath("/axdf/skin")
@@ -90,7 +90,7 @@ def test_usd_stage_references_the_skin(whole):
     mesh = UsdGeom.Mesh(prim)
     counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get())
     assert len(counts) and (counts == 3).all()
-    np.testing.assert_allclose(mesh.GetDisplayColorAttr().Get()[0], SKIN_COLOR, atol=1e-6)
+    np.testing.assert_allclose(mesh.GetDisplayColorAttr().Get()[0], COLORS[Kind.SKIN], atol=1e-6)
     pts = ply_points(whole)
     assert mesh.GetPointsAttr().GetNumTimeSamples() == len(FRAMES)
     for k, f in enumerate(FRAMES):

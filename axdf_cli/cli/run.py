@@ -49,9 +49,9 @@ def add_stage_args(p) -> None:
     (:data:`axdf_cli.pipeline.stages.STAGES`); neither: the job's word, else the stage's default."""
     import argparse
 
-    from axdf_cli.pipeline.stages import STAGES, stage_default
+    from axdf_cli.pipeline.stages import stage_default, switched
 
-    for name in STAGES:
+    for name in switched():
         p.add_argument(f"--{name}", dest=f"stage_{name}", action=argparse.BooleanOptionalAction, default=None,
                        help=f"run the {name} stage, or leave it out (default: the job's {name}: key, else "
                             f"{'on' if stage_default(name) else 'off'})")
@@ -59,9 +59,9 @@ def add_stage_args(p) -> None:
 
 def stage_switches(args) -> dict:
     """The stages switched on or off on the command line: name -> bool."""
-    from axdf_cli.pipeline.stages import STAGES
+    from axdf_cli.pipeline.stages import switched
 
-    return {name: v for name in STAGES if (v := getattr(args, f"stage_{name}", None)) is not None}
+    return {name: v for name in switched() if (v := getattr(args, f"stage_{name}", None)) is not None}
 
 
 def positive(text: str) -> int:

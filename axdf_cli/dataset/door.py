@@ -51,14 +51,17 @@ def written_meshes(plan: RunPlan, frame: int) -> tuple[list, list]:
     return pos, nrm
 
 
-def written_skin(plan: RunPlan, frame: int) -> tuple[np.ndarray, np.ndarray]:
-    """The skin of one frame as the run wrote it (``meshes/skin/``): (V, 3) float32 positions
-    and normals."""
+def written_layers(plan: RunPlan, frame: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The parts the stages added (``plan.layers``: the skin) at one frame as the run wrote them
+    (``meshes/<part>/``): per part, (V, 3) float32 positions and normals."""
     from axdf_cli.formats import FORMATS
-    from axdf_cli.fileio.runfolder import SKIN_MESH, mesh_relpath
+    from axdf_cli.fileio.runfolder import mesh_relpath
 
-    m = FORMATS[plan.fmt].reader((plan.out / mesh_relpath(SKIN_MESH, int(frame), plan.fmt)).read_bytes())
-    return m.vertices.astype(np.float32), m.normals.astype(np.float32)
+    out = []
+    for part in plan.layers:
+        m = FORMATS[plan.fmt].reader((plan.out / mesh_relpath(part.name, int(frame), plan.fmt)).read_bytes())
+        out.append((m.vertices.astype(np.float32), m.normals.astype(np.float32)))
+    return out
 
 
 def build_models(specs, skeleton) -> list:

@@ -1,8 +1,9 @@
 """The index: one Parquet table of every sample (sequence x frame x view), in sequence order.
 
-``skin`` is the sample's skin mesh where the data set wears one (``skin:``), and
-``skin_passes`` names the EXR channels the skin adds (``under.id``, ``under.Z``, ``part.id``:
-an opaque skin's muscle-under-skin and body-part passes).
+``parts`` lists the sample's meshes of the parts the stages add (comma-separated paths, in
+the stages' order: the skin where the data set wears one); ``skin`` is the mesh of the part of
+kind skin, and ``skin_passes`` names the EXR channels a skin adds (``under.id``, ``under.Z``,
+``part.id``: an opaque skin's muscle-under-skin and body-part passes).
 
 ``visible_keypoints`` counts the keypoints visible in the sample (``labels.npz``'s ``visible``):
 0 marks a sample whose view shows none of them (the subject out of view or hidden), so a
@@ -26,7 +27,7 @@ from axdf_cli.errors import EnvironmentProblem
 
 COLUMNS = ("sample", "sequence", "sequence_index", "source", "frame", "frame_index", "view", "view_index",
             "seed", "shard", "png", "exr", "labels", "amodal", "meshes", "mask", "depth", "visible_keypoints",
-            "skin", "skin_passes")
+            "skin", "skin_passes", "parts")
 
 
 def _pyarrow():
@@ -65,12 +66,19 @@ def index_rows(records: list[dict], seed: int, shards: int, passes) -> dict:
                 for p in ("mask", "depth"):  # (views.VIEW_PNG_PASSES: <frame>.mask.png, .depth.png)
                     cols[p].append(f"{name}/views/{view}/{frame:04d}.{p}.png" if p in passes else None)
                 cols["visible_keypoints"].append(_count(rec.get("visible_keypoints"), fi, vi))
-                skin = [k for k in rec.get("files", {}) if k.startswith(f"meshes/skin/skin_{frame:04d}.")]
-                cols["skin"].append(f"{name}/{skin[0]}" if skin else None)
+                meshes = {p["name"]: _part_mesh(rec, p["name"], frame) for p in rec.get("parts", [])}
+                skin = next((meshes[p["name"]] for p in rec.get("parts", []) if p["kind"] == "skin"), None)
+                cols["skin"].append(f"{name}/{skin}" if skin else None)
+                cols["parts"].append(",".join(f"{name}/{m}" for m in meshes.values() if m) or None)
                 sp = rec.get("skin_passes")
                 cols["skin_passes"].append(",".join(sp) if sp and "exr" in passes else None)
                 n += 1
     return cols
+
+
+def _part_mesh(rec: dict, part: str, frame: int) -> str | None:
+    """A part's mesh file at ``frame`` among the record's files (``meshes/<part>/<part>_<frame>.<ext>``)."""
+    return next((k for k in rec.get("files", {}) if k.startswith(f"meshes/{part}/{part}_{frame:04d}.")), None)
 
 
 def _count(counts, fi: int, vi: int) -> int | None:

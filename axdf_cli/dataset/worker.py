@@ -77,7 +77,7 @@ def build_context(path: Path | str, seed: int | None = None, policy=None, listed
     lie). ``listed`` False: the sequences are not listed and dataset.json not made (``--dry-run``:
     memory and time independent of the number of sequences; :func:`spec.count` counts them);
     ``fit`` False: motion-capture takes are read, not fitted (:func:`spec.load_dataset`)."""
-    from axdf_cli.render.scene import Scene, SceneBone, SceneMuscle
+    from axdf_cli.render.scene import Scene, SceneBone, SceneLayer, SceneMuscle
 
     spec = load_dataset(path, seed, policy, fit=fit)
     skel = load_skeleton(spec.skeleton_path, spec.policy)
@@ -85,38 +85,42 @@ def build_context(path: Path | str, seed: int | None = None, policy=None, listed
     models = door.build_models(muscles, skel)
     bone_meshes = {i: load_bone_mesh(b.mesh, spec.skeleton_path) for i, b in enumerate(skel.bones) if b.mesh}
     srcs = [spec.source, spec.skeleton_path, *spec.muscle_files, *sorted({b.mesh for b in skel.bones if b.mesh})]
-    skin = skin_stage = scene_skin = face_part = None
+    skin = face_part = None
     if spec.skin is not None:
-        from axdf_cli.pipeline.skin_stage import SkinStage
-        from axdf_cli.render.scene import SKIN_COLOR, SceneSkin
         from axdf_cli.render.under import face_parts
         from axdf_cli.specs.skin import load_skin
 
         skin = load_skin(spec.skin, skel, spec.policy)
         srcs += list(skin.files)
-        from axdf_cli.pipeline.stages import stage_default
-
-        skin_stage = SkinStage(skin, jiggle=dict(spec.stages).get("jiggle", stage_default("jiggle")))
-        scene_skin = SceneSkin(skin.faces, SKIN_COLOR)
         face_part = face_parts(skin.faces, skin.weights)
+    stages = build_stages(dict(spec.stages), muscles=muscles, skin=skin)
+    layers = tuple(p for s in stages for p in s.parts(_Models(muscles, models)))
     inputs = {display_path(Path(s)): atomic.sha256_file(s) for s in srcs}
     motion_inputs = {m.name: {display_path(Path(p)): atomic.sha256_file(p) for p in (m.path, m.map) if p}
                      for m in spec.motions.values()}
     scene_bones = sorted(bone_meshes) if spec.render.bones else []
     scene = Scene(muscles=tuple(SceneMuscle(s.name, s.color, m.faces) for s, m in zip(muscles, models)),
                   bones=tuple(SceneBone(skel.bones[i].name, bone_meshes[i][0], bone_meshes[i][1]) for i in scene_bones),
-                  bounds=np.zeros((2, 3)), frames=(), skin=scene_skin)
+                  bounds=np.zeros((2, 3)), frames=(),
+                  layers=tuple(SceneLayer(p.name, p.kind, p.faces, p.color) for p in layers))
     sequences = expand_sequences(spec) if listed else []
     keypoints = skeleton_keypoints(skel, {i: m[0] for i, m in bone_meshes.items()})
     ctx = Context(spec, sequences, skel, door.without_meshes(skel), muscles, models, bone_meshes, keypoints,
                   inputs, motion_inputs, scene, scene_bones, b"", "",
-                  stages=build_stages(dict(spec.stages), muscles=muscles) + ((skin_stage,) if skin_stage else ()),
-                  skin=skin, face_part=face_part)
+                  stages=stages, skin=skin, face_part=face_part)
     if not listed:
         return ctx
     ctx.dataset_json = (json.dumps(dataset_dict(ctx), indent=1) + "\n").encode()
     ctx.digest = hashlib.sha256(ctx.dataset_json).hexdigest()
     return ctx
+
+
+@dataclass(frozen=True)
+class _Models:
+    """What a stage's ``parts`` reads of a run (its muscles and models), for the data set's scene."""
+
+    muscles: list
+    models: list
 
 
 def sequence_plates(ctx: Context, subject: np.ndarray):
@@ -338,14 +342,15 @@ def _make_sequence(ctx: Context, seq: Sequence, folder: Path, resume: bool, timi
     for fi, frame in enumerate(frames):
         ta = time.perf_counter()
         pos, nrm = door.written_meshes(plan, int(frame))
-        skin = door.written_skin(plan, int(frame)) if ctx.skin is not None else None
+        layers = door.written_layers(plan, int(frame))
+        skin = layers[ctx.scene.skin_index] if ctx.scene.skin is not None else None
         cams = [view_camera(views[v], K[v], w2c[fi, v], clip[fi, v, 0], clip[fi, v, 1], spec.render.size)
                 for v in range(nv)]
         bw = world[fi, ctx.scene_bones] if ctx.scene_bones else None
         if plates is not None:
             bw = placed_plates(plates, bw)
         tb = time.perf_counter()
-        imgs = vr.render(int(frame), pos, nrm, bw, cams, skin)
+        imgs = vr.render(int(frame), pos, nrm, bw, cams, layers)
         if skin is not None and spec.render.skin == "opaque":
             meshes = [(p, m.faces) for p, m in zip(pos, ctx.models)]
             imgs = [replace(im, under=vr.renderer.under(im, meshes),
@@ -391,6 +396,7 @@ def _make_sequence(ctx: Context, seq: Sequence, folder: Path, resume: bool, timi
     rec = {"dataset": ctx.digest, "sequence": seq.name, "index": seq.index, "source": entry.label,
            "frames": [int(f) for f in frames], "views": list(views),
            "visible_keypoints": visible.sum(axis=-1).astype(int).tolist(),  # (F, V): 0 marks a sample showing none
+           **({"parts": [{"name": p.name, "kind": p.kind.value} for p in plan.layers]} if plan.layers else {}),
            **({"skin_passes": ["under.id", "under.Z", "part.id"]}
               if ctx.skin is not None and spec.render.skin == "opaque" else {}),
            "files": dict(sorted(files.items()))}

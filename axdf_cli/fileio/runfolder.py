@@ -75,9 +75,6 @@ def command_of(manifest: "Manifest") -> str:
     return c if isinstance(c, str) else repr(c)
 
 
-#: The skin's name among a run's meshes (``axdf run --skin``: ``meshes/skin/skin_<frame>.<fmt>``);
-#: no muscle may have it.
-SKIN_MESH = "skin"
 
 
 def mesh_relpath(muscle: str, frame: int, fmt: str) -> str:

@@ -171,7 +171,7 @@ def write_bones_layer(path: Path | str, bones) -> None:
 
 
 def write_stage(path: Path | str, frames, fps: float, muscles, bones, bone_rows: np.ndarray, camera=None,
-                skin=None) -> None:
+                layers=()) -> None:
     """The run's root stage (``scene.usda``); references are paths relative to its folder.
 
     muscles: [(name, layer)] (``usd/<m>.usdc``); bones: [(name, layer or None)]: a bone with
@@ -179,8 +179,8 @@ def write_stage(path: Path | str, frames, fps: float, muscles, bones, bone_rows:
     bone_rows: (F, B, 7) x y z qw qx qy qz, each bone's frame in the world per frame;
     camera: None or a dict with ``world_to_camera`` (F, 4, 4) OpenCV axes (x right, y down,
     z forward), ``K`` (3, 3) pixels, ``size`` (W, H), ``near``, ``far``;
-    skin: None or (name, layer): the run's skin (``usd/skin.usdc``), a mesh under the root
-    next to the muscles."""
+    layers: [(name, layer)]: the parts the run's stages add (the skin: ``usd/skin.usdc``), each
+    a mesh under the root next to the muscles."""
     Sdf, Usd, UsdGeom, Vt, Gf, _ = pxr()
     layer = Sdf.Layer.CreateNew(str(path))  # at its own path: the relative references resolve
     stage = Usd.Stage.Open(layer)
@@ -191,8 +191,8 @@ def write_stage(path: Path | str, frames, fps: float, muscles, bones, bone_rows:
     for prim, (_, ref) in zip(prim_names(n for n, _ in muscles), muscles):
         p = stage.DefinePrim(f"{ROOT}/muscles/{prim}")
         p.GetReferences().AddReference("./" + ref)
-    if skin is not None:
-        stage.DefinePrim(f"{ROOT}/{prim_names([skin[0]])[0]}").GetReferences().AddReference("./" + skin[1])
+    for prim, (_, ref) in zip(prim_names(n for n, _ in layers), layers):
+        stage.DefinePrim(f"{ROOT}/{prim}").GetReferences().AddReference("./" + ref)
     UsdGeom.Scope.Define(stage, f"{ROOT}/bones")
     for b, (prim, (_, ref)) in enumerate(zip(prim_names(n for n, _ in bones), bones)):
         x = UsdGeom.Xform.Define(stage, f"{ROOT}/bones/{prim}")

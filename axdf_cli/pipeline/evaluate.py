@@ -195,8 +195,7 @@ def time_states(plan: RunPlan) -> dict:
         if e == 0:
             state, walk = tuple(s.start(plan) for s in stages), first
         else:  # a stage without ``restart`` walks from the pose's first frame
-            pairs = [s.restart(plan, first + e0 * TIME_BLOCK, TIME_BLOCK) if hasattr(s, "restart")
-                     else (s.start(plan), first) for s in stages]
+            pairs = [s.restart(plan, first + e0 * TIME_BLOCK, TIME_BLOCK) for s in stages]
             state, walk = tuple(p[0] for p in pairs), min(p[1] for p in pairs)
         last = max(b for b in need if b // TIME_EPOCH_BLOCKS == e)
         for b in range(min(e0, (walk - first) // TIME_BLOCK), last + 1):

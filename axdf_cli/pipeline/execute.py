@@ -28,7 +28,6 @@ from axdf_cli.pipeline.manifest import check_resume, manifest_dict
 from axdf_cli.pipeline.overlap import bulk_overlap, bulk_overlap_text, overlap_share, with_pack_command
 from axdf_cli.pipeline.packed import SequenceFiles, file_relpath, part_sizes, parts_of, sequence_formats, write_run_files
 from axdf_cli.pipeline.plan import RunPlan
-from axdf_cli.pipeline.skin_stage import SKIN_CSV, SKIN_COLUMNS, SKIN_NAME, skin_csv, skin_of
 from axdf_cli.pipeline.stages import Scope, of_scope
 from axdf_cli.render.framing import framing_record, plan_framing
 from axdf_cli.pipeline.tables import NSTATS, STATS_COLUMNS, bones_csv, stats_csv
@@ -45,10 +44,10 @@ def run_dirs(plan: RunPlan) -> list[str]:
         dirs = [PurePosixPath(mesh_relpath(n, 0, f)).parent.as_posix() for f in plan.formats if f in WRITERS
                 for n in plan.names]
     dirs += sorted({PurePosixPath(file_relpath(n, f)).parent.as_posix() for f in sequence_formats(plan.formats)
-                    for n in plan.names + ([SKIN_NAME] if skin_of(plan) is not None else [])})
+                    for n in plan.names + [p.name for p in plan.layers]})
     dirs += [PurePosixPath(bone_mesh_relpath("b")).parent.as_posix()]
-    if skin_of(plan) is not None:
-        dirs += [PurePosixPath(mesh_relpath(SKIN_NAME, 0, f)).parent.as_posix() for f in plan.formats if f in WRITERS][:1]
+    for part in plan.layers:
+        dirs += [PurePosixPath(mesh_relpath(part.name, 0, f)).parent.as_posix() for f in plan.formats if f in WRITERS][:1]
     if plan.rendering:
         dirs.append(PurePosixPath(frame_relpath(0, "png")).parent.as_posix())
     return dirs
@@ -73,7 +72,7 @@ class MeshPassResult:
     skipped: int = 0
     bone_rows: np.ndarray | None = None  # (R, B, 7) x y z qw qx qy qz, when asked for
     spill: str | None = None  # the raw meshes of these frames, for the packed files (see Spill)
-    skin: np.ndarray | None = None  # (R, len(SKIN_COLUMNS)) the skin's measures, when the run has a skin
+    tables: dict | None = None  # the stages' tables: file -> (R, columns) rows (axdf_cli.parts.Table)
 
 
 def split_of(plan: RunPlan) -> str:
@@ -83,7 +82,7 @@ def split_of(plan: RunPlan) -> str:
 
 
 class Spill:
-    """Every part's (muscles', then the skin's: :func:`parts_of`) positions and normals over a
+    """Every part's (the muscles', then the stages' parts: :func:`parts_of`) positions and normals over a
     block of R frames, raw float32 in one
     ``.npy`` (2, R, sum V, 3) at a temporary name in OUT (so that a killed run's is removed
     as any temporary): a frames worker's share of the packed files, streamed in frame order
@@ -134,15 +133,14 @@ def mesh_pass(plan: RunPlan, prep: Prepass, writer: OutputWriter, muscles: list[
                    for f in frame_formats}
     col = {j: k for k, j in enumerate(muscles)}
     stats = np.zeros((n_rows, len(muscles), NSTATS))
-    skin = skin_of(plan)
-    skin_rows = np.zeros((n_rows, len(SKIN_COLUMNS))) if skin is not None else None
-    skin_writers = {f: WRITERS[f](skin.faces, SKIN_NAME) for f in frame_formats} if skin is not None else {}
+    tables = {t.file: np.zeros((n_rows, len(t.columns))) for s in plan.stages for t in s.tables}
+    layer_writers = [{f: WRITERS[f](part.faces, part.name) for f in frame_formats} for part in plan.layers]
     bone_rows = np.zeros((n_rows, len(plan.pose.skeleton.bones), 7)) if bones else None
     warns: list = []
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
     packed = bool(sequence_formats(plan.formats))
-    seq_parts = muscles + ([nm] if skin is not None else [])  # (the skin: part nm, see parts_of)
+    seq_parts = muscles + list(range(nm, nm + len(plan.layers)))  # (the stages' parts follow the muscles: parts_of)
     seq = SequenceFiles(plan, seq_parts, writer) if packed and spill is None else None
     raw = None
     try:
@@ -185,20 +183,19 @@ def mesh_pass(plan: RunPlan, prep: Prepass, writer: OutputWriter, muscles: list[
                     for i, frame in enumerate(frames):
                         writer.write(frame_mesh_relpath(int(frame), f),
                                      writers[f].encode([p[i] for p, _ in meshes], [n[i] for _, n in meshes]))
-            if chunk.skin is not None:  # (the skin stage ran while the results were handed out)
-                skin_rows[here] = chunk.skin.stats
-                sp = chunk.skin.positions  # (the bounds of every written vertex hold the body too)
-                if np.isfinite(sp).all():
-                    lo = np.minimum(lo, sp.min(axis=(0, 1)))
-                    hi = np.maximum(hi, sp.max(axis=(0, 1)))
+            for file, rows_of in chunk.tables.items():  # (the FRAME stages ran while the results were handed out)
+                tables[file][here] = rows_of
+            for k, part in enumerate(plan.layers):
+                pf = chunk.parts[part.name]
+                lo, hi = _with_bounds(lo, hi, pf.positions)  # (the bounds of every written vertex)
                 for f in frame_formats:
                     for i, frame in enumerate(frames):
-                        writer.write(mesh_relpath(SKIN_NAME, int(frame), f),
-                                     skin_writers[f].encode(chunk.skin.positions[i], chunk.skin.normals[i]))
+                        writer.write(mesh_relpath(part.name, int(frame), f),
+                                     layer_writers[k][f].encode(pf.positions[i], pf.normals[i]))
                 if seq is not None:
-                    seq.append(nm, chunk.skin.positions, chunk.skin.normals)
+                    seq.append(nm + k, pf.positions, pf.normals)
                 if raw is not None:
-                    raw.put(nm, here, chunk.skin.positions, chunk.skin.normals)
+                    raw.put(nm + k, here, pf.positions, pf.normals)
             if seq is not None:
                 seq.end_chunk()
             if on_chunk:
@@ -217,7 +214,14 @@ def mesh_pass(plan: RunPlan, prep: Prepass, writer: OutputWriter, muscles: list[
             Path(spill).unlink(missing_ok=True)
         raise
     return MeshPassResult(muscles, rows, writer.files, stats, warns, lo, hi, writer.skipped, bone_rows,
-                          str(spill) if raw is not None else None, skin_rows)
+                          str(spill) if raw is not None else None, tables)
+
+
+def _with_bounds(lo: np.ndarray, hi: np.ndarray, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The bounds ``lo``, ``hi`` (3,) grown by a part's (C, V, 3) positions where all are finite."""
+    if positions.size and np.isfinite(positions).all():
+        return np.minimum(lo, positions.min(axis=(0, 1))), np.maximum(hi, positions.max(axis=(0, 1)))
+    return lo, hi
 
 
 def _mesh_worker(shared: dict, task) -> MeshPassResult:
@@ -231,8 +235,8 @@ def _mesh_worker(shared: dict, task) -> MeshPassResult:
 
 
 def _sequence_worker(shared: dict, muscles: list[int]) -> tuple[dict, int]:
-    """Stream the packed files of ``muscles`` (parts: the skin is part ``len(plan.models)``)
-    from the spilled blocks, in frame order."""
+    """Stream the packed files of ``muscles`` (parts: :func:`parts_of`) from the spilled
+    blocks, in frame order."""
     plan = shared["plan"]
     writer = OutputWriter(shared["root"], shared["previous"])
     seq = SequenceFiles(plan, muscles, writer)
@@ -398,14 +402,14 @@ def _write_run(plan: RunPlan, session, prep: Prepass, progress, render_progress,
         all_warns = list(plan.frame_warnings)
         writer.skipped = sum(p.skipped for p in parts)  # (one pass in this process: its writer is ours)
         bone_rows = np.zeros((nf, len(bones), 7))
-        skin_rows = np.zeros((nf, len(SKIN_COLUMNS)))
+        tables = {t.file: (t, np.zeros((nf, len(t.columns)))) for s in plan.stages for t in s.tables}
         for part in parts:
             writer.files.update(part.files)
             stats[part.rows, part.muscles] = part.stats
             if part.bone_rows is not None:
                 bone_rows[part.rows] = part.bone_rows
-            if part.skin is not None:
-                skin_rows[part.rows] = part.skin
+            for file, rows_of in (part.tables or {}).items():
+                tables[file][1][part.rows] = rows_of
             all_warns += part.warnings
         warnings: list[str] = list(plan.warnings)
         share = overlap_share(plan, stats[..., STATS_COLUMNS.index("inside_muscle")])
@@ -424,8 +428,8 @@ def _write_run(plan: RunPlan, session, prep: Prepass, progress, render_progress,
             writer.write(bone_mesh_relpath(bones[i].name), data)
         writer.write(STATS, stats_csv(plan, stats, warn_text))
         writer.write(BONES_CSV, bones_csv(plan, bone_rows))
-        if skin_of(plan) is not None:
-            writer.write(SKIN_CSV, skin_csv(plan.frames, skin_rows))
+        for file, (table, rows_of) in tables.items():
+            writer.write(file, table.encode(plan.frames, rows_of))
         frame_pts = plan_framing(plan)
         extra = {"bounds": [[float(f"{x:.9g}") for x in lo], [float(f"{x:.9g}") for x in hi]],
                  "framing": framing_record(frame_pts, plan.pose.first)}

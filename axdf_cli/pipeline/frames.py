@@ -16,8 +16,7 @@ from axdf_cli.pipeline.evaluate import Prepass, evaluate_plan, finite_or_rest
 from axdf_cli.pipeline.plan import camera_targets
 from axdf_cli.render.framing import plan_framing, scene_framing
 from axdf_cli.render.renderer import bone_layout
-from axdf_cli.pipeline.skin_stage import skin_of
-from axdf_cli.render.scene import SKIN_COLOR, FrameChunk, Scene, SceneMuscle, SceneSkin
+from axdf_cli.render.scene import FrameChunk, Scene, SceneLayer, SceneMuscle
 from axdf_cli.render.framefiles import RENDER_CHUNK, render_frames_of
 
 
@@ -40,7 +39,7 @@ def render_plan(plan, out_dir: Path, bounds, prep: Prepass, progress: Callable[[
         muscles=tuple(SceneMuscle(s.name, s.color, m.faces) for s, m in zip(plan.muscles, plan.models)),
         bones=layout.bones, bounds=bounds, frames=tuple(int(f) for f in plan.frames),
         first_frame=int(plan.pose.first), targets=camera_targets(plan),
-        skin=SceneSkin(skin.faces, SKIN_COLOR) if (skin := skin_of(plan)) is not None else None,
+        layers=tuple(SceneLayer(p.name, p.kind, p.faces, p.color) for p in plan.layers),
         **scene_framing(framing, plan.pose, plan.frames))
     todo = scene.frames if frames is None else frames
     return render_frames_of(scene, PlanFrames(plan, prep, layout), todo, plan.render, out_dir, jobs,
@@ -71,7 +70,7 @@ class PlanFrames:
             rows_run = slice(int(run[0]), int(run[-1]) + 1)
             for chunk, results in evaluate_plan(plan, self.prep, rows_run, size=RENDER_CHUNK):
                 done = [finite_or_rest(r, plan.models[j]) for j, r in results]
-                skin = (chunk.skin.positions, chunk.skin.normals) if chunk.skin is not None else None
+                layers = tuple((chunk.parts[p.name].positions, chunk.parts[p.name].normals) for p in plan.layers)
                 yield FrameChunk(frames=chunk.frames, positions=tuple(d[0] for d in done),
                                  normals=tuple(d[1] for d in done), bone_world=self.layout.transforms(chunk.world),
-                                 skin=skin)
+                                 layers=layers)

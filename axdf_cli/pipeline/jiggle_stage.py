@@ -34,6 +34,7 @@ import numpy as np
 from axdf_cli import tolerances as tol
 from axdf_cli.model import jiggle
 from axdf_cli.model.pose import effective_tension
+from axdf_cli.pipeline.stage import RunInputs, Scope, StageBase
 
 
 @dataclass
@@ -63,12 +64,12 @@ class JiggleState:
     frame: int | None = None
 
 
-class JiggleStage:
+class JiggleStage(StageBase):
     """Damped oscillators on the free axis control points of the muscles with ``jiggle``
     (docs/FORMATS.md, "Jiggle"); switched off by ``--no-jiggle`` or a job's ``jiggle: false``."""
 
     name = "jiggle"
-    scope = "time"  # Scope.TIME (its value: :mod:`.stages` registers this stage, so it is not imported here)
+    scope = Scope.TIME
 
     @property
     def settings(self) -> dict:
@@ -76,10 +77,10 @@ class JiggleStage:
         warm-up's precision, recorded in the manifest so that ``--resume`` refuses a change."""
         return {"bound": tol.JIGGLE_BOUND, "knee": tol.JIGGLE_BOUND_KNEE, "warmup_eps": tol.JIGGLE_WARMUP_EPS}
 
-    @staticmethod
-    def needed(specs) -> bool:
-        """Whether the stage acts on any of these muscles (a run without one leaves it out)."""
-        return any(s.jiggle is not None for s in specs)
+    @classmethod
+    def for_run(cls, inputs: RunInputs) -> "JiggleStage | None":
+        """The stage where it acts on one of the run's muscles (a run without one leaves it out)."""
+        return cls() if any(s.jiggle is not None for s in inputs.muscles) else None
 
     def start(self, plan) -> JiggleState:
         """The state before the pose's first frame: every muscle starts there."""

@@ -70,7 +70,7 @@ def stage_source_files(stage) -> dict[str, Path]:
     root = Path(axdf_cli.__file__).parent.resolve()
     path = Path(sys.modules[type(stage).__module__].__file__).resolve()
     own = path.relative_to(root).as_posix() if path.is_relative_to(root) else path.name
-    return dict(sorted({own: path, **{rel: root / rel for rel in getattr(stage, "sources", ())}}.items()))
+    return dict(sorted({own: path, **{rel: root / rel for rel in stage.sources}}.items()))
 
 
 def stage_sources(stage) -> list[str]:
@@ -171,6 +171,9 @@ def manifest_dict(plan: RunPlan, files: dict, warnings: list, complete: bool, ex
         "warnings": warnings,
         "files": files,
     }
+    if plan.layers:  # the parts the stages add (left out without: such runs keep their manifests)
+        m["parts"] = [{"name": p.name, "kind": p.kind.value, "color": [round(float(c), 6) for c in p.color],
+                       "vertices": p.n_vertices, "faces": int(len(p.faces))} for p in plan.layers]
     if plan.mesh_files != "muscle":  # (the default is left unsaid: earlier runs' manifests stay the same)
         m["settings"]["mesh_files"] = plan.mesh_files
     if plan.pose.clamp_ranges:  # (--clamp-ranges, a job's or pose's clamp_ranges: the pose is sampled otherwise)

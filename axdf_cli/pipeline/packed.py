@@ -2,7 +2,7 @@
 every frame (each format's folder, faces and rest mesh: its ``FORMATS`` entry).
 
 The mesh pass evaluates all its muscles chunk by chunk; :class:`SequenceFiles` streams each
-chunk of every part (the muscles, and a run's skin: :func:`parts_of`) into every selected
+chunk of every part (the muscles, then the parts the stages add: :func:`parts_of`) into every selected
 per-sequence format on its own background thread (so writing
 overlaps evaluation, as the per-frame writer's thread does) and completes the files when
 the pass ends. Every file is written under a temporary name and renamed when whole; its
@@ -12,7 +12,7 @@ entry, the old one is kept and counted as skipped.
 
 After the mesh pass, :func:`write_run_files` writes what belongs to the run rather than to
 one muscle: the USD root stage (``scene.usda``) with the bones and camera, ``usd/bones.usdc``,
-and the rest meshes the point caches apply to (the skin's too).
+and the rest meshes the point caches apply to (every part's).
 """
 from __future__ import annotations
 
@@ -24,7 +24,7 @@ import numpy as np
 from axdf_cli.fileio import atomic
 from axdf_cli.formats import FORMATS, of_layout
 from axdf_cli.formats.packed import SequenceInfo
-from axdf_cli.fileio.runfolder import SKIN_MESH, USD_BONES, USD_STAGE, is_file_with, rest_mesh_relpath, sequence_relpath
+from axdf_cli.fileio.runfolder import USD_BONES, USD_STAGE, is_file_with, rest_mesh_relpath, sequence_relpath
 
 MAX_PENDING_CHUNKS = 2  # chunks (every muscle's frames of one) queued for the sequence thread (bounds memory)
 CLOSE_THREADS = 2  # files completed (headers, sha256 read back) at once at the end; USD layers one at a time
@@ -36,19 +36,14 @@ def sequence_formats(formats) -> list[str]:
 
 
 def parts_of(plan) -> int:
-    """How many parts have per-sequence files: the muscles (part j: muscle j), then the run's
-    skin when it has one (part ``len(plan.models)``, named SKIN_NAME)."""
-    from axdf_cli.pipeline.skin_stage import skin_of
-
-    return len(plan.models) + (skin_of(plan) is not None)
+    """How many parts have per-sequence files: the muscles (part j: muscle j), then the parts
+    the stages add (``plan.layers``: part ``len(plan.models) + k``)."""
+    return len(plan.models) + len(plan.layers)
 
 
 def part_sizes(plan) -> list[int]:
     """Every part's vertex count, in part order."""
-    from axdf_cli.pipeline.skin_stage import skin_of
-
-    skin = skin_of(plan)
-    return [m.n_vertices for m in plan.models] + ([len(skin.vertices)] if skin is not None else [])
+    return [m.n_vertices for m in plan.models] + [p.n_vertices for p in plan.layers]
 
 
 def part_of(plan, j: int) -> tuple:
@@ -56,15 +51,8 @@ def part_of(plan, j: int) -> tuple:
     if j < len(plan.models):
         spec, m = plan.muscles[j], plan.models[j]
         return spec.name, tuple(spec.color), m.faces, m.n_vertices, m.rest_vertices, m.rest_normals
-    from axdf_cli.model.skin import normals_volume
-    from axdf_cli.pipeline.skin_stage import SKIN_NAME, skin_of
-    from axdf_cli.render.scene import SKIN_COLOR
-
-    skin = skin_of(plan)
-    v = np.ascontiguousarray(skin.vertices, np.float64)
-    normals = np.zeros_like(v)
-    normals_volume(v, np.ascontiguousarray(skin.faces, np.int64), normals)
-    return SKIN_NAME, SKIN_COLOR, skin.faces, len(v), v, normals
+    p = plan.layers[j - len(plan.models)]
+    return p.name, p.color, p.faces, p.n_vertices, p.rest_vertices, p.rest_normals
 
 
 def file_relpath(muscle: str, fmt: str) -> str:
@@ -80,7 +68,7 @@ def unchanged(previous: dict, path: Path, rel: str, sha: str) -> bool:
 
 
 class SequenceFiles:
-    """The per-sequence files of some parts (:func:`parts_of`: muscles, the skin), fed chunk by
+    """The per-sequence files of some parts (:func:`parts_of`: muscles, the stages' parts), fed chunk by
     chunk on a background thread.
 
     ``append(j, positions, normals)`` queues part ``j``'s next chunk ((C, V, 3) float32,
@@ -195,10 +183,10 @@ def _write_usd_stage(plan, writer, bone_rows, bounds, framing) -> None:
     with_mesh = {i for i in plan.bone_meshes}
     muscles = [(s.name, file_relpath(s.name, "usd")) for s in plan.muscles]
     bone_refs = [(b.name, USD_BONES if i in with_mesh else None) for i, b in enumerate(bones)]
-    skin = None if parts_of(plan) == len(plan.models) else (SKIN_MESH, file_relpath(SKIN_MESH, "usd"))
+    layers = [(p.name, file_relpath(p.name, "usd")) for p in plan.layers]
     camera = usd_camera(plan, bounds, framing)
     _write_with(writer, USD_STAGE, lambda tmp: write_stage(tmp, plan.frames, float(plan.pose.fps), muscles,
-                                                           bone_refs, bone_rows, camera, skin))
+                                                           bone_refs, bone_rows, camera, layers))
 
 
 def usd_camera(plan, bounds, framing) -> dict:

@@ -44,6 +44,18 @@ class RunPlan:
     def names(self) -> list[str]:
         return [m.name for m in self.muscles]
 
+    @functools.cached_property
+    def layers(self) -> tuple:
+        """The parts the stages add to every frame (:class:`axdf_cli.parts.Part`), in stage
+        order: the run's parts are its muscles (part j: muscle j), then these."""
+        return tuple(p for s in self.stages for p in s.parts(self))
+
+    @property
+    def contact_meshes(self) -> dict:
+        """The bone meshes contact and the skin push against: the run's, else those a data
+        set's sequence carries without storing them (``collision_meshes``)."""
+        return self.bone_meshes or self.collision_meshes or {}
+
     @property
     def fmt(self) -> str:
         """The formats as ``--format`` takes them: ``ply`` or ``ply,usd``."""
@@ -173,15 +185,9 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
 
     srcs = ([job.source] if job is not None else []) + [pose.source, pose.skeleton_path] + [str(f) for f in files]
     srcs += sorted({b.mesh for b in skel.bones if b.mesh})
-    built = build_stages(stages, specs)
     skin = plan_skin(job, skin_arg, skel, policy, specs)
+    built = build_stages(stages, specs, skin=skin)
     if skin is not None:
-        from axdf_cli.pipeline.skin_stage import SkinStage
-
-        from axdf_cli.pipeline.stages import stage_default
-
-        # --no-jiggle (a job's jiggle: false) stills the skin's jiggle as well as the muscles'
-        built = built + (SkinStage(skin, jiggle=(stages or {}).get("jiggle", stage_default("jiggle"))),)
         srcs += [str(s) for s in skin.files]
     srcs = [s for s in srcs if Path(s).is_file()]
     base = input_base(srcs)

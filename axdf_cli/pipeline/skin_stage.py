@@ -25,11 +25,13 @@ Each frame, in order:
 4. **volume**: the excess over the rest volume taken back from the vertices with room under
    them (:func:`keep_volume`).
 
-The kernels are :mod:`axdf_cli.model.skin`'s. Each frame is computed alone (a loop over the
+The stage makes one part (:meth:`SkinStage.parts`: ``skin``, of kind skin) and one table
+(``skin.csv``); the sinks write them as every part and table. The kernels are
+:mod:`axdf_cli.model.skin`'s. Each frame is computed alone (a loop over the
 chunk's frames; the kernels loop over vertices in a fixed order), so a frame's skin is the same bytes whichever frames
 share its chunk: ``--jobs``, ``--resume`` and ``--frames`` subsets agree. The stage leaves
-``chunk.skin`` (:class:`SkinFrames`: positions, normals and per-frame measures) for the sinks
-(``meshes/skin/``, ``skin.csv``); it changes no muscle.
+the skin's frames in ``chunk.parts["skin"]`` and its measures in ``chunk.tables["skin.csv"]``
+for the sinks; it changes no muscle.
 """
 from __future__ import annotations
 
@@ -40,13 +42,13 @@ import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
 from axdf_cli import tolerances as tol
-from axdf_cli.fileio.runfolder import SKIN_MESH
 from axdf_cli.model import skin as kernels
 from axdf_cli.model.skeleton import forward_kinematics
-from axdf_cli.pipeline.stages import Scope
+from axdf_cli.parts import COLORS, Kind, Part, PartFrames, Table
+from axdf_cli.pipeline.stage import RunInputs, Scope, StageBase
 
 #: The skin's name among a run's meshes (``meshes/skin/``); no muscle may have it.
-SKIN_NAME = SKIN_MESH
+SKIN_NAME = "skin"
 #: skin.csv's numeric columns: the skin's volume (m^3) and its ratio to the skin's as the stage
 #: wears it at the rest pose (the rest mesh pushed over the bones' vertices outside it); the
 #: share of every muscle vertex that lies outside the skin (measured along the skinned normal of
@@ -56,27 +58,8 @@ SKIN_COLUMNS = ("volume", "volume_ratio", "outside", "push")
 SKIN_CSV = "skin.csv"
 
 
-def skin_of(plan):
-    """The run's skin (:class:`~axdf_cli.specs.skin.Skin`), or None when it has none."""
-    return next((s.skin for s in plan.stages if isinstance(s, SkinStage)), None)
-
-
-def skin_csv(frames, rows: np.ndarray) -> bytes:
-    """skin.csv: a row per frame, numbers to 9 significant digits (-0 written 0)."""
-    fmt = "%d" + ",%.9g" * len(SKIN_COLUMNS) + "\n"
-    out = [",".join(("frame",) + SKIN_COLUMNS) + "\n"]
-    out += [fmt % (f, *r) for f, r in zip(np.asarray(frames).tolist(), (rows + 0.0).tolist())]
-    return "".join(out).encode()
-
-
-@dataclass
-class SkinFrames:
-    """The skin over a chunk's frames: positions and normals (C, V, 3) float32, measures (C,
-    len(SKIN_COLUMNS)) float64."""
-
-    positions: np.ndarray
-    normals: np.ndarray
-    stats: np.ndarray
+#: The skin's table: a row per frame (:data:`SKIN_COLUMNS`).
+SKIN_TABLE = Table(SKIN_CSV, SKIN_COLUMNS)
 
 
 @dataclass
@@ -136,7 +119,7 @@ def build(skin, plan) -> SkinModel:
     pts = [muscle[muscle_points]]
     bone_points = []
     weighed = set(bones.tolist())  # a bone the skin does not wear (gait2392's ground) is left out
-    bone_meshes = plan.bone_meshes or getattr(plan, "collision_meshes", None) or {}  # (a data set's sequence)
+    bone_meshes = plan.contact_meshes
     for b, (bv, bf, _) in sorted(bone_meshes.items()):
         if b not in weighed:
             continue
@@ -307,12 +290,28 @@ def skin_frame(model: SkinModel, world: np.ndarray, points: np.ndarray, keep: bo
     return y, ny, np.array([vol, vol / model.rest_volume, float(outside), float(offset.max(initial=0.0))])
 
 
-class SkinStage:
-    """The skin stage (module doc): built by the plan when the run has a skin (it is not one
-    of :data:`~axdf_cli.pipeline.stages.STAGES`, which are switched on and off by name)."""
+class SkinStage(StageBase):
+    """The skin stage (module doc): in the run when it has a skin (``for_run``; it is not
+    switched by name)."""
 
     name = "skin"
     scope = Scope.FRAME
+    tables = (SKIN_TABLE,)
+
+    @classmethod
+    def for_run(cls, inputs: RunInputs) -> "SkinStage | None":
+        """The stage for a run that wears a skin; ``--no-jiggle`` (a job's ``jiggle: false``)
+        stills the skin's jiggle as well as the muscles'."""
+        if inputs.skin is None:
+            return None
+        return cls(inputs.skin, jiggle=inputs.switches.get("jiggle", True))
+
+    def parts(self, plan) -> tuple:
+        """The skin: one part, of kind skin, its rest normals those of the kernels."""
+        v = np.ascontiguousarray(self.skin.vertices, np.float64)
+        normals = np.zeros_like(v)
+        kernels.normals_volume(v, np.ascontiguousarray(self.skin.faces, np.int64), normals)
+        return (Part(SKIN_NAME, Kind.SKIN, self.skin.faces, v, normals, COLORS[Kind.SKIN]),)
 
     def __init__(self, skin, jiggle: bool = True):
         self.skin = skin
@@ -360,5 +359,6 @@ class SkinStage:
             pos[i], nrm[i] = y, ny
             st[2] /= max(state.n_muscle_vertices, 1)
             stats[i] = st
-        chunk.skin = SkinFrames(pos, nrm, stats)
+        chunk.parts[SKIN_NAME] = PartFrames(pos, nrm)
+        chunk.tables[SKIN_CSV] = stats
         return state, chunk

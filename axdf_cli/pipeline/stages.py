@@ -38,93 +38,49 @@ runner (:func:`axdf_cli.pipeline.execute.execute`):
   still come out in frame order, byte-identical. Contract: a frame's output depends on that
   frame's chunk rows only (never on which other frames share the chunk).
 
-Adding a stage: write it (a class with ``name``, ``scope``, ``start`` and ``__call__``), add
-its factory to :data:`STAGES`. ``axdf run --no-<name>`` comes from the table
+Adding a stage: write it (a :class:`~axdf_cli.pipeline.stage.StageBase` with ``name``,
+``scope``, ``start`` and ``__call__``; the protocol, and what else it may declare, is
+:mod:`axdf_cli.pipeline.stage`'s), add it to :data:`STAGES`. ``axdf run --no-<name>`` comes from the table
 (:func:`axdf_cli.cli.run.add_args`); a job key ``<name>: false`` goes in
 :mod:`axdf_cli.specs.job` and reaches :func:`build_stages` through ``plan_run(stages=...)``.
 The stages a run used (names and each one's ``settings``) are recorded in its manifest's
 ``settings.stages``, so ``--resume`` refuses a change.
 
-The skin stage (:mod:`axdf_cli.pipeline.skin_stage`, FRAME, last) is not in the table: the
-plan adds it when the run has a skin (``--skin FILE``, a job's ``skin:``), since it needs one.
+A stage that adds a layer of the body declares its parts and tables (the skin stage,
+:mod:`axdf_cli.pipeline.skin_stage`: the part ``skin`` of kind skin and ``skin.csv``); the
+sinks write them as they write every part. The skin stage is turned on by the run's inputs
+(``--skin FILE``, a job's ``skin:``), not by name: it is in :data:`BY_INPUT`.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from enum import Enum
-from typing import Callable, Mapping, Protocol
-
-import numpy as np
+from typing import Mapping
 
 from axdf_cli import runtime
 from axdf_cli import tolerances as tol
 from axdf_cli.fileio import fieldcache
 from axdf_cli.model import contact
-from axdf_cli.model.muscle import FrameResult
 from axdf_cli.model.skeleton import forward_kinematics
 from axdf_cli.pipeline.jiggle_stage import JiggleStage
-
-
-class Scope(str, Enum):
-    """What a stage needs at once: one muscle (the model itself), time (the frames before,
-    per muscle), or a frame (all muscles of it)."""
-
-    MUSCLE = "muscle"
-    TIME = "time"
-    FRAME = "frame"
-
-
-@dataclass
-class Chunk:
-    """All carried muscles of a block of consecutive frames (batch dimension first).
-
-    For a FRAME stage and the sinks, the frames are consecutive *selected* frames and
-    ``rows`` their positions in ``plan.frames``. For a TIME stage they are every frame of one
-    block of the pose's timeline (selected or not) and ``rows`` their positions in
-    ``plan.pose.frames``."""
-
-    rows: slice  # positions of these frames (see above)
-    frames: np.ndarray  # (C,) frame numbers
-    coords: np.ndarray  # (C, Q) skeleton coordinates
-    world: np.ndarray  # (C, B, 4, 4) bone world transforms
-    activation: np.ndarray  # (C, M) activation of every muscle (NaN: none given)
-    muscles: list[int]  # the muscles carried (all of them whenever a FRAME stage runs)
-    axis: dict[int, np.ndarray]  # muscle -> (C, n_j, 3) axis control points, world (after TIME stages)
-    results: dict[int, FrameResult] = field(default_factory=dict)  # muscle -> surfaces (after 1b, then FRAME)
-    twist: np.ndarray | None = None  # (C, M) unwrapped twist references (radians) of the selected frames
-    notes: dict[int, list] = field(default_factory=dict)  # muscle -> step 1a's [(frame index, warning)]
-    skin: object = None  # the skin stage's SkinFrames (axdf_cli.pipeline.skin_stage), when the run has a skin
-
-
-class Stage(Protocol):
-    """A stage of the run (module doc). ``start(plan)`` is its state before the pose's first
-    frame; ``stage(state, chunk)`` returns the next state and the chunk (changed in place or
-    anew). ``settings`` (optional): a JSON-able mapping of what changes its output, recorded
-    in the manifest."""
-
-    name: str
-    scope: Scope
-
-    def start(self, plan) -> object: ...
-
-    def __call__(self, state, chunk: Chunk) -> tuple[object, Chunk]: ...
+from axdf_cli.pipeline.skin_stage import SkinStage
+from axdf_cli.pipeline.stage import Chunk, RunInputs, Scope, Stage, StageBase
 
 
 def _contact_model(plan, enabled: bool):
     rest = forward_kinematics(plan.pose.skeleton, plan.pose.skeleton.rest_coordinates()[None])[0]
-    meshes = plan.bone_meshes or getattr(plan, "collision_meshes", None) or {}
-    return contact.build(plan.muscles, plan.models, rest, meshes, enabled=enabled, field_cache=fieldcache.cached)
+    return contact.build(plan.muscles, plan.models, rest, plan.contact_meshes, enabled=enabled,
+                         field_cache=fieldcache.cached)
 
 
-class ContactStage:
+class ContactStage(StageBase):
     """Muscles push each other out of the way, bones push muscles (:mod:`axdf_cli.model.contact`).
     Its state is the run's :class:`~axdf_cli.model.contact.ContactModel` (the bones' distance
     fields, the pairs and their shares), built once by :meth:`start`; each frame of a chunk is
-    resolved alone. Leaves the measures after contact in ``FrameResult.contact``."""
+    resolved alone. Leaves the measures after contact in ``FrameResult.contact``
+    (stats.csv's inside_muscle, inside_bone, depth)."""
 
     name = "contact"
     scope = Scope.FRAME
-    measures = True  # stats.csv's inside_muscle, inside_bone, depth
+    measures = True
 
     @property
     def settings(self) -> dict:
@@ -138,7 +94,7 @@ class ContactStage:
         return state, chunk
 
 
-class PenetrationStage:
+class PenetrationStage(StageBase):
     """The contact measures (stats.csv's inside_muscle, inside_bone, depth) of the meshes as
     they are, where the contact stage did not run (``--no-contact``): changes no vertex."""
 
@@ -155,18 +111,27 @@ class PenetrationStage:
         return state, chunk
 
 
-#: The stages a run may use: name -> factory (no arguments), in the order they run within
-#: their scope. Each is on unless switched off (``--no-<name>``, a job's ``<name>: false``),
-#: or, if named in :data:`OFF_BY_DEFAULT`, off unless switched on (``--<name>``, ``<name>: true``).
-STAGES: dict[str, Callable[[], Stage]] = {
+#: The stages a run may use: name -> stage class, in the order they run within their scope.
+#: Each is on unless switched off (``--no-<name>``, a job's ``<name>: false``), or, if named in
+#: :data:`OFF_BY_DEFAULT`, off unless switched on (``--<name>``, ``<name>: true``); those in
+#: :data:`BY_INPUT` are on exactly when the run's inputs ask (``for_run`` decides).
+STAGES: dict[str, type[StageBase]] = {
     "jiggle": JiggleStage,  # TIME: secondary motion of the axis (muscles' `jiggle:`)
     "contact": ContactStage,  # FRAME: muscles push each other, bones push muscles
     "penetration": PenetrationStage,  # FRAME: the contact measures where contact is off
+    "skin": SkinStage,  # FRAME, last: the skin worn over the muscles and bones (a run with --skin)
 }
 #: Stages a run leaves out unless asked for. Contact is on (``--no-contact`` or a job's
 #: ``contact: false`` leaves it out); its measures alone (``penetration``) are for runs
 #: without it.
 OFF_BY_DEFAULT: frozenset[str] = frozenset({"penetration"})
+#: Stages the run's inputs turn on, never switched by name (the skin: a run with a skin file).
+BY_INPUT: frozenset[str] = frozenset({"skin"})
+
+
+def switched() -> tuple[str, ...]:
+    """The stages switched on and off by name (``--<name>``, a job's ``<name>:``), in order."""
+    return tuple(n for n in STAGES if n not in BY_INPUT)
 
 
 def stage_default(name: str) -> bool:
@@ -174,17 +139,20 @@ def stage_default(name: str) -> bool:
     return name not in OFF_BY_DEFAULT
 
 
-def build_stages(switches: Mapping[str, bool] | None = None, muscles=None) -> tuple[Stage, ...]:
+def build_stages(switches: Mapping[str, bool] | None = None, muscles=None, skin=None) -> tuple[Stage, ...]:
     """The run's stages: every registered stage that ``switches`` (name -> on) turns on, or
-    leaves at its default (:func:`stage_default`), and, given the run's ``muscles`` (specs), that acts on one of them: a stage may say
-    so with ``needed(muscles) -> bool`` (jiggle: a muscle has ``jiggle``), so a run it would
-    not change neither pays for it nor records it."""
-    switches = switches or {}
-    unknown = sorted(set(switches) - set(STAGES))
+    leaves at its default (:func:`stage_default`), and that, given the run's ``muscles``
+    (specs) and ``skin``, has something to do (its ``for_run``: jiggle only where a muscle has
+    ``jiggle``, the skin only with a skin), so a run it would not change neither pays for it
+    nor records it."""
+    switches = dict(switches or {})
+    unknown = sorted(set(switches) - set(switched()))
     if unknown:
-        raise ValueError(f"unknown stage(s) {', '.join(unknown)}; known: {', '.join(STAGES) or 'none'}")
-    out = (make() for name, make in STAGES.items() if switches.get(name, stage_default(name)))
-    return tuple(s for s in out if muscles is None or getattr(s, "needed", None) is None or s.needed(muscles))
+        raise ValueError(f"unknown stage(s) {', '.join(unknown)}; known: {', '.join(switched()) or 'none'}")
+    inputs = RunInputs(tuple(muscles or ()), skin, switches)
+    out = (cls.for_run(inputs) for name, cls in STAGES.items()
+           if name in BY_INPUT or switches.get(name, stage_default(name)))
+    return tuple(s for s in out if s is not None)
 
 
 def of_scope(stages, scope: Scope) -> tuple[Stage, ...]:
@@ -196,5 +164,4 @@ def stages_record(stages) -> list[dict] | None:
     key is left out, so runs without stages keep their manifests)."""
     if not stages:
         return None
-    return [{"name": s.name, "scope": Scope(s.scope).value, **dict(getattr(s, "settings", None) or {})}
-            for s in stages]
+    return [{"name": s.name, "scope": Scope(s.scope).value, **dict(s.settings)} for s in stages]

@@ -20,7 +20,7 @@ MEASURED_COLUMNS = 3
 def stats_csv(plan: RunPlan, stats: np.ndarray, warn_text: list) -> bytes:
     """stats.csv: a row per frame and muscle; numbers to 9 significant digits (-0 written 0).
     One ``%`` per row over plain floats (far cheaper than formatting each number alone)."""
-    columns = STATS_COLUMNS if any(getattr(st, "measures", False) for st in plan.stages) else \
+    columns = STATS_COLUMNS if any(st.measures for st in plan.stages) else \
         STATS_COLUMNS[:-MEASURED_COLUMNS]
     stats = stats[..., :len(columns)]
     fmt = "%d,%s" + ",%.9g" * stats.shape[-1] + ",%s\n"

@@ -13,7 +13,8 @@ Per frame and per panel (view) two passes are drawn:
    2^24). Background: id 0, depth 0, normal 0.
 
 Ids: 0 = background, ``1 .. M`` = ``Scene.muscles`` in order, ``M+1 .. M+B`` = bones,
-``M+B+1`` = the skin when it is drawn opaque.
+then ``M+B+1 ..`` the scene's layers (the parts the stages add) in order: each drawn opaque
+with its colour, the skin as its settings say (its id is in the id pass when opaque).
 
 The **skin** (``Scene.skin``, a run with ``--skin``) is drawn as ``RenderSettings.skin`` says:
 ``opaque`` like any surface, in both passes (the data passes see the body); ``see-through``
@@ -43,6 +44,7 @@ from typing import Iterable, Iterator
 
 import numpy as np
 
+from axdf_cli.parts import Kind
 from axdf_cli.render.camera import Camera, sequence_cameras
 from axdf_cli.render.context import check_same_process
 from axdf_cli.render.framing import placed_plates
@@ -274,9 +276,14 @@ def panels(img: "FrameImages"):
         yield (slice(y0, y0 + h), slice(x0, x0 + w)), K, cam
 
 
+def layer_id(scene: Scene, k: int) -> int:
+    """The id of the scene's layer ``k`` in the ``id`` pass (after every muscle and scene bone)."""
+    return 1 + len(scene.muscles) + len(scene.bones) + k
+
+
 def skin_id(scene: Scene) -> int:
-    """The opaque skin's id in the ``id`` pass (after every muscle and scene bone)."""
-    return 1 + len(scene.muscles) + len(scene.bones)
+    """The opaque skin's id in the ``id`` pass (its layer's)."""
+    return layer_id(scene, scene.skin_index)
 
 
 def id_map(scene: Scene, bones: bool, skin: str = "off") -> dict:
@@ -288,8 +295,9 @@ def id_map(scene: Scene, bones: bool, skin: str = "off") -> dict:
     if bones:
         for j, b in enumerate(scene.bones):
             out[str(1 + len(scene.muscles) + j)] = {"kind": "bone", "name": b.name}
-    if scene.skin is not None and skin == "opaque":
-        out[str(skin_id(scene))] = {"kind": "skin", "name": "skin"}
+    for k, layer in enumerate(scene.layers):  # (a skin has an id where it is drawn opaque)
+        if Kind(layer.kind) is not Kind.SKIN or skin == "opaque":
+            out[str(layer_id(scene, k))] = {"kind": Kind(layer.kind).value, "name": layer.name}
     return out
 
 
@@ -341,16 +349,24 @@ class Renderer:
                                         index_buffer=ibo, index_element_size=4)
                 self.bones.append((j, vao, dvao, float(1 + len(scene.muscles) + j)))
         self.skin = None  # (positions, normals, vao, data vao): the skin when it is drawn
-        if scene.skin is not None and settings.skin != "off" and len(scene.skin.faces):
-            nv = int(scene.skin.faces.max()) + 1
-            ibo = ctx.buffer(np.ascontiguousarray(scene.skin.faces, dtype=np.int32).tobytes())
+        self.layers = {}  # layer index -> (positions, normals, vao, data vao, colour, id): the others, opaque
+        for k, layer in enumerate(scene.layers):
+            skin = Kind(layer.kind) is Kind.SKIN
+            if not len(layer.faces) or (skin and (k != scene.skin_index or settings.skin == "off")):
+                continue
+            nv = int(layer.faces.max()) + 1
+            ibo = ctx.buffer(np.ascontiguousarray(layer.faces, dtype=np.int32).tobytes())
             vpos = ctx.buffer(reserve=nv * 12, dynamic=True)
             vnrm = ctx.buffer(reserve=nv * 12, dynamic=True)
             vao = ctx.vertex_array(self.prog, [(vpos, "3f", "in_pos"), (vnrm, "3f", "in_nrm")],
                                    index_buffer=ibo, index_element_size=4)
             dvao = ctx.vertex_array(self.dprog, [(vpos, "3f", "in_pos"), (vnrm, "3f", "in_nrm")],
                                     index_buffer=ibo, index_element_size=4)
-            self.skin = (vpos, vnrm, vao, dvao)
+            if skin:
+                self.skin = (vpos, vnrm, vao, dvao)
+            else:
+                self.layers[k] = (vpos, vnrm, vao, dvao, tuple(float(c) for c in layer.color),
+                                  float(layer_id(scene, k)))
         self._ident = np.eye(4, dtype="f4").T.tobytes()
         self._mask = None  # the amodal pass's program, targets and vertex arrays: made on first use
 
@@ -372,6 +388,15 @@ class Renderer:
                 dvao.render()
             else:
                 prog["u_albedo"].value = BONE_COLOR
+                prog["u_wire"].value = int(wire)
+                vao.render()
+        for vpos, vnrm, vao, dvao, color, ident in self.layers.values():
+            prog["u_model"].write(self._ident)
+            if data:
+                prog["u_id"].value = ident
+                dvao.render()
+            else:
+                prog["u_albedo"].value = color
                 prog["u_wire"].value = int(wire)
                 vao.render()
         if self.skin is not None and self.settings.skin == "opaque":
@@ -404,12 +429,12 @@ class Renderer:
             prog["u_alpha"].value = 1.0
 
     def render(self, frame: int, positions, normals, bone_world: np.ndarray | None,
-               cameras: list[Camera], skin: tuple | None = None) -> FrameImages:
+               cameras: list[Camera], layers=()) -> FrameImages:
         """Draw one frame.
 
         ``positions`` / ``normals``: per muscle (V_m, 3) float32 world arrays;
-        ``bone_world``: (n_bones, 4, 4) float64; ``cameras``: one per panel; ``skin``: the
-        skin's (V, 3) positions and normals (a scene with a skin).
+        ``bone_world``: (n_bones, 4, 4) float64; ``cameras``: one per panel; ``layers``: per
+        scene layer its (V, 3) positions and normals.
         """
         ctx = self.ctx
         check_same_process(ctx)
@@ -417,11 +442,14 @@ class Renderer:
         for (vpos, vnrm, *_), p, n in zip(self.muscles, positions, normals):
             vpos.write(np.ascontiguousarray(p, dtype=np.float32).tobytes())
             vnrm.write(np.ascontiguousarray(n, dtype=np.float32).tobytes())
-        if self.skin is not None:
-            if skin is None:
-                raise ValueError(f"frame {frame}: the scene has a skin and the frame none")
-            self.skin[0].write(np.ascontiguousarray(skin[0], dtype=np.float32).tobytes())
-            self.skin[1].write(np.ascontiguousarray(skin[1], dtype=np.float32).tobytes())
+        if len(layers) != len(self.scene.layers):
+            raise ValueError(f"frame {frame}: the scene has {len(self.scene.layers)} layer(s) and the frame "
+                             f"{len(layers)}")
+        for k, (p, n) in enumerate(layers):
+            buffers = self.skin if k == self.scene.skin_index else self.layers.get(k)
+            if buffers is not None:
+                buffers[0].write(np.ascontiguousarray(p, dtype=np.float32).tobytes())
+                buffers[1].write(np.ascontiguousarray(n, dtype=np.float32).tobytes())
         self.prog["u_alpha"].value = 1.0
         ctx.enable_only(ctx.DEPTH_TEST)
         bg = self.settings.background
@@ -517,9 +545,9 @@ class Renderer:
                 if f not in cameras:
                     raise ValueError(f"frame {f} is not in Scene.frames")
                 bw = placed_plates(self.scene, chunk.bone_world[c]) if len(self.scene.bones) else None
-                skin = (chunk.skin[0][c], chunk.skin[1][c]) if chunk.skin is not None else None
+                layers = [(p[c], n[c]) for p, n in chunk.layers]
                 img = self.render(f, [p[c] for p in chunk.positions], [n[c] for n in chunk.normals], bw, cameras[f],
-                                  skin)
+                                  layers)
                 if self.skin is not None and self.settings.skin == "opaque":
                     img = replace(img, under=self.under(img, [(p[c], m.faces) for p, m in
                                                               zip(chunk.positions, self.scene.muscles)]))
@@ -556,6 +584,7 @@ class Renderer:
         (self.ctx.screen or self.ctx.detect_framebuffer(0)).use()
         meshes = [obj for vpos, vnrm, vao, dvao, *_ in self.muscles for obj in (vao, dvao, vpos, vnrm)]
         meshes += [obj for _, vao, dvao, _ in self.bones for obj in (vao, dvao)]
+        meshes += [obj for vpos, vnrm, vao, dvao, *_ in self.layers.values() for obj in (vao, dvao, vpos, vnrm)]
         for obj in (*meshes, *(self.skin or ()), self.color_fbo, self.data_fbo, self.color_tex, self.data_tex,
                     self.id_tex, self.prog, self.dprog):
             obj.release()

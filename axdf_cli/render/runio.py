@@ -17,8 +17,9 @@ The layout and the manifest are :mod:`axdf_cli.fileio.runfolder`'s. What is read
   muscle a named part (OBJ ``o``, PLY ``muscle`` vertex property); in a run without a
   per-frame format, each muscle's per-sequence file (``npz/<m>.npz``, ``pc2/<m>.pc2`` with
   its rest mesh ``pc2/<m>.ply``, ``mdd/<m>.mdd``, ``usd/<m>.usdc``), read a frame at a time.
-- ``meshes/skin/skin_<frame:04d>.ply|obj``: a run with ``--skin`` (listed in its manifest),
-  drawn as ``settings.render.skin`` says.
+- ``meshes/<part>/<part>_<frame:04d>.ply|obj``: each part the run's stages added (its
+  manifest's ``parts``: the skin of a run with ``--skin``), drawn by its kind (a skin as
+  ``settings.render.skin`` says).
 - ``bones.csv``: ``frame,bone,x,y,z,qw,qx,qy,qz`` world pose of each bone per frame.
 """
 from __future__ import annotations
@@ -33,12 +34,13 @@ import numpy as np
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.formats import FORMATS, MESH_FILES, MeshReadError, load_triangles, read_preference, read_sequence
 from axdf_cli.specs.render import RenderSettings, parse_render_settings
-from axdf_cli.fileio.runfolder import (BONES_CSV, SKIN_MESH, Manifest, frame_mesh_relpath, mesh_relpath,
+from axdf_cli.fileio.runfolder import (BONES_CSV, Manifest, frame_mesh_relpath, mesh_relpath,
                                       read_run_manifest)
 from axdf_cli.fileio.runfolder import plain_relpath as _plain
 from axdf_cli.fileio.yamlio import NAME_ALLOWED, is_name
 from axdf_cli.render.framing import follow_rows, recorded_follow, recorded_framing
-from axdf_cli.render.scene import SKIN_COLOR, FrameChunk, Scene, SceneMuscle, SceneSkin
+from axdf_cli.parts import Kind
+from axdf_cli.render.scene import FrameChunk, Scene, SceneLayer, SceneMuscle
 
 def _color(c, where: Mark) -> tuple[float, float, float]:
     if isinstance(c, str) and len(c) == 7 and c.startswith("#"):
@@ -273,29 +275,41 @@ def load_run_source(run_dir: Path, manifest: Manifest | None = None, frames=None
             raise m.error(("framing", "follow"), f"{follow_bone!r} is not a bone of this run",
                           "bones: " + ", ".join(bone_names))
         follow = follow_rows(_read_bones_csv(run_dir / BONES_CSV, all_frames, [follow_bone])[:, 0, :3, 3])
-    skin_source = _skin_source(run_dir, m, formats, all_frames)
-    skin = None
-    if skin_source is not None:
-        skin = SceneSkin(skin_source.read(all_frames[0])[2], SKIN_COLOR)
+    layer_sources = _layer_sources(run_dir, m, formats, all_frames)
+    layers = tuple(SceneLayer(name, kind, src.read(all_frames[0])[2], color) for name, kind, color, src in layer_sources)
     scene = Scene(tuple(muscles), layout.bones, bounds.astype(np.float64), all_frames,
                   framing=framing, first_frame=first_frame, targets=targets, follow=follow,
-                  ground=ground, footprint=footprint, skin=skin)
+                  ground=ground, footprint=footprint, layers=layers)
 
     source = RunFrames(run_dir, names, formats, all_frames, fps, selected, bone_world, sources, mesh_files,
-                       skin=skin_source.fmt if skin_source is not None else None)
+                       layers=tuple((name, src.fmt) for name, _, _, src in layer_sources))
     return scene, source, settings
 
 
-def _skin_source(run_dir: Path, m: Manifest, formats, all_frames) -> "_FrameFiles | None":
-    """The run's skin meshes, one file per frame of a per-frame format (a run with ``--skin``
-    lists them in its manifest), or None."""
+def _layer_sources(run_dir: Path, m: Manifest, formats, all_frames) -> list:
+    """The parts the run's stages added (its manifest's ``parts``: the skin of a run with
+    ``--skin``), each with its meshes, one file per frame of a per-frame format:
+    [(name, kind, colour, :class:`_FrameFiles`)]."""
     files = m.data.get("files") if isinstance(m.data, dict) else None
+    parts = m.data.get("parts", []) if isinstance(m.data, dict) else []
     if not isinstance(files, dict) or not all_frames:
-        return None
-    for fmt in formats:
-        if FORMATS[fmt].layout == "frame" and mesh_relpath(SKIN_MESH, all_frames[0], fmt) in files:
-            return _FrameFiles(run_dir, SKIN_MESH, fmt)
-    return None
+        return []
+    if not isinstance(parts, list):
+        raise m.error(("parts",), "parts is not a list", "a list of {name, kind, color} as axdf run writes")
+    out = []
+    for k, p in enumerate(parts):
+        kinds = [x.value for x in Kind]
+        if not (isinstance(p, dict) and isinstance(p.get("name"), str) and p.get("kind") in kinds
+                and isinstance(p.get("color"), list) and len(p["color"]) == 3):
+            raise m.error(("parts", k), "not a part", f"{{name, kind, color}} with kind one of {', '.join(kinds)}")
+        fmt = next((f for f in formats if FORMATS[f].layout == "frame"
+                    and mesh_relpath(p["name"], all_frames[0], f) in files), None)
+        if fmt is None:
+            raise m.error(("parts", k), f"part {p['name']!r} has no meshes per frame in this run",
+                          "render a run that wrote its parts as PLY or OBJ (--format ply)")
+        out.append((p["name"], Kind(p["kind"]), tuple(float(c) for c in p["color"]),
+                    _FrameFiles(run_dir, p["name"], fmt)))
+    return out
 
 
 def per_frame_sources(run_dir: Path, names, formats, all_frames, fps, mesh_files: str = "muscle") -> list:
@@ -315,10 +329,10 @@ class RunFrames:
     the format has none; the bones' transforms of the ``selected`` frames."""
 
     def __init__(self, run_dir: Path, names, formats, all_frames, fps, selected, bone_world, sources=None,
-                 mesh_files: str = "muscle", skin: str | None = None):
+                 mesh_files: str = "muscle", layers=()):
         self.run_dir, self.names, self.formats, self.all_frames, self.fps = run_dir, names, formats, all_frames, fps
         self.mesh_files = mesh_files
-        self.skin = skin  # the format of the run's skin meshes (None: no skin): each chunk carries it
+        self.layers = tuple(layers)  # (name, format) of each part the stages added: each chunk carries them
         self.selected = tuple(selected)
         self.bone_world = bone_world  # (len(selected), n_scene_bones, 4, 4)
         self._sources = sources
@@ -332,18 +346,18 @@ class RunFrames:
             self._sources = per_frame_sources(self.run_dir, self.names, self.formats, self.all_frames, self.fps,
                                               self.mesh_files)
         row = {f: k for k, f in enumerate(self.selected)}
-        skin_src = _FrameFiles(self.run_dir, SKIN_MESH, self.skin) if self.skin is not None else None
+        layer_src = [_FrameFiles(self.run_dir, name, fmt) for name, fmt in self.layers]
         for f in frames:
             ps, ns = [], []
             for src in self._sources:
                 pos, nrm = _with_normals(*src.read(f))
                 ps.append(pos[None])
                 ns.append(nrm[None])
-            skin = None
-            if skin_src is not None:
-                pos, nrm = _with_normals(*skin_src.read(f))
-                skin = (pos[None], nrm[None])
-            yield FrameChunk(np.array([f]), tuple(ps), tuple(ns), self.bone_world[row[f]:row[f] + 1], skin)
+            layers = []
+            for src in layer_src:
+                pos, nrm = _with_normals(*src.read(f))
+                layers.append((pos[None], nrm[None]))
+            yield FrameChunk(np.array([f]), tuple(ps), tuple(ns), self.bone_world[row[f]:row[f] + 1], tuple(layers))
 
 
 def _with_normals(pos: np.ndarray, nrm: np.ndarray | None, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -10,6 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from axdf_cli.parts import Kind, of_kind
+
 
 @dataclass(frozen=True)
 class SceneMuscle:
@@ -25,14 +27,13 @@ class SceneBone:
     faces: np.ndarray  # (T, 3) int32
 
 
-#: The skin's colour: linear RGB of sRGB #e0ac96, a light skin tone.
-SKIN_COLOR = (0.745, 0.413, 0.305)
-
-
 @dataclass(frozen=True)
-class SceneSkin:
-    """The body's skin over the muscles (``axdf run --skin``): one closed triangle mesh."""
+class SceneLayer:
+    """A part a run's stages add (:class:`axdf_cli.parts.Part`): one closed triangle mesh,
+    drawn by its kind (a skin as ``RenderSettings.skin`` says, any other opaque)."""
 
+    name: str
+    kind: Kind
     faces: np.ndarray  # (T, 3) int32, counter-clockwise seen from outside
     color: tuple[float, float, float]  # linear RGB in [0, 1]
 
@@ -49,7 +50,17 @@ class Scene:
     follow: np.ndarray | None = None  # (F, 3) a following camera's offset at each of `frames`; `framing` is relative to it
     ground: tuple[str, ...] = ()  # names of `bones` drawn as a ground plate under the subject (render/framing.py)
     footprint: np.ndarray | None = None  # (2, 2) the subject's horizontal box [lo, hi] a ground plate covers
-    skin: SceneSkin | None = None  # drawn as RenderSettings.skin says
+    layers: tuple[SceneLayer, ...] = ()  # the parts the stages add, after the muscles and bones
+
+    @property
+    def skin(self) -> SceneLayer | None:
+        """The scene's skin: its first layer of kind skin, or None."""
+        return next(iter(of_kind(self.layers, Kind.SKIN)), None)
+
+    @property
+    def skin_index(self) -> int | None:
+        """Where the skin is among ``layers`` (None: no skin)."""
+        return next((k for k, p in enumerate(self.layers) if Kind(p.kind) is Kind.SKIN), None)
 
 
 @dataclass(frozen=True)
@@ -58,4 +69,4 @@ class FrameChunk:
     positions: tuple[np.ndarray, ...]  # per muscle: (C, V_m, 3) float32 world positions
     normals: tuple[np.ndarray, ...]  # per muscle: (C, V_m, 3) float32 unit outward normals
     bone_world: np.ndarray  # (C, n_scene_bones, 4, 4) float64 world transform of each Scene bone
-    skin: tuple[np.ndarray, np.ndarray] | None = None  # (C, V, 3) float32 positions and normals of Scene.skin
+    layers: tuple = ()  # per Scene layer: ((C, V, 3) float32 positions, normals)

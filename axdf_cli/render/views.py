@@ -44,11 +44,11 @@ class ViewRenderer:
         self.labels = scene_labels(scene)
 
     def render(self, frame: int, positions, normals, bone_world: np.ndarray | None,
-               cameras: list[Camera], skin: tuple | None = None) -> list[FrameImages]:
+               cameras: list[Camera], layers=()) -> list[FrameImages]:
         """``positions`` / ``normals``: per muscle (V_m, 3) float32 world arrays;
-        ``bone_world`` (n_scene_bones, 4, 4); ``skin``: the skin's (V, 3) positions and normals
-        (a scene with a skin); one :class:`FrameImages` per camera."""
-        return [self.renderer.render(frame, positions, normals, bone_world, [cam], skin) for cam in cameras]
+        ``bone_world`` (n_scene_bones, 4, 4); ``layers``: per scene layer its (V, 3) positions
+        and normals; one :class:`FrameImages` per camera."""
+        return [self.renderer.render(frame, positions, normals, bone_world, [cam], layers) for cam in cameras]
 
     def release(self) -> None:
         if os.getpid() == self.pid:
@@ -58,8 +58,8 @@ class ViewRenderer:
 
 def scene_labels(scene: Scene) -> int:
     """How many ids a scene's id pass holds: 0 (background), 1..M muscles, M+1.. bones, then
-    the skin where the scene has one."""
-    return 1 + len(scene.muscles) + len(scene.bones) + (scene.skin is not None)
+    the scene's layers (the skin among them)."""
+    return 1 + len(scene.muscles) + len(scene.bones) + len(scene.layers)
 
 
 #: Image passes of a data set's views beyond the frame files (png, exr): pass -> the file's

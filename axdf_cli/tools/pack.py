@@ -110,7 +110,7 @@ def _pose_frames(muscle_files, skel, pose_path: Path, frames: str | None, policy
     from dataclasses import replace
 
     from axdf_cli.pipeline.evaluate import evaluate_plan
-    from axdf_cli.pipeline.stages import STAGES
+    from axdf_cli.pipeline.stages import switched
 
     if not pose_path.is_file():
         raise InputError(Mark("--pose"), f"pose file {str(pose_path)!r} not found", "an existing pose YAML file")
@@ -120,7 +120,7 @@ def _pose_frames(muscle_files, skel, pose_path: Path, frames: str | None, policy
                          f"{Path(skel.source).name}, the one the muscles are packed on",
                          "a pose of the --skeleton's bones")
     plan = plan_run(None, muscle_args=[str(f) for f in muscle_files], pose_arg=str(pose_path), frames_arg=frames,
-                    policy=policy or RefPolicy(), stages={name: False for name in STAGES})
+                    policy=policy or RefPolicy(), stages={name: False for name in switched()})
     if plan.names != names:  # (the same files, read the same way)
         raise InputError(Mark(str(pose_path)), "the pose's run reads other muscles than the pack", "the same muscle files")
     if frames is None and len(plan.frames) > tc.PACK_POSE_FRAMES:

@@ -20,15 +20,15 @@ def skin_pass(plan) -> tuple[float, np.ndarray]:
     """Evaluate every frame of ``plan`` with its stages: wall time (s) and, where the plan has
     a skin, its measures per frame (F, len(SKIN_COLUMNS)); zeros without one."""
     from axdf_cli.pipeline.evaluate import evaluate_plan
-    from axdf_cli.pipeline.skin_stage import SKIN_COLUMNS
+    from axdf_cli.pipeline.skin_stage import SKIN_COLUMNS, SKIN_CSV
 
     out = np.zeros((len(plan.frames), len(SKIN_COLUMNS)))
     t0 = time.perf_counter()
     for chunk, results in evaluate_plan(plan):
         for _ in results:
             pass
-        if chunk.skin is not None:
-            out[np.arange(len(plan.frames))[chunk.rows]] = chunk.skin.stats
+        if SKIN_CSV in chunk.tables:
+            out[np.arange(len(plan.frames))[chunk.rows]] = chunk.tables[SKIN_CSV]
     return time.perf_counter() - t0, out
 
 
@@ -42,7 +42,7 @@ def skin_checks(plan) -> dict:
 
     from axdf_cli.model import skin as kernels
     from axdf_cli.pipeline.evaluate import evaluate_plan
-    from axdf_cli.pipeline.skin_stage import SkinStage
+    from axdf_cli.pipeline.skin_stage import SKIN_NAME, SkinStage
     from axdf_cli.tools.skin_muscles import capped
 
     model = next(s for s in plan.stages if isinstance(s, SkinStage)).start(plan)
@@ -53,7 +53,7 @@ def skin_checks(plan) -> dict:
     for chunk, results in evaluate_plan(plan):
         res = {j: r for j, r in results}
         for i in range(len(chunk.frames)):
-            y = chunk.skin.positions[i].astype(np.float64)
+            y = chunk.parts[SKIN_NAME].positions[i].astype(np.float64)
             mus = np.concatenate([res[j].vertices[i] for j in sorted(res)]).astype(np.float64)
             outside = max(outside, float((igl.fast_winding_number(y, model.faces, mus) < 0.5).mean()))
             ins = np.zeros(len(y), bool)
@@ -87,7 +87,7 @@ def skin_offsets(plan, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     (jiggle) are left out: they integrate at the pose's own frame rate."""
     from axdf_cli.model import skin as kernels
     from axdf_cli.pipeline.evaluate import evaluate_plan
-    from axdf_cli.pipeline.skin_stage import SkinStage
+    from axdf_cli.pipeline.skin_stage import SKIN_NAME, SkinStage
     from axdf_cli.pipeline.stages import Scope
 
     plan = dataclasses.replace(plan, frames=np.asarray(frames, np.float64),
@@ -98,7 +98,7 @@ def skin_offsets(plan, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         for _ in results:
             pass
         for i in range(len(chunk.frames)):
-            y = chunk.skin.positions[i].astype(np.float64)
+            y = chunk.parts[SKIN_NAME].positions[i].astype(np.float64)
             x = np.empty_like(y)
             kernels.blend(model.weights, np.ascontiguousarray((chunk.world[i][model.bones] @ model.inv_rest)[:, :3, :]),
                           model.rest, x)
