@@ -101,11 +101,11 @@ DEMO_JOBS := $(DEMO):out/demo poses/jobs/gait2392_walk.yaml:out/gait2392_walk \
   poses/jobs/paper_gastrocnemius_gait2392.yaml:out/paper_gastrocnemius_gait2392 poses/jobs/cmu_walk.yaml:out/cmu_walk \
   poses/jobs/gait2392_cmu_walk.yaml:out/gait2392_cmu_walk
 
-# Every command's numba kernels compiled into the kernel cache, with progress (tools/warm_kernels.py
+# Every command's numba kernels compiled into the kernel cache, with progress (scripts/warm_kernels.py
 # runs run, fit, skin and dataset build once on tiny inputs): after it no first command compiles.
 warm: $(STAMP)
 	@echo "warm: compiling every command's kernels once (run, fit, skin, dataset; minutes on a cold cache, seconds after)"
-	@$(BIN)/python tools/warm_kernels.py
+	@$(BIN)/python scripts/warm_kernels.py
 
 demo: $(STAMP) warm
 	@n=0; for jo in $(DEMO_JOBS); do n=$$((n + 1)); job=$${jo%%:*}; out=$${jo#*:}; \
@@ -230,13 +230,13 @@ lock: $(TEST_STAMP)
 ATLAS  ?= $(DATA)/atlas/visible_human_female
 ATLAS_SIDES ?= r,l
 atlas: $(STAMP)
-	$(BIN)/python tools/atlas_library.py --data $(ATLAS) --sides $(ATLAS_SIDES) --out muscles/gait2392_atlas
+	$(BIN)/python scripts/atlas_library.py --data $(ATLAS) --sides $(ATLAS_SIDES) --out muscles/gait2392_atlas
 
 import-mjcf: $(TEST_STAMP)
-	$(BIN)/python tools/myo_sim_xml.py myoarm $(MYO)/myoarm.xml
-	$(BIN)/python tools/myo_sim_xml.py myofullbody $(MYO)/myofullbody.xml
-	$(BIN)/python tools/myo_motion.py arm26 $(MYO)/myoarm.xml $(MYO)/myoarm_elbow.npz $(OSIM)/arm26/arm26_Kinematics_q.sto
-	$(BIN)/python tools/myo_motion.py gait $(MYO)/myofullbody.xml $(MYO)/myobody_gait.npz
+	$(BIN)/python scripts/myo_sim_xml.py myoarm $(MYO)/myoarm.xml
+	$(BIN)/python scripts/myo_sim_xml.py myofullbody $(MYO)/myofullbody.xml
+	$(BIN)/python scripts/myo_motion.py arm26 $(MYO)/myoarm.xml $(MYO)/myoarm_elbow.npz $(OSIM)/arm26/arm26_Kinematics_q.sto
+	$(BIN)/python scripts/myo_motion.py gait $(MYO)/myofullbody.xml $(MYO)/myobody_gait.npz
 	$(BIN)/axdf import mjcf $(MYO)/myoarm.xml --name myoarm --motion $(MYO)/myoarm_elbow.npz $(MJCF_MESHES) \
 	  --out muscles/myoarm --muscles-out muscles/myoarm --skeleton-out poses/skeletons/myoarm.yaml \
 	  --pose-out poses/myoarm_elbow.yaml --overwrite

@@ -18,7 +18,8 @@ def rmf_samples(n_control_points: int) -> int:
     dense = min(spans, RMF_DENSE_SPANS)
     return RMF_SAMPLES_PER_SPAN * dense + RMF_SAMPLES_PER_EXTRA_SPAN * (spans - dense)
 
-# The frame error the issue asks for; tests check RMF_SAMPLES_PER_SPAN achieves it.
+# The largest frame error (radians) the RMF sampling may leave; tests check RMF_SAMPLES_PER_SPAN
+# achieves it.
 RMF_MAX_FRAME_ERROR_RAD = 1e-4
 
 # Closest-point binding: Newton iterations on (P - C(t)).C'(t) = 0 from the best dense sample
@@ -63,10 +64,9 @@ BVH_MAX_BYTES = 512 * 1024 * 1024
 # stature, 1st to 99th percentile, both sexes: 1.45-1.95 m, with room). The person's stature
 # is estimated from the rest joint span (the extent along BVH Y, up, of every joint and end
 # site at rest) as span / STATURE_SPAN_RATIO: the span is shorter than the stature because the
-# highest end site lies inside the head and a rest pose may splay the legs (CMU's conversions:
-# span 1.37 m, Head's end site ~10 cm below the vertex, thighs 20 deg apart, for subject 131,
-# whose 0.80 m hip-to-ankle legs at 0.49 of stature make ~1.6 m: 0.85); a T-pose whose top end
-# site is the vertex (span = stature) reads 16% tall, still in the band for 1.2-1.8 m spans.
+# highest end site lies inside the head and a rest pose may splay the legs (as CMU's
+# conversions do); a T-pose whose top end site is the vertex (span = stature) then reads a
+# little tall, still inside the band for ordinary statures.
 # The unit (m, cm, mm, in, CMU's 1/0.45 in) whose stature lands in the band is taken; when none
 # does, lengths are scaled to TYPICAL_STATURE and a warning says so.
 STATURE_BAND = (1.4, 2.1)
@@ -93,8 +93,8 @@ RENDER_EDGE_MARGIN_PX = 0.02
 
 # Retargeting (axdf retarget, axdf_cli/model/ik.py). Each frame's least squares stops when
 # the cost changes by less than IK_FTOL relative or the step by less than IK_XTOL relative
-# (exact data is fitted to ~1 µm; mocap is good to ~1 mm), or after IK_MAX_EVALUATIONS
-# (a warm-started frame takes 3-10).
+# (far below motion capture's millimetre), or after IK_MAX_EVALUATIONS (far more than a frame
+# started from the one before needs).
 IK_FTOL = 1e-10
 IK_XTOL = 1e-10
 IK_GTOL = 1e-10
@@ -104,8 +104,8 @@ IK_MAX_EVALUATIONS = 200
 # centre error. Where the points decide a coordinate it is negligible (a 0.4 m lever moves its
 # end 7 mm per degree, ~50 times the pull's weight in the cost: a lag of ~2% of a frame's
 # change); it decides what the points barely tell: a hip's rotation about a nearly straight
-# leg, a toe's flexion on a 5 cm lever (with a pull ten times weaker, CMU's noisy toe joints
-# turn the toes through 60 degrees in a 30th of a second). Translations: 0.01 m per metre (the root is seen directly).
+# leg, a toe's flexion on a 5 cm lever (a much weaker pull lets noisy toe joints flick the
+# toes between frames). Translations: 0.01 m per metre (the root is seen directly).
 IK_SMOOTH_ROTATION = 1e-3
 IK_SMOOTH_TRANSLATION = 1e-2
 # A free coordinate within this share of its range's width of an end is reported as held there.
@@ -114,16 +114,14 @@ IK_AT_BOUND = 1e-6
 # A motion column of a coupled coordinate (a CoordinateCouplerConstraint's dependent) is
 # not read: the skeleton computes it. When it strays from the coupler's function of its
 # leader's column by more than this (OpenSim units, rad or m) the import warns. OpenSim's IK
-# satisfies the constraint to its assembly accuracy (the Rajagopal run: < 1e-8 rad); the
-# motion file's 8 printed decimals leave ~1e-8; 1e-5 rad (6e-4 deg, 10 µm) is far above
-# both and far below anything visible.
+# satisfies the constraint to its assembly accuracy and a motion file prints 8 decimals;
+# 1e-5 rad (6e-4 deg, 10 µm) is far above both and far below anything visible.
 COUPLED_COLUMN_ATOL = 1e-5
 
 # Axis control points of imported path muscles (axdf import osim|mjcf; importers/emit.py
 # axis_points_for). The axis is a quadratic B-spline fitted to the wrapped path, and it cuts
-# the path's corners: a hamstring's 1.2 cm insertion hook at 111 degrees of knee flexion
-# (Rajagopal2016's run: 1.25% short at the default 12 points), finger flexors that fold by up to
-# 140 degrees over a few millimetres (MyoSuite's hands). Each muscle keeps the default count
+# the path's corners: a hamstring's insertion hook at deep knee flexion, finger flexors that
+# fold sharply over a few millimetres (MyoSuite's hands). Each muscle keeps the default count
 # (8 + 4 per interior point and surface, at most 48) unless its axis length differs from the
 # wrapped path's by more than AXIS_SHORTFALL_MAX in some measured pose; then it gets the first
 # count that stays within: steps of AXIS_POINTS_STEP up to AXIS_POINTS_FINE_MAX (a bend needs
@@ -132,8 +130,7 @@ COUPLED_COLUMN_ATOL = 1e-5
 # every 0.8% of the path, ~2 mm of a finger flexor), or the best of them.
 # AXIS_SHORTFALL_MAX is half of the 1% within which every imported muscle must match its
 # simulator's own length (OpenSim's getLength, MuJoCo's ten_length): the rest is room for the
-# wrapping's own tolerances and for poses the importer did not measure. The shipped gait2392
-# walk and arm26 flexion stay within it at the default counts.
+# wrapping's own tolerances and for poses the importer did not measure.
 AXIS_SHORTFALL_MAX = 5e-3
 AXIS_POINTS_STEP = 4
 AXIS_POINTS_FINE_MAX = 48
@@ -163,16 +160,16 @@ CONTACT_MARGIN = 0.001
 CONTACT_BONE_MARGIN = 0.001
 # Jacobi passes (push, fit the rings' modes, re-solve the volume); a fixed number, so the result
 # is a continuous function of the frame. More passes clear more overlap but, the volume being
-# kept, press it into the next layer and follow the neighbours' motion more. Two passes clear
-# about half of one pass's overlap with every vertex step within 1.5x the no-contact one (no
-# pops); a third pass pops. The contact rows of `make bench` (docs/BENCH.md) measure it.
+# kept, press it into the next layer and follow the neighbours' motion more: two passes are
+# the most that keep every vertex's step between frames near the no-contact one (no pops; the
+# contact rows of `make bench` measure it, docs/BENCH.md).
 CONTACT_ITERATIONS = 2
 # Over-relaxation of a pass's pushes: the muscles' pushes, the bones' and the thick muscles'
 # giving way (to a thin muscle or a pole inside them) are asked for this many times over. A
 # pass delivers only part of what its samples ask for at the deepest points (the rings' five
 # modes and the smoothing along the muscle spread a local push, and the volume's re-solve
-# gives some back), so two passes without it leave overlap they could clear. 2 on the
-# muscles' pushes takes the worst step past 1.5x (a pop). A pole's own push out of a bone is
+# gives some back), so two passes without it leave overlap they could clear; asked for much
+# more, the muscles' pushes overshoot between frames (pops). A pole's own push out of a bone is
 # asked for once (nothing spreads it, so more would overshoot the bone's surface). Packing's
 # polish, which iterates to the end, does not over-relax (the packer's PACK_RELAX; docs/CONTACT.md).
 CONTACT_RELAX = (1.6, 2.0, 2.0)
@@ -182,10 +179,10 @@ CONTACT_RELAX = (1.6, 2.0, 2.0)
 # next to an attachment keep their own push out of the bone (the pole itself stays): pinned,
 # a tendon's end ring would never leave the bone it attaches to.
 CONTACT_SMOOTH_PASSES = 4
-# Bones' signed distance fields: grid step and padding around the mesh (m). Trilinear on a
-# 3 mm grid reads a convex bone's distance too large (a convex function's chords lie above
-# it), by up to about 1 mm at the vertices contact leaves inside a bone. A 2 mm grid halves
-# that, for 3.4x the memory, and barely changes what contact leaves inside (docs/CONTACT.md).
+# Bones' signed distance fields: grid step and padding around the mesh (m). Trilinear
+# interpolation reads a convex bone's distance too large (a convex function's chords lie above
+# it), by a fraction of the step; a finer grid costs memory as the cube of the step and barely
+# changes what contact leaves inside a bone (docs/CONTACT.md).
 CONTACT_SDF_STEP = 0.003
 CONTACT_SDF_PAD = 0.02
 # Shares of an overlap: 0.5 each for equal yields, +CONTACT_SHARE_PER_LAYER per layer of
@@ -221,7 +218,8 @@ CONTACT_AXES_FADE = (0.1, 0.4)
 # much of its ring centre's: a ring that crosses a neighbour off its axis is pushed out even
 # where its points pass near that axis (the push's direction is the centres', defined there;
 # the point's own radial part of it still fades), as the sartorius crossing the adductor
-# brevis. 1.0 makes the walk as imported step over 1.5x (a pop); 0.75 stays under it.
+# brevis. Less than 1: at the centres' full distance a crossing ring's step between frames grows
+# into a pop.
 CONTACT_DEEP_FADE_CENTRES = 0.75
 # A thin muscle inside a thick one (its ring's radius below CONTACT_THIN[1] of the neighbour's
 # radius, fully from CONTACT_THIN[0], smoothstep between) also makes the thick one give way:
@@ -229,8 +227,8 @@ CONTACT_DEEP_FADE_CENTRES = 0.75
 CONTACT_THIN = (0.25, 0.5)
 # The pushes are sampled at A / CONTACT_SAMPLE_COLUMNS evenly spaced points (12 of 24) of every
 # CONTACT_SAMPLE_RINGS-th ring; each sampled ring's displacement modes are fitted to them.
-# Sparser (8 points of every second ring) aliases: the pushes turn between frames near shared
-# attachments (pops); all 24 points of every ring gain nothing for 1.5x the cost.
+# Sparser sampling aliases: the pushes turn between frames near shared attachments (pops);
+# denser sampling costs more and gains nothing.
 CONTACT_SAMPLE_COLUMNS = 2
 CONTACT_SAMPLE_RINGS = 1
 
@@ -254,8 +252,7 @@ PACK_FIT_ROUNDS = 12
 PACK_DRAW_IN = 0.8
 # Polish (step 5): rounds of the frame's contact resolved at the rest pose with this many passes
 # (a one-off, so no pops to avoid: as many as clear it), the sections fitted to it each round.
-# Each round clears most of what the one before left; three leave a few hundredths of a per
-# cent of the rest vertices inside another muscle, and fewer passes a round leave more.
+# Each round clears most of what the one before left; fewer passes a round leave more.
 PACK_POLISH_ROUNDS = 3
 PACK_POLISH_PASSES = 24
 # A packed section's control points keep to their rays from its centre (star-shaped sections,
@@ -266,12 +263,11 @@ PACK_RAY_MIN = 0.15
 # point from where the bones put it is at most JIGGLE_BOUND of the muscle's axis length at
 # that frame (its control polygon's), reached smoothly: unchanged up to JIGGLE_BOUND_KNEE of
 # the bound, then a tanh shoulder (the same value, slope and curvature at the knee: no kink).
-# Soft tissue sways centimetres on muscles tens of centimetres long; the shipped gait2392 walk
-# moves axes by at most 3.5% of their length and the hand-keyed hop's dead-stop landing, the
-# hardest shipped motion, by 16.8% (vastus medialis), below the knee (18.75%), so neither
-# changes. What it stops is a motion too fast for its frame rate (the walk played 10x fast
-# moved axes by 270% of their length): an offset of a quarter of the length in the middle
-# of a two-segment axis lengthens it by sqrt(1 + 4 * 0.25^2) - 1 = 12%.
+# Soft tissue sways centimetres on muscles tens of centimetres long: the knee lies above what
+# the shipped motions reach, the hardest (a hop's dead-stop landing) included, so they are
+# unchanged (docs/BENCH.md, jiggle). What it stops is a motion too fast for its frame rate,
+# whose offsets grow past the axis's own length: an offset of a quarter of the length in the
+# middle of a two-segment axis lengthens it by sqrt(1 + 4 * 0.25^2) - 1 = 12%.
 JIGGLE_BOUND = 0.25
 JIGGLE_BOUND_KNEE = 0.75
 # Jiggle's memory (axdf_cli/pipeline/jiggle_stage.py): the pose's timeline is cut into
@@ -280,8 +276,8 @@ JIGGLE_BOUND_KNEE = 0.75
 # state's difference decay to JIGGLE_WARMUP_EPS of itself (model/jiggle.py, warmup_frames),
 # so a frame costs at most an epoch and a warm-up, not the whole pose before it. At 1e-9 the
 # jump where two epochs meet is below a nanometre for a 1 m offset (float32 positions near
-# 1 m resolve 60 nm): no pop. A walk's slowest shipped muscle (8 Hz, damping 0.2) needs 2.1 s
-# of warm-up; an undamped muscle integrates from the pose's first frame.
+# 1 m resolve 60 nm): no pop. The slower and less damped a muscle, the longer its warm-up; an
+# undamped muscle integrates from the pose's first frame.
 JIGGLE_WARMUP_EPS = 1e-9
 
 # ---------------------------------------------------------------- importers (hostile inputs)
@@ -341,9 +337,9 @@ SKIN_CANDIDATES = 8
 # skin holds it where that is shallower (the fitted rest skin clears the muscles by
 # SKIN_PUSH_CLEARANCE only; asking for the full fat there would inflate it at rest).
 # A candidate more than SKIN_MAX_HEIGHT metres above a skin vertex (along its normal) pushes it
-# not at all: measured on the walk, the muscle vertices truly outside the skinned mesh (winding
-# number) lie at most 28 mm above it, while those 3-9 cm "above" lie in the crease between the
-# thighs, inside the body, the vertex on the other leg.
+# not at all: it lies above the muscle vertices truly outside the skinned mesh (winding number)
+# and below the points that only seem "above" a skin vertex, in the crease between the thighs,
+# inside the body, the vertex on the other leg.
 SKIN_MAX_HEIGHT = 0.035
 # Above SKIN_SOFT_HEIGHT a candidate's push fades linearly to nothing at SKIN_MAX_HEIGHT: a point
 # rising through the limit would otherwise drop a push of ~35 mm between two frames (a pop).
@@ -351,9 +347,8 @@ SKIN_SOFT_HEIGHT = 0.03
 # A point pushes a skin vertex in full while it lies within SKIN_SPREAD_IN times the vertex's
 # longest edge of it across the vertex's normal (the triangles around the vertex), less and
 # less out to SKIN_SPREAD_OUT times that (a smoothstep), and not at all beyond: a point sliding
-# under the skin hands its push on without a jump. Measured at the CMU walk's deepest crouch
-# (frames 91..96), muscle vertices outside the skin by the winding number: 0.46% at 1 and 2
-# edges, 0.38% at 1.5 and 3, 0.36% at 2 and 4 (beyond that a point's 8 candidates end first).
+# under the skin hands its push on without a jump. Wider spreads leave fewer muscle vertices
+# outside the skin, less and less so, until a point's SKIN_CANDIDATES end first.
 SKIN_SPREAD_IN = 1.5
 SKIN_SPREAD_OUT = 3.0
 # A skin's jiggle (its file's `jiggle:`) remembers at most this many seconds of the bones' motion:
@@ -368,8 +363,8 @@ SKIN_JIGGLE_MEMORY = 2.0
 SKIN_JIGGLE_TAPS = 512
 # Relaxation after the push: passes of neighbour averaging of the offsets, each held at least
 # at its push (sticky); about one edge (~1-2 cm) of spread per pass, so a push becomes a smooth
-# bulge, not a spike. Each pass also widens the bulges: on the walk 6 passes gain the skin
-# +3.1..4.3% of its volume, 3 passes +2.4..3.5%.
+# bulge, not a spike. Each pass also widens the bulges and adds to the skin's volume, which
+# the volume step below takes back: a few passes are enough for smooth bulges.
 SKIN_RELAX_ITERATIONS = 3
 # The volume step after the relax holds the skin at its volume as worn at rest (soft tissue is
 # incompressible): the excess the pushes and the relax add is taken back from vertices with
@@ -401,6 +396,7 @@ SKIN_MAX_NAME = 256
 SKIN_SEGMENT_TOLERANCE = 0.05
 # A skin file without `segments:` (written before axdf skin recorded them, as skins/gait2392):
 # the skeleton's joints the skin wears lie inside its rest mesh, or at most SKIN_FIT_OUTSIDE
-# metres outside it (an unpushed myobody fit leaves its heels 5 mm and its head's origin 9 mm
-# out; gait2392 with 1.6 times longer shanks puts its feet's joints 23 cm out).
+# metres outside it: more than a skin fitted to the skeleton itself leaves out (its heels and
+# head's origin, by millimetres), far less than a skeleton of other proportions puts out (a
+# longer shank's feet, by decimetres).
 SKIN_FIT_OUTSIDE = 0.03

@@ -13,10 +13,10 @@ from pathlib import Path
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / "tools"))
+sys.path.insert(0, str(REPO / "scripts"))
 
-import myo_motion  # noqa: E402  (tools/: the motions and couplings)
-import myo_sim_xml  # noqa: E402  (tools/: myo-sim models as MJCF files)
+import myo_motion  # noqa: E402  (scripts/: the motions and couplings)
+import myo_sim_xml  # noqa: E402  (scripts/: myo-sim models as MJCF files)
 
 from opensim_judge import pose_coordinates  # noqa: E402
 

@@ -11,8 +11,19 @@ import numpy as np
 
 from axdf_cli import tolerances as tol
 from axdf_cli.model import rmf
-from axdf_cli.model.muscle import SOLVED_MODES, FrameResult, start_scale
+from axdf_cli.model.muscle import FrameResult, VolumeMode
 import surface_kernel
+
+#: Modes whose scale is solved against the rest volume (the others keep their start scale).
+SOLVED_MODES = frozenset({VolumeMode.EXACT})
+
+
+def start_scale(mode: VolumeMode, ratio: np.ndarray) -> np.ndarray:
+    """The scale a frame starts from, l0 / l1 = ``ratio`` (F,): 1 for ``none``, the paper's
+    sqrt(l0/l1) otherwise (``exact`` solves from there)."""
+    if mode is VolumeMode.NONE:
+        return np.ones_like(ratio)
+    return np.sqrt(ratio)
 
 
 def _unit(d: np.ndarray) -> np.ndarray:

@@ -27,12 +27,9 @@ needs_atlas = pytest.mark.skipif(not (ATLAS / "Right").is_dir(),
 
 @pytest.fixture(scope="module")
 def rest():
-    import sys
+    from axdf_cli.tools.atlas_library import rest_bones
 
-    sys.path.insert(0, str(REPO / "tools"))
-    from atlas_measure import rest_state
-
-    return rest_state(SKELETON)
+    return rest_bones(SKELETON)
 
 
 @pytest.fixture(scope="module")
@@ -113,7 +110,7 @@ def test_push_out_moves_a_point_out_of_a_bone():
 @needs_atlas
 @pytest.mark.skipif(not LIB.is_dir(), reason="muscles/gait2392_atlas not made (make atlas)")
 def test_registered_meshes_are_the_ones_the_library_was_fitted_to(rest):
-    """``registered_meshes`` (what tools/atlas_sheet.py draws beside the library) gives the
+    """``registered_meshes`` (what scripts/atlas_sheet.py draws beside the library) gives the
     right leg's muscles the shipped library's report records: the same names, atlas files and
     parts, and the same count of vertices pushed out of the bones; closed meshes that hold a
     volume, each near its fitted muscle."""

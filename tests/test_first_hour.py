@@ -262,7 +262,7 @@ def test_make_demo_compiles_every_command_that_compiles_first(tmp_path):
 
     from axdf_cli.cli.main import KERNEL_COMMANDS
 
-    spec = importlib.util.spec_from_file_location("warm_kernels", REPO_ROOT / "tools" / "warm_kernels.py")
+    spec = importlib.util.spec_from_file_location("warm_kernels", REPO_ROOT / "scripts" / "warm_kernels.py")
     warm = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(warm)
     commands = {argv[0] for _, argv in warm.steps(tmp_path)}
@@ -276,7 +276,7 @@ def test_make_demo_compiles_every_command_that_compiles_first(tmp_path):
     if shutil.which("make") is None:
         pytest.skip("no make here")
     plan = subprocess.run(["make", "-n", "demo"], cwd=REPO_ROOT, capture_output=True, text=True, check=True).stdout
-    assert plan.index("tools/warm_kernels.py") < plan.index("axdf run"), plan
+    assert plan.index("scripts/warm_kernels.py") < plan.index("axdf run"), plan
 
 
 # ----------------------------------------------------------------------------- make demo installs no test tools

@@ -344,7 +344,7 @@ def test_a_mesh_far_from_every_bone_is_refused_and_a_transform_brings_it_home(tu
 def test_atlas_meshes_in_their_scan_frame_are_refused_until_registered(tmp_path, capsys):
     """The Visible Human's meshes in their scan frame (mm) given to gait2392: refused, each named,
     with the route (they lay 0.39 m and more from every bone and were bound to torso, pelvis and
-    femur_l). Registered by the atlas' own landmark similarity (tools/atlas_library.py
+    femur_l). Registered by the atlas' own landmark similarity (scripts/atlas_library.py
     --transform), soleus and vastus lateralis hang on the right tibia and femur."""
     from conftest import REPO_ROOT
 
@@ -359,7 +359,7 @@ def test_atlas_meshes_in_their_scan_frame_are_refused_until_registered(tmp_path,
     for m in meshes:
         assert f"{m}: the mesh lies 0." in err
     assert err.count("register the meshes onto the skeleton first (--transform FILE") == 2
-    assert "tools/atlas_library.py --transform FILE" in err
+    assert "scripts/atlas_library.py --transform FILE" in err
     assert not (tmp_path / "scan").exists()
     (tmp_path / "vhf_r.yaml").write_text(landmark_transform(ATLAS.parent, skel, "r"))
     assert run_cli(tmp_path, "fit", *meshes, "--skeleton", str(skel), "--out", "fit", "--units", "mm",

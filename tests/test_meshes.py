@@ -14,11 +14,17 @@ import trimesh
 
 from axdf_cli.formats import WRITERS, ObjWriter, PlyWriter
 from axdf_cli.formats import read_triangles
-from axdf_cli.model.muscle import grid_faces, grid_to_vertices
+from axdf_cli.model.muscle import grid_faces
 from axdf_cli.model.pose import sample_coordinates
 from axdf_cli.model.skeleton import forward_kinematics
 
 from conftest import mesh_volume
+
+
+def grid_to_vertices(g: np.ndarray) -> np.ndarray:
+    """(F, U, A, 3) grid with collapsed pole rows → (F, 2 + (U-2) A, 3) vertices."""
+    f, u, a, _ = g.shape
+    return np.concatenate([g[:, :1, 0], g[:, 1:-1].reshape(f, (u - 2) * a, 3), g[:, -1:, 0]], axis=1)
 
 
 def _trimesh(v, f):

@@ -62,16 +62,6 @@ class VolumeMode(str, Enum):
 
 
 VOLUME_MODES = tuple(m.value for m in VolumeMode)
-#: Modes whose scale is solved against the rest volume (the others keep their start scale).
-SOLVED_MODES = frozenset({VolumeMode.EXACT})
-
-
-def start_scale(mode: VolumeMode, ratio: np.ndarray) -> np.ndarray:
-    """The scale a frame starts from, l0 / l1 = ``ratio`` (F,): 1 for ``none``, the paper's
-    sqrt(l0/l1) otherwise (``exact`` solves from there)."""
-    if mode is VolumeMode.NONE:
-        return np.ones_like(ratio)
-    return np.sqrt(ratio)
 
 # ----------------------------------------------------------------------------- specs
 
@@ -162,12 +152,6 @@ def grid_faces(along: int, around: int) -> np.ndarray:
     top = 1 + (rings - 1) * around
     faces.append(np.stack([top + j, top + jn, np.full(around, last)], axis=1))
     return np.concatenate(faces).astype(np.int32)
-
-
-def grid_to_vertices(g: np.ndarray) -> np.ndarray:
-    """(F, U, A, 3) grid with collapsed pole rows → (F, 2 + (U-2) A, 3) vertices."""
-    f, u, a, _ = g.shape
-    return np.concatenate([g[:, :1, 0], g[:, 1:-1].reshape(f, (u - 2) * a, 3), g[:, -1:, 0]], axis=1)
 
 
 # ----------------------------------------------------------------------------- the model

@@ -17,8 +17,11 @@ model's skeleton at rest (gait2392, metres), one leg at a time.
    pelvis, which the atlas lacks, are held by their landmarks. The muscles are carried by the
    last round's spline (:meth:`Registration.apply`).
 
-Nothing here reads the skeleton's file or writes anything: the caller passes the skeleton,
-its rest transforms and its bone meshes (world, metres) and the atlas folder.
+The atlas' names (its legs' folders, the landmarks' cartilages and model bones, which atlas
+bones go onto which model bone) are data: axdf_cli/data/atlas_gait2392.yaml
+(:func:`axdf_cli.tools.tables.atlas_map`). Nothing here reads the skeleton's file or writes
+anything: the caller passes the skeleton, its rest transforms and its bone meshes (world,
+metres) and the atlas folder.
 """
 from __future__ import annotations
 
@@ -29,23 +32,11 @@ import numpy as np
 
 from axdf_cli.tools import constants as tol
 from axdf_cli.errors import InputError, Mark
-
-SIDES = {"r": "Right", "l": "Left"}
-#: atlas bones (file name part) -> the model bone they are pulled onto, and whether the model's
-#: mesh is that bone alone (then the correspondences run both ways) or holds more (the model's
-#: calcaneus is the whole hind- and midfoot: one way only)
-BONE_PAIRS = (
-    (("Tibia", "Fibula"), "tibia", True),
-    (("Talus",), "talus", True),
-    (("Calcaneous", "Cuboid", "Navicular", "MedialCuneiform", "IntermediateCuneiform", "LateralCuneiform"),
-     "calcn", False),
-)
-LANDMARKS = ("hip", "hip_other", "knee", "ankle")
-
+from axdf_cli.tools.tables import atlas_map
 
 def atlas_path(root: Path, side: str, kind: str, name: str) -> Path:
     """The atlas file of a structure (kind Bone, Cartilage, Muscle) on a side ('r', 'l')."""
-    s = SIDES[side]
+    s = atlas_map().sides[side]
     return Path(root) / s / f"VHF_{s}_{kind}_{name}_smooth.ply"
 
 
@@ -69,26 +60,30 @@ def sphere_fit(points: np.ndarray) -> tuple[np.ndarray, float]:
     return c, float(np.sqrt(max(sol[3] + c @ c, 0.0)))
 
 
-def atlas_landmarks(root: Path, side: str) -> dict[str, np.ndarray]:
-    """The atlas' joint centres (metres, the atlas' frame) for the leg of ``side``."""
-    other = "l" if side == "r" else "r"
+def _leg(side: str, other: bool) -> str:
+    return ("l" if side == "r" else "r") if other else side
 
+
+def atlas_landmarks(root: Path, side: str) -> dict[str, np.ndarray]:
+    """The atlas' joint centres (metres, the atlas' frame) for the leg of ``side``: the centres
+    of the spheres fitted to the map's cartilages (``landmarks:``)."""
     def centre(s, name):
         return sphere_fit(read_atlas_mesh(atlas_path(root, s, "Cartilage", name))[0])[0]
 
-    return {"hip": centre(side, "FemurHead"), "hip_other": centre(other, "FemurHead"),
-            "knee": centre(side, "FemurDistal"), "ankle": centre(side, "Talus")}
+    return {k: centre(_leg(side, other), cart) for k, (cart, other, _) in atlas_map().landmarks.items()}
 
 
 def model_landmarks(skel, rest: np.ndarray, side: str) -> dict[str, np.ndarray]:
-    """The skeleton's joint centres at rest (world, metres) for the leg of ``side``: the femur's,
-    the other femur's, the tibia's and the talus' origins."""
-    other = "l" if side == "r" else "r"
-    names = {"hip": f"femur_{side}", "hip_other": f"femur_{other}", "knee": f"tibia_{side}", "ankle": f"talus_{side}"}
+    """The skeleton's joint centres at rest (world, metres) for the leg of ``side``: the origins
+    of the map's landmark bones (gait2392's: the femur's, the other femur's, the tibia's and
+    the talus')."""
+    amap = atlas_map()
+    names = {k: f"{bone}_{_leg(side, other)}" for k, (_, other, bone) in amap.landmarks.items()}
     for n in names.values():
         if n not in skel.bone_index:
+            leg = dict.fromkeys([b for _, _, b in amap.landmarks.values()] + [b for _, b, _ in amap.bones])
             raise InputError(Mark(skel.name), f"skeleton {skel.name} has no bone {n!r}",
-                             "a gait2392-like leg: femur_r/l, tibia_r/l, talus_r/l, calcn_r/l")
+                             "a gait2392-like leg: " + ", ".join(f"{b}_r/l" for b in leg))
     return {k: rest[skel.bone_index[n], :3, 3].astype(np.float64) for k, n in names.items()}
 
 
@@ -158,21 +153,24 @@ def register(root: Path, skel, rest: np.ndarray, bone_meshes: dict, side: str, r
 
     rounds = tol.ATLAS_WARP_ROUNDS if rounds is None else rounds
     smoothing = tol.ATLAS_WARP_SMOOTHING if smoothing is None else smoothing
+    amap = atlas_map()
+    names = tuple(amap.landmarks)
     la, lm = atlas_landmarks(root, side), model_landmarks(skel, rest, side)
-    src = np.array([la[k] for k in LANDMARKS])
-    dst = np.array([lm[k] for k in LANDMARKS])
-    s, R, t = similarity(src, dst, [tol.ATLAS_OTHER_HIP_WEIGHT if k == "hip_other" else 1.0 for k in LANDMARKS])
+    src = np.array([la[k] for k in names])
+    dst = np.array([lm[k] for k in names])
+    # the other leg's landmark only fixes the turn about the leg's long axis: weighted less
+    s, R, t = similarity(src, dst, [tol.ATLAS_OTHER_HIP_WEIGHT if amap.landmarks[k][1] else 1.0 for k in names])
     reg = Registration(side, s, R, t, la, lm)
     lm_res = np.linalg.norm(reg.rigid(src) - dst, axis=1)
-    reg.report = {"side": side, "scale": s, "landmark_residual_mm": dict(zip(LANDMARKS, (lm_res * 1e3).round(2).tolist()))}
+    reg.report = {"side": side, "scale": s, "landmark_residual_mm": dict(zip(names, (lm_res * 1e3).round(2).tolist()))}
     # the bones: samples in the similarity's frame, each with its model bone
     groups = []
-    for k, (names, bone, both) in enumerate(BONE_PAIRS):
+    for k, (atlas_bones, bone, both) in enumerate(amap.bones):
         mb = f"{bone}_{side}"
         if mb not in bone_meshes:
             continue
         pts = [_samples(*read_atlas_mesh(atlas_path(root, side, "Bone", n)), tol.ATLAS_BONE_SAMPLES, tol.FIT_SEED + k)
-               for n in names]
+               for n in atlas_bones]
         groups.append((mb, reg.rigid(np.concatenate(pts)), both))
     reg.report["bones_before"] = _bone_residual(groups, bone_meshes, lambda p: p)
     if rounds == 0:
@@ -201,7 +199,7 @@ def register(root: Path, skel, rest: np.ndarray, bone_meshes: dict, side: str, r
         smooth[:len(lm_y)] = 0.0  # the landmarks are held
         reg.warp = RBFInterpolator(X, Y - X, kernel="thin_plate_spline", smoothing=smooth, degree=1)
     reg.report["bones_after"] = _bone_residual(groups, bone_meshes, lambda p: p + reg.warp(p))
-    reg.report["landmarks_after_mm"] = dict(zip(LANDMARKS, (np.linalg.norm(lm_y + reg.warp(lm_y) - dst, axis=1)
+    reg.report["landmarks_after_mm"] = dict(zip(names, (np.linalg.norm(lm_y + reg.warp(lm_y) - dst, axis=1)
                                                              * 1e3).round(3).tolist()))
     return reg
 

@@ -2,12 +2,12 @@
 registered onto the skeleton (axdf_cli/tools/atlas.py) and fitted (axdf_cli/tools/fit.py)
 under the model's name; the muscles the atlas lacks copied from the model's own library.
 
-The name map is axdf_cli/data/atlas_gait2392.yaml. Per leg: the atlas' muscle meshes are
-carried by the leg's registration, their vertices inside a model bone put just outside it
-(:func:`atlas.push_out`), a muscle shared by a model group cut into the group's parts
-(:func:`split_parts`), and each is fitted as an ``axis:`` muscle bound to the bones of the
-model muscle's path (``axdf fit --paths``). Nothing here writes: the caller gets the files'
-bytes and the report.
+The name map is axdf_cli/data/atlas_gait2392.yaml (:func:`axdf_cli.tools.tables.atlas_map`).
+Per leg: the atlas' muscle meshes are carried by the leg's registration, their vertices inside
+a model bone put just outside it (:func:`atlas.push_out`), a muscle shared by a model group
+cut into the group's parts (:func:`split_parts`), and each is fitted as an ``axis:`` muscle
+bound to the bones of the model muscle's path (``axdf fit --paths``). Nothing here writes:
+the caller gets the files' bytes and the report.
 """
 from __future__ import annotations
 
@@ -20,16 +20,9 @@ import numpy as np
 from axdf_cli.tools import constants as tol
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.tools import atlas as at
+from axdf_cli.tools.tables import atlas_map
 
-MAP = Path(__file__).resolve().parent.parent / "data" / "atlas_gait2392.yaml"
 REPORT = "atlas_report.json"
-
-
-def load_map(path: Path = MAP) -> dict:
-    import yaml
-
-    with open(path) as fh:
-        return yaml.safe_load(fh)
 
 
 def find_atlas(root: Path, side: str, names: list[str]) -> Path | None:
@@ -117,10 +110,10 @@ def registered_meshes(data_root: Path, skel, rest, bones: dict, old: Path, sides
     out of the bones). ``old``: the model's own muscle folder (the paths that cut a shared
     atlas muscle into the model's parts)."""
     tell = tell or (lambda text: None)
-    names = load_map()
+    names = atlas_map()
     meshes, sides_rep = [], {}
     for side in sides:
-        tell(f"registering the atlas' {at.SIDES[side].lower()} leg")
+        tell(f"registering the atlas' {names.sides[side].lower()} leg")
         reg = at.register(data_root, skel, rest, bones, side)
         side_rep = dict(reg.report, muscles={})
         ta = find_atlas(data_root, side, ["TibialisAnterior"])
@@ -129,8 +122,8 @@ def registered_meshes(data_root: Path, skel, rest, bones: dict, old: Path, sides
             tib = bones[f"tibia_{side}"]
             side_rep["tib_ant_inside_tibia"] = {"landmarks": at.inside_share(reg.apply(tv, warp=False), tib),
                                                 "warp": at.inside_share(reg.apply(tv), tib)}
-        jobs = [(m, [m], src) for m, src in names["muscles"].items()] + \
-               [(g, s["parts"], s["atlas"]) for g, s in names["split"].items()]
+        jobs = [(m, [m], list(src)) for m, src in names.muscles.items()] + \
+               [(g, list(parts), list(src)) for g, (src, parts) in names.split.items()]
         for key, parts, src in jobs:
             p = find_atlas(data_root, side, src)
             if p is None:
@@ -162,8 +155,8 @@ def landmark_transform(data_root: Path, skeleton_path: Path, side: str = "r") ->
     reg = at.register(data_root, skel, rest, bones, side, rounds=0)
     res = ", ".join(f"{k} {v:g} mm" for k, v in reg.report["landmark_residual_mm"].items())
     return transform_text(reg.scale, reg.rotation, reg.shift,
-                          f"The {at.SIDES[side].lower()} leg of the atlas {data_root.name} onto {skel.name} at rest: "
-                          f"the similarity of its joint centres\n(tools/atlas_library.py --transform; scale "
+                          f"The {atlas_map().sides[side].lower()} leg of the atlas {data_root.name} onto {skel.name} at rest: "
+                          f"the similarity of its joint centres\n(scripts/atlas_library.py --transform; scale "
                           f"{reg.scale:.4f}; residuals {res}).\nUse: axdf fit MESH ... --units mm --transform FILE "
                           f"--skeleton {skeleton_path.name} (docs/FIT.md)")
 

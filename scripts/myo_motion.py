@@ -1,7 +1,7 @@
 """Real motions as ``qpos`` npz files for the myo-sim models (``axdf import mjcf --motion``).
 
-    python tools/myo_motion.py gait MODEL.xml OUT.npz    # MyoSuite's sample gait cycle
-    python tools/myo_motion.py arm26 MODEL.xml OUT.npz [STO]   # OpenSim arm26's elbow flexion
+    python scripts/myo_motion.py gait MODEL.xml OUT.npz    # MyoSuite's sample gait cycle
+    python scripts/myo_motion.py arm26 MODEL.xml OUT.npz [STO]   # OpenSim arm26's elbow flexion
 
 - ``gait``: ``poses/motions/myosuite_sample_gait_cycle.csv``, copied unchanged from MyoSuite
   3.0.0 (``myosuite/envs/myo/assets/leg/sample_gait_cycle.csv``, Apache-2.0): 247 rows of one
@@ -120,7 +120,7 @@ def motion_qpos(kind: str, model, sto: Path | None = None) -> tuple[np.ndarray, 
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if len(argv) not in (3, 4):
-        print("usage: python tools/myo_motion.py gait|arm26 MODEL.xml OUT.npz [arm26_Kinematics_q.sto]", file=sys.stderr)
+        print("usage: python scripts/myo_motion.py gait|arm26 MODEL.xml OUT.npz [arm26_Kinematics_q.sto]", file=sys.stderr)
         return 2
     import mujoco
 

@@ -1,4 +1,4 @@
-"""A contact sheet of a data set's views: python tools/dataset_contact_sheet.py OUT SHEET.png
+"""A contact sheet of a data set's views: python scripts/dataset_contact_sheet.py OUT SHEET.png
 
 Tiles the first samples of OUT/index.parquet (one row per sequence and frame, one column per
 view, at most --rows rows), composited on white, with each keypoint's projection drawn from

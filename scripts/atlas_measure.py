@@ -1,7 +1,7 @@
 """Shape measures of a gait2392 muscle library at the skeleton's rest pose (right leg), the
 numbers of issue 35's "done when" (docs/FIT.md, "Atlas onto a skeleton"):
 
-    python tools/atlas_measure.py muscles/gait2392_atlas [muscles/gait2392 ...]
+    python scripts/atlas_measure.py muscles/gait2392_atlas [muscles/gait2392 ...]
 
 - thigh fill: muscle + femur area over the area of their convex hull, in the plane across
   the hip -> knee line at 25, 50 and 75% of its length (a 1 mm grid, winding-number insides);

@@ -1,4 +1,4 @@
-"""The walk with its skin, three ways: python tools/walk_skin_sheet.py SHEET.png [--frame N]
+"""The walk with its skin, three ways: python scripts/walk_skin_sheet.py SHEET.png [--frame N]
 
 Runs poses/jobs/gait2392_walk_skin.yaml at one frame into a temporary folder and renders it
 twice: the skin see-through over the muscles, and opaque. The third panel is the opaque

@@ -10,7 +10,7 @@ class (MuJoCo: "empty class name"), and the mirrored arm repeats the arm's class
 drops the repeats (checked to be identical to the class they repeat but for colours), so that MuJoCo loads
 the file, and ``axdf import mjcf`` reads the same file MuJoCo judges.
 
-    python tools/myo_sim_xml.py myoarm out/mjcf/myoarm.xml
+    python scripts/myo_sim_xml.py myoarm out/mjcf/myoarm.xml
 
 Meshes stay where the package has them (the file's ``meshdir`` is the package's models
 folder). Needs ``mujoco`` and ``myo-sim`` (the test extra).
@@ -78,7 +78,7 @@ def export(name: str) -> str:
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if len(argv) != 2:
-        print("usage: python tools/myo_sim_xml.py NAME OUT.xml", file=sys.stderr)
+        print("usage: python scripts/myo_sim_xml.py NAME OUT.xml", file=sys.stderr)
         return 2
     out = Path(argv[1])
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -1,4 +1,4 @@
-"""A data set's skin passes side by side: python tools/dataset_skin_sheet.py OUT SHEET.png
+"""A data set's skin passes side by side: python scripts/dataset_skin_sheet.py OUT SHEET.png
 
 For the samples of OUT/index.parquet named by --samples (default the first 2): the image on
 white, the muscle-under-skin pass (EXR ``under.id``: each muscle its own colour, black where

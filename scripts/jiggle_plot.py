@@ -1,6 +1,6 @@
 """Plot a muscle's centroid over time with and without jiggle (docs/jiggle_hop.png).
 
-    python tools/jiggle_plot.py OUT.png [JOB] [--muscles med_gas_r vas_lat_r]
+    python scripts/jiggle_plot.py OUT.png [JOB] [--muscles med_gas_r vas_lat_r]
 
 Runs JOB (default poses/jobs/gait2392_hop.yaml) twice into a temporary folder, with jiggle
 and with ``--no-jiggle``, reads every frame's PLY back and plots, per muscle, the centroid

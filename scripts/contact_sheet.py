@@ -1,6 +1,6 @@
 """Tile rendered run frames into a contact sheet: one row per run folder, one column per frame.
 
-    python tools/contact_sheet.py OUT.png "before=/tmp/sheet_before" "after=out/sheet_after"
+    python scripts/contact_sheet.py OUT.png "before=/tmp/sheet_before" "after=out/sheet_after"
 
 Each row takes every ``frames/*.png`` of its run folder in frame order (all rows must have
 the same frames and size) and is labelled on its left; the frame numbers head the columns.

@@ -1,6 +1,6 @@
 """The old library, the atlas library and the atlas' meshes side by side:
 
-    python tools/atlas_sheet.py SHEET.png [--old muscles/gait2392_packed] [--atlas muscles/gait2392_atlas]
+    python scripts/atlas_sheet.py SHEET.png [--old muscles/gait2392_packed] [--atlas muscles/gait2392_atlas]
                                 [--frame 62] [--size 240x320]
 
 Three rows: the thighs from the front, the gluteal region from behind, the calves

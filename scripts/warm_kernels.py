@@ -7,7 +7,7 @@ what a command runs is to run the command: each step below runs one command in p
 smallest input of the repository's own files that reaches its kernels, in a temporary folder
 that is removed afterwards. A step whose kernels are all cached already takes seconds.
 
-    python tools/warm_kernels.py            # from the repository root
+    python scripts/warm_kernels.py            # from the repository root
 """
 from __future__ import annotations
 

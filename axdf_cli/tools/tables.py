@@ -1,0 +1,266 @@
+"""The per-model tables the tools read, as data (axdf_cli/data/): each file read once per
+process through the YAML reader with positions (axdf_cli/fileio/yamlio.py) and checked, so
+that a bad entry is refused as ``FILE:LINE:COL: what is wrong; what is allowed`` (exit 2) and
+a new model is a new entry, not a change of code.
+
+- :func:`rig`: MakeHuman's rig as ``axdf skin`` uses it (data/makehuman/bone_map.yaml);
+- :func:`families`: the skeleton families the body is fitted to (data/skeleton_families.yaml);
+- :func:`atlas_map`: the Visible Human atlas onto gait2392 (data/atlas_gait2392.yaml).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path
+
+from axdf_cli.errors import InputError, Mark
+from axdf_cli.fileio.yamlio import Fields, check_name, did_you_mean, item_marks, load_yaml
+
+DATA = Path(__file__).resolve().parent.parent / "data"
+RIG_FILE = DATA / "makehuman" / "bone_map.yaml"
+FAMILIES_FILE = DATA / "skeleton_families.yaml"
+ATLAS_MAP_FILE = DATA / "atlas_gait2392.yaml"
+
+#: The sides a ``{s}`` entry is made for, in order: (s, S, side).
+SIDES = (("l", "L", "Left"), ("r", "R", "Right"))
+PLACEHOLDERS = "{s} (l, r), {S} (L, R), {side} (Left, Right)"
+#: The landmarks every family has: the stature is estimated from them (axdf_cli/model/stature.py).
+NEEDED_LANDMARKS = ("hip_l", "hip_r", "knee_l", "knee_r", "ankle_l", "ankle_r")
+
+
+def _names(value, where: Mark, what: str) -> tuple:
+    """A non-empty list of names."""
+    if not isinstance(value, list) or not value:
+        raise InputError(where, f"{what} is not a list of names", f"{what}: a list of one name or more, [A, B]")
+    return tuple(check_name(v, m, what) for v, m in zip(value, item_marks(value, where)))
+
+
+def _entries(f: Fields, key: str) -> list:
+    """(key, value, key mark, value mark) of the mapping ``key`` of ``f`` (required, not empty)."""
+    m = f.mapping(key, required=True)
+    if not m:
+        raise InputError(f.vmark(key), f"{key} is empty", f"{key}: one entry or more")
+    return [(k, v, m.key_mark(k), m.value_mark(k)) for k, v in m.items()]
+
+
+def _known(key, kmark: Mark, known, what: str) -> str:
+    if key not in known:
+        raise InputError(kmark, f"unknown {what} {key!r}", f"{did_you_mean(key, known)}{what}s: {', '.join(known)}")
+    return key
+
+
+# ----------------------------------------------------------------------------- the rig
+
+
+@dataclass(frozen=True)
+class Rig:
+    """MakeHuman's rig as the fit reads it (the file's own doc)."""
+
+    parts: dict  # part -> (segment whose map moves it, rig bones that start it)
+    segments: dict  # segment -> (parent or None, proximal landmark, distal landmark or None), parents first
+    keep_length: frozenset  # segments turned but kept at MakeHuman's length
+    landmarks: dict  # landmark -> rig bones whose heads' mean it is
+    centres: dict  # centre -> (landmark, landmark): their midpoint
+    lower_belly: str  # the rig bone moving with the pelvis whose skin has the belly's fat
+    bone_marks: dict = field(default_factory=dict, compare=False)  # rig bone -> where it is first named
+
+
+def load_rig(path: Path | str = RIG_FILE) -> Rig:
+    path = str(path)
+    f = Fields(load_yaml(path), Mark(path), "the rig", keys=("parts", "segments", "landmarks", "centres",
+                                                              "lower_belly"))
+    marks: dict = {}
+
+    def bones(value, where, what):
+        out = _names(value, where, what)
+        for b, m in zip(out, item_marks(value, where)):
+            marks.setdefault(b, m)
+        return out
+
+    landmarks = {check_name(k, km, "landmark"): bones(v, vm, f"landmark {k}'s bones")
+                 for k, v, km, vm in _entries(f, "landmarks")}
+    centres = {}
+    for k, v, km, vm in _entries(f, "centres"):
+        pair = _names(v, vm, f"centre {k}")
+        if len(pair) != 2:
+            raise InputError(vm, f"centre {k} names {len(pair)} landmarks", "a centre: [LEFT, RIGHT], two landmarks")
+        for p, m in zip(pair, item_marks(v, vm)):
+            _known(p, m, landmarks, "landmark")
+        centres[check_name(k, km, "centre")] = pair
+    points = list(landmarks) + list(centres)
+    segments, keep = {}, set()
+    for k, v, km, vm in _entries(f, "segments"):
+        s = Fields(v, vm, f"segment {k}", keys=("parent", "from", "to", "keep_length"))
+        parent = s.raw("parent", required=True)
+        if parent is not None and parent not in segments:
+            raise InputError(s.vmark("parent"), f"segment {k}'s parent {parent!r} is not a segment before it",
+                             f"{did_you_mean(parent, segments)}parents first: {', '.join(segments) or 'none yet'}")
+        prox = _known(s.name("from", required=True), s.vmark("from"), points, "landmark")
+        dist = s.raw("to", required=True)
+        if dist is not None:
+            _known(dist, s.vmark("to"), points, "landmark")
+        if s.boolean("keep_length", default=False):
+            keep.add(k)
+        segments[check_name(k, km, "segment")] = (parent, prox, dist)
+    if next(iter(segments.values()))[0] is not None:
+        raise InputError(f.vmark("segments"), "the first segment has a parent", "the root segment first (parent: null)")
+    parts = {}
+    for k, v, km, vm in _entries(f, "parts"):
+        p = Fields(v, vm, f"part {k}", keys=("segment", "bones"))
+        seg = _known(p.name("segment", required=True), p.vmark("segment"), list(segments), "segment")
+        parts[check_name(k, km, "part")] = (seg, bones(p.raw("bones", required=True), p.vmark("bones"),
+                                                       f"part {k}'s bones"))
+    belly = f.name("lower_belly", required=True)
+    marks.setdefault(belly, f.vmark("lower_belly"))
+    return Rig(parts, segments, frozenset(keep), landmarks, centres, belly, marks)
+
+
+@lru_cache(maxsize=None)
+def rig() -> Rig:
+    """The packaged rig (read once)."""
+    return load_rig(RIG_FILE)
+
+
+# ----------------------------------------------------------------------------- skeleton families
+
+
+@dataclass(frozen=True)
+class Family:
+    """How one family of skeletons takes the body: which bone's origin is each landmark, which
+    bone each part is bound to, and (without shoulders) the trunk's up axis in a bone's frame."""
+
+    name: str
+    landmarks: dict  # landmark -> skeleton bone (its origin at rest is the landmark)
+    bind: dict  # part -> skeleton bone
+    up: tuple | None = None  # (bone, axis in its frame): the trunk's direction without shoulders
+    points: dict = field(default_factory=dict)  # landmark -> (bone, point in its frame): joints it lacks
+    back: float = 0.0  # metres the trunk sits behind where its hip centre puts it (the spine's depth)
+
+
+def _sided(f: Fields, key: str, known, what: str) -> dict:
+    """The mapping ``key`` of ``f`` with every ``{s}`` entry made per side (:data:`SIDES`), its
+    keys checked against ``known``: key -> skeleton bone."""
+    out = {}
+    for k, v, km, vm in _entries(f, key):
+        if not isinstance(v, str):
+            check_name(v, vm, f"{what} {k}'s bone")
+        made = [(k, v)]
+        if isinstance(k, str) and "{s}" in k:
+            try:
+                made = [(k.replace("{s}", s), v.format(s=s, S=S, side=side)) for s, S, side in SIDES]
+            except (KeyError, IndexError, ValueError):
+                raise InputError(vm, f"{what} {k}'s bone {v!r} has an unknown placeholder",
+                                 f"placeholders {PLACEHOLDERS}") from None
+        for name, bone in made:
+            _known(name, km, known, what)
+            if name in out:
+                raise InputError(km, f"{what} {name} is given twice", f"each {what} once")
+            out[name] = check_name(bone, vm, f"{what} {name}'s bone")
+    return out
+
+
+def _family(item, where: Mark, the_rig: Rig) -> Family:
+    f = Fields(item, where, "a family", keys=("name", "landmarks", "bind", "points", "up", "back"))
+    name = f.name("name", required=True)
+    landmarks = _sided(f, "landmarks", list(the_rig.landmarks), "landmark")
+    bind = _sided(f, "bind", list(the_rig.parts), "part")
+    unbound = [p for p in the_rig.parts if p not in bind]
+    if unbound:
+        raise InputError(f.vmark("bind"), f"family {name} binds no bone for part{'s' if len(unbound) > 1 else ''} "
+                         f"{', '.join(unbound)}", "a bone for every part: " + ", ".join(the_rig.parts))
+    points = {}
+    for k, v, km, vm in (_entries(f, "points") if f.has("points") else []):
+        _known(k, km, list(the_rig.landmarks), "landmark")
+        if k in landmarks:
+            raise InputError(km, f"landmark {k} is both a bone's origin and a point", "each landmark once")
+        p = Fields(v, vm, f"point {k}", keys=("bone", "at"))
+        points[k] = (p.name("bone", required=True), p.vector("at", 3, required=True))
+    up = None
+    if f.has("up"):
+        u = Fields(f.mapping("up"), f.vmark("up"), "up", keys=("bone", "axis"))
+        up = (u.name("bone", required=True), u.vector("axis", 3, required=True))
+    lacking = [k for k in NEEDED_LANDMARKS if k not in landmarks and k not in points]
+    if lacking:
+        raise InputError(f.vmark("landmarks"), f"family {name} has no landmark {', '.join(lacking)}",
+                         f"every family has {', '.join(NEEDED_LANDMARKS)} (the stature is estimated from them)")
+    return Family(name, landmarks, bind, up, points, float(f.number("back", default=0.0, lo=0.0, hi=1.0)))
+
+
+def load_families(path: Path | str = FAMILIES_FILE, the_rig: Rig | None = None) -> tuple:
+    path = str(path)
+    f = Fields(load_yaml(path), Mark(path), "the skeleton families", keys=("families",))
+    seq = f.seq("families", required=True, min_len=1)
+    out, seen = [], {}
+    for item, m in zip(seq, item_marks(seq, f.vmark("families"))):
+        fam = _family(item, m, rig() if the_rig is None else the_rig)
+        if fam.name in seen:
+            raise InputError(m, f"family {fam.name} is given twice (first at line {seen[fam.name].line})",
+                             "each family once")
+        seen[fam.name] = m
+        out.append(fam)
+    return tuple(out)
+
+
+@lru_cache(maxsize=None)
+def families() -> tuple:
+    """The packaged skeleton families, in the order they are tried (read once)."""
+    return load_families(FAMILIES_FILE)
+
+
+# ----------------------------------------------------------------------------- the atlas map
+
+
+@dataclass(frozen=True)
+class AtlasMap:
+    """The Visible Human atlas onto gait2392 (the file's own doc). Model names lack the side
+    suffix (``_r``, ``_l`` is added per leg)."""
+
+    muscles: dict  # model muscle -> atlas muscles, the first that exists on the leg
+    split: dict  # model group -> (atlas muscles, the group's model muscles in order)
+    kept: tuple  # model muscles the atlas lacks
+    unused: tuple  # atlas muscles the model has none for
+    sides: dict  # side suffix -> the atlas' folder of that leg
+    landmarks: dict  # landmark -> (atlas cartilage, of the other leg?, model bone)
+    bones: tuple  # (atlas bones, model bone, correspondences both ways?)
+
+
+def load_atlas_map(path: Path | str = ATLAS_MAP_FILE) -> AtlasMap:
+    path = str(path)
+    f = Fields(load_yaml(path), Mark(path), "the atlas map",
+               keys=("muscles", "split", "kept", "unused", "sides", "landmarks", "bones"))
+    muscles = {check_name(k, km, "muscle"): _names(v, vm, f"muscle {k}'s atlas names")
+               for k, v, km, vm in _entries(f, "muscles")}
+    split = {}
+    for k, v, km, vm in _entries(f, "split"):
+        s = Fields(v, vm, f"split {k}", keys=("atlas", "parts"))
+        split[check_name(k, km, "group")] = (_names(s.raw("atlas", required=True), s.vmark("atlas"), "atlas"),
+                                             _names(s.raw("parts", required=True), s.vmark("parts"), "parts"))
+    sides = {_known(k, km, ("r", "l"), "side"): check_name(v, vm, f"side {k}'s folder")
+             for k, v, km, vm in _entries(f, "sides")}
+    if set(sides) != {"r", "l"}:
+        raise InputError(f.vmark("sides"), "sides has no " + " ".join(s for s in ("r", "l") if s not in sides),
+                         "sides: {r: FOLDER, l: FOLDER}")
+    landmarks = {}
+    for k, v, km, vm in _entries(f, "landmarks"):
+        lm = Fields(v, vm, f"landmark {k}", keys=("cartilage", "leg", "bone"))
+        landmarks[check_name(k, km, "landmark")] = (lm.name("cartilage", required=True),
+                                                    lm.choice("leg", ("same", "other"), required=True) == "other",
+                                                    lm.name("bone", required=True))
+    if len(landmarks) < 3:
+        raise InputError(f.vmark("landmarks"), f"landmarks has {len(landmarks)} entries",
+                         "three landmarks or more (a similarity in 3D)")
+    seq = f.seq("bones", required=True, min_len=1)
+    bones = []
+    for item, m in zip(seq, item_marks(seq, f.vmark("bones"))):
+        b = Fields(item, m, "a bone pair", keys=("atlas", "bone", "both"))
+        bones.append((_names(b.raw("atlas", required=True), b.vmark("atlas"), "atlas"),
+                      b.name("bone", required=True), b.boolean("both", required=True)))
+    kept = _names(f.raw("kept", required=True), f.vmark("kept"), "kept")
+    unused = _names(f.raw("unused", required=True), f.vmark("unused"), "unused")
+    return AtlasMap(muscles, split, kept, unused, sides, landmarks, tuple(bones))
+
+
+@lru_cache(maxsize=None)
+def atlas_map() -> AtlasMap:
+    """The packaged atlas map (read once)."""
+    return load_atlas_map(ATLAS_MAP_FILE)

@@ -1,0 +1,152 @@
+"""The per-model tables as data (axdf_cli/tools/tables.py, axdf_cli/data/*.yaml): the packaged
+files give the tables the code held (a few known entries of each), they ship with the package
+(pyproject.toml package-data), and a broken copy is refused at the entry's line and column,
+saying what is wrong and what is allowed."""
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from axdf_cli.errors import InputError
+from axdf_cli.tools import tables as T
+from conftest import REPO_ROOT
+
+DATA_FILES = (T.RIG_FILE, T.FAMILIES_FILE, T.ATLAS_MAP_FILE)
+
+
+def test_the_rig_is_makehumans():
+    rig = T.rig()
+    assert rig.parts["pelvis"] == ("trunk", ("root", "pelvis.L", "pelvis.R", "spine05"))
+    assert rig.parts["toes_r"] == ("foot_r", ("toe1-1.R", "toe2-1.R", "toe3-1.R", "toe4-1.R", "toe5-1.R"))
+    assert list(rig.parts)[:6] == ["pelvis", "abdomen", "chest", "neck", "head", "thigh_l"]
+    assert rig.segments["trunk"] == (None, "hip_c", "shoulder_c")
+    assert rig.segments["hand_l"] == ("forearm_l", "wrist_l", None)
+    assert list(rig.segments)[-1] == "head" and len(rig.segments) == 14
+    assert rig.keep_length == {"foot_l", "foot_r"}
+    assert rig.landmarks["toe_l"] == ("toe2-1.L",) and rig.landmarks["neck"] == ("neck01",)
+    assert rig.centres == {"hip_c": ("hip_l", "hip_r"), "shoulder_c": ("shoulder_l", "shoulder_r")}
+    assert rig.lower_belly == "spine05"
+
+
+def test_the_families_are_the_joint_map():
+    fams = {f.name: f for f in T.families()}
+    assert [f.name for f in T.families()] == ["myobody", "Rajagopal2016", "gait2392", "CMU"]
+    g = fams["gait2392"]
+    assert g.points == {"shoulder_l": ("torso", (0.003155, 0.3715, -0.17)),
+                        "shoulder_r": ("torso", (0.003155, 0.3715, 0.17))}
+    assert g.landmarks == {"hip_l": "femur_l", "hip_r": "femur_r", "knee_l": "tibia_l", "knee_r": "tibia_r",
+                           "ankle_l": "talus_l", "ankle_r": "talus_r", "toe_l": "toes_l", "toe_r": "toes_r"}
+    assert g.bind["hand_l"] == "torso" and g.bind["foot_r"] == "calcn_r" and g.back == 0.03 and g.up is None
+    assert fams["myobody"].bind["abdomen"] == "lumbar3" and fams["myobody"].landmarks["wrist_r"] == "lunate_r"
+    assert fams["myobody"].back == 0.05 and fams["Rajagopal2016"].landmarks["wrist_l"] == "hand_l"
+    cmu = fams["CMU"]
+    assert cmu.landmarks["hip_l"] == "LeftHip" and cmu.landmarks["wrist_r"] == "RightWrist"
+    assert cmu.bind["hand_l"] == "lhand" and cmu.bind["hand_r"] == "rhand" and cmu.back == 0.0
+    assert all(set(f.bind) == set(T.rig().parts) for f in fams.values())
+
+
+def test_the_atlas_map_is_gait2392s():
+    a = T.atlas_map()
+    assert a.sides == {"r": "Right", "l": "Left"}
+    assert a.muscles["semiten"] == ("Semitendinosus", "Semitendonosus") and len(a.muscles) == 29
+    assert a.split["glut_max"] == (("GluteusMaximus",), ("glut_max1", "glut_max2", "glut_max3"))
+    assert a.landmarks == {"hip": ("FemurHead", False, "femur"), "hip_other": ("FemurHead", True, "femur"),
+                           "knee": ("FemurDistal", False, "tibia"), "ankle": ("Talus", False, "talus")}
+    assert a.bones[0] == (("Tibia", "Fibula"), "tibia", True)
+    assert a.bones[2][1:] == ("calcn", False) and a.bones[2][0][0] == "Calcaneous"
+    assert "ercspn" in a.kept and "Plantaris" in a.unused
+
+
+def test_the_tables_ship_with_the_package():
+    globs = tomllib.loads((REPO_ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["package-data"]["axdf_cli"]
+    package = REPO_ROOT / "axdf_cli"
+    shipped = {p for g in globs for p in package.glob(g)}
+    assert set(DATA_FILES) <= shipped, sorted(str(p) for p in set(DATA_FILES) - shipped)
+
+
+def broken(tmp_path: Path, source: Path, old: str, new: str, token: str) -> tuple[Path, int, int]:
+    """A copy of ``source`` with ``old`` (once in it) replaced by ``new``: its path, and the
+    line and column of ``token`` (in ``new``) in the copy."""
+    text = source.read_text()
+    assert text.count(old) == 1, old
+    at = text.index(old) + new.index(token)
+    copy = text.replace(old, new)
+    path = tmp_path / source.name
+    path.write_text(copy)
+    return path, copy.count("\n", 0, at) + 1, at - (copy.rfind("\n", 0, at) + 1) + 1
+
+
+def refused(load, path: Path, line: int, col: int) -> InputError:
+    with pytest.raises(InputError) as e:
+        load(path)
+    err = e.value
+    assert (err.where.file, err.where.line, err.where.col) == (str(path), line, col), str(err)
+    assert str(err).startswith(f"{path}:{line}:{col}: ") and "; " in str(err)
+    return err
+
+
+def families_of(path):
+    return T.load_families(path, T.rig())
+
+
+@pytest.mark.parametrize("old,new,token,says", [
+    # an unknown part (a misspelt key made per side): at the key, with the nearest
+    ('      thigh_{s}: "{side}Hip"', '      thighs_{s}: "{side}Hip"', "thighs", "unknown part 'thighs_l'"),
+    # an unknown landmark
+    ("      wrist_{s}: lunate_{s}", "      wirst_{s}: lunate_{s}", "wirst", "did you mean 'wrist_l'?"),
+    # a bone of the wrong type
+    ("      abdomen: lumbar3", "      abdomen: [lumbar3]", "[", "part abdomen's bone is a list"),
+    # a placeholder there is none of
+    ('      hand_{s}: "{s}hand"', '      hand_{s}: "{c}hand"', '"', "unknown placeholder"),
+    # a number that is a string, and a point of two coordinates
+    ("    back: 0.05", "    back: deep", "deep", "back is the string 'deep'"),
+    ("at: [0.003155, 0.3715, 0.17]", "at: [0.3715, 0.17]", "[", "at has 2 values"),
+    # a key a family has not
+    ("  - name: CMU\n", "  - name: CMU\n    spine: 0.1\n", "spine", "unknown key 'spine' in a family"),
+])
+def test_a_broken_family_is_refused_where_it_is(tmp_path, old, new, token, says):
+    err = refused(families_of, *broken(tmp_path, T.FAMILIES_FILE, old, new, token))
+    assert says in str(err)
+
+
+def test_a_family_that_binds_no_bone_for_a_part_is_refused_at_its_bind(tmp_path):
+    old = "    bind:\n      pelvis: pelvis\n      abdomen: lumbar3\n      chest: torso\n      neck: neck\n"
+    new = "    bind:\n      pelvis: pelvis\n      abdomen: lumbar3\n      chest: torso\n"
+    err = refused(families_of, *broken(tmp_path, T.FAMILIES_FILE, old, new, "pelvis"))
+    assert "family myobody binds no bone for part neck" in str(err) and "a bone for every part" in str(err)
+
+
+@pytest.mark.parametrize("old,new,token,says", [
+    ("  toe_l: [toe2-1.L]", "  toe_l: toe2-1.L", "toe2", "landmark toe_l's bones is not a list of names"),
+    ("  hand_r: {segment: hand_r,", "  hand_r: {segment: hand,", "hand,", "unknown segment 'hand'"),
+    ("  head: {parent: trunk, from: neck,", "  head: {parent: trunk, from: nek,", "nek", "unknown landmark 'nek'"),
+    ("keep_length: true}\n  upperarm_l", "keep_length: 1}\n  upperarm_l", "1}", "keep_length must be true or false"),
+])
+def test_a_broken_rig_is_refused_where_it_is(tmp_path, old, new, token, says):
+    err = refused(T.load_rig, *broken(tmp_path, T.RIG_FILE, old, new, token))
+    assert says in str(err)
+
+
+def test_a_rig_bone_the_body_lacks_is_refused_at_its_entry(tmp_path):
+    from axdf_cli.tools import skin as sk
+
+    path, line, col = broken(tmp_path, T.RIG_FILE, "  knee_l: [lowerleg01.L]", "  knee_l: [lowerleg1.L]", "lower")
+    with pytest.raises(InputError) as e:
+        sk.check_rig(T.load_rig(path), sk.load_body())
+    assert e.value.where == (str(path), line, col)
+    assert "rig bone 'lowerleg1.L' is not in the body; did you mean 'lowerleg01.L'?" in str(e.value)
+
+
+@pytest.mark.parametrize("old,new,token,says", [
+    ("bone: calcn, both: false}", "bone: calcn, both: 0}", "0}", "both must be true or false"),
+    ("  knee: {cartilage: FemurDistal, leg: same,", "  knee: {cartilage: FemurDistal, leg: left,", "left",
+     "leg is one of same, other"),
+    ("  tfl: [TensorFasciaeLatae]", "  tfl: TensorFasciaeLatae", "Tensor", "muscle tfl's atlas names is not a list"),
+    ("sides: {r: Right, l: Left}", "sides: {r: Right, x: Left}", "x:", "unknown side 'x'"),
+    ("kept: [", "keep: [", "keep", "unknown key 'keep' in the atlas map"),
+])
+def test_a_broken_atlas_map_is_refused_where_it_is(tmp_path, old, new, token, says):
+    err = refused(T.load_atlas_map, *broken(tmp_path, T.ATLAS_MAP_FILE, old, new, token))
+    assert says in str(err)
