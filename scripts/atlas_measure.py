@@ -1,5 +1,5 @@
 """Shape measures of a gait2392 muscle library at the skeleton's rest pose (right leg), the
-numbers of issue 35's "done when" (docs/FIT.md, "Atlas onto a skeleton"):
+numbers docs/FIT.md reports ("Atlas onto a skeleton"):
 
     python scripts/atlas_measure.py muscles/gait2392_atlas [muscles/gait2392 ...]
 

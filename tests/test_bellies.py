@@ -1,4 +1,4 @@
-"""Anatomical bellies (issue 14): the slenderness measure, and the shipped gait2392 and arm26
+"""Anatomical bellies: the slenderness measure, and the shipped gait2392 and arm26
 libraries measured with it at rest and over their motions.
 
 The measure (axdf_cli/model/measure.py): along the mesh's principal axis, the length over which the

@@ -1,4 +1,4 @@
-"""Cameras that hold still and frame the subject (issue 11.3): the automatic camera depends on
+"""Cameras that hold still and frame the subject: the automatic camera depends on
 the skeleton and the whole pose only; it fits tightly and centred; camera flags; sticks for
 bones without meshes. Runs render at small sizes through llvmpipe."""
 from __future__ import annotations
@@ -29,7 +29,7 @@ def _project(cam: dict, P: np.ndarray) -> np.ndarray:
 
 def test_camera_ignores_the_frame_subset_and_frames_the_muscles(repo_root, tmp_path, capsys):
     """The same camera for frame 100 whichever frames are written; other muscles, another
-    framing (the camera frames the run's muscles, issue 17 F)."""
+    framing (the camera frames the run's muscles)."""
     runs = {
         "one": DEMO + ["--frames", "100"],
         "many": DEMO + ["--frames", "0,100,150"],
@@ -186,7 +186,7 @@ def _vertices(out: Path, frame: int) -> np.ndarray:
 
 
 def test_few_muscles_are_framed_on_them_not_on_the_skeleton(repo_root, tmp_path, capsys):
-    """The paper's deltoid on arm26 (issue 17 F: a 20 px blob at 512x512 when the whole arm and
+    """The paper's deltoid on arm26 (once a 20 px blob at 512x512 when the whole arm and
     trunk were framed): its vertices over the whole elevation span most of the image, and
     stay inside it at every frame."""
     from axdf_cli.pipeline.plan import plan_run

@@ -1,4 +1,4 @@
-"""`axdf compare` against hostile files (issue 10, A, B and F of issue 11).
+"""`axdf compare` against hostile files.
 
 One bad file never aborts a folder comparison: it is an ERROR verdict (distinct from FAIL)
 in the summary, the JSON report and the JUnit XML (``<error>``), the exit code is 1, and no

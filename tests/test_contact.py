@@ -139,7 +139,7 @@ def test_over_relaxed_passes_clear_more_and_keep_volume(demo):
 
 
 WALK_JOB = REPO_ROOT / "poses" / "jobs" / "gait2392_walk.yaml"
-POP_RATIO = 1.5  # the issue's rule: no vertex steps more than this times its no-contact step
+POP_RATIO = 1.5  # the rule: no vertex steps more than this times its no-contact step
 
 
 def _steps(plan):
@@ -155,7 +155,7 @@ def _steps(plan):
 @pytest.mark.skipif(not WALK_JOB.is_file(), reason="the shipped gait2392 library (make import)")
 @pytest.mark.parametrize("library", ["gait2392", "gait2392_packed"])
 def test_no_pops_on_the_walk(library):
-    """The issue's no-pops rule on the shipped walk (67 frames x 92 muscles): with contact, no
+    """The no-pops rule on the shipped walk (67 frames x 92 muscles): with contact, no
     muscle's largest vertex step from one frame to the next exceeds 1.5x its step without;
     with the muscles as imported and with the walk's own, packed by `axdf pack` (worst 1.48x
     and 1.44x)."""

@@ -1,4 +1,4 @@
-"""Coupled coordinates (issue 20, part 2): a skeleton coordinate that `follows` another through
+"""Coupled coordinates: a skeleton coordinate that `follows` another through
 a function is computed, never keyed, wherever coordinates are made (rest pose, pose samples,
 data-set draws); its bones move with its leader; bad files are refused at their position;
 OpenSim's CoordinateCouplerConstraint imports as one (its scale factor, units and the

@@ -1,4 +1,4 @@
-"""The amodal pass (issue 17 E): each muscle's full extent per view and frame, occluders
+"""The amodal pass: each muscle's full extent per view and frame, occluders
 ignored, as COCO RLE annotations: it equals the muscle's silhouette rendered with nothing in
 front of it, holds every pixel the id pass shows of it, and is larger where bones hide it."""
 from __future__ import annotations

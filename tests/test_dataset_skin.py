@@ -1,4 +1,4 @@
-"""Data sets that wear the skin (``skin:``; issue 36): the shipped poses/datasets/gait2392_skin.yaml
+"""Data sets that wear the skin (``skin:``): the shipped poses/datasets/gait2392_skin.yaml
 (gait2392's packed muscles under skins/gait2392, the walk at 4 frames, 2 views) built in process.
 Its images show the body; in each EXR, the muscle-under-skin pass names, for >= 95% of the skin
 pixels, the muscle whose surface is nearest beneath them, checked independently: each pixel's

@@ -1,4 +1,4 @@
-"""What a new user meets in the first hour (issue 37): the compare header, the hint for a
+"""What a new user meets in the first hour: the compare header, the hint for a
 motion file given as a pose, range warnings for path muscles, a data set's frame ranges
 checked before the work, the compile notice and pack's progress."""
 from __future__ import annotations

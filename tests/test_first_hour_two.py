@@ -1,4 +1,4 @@
-"""The first hour, round two (issue 49): a golden check that fails only where a change is
+"""The first hour, round two: a golden check that fails only where a change is
 (the golden's camera pinned with ``--camera``, the report naming the muscle), framing by the
 body's bounds for every skeleton, a data set's dry run that says its size quickly, and
 myoarm's rest pose without a stray rod."""

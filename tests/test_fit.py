@@ -282,7 +282,7 @@ def test_paths_bind_a_muscle_to_the_bones_its_path_crosses(tube_fit, capsys):
     assert "no muscle file other.yaml in --paths model" in err
 
 
-# ----------------------------------------------------------------------------- issue 49
+# ----------------------------------------------------------------------------- hostile meshes and frames
 
 
 def test_slivers_are_dropped_and_a_second_piece_is_refused_every_refusal_at_once(tube_fit, capsys):

@@ -1,4 +1,4 @@
-"""Hostile inputs to `axdf fit` (issue 49), each refused with exit 2 by the file's name, no
+"""Hostile inputs to `axdf fit`, each refused with exit 2 by the file's name, no
 traceback, nothing written; and the costs a hostile `--sections` could run up, bounded.
 
 - a PLY face naming vertex 10^6 of a 642-vertex mesh (was exit 70, an IndexError);

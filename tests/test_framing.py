@@ -1,4 +1,4 @@
-"""The automatic camera keeps the body in view (issue 37, framing): the shipped retargeted walk
+"""The automatic camera keeps the body in view: the shipped retargeted walk
 keeps every keypoint of every frame inside the image with the body at least 40% of its height;
 a subject that travels farther than it is tall is followed; framing poses a bounded sample of
 the pose, never every frame; a ground plate lies under the subject; data sets aim at a bone

@@ -1,4 +1,4 @@
-"""Property test (issue 6): the shipped YAML files mutated at random never crash axdf.
+"""Property test: the shipped YAML files mutated at random never crash axdf.
 
 Whatever the mutation, ``axdf run`` exits 0 or 2, prints no traceback, and writes nothing
 outside its output folder. Seeded (``derandomize``) and bounded (``max_examples``)."""

@@ -1,4 +1,4 @@
-"""The shipped gait2392 library (issue 5): all 92 muscles over the whole walking trial."""
+"""The shipped gait2392 library: all 92 muscles over the whole walking trial."""
 from __future__ import annotations
 
 import csv

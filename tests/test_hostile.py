@@ -1,4 +1,4 @@
-"""Issue 17's fresh hostile round: new variations of its cases (output rule, links, signals,
+"""A hostile round: new variations of its cases (output rule, links, signals,
 damaged inputs and packed files), each a regression test of a defect the round found.
 
 Where a command must leave things alone, the test snapshots the tree (test_safety.snapshot).
@@ -312,7 +312,7 @@ def test_a_read_only_place_for_a_file_outside_out_is_exit_3_before_out_is_writte
 
 
 def test_an_import_shows_its_progress_on_a_terminal(proj):
-    """Issue 17: `import bvh` of a 100k-joint file ran 813 s with no progress. On a terminal
+    """`import bvh` of a 100k-joint file ran 813 s with no progress. On a terminal
     (stderr a tty) an import now shows a bar through its steps, ending at the write."""
     import pty
     import subprocess

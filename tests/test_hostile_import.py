@@ -1,4 +1,4 @@
-"""Issue 37's hostile round on the importers (``import mjcf``, ``import osim``, the motion
+"""A hostile round on the importers (``import mjcf``, ``import osim``, the motion
 readers): each test is a small hand-written model or file that once gave exit 70, a hang, a
 huge allocation, an output ``axdf validate`` refuses, or a refusal of what MuJoCo loads.
 

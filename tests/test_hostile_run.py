@@ -1,4 +1,4 @@
-"""Hostile round on the command line's process (issue 37): a SIGINT or SIGTERM at any moment
+"""Hostile round on the command line's process: a SIGINT or SIGTERM at any moment
 of a command, from its first instant to its teardown, ends it with exit 130 and "axdf:
 interrupted", no traceback and no partial output."""
 from __future__ import annotations

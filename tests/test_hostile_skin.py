@@ -1,4 +1,4 @@
-"""Hostile round 5 (issue 49): skin files checked as strictly as muscle files. Each case is
+"""Hostile round 5: skin files checked as strictly as muscle files. Each case is
 refused with exit 2 and ``FILE:LINE:COL: what; allowed`` (no traceback, nothing written) or,
 where it is no error, holds: a run that would replace its own input, ``axdf skin`` on a
 zero-length segment, a rest mesh that is no body, malformed or oversized NPZ arrays, a jiggle

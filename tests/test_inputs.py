@@ -1,5 +1,5 @@
-"""Inputs accepted silently or refused wrongly (issue 11.2), the explicit path policy (11.4,
-issue 10) and validate = run's planning. Small synthetic projects in tmp folders; the CLI is
+"""Inputs accepted silently or refused wrongly, the explicit path policy
+and validate = run's planning. Small synthetic projects in tmp folders; the CLI is
 called in process."""
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Hostile input files (issue 10, C and D; issue 11 H): every input is read through
+"""Hostile input files: every input is read through
 ``yamlio.read_input`` (YAML, .sto, XML, bone meshes), which reads regular files only, after a
 ``stat``, and at most ``limit + 1`` bytes; symlink loops, FIFOs and devices are exit 2 naming
 the path, never a hang or a traceback. YAML 1.2 floats (``1e-5``) are numbers in every

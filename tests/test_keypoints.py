@@ -1,4 +1,4 @@
-"""Data-set keypoints (issue 17 E): anatomical names from the skeleton's joints, no world
+"""Data-set keypoints: anatomical names from the skeleton's joints, no world
 origin, no coincident duplicates, and the head, hands and toes where a skeleton has them."""
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""One person, one height (issue 49): ``axdf retarget`` (its printout and
+"""One person, one height: ``axdf retarget`` (its printout and
 retarget_report.json) and ``axdf skin`` (its printout and skin_report.json) state the height
 that :func:`axdf_cli.model.stature.stature` defines, head top to sole from the skeleton's joints
 at rest. The CLI in process."""

@@ -1,4 +1,4 @@
-"""OpenSim itself as the judge (issue 14): every imported muscle's axis length against
+"""OpenSim itself as the judge: every imported muscle's axis length against
 ``Muscle.getLength`` at every frame of the shipped motions, and the wrapped path's points
 (tangent points included) against ``GeometryPath.getCurrentPath``."""
 from __future__ import annotations
@@ -15,7 +15,7 @@ opensim = pytest.importorskip("opensim", reason="the OpenSim judge needs `pip in
 
 from opensim_judge import OpenSimModel, compare, pose_coordinates  # noqa: E402
 
-LENGTH_TOL = 0.01  # relative: the issue's bound for every muscle at every frame
+LENGTH_TOL = 0.01  # relative: the bound for every muscle at every frame
 POINT_TOL = 2e-4  # m: path and tangent points against getCurrentPath
 
 CASES = {"arm26": (ARM, REPO / "muscles" / "arm26", REPO / "poses" / "arm26_flex.yaml"),

@@ -270,7 +270,7 @@ def test_shipped_library_is_up_to_date(tmp_path):
 
 
 def test_bad_body_name_points_at_the_osim_line(tmp_path, capsys):
-    """Issue 10: a body name axdf cannot use is reported at its line in the .osim, not in a
+    """A body name axdf cannot use is reported at its line in the .osim, not in a
     YAML that was never written."""
     from osim_common import ARM, run_import
 
@@ -340,7 +340,7 @@ def test_handsfield_volumes_size_the_lower_limb_by_height_and_mass(tmp_path, cap
         assert [g["volume_share"] for g in glut] == pytest.approx([f / sum(forces) for f in forces], rel=1e-6)
         assert rows[f"ercspn_{side}"]["volume_law"] == "pcsa"
         assert rows[f"ercspn_{side}"]["volume_m3"] == pytest.approx(pcsa[f"ercspn_{side}"]["volume_m3"], rel=1e-9)
-    # the issue's example: vastus lateralis was 0.29x its prediction, the short head 2.1x
+    # the example: vastus lateralis was 0.29x its prediction, the short head 2.1x
     assert pcsa["vas_lat_r"]["volume_m3"] < 0.35 * rows["vas_lat_r"]["volume_m3"]
     assert pcsa["bifemsh_r"]["volume_m3"] > 2.0 * rows["bifemsh_r"]["volume_m3"]
     assert "Handsfield et al. (2014)" in (hf / "IMPORT.md").read_text()

@@ -22,7 +22,7 @@ from osim_common import FK_MODEL, FK_POS, FK_Q, needs_data, run_import
 
 pytestmark = needs_data
 
-POS_TOL = 0.5e-3  # m: the bound; the importer + FK reach ~0.3 µm
+POS_TOL = 0.5e-3  # m: the bound; the importer + FK reach ~0.3 µm
 ANG_TOL = 0.05  # degrees
 
 

@@ -8,7 +8,7 @@ from osim_common import ARM, GAIT, needs_data, run_import
 
 pytestmark = needs_data
 
-END_TOL = 1e-4  # m: the bound (0.1 mm) for origin / insertion
+END_TOL = 1e-4  # m: the bound (0.1 mm) for origin / insertion
 
 
 @pytest.fixture(scope="module", params=[("arm26", ARM), ("gait2392", GAIT)], ids=["arm26", "gait2392"])

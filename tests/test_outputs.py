@@ -1,4 +1,4 @@
-"""One output rule for every command that writes (issue 17 A-D): imports, transfer, data sets
+"""One output rule for every command that writes: imports, transfer, data sets
 and `render --out` never lose a user's file, never write through a link, never take an input
 for an output, check everything before the first byte, hold one writer's lock, and leave no
 process or lock behind; `compare` calls a broken packed file an ERROR; importers write only

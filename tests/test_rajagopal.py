@@ -1,4 +1,4 @@
-"""Rajagopal2016 (issue 20, part 2): a model whose patellae follow the knees through
+"""Rajagopal2016: a model whose patellae follow the knees through
 CoordinateCouplerConstraints, imported and judged by OpenSim itself over one running stride.
 
 The data is vendored (tests/data/rajagopal2016/, README there): the test runs offline. The
@@ -22,7 +22,7 @@ DATA = Path(__file__).resolve().parent / "data" / "rajagopal2016"
 MODEL = DATA / "Rajagopal2016.osim"
 MOTION = DATA / "run_stride_ik.mot"
 
-LENGTH_TOL = 0.01  # relative: the issue's bound for every muscle at every frame
+LENGTH_TOL = 0.01  # relative: the bound for every muscle at every frame
 BODY_TOL = 1e-6  # m: the patellae in ground against OpenSim (FK and the coupler are exact)
 
 
@@ -114,7 +114,7 @@ def test_every_muscle_length_within_1pct_of_opensim(imported):
     worst = rel.max(axis=0)
     bad = {n: f"{w:.2%}" for n, w in zip(names, worst) if w > LENGTH_TOL}
     assert not bad, bad
-    for name in ("vasmed_r", "vaslat_l", "recfem_r", "bflh_r"):  # those the issue named: well inside
+    for name in ("vasmed_r", "vaslat_l", "recfem_r", "bflh_r"):  # those named: well inside
         assert worst[names.index(name)] < 0.007, (name, worst[names.index(name)])
 
 

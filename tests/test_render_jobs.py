@@ -1,4 +1,4 @@
-"""`axdf run --jobs N` and `axdf render --jobs N` render over N worker processes (issue 13).
+"""`axdf run --jobs N` and `axdf render --jobs N` render over N worker processes.
 
 The frames are split in blocks over render workers that come from a fork server (never
 forked from the process that may have rendered before), each with its own GL context: the

@@ -245,7 +245,7 @@ def test_renderers_one_after_another_in_one_context_leave_no_gl_error():
 def test_the_muscle_under_skin_pass_names_the_nearest_muscle_beneath_each_skin_pixel():
     """An opaque skin's pixels unprojected through the camera lie on the skin's triangles
     (within 0.1 mm); the pass names, for >= 99% of those within SKIN_UNDER_MAX_DEPTH of a muscle,
-    the muscle whose surface a dense sampling finds nearest (the issue's bar is 95%), and its
+    the muscle whose surface a dense sampling finds nearest (the bar is 95%), and its
     depth is that distance within 1 mm; farther pixels name none."""
     import igl
     import trimesh

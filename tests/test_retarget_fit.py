@@ -1,4 +1,4 @@
-"""``axdf retarget``: a fit that holds, or says why not (issue 37).
+"""``axdf retarget``: a fit that holds, or says why not.
 
 - A turning walk (the shared CMU walk with its root turned about the vertical by a ramp of
   360 degrees over the take) retargeted onto gait2392 with the shipped map pins no root

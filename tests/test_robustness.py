@@ -1,4 +1,4 @@
-"""Faults and hostile input (issue 6): resume after SIGKILL, signals, full disk, unwritable
+"""Faults and hostile input: resume after SIGKILL, signals, full disk, unwritable
 output, hostile YAML, degenerate geometry. Each fault class has its own test."""
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""What a run records of itself (issues 46 and 49): its inputs named the same from any folder,
+"""What a run records of itself: its inputs named the same from any folder,
 the coordinates its pose takes outside their ranges, and an identity that ``--resume``
 compares: every flag that changes an output (``--clamp-ranges``) and each stage's own
 sources, but none of the tools' constants. Small synthetic projects; the CLI in process."""

@@ -1,5 +1,5 @@
-"""Never lose a user's files (issue 10, the run folder's part) and `axdf render`'s frame
-discipline (issue 11).
+"""Never lose a user's files and `axdf render`'s frame
+discipline.
 
 Each case runs in a copy of the library in a tmp folder. Where a command must not touch
 anything outside OUT (or anything at all), the test snapshots the whole tmp tree (file

@@ -1,4 +1,4 @@
-"""`axdf skin` through the command line, in process (issue 36, parts 1 and 2): the skin file
+"""`axdf skin` through the command line, in process: the skin file
 for gait2392 and the CMU skeleton, read back by its loader; the muscles outside the rest skin
 before and after --push; refusals (exit 2, nothing written, FILE:LINE:COL)."""
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The skin in every per-sequence format (issue 36, part 4): a run with ``--skin`` and
+"""The skin in every per-sequence format: a run with ``--skin`` and
 ``--format npz|usd|pc2`` writes ``npz/skin.npz``, ``usd/skin.usdc`` (referenced from
 ``scene.usda``) and ``pc2/skin.pc2`` with its rest mesh. Each is read back with the real
 reader and holds, frame by frame, the points of the same run's ``meshes/skin`` PLY files;

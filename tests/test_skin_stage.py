@@ -1,4 +1,4 @@
-"""The skin stage of ``axdf run --skin`` (issue 36, part 3), in process, on the shipped walk
+"""The skin stage of ``axdf run --skin``, in process, on the shipped walk
 with a few muscles of the packed gait2392 library round the left knee (frames 20..25: the
 knee flexed ~60°) and a skin made by ``axdf skin --push``: the run writes meshes/skin and
 skin.csv; the muscle vertices lie inside the skin (libigl's winding number) and its volume

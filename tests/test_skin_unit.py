@@ -1,4 +1,4 @@
-"""`axdf skin`'s parts in process (issue 36, parts 1 and 2): the CC0 body, its fit to a
+"""`axdf skin`'s parts in process: the CC0 body, its fit to a
 skeleton's rest pose, the fat map, inside/outside and the push (axdf_cli/tools/skin*.py)."""
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The pipeline's rules (issue 18), proven with the test stages of tests/stage_doubles.py: a
+"""The pipeline's rules, proven with the test stages of tests/stage_doubles.py: a
 TIME stage that carries a real state (exponential smoothing of the axis from the pose's first
 frame) and a FRAME stage that depends on every muscle of a frame (each muscle moved by the
 others' mean centroid). With either or both, ``--jobs 2``, an interrupted or killed run

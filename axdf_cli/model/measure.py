@@ -1,6 +1,6 @@
 """Shape measures of muscle meshes.
 
-**Belly slenderness** (issue 14): how much a mesh looks like a muscle belly rather than a bulb.
+**Belly slenderness**: how much a mesh looks like a muscle belly rather than a bulb.
 Along the mesh's principal axis (its axis of least inertia, the closed mesh taken as a solid
 of uniform density) the mesh is cut by PLANES evenly spaced planes; each cut's width is the
 diameter of the circle of the same area (the cut's area by Green's theorem over the cut
