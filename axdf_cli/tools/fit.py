@@ -59,7 +59,7 @@ def bone_geometry(skel: Skeleton, rest: np.ndarray, skeleton_path: Path, meshes:
     """Per bone what a point is bound to by nearness: ('mesh', world vertices, faces) where the
     skeleton has bone meshes (only those bones then; ``meshes`` False: never), else
     ('segments', (k, 2, 3)) from its origin to each child's origin (a leaf: its origin)."""
-    from axdf_cli.pipeline.plan import load_bone_mesh
+    from axdf_cli.geometry.bones import load_bone_mesh
 
     if meshes and any(b.mesh for b in skel.bones):
         out = []

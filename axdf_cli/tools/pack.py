@@ -22,7 +22,8 @@ from axdf_cli.tools.transfer import UniqueFiles, file_doc, load_muscle_files
 from axdf_cli.model import contact, pack
 from axdf_cli.model.muscle import MuscleModel
 from axdf_cli.model.skeleton import forward_kinematics
-from axdf_cli.pipeline.plan import load_bone_mesh, plan_run
+from axdf_cli.geometry.bones import load_bone_mesh
+from axdf_cli.pipeline.plan import plan_run
 from axdf_cli.specs import RefPolicy, load_pose, load_skeleton
 
 REPORT = "pack_report.json"
