@@ -18,7 +18,8 @@ from axdf_cli.tools import constants as tc
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.fileio import fieldcache
 from axdf_cli.importers import emit
-from axdf_cli.tools.transfer import UniqueFiles, file_doc, load_muscle_files
+from axdf_cli.fileio.outputs import UniqueFiles
+from axdf_cli.tools.muscle_files import file_doc, load_muscle_files
 from axdf_cli.model import contact, pack
 from axdf_cli.model.muscle import MuscleModel
 from axdf_cli.model.skeleton import forward_kinematics
