@@ -61,3 +61,10 @@ def test_rest_bone_meshes_capped_or_as_read():
     cv, cf, _ = closed["torso"]  # (open at the neck)
     assert len(cf) > len(f) and np.array_equal(cv[:len(v)], v)
     assert set(rest_bone_meshes(skel, str(path))) == {b.name for b in skel.bones if b.mesh}
+
+
+def test_signed_keeps_the_older_rule_for_meshes_wound_inward(box):
+    v, f = box
+    pts = np.zeros((1, 3))
+    assert inside(v, f, pts, signed=True).all() and not inside(v, f[:, ::-1], pts, signed=True).any()
+    assert push_out_of_meshes(pts, [(v, f[:, ::-1])], 0.001, signed=True)[1] == 0

@@ -142,7 +142,8 @@ def registered_meshes(data_root: Path, skel, rest, bones: dict, old: Path, sides
             pieces = [(w, fc)] if len(parts) == 1 else split_parts(
                 w, fc, np.array([path_centroid(old, f"{q}_{side}", skel, rest) for q in parts]), tol.ATLAS_SPLIT_SPACING)
             for q, (pv, pf) in zip(parts, pieces):
-                pv, moved = push_out_of_meshes(pv, bones.values(), tol.ATLAS_BONE_MARGIN)
+                # (signed: w > 0.5, as the shipped library was made; gait2392's torso is wound inconsistently)
+                pv, moved = push_out_of_meshes(pv, bones.values(), tol.ATLAS_BONE_MARGIN, signed=True)
                 name = f"{q}_{side}"
                 meshes.append((name, pv, pf))
                 side_rep["muscles"][name] = {"atlas": p.name, "pushed_out_of_bones": moved,
