@@ -22,12 +22,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
-
-
-def rest_state(skeleton: Path):
-    from axdf_cli.tools.atlas_library import rest_bones
-
-    return rest_bones(skeleton)
+from axdf_cli.geometry.winding import inside  # noqa: E402  (signed: w > 0.5, as docs/FIT.md's numbers were made)
+from axdf_cli.tools.atlas_library import rest_state  # noqa: E402  (the skeleton, rest, bone meshes)
 
 
 def leg_muscles(folder: Path, skel, rest, side: str = "r") -> dict:
@@ -40,12 +36,6 @@ def leg_muscles(folder: Path, skel, rest, side: str = "r") -> dict:
             m = MuscleModel(spec, skel.bone_index, rest, skel)
             out[spec.name] = (np.asarray(m.rest_vertices, np.float64), np.asarray(m.faces, np.int64))
     return out
-
-
-def inside(mesh, pts) -> np.ndarray:
-    import igl
-
-    return igl.fast_winding_number(mesh[0], mesh[1], np.ascontiguousarray(pts, np.float64)) > 0.5
 
 
 def plane_grid(centre, normal, half, step):
@@ -62,12 +52,12 @@ def thigh_fill(muscles, bones, hip, knee, frac) -> float:
 
     d = (knee - hip) / np.linalg.norm(knee - hip)
     pts, uv = plane_grid(hip + frac * (knee - hip), d, 0.15, 0.001)
-    full = inside(bones["femur_r"], pts)
+    full = inside(*bones["femur_r"], pts, signed=True)
     for mesh in muscles.values():
         lo, hi = mesh[0].min(axis=0), mesh[0].max(axis=0)
         near = ((pts >= lo) & (pts <= hi)).all(axis=1)
         if near.any():
-            full[near] |= inside(mesh, pts[near])
+            full[near] |= inside(*mesh, pts[near], signed=True)
     hull = Delaunay(uv[full])
     return float(full.sum() / (hull.find_simplex(uv) >= 0).sum())
 
@@ -81,7 +71,7 @@ def widest(mesh, hip, knee):
     best = (0, None, None)
     for t in np.linspace(s.min(), s.max(), 52)[1:-1]:
         pts, uv = plane_grid(c + t * ax, ax, 0.12, 0.001)
-        ins = inside(mesh, pts)
+        ins = inside(*mesh, pts, signed=True)
         if ins.sum() > best[0]:
             q = uv[ins] - uv[ins].mean(axis=0)
             ev = np.linalg.eigvalsh(q.T @ q / len(q))
@@ -102,7 +92,7 @@ def overlaps(muscles, bones) -> tuple[float, float]:
             lo, hi = boxes[other]
             near = ((v >= lo) & (v <= hi)).all(axis=1)
             if near.any():
-                (hit_b if other in bones else hit_m)[near] |= inside(mesh, v[near])
+                (hit_b if other in bones else hit_m)[near] |= inside(*mesh, v[near], signed=True)
         n += len(v)
         in_m += int(hit_m.sum())
         in_b += int(hit_b.sum())

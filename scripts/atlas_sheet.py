@@ -54,10 +54,10 @@ def do(args: list[str]) -> None:
 def atlas_run(atlas_rest: Path, out: Path, data: Path) -> None:
     """A copy of the atlas library's rest run with each fitted muscle's mesh replaced by the
     atlas mesh it was fitted to (a run folder reads any PLY per muscle and frame)."""
-    from axdf_cli.tools.atlas_library import registered_meshes, rest_bones, write_ply
+    from axdf_cli.tools.atlas_library import registered_meshes, rest_state, write_ply
 
     shutil.copytree(atlas_rest, out)
-    skel, rest, bones = rest_bones(ROOT / "poses/skeletons/gait2392.yaml")
+    skel, rest, bones = rest_state(ROOT / "poses/skeletons/gait2392.yaml")
     carried, _ = registered_meshes(data, skel, rest, bones, ROOT / "muscles/gait2392", ("r", "l"),
                                    lambda text: print(f"atlas_sheet: {text}", flush=True))
     for name, v, f in carried:

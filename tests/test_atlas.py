@@ -96,12 +96,12 @@ def test_split_parts_are_closed_and_keep_the_volume():
 def test_push_out_moves_a_point_out_of_a_bone():
     import trimesh
 
-    from axdf_cli.tools import atlas as at
+    from axdf_cli.geometry.winding import push_out_of_meshes
 
     box = trimesh.creation.box(extents=[0.1, 0.1, 0.1])
-    bones = {"b": (np.asarray(box.vertices), np.asarray(box.faces))}
+    bones = [(np.asarray(box.vertices), np.asarray(box.faces))]
     pts = np.array([[0.045, 0.0, 0.0], [0.2, 0.0, 0.0]])
-    out, moved = at.push_out(pts, bones, 0.001)
+    out, moved = push_out_of_meshes(pts, bones, 0.001)
     assert moved == 1
     assert out[0] == pytest.approx([0.051, 0.0, 0.0], abs=1e-9)
     assert out[1] == pytest.approx(pts[1])

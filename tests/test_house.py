@@ -27,6 +27,7 @@ ROOMS = (
     ("workers", "runtime"),  # process pools whose workers die with the parent; threads and kernel cache
     ("formats",),  # mesh formats: one entry per format in FORMATS
     ("model",),  # skeleton + FK, poses, the muscle model, paths, kernels
+    ("geometry",),  # closed meshes once: inside by winding number, push-out, caps, bone meshes at rest
     ("specs",),  # YAML file specs by kind
     ("importers",),  # OpenSim, MuJoCo and BVH readers, one neutral model, one emitter
     ("render",),  # the EGL renderer: a scene and array chunks in, never evaluates

@@ -180,7 +180,7 @@ def test_pack_command_follows_the_output_rule(demo, tmp_path, capsys):
 def test_a_muscle_document_keeps_its_contact_keys(tmp_path):
     """transfer and pack write muscles through one document writer: `contact:` survives it."""
     from axdf_cli.importers import emit
-    from axdf_cli.tools.transfer import file_doc
+    from axdf_cli.tools.muscle_files import file_doc
 
     src = (REPO_ROOT / "muscles" / "demo" / "biceps_brachii.yaml").read_text()
     p = tmp_path / "b.yaml"

@@ -150,11 +150,13 @@ def test_the_pushed_rest_skin_clears_the_bones(skin):
 
     from axdf_cli.specs import load_skeleton
     from axdf_cli.specs.skin import load_skin
-    from axdf_cli.tools.skin_muscles import rest_bones
+    from axdf_cli.geometry.bones import rest_bone_meshes
 
     rest = load_skin(skin)
     skel_file = REPO_ROOT / "poses" / "skeletons" / "gait2392.yaml"
-    meshes, _ = rest_bones(load_skeleton(skel_file), str(skel_file), set(rest.bones))
+    worn = set(rest.bones)
+    meshes = [(bv, bf) for bv, bf, _ in rest_bone_meshes(load_skeleton(skel_file), str(skel_file),
+                                                          lambda b: b.name in worn, cap=True).values()]
     v = np.asarray(rest.vertices, np.float64)
     inside = np.zeros(len(v), bool)
     for bv, bf in meshes:

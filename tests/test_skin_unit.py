@@ -11,7 +11,8 @@ import trimesh
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.specs import load_skeleton
 from axdf_cli.tools import skin as sk
-from axdf_cli.tools.skin_muscles import outside, push_out
+from axdf_cli.geometry.winding import inside
+from axdf_cli.tools.skin_muscles import grow_over
 from conftest import REPO_ROOT
 
 SKELETONS = REPO_ROOT / "poses" / "skeletons"
@@ -107,10 +108,10 @@ def test_outside_and_push():
     rng = np.random.default_rng(7)
     pts = rng.normal(size=(200, 3))
     pts = pts / np.linalg.norm(pts, axis=1, keepdims=True) * rng.uniform(0.02, 0.13, size=(200, 1))
-    out = outside(sphere.vertices, sphere.faces, pts)
+    out = ~inside(sphere.vertices, sphere.faces, pts)
     np.testing.assert_array_equal(out, np.linalg.norm(pts, axis=1) > 0.1 * 0.999)
-    pushed = push_out(sphere.vertices, sphere.faces, pts)
-    assert out.sum() > 50 and not outside(pushed, sphere.faces, pts).any()
+    pushed = grow_over(sphere.vertices, sphere.faces, pts)
+    assert out.sum() > 50 and inside(pushed, sphere.faces, pts).all()
     assert trimesh.Trimesh(pushed, sphere.faces, process=False).is_watertight
 
 

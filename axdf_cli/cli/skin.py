@@ -60,23 +60,29 @@ def run(args) -> int:
                         f"stature {fit.stature:.3f} m")
     inputs = [args.skeleton, str(sk.BODY_FILE)]
     if args.muscles:
-        from axdf_cli.tools.skin_muscles import (bone_points, clear_bones, outside, push_out, rest_bones,
-                                                 rest_muscle_vertices)
+        from axdf_cli.geometry.bones import rest_bone_meshes
+        from axdf_cli.geometry.winding import inside
+        from axdf_cli.tools.skin_muscles import bone_points, clear_bones, grow_over, rest_muscle_vertices
+
+        def outside(v, p):  # how many of points p lie outside the skin (vertices v)
+            return int((~inside(v, fit.faces, p)).sum())
 
         pts, n_muscles, files = rest_muscle_vertices(Path(args.muscles), skel, policy)
         inputs += [str(p) for p in files]
-        before = int(outside(fit.vertices, fit.faces, pts).sum())
+        before = outside(fit.vertices, pts)
         m = {"muscles": n_muscles, "vertices": len(pts), "outside_before": before}
         if args.push:  # over the bones' meshes too (a skull larger than the body's head)
-            meshes, bone_files = rest_bones(skel, args.skeleton, set(fit.bones))
+            wears = set(fit.bones)
+            worn = rest_bone_meshes(skel, args.skeleton, lambda b: b.name in wears, cap=True).values()
+            meshes = [(v, f) for v, f, _ in worn]
             bone_pts = bone_points(meshes)
-            inputs += [str(p) for p in bone_files]
+            inputs += [str(p) for _, _, p in worn]
             m["bone_points"] = len(bone_pts)
-            m["bone_points_outside_before"] = int(outside(fit.vertices, fit.faces, bone_pts).sum())
-            pushed = push_out(fit.vertices, fit.faces, np.concatenate([pts, bone_pts]))
+            m["bone_points_outside_before"] = outside(fit.vertices, bone_pts)
+            pushed = grow_over(fit.vertices, fit.faces, np.concatenate([pts, bone_pts]))
             pushed, m["skin_vertices_out_of_bones"] = clear_bones(pushed, fit.faces, meshes)
-            m["bone_points_outside_after"] = int(outside(pushed, fit.faces, bone_pts).sum())
-            m["outside_after"] = int(outside(pushed, fit.faces, pts).sum())
+            m["bone_points_outside_after"] = outside(pushed, bone_pts)
+            m["outside_after"] = outside(pushed, pts)
             m["push_max"] = round(float(np.linalg.norm(pushed - fit.vertices, axis=1).max()), 4)
             fit.vertices = pushed
         report["muscles"] = m

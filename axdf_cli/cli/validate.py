@@ -24,7 +24,7 @@ def add_args(p) -> None:
 
 def _bone_meshes(skel) -> str:
     """Read every bone mesh of ``skel`` as a run does; a short description."""
-    from axdf_cli.pipeline import load_bone_mesh
+    from axdf_cli.geometry.bones import load_bone_mesh
 
     meshes = [b.mesh for b in skel.bones if b.mesh]
     for m in meshes:

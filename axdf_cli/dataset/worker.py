@@ -26,7 +26,8 @@ from axdf_cli.dataset import amodal as coco
 from axdf_cli.dataset.folder import DATASET_JSON, INDEX, RECORD  # noqa: F401  (RECORD: written last)
 from axdf_cli.dataset import labels as lab
 from axdf_cli.dataset import door
-from axdf_cli.pipeline.plan import display_path, load_bone_mesh, load_muscle_specs
+from axdf_cli.geometry.bones import load_bone_mesh
+from axdf_cli.pipeline.plan import display_path, load_muscle_specs
 from axdf_cli.pipeline.stages import build_stages, stages_record
 from axdf_cli.render.framing import ground_bones, placed_plates, skeleton_points
 from axdf_cli.render.renderer import id_map

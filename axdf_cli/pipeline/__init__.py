@@ -14,9 +14,9 @@ already match the manifest, and refuses other inputs, settings or model: the run
 from axdf_cli.pipeline.evaluate import (CHUNK_FRAMES, Prepass, batch_of, chunk_frames, evaluate_plan,
                                         evaluate_chunks, prepare, twist_references)
 from axdf_cli.pipeline.execute import check_output, execute, mesh_pass
-from axdf_cli.pipeline.plan import RunPlan, job_render_settings, load_bone_mesh, plan_run
+from axdf_cli.pipeline.plan import RunPlan, job_render_settings, plan_run
 from axdf_cli.pipeline.stages import STAGES, Chunk, Scope, Stage, build_stages
 
 __all__ = ["CHUNK_FRAMES", "Chunk", "Prepass", "RunPlan", "STAGES", "Scope", "Stage", "batch_of",
            "build_stages", "check_output", "chunk_frames", "evaluate_chunks", "evaluate_plan", "execute",
-           "job_render_settings", "load_bone_mesh", "mesh_pass", "plan_run", "prepare", "twist_references"]
+           "job_render_settings", "mesh_pass", "plan_run", "prepare", "twist_references"]

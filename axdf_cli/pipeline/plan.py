@@ -11,6 +11,7 @@ import numpy as np
 from axdf_cli.fileio import atomic
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.formats import parse_formats
+from axdf_cli.geometry.bones import load_bone_mesh
 from axdf_cli.specs import Job, Pose, RefPolicy, expand_muscle_paths, load_muscle_file, load_pose
 from axdf_cli.model.muscle import MuscleModel, MuscleSpec
 from axdf_cli.model.pose import activation_problems, muscle_range_warnings, outside_ranges, parse_frames
@@ -275,39 +276,6 @@ def check_formats(formats, frames, frames_mark: Mark) -> None:
 def _frames_text(frames) -> str:
     f = [int(x) for x in frames]
     return ",".join(map(str, f)) if len(f) <= 8 else ",".join(map(str, f[:8])) + ",..."
-
-
-def load_bone_mesh(path: str, skeleton_file: str):
-    """Read a bone's mesh (PLY or OBJ triangles, one read) → (vertices, faces, PLY bytes for the
-    run's ``bones/<bone>.ply``: the file itself when it is a PLY, else the triangles written as
-    one); bad files are input errors."""
-    from axdf_cli.formats import PlyWriter, load_triangles_and_bytes
-
-    if not Path(path).is_file():
-        raise InputError(Mark(skeleton_file), f"bone mesh {path} not found", "a PLY file relative to the skeleton file")
-    (v, _, f), data = load_triangles_and_bytes(path)
-    if len(f) == 0:
-        raise InputError(Mark(str(path)), "bone mesh has no triangles", "a PLY or OBJ mesh with at least one triangle")
-    if not np.isfinite(v).all():
-        raise InputError(Mark(str(path)), "non-finite vertex coordinates", "finite numbers only")
-    if Path(path).suffix.lower() != "." + PlyWriter.extension:
-        data = PlyWriter(f).encode(v)
-    return np.ascontiguousarray(v, dtype=np.float32), f, data
-
-
-def rest_bone_meshes(skel, skeleton_file: str, keep) -> dict:
-    """The meshes of the skeleton's bones for which ``keep(bone)`` holds, placed in the world at
-    the rest pose: name -> ((V, 3) float64, (T, 3) int64, the mesh file)."""
-    from axdf_cli.model.skeleton import forward_kinematics
-
-    world = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
-    out = {}
-    for i, b in enumerate(skel.bones):
-        if b.mesh and keep(b):
-            v, f, _ = load_bone_mesh(b.mesh, skeleton_file)
-            out[b.name] = (v.astype(np.float64) @ world[i, :3, :3].T + world[i, :3, 3], np.asarray(f, np.int64),
-                           Path(b.mesh))
-    return out
 
 
 def camera_targets(plan: RunPlan, frames=None) -> np.ndarray | None:

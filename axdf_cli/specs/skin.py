@@ -300,7 +300,7 @@ def check_fitted(skin: Skin, skeleton, where: Mark) -> None:
                              + "; ".join(off[:4]) + (f" and {len(off) - 4} more" if len(off) > 4 else ""),
                              f"segments within {100 * tol.SKIN_SEGMENT_TOLERANCE:g}% of the fit's; {refit}")
         return
-    import igl
+    from axdf_cli.geometry.winding import inside
 
     labels, points = [], []
     for b in skin.bones:
@@ -314,9 +314,9 @@ def check_fitted(skin: Skin, skeleton, where: Mark) -> None:
     from scipy.spatial import cKDTree
 
     points = np.asarray(points, dtype=np.float64)
-    w = igl.fast_winding_number(np.ascontiguousarray(skin.vertices), np.ascontiguousarray(skin.faces), points)
+    within = inside(skin.vertices, skin.faces, points)
     depth = cKDTree(skin.vertices).query(points)[0]  # how far outside (the nearest vertex: within an edge)
-    out = [f"{lab} {1000 * d:.0f} mm" for lab, x, d in zip(labels, w, depth) if x < 0.5 and d > tol.SKIN_FIT_OUTSIDE]
+    out = [f"{lab} {1000 * d:.0f} mm" for lab, x, d in zip(labels, within, depth) if not x and d > tol.SKIN_FIT_OUTSIDE]
     if out:
         raise InputError((skin.marks or {}).get("skeleton", where),
                          f"{len(out)} of skeleton {skeleton.name!r}'s joints and bones the skin wears lie outside "

@@ -211,35 +211,3 @@ def _bone_residual(groups, bone_meshes, move) -> dict:
         d = bone_distance(move(x), bone_meshes[mb]) * 1e3
         out[mb] = {"mean_mm": round(float(d.mean()), 2), "max_mm": round(float(d.max()), 2)}
     return out
-
-
-def inside_share(points: np.ndarray, mesh: tuple) -> float:
-    """The share of points inside a mesh (generalized winding number > 0.5)."""
-    import igl
-
-    w = igl.fast_winding_number(np.asarray(mesh[0], np.float64), np.asarray(mesh[1], np.int64),
-                                np.ascontiguousarray(points, dtype=np.float64))
-    return float((w > 0.5).mean())
-
-
-def push_out(points: np.ndarray, bone_meshes: dict, margin: float) -> tuple[np.ndarray, int]:
-    """Points inside any bone (winding number > 0.5) moved to their nearest point on that bone's
-    surface and ``margin`` beyond it; the moved points and how many moved."""
-    import igl
-
-    out = np.array(points, dtype=np.float64)
-    moved = 0
-    for V, F in bone_meshes.values():
-        V, F = np.asarray(V, np.float64), np.asarray(F, np.int64)
-        lo, hi = V.min(axis=0) - margin, V.max(axis=0) + margin
-        near = np.flatnonzero(((out >= lo) & (out <= hi)).all(axis=1))
-        if len(near) == 0:
-            continue
-        inside = near[igl.fast_winding_number(V, F, out[near]) > 0.5]
-        if len(inside) == 0:
-            continue
-        _, _, c = igl.point_mesh_squared_distance(out[inside], V, F)
-        d = c - out[inside]
-        out[inside] = c + margin * d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
-        moved += len(inside)
-    return out, moved

@@ -4,7 +4,8 @@ under the model's name; the muscles the atlas lacks copied from the model's own 
 
 The name map is axdf_cli/data/atlas_gait2392.yaml (:func:`axdf_cli.tools.tables.atlas_map`).
 Per leg: the atlas' muscle meshes are carried by the leg's registration, their vertices inside
-a model bone put just outside it (:func:`atlas.push_out`), a muscle shared by a model group
+a model bone put just outside it (:func:`~axdf_cli.geometry.winding.push_out_of_meshes`), a
+muscle shared by a model group
 cut into the group's parts (:func:`split_parts`), and each is fitted as an ``axis:`` muscle
 bound to the bones of the model muscle's path (``axdf fit --paths``). Nothing here writes:
 the caller gets the files' bytes and the report.
@@ -19,6 +20,7 @@ import numpy as np
 
 from axdf_cli.tools import constants as tol
 from axdf_cli.errors import InputError, Mark
+from axdf_cli.geometry.winding import inside_share, push_out_of_meshes, winding_numbers
 from axdf_cli.tools import atlas as at
 from axdf_cli.tools.tables import atlas_map
 
@@ -61,7 +63,7 @@ def split_parts(v: np.ndarray, f: np.ndarray, centres: np.ndarray, spacing: floa
     gx, gy, gz = np.meshgrid(*axes, indexing="ij")
     # igl.marching_cubes takes x fastest
     grid = np.stack([gx.ravel(order="F"), gy.ravel(order="F"), gz.ravel(order="F")], axis=1)
-    w = igl.fast_winding_number(v, f, grid)
+    w = winding_numbers(v, f, grid)
     proj = grid @ d
     parts = []
     edges = np.concatenate([[-np.inf], cuts, [np.inf]])
@@ -90,18 +92,19 @@ def fit_holds(entry: dict) -> bool:
     return entry["iou"] >= tol.ATLAS_MIN_IOU and 1.0 / tol.ATLAS_MAX_VOLUME_FACTOR <= r <= tol.ATLAS_MAX_VOLUME_FACTOR
 
 
-
-def rest_bones(skeleton_path: Path) -> tuple:
-    """The skeleton, its bones' rest world transforms (B, 4, 4) and each moving bone's mesh in
-    the world at rest: name -> ((V, 3) float64, (T, 3) int64)."""
+def rest_state(skeleton_path: Path) -> tuple:
+    """The skeleton read, its bones' rest world transforms (B, 4, 4) and each moving bone's mesh
+    in the world at rest (:func:`~axdf_cli.geometry.bones.rest_bone_meshes`): name -> ((V, 3)
+    float64, (T, 3) int64)."""
+    from axdf_cli.geometry.bones import rest_bone_meshes
     from axdf_cli.model.skeleton import forward_kinematics
-    from axdf_cli.pipeline.plan import rest_bone_meshes
     from axdf_cli.specs import RefPolicy, load_skeleton
 
     skel = load_skeleton(skeleton_path, RefPolicy())
     rest = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
     meshes = rest_bone_meshes(skel, str(skeleton_path), lambda b: b.parent is not None)
     return skel, rest, {name: (v, f) for name, (v, f, _) in meshes.items()}
+
 
 def registered_meshes(data_root: Path, skel, rest, bones: dict, old: Path, sides=("r",), tell=None) -> tuple:
     """The atlas' muscles carried onto the skeleton at rest, under the model's names: a list of
@@ -120,8 +123,8 @@ def registered_meshes(data_root: Path, skel, rest, bones: dict, old: Path, sides
         if ta is not None:
             tv = at.read_atlas_mesh(ta)[0]
             tib = bones[f"tibia_{side}"]
-            side_rep["tib_ant_inside_tibia"] = {"landmarks": at.inside_share(reg.apply(tv, warp=False), tib),
-                                                "warp": at.inside_share(reg.apply(tv), tib)}
+            side_rep["tib_ant_inside_tibia"] = {"landmarks": inside_share(*tib, reg.apply(tv, warp=False)),
+                                                "warp": inside_share(*tib, reg.apply(tv))}
         jobs = [(m, [m], list(src)) for m, src in names.muscles.items()] + \
                [(g, list(parts), list(src)) for g, (src, parts) in names.split.items()]
         for key, parts, src in jobs:
@@ -133,7 +136,8 @@ def registered_meshes(data_root: Path, skel, rest, bones: dict, old: Path, sides
             pieces = [(w, fc)] if len(parts) == 1 else split_parts(
                 w, fc, np.array([path_centroid(old, f"{q}_{side}", skel, rest) for q in parts]), tol.ATLAS_SPLIT_SPACING)
             for q, (pv, pf) in zip(parts, pieces):
-                pv, moved = at.push_out(pv, bones, tol.ATLAS_BONE_MARGIN)
+                # (signed: w > 0.5, as the shipped library was made; gait2392's torso is wound inconsistently)
+                pv, moved = push_out_of_meshes(pv, bones.values(), tol.ATLAS_BONE_MARGIN, signed=True)
                 name = f"{q}_{side}"
                 meshes.append((name, pv, pf))
                 side_rep["muscles"][name] = {"atlas": p.name, "pushed_out_of_bones": moved,
@@ -151,7 +155,7 @@ def landmark_transform(data_root: Path, skeleton_path: Path, side: str = "r") ->
     data_root, skeleton_path = Path(data_root), Path(skeleton_path)
     if not data_root.is_dir():
         raise InputError(Mark(str(data_root)), "atlas folder not found", "the Visible Human Female folder (Left/, Right/)")
-    skel, rest, bones = rest_bones(skeleton_path)
+    skel, rest, bones = rest_state(skeleton_path)
     reg = at.register(data_root, skel, rest, bones, side, rounds=0)
     res = ", ".join(f"{k} {v:g} mm" for k, v in reg.report["landmark_residual_mm"].items())
     return transform_text(reg.scale, reg.rotation, reg.shift,
@@ -172,7 +176,7 @@ def build_library(data_root: Path, skeleton_path: Path, old: Path, sides=("r",),
     data_root, skeleton_path, old = Path(data_root), Path(skeleton_path), Path(old)
     if not data_root.is_dir():
         raise InputError(Mark(str(data_root)), "atlas folder not found", "the Visible Human Female folder (Left/, Right/)")
-    skel, rest, bones = rest_bones(skeleton_path)
+    skel, rest, bones = rest_state(skeleton_path)
     report = {"atlas": str(data_root.name), "skeleton": skeleton_path.name, "sides": {}, "fitted": [], "failed": [],
               "kept": []}
     files: dict[str, bytes] = {}

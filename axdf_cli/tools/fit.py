@@ -28,6 +28,7 @@ from axdf_cli.specs import RefPolicy, load_muscle_file, load_skeleton
 from axdf_cli.specs.muscle import default_color, parse_muscle_text
 from axdf_cli.tools import fit_sections as fs
 from axdf_cli.tools.fit_mesh import UNITS, load_transform, read_mesh, unit_name, unit_scale
+from axdf_cli.tools.muscle_files import muscle_doc
 
 REPORT = "fit_report.json"
 SUMMARY = "FIT.md"
@@ -59,7 +60,7 @@ def bone_geometry(skel: Skeleton, rest: np.ndarray, skeleton_path: Path, meshes:
     """Per bone what a point is bound to by nearness: ('mesh', world vertices, faces) where the
     skeleton has bone meshes (only those bones then; ``meshes`` False: never), else
     ('segments', (k, 2, 3)) from its origin to each child's origin (a leaf: its origin)."""
-    from axdf_cli.pipeline.plan import load_bone_mesh
+    from axdf_cli.geometry.bones import load_bone_mesh
 
     if meshes and any(b.mesh for b in skel.bones):
         out = []
@@ -181,8 +182,6 @@ def fit_one(mesh, name: str, n_sections: int, skel: Skeleton, rest: np.ndarray, 
                       tuple(Section(float(t), None, 0.0, tuple((float(a), float(b)) for a, b in o))
                             for t, o in zip(sec_t, xy)),
                       tendons=tendons, resolution=(along, tol.FIT_OUTPUT_AROUND), path=line)
-    from axdf_cli.tools.transfer import muscle_doc
-
     kept = "; its path, the model's line of action" if line is not None else ""
     text = emit.dump_yaml(emit.rounded(muscle_doc(spec)),
                           header=f"{name}: fitted by `axdf fit` to its mesh ({n_sections} sections{kept}; "

@@ -30,6 +30,7 @@ from __future__ import annotations
 import numpy as np
 
 from axdf_cli.tools import constants as tol
+from axdf_cli.geometry.winding import inside
 from axdf_cli.model import bspline
 from axdf_cli.model.muscle import OCT
 
@@ -343,10 +344,11 @@ def fit_rows(mesh, rows: RowFit, frames, samples: np.ndarray, normals: np.ndarra
 
 def measure(mesh_v: np.ndarray, mesh_f: np.ndarray, fit_v: np.ndarray, fit_f: np.ndarray, seed: int = 0) -> dict:
     """How well a fitted surface reproduces a mesh (both closed, metres): the volumetric
-    overlap (IoU of the winding-number insides on a grid of at most tol.FIT_IOU_SPACING, finer
-    for a muscle too thin for tol.FIT_IOU_MIN_CELLS such cells: tol.FIT_IOU_SMALL_CELLS across
-    its box's thinnest side), the
-    surface distance both ways (mean, median, mm) and the volume ratio fitted / mesh."""
+    overlap (IoU of the winding-number insides, :func:`~axdf_cli.geometry.winding.inside` signed:
+    as the shipped reports were made; on a grid of at most tol.FIT_IOU_SPACING, finer for a
+    muscle too thin for tol.FIT_IOU_MIN_CELLS such cells: tol.FIT_IOU_SMALL_CELLS across its
+    box's thinnest side), the surface distance both ways (mean, median, mm) and the volume
+    ratio fitted / mesh."""
     import igl
     import trimesh
 
@@ -360,8 +362,7 @@ def measure(mesh_v: np.ndarray, mesh_f: np.ndarray, fit_v: np.ndarray, fit_f: np
     h = max(h, float(np.prod(hi - lo) / tol.FIT_IOU_MAX_POINTS) ** (1.0 / 3.0))
     axes = [np.arange(lo[k] + 0.5 * h, hi[k], h) for k in range(3)]
     q = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-    ia = igl.fast_winding_number(np.asarray(mesh_v, np.float64), np.asarray(mesh_f, np.int64), q) > 0.5
-    ib = igl.fast_winding_number(np.asarray(fit_v, np.float64), np.asarray(fit_f, np.int64), q) > 0.5
+    ia, ib = inside(mesh_v, mesh_f, q, signed=True), inside(fit_v, fit_f, q, signed=True)
     iou = float((ia & ib).sum() / max((ia | ib).sum(), 1))
     pa, _ = trimesh.sample.sample_surface(a, tol.FIT_MEASURE_SAMPLES, seed=seed)
     pb, _ = trimesh.sample.sample_surface(b, tol.FIT_MEASURE_SAMPLES, seed=seed)

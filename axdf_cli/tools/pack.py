@@ -18,11 +18,13 @@ from axdf_cli.tools import constants as tc
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.fileio import fieldcache
 from axdf_cli.importers import emit
-from axdf_cli.tools.transfer import UniqueFiles, file_doc, load_muscle_files
+from axdf_cli.fileio.outputs import UniqueFiles
+from axdf_cli.tools.muscle_files import file_doc, load_muscle_files
 from axdf_cli.model import contact, pack
 from axdf_cli.model.muscle import MuscleModel
 from axdf_cli.model.skeleton import forward_kinematics
-from axdf_cli.pipeline.plan import load_bone_mesh, plan_run
+from axdf_cli.geometry.bones import load_bone_mesh
+from axdf_cli.pipeline.plan import plan_run
 from axdf_cli.specs import RefPolicy, load_pose, load_skeleton
 
 REPORT = "pack_report.json"

@@ -1,9 +1,9 @@
 """The muscles under a fitted skin at rest: how many of their vertices lie outside it, and the
-rest skin pushed outward until they lie inside (``axdf skin --muscles DIR [--push]``).
+rest skin grown outward until they lie inside (``axdf skin --muscles DIR [--push]``).
 
-Inside is the skin's winding number (libigl's fast winding number: the skin is one closed
-surface) over one half. The push moves skin vertices outward along their normals, over the
-muscle vertices outside, by how far out each one is plus tol.SKIN_PUSH_CLEARANCE, each push
+Inside is the skin's winding number (:mod:`axdf_cli.geometry.winding`: the skin is one closed
+surface). The growth (:func:`grow_over`) moves skin vertices outward along their normals, over
+the muscle vertices outside, by how far out each one is plus tol.SKIN_PUSH_CLEARANCE, each push
 spread over the skin around it so that the skin bulges instead of spiking.
 """
 from __future__ import annotations
@@ -14,6 +14,7 @@ import numpy as np
 
 from axdf_cli.tools import constants as tol
 from axdf_cli.errors import InputError, Mark
+from axdf_cli.geometry.winding import inside, inside_of, winding_numbers
 from axdf_cli.model.muscle import MuscleModel
 from axdf_cli.model.skeleton import Skeleton, forward_kinematics
 from axdf_cli.specs import RefPolicy, expand_muscle_paths
@@ -44,42 +45,6 @@ def spec_bones(spec) -> set:
     from axdf_cli.model.pose import muscle_bones
 
     return muscle_bones(spec)
-
-
-def rest_bones(skel: Skeleton, skeleton_file: str, worn) -> tuple[list, list]:
-    """The meshes of the bones the skin wears (``worn``: bone names) at the skeleton's rest
-    pose, their holes capped (:func:`capped`): [((V, 3) float64, (T, 3) int64)], and the mesh
-    files read."""
-    from axdf_cli.pipeline.plan import rest_bone_meshes
-
-    meshes = rest_bone_meshes(skel, skeleton_file, lambda b: b.name in worn).values()
-    return [capped(v, f) for v, f, _ in meshes], [path for _, _, path in meshes]
-
-
-def capped(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The mesh with every boundary loop closed by a fan to the loop's centroid, so that its
-    winding number says inside or outside everywhere (gait2392's torso is open at the neck, its
-    skull at the orbits and the foramen)."""
-    v, f = np.asarray(vertices, np.float64), np.asarray(faces, np.int64)
-    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
-    _, inv, cnt = np.unique(np.sort(e, axis=1), axis=0, return_inverse=True, return_counts=True)
-    nxt = {int(a): int(b) for a, b in e[cnt[inv.ravel()] == 1]}  # each boundary edge, as wound
-    seen, centres, fans = set(), [], []
-    for start in sorted(nxt):
-        if start in seen:
-            continue
-        loop, c = [start], nxt[start]
-        seen.add(start)
-        while c != start and c in nxt and c not in seen:
-            loop.append(c)
-            seen.add(c)
-            c = nxt[c]
-        centre = len(v) + len(centres)
-        centres.append(v[loop].mean(axis=0))
-        fans += [(loop[(k + 1) % len(loop)], loop[k], centre) for k in range(len(loop))]
-    if not centres:
-        return v, f
-    return np.concatenate([v, np.array(centres)]), np.concatenate([f, np.array(fans, np.int64)])
 
 
 def bone_points(meshes: list) -> np.ndarray:
@@ -123,34 +88,27 @@ def _snap_out(v: np.ndarray, meshes: list) -> tuple[np.ndarray, np.ndarray]:
         near = np.flatnonzero(np.all((v > lo) & (v < hi), axis=1))
         if not len(near):
             continue
-        w = igl.winding_number(bv, bf, v[near])
-        inside = near[np.abs(w) > 0.5]
-        if not len(inside):
+        w = winding_numbers(bv, bf, v[near], exact=True)  # (skin vertices close to a bone: exact)
+        into = near[inside_of(w)]
+        if not len(into):
             continue
-        _, tri, closest = igl.point_mesh_squared_distance(v[inside], bv, bf)
+        _, tri, closest = igl.point_mesh_squared_distance(v[into], bv, bf)
         a, b, c = bv[bf[tri, 0]], bv[bf[tri, 1]], bv[bf[tri, 2]]
         n = np.cross(b - a, c - a) * np.sign(np.mean(w))  # (a mesh wound inward)
-        out = closest - v[inside]  # from inside to the nearest surface point: the way out
+        out = closest - v[into]  # from inside to the nearest surface point: the way out
         on = np.linalg.norm(out, axis=1) < 1e-9  # (on the surface: the triangle's normal)
         out[on] = n[on]
         out /= np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-300)
-        v[inside] = closest + out * tol.SKIN_PUSH_CLEARANCE
-        moved[inside] = True
+        v[into] = closest + out * tol.SKIN_PUSH_CLEARANCE
+        moved[into] = True
     return v, moved
 
 
-def outside(vertices: np.ndarray, faces: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """(N,) bool: the points that lie outside the closed surface (vertices, faces)."""
-    import igl
-
-    w = igl.fast_winding_number(np.ascontiguousarray(vertices, dtype=np.float64),
-                                np.ascontiguousarray(faces, dtype=np.int64),
-                                np.ascontiguousarray(points, dtype=np.float64))
-    return w < 0.5
-
-
-def push_out(vertices: np.ndarray, faces: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """The skin moved outward (tol.SKIN_PUSH_ROUNDS rounds at most) so that ``points`` lie inside it."""
+def grow_over(vertices: np.ndarray, faces: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """A closed surface (the skin: vertices (V, 3), faces (T, 3)) grown outward over ``points``
+    (N, 3), tol.SKIN_PUSH_ROUNDS rounds at most, so that they lie inside it → vertices (V, 3)
+    float64 (a new array; the faces are kept). Not :func:`~axdf_cli.geometry.winding.push_out_of_meshes`,
+    which moves points out of meshes: here the surface moves, the points stay."""
     import igl
     import trimesh
 
@@ -160,7 +118,7 @@ def push_out(vertices: np.ndarray, faces: np.ndarray, points: np.ndarray) -> np.
     f64 = np.ascontiguousarray(faces, dtype=np.int64)
     avg = neighbour_mean(faces, len(v))
     for _ in range(tol.SKIN_PUSH_ROUNDS):
-        out = outside(v, faces, points)
+        out = ~inside(v, faces, points)
         if not out.any():
             break
         p = points[out]

@@ -38,12 +38,11 @@ def skin_checks(plan) -> dict:
     inside a bone (each bone mesh with its holes capped), at the worst frame; and the largest
     change, between consecutive frames of the plan, of a skin vertex's offset from where
     skinning alone puts it (m): a pop is the stage's own jump, not the motion's."""
-    import igl
-
+    from axdf_cli.geometry.mesh import capped
+    from axdf_cli.geometry.winding import inside as within
     from axdf_cli.model import skin as kernels
     from axdf_cli.pipeline.evaluate import evaluate_plan
     from axdf_cli.pipeline.skin_stage import SKIN_NAME, SkinStage
-    from axdf_cli.tools.skin_muscles import capped
 
     model = next(s for s in plan.stages if isinstance(s, SkinStage)).start(plan)
     worn = set(model.bones.tolist())
@@ -55,14 +54,14 @@ def skin_checks(plan) -> dict:
         for i in range(len(chunk.frames)):
             y = chunk.parts[SKIN_NAME].positions[i].astype(np.float64)
             mus = np.concatenate([res[j].vertices[i] for j in sorted(res)]).astype(np.float64)
-            outside = max(outside, float((igl.fast_winding_number(y, model.faces, mus) < 0.5).mean()))
+            outside = max(outside, float((~within(y, model.faces, mus)).mean()))
             ins = np.zeros(len(y), bool)
             for b, (bv, bf) in bones.items():
                 w = chunk.world[i, b]
                 wv = bv @ w[:3, :3].T + w[:3, 3]
                 near = np.flatnonzero(np.all((y > wv.min(axis=0)) & (y < wv.max(axis=0)), axis=1))
                 if len(near):
-                    ins[near[np.abs(igl.winding_number(wv, bf, y[near])) > 0.5]] = True
+                    ins[near[within(wv, bf, y[near], exact=True)]] = True
             inside = max(inside, float(ins.mean()))
             x = np.empty_like(y)
             kernels.blend(model.weights, np.ascontiguousarray((chunk.world[i][model.bones] @ model.inv_rest)[:, :3, :]),
