@@ -27,9 +27,9 @@ needs_atlas = pytest.mark.skipif(not (ATLAS / "Right").is_dir(),
 
 @pytest.fixture(scope="module")
 def rest():
-    from axdf_cli.tools.atlas_library import rest_bones
+    from axdf_cli.tools.atlas_library import rest_state
 
-    return rest_bones(SKELETON)
+    return rest_state(SKELETON)
 
 
 @pytest.fixture(scope="module")
