@@ -373,41 +373,27 @@ class Renderer:
     # ---------------------------------------------------------------------------------------
     def _draw_all(self, prog, data: bool, bone_world: np.ndarray | None, wire: bool = False):
         for vpos, vnrm, vao, dvao, color, ident in self.muscles:
-            prog["u_model"].write(self._ident)
-            if data:
-                prog["u_id"].value = ident
-                dvao.render()
-            else:
-                prog["u_albedo"].value = color
-                prog["u_wire"].value = int(wire)
-                vao.render()
+            self._draw(prog, data, wire, self._ident, (vao, dvao), color, ident)
         for j, vao, dvao, ident in self.bones:
-            prog["u_model"].write(np.asarray(bone_world[j], dtype="f4").T.tobytes())
-            if data:
-                prog["u_id"].value = ident
-                dvao.render()
-            else:
-                prog["u_albedo"].value = BONE_COLOR
-                prog["u_wire"].value = int(wire)
-                vao.render()
+            self._draw(prog, data, wire, np.asarray(bone_world[j], dtype="f4").T.tobytes(), (vao, dvao), BONE_COLOR,
+                       ident)
         for vpos, vnrm, vao, dvao, color, ident in self.layers.values():
-            prog["u_model"].write(self._ident)
-            if data:
-                prog["u_id"].value = ident
-                dvao.render()
-            else:
-                prog["u_albedo"].value = color
-                prog["u_wire"].value = int(wire)
-                vao.render()
+            self._draw(prog, data, wire, self._ident, (vao, dvao), color, ident)
         if self.skin is not None and self.settings.skin == "opaque":
-            prog["u_model"].write(self._ident)
-            if data:
-                prog["u_id"].value = float(skin_id(self.scene))
-                self.skin[3].render()
-            else:
-                prog["u_albedo"].value = self.scene.skin.color
-                prog["u_wire"].value = int(wire)
-                self.skin[2].render()
+            self._draw(prog, data, wire, self._ident, (self.skin[2], self.skin[3]), self.scene.skin.color,
+                       float(skin_id(self.scene)))
+
+    @staticmethod
+    def _draw(prog, data: bool, wire: bool, model: bytes, vaos: tuple, color, ident: float) -> None:
+        """One mesh: into the data targets (its id) or the beauty target (its colour)."""
+        prog["u_model"].write(model)
+        if data:
+            prog["u_id"].value = ident
+            vaos[1].render()
+        else:
+            prog["u_albedo"].value = color
+            prog["u_wire"].value = int(wire)
+            vaos[0].render()
 
     def _draw_see_through_skin(self) -> None:
         """The see-through skin over what the beauty target holds: front faces only, blended
