@@ -52,8 +52,10 @@ SKIN_NAME = "skin"
 #: skin.csv's numeric columns: the skin's volume (m^3) and its ratio to the skin's as the stage
 #: wears it at the rest pose (the rest mesh pushed over the bones' vertices outside it); the
 #: share of every muscle vertex that lies outside the skin (measured along the skinned normal of
-#: its nearest candidate skin vertex, after the push); the largest outward push (m).
-SKIN_COLUMNS = ("volume", "volume_ratio", "outside", "push")
+#: its nearest candidate skin vertex, after the push); the largest outward push (m); the share
+#: of the worn bones' points (their meshes' vertices and triangle centroids) outside the skin,
+#: by the same test.
+SKIN_COLUMNS = ("volume", "volume_ratio", "outside", "push", "bone_outside")
 #: The run's table of the skin's measures: a row per frame.
 SKIN_CSV = "skin.csv"
 
@@ -84,6 +86,7 @@ class SkinModel:
     rest_volume: float
     room: np.ndarray  # (V,) how far each skin vertex may come in from where it is skinned (m)
     jiggle: tuple | None = None  # (coefficients (J,), their step in frames, each vertex's gain (V,), the pose)
+    n_bone_points: int = 0  # every point of the worn bones (vertices and triangle centroids), candidates or not
 
 
 def ring(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -118,6 +121,7 @@ def build(skin, plan) -> SkinModel:
     muscle_points = np.flatnonzero(near)
     pts = [muscle[muscle_points]]
     bone_points = []
+    n_bone = 0
     weighed = set(bones.tolist())  # a bone the skin does not wear (gait2392's ground) is left out
     bone_meshes = plan.contact_meshes
     for b, (bv, bf, _) in sorted(bone_meshes.items()):
@@ -126,6 +130,7 @@ def build(skin, plan) -> SkinModel:
         bv = np.asarray(bv, dtype=np.float64)  # its vertices and its triangles' centroids (a coarse
         local = np.concatenate([bv, bv[np.asarray(bf, np.int64)].mean(axis=1)])  # mesh's faces bulge between them)
         world = local @ rest_world[b, :3, :3].T + rest_world[b, :3, 3]
+        n_bone += len(local)
         keep = np.isfinite(tree.query(world, k=1, distance_upper_bound=reach)[0])
         if keep.any():
             bone_points.append((int(b), local[keep]))
@@ -151,7 +156,8 @@ def build(skin, plan) -> SkinModel:
     room = np.minimum(np.maximum(dist - skin.fat, 0.0), tol.SKIN_VOLUME_MAX_SHIFT)
     model = SkinModel(v, faces, np.ascontiguousarray(skin.weights, dtype=np.float64), bones,
                       np.linalg.inv(rest_world[bones]), ptr, idx, muscle_points, bone_points, cand, pairs,
-                      np.ascontiguousarray(target), np.ascontiguousarray(spread), int(len(muscle)), 1.0, room)
+                      np.ascontiguousarray(target), np.ascontiguousarray(spread), int(len(muscle)), 1.0, room,
+                      n_bone_points=n_bone)
     model.rest_volume = float(skin_frame(model, rest_world, p, keep=False)[2][0])  # the skin as worn at rest
     return model
 
@@ -262,7 +268,7 @@ def skin_frame(model: SkinModel, world: np.ndarray, points: np.ndarray, keep: bo
     """One frame: the skin skinned by ``world`` (B, 4, 4) (and moved by its jiggle's ``lag``,
     (V, 3)), pushed over ``points`` (the
     candidates' world positions, (N, 3)), relaxed and (``keep``) held at its rest volume →
-    (positions (V, 3), normals (V, 3), measures (len(SKIN_COLUMNS),) with the outside share
+    (positions (V, 3), normals (V, 3), measures (len(SKIN_COLUMNS),) with the outside shares
     still to divide)."""
     rel = np.ascontiguousarray((world[model.bones] @ model.inv_rest)[:, :3, :])  # (K, 3, 4)
     nv = len(model.rest)
@@ -281,13 +287,15 @@ def skin_frame(model: SkinModel, world: np.ndarray, points: np.ndarray, keep: bo
     y = x + n * offset[:, None]
     ny = np.empty_like(y)
     vol = kernels.normals_volume(y, model.faces, ny)
-    nm = len(model.muscle_points)
-    nearest, height = np.empty(nm, np.int64), np.empty(nm)
-    kernels.nearest_heights(points[:nm], x, n, model.candidates[:nm], nearest, height)
-    at = np.argmax(model.candidates[:nm] == nearest[:, None], axis=1)  # (the nearest is a candidate)
-    allowed = np.maximum(-model.target[np.arange(nm), at], 0.0)
-    outside = kernels.count_outside(points[:nm], y, n, nearest[:nm], allowed)
-    return y, ny, np.array([vol, vol / model.rest_volume, float(outside), float(offset.max(initial=0.0))])
+    nm, npts = len(model.muscle_points), len(points)
+    nearest, height = np.empty(npts, np.int64), np.empty(npts)
+    kernels.nearest_heights(points, x, n, model.candidates, nearest, height)
+    at = np.argmax(model.candidates == nearest[:, None], axis=1)  # (the nearest is a candidate)
+    allowed = np.maximum(-model.target[np.arange(npts), at], 0.0)
+    outside = kernels.count_outside(points[:nm], y, n, nearest[:nm], allowed[:nm])
+    bone_outside = kernels.count_outside(points[nm:], y, n, nearest[nm:], allowed[nm:])
+    return y, ny, np.array([vol, vol / model.rest_volume, float(outside), float(offset.max(initial=0.0)),
+                            float(bone_outside)])
 
 
 class SkinStage(StageBase):
@@ -358,6 +366,7 @@ class SkinStage(StageBase):
             y, ny, st = skin_frame(state, chunk.world[i], np.ascontiguousarray(np.concatenate(pts)), lag=lag[i])
             pos[i], nrm[i] = y, ny
             st[2] /= max(state.n_muscle_vertices, 1)
+            st[4] /= max(state.n_bone_points, 1)
             stats[i] = st
         chunk.parts[SKIN_NAME] = PartFrames(pos, nrm)
         chunk.tables[SKIN_CSV] = stats
