@@ -101,3 +101,16 @@ def test_a_data_set_lists_the_layer_in_its_index(tmp_path, monkeypatch):
         assert (out / row["parts"]).is_file()
     ids = json.loads((out / "dataset.json").read_text())["ids"]
     assert {"kind": "fat", "name": "shell"} in ids.values()
+
+
+def test_a_muscle_named_as_a_part_is_refused(project, capsys, monkeypatch):
+    """A stage's part and a muscle share the meshes' folder by name: the run is refused before it
+    writes, naming the muscle's file."""
+    first = sorted((project / "muscles/demo").glob("*.yaml"))[0]
+    text = first.read_text()
+    name = next(line.split(":", 1)[1].strip() for line in text.splitlines() if line.startswith("muscle:"))
+    first.write_text(text.replace(f"muscle: {name}", "muscle: shell", 1))
+    use_stages(monkeypatch, ["shell"], block=None)
+    rc, _, err = run_main(RUN + ["--out", "clash"], capsys)
+    assert rc == 2 and "a muscle is named 'shell'" in err and first.name in err, err
+    assert not (project / "clash").exists()

@@ -195,9 +195,15 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
     inputs = {display_path(Path(s), base): atomic.sha256_file(s) for s in srcs}
     if any(st.name == "jiggle" for st in built):
         notes += jiggle_notes(pose, specs)
-    return RunPlan(pose, specs, models, frames, formats, out, inputs, render=render, warnings=warnings,
+    plan = RunPlan(pose, specs, models, frames, formats, out, inputs, render=render, warnings=warnings,
                    bone_meshes=bone_meshes, notes=notes, frame_warnings=muscle_range_warnings(pose, frames, specs),
                    stages=built, mesh_files=mesh_files, outside=tuple(outside_ranges(pose, frames)), base=base)
+    named = {s.name: s for s in specs}
+    for part in plan.layers:  # (a part's meshes lie in meshes/<name>/, as a muscle's)
+        if part.name in named:
+            raise InputError(Mark(str(named[part.name].source)), f"a muscle is named {part.name!r}, as the "
+                             f"{part.kind.value} part a stage adds", "rename the muscle")
+    return plan
 
 
 def plan_skin(job: Job | None, arg, skeleton, policy: RefPolicy, specs):
