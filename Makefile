@@ -226,11 +226,18 @@ lock: $(TEST_STAMP)
 # (+ meshes/), poses/myoarm_elbow.yaml (arm26's elbow flexion), poses/myobody_gait.yaml (MyoSuite's gait cycle),
 # and the CMU walk fitted onto myobody (poses/maps/cmu_to_myobody.yaml): poses/retargeted/cmu_131_01_walk_myobody/.
 # muscles/gait2392_atlas: the Visible Human Female atlas (CC BY 4.0) registered onto gait2392
-# and fitted under its names (docs/FIT.md, "Atlas onto a skeleton"; a few minutes)
+# and fitted under its names by `axdf atlas` (docs/ATLAS.md; about 10 minutes on two cores).
+# ATLAS_OUT keeps the registered meshes and residuals; the library is its muscles/ and report.
 ATLAS  ?= $(DATA)/atlas/visible_human_female
 ATLAS_SIDES ?= r,l
+ATLAS_OUT ?= build/atlas_gait2392
 atlas: $(STAMP)
-	$(BIN)/python scripts/atlas_library.py --data $(ATLAS) --sides $(ATLAS_SIDES) --out muscles/gait2392_atlas
+	$(BIN)/axdf atlas $(ATLAS) --onto poses/skeletons/gait2392.yaml --map atlases/gait2392.yaml \
+	  --muscles muscles/gait2392 --sides $(ATLAS_SIDES) --out $(ATLAS_OUT) --overwrite
+	rm -rf muscles/gait2392_atlas.partial
+	cp -r $(ATLAS_OUT)/muscles muscles/gait2392_atlas.partial
+	cp $(ATLAS_OUT)/atlas_report.json muscles/gait2392_atlas.partial/
+	rm -rf muscles/gait2392_atlas && mv muscles/gait2392_atlas.partial muscles/gait2392_atlas
 
 import-mjcf: $(TEST_STAMP)
 	$(BIN)/python scripts/myo_sim_xml.py myoarm $(MYO)/myoarm.xml

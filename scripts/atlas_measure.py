@@ -1,5 +1,5 @@
 """Shape measures of a gait2392 muscle library at the skeleton's rest pose (right leg), the
-numbers docs/FIT.md reports ("Atlas onto a skeleton"):
+numbers docs/ATLAS.md reports:
 
     python scripts/atlas_measure.py muscles/gait2392_atlas [muscles/gait2392 ...]
 

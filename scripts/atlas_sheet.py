@@ -6,7 +6,7 @@
 Three rows: the thighs from the front, the gluteal region from behind, the calves
 from behind. Five columns: the old library and the atlas library at the skeleton's rest pose
 (poses/gait2392_rest.yaml), the atlas' own muscle meshes registered onto gait2392 at rest
-(axdf_cli/tools/atlas_library.py ``registered_meshes``: the meshes the library was fitted to;
+(axdf_cli/tools/atlas_library.py ``registered_meshes``, as `axdf atlas` writes them: the meshes the library was fitted to;
 the muscles the atlas lacks are drawn from the atlas library), then both libraries at the
 walk's frame (poses/jobs/gait2392_walk.yaml, with its contact stage). Each panel is an
 ``axdf render`` of an ``axdf run`` with an explicit camera aimed from the bones' positions in
@@ -54,11 +54,14 @@ def do(args: list[str]) -> None:
 def atlas_run(atlas_rest: Path, out: Path, data: Path) -> None:
     """A copy of the atlas library's rest run with each fitted muscle's mesh replaced by the
     atlas mesh it was fitted to (a run folder reads any PLY per muscle and frame)."""
+    from axdf_cli.tools.atlas import Atlas
     from axdf_cli.tools.atlas_library import registered_meshes, rest_state, write_ply
+    from axdf_cli.tools.tables import load_atlas_map
 
     shutil.copytree(atlas_rest, out)
     skel, rest, bones = rest_state(ROOT / "poses/skeletons/gait2392.yaml")
-    carried, _ = registered_meshes(data, skel, rest, bones, ROOT / "muscles/gait2392", ("r", "l"),
+    atlas = Atlas(data, load_atlas_map(ROOT / "atlases/gait2392.yaml"))
+    carried, _ = registered_meshes(atlas, skel, rest, bones, ROOT / "muscles/gait2392", ("r", "l"),
                                    lambda text: print(f"atlas_sheet: {text}", flush=True))
     for name, v, f in carried:
         target = out / "meshes" / name / f"{name}_0000.ply"

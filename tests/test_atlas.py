@@ -21,6 +21,7 @@ ATLAS = DATA / "atlas" / "visible_human_female"
 LIB = REPO / "muscles" / "gait2392_atlas"
 OLD = REPO / "muscles" / "gait2392"
 SKELETON = REPO / "poses" / "skeletons" / "gait2392.yaml"
+MAP = REPO / "atlases" / "gait2392.yaml"
 needs_atlas = pytest.mark.skipif(not (ATLAS / "Right").is_dir(),
                                  reason=f"the Visible Human atlas not found at {ATLAS} (../shared/data)")
 
@@ -33,11 +34,19 @@ def rest():
 
 
 @pytest.fixture(scope="module")
-def registration(rest):
+def atlas():
+    from axdf_cli.tools.atlas import Atlas
+    from axdf_cli.tools.tables import load_atlas_map
+
+    return Atlas(ATLAS, load_atlas_map(MAP))
+
+
+@pytest.fixture(scope="module")
+def registration(rest, atlas):
     from axdf_cli.tools import atlas as at
 
     skel, pose, bones = rest
-    return at.register(ATLAS, skel, pose, bones, "r")
+    return at.register(atlas, skel, pose, bones, "r")
 
 
 @needs_atlas
@@ -50,11 +59,11 @@ def test_bones_registered_within_half_a_millimetre(registration):
 
 
 @needs_atlas
-def test_warp_puts_the_landmarks_on_the_joints(registration, rest):
+def test_warp_puts_the_landmarks_on_the_joints(registration, rest, atlas):
     from axdf_cli.tools import atlas as at
 
     skel, pose, _ = rest
-    model = at.model_landmarks(skel, pose, "r")
+    model = at.model_landmarks(skel, pose, atlas.map, "r")
     for name, x in registration.landmarks_atlas.items():
         got = registration.apply(x[None])[0]
         assert np.linalg.norm(got - model[name]) < 1e-4, name  # 0.1 mm
@@ -64,11 +73,11 @@ def test_warp_puts_the_landmarks_on_the_joints(registration, rest):
 
 
 @needs_atlas
-def test_identity_for_the_warp_leaves_the_tibia_apart(registration, rest):
+def test_identity_for_the_warp_leaves_the_tibia_apart(registration, rest, atlas):
     from axdf_cli.tools import atlas as at
 
     _, _, bones = rest
-    v, _ = at.read_atlas_mesh(at.atlas_path(ATLAS, "r", "Bone", "Tibia"))
+    v, _ = at.read_atlas_mesh(atlas.path("r", "Bone", "Tibia"))
     v = v[::10]
     warped = at.bone_distance(registration.apply(v), bones["tibia_r"]).mean()
     landmarks_only = at.bone_distance(registration.apply(v, warp=False), bones["tibia_r"]).mean()
@@ -109,7 +118,7 @@ def test_push_out_moves_a_point_out_of_a_bone():
 
 @needs_atlas
 @pytest.mark.skipif(not LIB.is_dir(), reason="muscles/gait2392_atlas not made (make atlas)")
-def test_registered_meshes_are_the_ones_the_library_was_fitted_to(rest):
+def test_registered_meshes_are_the_ones_the_library_was_fitted_to(rest, atlas):
     """``registered_meshes`` (what scripts/atlas_sheet.py draws beside the library) gives the
     right leg's muscles the shipped library's report records: the same names, atlas files and
     parts, and the same count of vertices pushed out of the bones; closed meshes that hold a
@@ -119,7 +128,7 @@ def test_registered_meshes_are_the_ones_the_library_was_fitted_to(rest):
     from axdf_cli.tools.atlas_library import registered_meshes
 
     skel, pose, bones = rest
-    meshes, sides = registered_meshes(ATLAS, skel, pose, bones, OLD, ("r",))
+    meshes, sides = registered_meshes(atlas, skel, pose, bones, OLD, ("r",))
     recorded = json.loads((LIB / "atlas_report.json").read_text())["sides"]["r"]["muscles"]
     assert sides["r"]["muscles"] == recorded
     assert sorted(name for name, _, _ in meshes) == sorted(recorded)

@@ -27,6 +27,7 @@ COMMANDS = {
     "transfer": ("axdf_cli.cli.transfer", "move muscles onto another skeleton through a bone map"),
     "pack": ("axdf_cli.cli.pack", "make a body's muscles share space at the rest pose (section outlines)"),
     "fit": ("axdf_cli.cli.fit", "fit closed muscle meshes (STL, PLY, OBJ) as AxDf muscle files"),
+    "atlas": ("axdf_cli.cli.atlas", "register an anatomical atlas onto a skeleton and fit its muscles"),
     "retarget": ("axdf_cli.cli.retarget", "fit a muscle model's skeleton to motion capture (BVH, 3D joints)"),
     "dataset": ("axdf_cli.cli.dataset", "build data sets: sampled poses, several views, labels, one index"),
     "skin": ("axdf_cli.cli.skin", "fit a CC0 body (MakeHuman) to a skeleton at rest: a skin file"),
@@ -96,7 +97,7 @@ def _install(handler) -> dict:
 #: arguments: ``skin`` evaluates muscles only with ``--muscles``): a note before a cold compile
 #: (runtime.compile_notice).
 KERNEL_COMMANDS = {"run": None, "pack": None, "dataset": ("build",), "import": ("osim", "mjcf"), "fit": None,
-                   "skin": lambda args: args.muscles is not None}
+                   "atlas": lambda args: not args.register_only, "skin": lambda args: args.muscles is not None}
 
 
 def _notice(args) -> str | None:

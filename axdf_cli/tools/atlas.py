@@ -17,11 +17,11 @@ model's skeleton at rest (gait2392, metres), one leg at a time.
    pelvis, which the atlas lacks, are held by their landmarks. The muscles are carried by the
    last round's spline (:meth:`Registration.apply`).
 
-The atlas' names (its legs' folders, the landmarks' cartilages and model bones, which atlas
-bones go onto which model bone) are data: axdf_cli/data/atlas_gait2392.yaml
-(:func:`axdf_cli.tools.tables.atlas_map`). Nothing here reads the skeleton's file or writes
-anything: the caller passes the skeleton, its rest transforms and its bone meshes (world,
-metres) and the atlas folder.
+The atlas' names (its files' pattern, its sides' folders, the landmarks' cartilages and model
+bones, which atlas bones go onto which model bone) are the map ``axdf atlas --map`` reads
+(:func:`axdf_cli.tools.tables.load_atlas_map`; atlases/gait2392.yaml). Nothing here reads the
+skeleton's file or writes anything: the caller passes the skeleton, its rest transforms and its
+bone meshes (world, metres) and the :class:`Atlas` (its folder and map).
 """
 from __future__ import annotations
 
@@ -32,12 +32,35 @@ import numpy as np
 
 from axdf_cli.tools import constants as tol
 from axdf_cli.errors import InputError, Mark
-from axdf_cli.tools.tables import atlas_map
+from axdf_cli.fileio.yamlio import did_you_mean
+from axdf_cli.tools.tables import AtlasMap
 
-def atlas_path(root: Path, side: str, kind: str, name: str) -> Path:
-    """The atlas file of a structure (kind Bone, Cartilage, Muscle) on a side ('r', 'l')."""
-    s = atlas_map().sides[side]
-    return Path(root) / s / f"VHF_{s}_{kind}_{name}_smooth.ply"
+
+@dataclass(frozen=True)
+class Atlas:
+    """An atlas folder (meshes in millimetres, its own frame) and its map onto a model."""
+    root: Path
+    map: AtlasMap
+
+    def path(self, side: str, kind: str, name: str) -> Path:
+        """The atlas file of a structure (kind Bone, Cartilage, Muscle) on a side ('r', 'l')."""
+        return Path(self.root) / self.map.files.format(folder=self.map.sides[side], kind=kind, name=name)
+
+    def check(self, sides) -> None:
+        """Refuse, at the map's line, a landmark's or a warped bone's file the folder lacks."""
+        if not Path(self.root).is_dir():
+            raise InputError(Mark(str(self.root)), "atlas folder not found",
+                             f"the folder the map's files: pattern ({self.map.files}) is read in")
+        for side in sides:
+            need = [(("landmark", k), "Cartilage", cart, _leg(side, other))
+                    for k, (cart, other, _) in self.map.landmarks.items()]
+            need += [(("bone", i), "Bone", n, side) for i, (names, _, _) in enumerate(self.map.bones) for n in names]
+            for key, kind, name, s in need:
+                p = self.path(s, kind, name)
+                if not p.is_file():
+                    raise InputError(self.map.marks.get(key, Mark(self.map.path)),
+                                     f"{key[0]} {key[1] if key[0] == 'landmark' else name}: no atlas file {p}",
+                                     f"a {kind.lower()} of {self.root} by the map's files: pattern ({self.map.files})")
 
 
 def read_atlas_mesh(path: Path):
@@ -45,8 +68,7 @@ def read_atlas_mesh(path: Path):
     import trimesh
 
     if not Path(path).is_file():
-        raise InputError(Mark(str(path)), "atlas file not found",
-                         "the Visible Human Female folder (Left/, Right/ of VHF_<Side>_<Kind>_<Name>_smooth.ply)")
+        raise InputError(Mark(str(path)), "atlas file not found", "a mesh the atlas map's files: pattern names")
     m = trimesh.load(str(path), force="mesh", process=False)
     return np.asarray(m.vertices, dtype=np.float64) * 1e-3, np.asarray(m.faces, dtype=np.int64)
 
@@ -64,26 +86,26 @@ def _leg(side: str, other: bool) -> str:
     return ("l" if side == "r" else "r") if other else side
 
 
-def atlas_landmarks(root: Path, side: str) -> dict[str, np.ndarray]:
+def atlas_landmarks(atlas: Atlas, side: str) -> dict[str, np.ndarray]:
     """The atlas' joint centres (metres, the atlas' frame) for the leg of ``side``: the centres
     of the spheres fitted to the map's cartilages (``landmarks:``)."""
     def centre(s, name):
-        return sphere_fit(read_atlas_mesh(atlas_path(root, s, "Cartilage", name))[0])[0]
+        return sphere_fit(read_atlas_mesh(atlas.path(s, "Cartilage", name))[0])[0]
 
-    return {k: centre(_leg(side, other), cart) for k, (cart, other, _) in atlas_map().landmarks.items()}
+    return {k: centre(_leg(side, other), cart) for k, (cart, other, _) in atlas.map.landmarks.items()}
 
 
-def model_landmarks(skel, rest: np.ndarray, side: str) -> dict[str, np.ndarray]:
+def model_landmarks(skel, rest: np.ndarray, amap: AtlasMap, side: str) -> dict[str, np.ndarray]:
     """The skeleton's joint centres at rest (world, metres) for the leg of ``side``: the origins
     of the map's landmark bones (gait2392's: the femur's, the other femur's, the tibia's and
     the talus')."""
-    amap = atlas_map()
     names = {k: f"{bone}_{_leg(side, other)}" for k, (_, other, bone) in amap.landmarks.items()}
-    for n in names.values():
+    for k, n in names.items():
         if n not in skel.bone_index:
-            leg = dict.fromkeys([b for _, _, b in amap.landmarks.values()] + [b for _, b, _ in amap.bones])
-            raise InputError(Mark(skel.name), f"skeleton {skel.name} has no bone {n!r}",
-                             "a gait2392-like leg: " + ", ".join(f"{b}_r/l" for b in leg))
+            raise InputError(amap.marks.get(("landmark", k), Mark(amap.path)),
+                             f"landmark {k}: skeleton {skel.name} has no bone {n!r}",
+                             f"{did_you_mean(n, list(skel.bone_index))}a bone of the skeleton --onto names "
+                             "(its name without the side suffix _r, _l)")
     return {k: rest[skel.bone_index[n], :3, 3].astype(np.float64) for k, n in names.items()}
 
 
@@ -142,7 +164,7 @@ def bone_distance(points: np.ndarray, mesh: tuple) -> np.ndarray:
     return np.sqrt(igl.point_mesh_squared_distance(points, mesh[0], mesh[1].astype(np.int64))[0])
 
 
-def register(root: Path, skel, rest: np.ndarray, bone_meshes: dict, side: str, rounds: int | None = None,
+def register(atlas: Atlas, skel, rest: np.ndarray, bone_meshes: dict, side: str, rounds: int | None = None,
              smoothing: float | None = None) -> Registration:
     """Register the atlas' leg of ``side`` onto the skeleton at rest. ``bone_meshes``: model
     bone name -> (world vertices (V, 3), faces) at rest. ``rounds`` 0: the landmarks'
@@ -153,9 +175,9 @@ def register(root: Path, skel, rest: np.ndarray, bone_meshes: dict, side: str, r
 
     rounds = tol.ATLAS_WARP_ROUNDS if rounds is None else rounds
     smoothing = tol.ATLAS_WARP_SMOOTHING if smoothing is None else smoothing
-    amap = atlas_map()
+    amap = atlas.map
     names = tuple(amap.landmarks)
-    la, lm = atlas_landmarks(root, side), model_landmarks(skel, rest, side)
+    la, lm = atlas_landmarks(atlas, side), model_landmarks(skel, rest, amap, side)
     src = np.array([la[k] for k in names])
     dst = np.array([lm[k] for k in names])
     # the other leg's landmark only fixes the turn about the leg's long axis: weighted less
@@ -169,7 +191,7 @@ def register(root: Path, skel, rest: np.ndarray, bone_meshes: dict, side: str, r
         mb = f"{bone}_{side}"
         if mb not in bone_meshes:
             continue
-        pts = [_samples(*read_atlas_mesh(atlas_path(root, side, "Bone", n)), tol.ATLAS_BONE_SAMPLES, tol.FIT_SEED + k)
+        pts = [_samples(*read_atlas_mesh(atlas.path(side, "Bone", n)), tol.ATLAS_BONE_SAMPLES, tol.FIT_SEED + k)
                for n in atlas_bones]
         groups.append((mb, reg.rigid(np.concatenate(pts)), both))
     reg.report["bones_before"] = _bone_residual(groups, bone_meshes, lambda p: p)

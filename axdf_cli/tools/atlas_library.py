@@ -1,9 +1,10 @@
-"""A muscle library of a model from the atlas: every muscle of gait2392 the atlas has,
-registered onto the skeleton (axdf_cli/tools/atlas.py) and fitted (axdf_cli/tools/fit.py)
-under the model's name; the muscles the atlas lacks copied from the model's own library.
+"""``axdf atlas``: a muscle library of a model from an atlas. Every muscle of the model the
+atlas has is registered onto the skeleton (axdf_cli/tools/atlas.py) and fitted
+(axdf_cli/tools/fit.py) under the model's name; the muscles the atlas lacks are copied from the
+model's own library.
 
-The name map is axdf_cli/data/atlas_gait2392.yaml (:func:`axdf_cli.tools.tables.atlas_map`).
-Per leg: the atlas' muscle meshes are carried by the leg's registration, their vertices inside
+The name map is the command's ``--map`` (:func:`axdf_cli.tools.tables.load_atlas_map`;
+atlases/gait2392.yaml). Per side: the atlas' muscle meshes are carried by the leg's registration, their vertices inside
 a model bone put just outside it (:func:`~axdf_cli.geometry.winding.push_out_of_meshes`), a
 muscle shared by a model group
 cut into the group's parts (:func:`split_parts`), and each is fitted as an ``axis:`` muscle
@@ -22,15 +23,16 @@ from axdf_cli.tools import constants as tol
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.geometry.winding import inside_share, push_out_of_meshes, winding_numbers
 from axdf_cli.tools import atlas as at
-from axdf_cli.tools.tables import atlas_map
 
 REPORT = "atlas_report.json"
+REGISTERED = "registered"  # the carried atlas meshes, world metres at rest, under the model's names
+LIBRARY = "muscles"  # the fitted library
 
 
-def find_atlas(root: Path, side: str, names: list[str]) -> Path | None:
-    """The first atlas muscle file of ``names`` on the leg, or None."""
+def find_atlas(atlas: at.Atlas, side: str, names: list[str]) -> Path | None:
+    """The first atlas muscle file of ``names`` on the side, or None."""
     for n in names:
-        p = at.atlas_path(root, side, "Muscle", n)
+        p = atlas.path(side, "Muscle", n)
         if p.is_file():
             return p
     return None
@@ -75,13 +77,18 @@ def split_parts(v: np.ndarray, f: np.ndarray, centres: np.ndarray, spacing: floa
     return parts
 
 
-def write_ply(path: Path, v: np.ndarray, f: np.ndarray) -> None:
+def ply_bytes(v: np.ndarray, f: np.ndarray) -> bytes:
+    """A closed mesh as binary PLY, wound outward (vertices merged)."""
     import trimesh
 
     m = trimesh.Trimesh(v, f, process=True)
     if m.volume < 0:
         m.invert()
-    m.export(str(path))
+    return m.export(file_type="ply")
+
+
+def write_ply(path: Path, v: np.ndarray, f: np.ndarray) -> None:
+    Path(path).write_bytes(ply_bytes(v, f))
 
 
 def fit_holds(entry: dict) -> bool:
@@ -106,20 +113,24 @@ def rest_state(skeleton_path: Path) -> tuple:
     return skel, rest, {name: (v, f) for name, (v, f, _) in meshes.items()}
 
 
-def registered_meshes(data_root: Path, skel, rest, bones: dict, old: Path, sides=("r",), tell=None) -> tuple:
+def registered_meshes(atlas: at.Atlas, skel, rest, bones: dict, old: Path, sides=("r",), tell=None,
+                      registrations: dict | None = None) -> tuple:
     """The atlas' muscles carried onto the skeleton at rest, under the model's names: a list of
     (name, (V, 3) float64 world metres, (F, 3) int64) and the report of each leg (the
     registration's residuals, each muscle's source and how many of its vertices were pushed
     out of the bones). ``old``: the model's own muscle folder (the paths that cut a shared
-    atlas muscle into the model's parts)."""
+    atlas muscle into the model's parts). ``registrations``, when given, receives each side's
+    :class:`~axdf_cli.tools.atlas.Registration`."""
     tell = tell or (lambda text: None)
-    names = atlas_map()
+    names = atlas.map
     meshes, sides_rep = [], {}
     for side in sides:
-        tell(f"registering the atlas' {names.sides[side].lower()} leg")
-        reg = at.register(data_root, skel, rest, bones, side)
+        tell(f"registering the atlas' side {side} ({names.sides[side]})")
+        reg = at.register(atlas, skel, rest, bones, side)
+        if registrations is not None:
+            registrations[side] = reg
         side_rep = dict(reg.report, muscles={})
-        ta = find_atlas(data_root, side, ["TibialisAnterior"])
+        ta = find_atlas(atlas, side, ["TibialisAnterior"]) if f"tibia_{side}" in bones else None
         if ta is not None:
             tv = at.read_atlas_mesh(ta)[0]
             tib = bones[f"tibia_{side}"]
@@ -128,7 +139,7 @@ def registered_meshes(data_root: Path, skel, rest, bones: dict, old: Path, sides
         jobs = [(m, [m], list(src)) for m, src in names.muscles.items()] + \
                [(g, list(parts), list(src)) for g, (src, parts) in names.split.items()]
         for key, parts, src in jobs:
-            p = find_atlas(data_root, side, src)
+            p = find_atlas(atlas, side, src)
             if p is None:
                 continue
             v, fc = at.read_atlas_mesh(p)
@@ -146,58 +157,89 @@ def registered_meshes(data_root: Path, skel, rest, bones: dict, old: Path, sides
     return meshes, sides_rep
 
 
-def landmark_transform(data_root: Path, skeleton_path: Path, side: str = "r") -> str:
-    """The ``axdf fit --transform`` file (text) of one leg's registration onto the skeleton at
-    rest: the landmarks' similarity (:func:`atlas.register` without the warp), from the atlas'
-    frame in metres (``--units mm``) into the skeleton's rest frame."""
+def transform_file(atlas: at.Atlas, reg, skel, skeleton_path: Path) -> str:
+    """The ``axdf fit --transform`` file (text) of one side's landmark similarity (the
+    registration without its warp), from the atlas' frame in metres (``--units mm``) into the
+    skeleton's rest frame."""
     from axdf_cli.tools.fit_mesh import transform_text
 
-    data_root, skeleton_path = Path(data_root), Path(skeleton_path)
-    if not data_root.is_dir():
-        raise InputError(Mark(str(data_root)), "atlas folder not found", "the Visible Human Female folder (Left/, Right/)")
-    skel, rest, bones = rest_state(skeleton_path)
-    reg = at.register(data_root, skel, rest, bones, side, rounds=0)
     res = ", ".join(f"{k} {v:g} mm" for k, v in reg.report["landmark_residual_mm"].items())
     return transform_text(reg.scale, reg.rotation, reg.shift,
-                          f"The {atlas_map().sides[side].lower()} leg of the atlas {data_root.name} onto {skel.name} at rest: "
-                          f"the similarity of its joint centres\n(scripts/atlas_library.py --transform; scale "
-                          f"{reg.scale:.4f}; residuals {res}).\nUse: axdf fit MESH ... --units mm --transform FILE "
-                          f"--skeleton {skeleton_path.name} (docs/FIT.md)")
+                          f"Side {reg.side} of the atlas {Path(atlas.root).name} onto {skel.name} at rest: the "
+                          f"similarity of its landmarks\n(axdf atlas; scale {reg.scale:.4f}; residuals {res}).\n"
+                          f"Use: axdf fit MESH ... --units mm --transform FILE --skeleton {Path(skeleton_path).name} "
+                          "(docs/ATLAS.md)")
 
 
-def build_library(data_root: Path, skeleton_path: Path, old: Path, sides=("r",), sections: int | None = None,
-                  on_muscle=None, on_phase=None) -> tuple[dict, dict]:
-    """The library's files (name -> bytes: one muscle file per model muscle, the report) and
-    the report. ``old``: the model's own muscle folder (paths, and the muscles the atlas lacks).
+def _check_model(atlas: at.Atlas, old: Path, sides) -> None:
+    """Refuse, at the map's line, a model muscle the map names that --muscles lacks."""
+    if not Path(old).is_dir():
+        raise InputError(Mark(str(old)), "muscle folder not found", "the model's muscle files (--muscles DIR)")
+    for key, parts in [(m, [m]) for m in atlas.map.muscles] + [(g, list(p)) for g, (_, p) in atlas.map.split.items()]:
+        for q in parts:
+            for side in sides:
+                if not (Path(old) / f"{q}_{side}.yaml").is_file():
+                    raise InputError(atlas.map.marks.get(("muscle", key), Mark(atlas.map.path)),
+                                     f"muscle {q}: {old} has no {q}_{side}.yaml",
+                                     "a muscle of the model's library (--muscles), without its side suffix")
+
+
+def build_library(atlas: at.Atlas, skeleton_path: Path, old: Path, sides=("r",), sections: int | None = None,
+                  on_muscle=None, on_phase=None, fit: bool = True) -> tuple[dict, dict]:
+    """What ``axdf atlas`` writes (path relative to its folder -> bytes) and the report:
+    ``registered/NAME.ply`` (each carried atlas muscle), ``landmarks_SIDE.yaml`` (each side's
+    landmark similarity as an ``axdf fit --transform`` file), ``atlas_report.json`` and, with
+    ``fit``, the library ``muscles/`` (one file per model muscle and the credit README.md).
+    ``old``: the model's own muscle folder (paths, and the muscles the atlas lacks).
     ``on_phase(text)`` is told as each phase starts; ``on_muscle(name, entry)`` as each fit ends."""
     from axdf_cli.tools.fit import build_fit
 
     tell = on_phase or (lambda text: None)
-    data_root, skeleton_path, old = Path(data_root), Path(skeleton_path), Path(old)
-    if not data_root.is_dir():
-        raise InputError(Mark(str(data_root)), "atlas folder not found", "the Visible Human Female folder (Left/, Right/)")
+    skeleton_path, old = Path(skeleton_path), Path(old)
+    atlas.check(sides)
+    _check_model(atlas, old, sides)
     skel, rest, bones = rest_state(skeleton_path)
-    report = {"atlas": str(data_root.name), "skeleton": skeleton_path.name, "sides": {}, "fitted": [], "failed": [],
-              "kept": []}
+    report = {"atlas": str(Path(atlas.root).name), "map": Path(atlas.map.path).name, "skeleton": skeleton_path.name,
+              "sides": {}, "fitted": [], "failed": [], "kept": []}
     files: dict[str, bytes] = {}
-    with tempfile.TemporaryDirectory(prefix="axdf-atlas-") as tmp:
-        carried, report["sides"] = registered_meshes(data_root, skel, rest, bones, old, sides, tell)
-        meshes = []
-        for name, pv, pf in carried:
-            out = Path(tmp) / f"{name}.ply"
-            write_ply(out, pv, pf)
-            meshes.append(out)
-        tell(f"fitting {len(meshes)} muscles")
-        res = build_fit(meshes, skeleton_path, "m", sections, on_muscle=on_muscle, paths=old)
-    failed = {m["muscle"] for m in res.report["muscles"] if not fit_holds(m)}
-    for rel, data in res.files.items():
-        if rel.startswith("muscles/") and Path(rel).stem not in failed:
-            files[rel[len("muscles/"):]] = data
-    report["fitted"] = [m for m in res.report["muscles"] if m["muscle"] not in failed]
-    report["failed"] = [m for m in res.report["muscles"] if m["muscle"] in failed]
-    for p in sorted(old.glob("*.yaml")):
-        if p.name not in files:
-            files[p.name] = p.read_bytes()
-            report["kept"].append(p.stem)
+    regs: dict = {}
+    carried, report["sides"] = registered_meshes(atlas, skel, rest, bones, old, sides, tell, regs)
+    for side, reg in regs.items():
+        files[f"landmarks_{side}.yaml"] = transform_file(atlas, reg, skel, skeleton_path).encode()
+    for name, pv, pf in carried:
+        files[f"{REGISTERED}/{name}.ply"] = ply_bytes(pv, pf)
+    if fit:
+        with tempfile.TemporaryDirectory(prefix="axdf-atlas-") as tmp:
+            meshes = []
+            for name, _, _ in carried:
+                out = Path(tmp) / f"{name}.ply"
+                out.write_bytes(files[f"{REGISTERED}/{name}.ply"])
+                meshes.append(out)
+            tell(f"fitting {len(meshes)} muscles")
+            res = build_fit(meshes, skeleton_path, "m", sections, on_muscle=on_muscle, paths=old)
+        failed = {m["muscle"] for m in res.report["muscles"] if not fit_holds(m)}
+        for rel, data in res.files.items():
+            if rel.startswith(f"{LIBRARY}/") and Path(rel).stem not in failed:
+                files[rel] = data
+        report["fitted"] = [m for m in res.report["muscles"] if m["muscle"] not in failed]
+        report["failed"] = [m for m in res.report["muscles"] if m["muscle"] in failed]
+        for p in sorted(old.glob("*.yaml")):
+            if f"{LIBRARY}/{p.name}" not in files:
+                files[f"{LIBRARY}/{p.name}"] = p.read_bytes()
+                report["kept"].append(p.stem)
+        files[f"{LIBRARY}/README.md"] = library_readme(atlas, skel, old, sides, report).encode()
     files[REPORT] = (json.dumps(report, indent=1, sort_keys=True, default=float) + "\n").encode()
     return files, report
+
+
+def library_readme(atlas: at.Atlas, skel, old: Path, sides, report: dict) -> str:
+    """The library's README: how it was made and the atlas' credit (the map's ``credit:``)."""
+    credit = atlas.map.credit.strip() or "The atlas map gives no credit: name the atlas' source and licence here."
+    return (f"# {skel.name} muscles fitted to the atlas {Path(atlas.root).name}\n\n"
+            f"Made by `axdf atlas` (docs/ATLAS.md) with the map {Path(atlas.map.path).name}: the atlas' muscles of "
+            f"side{'s' if len(sides) > 1 else ''} {', '.join(sides)} registered onto {skel.name}'s skeleton at rest "
+            f"(landmarks, then a thin-plate warp onto the model's bones) and fitted as axis muscles under "
+            f"{skel.name}'s names. {len(report['fitted'])} are fitted; the rest ({len(report['kept'])}: the sides not "
+            f"registered, what the atlas lacks and the fits that did not hold) are copied from {old.name}. "
+            "atlas_report.json holds the registration's residuals and each fit's error.\n\n"
+            f"## Credit\n\n{credit}\n")

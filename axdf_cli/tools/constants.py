@@ -187,7 +187,7 @@ FIT_MEASURE_SAMPLES = 20000
 # along one axis (a ring, a branching or C-shaped muscle; docs/FIT.md).
 FIT_WARN_IOU = 0.75
 
-# --- the atlas registered onto a skeleton (axdf_cli/tools/atlas.py; docs/FIT.md "Atlas onto a skeleton")
+# --- the atlas registered onto a skeleton (axdf_cli/tools/atlas.py; docs/ATLAS.md)
 # samples per atlas bone for the warp's closest points: enough to follow a tibia's crest, few
 # enough that a thin-plate spline round solves in seconds
 ATLAS_BONE_SAMPLES = 400

@@ -240,9 +240,10 @@ def _read_all(mesh_paths, scale, transform, skel, rest, geometry, paths, policy,
                 raise InputError(Mark(str(p)), f"the mesh lies {gap:.3f} m from the nearest bone of {skel.name} at "
                                  f"rest ({skel.bones[bone].name}), {how}: it is not in the skeleton's rest frame",
                                  f"a muscle within {tol.FIT_MAX_BONE_GAP:g} m of a bone: register the meshes onto the "
-                                 "skeleton first (--transform FILE, a 4x4 matrix into the rest frame; for the Visible "
-                                 "Human atlas `python scripts/atlas_library.py --transform FILE`; docs/FIT.md, "
-                                 f"\"Meshes in another frame\") or check --units (now {units})")
+                                 "skeleton first (an atlas: `axdf atlas ATLAS_DIR --onto SKELETON --map MAP "
+                                 "--muscles DIR --out DIR --register-only`, then fit DIR/registered/*.ply; docs/ATLAS.md), "
+                                 "or carry them with --transform FILE (a 4x4 matrix into the rest frame; docs/FIT.md, "
+                                 f"\"Meshes in another frame\"), or check --units (now {units})")
             if paths is not None:
                 allowed[name] = model_bones(paths, name, skel, rest, policy)
             meshes.append((p, name, got))

@@ -5,7 +5,8 @@ a new model is a new entry, not a change of code.
 
 - :func:`rig`: MakeHuman's rig as ``axdf skin`` uses it (data/makehuman/bone_map.yaml);
 - :func:`families`: the skeleton families the body is fitted to (data/skeleton_families.yaml);
-- :func:`atlas_map`: the Visible Human atlas onto gait2392 (data/atlas_gait2392.yaml).
+- :func:`load_atlas_map`: an atlas onto a model, for ``axdf atlas --map`` (atlases/gait2392.yaml:
+  the Visible Human Female's legs onto gait2392).
 """
 from __future__ import annotations
 
@@ -19,7 +20,6 @@ from axdf_cli.fileio.yamlio import Fields, check_name, did_you_mean, item_marks,
 DATA = Path(__file__).resolve().parent.parent / "data"
 RIG_FILE = DATA / "makehuman" / "bone_map.yaml"
 FAMILIES_FILE = DATA / "skeleton_families.yaml"
-ATLAS_MAP_FILE = DATA / "atlas_gait2392.yaml"
 
 #: The sides a ``{s}`` entry is made for, in order: (s, S, side).
 SIDES = (("l", "L", "Left"), ("r", "R", "Right"))
@@ -209,34 +209,62 @@ def families() -> tuple:
 
 # ----------------------------------------------------------------------------- the atlas map
 
+#: The placeholders of an atlas map's ``files:`` pattern.
+FILE_FIELDS = ("folder", "kind", "name")
+
 
 @dataclass(frozen=True)
 class AtlasMap:
-    """The Visible Human atlas onto gait2392 (the file's own doc). Model names lack the side
-    suffix (``_r``, ``_l`` is added per leg)."""
+    """An atlas onto a model (the map file's own doc; atlases/gait2392.yaml). Model names lack
+    the side suffix (``_r``, ``_l`` is added per side)."""
 
-    muscles: dict  # model muscle -> atlas muscles, the first that exists on the leg
+    muscles: dict  # model muscle -> atlas muscles, the first that exists on the side
     split: dict  # model group -> (atlas muscles, the group's model muscles in order)
     kept: tuple  # model muscles the atlas lacks
     unused: tuple  # atlas muscles the model has none for
-    sides: dict  # side suffix -> the atlas' folder of that leg
-    landmarks: dict  # landmark -> (atlas cartilage, of the other leg?, model bone)
+    sides: dict  # side suffix -> the atlas' folder of that side
+    landmarks: dict  # landmark -> (atlas cartilage, of the other side?, model bone)
     bones: tuple  # (atlas bones, model bone, correspondences both ways?)
+    files: str = "{folder}/{name}.ply"  # an atlas file's path in its folder ({folder}, {kind}, {name})
+    credit: str = ""  # the atlas' credit and licence, written with what is derived from it
+    path: str = ""  # the map file
+    marks: dict = field(default_factory=dict, compare=False)  # ("landmark", k) | ("bone", i) | key -> Mark
 
 
-def load_atlas_map(path: Path | str = ATLAS_MAP_FILE) -> AtlasMap:
+def load_atlas_map(path: Path | str) -> AtlasMap:
+    """An atlas map read and checked (FILE:LINE:COL errors)."""
     path = str(path)
+    if not Path(path).is_file():
+        raise InputError(Mark(path), "atlas map not found", "a YAML atlas map (atlases/gait2392.yaml shows one)")
     f = Fields(load_yaml(path), Mark(path), "the atlas map",
-               keys=("muscles", "split", "kept", "unused", "sides", "landmarks", "bones"))
-    muscles = {check_name(k, km, "muscle"): _names(v, vm, f"muscle {k}'s atlas names")
-               for k, v, km, vm in _entries(f, "muscles")}
+               keys=("files", "credit", "muscles", "split", "kept", "unused", "sides", "landmarks", "bones"))
+    marks: dict = {"files": f.vmark("files"), "sides": f.vmark("sides")}
+    files = f.string("files", required=True)
+    import string
+
+    try:
+        used = {fld for _, fld, _, _ in string.Formatter().parse(files) if fld is not None}
+    except ValueError as e:
+        raise InputError(f.vmark("files"), f"files: {e}", "a pattern with {folder}, {kind} and {name}") from None
+    if not used <= set(FILE_FIELDS) or "name" not in used or Path(files).is_absolute() or ".." in Path(files).parts:
+        raise InputError(f.vmark("files"), f"files: {files!r} is not an atlas file pattern",
+                         "a relative path with {name} and, as needed, {folder} (the side's folder) and {kind} "
+                         "(Muscle, Bone, Cartilage), e.g. \"{folder}/VHF_{folder}_{kind}_{name}_smooth.ply\"")
+    credit = f.string("credit", default="")
+    muscles = {}
+    for k, v, km, vm in _entries(f, "muscles"):
+        muscles[check_name(k, km, "muscle")] = _names(v, vm, f"muscle {k}'s atlas names")
+        marks[("muscle", k)] = vm
     split = {}
     for k, v, km, vm in _entries(f, "split"):
+        marks[("muscle", k)] = vm
         s = Fields(v, vm, f"split {k}", keys=("atlas", "parts"))
         split[check_name(k, km, "group")] = (_names(s.raw("atlas", required=True), s.vmark("atlas"), "atlas"),
                                              _names(s.raw("parts", required=True), s.vmark("parts"), "parts"))
-    sides = {_known(k, km, ("r", "l"), "side"): check_name(v, vm, f"side {k}'s folder")
-             for k, v, km, vm in _entries(f, "sides")}
+    sides = {}
+    for k, v, km, vm in _entries(f, "sides"):
+        sides[_known(k, km, ("r", "l"), "side")] = check_name(v, vm, f"side {k}'s folder")
+        marks[("side", k)] = vm
     if set(sides) != {"r", "l"}:
         raise InputError(f.vmark("sides"), "sides has no " + " ".join(s for s in ("r", "l") if s not in sides),
                          "sides: {r: FOLDER, l: FOLDER}")
@@ -246,21 +274,17 @@ def load_atlas_map(path: Path | str = ATLAS_MAP_FILE) -> AtlasMap:
         landmarks[check_name(k, km, "landmark")] = (lm.name("cartilage", required=True),
                                                     lm.choice("leg", ("same", "other"), required=True) == "other",
                                                     lm.name("bone", required=True))
+        marks[("landmark", k)] = vm
     if len(landmarks) < 3:
         raise InputError(f.vmark("landmarks"), f"landmarks has {len(landmarks)} entries",
                          "three landmarks or more (a similarity in 3D)")
     seq = f.seq("bones", required=True, min_len=1)
     bones = []
-    for item, m in zip(seq, item_marks(seq, f.vmark("bones"))):
+    for i, (item, m) in enumerate(zip(seq, item_marks(seq, f.vmark("bones")))):
         b = Fields(item, m, "a bone pair", keys=("atlas", "bone", "both"))
         bones.append((_names(b.raw("atlas", required=True), b.vmark("atlas"), "atlas"),
                       b.name("bone", required=True), b.boolean("both", required=True)))
+        marks[("bone", i)] = m
     kept = _names(f.raw("kept", required=True), f.vmark("kept"), "kept")
     unused = _names(f.raw("unused", required=True), f.vmark("unused"), "unused")
-    return AtlasMap(muscles, split, kept, unused, sides, landmarks, tuple(bones))
-
-
-@lru_cache(maxsize=None)
-def atlas_map() -> AtlasMap:
-    """The packaged atlas map (read once)."""
-    return load_atlas_map(ATLAS_MAP_FILE)
+    return AtlasMap(muscles, split, kept, unused, sides, landmarks, tuple(bones), files, credit, path, marks)
