@@ -344,6 +344,18 @@ SKIN_MAX_HEIGHT = 0.035
 # Above SKIN_SOFT_HEIGHT a candidate's push fades linearly to nothing at SKIN_MAX_HEIGHT: a point
 # rising through the limit would otherwise drop a push of ~35 mm between two frames (a pop).
 SKIN_SOFT_HEIGHT = 0.03
+# A skin grown outward over muscle and bone points that lie outside it (axdf skin --push, and the
+# skin stage for a skin worn over muscles it was not fitted to; axdf_cli/geometry/grow.py): rounds
+# at most, the clearance each point is given (metres: the skin ends at least this far outside it),
+# and passes of neighbour averaging that spread each push over the skin around it (no spikes).
+SKIN_PUSH_ROUNDS = 8
+SKIN_PUSH_CLEARANCE = 0.002
+SKIN_PUSH_SMOOTHING = 4
+# A skin worn over muscles it was not fitted to: more than this share of the muscle vertices (or
+# of the worn bones' points) outside it at rest is said on stderr, with the command that refits
+# it (the bounds a fitted skin holds: docs/SKIN.md).
+SKIN_FOREIGN_MUSCLE_SHARE = 0.005
+SKIN_FOREIGN_BONE_SHARE = 0.001
 # A point pushes a skin vertex in full while it lies within SKIN_SPREAD_IN times the vertex's
 # longest edge of it across the vertex's normal (the triangles around the vertex), less and
 # less out to SKIN_SPREAD_OUT times that (a smoothstep), and not at all beyond: a point sliding

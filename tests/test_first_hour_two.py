@@ -122,7 +122,8 @@ def test_a_dry_run_says_the_size_a_build_makes(tmp_path, capsys):
     assert rc == 0, err
     m = re.search(r"would make 3 of 3 sequences \((\d+) frames x 2 view\(s\) = (\d+) samples\)", out)
     assert m and int(m.group(1)) == 2 + 4 and int(m.group(2)) == 12, out
-    size = re.search(r"size: about ([0-9.]+) (kB|MB) and (\d+) (s|min) with --jobs 1; estimated from 4 samples", out)
+    size = re.search(r"size: about ([0-9.]+) (kB|MB) and (\d+) (s|min) with --jobs 1; estimated from sequences made now: "
+                     r"[0-9.]+ s a sequence and [0-9.]+ s and [0-9.]+ (?:kB|MB|B) a sample", out)
     assert size, out
     assert not (tmp_path / "ds").exists()
     rc, out, err = run_main([*argv, "--quiet"], capsys)

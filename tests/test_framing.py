@@ -72,18 +72,24 @@ def _walker(tmp_path, last: int, travel: float):
     return load_pose(tmp_path / "p.yaml")
 
 
-def test_the_shipped_walk_keeps_every_keypoint_in_view_and_the_body_large(repo_root):
+@pytest.mark.parametrize("job", [WALK_JOB, REPO_ROOT / "poses" / "jobs" / "myobody_cmu_walk.yaml"],
+                         ids=["gait2392", "myobody"])
+def test_the_shipped_walk_keeps_every_keypoint_in_view_and_the_body_large(job):
     """Every keypoint (joints, head top, toe tips) of every frame of the retargeted CMU walk
-    projects inside the image of its default camera, and the body spans at least 40% of the
-    image height at every frame."""
+    (gait2392's and myobody's) projects inside the image of its default camera, the body spans
+    at least 40% of the image height at every frame, and the followed root (the pelvis) stays in
+    the middle across: within 2% of the width of the centre (the framing's hull is made
+    symmetric about it; before, it sat 6% right on average, the body in the right half)."""
     from axdf_cli.model.keypoints import skeleton_keypoints
     from axdf_cli.model.pose import sample_coordinates
     from axdf_cli.model.skeleton import forward_kinematics
     from axdf_cli.pipeline.plan import plan_run
+    from axdf_cli.render import framing
     from axdf_cli.specs import load_job
 
-    plan = plan_run(load_job(WALK_JOB), frames_arg="0:248")
+    plan = plan_run(load_job(job), frames_arg="0:248")
     cam = _camera_json(plan)
+    root = framing.moving_root(plan.pose.skeleton)
     W, H = cam["width"], cam["height"]
     skel = plan.pose.skeleton
     keypoints = skeleton_keypoints(skel, {i: v for i, (v, _, _) in plan.bone_meshes.items()})
@@ -95,6 +101,8 @@ def test_the_shipped_walk_keeps_every_keypoint_in_view_and_the_body_large(repo_r
         uv = _project(rec["cameras"][0], joints[fi])
         assert (uv >= 0).all() and (uv[:, 0] <= W).all() and (uv[:, 1] <= H).all(), (rec["frame"], uv)
         spans.append(np.ptp(uv[:, 1]) / H)
+        across = _project(rec["cameras"][0], world[fi, root:root + 1, :3, 3])[0, 0] / W - 0.5
+        assert abs(across) <= 0.02, (rec["frame"], across)
     assert min(spans) >= 0.4, min(spans)
 
 

@@ -190,7 +190,7 @@ def test_a_tool_constant_leaves_a_run_s_resume_alone(proj, capsys, monkeypatch):
 
     out = proj / "o"
     assert run_main(run_args(proj, out), capsys)[0] == 0
-    for name in ("FIT_SAMPLES", "ATLAS_WARP_ROUNDS", "SKIN_PUSH_ROUNDS", "RETARGET_RMS_SHARE", "PACK_POSE_FRAMES"):
+    for name in ("FIT_SAMPLES", "ATLAS_WARP_ROUNDS", "SKIN_FAT_SMOOTHING", "RETARGET_RMS_SHARE", "PACK_POSE_FRAMES"):
         monkeypatch.setattr(constants, name, getattr(constants, name) * 2)
         assert not hasattr(tolerances, name), name
     rc, _, err = run_main(run_args(proj, out, "--resume"), capsys)

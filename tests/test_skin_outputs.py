@@ -67,7 +67,11 @@ def test_npz_holds_the_skin(whole):
 
 
 def test_pc2_holds_the_skin_with_its_rest_mesh(whole):
+    """pc2/skin.ply is the rest mesh as the run wears it: the file's, grown over the few worn
+    bone points that lay outside it at rest (skin_stage.worn_rest)."""
     from axdf_cli.formats.pc2 import read_pc2
+    from axdf_cli.pipeline.plan import plan_run
+    from axdf_cli.pipeline.skin_stage import SkinStage
     from axdf_cli.specs.skin import load_skin
 
     seq = read_pc2(whole / "pc2/skin.pc2")
@@ -75,7 +79,12 @@ def test_pc2_holds_the_skin_with_its_rest_mesh(whole):
     (v, _, faces), _ = load_triangles_and_bytes(whole / "pc2/skin.ply")
     rest = load_skin(SKIN)
     assert np.array_equal(faces, rest.faces)
-    np.testing.assert_allclose(v, rest.vertices, atol=1e-6)
+    plan = plan_run(None, muscle_args=[str(PACKED / f"{m}.yaml") for m in KNEE], pose_arg=str(POSE),
+                    skin_arg=str(SKIN), frames_arg="20")
+    worn = next(s for s in plan.stages if isinstance(s, SkinStage)).worn(plan)
+    np.testing.assert_allclose(v, worn.vertices, atol=1e-6)
+    moved = np.linalg.norm(worn.vertices - rest.vertices, axis=1)
+    assert worn.grown > 0 and moved.max() < 0.01 and (moved > 1e-6).mean() < 0.1  # a few mm, a few patches
 
 
 def test_usd_stage_references_the_skin(whole):

@@ -246,7 +246,8 @@ def test_bone_points_through_the_skin_are_counted(skin):
     rest a few (under 0.5%: the test reads some points under concave patches and at the volume
     step's pull as above); with the candidate bone points of one bone moved 10 cm out along
     their nearest skin vertex's normal (past SKIN_MAX_HEIGHT, so they push nothing) those are
-    counted too, and the muscles' share does not move."""
+    counted too (90% or more: the normal test reads a point above a concave patch of the worn
+    rest skin by a neighbouring vertex's normal), and the muscles' share does not move."""
     from axdf_cli.model import skin as kernels
     from axdf_cli.model.skeleton import forward_kinematics
     from axdf_cli.pipeline.plan import plan_run
@@ -272,5 +273,42 @@ def test_bone_points_through_the_skin_are_counted(skin):
     kernels.normals_volume(model.rest, model.faces, normals)
     moved[sel] += 0.10 * normals[model.candidates[sel, 0]]
     st2 = skin_frame(model, world, np.ascontiguousarray(moved))[2]
-    assert 0.95 * len(sel) <= st2[col] - st[col] <= len(sel) and len(sel) > 100
+    assert 0.9 * len(sel) <= st2[col] - st[col] <= len(sel) and len(sel) > 100
     assert st2[SKIN_COLUMNS.index("outside")] == st[SKIN_COLUMNS.index("outside")]
+
+
+def test_a_skin_fitted_over_no_muscles_is_grown_over_them_and_the_run_says_so(tmp_path, capsys):
+    """MakeHuman's body fitted by ``axdf skin`` without ``--muscles`` (never pushed over any),
+    worn over the knee's packed muscles: at rest 18% of their vertices and 14% of the worn
+    bones' points lie outside it. The run warns once on stderr, with both shares and the
+    ``axdf skin ... --push`` command that fits it over these muscles; it grows the rest skin over
+    them before the first frame, so no muscle vertex is outside at any frame (skin.csv), the
+    grown rest mesh holds every muscle rest vertex by winding number, and the shipped skin
+    (fitted over these muscles) gives no warning."""
+    from axdf_cli.geometry.winding import inside
+    from axdf_cli.pipeline.plan import plan_run
+    from axdf_cli.pipeline.skin_stage import SkinStage
+
+    bare = tmp_path / "bare"
+    rc, _, err = run_main(["skin", "--skeleton", REPO_ROOT / "poses" / "skeletons" / "gait2392.yaml",
+                           "--out", bare, "--quiet"], capsys)
+    assert rc == 0, err
+    out = tmp_path / "run"
+    rc, _, err = run_main(run(out, bare / "skin.yaml", frames="20:21"), capsys)
+    assert rc == 0, err
+    warned = [line for line in err.splitlines() if "lie outside it at rest" in line]
+    assert len(warned) == 1, err
+    shares = [float(s.rstrip("%")) for s in warned[0].split() if s.endswith("%")]
+    assert shares[0] > 5.0 and shares[1] > 1.0, warned
+    assert f"axdf skin --skeleton {REPO_ROOT / 'poses' / 'skeletons' / 'gait2392.yaml'} --muscles {PACKED} --push" \
+        in warned[0]
+    rows = (out / "skin.csv").read_text().splitlines()
+    col = rows[0].split(",").index("outside")
+    assert [float(r.split(",")[col]) for r in rows[1:]] == [0.0, 0.0]
+    plan = plan_run(None, muscle_args=muscles(), pose_arg=str(POSE), skin_arg=str(bare / "skin.yaml"), frames_arg="20")
+    worn = next(s for s in plan.stages if isinstance(s, SkinStage)).worn(plan)
+    rest = np.concatenate([m.rest_vertices.astype(np.float64) for m in plan.models])
+    assert inside(worn.vertices, np.ascontiguousarray(plan.layers[0].faces, np.int64), rest).all()
+    assert worn.grown > 0 and abs(worn.muscle_outside - shares[0] / 100) < 1e-3
+    rc, _, err = run_main(run(tmp_path / "fitted", REPO_ROOT / "skins" / "gait2392" / "skin.yaml", frames="20"), capsys)
+    assert rc == 0 and "lie outside it at rest" not in err, err

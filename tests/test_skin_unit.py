@@ -12,7 +12,7 @@ from axdf_cli.errors import InputError, Mark
 from axdf_cli.specs import load_skeleton
 from axdf_cli.tools import skin as sk
 from axdf_cli.geometry.winding import inside
-from axdf_cli.tools.skin_muscles import grow_over
+from axdf_cli.geometry.grow import grow_over
 from conftest import REPO_ROOT
 
 SKELETONS = REPO_ROOT / "poses" / "skeletons"

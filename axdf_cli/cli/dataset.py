@@ -140,8 +140,8 @@ def bulk_warning(res, ctx) -> str | None:
 def _dry_run(args, shard, policy) -> int:
     """Check every input and what OUT holds; print what would be made (counted, not listed:
     bounded memory and time for any number of sequences) and its size: samples, frames, bytes
-    and time, both estimated from one small sequence made and timed in a temporary folder
-    (removed after). Motion-capture takes are read, not fitted (the build fits them: a minute
+    and time, both estimated from small sequences made and timed in a temporary folder
+    (removed after; :func:`~axdf_cli.dataset.engine.probe`). Motion-capture takes are read, not fitted (the build fits them: a minute
     or more a take), so their fit's warnings come with the build. Writes nothing in OUT."""
     from axdf_cli.dataset.engine import probe
     from axdf_cli.dataset.folder import check_dry
@@ -169,12 +169,12 @@ def _dry_run(args, shard, policy) -> int:
               "axdf retarget shows them alone)")
     p = probe(ctx, args.dataset)
     jobs = max(1, args.jobs)
-    seconds = samples * p.per_sample / min(jobs, max(1, n_mine))
+    seconds = (n_mine * p.per_sequence + samples * p.per_sample) / min(jobs, max(1, n_mine))
     print(f"size: about {_bytes(samples * p.bytes_per_sample)} and {_duration(seconds)} with --jobs {jobs}"
           + (f" (plus fitting {len(takes)} take(s))" if takes else "")
-          + f"; estimated from {p.samples} samples made now: {p.per_sample:.2f} s and "
-          f"{_bytes(p.bytes_per_sample)} per sample (run {p.timing['run'] / max(1, p.samples):.2f} s, "
-          f"render {p.timing['render'] / max(1, p.samples):.2f} s a sample)")
+          + f"; estimated from sequences made now: {p.per_sequence:.2f} s a sequence and {p.per_sample:.2f} s and "
+          f"{_bytes(p.bytes_per_sample)} a sample (run {p.timing['run'] / max(1, p.samples):.2f} s, "
+          f"render {p.timing['render'] / max(1, p.samples):.2f} s a sample at {p.samples} samples)")
     return 0
 
 

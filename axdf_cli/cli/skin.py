@@ -62,7 +62,8 @@ def run(args) -> int:
     if args.muscles:
         from axdf_cli.geometry.bones import rest_bone_meshes
         from axdf_cli.geometry.winding import inside
-        from axdf_cli.tools.skin_muscles import bone_points, clear_bones, grow_over, rest_muscle_vertices
+        from axdf_cli.geometry.grow import grow_over
+        from axdf_cli.tools.skin_muscles import bone_points, clear_bones, rest_muscle_vertices
 
         def outside(v, p):  # how many of points p lie outside the skin (vertices v)
             return int((~inside(v, fit.faces, p)).sum())

@@ -396,43 +396,51 @@ def merge(out: Path | str) -> tuple[Path, int]:
 
 
 # ----------------------------------------------------------------------------- a dry run's estimate
-#: frames of the one sampled sequence a dry run makes and times (its samples: frames x views)
-PROBE_FRAMES = 2
+#: frames of the sampled sequences a dry run makes and times, in order: the first warms the
+#: process (imports, the GL context, the kernels: what a worker pays once), the other two give
+#: a sequence's own cost and each sample's (their difference)
+PROBE_FRAMES = (1, 2, 6)
 
 
 @dataclass
 class Probe:
-    """What one small sequence of a data set cost to make (``axdf dataset build --dry-run``)."""
+    """What small sequences of a data set cost to make (``axdf dataset build --dry-run``)."""
 
-    samples: int  # samples made (PROBE_FRAMES x views)
-    seconds: float  # wall time of the whole probe build (process set-up, GL context included)
-    per_sample: float  # seconds per sample, summed over its phases (run, read, render, write)
+    samples: int  # samples made by the longest probe (frames x views)
+    seconds: float  # wall time of the probes' builds (process set-up, GL context included)
+    per_sample: float  # seconds per sample beyond a sequence's own (phases run, read, render, write)
+    per_sequence: float  # seconds a sequence costs whatever its length (its set-up, its first frame's)
     bytes_per_sample: float  # bytes written per sample (meshes, images, labels, the sequence's files)
-    timing: dict  # the phases' seconds (Outcome.timing)
+    timing: dict  # the longest probe's phases' seconds (Outcome.timing)
 
 
 def probe(ctx: wk.Context, path) -> Probe:
-    """Make and time one sampled sequence of PROBE_FRAMES frames (a uniform pose sample, the
-    data set's muscles, stages, views, render size and passes) in a temporary folder that is
-    removed after: what each sample of the data set costs on this machine (the inputs' own
-    motions are not made: a take's fit is not measured)."""
+    """Make and time sampled sequences of PROBE_FRAMES frames (a uniform pose sample, the data
+    set's muscles, stages, views, render size and passes) in a temporary folder that is removed
+    after: what each sequence and each sample of the data set cost on this machine, fitted as
+    ``a + b samples`` to the last two (the inputs' own motions are not made: a take's fit is not
+    measured)."""
     import tempfile
 
     from axdf_cli.dataset.spec import Entry, expand_sequences
 
-    spec = replace(ctx.spec, entries=(Entry("uniform", 1, None, PROBE_FRAMES, None, {}),), shards=1)
-    small = replace(ctx, spec=spec, sequences=expand_sequences(spec))
-    small.dataset_json = (json.dumps(wk.dataset_dict(small), indent=1) + "\n").encode()
-    small.digest = hashlib.sha256(small.dataset_json).hexdigest()
     tmp = Path(tempfile.mkdtemp(prefix="axdf-dry-run-"))
+    made, wall = [], 0.0
     try:
-        t0 = time.perf_counter()
-        res = build(path, tmp / "probe", ctx=small, policy=ctx.spec.policy)
-        wall = time.perf_counter() - t0
-        seq = tmp / "probe" / small.sequences[0].name
-        size = sum(f.stat().st_size for f in seq.rglob("*") if f.is_file())
+        for k, frames in enumerate(PROBE_FRAMES):
+            spec = replace(ctx.spec, entries=(Entry("uniform", 1, None, frames, None, {}),), shards=1)
+            small = replace(ctx, spec=spec, sequences=expand_sequences(spec))
+            small.dataset_json = (json.dumps(wk.dataset_dict(small), indent=1) + "\n").encode()
+            small.digest = hashlib.sha256(small.dataset_json).hexdigest()
+            t0 = time.perf_counter()
+            res = build(path, tmp / f"probe{k}", ctx=small, policy=ctx.spec.policy)
+            wall += time.perf_counter() - t0
+            seq = tmp / f"probe{k}" / small.sequences[0].name
+            size = sum(f.stat().st_size for f in seq.rglob("*") if f.is_file())
+            cost = sum(v for key, v in res.timing.items() if key in ("run", "read", "render", "write"))
+            made.append((max(1, res.built_samples), cost, size, dict(res.timing)))
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-    n = max(1, res.built_samples)
-    per = sum(v for k, v in res.timing.items() if k in ("run", "read", "render", "write")) / n
-    return Probe(res.built_samples, wall, per, size / n, dict(res.timing))
+    (na, ta, _, _), (nb, tb, size, timing) = made[-2], made[-1]
+    per = (tb - ta) / (nb - na) if nb > na and tb > ta else tb / nb
+    return Probe(nb, wall, per, max(ta - per * na, 0.0), size / nb, timing)

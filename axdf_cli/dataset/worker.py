@@ -95,7 +95,7 @@ def build_context(path: Path | str, seed: int | None = None, policy=None, listed
         srcs += list(skin.files)
         face_part = face_parts(skin.faces, skin.weights)
     stages = build_stages(dict(spec.stages), muscles=muscles, skin=skin)
-    layers = tuple(p for s in stages for p in s.parts(_Models(muscles, models)))
+    layers = tuple(p for s in stages for p in s.parts(_Models(muscles, models, _Rest(skel), bone_meshes)))
     inputs = {display_path(Path(s)): atomic.sha256_file(s) for s in srcs}
     motion_inputs = {m.name: {display_path(Path(p)): atomic.sha256_file(p) for p in (m.path, m.map) if p}
                      for m in spec.motions.values()}
@@ -118,10 +118,20 @@ def build_context(path: Path | str, seed: int | None = None, policy=None, listed
 
 @dataclass(frozen=True)
 class _Models:
-    """What a stage's ``parts`` reads of a run (its muscles and models), for the data set's scene."""
+    """What a stage's ``parts`` reads of a run (its muscles, models, skeleton and bone meshes),
+    for the data set's scene."""
 
     muscles: list
     models: list
+    pose: object  # .skeleton, as a run's pose has it
+    contact_meshes: dict  # {bone index: (vertices, faces, bytes)}, as a run's
+
+
+@dataclass(frozen=True)
+class _Rest:
+    """The skeleton a stage reads as ``plan.pose.skeleton``."""
+
+    skeleton: object
 
 
 def sequence_plates(ctx: Context, subject: np.ndarray):

@@ -203,6 +203,7 @@ def plan_run(job: Job | None, *, muscle_args=None, pose_arg=None, out_arg=None, 
         if part.name in named:
             raise InputError(Mark(str(named[part.name].source)), f"a muscle is named {part.name!r}, as the "
                              f"{part.kind.value} part a stage adds", "rename the muscle")
+    plan.warnings.extend(w for st in built for w in st.warnings(plan))
     return plan
 
 

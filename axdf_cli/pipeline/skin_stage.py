@@ -1,7 +1,13 @@
 """The skin stage (scope FRAME, after contact): the run's skin (``axdf run --skin``, a job's
 ``skin:``; :mod:`axdf_cli.specs.skin`) worn over the muscles and bones, frame by frame.
 
-Each frame, in order:
+Before the first frame, the skin's rest mesh is checked against the run's muscles and worn
+bones by winding number (:func:`worn_rest`): what lies outside it (a skin worn over muscles it
+was not fitted to, or a fit that left a few vertices out) is grown over once, as ``axdf skin
+--push`` grows a fitted body (:func:`~axdf_cli.geometry.grow.grow_over`), so every point starts
+inside; more than ``tol.SKIN_FOREIGN_MUSCLE_SHARE`` of the muscle vertices (or
+``tol.SKIN_FOREIGN_BONE_SHARE`` of the bone points) outside is a run warning naming the
+command that refits the skin (:meth:`SkinStage.warnings`). Each frame, in order:
 
 1. **skinning**: linear blend of the skin's rest mesh by its bones' world transforms relative
    to rest (the bones :func:`~axdf_cli.model.skeleton.forward_kinematics` gives the chunk);
@@ -42,6 +48,8 @@ import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
 from axdf_cli import tolerances as tol
+from axdf_cli.geometry.grow import grow_over
+from axdf_cli.geometry.winding import inside
 from axdf_cli.model import skin as kernels
 from axdf_cli.model.skeleton import forward_kinematics
 from axdf_cli.parts import COLORS, Kind, Part, PartFrames, Table
@@ -99,14 +107,58 @@ def ring(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     return adj.indptr.astype(np.int64), adj.indices.astype(np.int64)
 
 
-def build(skin, plan) -> SkinModel:
+@dataclass(frozen=True)
+class WornRest:
+    """The skin's rest mesh as the run wears it (:func:`worn_rest`)."""
+
+    vertices: np.ndarray  # (V, 3) the skin file's rest mesh, grown over what lay outside it
+    muscle_outside: float  # the share of the muscles' rest vertices outside the file's mesh (winding number)
+    bone_outside: float  # the share of the worn bones' points (vertices, triangle centroids) outside it
+    grown: int  # how many points were grown over
+
+
+def _bone_points(skin, plan, rest_world) -> list:
+    """[(bone index, (N, 3) bone-local points)]: each worn bone's mesh vertices and triangle
+    centroids (a coarse mesh's faces bulge between its vertices); a bone the skin does not wear
+    (gait2392's ground) is left out."""
+    weighed = set(plan.pose.skeleton.bone_index[b] for b in skin.bones)
+    out = []
+    for b, (bv, bf, _) in sorted(plan.contact_meshes.items()):
+        if b in weighed:
+            bv = np.asarray(bv, dtype=np.float64)
+            out.append((int(b), np.concatenate([bv, bv[np.asarray(bf, np.int64)].mean(axis=1)])))
+    return out
+
+
+def worn_rest(skin, plan) -> WornRest:
+    """The skin's rest mesh with every muscle vertex and worn bone point of the run at rest
+    inside it: the points outside it by winding number are grown over
+    (:func:`~axdf_cli.geometry.grow.grow_over`), the rest of the mesh as the file has it."""
+    skel = plan.pose.skeleton
+    rest_world = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
+    muscle = np.concatenate([np.zeros((0, 3))] + [m.rest_vertices.astype(np.float64) for m in plan.models])
+    bone = np.concatenate([np.zeros((0, 3))] + [local @ rest_world[b, :3, :3].T + rest_world[b, :3, 3]
+                                                for b, local in _bone_points(skin, plan, rest_world)])
+    v = np.ascontiguousarray(skin.vertices, dtype=np.float64)
+    faces = np.ascontiguousarray(skin.faces, dtype=np.int64)
+    pts = np.concatenate([muscle, bone])
+    out = ~inside(v, faces, pts) if len(pts) else np.zeros(0, bool)
+    share = (float(out[:len(muscle)].mean()) if len(muscle) else 0.0,
+             float(out[len(muscle):].mean()) if len(bone) else 0.0)
+    if out.any():
+        v = grow_over(v, faces, pts[out])
+    return WornRest(v, share[0], share[1], int(out.sum()))
+
+
+def build(skin, plan, worn: WornRest | None = None) -> SkinModel:
     """The stage's model: the skin's 1-ring, and the candidate points (muscle and bone
-    vertices near the rest skin) with their nearest rest skin vertices and target depths."""
+    vertices near the rest skin as worn, :func:`worn_rest`) with their nearest rest skin
+    vertices and target depths."""
     skel = plan.pose.skeleton
     rest_world = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
     bones = np.array([skel.bone_index[b] for b in skin.bones], dtype=np.int64)
     faces = np.ascontiguousarray(skin.faces, dtype=np.int64)
-    v = np.ascontiguousarray(skin.vertices, dtype=np.float64)
+    v = np.ascontiguousarray((worn or worn_rest(skin, plan)).vertices, dtype=np.float64)
     ptr, idx = ring(faces, len(v))
     normals = np.empty_like(v)
     kernels.normals_volume(v, faces, normals)
@@ -122,13 +174,7 @@ def build(skin, plan) -> SkinModel:
     pts = [muscle[muscle_points]]
     bone_points = []
     n_bone = 0
-    weighed = set(bones.tolist())  # a bone the skin does not wear (gait2392's ground) is left out
-    bone_meshes = plan.contact_meshes
-    for b, (bv, bf, _) in sorted(bone_meshes.items()):
-        if b not in weighed:
-            continue
-        bv = np.asarray(bv, dtype=np.float64)  # its vertices and its triangles' centroids (a coarse
-        local = np.concatenate([bv, bv[np.asarray(bf, np.int64)].mean(axis=1)])  # mesh's faces bulge between them)
+    for b, local in _bone_points(skin, plan, rest_world):
         world = local @ rest_world[b, :3, :3].T + rest_world[b, :3, 3]
         n_bone += len(local)
         keep = np.isfinite(tree.query(world, k=1, distance_upper_bound=reach)[0])
@@ -314,9 +360,31 @@ class SkinStage(StageBase):
             return None
         return cls(inputs.skin, jiggle=inputs.switches.get("jiggle", True))
 
+    def worn(self, plan) -> WornRest:
+        """The rest skin as this run wears it (:func:`worn_rest`; computed once per stage)."""
+        if self._worn is None:
+            self._worn = worn_rest(self.skin, plan)
+        return self._worn
+
+    def warnings(self, plan) -> list[str]:
+        """A skin worn over muscles it was not fitted to: how much lay outside it, and the
+        command that fits it over them."""
+        w = self.worn(plan)
+        if w.muscle_outside <= tol.SKIN_FOREIGN_MUSCLE_SHARE and w.bone_outside <= tol.SKIN_FOREIGN_BONE_SHARE:
+            return []
+        import os
+
+        dirs = sorted({os.path.dirname(str(m.source)) for m in plan.muscles if getattr(m, "source", None)})
+        folder = os.path.commonpath(dirs) if dirs else "MUSCLES_DIR"
+        return [f"skin {self.skin.name}: {100 * w.muscle_outside:.1f}% of the muscle vertices and "
+                f"{100 * w.bone_outside:.2f}% of the worn bones' points lie outside it at rest (it was fitted over "
+                f"other muscles, or none): the run grows it over them before the first frame; to fit it over these: "
+                f"axdf skin --skeleton {plan.pose.skeleton_path} --muscles {folder} --push --out DIR"]
+
     def parts(self, plan) -> tuple:
-        """The skin: one part, of kind skin, its rest normals those of the kernels."""
-        v = np.ascontiguousarray(self.skin.vertices, np.float64)
+        """The skin: one part, of kind skin (its rest mesh as worn), its rest normals those of
+        the kernels."""
+        v = np.ascontiguousarray(self.worn(plan).vertices, np.float64)
         normals = np.zeros_like(v)
         kernels.normals_volume(v, np.ascontiguousarray(self.skin.faces, np.int64), normals)
         return (Part(SKIN_NAME, Kind.SKIN, self.skin.faces, v, normals, COLORS[Kind.SKIN]),)
@@ -324,6 +392,7 @@ class SkinStage(StageBase):
     def __init__(self, skin, jiggle: bool = True):
         self.skin = skin
         self.jiggle = jiggle  # False: the run's --no-jiggle (a job's jiggle: false) stills the skin too
+        self._worn: WornRest | None = None
 
     @property
     def settings(self) -> dict:
@@ -341,7 +410,7 @@ class SkinStage(StageBase):
         return out
 
     def start(self, plan) -> SkinModel:
-        model = build(self.skin, plan)
+        model = build(self.skin, plan, self.worn(plan))
         j = self.skin.jiggle if self.jiggle else None
         if j is not None:
             gain = j.amount * self.skin.fat / max(float(self.skin.fat.max(initial=0.0)), 1e-12)

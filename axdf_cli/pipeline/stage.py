@@ -15,6 +15,8 @@ reads declarations, never probes for them:
   after the first, and the frame its warm-up starts at (default: from the pose's first frame);
 - ``measures``: it leaves the contact measures (stats.csv's inside_muscle, inside_bone,
   depth) in each result's ``contact``;
+- ``warnings(plan)``: what the run says on stderr (and in the manifest) before the first
+  frame (a skin worn over muscles it was not fitted to);
 - ``parts(plan)``: the meshes it adds to every frame (:class:`axdf_cli.parts.Part`; it sets
   ``chunk.parts[name]``); ``tables``: the tables it adds (:class:`axdf_cli.parts.Table`; it
   sets ``chunk.tables[file]``). The sinks write every declared part and table the same way.
@@ -93,6 +95,10 @@ class StageBase:
     def parts(self, plan) -> tuple:
         """The parts this stage adds to every frame (:class:`axdf_cli.parts.Part`), in order."""
         return ()
+
+    def warnings(self, plan) -> list[str]:
+        """What the run warns of before its first frame, because of this stage."""
+        return []
 
     def start(self, plan) -> object:
         raise NotImplementedError

@@ -12,8 +12,10 @@
   camera depends on the pose, never on ``--frames``, and one frame of a very long pose costs
   a bounded amount. When the subject's root travels farther than the subject is tall over
   the sample, the camera **follows** it: the points are taken relative to the root's
-  horizontal position (x, y, 0) at each frame (:func:`follow_offsets`), and the camera keeps
-  its orientation and distance while it moves with the root; else it stays fixed. The
+  horizontal position (x, y, 0) at each frame (:func:`follow_offsets`), made symmetric about
+  it across (so the root, and with it the body, stays in the middle of the picture, whichever
+  way the subject leans or turns), and the camera keeps its orientation and distance while it
+  moves with the root; else it stays fixed. The
   framing is recorded in the run's manifest (:func:`framing_record`) so that rendering the
   run again frames it the same way (:func:`recorded_framing`, :func:`recorded_follow`).
 - **A ground plate** (a mesh on a root without DOFs, such as OpenSim's ``ground``) is drawn
@@ -160,6 +162,8 @@ def run_framing(pose, models, bone_meshes: dict | None = None, bones: bool = Tru
     else:
         group = [g for g in groups if len(keep[g, False])]  # everything drawn
     pts = hull_points(np.concatenate([keep[g, follow] for g in group])) if group else origin
+    if follow:  # the followed root in the middle of the picture: the hull made symmetric about it across
+        pts = hull_points(np.concatenate([pts, pts * [-1.0, -1.0, 1.0]]))  # (a walk's reach ahead and behind)
     foot = np.round(np.stack([whole[:, :2].min(0), whole[:, :2].max(0)]), 6) + 0.0
     return Framing(np.round(_pad(pts), 6) + 0.0, skel.bones[root].name if follow else None, ground_bones(skel), foot)
 

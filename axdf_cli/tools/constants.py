@@ -80,12 +80,9 @@ SKIN_WEIGHT_MIN = 1e-3
 # Passes of neighbour averaging that soften the fat map's steps between regions (each pass
 # spreads a step over about one edge, ~1-2 cm on the body).
 SKIN_FAT_SMOOTHING = 6
-# --push: rounds of moving the rest skin outward over muscle vertices that lie outside it, the
-# clearance they are given (metres: the skin ends at least this far outside the muscle), and
-# passes of neighbour averaging that spread each push over the skin around it (no dents or spikes).
-SKIN_PUSH_ROUNDS = 8
-SKIN_PUSH_CLEARANCE = 0.002
-SKIN_PUSH_SMOOTHING = 4
+# --push grows the rest skin by the rule the run's skin stage also uses (a skin worn over muscles it
+# was not fitted to): its constants are run tolerances, axdf_cli/tolerances.py SKIN_PUSH_*.
+from axdf_cli.tolerances import SKIN_PUSH_CLEARANCE, SKIN_PUSH_ROUNDS, SKIN_PUSH_SMOOTHING  # noqa: E402,F401
 
 # ----------------------------------------------------------------------------- axdf fit, axdf atlas
 # `axdf fit` (axdf_cli/tools/fit.py, fit_sections.py): a closed muscle mesh → an AxDf muscle.

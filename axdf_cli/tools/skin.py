@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from axdf_cli.geometry.grow import neighbour_mean
 from axdf_cli.errors import InputError, Mark, did_you_mean
 from axdf_cli.model.stature import stature
 from axdf_cli.model.skeleton import Skeleton, forward_kinematics
@@ -325,17 +326,6 @@ FAT_MM = {
     "thigh": (7.0, "LT, FT"), "shank": (5.0, "MC"), "foot": (3.0, "assumed"),
 }
 REGIONS = tuple(FAT_MM)
-
-
-def neighbour_mean(faces: np.ndarray, n: int):
-    """The averaging over each vertex and its edge neighbours, as a sparse (n, n) matrix."""
-    from scipy import sparse
-
-    i = np.concatenate([faces[:, 0], faces[:, 1], faces[:, 2], np.arange(n)])
-    j = np.concatenate([faces[:, 1], faces[:, 2], faces[:, 0], np.arange(n)])
-    m = sparse.coo_matrix((np.ones(len(i)), (i, j)), shape=(n, n)).tocsr()
-    m = ((m + m.T) > 0).astype(np.float64)
-    return sparse.diags(1.0 / np.asarray(m.sum(axis=1)).ravel()) @ m
 
 
 def fat_map(body: Body, fit: Fit) -> tuple[np.ndarray, np.ndarray]:

@@ -2,7 +2,7 @@
 rest skin grown outward until they lie inside (``axdf skin --muscles DIR [--push]``).
 
 Inside is the skin's winding number (:mod:`axdf_cli.geometry.winding`: the skin is one closed
-surface). The growth (:func:`grow_over`) moves skin vertices outward along their normals, over
+surface). The growth (:func:`~axdf_cli.geometry.grow.grow_over`) moves skin vertices outward along their normals, over
 the muscle vertices outside, by how far out each one is plus tol.SKIN_PUSH_CLEARANCE, each push
 spread over the skin around it so that the skin bulges instead of spiking.
 """
@@ -14,6 +14,7 @@ import numpy as np
 
 from axdf_cli.tools import constants as tol
 from axdf_cli.errors import InputError, Mark
+from axdf_cli.geometry.grow import neighbour_mean
 from axdf_cli.geometry.winding import inside, inside_of, winding_numbers
 from axdf_cli.model.muscle import MuscleModel
 from axdf_cli.model.skeleton import Skeleton, forward_kinematics
@@ -59,8 +60,6 @@ def clear_bones(vertices: np.ndarray, faces: np.ndarray, meshes: list) -> tuple[
     surface (:func:`_snap_out`), then the skin around the moved ones is smoothed (its normals
     must point out again for the skin stage's push) and the snap repeated,
     ``tol.SKIN_PUSH_ROUNDS`` rounds at most; → (vertices, how many were inside at first)."""
-    from axdf_cli.tools.skin import neighbour_mean
-
     avg = neighbour_mean(faces, len(vertices))
     v, inside = _snap_out(np.array(vertices, dtype=np.float64), meshes)
     first = int(inside.sum())
@@ -102,34 +101,3 @@ def _snap_out(v: np.ndarray, meshes: list) -> tuple[np.ndarray, np.ndarray]:
         v[into] = closest + out * tol.SKIN_PUSH_CLEARANCE
         moved[into] = True
     return v, moved
-
-
-def grow_over(vertices: np.ndarray, faces: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """A closed surface (the skin: vertices (V, 3), faces (T, 3)) grown outward over ``points``
-    (N, 3), tol.SKIN_PUSH_ROUNDS rounds at most, so that they lie inside it → vertices (V, 3)
-    float64 (a new array; the faces are kept). Not :func:`~axdf_cli.geometry.winding.push_out_of_meshes`,
-    which moves points out of meshes: here the surface moves, the points stay."""
-    import igl
-    import trimesh
-
-    from axdf_cli.tools.skin import neighbour_mean
-
-    v = np.array(vertices, dtype=np.float64)
-    f64 = np.ascontiguousarray(faces, dtype=np.int64)
-    avg = neighbour_mean(faces, len(v))
-    for _ in range(tol.SKIN_PUSH_ROUNDS):
-        out = ~inside(v, faces, points)
-        if not out.any():
-            break
-        p = points[out]
-        d2, tri, _ = igl.point_mesh_squared_distance(p, v, f64)
-        need = np.zeros(len(v))
-        corners = faces[tri]  # (M, 3): every corner of the nearest triangle is pushed
-        depth = np.sqrt(d2) + tol.SKIN_PUSH_CLEARANCE
-        np.maximum.at(need, corners.ravel(), np.repeat(depth, 3))
-        spread = need.copy()
-        for _ in range(tol.SKIN_PUSH_SMOOTHING):  # the push spread over the skin around it, no less where needed
-            spread = np.maximum(need, avg @ spread)
-        normals = trimesh.Trimesh(v, faces, process=False).vertex_normals
-        v = v + normals * spread[:, None]
-    return v
