@@ -25,12 +25,14 @@ once, and the camera keeps them while its target moves. Near and far planes keep
 from __future__ import annotations
 
 import io
+import math
 import zipfile
 
 import numpy as np
 
 from axdf_cli.dataset.sampling import sphere_direction, sphere_draw
 from axdf_cli.dataset.spec import DatasetSpec, Sequence
+from axdf_cli.render.camera import FRAME_MARGIN, fit_distance, look_at
 from axdf_cli.render.framing import sequence_targets
 
 FLESH_MARGIN = 0.3  # metres of flesh kept inside the clip range beyond the subject's box
@@ -64,6 +66,10 @@ def view_cameras(spec: DatasetSpec, seq: Sequence, frames: np.ndarray, subject: 
         w2c = np.empty((nf, sph.views, 4, 4))
         dist = np.empty((nf, sph.views))
         targets = sequence_targets(skeleton, world, subject, sph.target)  # (F, 3)
+        tan_y = math.tan(math.radians(sph.fov) / 2) * (1 - 2 * FRAME_MARGIN)
+        tans = (tan_y * W / H, tan_y)
+        seq_rel = (subject - targets[:, None]).reshape(-1, 3) if nf else np.zeros((0, 3))
+        least: dict = {}  # per: sequence, view -> the distance that shows the whole sequence
         for fi, f in enumerate(frames):
             key = int(f) if sph.per == "frame" else 0
             if sph.target == "auto" and sph.per == "frame":
@@ -72,12 +78,28 @@ def view_cameras(spec: DatasetSpec, seq: Sequence, frames: np.ndarray, subject: 
                 tgt = targets[fi]
             for v in range(sph.views):
                 az, el, d = sphere_draw(spec, seq, key, v)
-                pos = tgt + d * sphere_direction(np.array(az), np.array(el))
+                direction = sphere_direction(np.array(az), np.array(el))
+                if sph.whole and len(seq_rel):  # never so near that the subject leaves the picture
+                    if sph.per == "frame":
+                        d = max(d, _least_distance(subject[fi] - tgt, direction, up, tans))
+                    else:
+                        if v not in least:
+                            least[v] = _least_distance(seq_rel, direction, up, tans)
+                        d = max(d, least[v])
+                pos = tgt + d * direction
                 w2c[fi, v] = look_at(pos, tgt - pos, up)
                 dist[fi, v] = np.linalg.norm(pos - centre)
     near = np.maximum(NEAR_MIN, 0.5 * (dist - radius))
     far = dist + radius + 1.0
     return K, w2c, np.stack([near, far], axis=-1)
+
+
+def _least_distance(rel: np.ndarray, direction: np.ndarray, up: np.ndarray, tans: tuple) -> float:
+    """The least distance along ``direction`` from the target at which a camera looking at it
+    shows every point ``rel`` (N, 3, relative to the target) inside the image less
+    ``FRAME_MARGIN`` at each border (:func:`axdf_cli.render.camera.fit_distance`)."""
+    R = look_at(np.zeros(3), -np.asarray(direction, np.float64), up)[:3, :3]
+    return fit_distance(rel, R, tans[0], tans[1])
 
 
 def project(K: np.ndarray, world_to_camera: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

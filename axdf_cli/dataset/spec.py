@@ -109,6 +109,7 @@ class Sphere:
     fov: float
     target: object  # "auto" | ("bone", NAME) | (x, y, z)
     per: str  # sequence | frame
+    whole: bool = True  # a drawn distance too near to show the whole subject backs off until it does
 
 
 @dataclass(frozen=True)
@@ -442,9 +443,10 @@ def _parse_cameras(value, where: Mark, skel):
         else:
             target = check_vector(t, s.vmark("target"), "target", 3)
     per = s.choice("per", CAMERA_PER, default="sequence")
+    whole = s.boolean("whole", default=True)
     s.done()
     f.done()
-    return None, Sphere(views, dist, elev, azim, fov, target, per)
+    return None, Sphere(views, dist, elev, azim, fov, target, per, whole)
 
 
 #: Passes of a data set beyond the image files: ``amodal``, each muscle's full extent per view

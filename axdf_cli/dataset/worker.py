@@ -29,7 +29,7 @@ from axdf_cli.dataset import door
 from axdf_cli.geometry.bones import load_bone_mesh
 from axdf_cli.pipeline.plan import display_path, load_muscle_specs
 from axdf_cli.pipeline.stages import build_stages, stages_record
-from axdf_cli.render.framing import ground_bones, placed_plates, skeleton_points
+from axdf_cli.render.framing import ground_bones, placed_plates, skeleton_points, skin_anchors, skin_points
 from axdf_cli.render.renderer import id_map
 from axdf_cli.specs.render import settings_to_dict
 from axdf_cli.errors import InputError
@@ -65,6 +65,7 @@ class Context:
     stages: tuple = ()  # the run's stages (axdf_cli.pipeline.stages), applied to every sequence
     skin: object = None  # the skin every sequence wears (axdf_cli.specs.skin.Skin), or None
     face_part: object = None  # (F,) each skin triangle's body part (index into skin.bones)
+    skin_anchors: list = field(default_factory=list)  # render.framing.skin_anchors of the skin, for the cameras
 
     @property
     def names(self) -> list[str]:
@@ -108,7 +109,8 @@ def build_context(path: Path | str, seed: int | None = None, policy=None, listed
     keypoints = skeleton_keypoints(skel, {i: m[0] for i, m in bone_meshes.items()})
     ctx = Context(spec, sequences, skel, door.without_meshes(skel), muscles, models, bone_meshes, keypoints,
                   inputs, motion_inputs, scene, scene_bones, b"", "",
-                  stages=stages, skin=skin, face_part=face_part)
+                  stages=stages, skin=skin, face_part=face_part,
+                  skin_anchors=skin_anchors(skel, skin) if skin is not None else [])
     if not listed:
         return ctx
     ctx.dataset_json = (json.dumps(dataset_dict(ctx), indent=1) + "\n").encode()
@@ -334,6 +336,8 @@ def _make_sequence(ctx: Context, seq: Sequence, folder: Path, resume: bool, timi
     world = forward_kinematics(ctx.skeleton, coords)
     joints = ctx.keypoints.positions(world)
     subject = skeleton_points(ctx.skeleton, world, ctx.bone_meshes)
+    if ctx.skin is not None:  # the body worn: its hands and head stay in view too
+        subject = np.concatenate([subject, skin_points(ctx.skin_anchors, world)], axis=1)
     K, w2c, clip = lab.view_cameras(spec, seq, frames, subject, world, ctx.skeleton)
     uv, z = lab.project(K, w2c, joints)
     _check_finite(seq.name, K=K, world_to_camera=w2c, joints3d=joints, joints2d=uv, joints_depth=z)

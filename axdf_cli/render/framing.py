@@ -22,7 +22,8 @@
   under the subject, grown to cover its footprint with a margin (:func:`plate_matrix`); a
   followed subject carries it along.
 - **A data set** frames its skeleton (:func:`skeleton_points`): its labels are the joints,
-  so every moving bone's joint centre and mesh box stays in view. Its cameras aim at one
+  so every moving bone's joint centre and mesh box stays in view; a data set that wears a skin
+  frames the skin too (:func:`skin_points`: its rest extremes carried by their heaviest bones). Its cameras aim at one
   target per frame (:func:`sequence_targets`), by the run's rule: a bone target is the
   bone's origin at each frame, ``auto`` the subject's centre, following the root when the
   subject travels farther than it is tall.
@@ -343,6 +344,33 @@ def skeleton_points(skeleton, world: np.ndarray, bone_meshes: dict) -> np.ndarra
         c = np.einsum("fbij,bkj->fbki", w[..., :3, :3], corners) + w[:, :, None, :3, 3]
         pts.append(c.reshape(len(world), -1, 3))
     return np.concatenate(pts, axis=1)
+
+
+def skin_anchors(skeleton, skin) -> list:
+    """[(bone index, (P, 3) bone-local points)]: the extremes of a skin's rest mesh over
+    ``FRAMING_DIRECTIONS``, vertex by vertex on its heaviest bone (the hands of a skeleton
+    without hand bones ride on the forearm), for :func:`skin_points`."""
+    rest = forward_kinematics(skeleton, skeleton.rest_coordinates()[None])[0]
+    heaviest = np.argmax(np.asarray(skin.weights), axis=1)
+    dirs = sphere_directions(FRAMING_DIRECTIONS)
+    out = []
+    for k, name in enumerate(skin.bones):
+        v = np.asarray(skin.vertices, np.float64)[heaviest == k]
+        if len(v):
+            v = v[np.unique(np.argmax(v @ dirs.T, axis=0))]
+            b = skeleton.bone_index[name]
+            out.append((b, (v - rest[b, :3, 3]) @ rest[b, :3, :3]))  # R^T (v - t), row by row
+    return out
+
+
+def skin_points(anchors: list, world: np.ndarray) -> np.ndarray:
+    """(F, P, 3) the skin's framing points (:func:`skin_anchors`) posed rigidly by ``world``
+    (F, B, 4, 4): a data set's subject wears its skin (hands and head included)."""
+    if not anchors:
+        return np.zeros((len(world), 0, 3))
+    # x[f,p,i] = sum_j R_b[f,i,j] local[p,j] + t_b[f,i], bone by bone
+    return np.concatenate([np.einsum("fij,pj->fpi", world[:, b, :3, :3], local) + world[:, b, None, :3, 3]
+                           for b, local in anchors], axis=1)
 
 
 def sequence_targets(skeleton, world: np.ndarray, subject: np.ndarray, target) -> np.ndarray:
