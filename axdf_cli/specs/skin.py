@@ -28,6 +28,7 @@ import numpy as np
 from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.fileio.yamlio import Fields, load_yaml
+from axdf_cli.geometry.mesh import surface_problem
 from axdf_cli.specs.refs import RefPolicy
 
 SKIN_KEYS = ("skin", "skeleton", "family", "mesh", "weights", "fat", "stature", "height", "fat_source", "regions",
@@ -135,31 +136,14 @@ def check_rest_mesh(v: np.ndarray, faces: np.ndarray, where: Mark, name: str) ->
     consistently wound); wound outward (positive volume); its extent and fullness in
     ``tol.SKIN_MIN_EXTENT``..``tol.SKIN_MAX_EXTENT`` and ``tol.SKIN_MIN_FILL``. → its volume (m^3)."""
     allowed = "a closed triangle mesh of a body, wound outward (as axdf skin writes it)"
-    n, nf = len(v), len(faces)
-    if nf < 4:
-        raise InputError(where, f"{name} has {nf} triangle{'s' if nf != 1 else ''}, no closed surface", allowed)
-    bad = np.flatnonzero(~np.isfinite(v).all(axis=1))
+    bad = np.flatnonzero(~np.isfinite(v).all(axis=1)) if len(faces) >= 4 else ()
     if len(bad):
         raise InputError(where, f"{name} has {len(bad)} non-finite vertices (the first, vertex {int(bad[0])}: "
                          f"{np.asarray(v[bad[0]]).tolist()})", "finite coordinates (metres)")
     faces = np.asarray(faces, np.int64)
-    if ((faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (faces[:, 2] == faces[:, 0])).any():
-        raise InputError(where, f"{name} has triangles with a repeated corner", allowed)
-    loose = np.flatnonzero(np.bincount(faces.ravel(), minlength=n) == 0)
-    if len(loose):
-        raise InputError(where, f"{name} has {len(loose)} vertices on no triangle (the first, vertex {int(loose[0])})",
-                         allowed)
-    a = faces.ravel()
-    b = np.roll(faces, -1, axis=1).ravel()  # the directed edges a -> b of every triangle
-    key = a * n + b
-    uniq, count = np.unique(key, return_counts=True)
-    if (count > 1).any():
-        k = int(uniq[np.argmax(count > 1)])
-        raise InputError(where, f"{name} is not manifold or not wound consistently: the edge {k // n}-{k % n} runs "
-                         f"the same way in {int(count.max())} triangles", allowed)
-    open_ = ~np.isin(b * n + a, uniq)
-    if open_.any():
-        raise InputError(where, f"{name} is open: {int(open_.sum())} edges border one triangle only", allowed)
+    problem = surface_problem(faces, len(v))
+    if problem:
+        raise InputError(where, f"{name} {problem}", allowed)
     extent = float(np.ptp(v, axis=0).max())
     if not tol.SKIN_MIN_EXTENT <= extent <= tol.SKIN_MAX_EXTENT:
         raise InputError(where, f"{name} is {extent:.4g} m across", f"a body between {tol.SKIN_MIN_EXTENT:g} and "
