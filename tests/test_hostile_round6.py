@@ -1,0 +1,332 @@
+"""Hostile round 6: fresh cases of the four kinds earlier rounds found defects in, each refused
+with exit 2 and ``FILE:LINE:COL: what; allowed`` (or ``FILE: ...`` for a binary file), no
+traceback, nothing written (the --out folder not created or left as it was), or, where it is no
+error, holding: no NaN written, memory bounded, results independent of the working folder.
+
+1. ``axdf atlas`` on a small synthetic atlas (six real Visible Human files copied to tmp_path,
+   a map of one muscle): malformed maps (format specs in files:, an atlas file linking out of
+   the folder, muscles named twice, bone pairs the skeleton lacks, landmarks on one line,
+   lists past their bounds, no split:), corrupt PLYs (lying counts, NaN, a face out of range,
+   no faces, a point, 1e30), --sides and --sections, --out onto the inputs and --overwrite
+   emptying an input folder;
+2. ``axdf fit``: slivers, two pieces, open, non-manifold, NaN, huge and negative indices, a
+   PLY claiming 10^12 vertices, odd names, several bad files named at once;
+3. skin files: NPZ members of the wrong kind, object arrays, names that are no names, region
+   names twice, fat out of range, rest meshes degenerate or linked into the output;
+4. ``axdf run`` of an axis-and-path muscle, resumed from another working folder.
+
+Seeded where random. Needs ../shared/data for part 1 (skipped without it).
+"""
+from __future__ import annotations
+
+import io
+import json
+import os
+import shutil
+import struct
+import tracemalloc
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cli_in_folder import run_cli
+from conftest import REPO_ROOT, all_files
+from osim_common import DATA
+
+VHF = DATA / "atlas" / "visible_human_female"
+SKELETON = REPO_ROOT / "poses" / "skeletons" / "gait2392.yaml"
+SOLEUS = REPO_ROOT / "muscles" / "gait2392" / "soleus_r.yaml"
+needs_atlas = pytest.mark.skipif(not (VHF / "Right").is_dir(), reason=f"the Visible Human atlas not found at {VHF}")
+
+ATLAS_FILES = ("Right/VHF_Right_Cartilage_FemurHead_smooth.ply", "Left/VHF_Left_Cartilage_FemurHead_smooth.ply",
+               "Right/VHF_Right_Cartilage_FemurDistal_smooth.ply", "Right/VHF_Right_Cartilage_Talus_smooth.ply",
+               "Right/VHF_Right_Bone_Talus_smooth.ply", "Right/VHF_Right_Muscle_Soleus_smooth.ply")
+MAP = """\
+files: "{folder}/VHF_{folder}_{kind}_{name}_smooth.ply"
+sides: {r: Right, l: Left}
+landmarks:
+  hip: {cartilage: FemurHead, leg: same, bone: femur}
+  hip_other: {cartilage: FemurHead, leg: other, bone: femur}
+  knee: {cartilage: FemurDistal, leg: same, bone: tibia}
+  ankle: {cartilage: Talus, leg: same, bone: talus}
+bones:
+  - {atlas: [Talus], bone: talus, both: true}
+muscles:
+  soleus: [Soleus]
+"""
+
+
+def _no_trace(rc: int, err: str) -> None:
+    assert rc == 2, (rc, err[-3000:])
+    assert "Traceback" not in err and "internal error" not in err, err
+
+
+def _line(text: str, start: str) -> int:
+    return next(i for i, t in enumerate(text.splitlines(), 1) if t.lstrip().startswith(start))
+
+
+# ============================================================================ 1. axdf atlas
+
+
+@pytest.fixture(scope="module")
+def small_atlas(tmp_path_factory) -> Path:
+    """Six real files of the right leg (and the left femoral head): a map of one muscle."""
+    if not (VHF / "Right").is_dir():
+        pytest.skip(f"the Visible Human atlas not found at {VHF}")
+    root = tmp_path_factory.mktemp("atlas6")
+    for rel in ATLAS_FILES:
+        (root / "atlas" / rel).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy(VHF / rel, root / "atlas" / rel)
+    (root / "lib").mkdir()
+    shutil.copy(SOLEUS, root / "lib" / "soleus_r.yaml")
+    return root
+
+
+@pytest.fixture()
+def at(small_atlas, tmp_path) -> Path:
+    """A fresh copy of the small atlas, its library and map in tmp_path."""
+    shutil.copytree(small_atlas / "atlas", tmp_path / "atlas")
+    shutil.copytree(small_atlas / "lib", tmp_path / "lib")
+    (tmp_path / "map.yaml").write_text(MAP)
+    return tmp_path
+
+
+def _atlas(d: Path, capsys, *argv, out="out", map_="map.yaml", muscles="lib", atlas="atlas") -> tuple[int, str]:
+    capsys.readouterr()
+    rc = run_cli(d, "atlas", str(atlas), "--onto", str(SKELETON), "--map", str(map_), "--muscles", str(muscles),
+                 "--out", str(out), "--sides", "r", "--quiet", *argv)
+    return rc, capsys.readouterr().err
+
+
+def _atlas_refused(d: Path, capsys, *argv, **kw) -> str:
+    before = all_files(d)
+    rc, err = _atlas(d, capsys, "--register-only", *argv, **kw)
+    _no_trace(rc, err)
+    assert not (d / "out").exists() and all_files(d) == before
+    return err
+
+
+def _map(d: Path, text: str) -> str:
+    (d / "map.yaml").write_text(text)
+    return "map.yaml"
+
+
+@needs_atlas
+def test_the_small_atlas_registers(at, capsys):
+    """The baseline every atlas case departs from: it registers, finite numbers only."""
+    rc, err = _atlas(at, capsys, "--register-only")
+    assert rc == 0, err
+    report = json.loads((at / "out" / "atlas_report.json").read_text(),
+                        parse_constant=lambda c: pytest.fail(f"{c} in the report"))
+    assert report["sides"]["r"]["bones_after"]["talus_r"]["mean_mm"] < 2.0
+    assert (at / "out" / "registered" / "soleus_r.ply").is_file()
+
+
+@needs_atlas
+@pytest.mark.parametrize("spec", ["{name:>99999999}", "{name!r}", "{name:x}"])
+def test_a_files_placeholder_with_a_format_spec_is_refused(at, capsys, spec):
+    """{name:>99999999} padded every path to 100 MB before any check (memory), {name!r} quoted it."""
+    _map(at, MAP.replace("{name}_smooth", f"{spec}_smooth"))
+    err = _atlas_refused(at, capsys)
+    assert err.startswith(f"map.yaml:1:8: files: ") and "a placeholder takes no format or conversion" in err
+
+
+@needs_atlas
+def test_a_files_pattern_climbing_out_is_refused(at, capsys):
+    _map(at, MAP.replace('files: "{folder}/', 'files: "{folder}/../../'))
+    assert "is not an atlas file pattern" in _atlas_refused(at, capsys)
+
+
+@needs_atlas
+def test_an_atlas_file_linking_out_of_the_folder_is_refused_at_the_map(at, tmp_path_factory, capsys):
+    """A cartilage that is a link to a file elsewhere (read before: the atlas is a folder tree)."""
+    elsewhere = tmp_path_factory.mktemp("elsewhere") / "talus.ply"
+    target = at / "atlas" / "Right" / "VHF_Right_Cartilage_Talus_smooth.ply"
+    shutil.move(target, elsewhere)
+    target.symlink_to(elsewhere)
+    err = _atlas_refused(at, capsys)
+    assert err.startswith(f"map.yaml:{_line(MAP, 'ankle:')}:10: atlas file ") and "leaves the atlas folder" in err
+    # a link inside the tree is fine
+    shutil.copy(elsewhere, at / "atlas" / "talus_copy.ply")
+    target.unlink()
+    target.symlink_to(at / "atlas" / "talus_copy.ply")
+    rc, err = _atlas(at, capsys, "--register-only")
+    assert rc == 0, err
+
+
+@needs_atlas
+@pytest.mark.parametrize("extra, start, words", [
+    ("kept: [soleus]\n", "kept:", "kept muscle soleus is named twice (first at line 11)"),
+    ("split:\n  sol: {atlas: [Soleus], parts: [soleus, soleus2]}\n", "sol:", "split sol's part soleus is named twice"),
+    ("kept: [per_brev, per_brev]\n", "kept:", "kept muscle per_brev is named twice"),
+])
+def test_a_model_muscle_named_twice_is_refused(at, capsys, extra, start, words):
+    """(the later entry's files silently replaced the earlier's)"""
+    _map(at, MAP + extra)
+    err = _atlas_refused(at, capsys)
+    assert err.startswith(f"map.yaml:{_line(MAP + extra, start)}:") and words in err, err
+
+
+@needs_atlas
+def test_a_map_without_split_kept_or_unused_is_read(at, capsys):
+    """An atlas sharing no muscle between model parts: split: was required and could not be empty."""
+    rc, err = _atlas(at, capsys, "--register-only", map_=_map(at, MAP + "split: {}\nkept: []\n"))
+    assert rc == 0, err
+
+
+@needs_atlas
+def test_a_bone_pair_the_skeleton_lacks_is_refused_at_its_line(at, capsys):
+    """(it was skipped silently: the warp pulled nothing)"""
+    _map(at, MAP.replace("bone: talus, both", "bone: talusx, both"))
+    err = _atlas_refused(at, capsys)
+    assert err.startswith(f"map.yaml:{_line(MAP, '- {atlas: [Talus]')}:5: bone talusx: skeleton gait2392's "
+                          "bone talusx_r does not exist; did you mean 'talus_r'?"), err
+
+
+@needs_atlas
+def test_landmarks_on_one_point_are_refused(at, capsys):
+    """Every landmark the same cartilage and bone: the similarity's scale was 0/0 (NaN)."""
+    text = MAP.replace("FemurDistal, leg: same, bone: tibia", "Talus, leg: same, bone: talus") \
+        .replace("cartilage: FemurHead, leg: same, bone: femur", "cartilage: Talus, leg: same, bone: talus") \
+        .replace("cartilage: FemurHead, leg: other, bone: femur", "cartilage: Talus, leg: same, bone: talus")
+    err = _atlas_refused(at, capsys, map_=_map(at, text))
+    assert err.startswith(f"map.yaml:4:") and "on one line or point" in err, err
+
+
+@needs_atlas
+@pytest.mark.parametrize("case", ["landmarks", "names", "muscles"])
+def test_the_maps_lists_are_bounded(at, capsys, case):
+    """A small map cannot make the command fit thousands of spheres or look up thousands of files."""
+    from axdf_cli.tools import constants as tol
+
+    if case == "landmarks":
+        many = "".join(f"  l{i}: {{cartilage: Talus, leg: same, bone: talus}}\n" for i in range(tol.ATLAS_MAX_LANDMARKS + 1))
+        text = MAP.replace("landmarks:\n", "landmarks:\n" + many)
+        words = f"landmarks has {tol.ATLAS_MAX_LANDMARKS + 5} entries; landmarks: at most {tol.ATLAS_MAX_LANDMARKS}"
+    elif case == "names":
+        text = MAP.replace("soleus: [Soleus]", "soleus: [" + ", ".join(f"S{i}" for i in range(10000)) + "]")
+        words = f"lists 10000 names; muscle soleus's atlas names: at most {tol.ATLAS_MAX_NAMES}"
+    else:
+        text = MAP + "".join(f"  m{i}: [Soleus]\n" for i in range(tol.ATLAS_MAX_MUSCLES))
+        words = f"muscles has {tol.ATLAS_MAX_MUSCLES + 1} entries"
+    assert words in _atlas_refused(at, capsys, map_=_map(at, text))
+
+
+@needs_atlas
+@pytest.mark.parametrize("text, start, words", [
+    (MAP.replace("soleus: [Soleus]", "soleus: Soleus"), "soleus:", "is not a list of names"),
+    (MAP.replace("soleus: [Soleus]", "soleus: [Soleus]\n  soleus: [Soleus]"), 12, "duplicate key 'soleus' (first at line 11)"),
+    (MAP.replace("both: true", "both: yes please"), "- {atlas", "both is"),
+    (MAP.replace("sides: {r: Right, l: Left}", "sides: {r: Right, l: Left, x: Up}"), "sides:", "unknown side 'x'"),
+    (MAP.replace("leg: other", "leg: .nan"), "hip_other:", "'.nan' is not finite"),
+    (MAP.replace("sides: {r: Right, l: Left}", "sides: {r: ../Right, l: Left}"), "sides:", "side r's folder is"),
+    (MAP + "unused: [1.5]\n", "unused:", "unused is the number 1.5"),
+])
+def test_malformed_map_entries_are_refused_at_their_line(at, capsys, text, start, words):
+    err = _atlas_refused(at, capsys, map_=_map(at, text))
+    line = start if isinstance(start, int) else _line(text, start)
+    assert err.startswith(f"map.yaml:{line}:") and words in err, err
+
+
+def _ply(v: np.ndarray, f: np.ndarray, count_v: int | None = None, count_f: int | None = None) -> bytes:
+    head = (f"ply\nformat binary_little_endian 1.0\nelement vertex {len(v) if count_v is None else count_v}\n"
+            "property float x\nproperty float y\nproperty float z\n"
+            f"element face {len(f) if count_f is None else count_f}\nproperty list uchar int vertex_indices\n"
+            "end_header\n").encode()
+    rec = np.zeros(len(f), np.dtype([("n", "u1"), ("i", "<i4", (3,))]))
+    rec["n"], rec["i"] = 3, f
+    return head + np.asarray(v, "<f4").tobytes() + rec.tobytes()
+
+
+def _read(path: Path):
+    from axdf_cli.formats import load_triangles
+
+    v, _, f = load_triangles(path)
+    return np.asarray(v, np.float64), np.asarray(f, np.int64)
+
+
+@needs_atlas
+@pytest.mark.parametrize("case, words", [
+    ("nan", "has 1 non-finite vertices"),
+    ("face out of range", "a face index is outside 0.."),
+    ("no faces", "has 0 triangles, no closed surface"),
+    ("lying vertex count", "PLY file ends inside element"),
+    ("huge claimed count", "PLY file ends inside element 'vertex'"),
+    ("point", "is 0 mm across"),
+    ("far", "mm from the origin at most"),
+    ("open", "is open: 3 edges border one triangle only"),
+    ("not a ply", "not a readable mesh"),
+])
+def test_a_corrupt_atlas_mesh_is_refused_by_name(at, capsys, case, words):
+    """A cartilage (its sphere's centre a landmark) or the muscle made corrupt: NaN went into the
+    landmarks' similarity and out as NaN, a face out of range was an IndexError (exit 70)."""
+    name = "Right/VHF_Right_Muscle_Soleus_smooth.ply" if case in ("open", "no faces") else \
+        "Right/VHF_Right_Cartilage_FemurDistal_smooth.ply"
+    path = at / "atlas" / name
+    v, f = _read(path)
+    rng = np.random.default_rng(61)
+    k = int(rng.integers(len(v)))
+    data = {
+        "nan": lambda: _ply(np.where(np.arange(len(v))[:, None] == k, np.nan, v), f),
+        "face out of range": lambda: _ply(v, np.where(np.arange(len(f))[:, None] == k % len(f), 10 ** 9, f)),
+        "no faces": lambda: _ply(v, f[:0]),
+        "lying vertex count": lambda: _ply(v, f, count_v=len(v) * 3),
+        "huge claimed count": lambda: _ply(v, f, count_v=10 ** 12, count_f=10 ** 12),
+        "point": lambda: _ply(np.zeros_like(v) + 5.0, f),
+        "far": lambda: _ply(v + 1e30, f),
+        "open": lambda: _ply(v, f[1:]),
+        "not a ply": lambda: rng.bytes(5000),
+    }[case]()
+    path.write_bytes(data)
+    tracemalloc.start()
+    try:
+        err = _atlas_refused(at, capsys)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 200e6, peak
+    assert err.startswith(f"atlas/{name}: ") and words in err, err
+
+
+@needs_atlas
+@pytest.mark.parametrize("argv, words", [
+    (("--sides", ""), "--sides ''"), (("--sides", "r,"), "--sides 'r,'"), (("--sides", "R"), "--sides 'R'"),
+    (("--sections", "3"), "--sections 3"), (("--sections", "65"), "--sections 65"),
+    (("--sections", "-4"), "--sections -4"),
+])
+def test_sides_and_sections_out_of_range(at, capsys, argv, words):
+    capsys.readouterr()
+    rc = run_cli(at, "atlas", "atlas", "--onto", str(SKELETON), "--map", "map.yaml", "--muscles", "lib",
+                 "--out", "out", "--quiet", *argv)
+    err = capsys.readouterr().err
+    _no_trace(rc, err)
+    assert words in err and not (at / "out").exists()
+
+
+@needs_atlas
+@pytest.mark.parametrize("out", ["atlas", "atlas/Right/new", "lib", "lib/new"])
+def test_out_onto_an_input_folder_is_refused(at, capsys, out):
+    before = all_files(at)
+    rc, err = _atlas(at, capsys, "--register-only", "--overwrite", out=out)
+    _no_trace(rc, err)
+    assert "lies in this input folder" in err and all_files(at) == before
+
+
+@needs_atlas
+def test_overwrite_never_empties_an_input_folder(at, capsys):
+    """--muscles OUT/muscles with --out OUT --overwrite --register-only: the old output's muscles/,
+    the folder the command read, was deleted as 'listed in the old manifest'."""
+    rc, err = _atlas(at, capsys, "--sections", "4")
+    assert rc == 0, err
+    assert (at / "out" / "muscles" / "soleus_r.yaml").is_file()
+    before = all_files(at / "out")
+    rc, err = _atlas(at, capsys, "--register-only", "--overwrite", muscles="out/muscles")
+    _no_trace(rc, err)
+    assert "out/muscles: this input folder's files would be deleted: muscles/" in err, err
+    assert all_files(at / "out") == before
+    # the map inside the output folder, --overwrite: read, never deleted (not listed) and kept
+    shutil.copy(at / "map.yaml", at / "out" / "map.yaml")
+    rc, err = _atlas(at, capsys, "--sections", "4", "--overwrite", map_="out/map.yaml")
+    assert rc == 0, err
+    assert (at / "out" / "map.yaml").read_text() == MAP
