@@ -249,7 +249,7 @@ def _read(path: Path):
 @needs_atlas
 @pytest.mark.parametrize("case, words", [
     ("nan", "has 1 non-finite vertices"),
-    ("face out of range", "a face index is outside 0.."),
+    ("face out of range", "names vertex 1000000000, but the file has 12316 vertices"),
     ("no faces", "has 0 triangles, no closed surface"),
     ("lying vertex count", "PLY file ends inside element"),
     ("huge claimed count", "PLY file ends inside element 'vertex'"),
@@ -330,3 +330,180 @@ def test_overwrite_never_empties_an_input_folder(at, capsys):
     rc, err = _atlas(at, capsys, "--sections", "4", "--overwrite", map_="out/map.yaml")
     assert rc == 0, err
     assert (at / "out" / "map.yaml").read_text() == MAP
+
+
+# ============================================================================ 2. axdf fit
+
+LEG = """\
+skeleton: leg
+coordinates:
+  hip: {type: rotation, range: [-30, 120]}
+bones:
+  - name: pelvis
+    offset: [0, 0, 1.0]
+  - name: femur
+    parent: pelvis
+    offset: [0, 0, -0.05]
+    dofs:
+      - {coord: hip, type: rotation, axis: [1, 0, 0]}
+"""
+
+
+def _ellipsoid(shift=(0.03, 0.0, 0.7), scale=(0.02, 0.02, 0.12), subdiv: int = 3):
+    import trimesh
+
+    m = trimesh.creation.icosphere(subdiv, 1.0)
+    m.apply_scale(scale)
+    m.apply_translation(shift)
+    return np.asarray(m.vertices), np.asarray(m.faces, np.int64)
+
+
+@pytest.fixture()
+def leg(tmp_path) -> Path:
+    (tmp_path / "leg.yaml").write_text(LEG)
+    return tmp_path
+
+
+def _fit(d: Path, capsys, *argv) -> tuple[int, str]:
+    capsys.readouterr()
+    rc = run_cli(d, "fit", *argv, "--skeleton", "leg.yaml", "--out", "fitted", "--quiet", "--sections", "4")
+    return rc, capsys.readouterr().err
+
+
+def _fit_refused(d: Path, capsys, *argv) -> str:
+    rc, err = _fit(d, capsys, *argv)
+    _no_trace(rc, err)
+    assert not (d / "fitted").exists()
+    return err
+
+
+def test_a_sliver_is_dropped_and_a_second_body_refused(leg, capsys):
+    v, f = _ellipsoid()
+    sv, sf = _ellipsoid(shift=(0.1, 0, 0.7), scale=(0.001, 0.001, 0.001), subdiv=1)
+    (leg / "sliver.ply").write_bytes(_ply(np.concatenate([v, sv]), np.concatenate([f, sf + len(v)])))
+    rc, err = _fit(leg, capsys, "sliver.ply")
+    assert rc == 0, err
+    (rep,) = json.loads((leg / "fitted" / "fit_report.json").read_text())["muscles"]
+    assert rep["muscle"] == "sliver"
+    shutil.rmtree(leg / "fitted")
+    bv, bf = _ellipsoid(shift=(-0.03, 0, 0.7))
+    (leg / "two.ply").write_bytes(_ply(np.concatenate([v, bv]), np.concatenate([f, bf + len(v)])))
+    assert "two.ply: mesh is 2 separate closed pieces, 2 of them" in _fit_refused(leg, capsys, "two.ply")
+
+
+@pytest.mark.parametrize("case, words", [
+    ("open", "mesh is not closed"),
+    ("twice", "mesh is not closed"),
+    ("nan", "has non-finite vertex coordinates"),
+    ("inf", "has non-finite vertex coordinates"),
+    ("huge index", "names vertex"),
+    ("negative index", "names vertex -1"),
+    ("claims 10^12", "PLY"),
+    ("empty", "holds no triangles"),
+])
+def test_broken_meshes_are_refused_by_name(leg, capsys, case, words):
+    v, f = _ellipsoid()
+    rng = np.random.default_rng(62)
+    k = int(rng.integers(len(f)))
+    data = {
+        "open": lambda: _ply(v, np.delete(f, k, axis=0)),
+        "twice": lambda: _ply(v, np.concatenate([f, f[k:k + 1]])),
+        "nan": lambda: _ply(np.where(np.arange(len(v))[:, None] == k % len(v), np.nan, v), f),
+        "inf": lambda: _ply(np.where(np.arange(len(v))[:, None] == k % len(v), np.inf, v), f),
+        "huge index": lambda: _ply(v, np.where(np.arange(len(f))[:, None] == k, 2 ** 31 - 1, f)),
+        "negative index": lambda: _ply(v, np.where(np.arange(len(f))[:, None] == k, -1, f)),
+        "claims 10^12": lambda: _ply(v, f, count_v=10 ** 12, count_f=10 ** 12),
+        "empty": lambda: b"ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nproperty float y\n"
+                         b"property float z\nelement face 0\nproperty list uchar int vertex_indices\nend_header\n",
+    }[case]()
+    (leg / "bad.ply").write_bytes(data)
+    tracemalloc.start()
+    try:
+        err = _fit_refused(leg, capsys, "bad.ply")
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 200e6, peak
+    assert err.startswith("bad.ply: ") and words in err, err
+
+
+def test_an_obj_naming_a_missing_vertex_is_refused(leg, capsys):
+    v, f = _ellipsoid()
+    text = "".join(f"v {x:.6f} {y:.6f} {z:.6f}\n" for x, y, z in v)
+    text += "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in f[:-1]) + f"f 1 2 {10 ** 6}\n"
+    (leg / "bad.obj").write_text(text)
+    err = _fit_refused(leg, capsys, "bad.obj")
+    assert err.startswith("bad.obj: face 1279 (of 1280, counted from 0) names vertex 999999, but the file has 642 "
+                          "vertices"), err
+    assert "IndexError" not in err
+
+
+@pytest.mark.parametrize("stem, words", [
+    ("a b", "cannot name a muscle"), ("sóleus", "cannot name a muscle"), ("tab\t", "cannot name a muscle"),
+    ("x" * 250, "cannot name a muscle"),
+])
+def test_odd_stems_name_no_muscle(leg, capsys, stem, words):
+    v, f = _ellipsoid()
+    (leg / f"{stem}.ply").write_bytes(_ply(v, f))
+    assert words in _fit_refused(leg, capsys, f"{stem}.ply")
+
+
+def test_two_meshes_of_one_stem_are_refused(leg, capsys):
+    v, f = _ellipsoid()
+    for sub in ("a", "b"):
+        (leg / sub).mkdir()
+        (leg / sub / "m.ply").write_bytes(_ply(v, f))
+    err = _fit_refused(leg, capsys, "a/m.ply", "b/m.ply")
+    assert "m" in err
+    err = _fit_refused(leg, capsys, "a/m.ply", "a/m.ply")
+
+
+def test_several_bad_meshes_are_named_at_once(leg, capsys):
+    """Three bad files among two good ones: one refusal names all three, nothing written."""
+    v, f = _ellipsoid()
+    (leg / "good1.ply").write_bytes(_ply(v, f))
+    (leg / "good2.ply").write_bytes(_ply(v + [0.005, 0, 0], f))
+    (leg / "nan.ply").write_bytes(_ply(np.where(np.arange(len(v))[:, None] == 3, np.nan, v), f))
+    (leg / "open.ply").write_bytes(_ply(v, f[1:]))
+    (leg / "cut.ply").write_bytes(_ply(v, f)[:-100])
+    err = _fit_refused(leg, capsys, "good1.ply", "nan.ply", "good2.ply", "open.ply", "cut.ply", "missing.ply")
+    for name in ("nan.ply: ", "open.ply: ", "cut.ply: ", "missing.ply: "):
+        assert name in err, (name, err)
+    assert "good1.ply:" not in err and "good2.ply:" not in err
+
+
+def test_a_mesh_that_is_a_link_to_a_device_or_fifo_is_refused(leg, capsys):
+    (leg / "zero.stl").symlink_to("/dev/zero")
+    os.mkfifo(leg / "fifo.ply")
+    err = _fit_refused(leg, capsys, "zero.stl", "fifo.ply")
+    assert "zero.stl: " in err and "fifo.ply: " in err
+
+
+@pytest.mark.parametrize("paths, words", [
+    ("nowhere", "nowhere"), ("leg.yaml", "leg.yaml"),
+])
+def test_paths_that_are_no_muscle_folder_are_refused(leg, capsys, paths, words):
+    v, f = _ellipsoid()
+    (leg / "m.ply").write_bytes(_ply(v, f))
+    assert words in _fit_refused(leg, capsys, "m.ply", "--paths", paths)
+
+
+def test_paths_outside_the_tree_by_dotdot_resolve_from_the_working_folder(leg, tmp_path_factory, capsys):
+    """--paths ../lib given from a sub-folder: the same fit as the absolute path (the working folder
+    decides what a relative path names, nothing else)."""
+    v, f = _ellipsoid()
+    (leg / "m.ply").write_bytes(_ply(v, f))
+    (leg / "lib").mkdir()
+    (leg / "lib" / "m.yaml").write_text("muscle: m\npath:\n  - {bone: pelvis, at: [0.03, 0, -0.2]}\n"
+                                        "  - {bone: femur, at: [0.03, 0, -0.35]}\n"
+                                        "sections:\n  - {t: 0.3, radii: [0.02, 0.02], angle: 0}\n"
+                                        "  - {t: 0.7, radii: [0.02, 0.02], angle: 0}\n")
+    (leg / "sub").mkdir()
+    capsys.readouterr()
+    assert run_cli(leg / "sub", "fit", "../m.ply", "--skeleton", "../leg.yaml", "--paths", "../lib", "--out", "../a",
+                   "--quiet", "--sections", "4") == 0, capsys.readouterr().err
+    assert run_cli(Path("/"), "fit", str(leg / "m.ply"), "--skeleton", str(leg / "leg.yaml"), "--paths",
+                   str(leg / "lib"), "--out", str(leg / "b"), "--quiet", "--sections", "4",
+                   "--allow-outside") == 0, capsys.readouterr().err
+    a, b = all_files(leg / "a"), all_files(leg / "b")
+    assert a["muscles/m.yaml"] == b["muscles/m.yaml"]
