@@ -507,3 +507,163 @@ def test_paths_outside_the_tree_by_dotdot_resolve_from_the_working_folder(leg, t
                    "--allow-outside") == 0, capsys.readouterr().err
     a, b = all_files(leg / "a"), all_files(leg / "b")
     assert a["muscles/m.yaml"] == b["muscles/m.yaml"]
+
+
+# ============================================================================ 3. skin files
+
+SKIN = REPO_ROOT / "skins" / "gait2392"
+POSE = REPO_ROOT / "poses" / "gait2392_walk.yaml"
+REST = REPO_ROOT / "poses" / "gait2392_rest.yaml"
+VAS = REPO_ROOT / "muscles" / "gait2392_packed" / "vas_lat_l.yaml"
+
+
+def _skin(tmp_path: Path) -> Path:
+    shutil.copytree(SKIN, tmp_path / "s")
+    return tmp_path / "s" / "skin.yaml"
+
+
+def _npz(path: Path, allow_pickle: bool = False, **arrays) -> None:
+    buf = io.BytesIO()
+    np.savez(buf, **arrays) if allow_pickle else np.savez_compressed(buf, **arrays)
+    path.write_bytes(buf.getvalue())
+
+
+def _main(argv, capsys) -> tuple[int, str, str]:
+    from axdf_cli.cli.main import main
+
+    capsys.readouterr()
+    rc = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return rc, out, err
+
+
+def _skin_refused(capsys, argv, *words) -> str:
+    rc, _, err = _main(argv, capsys)
+    _no_trace(rc, err)
+    for w in words:
+        assert w in err, (w, err)
+    return err
+
+
+def _skin_run(out: Path, skin: Path, *extra, pose: Path = POSE, frames: str = "0:1") -> list:
+    return ["run", "--pose", pose, "--muscles", VAS, "--skin", skin, "--frames", frames, "--out", out, "--quiet",
+            "--allow-outside", *extra]
+
+
+def _skin_line(path: Path, key: str) -> int:
+    return _line(path.read_text(), f"{key}:")
+
+
+@pytest.mark.parametrize("which, change, words", [
+    ("fat", lambda a: {**a, "regions": np.array(["head", "head"] + [str(r) for r in a["regions"][2:]])},
+     "names region head more than once"),
+    ("fat", lambda a: {**a, "regions": np.array(["he ad"] + [str(r) for r in a["regions"][1:]])},
+     "lists the region name 'he ad'"),
+    ("fat", lambda a: {**a, "fat": np.where(np.arange(len(a["fat"])) == 7, 0.5, a["fat"]).astype("<f4")},
+     "thicknesses out of range (one is 0.5 m)"),
+    ("fat", lambda a: {**a, "fat": np.where(np.arange(len(a["fat"])) == 7, 1e30, a["fat"]).astype("<f4")},
+     "thicknesses out of range (one is 1e+30 m)"),
+    ("fat", lambda a: {**a, "fat": a["fat"].astype(np.complex64)}, "array fat is <c8"),
+    ("fat", lambda a: {**a, "region": a["region"].astype(bool)}, "array region is |b1"),
+    ("weights", lambda a: {**a, "bones": np.array([""] + [str(b) for b in a["bones"][1:]])},
+     "lists the bone name ''"),
+    ("weights", lambda a: {**a, "bones": np.array(["a/b"] + [str(b) for b in a["bones"][1:]])},
+     "lists the bone name 'a/b'"),
+    ("weights", lambda a: {**a, "bones": np.array(["pel\nvis"] + [str(b) for b in a["bones"][1:]])},
+     "lists the bone name 'pel\\nvis'"),
+    ("weights", lambda a: {**a, "vertex_count": np.array(13380.0)}, "array vertex_count is <f8 of shape ()"),
+    ("weights", lambda a: {**a, "weight": np.array(1.0, "<f4")}, "array weight is <f4 of shape ()"),
+    ("weights", lambda a: {**a, "bones": a["bones"].reshape(-1, 1)}, "array bones is <U"),
+    ("weights", lambda a: {**a, "bones": a["bones"].astype("S")}, "array bones is |S"),
+])
+def test_npz_members_of_the_wrong_kind_are_refused(tmp_path, capsys, which, change, words):
+    path = _skin(tmp_path)
+    target = path.parent / f"skin_{which}.npz"
+    _npz(target, **change(dict(np.load(target))))
+    _skin_refused(capsys, ["validate", path], f"{path}:{_skin_line(path, which)}:", target.name, words)
+
+
+def test_an_object_array_is_refused_unread(tmp_path, capsys, monkeypatch):
+    """An NPZ member pickled (dtype object) is refused from its header; nothing unpickles it."""
+    path = _skin(tmp_path)
+    target = path.parent / "skin_weights.npz"
+    arrays = dict(np.load(target))
+    arrays["bones"] = np.array(list(arrays["bones"]), dtype=object)
+    _npz(target, allow_pickle=True, **arrays)
+    import pickle
+
+    def no_pickle(*a, **k):
+        raise AssertionError("an NPZ member was unpickled")
+
+    monkeypatch.setattr(pickle, "load", no_pickle)
+    monkeypatch.setattr(pickle, "loads", no_pickle)
+    _skin_refused(capsys, ["validate", path], "skin_weights.npz: array bones is |O")
+
+
+def test_a_rest_mesh_linked_into_the_output_is_refused(tmp_path, capsys):
+    """The skin's mesh a link (outside OUT) to the run's own skin_0000.ply: the real path decides."""
+    out = tmp_path / "out"
+    rc, _, err = _main(_skin_run(out, SKIN / "skin.yaml", pose=REST, frames="0"), capsys)
+    assert rc == 0, err
+    path = _skin(tmp_path)
+    (path.parent / "skin_rest.ply").unlink()
+    (path.parent / "skin_rest.ply").symlink_to(out / "meshes" / "skin" / "skin_0000.ply")
+    before = all_files(out)
+    _skin_refused(capsys, _skin_run(out, path, "--overwrite", pose=REST, frames="0"),
+                  "this input lies in the output folder")
+    assert all_files(out) == before
+
+
+def test_a_rest_mesh_with_zero_area_triangles_gives_finite_meshes_or_a_refusal(tmp_path, capsys):
+    """Two vertices of one triangle moved onto the third (no index repeated: closed, finite, outward):
+    the run writes no NaN (normals of triangles with no area) or refuses the mesh by name."""
+    from axdf_cli.formats import PlyWriter, load_triangles
+
+    path = _skin(tmp_path)
+    v, _, f = load_triangles(SKIN / "skin_rest.ply")
+    v = np.array(v, np.float32)
+    a, b, c = f[int(np.random.default_rng(63).integers(len(f)))]
+    v[b] = v[a]
+    v[c] = v[a]
+    (path.parent / "skin_rest.ply").write_bytes(PlyWriter(f).encode(v))
+    out = tmp_path / "out"
+    rc, _, err = _main(_skin_run(out, path), capsys)
+    if rc == 2:
+        assert "skin_rest.ply" in err and "Traceback" not in err, err
+        assert not out.exists()
+        return
+    assert rc == 0, err
+    for k in (0, 1):
+        w, n, _ = load_triangles(out / "meshes" / "skin" / f"skin_{k:04d}.ply")
+        assert np.isfinite(w).all() and (n is None or np.isfinite(n).all())
+
+
+def test_axdf_skin_refuses_a_zero_length_left_shank(tmp_path, capsys):
+    text = (REPO_ROOT / "poses" / "skeletons" / "gait2392.yaml").read_text()
+    k = text.index("name: talus_l")
+    i = text.index("offset:", k)
+    j = text.index("\n", i)
+    zero = text[:i] + "offset: [0, 0, 0]" + text[j:]
+    skel = tmp_path / "skel.yaml"
+    skel.write_text(zero.replace("mesh: meshes/", f"mesh: {SKELETON.parent / 'meshes'}/"))
+    out = tmp_path / "o"
+    _skin_refused(capsys, ["skin", "--skeleton", skel, "--out", out, "--allow-outside"], f"{skel}:",
+                  "segment shank_l", "talus_l")
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("fps", [0.001, 1e5])
+def test_a_skin_jiggle_at_extreme_frame_rates_writes_finite_meshes(tmp_path, capsys, fps):
+    path = _skin(tmp_path)
+    path.write_text(path.read_text() + "jiggle: {frequency: 100, damping_ratio: 0.05}\n")
+    text = POSE.read_text().replace("skeleton: skeletons/gait2392.yaml", f"skeleton: {SKELETON}")
+    pose = tmp_path / "pose.yaml"
+    pose.write_text("\n".join(f"fps: {fps:g}" if t.startswith("fps:") else t for t in text.splitlines()) + "\n")
+    out = tmp_path / "out"
+    rc, _, err = _main(_skin_run(out, path, pose=pose, frames="5:6"), capsys)
+    assert rc == 0, err
+    from axdf_cli.formats import load_triangles
+
+    for k in (5, 6):
+        w, n, _ = load_triangles(out / "meshes" / "skin" / f"skin_{k:04d}.ply")
+        assert np.isfinite(w).all() and (n is None or np.isfinite(n).all())

@@ -210,6 +210,7 @@ def load_skin(path: Path | str, skeleton=None, policy: RefPolicy | None = None) 
         raise InputError(wm, f"{weights_p.name} weighs {int(w['vertex_count'])} vertices, the mesh "
                          f"{mesh_p.name} has {n}", "weights made for this mesh")
     bones = tuple(str(b) for b in w["bones"])
+    _check_names(bones, weights_p.name, wm, "bone")
     twice = sorted({b for b in bones if bones.count(b) > 1})
     if twice:
         raise InputError(wm, f"{weights_p.name} names bone{'s' if len(twice) > 1 else ''} {', '.join(twice[:5])} "
@@ -239,8 +240,15 @@ def load_skin(path: Path | str, skeleton=None, policy: RefPolicy | None = None) 
     if int(a["vertex_count"]) != n:
         raise InputError(fm, f"{fat_p.name} has the fat of {int(a['vertex_count'])} vertices, the mesh "
                          f"{mesh_p.name} has {n}", "a fat map made for this mesh")
-    if not np.isfinite(fat).all() or (fat < 0).any():
-        raise InputError(fm, f"{fat_p.name} has negative or non-finite thicknesses", "thicknesses >= 0 (metres)")
+    if not np.isfinite(fat).all() or (fat < 0).any() or (fat > tol.SKIN_MAX_FAT).any():
+        worst = fat[np.argmax(~np.isfinite(fat) | (fat < 0) | (fat > tol.SKIN_MAX_FAT))]
+        raise InputError(fm, f"{fat_p.name} has thicknesses out of range (one is {float(worst):.4g} m)",
+                         f"thicknesses 0 to {tol.SKIN_MAX_FAT:g} m (metres)")
+    _check_names(names, fat_p.name, fm, "region")
+    twice = sorted({r for r in names if names.count(r) > 1})
+    if twice:
+        raise InputError(fm, f"{fat_p.name} names region{'s' if len(twice) > 1 else ''} {', '.join(twice[:5])} "
+                         "more than once", "each region once (its vertices under one index)")
     if len(region) and (region.min() < 0 or region.max() >= len(names)):
         raise InputError(fm, f"{fat_p.name} names regions it does not list", "region indices below its regions' count")
     unknown = [r for r in names if r not in regions]
@@ -305,6 +313,15 @@ def check_fitted(skin: Skin, skeleton, where: Mark) -> None:
         raise InputError((skin.marks or {}).get("skeleton", where),
                          f"{len(out)} of skeleton {skeleton.name!r}'s joints and bones the skin wears lie outside "
                          f"its rest mesh ({', '.join(out[:6])}): it was fitted to other proportions", refit)
+
+
+def _check_names(names, file: str, where: Mark, what: str) -> None:
+    """Every bone or region name an NPZ lists is a name (``[A-Za-z0-9_.-]+``, as in YAML files)."""
+    from axdf_cli.fileio.yamlio import NAME_ALLOWED, is_name
+
+    bad = next((n for n in names if not is_name(n)), None)
+    if bad is not None:
+        raise InputError(where, f"{file} lists the {what} name {bad!r}", f"{what} names: {NAME_ALLOWED}")
 
 
 def _weight_sizes(h: dict, name: str, where: Mark, n: int, max_bones: int) -> None:
