@@ -327,7 +327,7 @@ def test_overwrite_never_empties_an_input_folder(at, capsys):
     assert all_files(at / "out") == before
     # the map inside the output folder, --overwrite: read, never deleted (not listed) and kept
     shutil.copy(at / "map.yaml", at / "out" / "map.yaml")
-    rc, err = _atlas(at, capsys, "--sections", "4", "--overwrite", map_="out/map.yaml")
+    rc, err = _atlas(at, capsys, "--register-only", "--overwrite", map_="out/map.yaml")
     assert rc == 0, err
     assert (at / "out" / "map.yaml").read_text() == MAP
 
@@ -667,3 +667,80 @@ def test_a_skin_jiggle_at_extreme_frame_rates_writes_finite_meshes(tmp_path, cap
     for k in (5, 6):
         w, n, _ = load_triangles(out / "meshes" / "skin" / f"skin_{k:04d}.ply")
         assert np.isfinite(w).all() and (n is None or np.isfinite(n).all())
+
+
+# ============================================================================ 4. run --resume elsewhere
+
+AXIS_PATH = REPO_ROOT / "muscles" / "gait2392_atlas" / "soleus_r.yaml"
+
+
+def _mesh_files(out: Path) -> dict:
+    return {k: v for k, v in all_files(out).items() if k.startswith("meshes/") or k in ("stats.csv", "bones.csv")}
+
+
+@pytest.fixture()
+def project(tmp_path) -> Path:
+    """A project folder: an axis-and-path muscle and a pose on gait2392 by relative paths."""
+    (tmp_path / "m").mkdir()
+    shutil.copy(AXIS_PATH, tmp_path / "m" / "soleus_r.yaml")
+    text = POSE.read_text().replace("skeleton: skeletons/gait2392.yaml", f"skeleton: {SKELETON}")
+    (tmp_path / "walk.yaml").write_text(text)
+    return tmp_path
+
+
+def _run_in(cwd: Path, capsys, *argv) -> tuple[int, str]:
+    old = os.getcwd()
+    os.chdir(cwd)
+    try:
+        rc, _, err = _main(["run", *argv, "--no-render", "--quiet"], capsys)
+    finally:
+        os.chdir(old)
+    return rc, err
+
+
+def test_resume_from_another_working_folder_gives_the_uninterrupted_run(project, capsys, tmp_path_factory):
+    """An axis-and-path muscle run from the project by relative paths, its last frames lost, resumed
+    from elsewhere by absolute paths (and from a sub-folder by ../ ones): the same files as one
+    uninterrupted run."""
+    rc, err = _run_in(project, capsys, "--muscles", "m", "--pose", "walk.yaml", "--frames", "0:5", "--out", "out")
+    assert rc == 0, err
+    (project / "out" / "meshes" / "soleus_r" / "soleus_r_0005.ply").unlink()
+    elsewhere = tmp_path_factory.mktemp("elsewhere")
+    rc, err = _run_in(elsewhere, capsys, "--muscles", str(project / "m"), "--pose", str(project / "walk.yaml"),
+                      "--frames", "0:5", "--out", str(project / "out"), "--resume", "--allow-outside")
+    assert rc == 0, err
+    (project / "out" / "meshes" / "soleus_r" / "soleus_r_0004.ply").unlink()
+    (project / "sub").mkdir()
+    rc, err = _run_in(project / "sub", capsys, "--muscles", "../m", "--pose", "../walk.yaml", "--frames", "0:5",
+                      "--out", "../out", "--resume")
+    assert rc == 0, err
+    rc, err = _run_in(project, capsys, "--muscles", "m", "--pose", "walk.yaml", "--frames", "0:5", "--out", "whole")
+    assert rc == 0, err
+    got, want = _mesh_files(project / "out"), _mesh_files(project / "whole")
+    assert set(got) == set(want) and "meshes/soleus_r/soleus_r_0005.ply" in got
+    assert got == want
+
+
+def test_resume_elsewhere_with_another_muscle_of_the_same_name_is_refused(project, capsys, tmp_path_factory):
+    """From another folder, the relative --muscles m names another file: resuming would mix two runs."""
+    rc, err = _run_in(project, capsys, "--muscles", "m", "--pose", "walk.yaml", "--frames", "0:1", "--out", "out")
+    assert rc == 0, err
+    other = tmp_path_factory.mktemp("other")
+    (other / "m").mkdir()
+    text = AXIS_PATH.read_text().replace("volume: exact", "volume: paper")
+    (other / "m" / "soleus_r.yaml").write_text(text)
+    shutil.copy(project / "walk.yaml", other / "walk.yaml")
+    before = all_files(project / "out")
+    rc, err = _run_in(other, capsys, "--muscles", "m", "--pose", "walk.yaml", "--frames", "0:3",
+                      "--out", str(project / "out"), "--resume", "--allow-outside")
+    _no_trace(rc, err)
+    assert "--resume" in err and all_files(project / "out") == before
+
+
+def test_an_axis_off_the_paths_bones_is_refused_before_the_run_writes(project, capsys):
+    text = AXIS_PATH.read_text().replace("{bone: tibia_r, at: [-0.0213981", "{bone: femur_l, at: [-0.0213981")
+    (project / "m" / "soleus_r.yaml").write_text(text)
+    rc, err = _run_in(project, capsys, "--muscles", "m", "--pose", "walk.yaml", "--frames", "0:1", "--out", "out")
+    _no_trace(rc, err)
+    assert err.startswith("m/soleus_r.yaml:10:") and "which its path does not span" in err, err
+    assert not (project / "out").exists()
