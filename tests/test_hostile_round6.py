@@ -23,7 +23,6 @@ import io
 import json
 import os
 import shutil
-import struct
 import tracemalloc
 from pathlib import Path
 
