@@ -400,6 +400,9 @@ SKIN_MIN_FILL = 1e-3
 # the NPZ's headers before anything is read (112 kB of NPZ can name 3 million bones, whose
 # dense weights would take hundreds of GB).
 SKIN_MAX_BONES = 1024
+# A skin's fat map holds thicknesses of at most SKIN_MAX_FAT metres (the regions' fat_mm are at
+# most 100 mm; a vertex's thickness widens the reach of every muscle and bone point it holds)
+SKIN_MAX_FAT = 0.1
 SKIN_MAX_NAME = 256
 # A skin is worn only on a skeleton whose fitted segments (docs/SKIN.md: thigh, shank, foot,
 # trunk, arms, the skin file's `segments:`) are within SKIN_SEGMENT_TOLERANCE of the lengths it

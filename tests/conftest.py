@@ -47,7 +47,7 @@ TIERS = {
                     "one_height", "layers"),
     "judges": ("blender", "mjcf_judge", "opensim_judge", "osim_fk", "osim_muscles"),
     "hostile": ("compare_hostile", "fuzz_yaml", "hostile", "inputs_hostile", "robustness", "safety", "hostile_import",
-                "hostile_run", "hostile_skin", "fit_hostile"),
+                "hostile_run", "hostile_skin", "fit_hostile", "hostile_round6"),
 }
 TIER_OF = {f"test_{name}": tier for tier, names in TIERS.items() for name in names}
 

@@ -229,6 +229,14 @@ def check_outputs(outputs: OutputSet, *, inputs=(), overwrite: bool = False, ass
         if i is not None and _real(Path(i)) in deleted:
             raise InputError(Mark(str(i)), f"this input would be deleted: {deleted[_real(Path(i))]}",
                              "an input is never overwritten or deleted; choose another output folder")
+    for d in input_dirs:  # a folder read whole (axdf atlas --muscles OUT/muscles) is not emptied either
+        real_d = _real(Path(d)).rstrip(os.sep) + os.sep
+        gone = sorted(v for r, v in deleted.items() if r.startswith(real_d))
+        if gone:
+            raise InputError(Mark(str(d)), f"this input folder's files would be deleted: {gone[0]}"
+                             + (f" and {len(gone) - 1} more" if len(gone) > 1 else ""),
+                             "an input is never overwritten or deleted; choose another output folder, or copy "
+                             "the input out of it first")
     outside: dict = {}
     for o in outside_files:
         rel = Path(os.path.relpath(o.path, os.path.abspath(out))).as_posix()

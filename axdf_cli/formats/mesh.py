@@ -38,7 +38,13 @@ class Mesh:
         if starts and (starts != sorted(starts) or starts[0] < 0 or starts[-1] > len(v)):
             raise MeshReadError(f"named parts start at vertices {starts[:8]}, not in order within 0..{len(v)}")
         if len(self.face_indices) and (self.face_indices.min() < 0 or self.face_indices.max() >= len(v)):
-            raise MeshReadError(f"a face index is outside 0..{len(v) - 1}")
+            out = np.flatnonzero((self.face_indices < 0) | (self.face_indices >= len(v)))
+            face = np.searchsorted(np.cumsum(self.face_sizes), out, side="right")
+            many = len(np.unique(face))
+            raise MeshReadError(f"face {int(face[0])} (of {len(self.face_sizes)}, counted from 0) names vertex "
+                                f"{int(self.face_indices[out[0]])}, but the file has {len(v)} vertices"
+                                + (f" ({many} such faces)" if many > 1 else "")
+                                + f"; faces naming vertices 0..{len(v) - 1}")
 
     def group_slices(self) -> dict[str, slice]:
         """Each named part's vertices, ``name -> slice`` (a name used twice: its first part)."""

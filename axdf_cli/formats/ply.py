@@ -195,7 +195,9 @@ def read_ply(data: bytes) -> Mesh:
     if fmt not in _FORMATS:
         raise MeshReadError(f"PLY format {fmt!r} is not {', '.join(_FORMATS)}")
     for name, _, props in elements:
-        if len(props) > 1 and any(isinstance(t, tuple) for _, t in props):
+        if len(props) > 1 and any(isinstance(t, tuple) for _, t in props[1:]):
+            raise MeshReadError(f"PLY element {name!r} has a list after its first property")
+        if len(props) > 1 and isinstance(props[0][1], tuple) and fmt == "ascii":
             raise MeshReadError(f"PLY element {name!r} mixes a list with other properties")
     if fmt == "ascii":
         arrays = _ascii_body(bytes(body).decode("ascii", "replace"), elements)
@@ -248,24 +250,29 @@ def _binary_body(body: memoryview, elements, order: str) -> dict[str, dict]:
             arrays[name] = {p: rec[p] for p, _ in props}
             continue
         pname, (ct, it) = props[0]
-        sizes, flat, pos = _read_lists(body, pos, count, np.dtype(order + ct), np.dtype(order + it), name)
+        # scalar properties after the list (trimesh's STL-derived PLYs: "property ushort stl"): skipped
+        rest = np.dtype([(p, order + t) for p, t in props[1:]])
+        sizes, flat, pos = _read_lists(body, pos, count, np.dtype(order + ct), np.dtype(order + it), name, rest)
         arrays[name] = {pname: (sizes, flat)}
     return arrays
 
 
-def _read_lists(body: memoryview, pos: int, count: int, ct: np.dtype, it: np.dtype, name: str):
-    """Read ``count`` lists -> sizes ``(count,)``, flat indices, the position after them.
-    Fast path when every list has the first list's length; otherwise one list at a time."""
+def _read_lists(body: memoryview, pos: int, count: int, ct: np.dtype, it: np.dtype, name: str,
+                rest: np.dtype = np.dtype([])):
+    """Read ``count`` lists, each followed by the scalar properties ``rest`` (skipped) -> sizes
+    ``(count,)``, flat indices, the position after them. Fast path when every list has the first
+    list's length; otherwise one list at a time."""
+    extra = rest.itemsize
     if count == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64), pos
     short = MeshReadError(f"PLY file ends inside element {name!r}")
-    if pos + count * ct.itemsize > len(body):  # every list holds at least its length
+    if pos + count * (ct.itemsize + extra) > len(body):  # every list holds at least its length
         raise short
     k = int(np.frombuffer(body, ct, 1, pos)[0])
     if k < 0:
         raise MeshReadError(f"PLY element {name!r} has a list of length {k}")
-    if pos + count * (ct.itemsize + k * it.itemsize) <= len(body):
-        dt = np.dtype([("n", ct), ("i", it, (k,))])
+    if pos + count * (ct.itemsize + k * it.itemsize + extra) <= len(body):
+        dt = np.dtype([("n", ct), ("i", it, (k,))] + [(f"_{j}", rest[j]) for j in range(len(rest))])
         rec = np.frombuffer(body, dt, count, pos)
         if np.all(rec["n"] == k):
             return (np.full(count, k, np.int64), rec["i"].reshape(-1).astype(np.int64),
@@ -283,6 +290,9 @@ def _read_lists(body: memoryview, pos: int, count: int, ct: np.dtype, it: np.dty
             raise short
         chunks.append(np.frombuffer(body, it, n, pos))
         pos += n * it.itemsize
+        if pos + extra > len(body):
+            raise short
+        pos += extra
         sizes[j] = n
     return sizes, np.concatenate(chunks).astype(np.int64), pos
 

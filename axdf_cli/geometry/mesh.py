@@ -30,3 +30,30 @@ def capped(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndar
     if not centres:
         return v, f
     return np.concatenate([v, np.array(centres)]), np.concatenate([f, np.array(fans, np.int64)])
+
+
+def surface_problem(faces: np.ndarray, n: int) -> str | None:
+    """What keeps triangles (T, 3) over ``n`` vertices from being one closed, manifold,
+    consistently wound surface (every vertex on a triangle, no repeated corner, every directed
+    edge once and its reverse once), as words after the mesh's name; None when nothing does."""
+    faces = np.asarray(faces, np.int64)
+    nf = len(faces)
+    if nf < 4:
+        return f"has {nf} triangle{'s' if nf != 1 else ''}, no closed surface"
+    if ((faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (faces[:, 2] == faces[:, 0])).any():
+        return "has triangles with a repeated corner"
+    loose = np.flatnonzero(np.bincount(faces.ravel(), minlength=n) == 0)
+    if len(loose):
+        return f"has {len(loose)} vertices on no triangle (the first, vertex {int(loose[0])})"
+    a = faces.ravel()
+    b = np.roll(faces, -1, axis=1).ravel()  # the directed edges a -> b of every triangle
+    key = a * n + b
+    uniq, count = np.unique(key, return_counts=True)
+    if (count > 1).any():
+        k = int(uniq[np.argmax(count > 1)])
+        return (f"is not manifold or not wound consistently: the edge {k // n}-{k % n} runs the same way in "
+                f"{int(count.max())} triangles")
+    open_ = ~np.isin(b * n + a, uniq)
+    if open_.any():
+        return f"is open: {int(open_.sum())} edges border one triangle only"
+    return None

@@ -28,6 +28,7 @@ import numpy as np
 from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.fileio.yamlio import Fields, load_yaml
+from axdf_cli.geometry.mesh import surface_problem
 from axdf_cli.specs.refs import RefPolicy
 
 SKIN_KEYS = ("skin", "skeleton", "family", "mesh", "weights", "fat", "stature", "height", "fat_source", "regions",
@@ -135,31 +136,14 @@ def check_rest_mesh(v: np.ndarray, faces: np.ndarray, where: Mark, name: str) ->
     consistently wound); wound outward (positive volume); its extent and fullness in
     ``tol.SKIN_MIN_EXTENT``..``tol.SKIN_MAX_EXTENT`` and ``tol.SKIN_MIN_FILL``. → its volume (m^3)."""
     allowed = "a closed triangle mesh of a body, wound outward (as axdf skin writes it)"
-    n, nf = len(v), len(faces)
-    if nf < 4:
-        raise InputError(where, f"{name} has {nf} triangle{'s' if nf != 1 else ''}, no closed surface", allowed)
-    bad = np.flatnonzero(~np.isfinite(v).all(axis=1))
+    bad = np.flatnonzero(~np.isfinite(v).all(axis=1)) if len(faces) >= 4 else ()
     if len(bad):
         raise InputError(where, f"{name} has {len(bad)} non-finite vertices (the first, vertex {int(bad[0])}: "
                          f"{np.asarray(v[bad[0]]).tolist()})", "finite coordinates (metres)")
     faces = np.asarray(faces, np.int64)
-    if ((faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (faces[:, 2] == faces[:, 0])).any():
-        raise InputError(where, f"{name} has triangles with a repeated corner", allowed)
-    loose = np.flatnonzero(np.bincount(faces.ravel(), minlength=n) == 0)
-    if len(loose):
-        raise InputError(where, f"{name} has {len(loose)} vertices on no triangle (the first, vertex {int(loose[0])})",
-                         allowed)
-    a = faces.ravel()
-    b = np.roll(faces, -1, axis=1).ravel()  # the directed edges a -> b of every triangle
-    key = a * n + b
-    uniq, count = np.unique(key, return_counts=True)
-    if (count > 1).any():
-        k = int(uniq[np.argmax(count > 1)])
-        raise InputError(where, f"{name} is not manifold or not wound consistently: the edge {k // n}-{k % n} runs "
-                         f"the same way in {int(count.max())} triangles", allowed)
-    open_ = ~np.isin(b * n + a, uniq)
-    if open_.any():
-        raise InputError(where, f"{name} is open: {int(open_.sum())} edges border one triangle only", allowed)
+    problem = surface_problem(faces, len(v))
+    if problem:
+        raise InputError(where, f"{name} {problem}", allowed)
     extent = float(np.ptp(v, axis=0).max())
     if not tol.SKIN_MIN_EXTENT <= extent <= tol.SKIN_MAX_EXTENT:
         raise InputError(where, f"{name} is {extent:.4g} m across", f"a body between {tol.SKIN_MIN_EXTENT:g} and "
@@ -226,6 +210,7 @@ def load_skin(path: Path | str, skeleton=None, policy: RefPolicy | None = None) 
         raise InputError(wm, f"{weights_p.name} weighs {int(w['vertex_count'])} vertices, the mesh "
                          f"{mesh_p.name} has {n}", "weights made for this mesh")
     bones = tuple(str(b) for b in w["bones"])
+    _check_names(bones, weights_p.name, wm, "bone")
     twice = sorted({b for b in bones if bones.count(b) > 1})
     if twice:
         raise InputError(wm, f"{weights_p.name} names bone{'s' if len(twice) > 1 else ''} {', '.join(twice[:5])} "
@@ -255,8 +240,15 @@ def load_skin(path: Path | str, skeleton=None, policy: RefPolicy | None = None) 
     if int(a["vertex_count"]) != n:
         raise InputError(fm, f"{fat_p.name} has the fat of {int(a['vertex_count'])} vertices, the mesh "
                          f"{mesh_p.name} has {n}", "a fat map made for this mesh")
-    if not np.isfinite(fat).all() or (fat < 0).any():
-        raise InputError(fm, f"{fat_p.name} has negative or non-finite thicknesses", "thicknesses >= 0 (metres)")
+    if not np.isfinite(fat).all() or (fat < 0).any() or (fat > tol.SKIN_MAX_FAT).any():
+        worst = fat[np.argmax(~np.isfinite(fat) | (fat < 0) | (fat > tol.SKIN_MAX_FAT))]
+        raise InputError(fm, f"{fat_p.name} has thicknesses out of range (one is {float(worst):.4g} m)",
+                         f"thicknesses 0 to {tol.SKIN_MAX_FAT:g} m (metres)")
+    _check_names(names, fat_p.name, fm, "region")
+    twice = sorted({r for r in names if names.count(r) > 1})
+    if twice:
+        raise InputError(fm, f"{fat_p.name} names region{'s' if len(twice) > 1 else ''} {', '.join(twice[:5])} "
+                         "more than once", "each region once (its vertices under one index)")
     if len(region) and (region.min() < 0 or region.max() >= len(names)):
         raise InputError(fm, f"{fat_p.name} names regions it does not list", "region indices below its regions' count")
     unknown = [r for r in names if r not in regions]
@@ -321,6 +313,15 @@ def check_fitted(skin: Skin, skeleton, where: Mark) -> None:
         raise InputError((skin.marks or {}).get("skeleton", where),
                          f"{len(out)} of skeleton {skeleton.name!r}'s joints and bones the skin wears lie outside "
                          f"its rest mesh ({', '.join(out[:6])}): it was fitted to other proportions", refit)
+
+
+def _check_names(names, file: str, where: Mark, what: str) -> None:
+    """Every bone or region name an NPZ lists is a name (``[A-Za-z0-9_.-]+``, as in YAML files)."""
+    from axdf_cli.fileio.yamlio import NAME_ALLOWED, is_name
+
+    bad = next((n for n in names if not is_name(n)), None)
+    if bad is not None:
+        raise InputError(where, f"{file} lists the {what} name {bad!r}", f"{what} names: {NAME_ALLOWED}")
 
 
 def _weight_sizes(h: dict, name: str, where: Mark, n: int, max_bones: int) -> None:

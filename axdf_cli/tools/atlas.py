@@ -25,6 +25,7 @@ bone meshes (world, metres) and the :class:`Atlas` (its folder and map).
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -42,9 +43,18 @@ class Atlas:
     root: Path
     map: AtlasMap
 
-    def path(self, side: str, kind: str, name: str) -> Path:
-        """The atlas file of a structure (kind Bone, Cartilage, Muscle) on a side ('r', 'l')."""
-        return Path(self.root) / self.map.files.format(folder=self.map.sides[side], kind=kind, name=name)
+    def path(self, side: str, kind: str, name: str, where: Mark | None = None) -> Path:
+        """The atlas file of a structure (kind Bone, Cartilage, Muscle) on a side ('r', 'l');
+        refused (at ``where``, else the map's files:) where it, a link resolved, leaves the
+        atlas folder."""
+        p = Path(self.root) / self.map.files.format(folder=self.map.sides[side], kind=kind, name=name)
+        root = os.path.realpath(self.root)
+        real = os.path.realpath(p)
+        if os.path.lexists(p) and real != root and not real.startswith(root.rstrip(os.sep) + os.sep):
+            raise InputError(where or self.map.marks.get("files", Mark(self.map.path)),
+                             f"atlas file {p} leaves the atlas folder {self.root} (it is {real})",
+                             "atlas files inside ATLAS_DIR (no link out of it)")
+        return p
 
     def check(self, sides) -> None:
         """Refuse, at the map's line, a landmark's or a warped bone's file the folder lacks."""
@@ -56,7 +66,7 @@ class Atlas:
                     for k, (cart, other, _) in self.map.landmarks.items()]
             need += [(("bone", i), "Bone", n, side) for i, (names, _, _) in enumerate(self.map.bones) for n in names]
             for key, kind, name, s in need:
-                p = self.path(s, kind, name)
+                p = self.path(s, kind, name, self.map.marks.get(key))
                 if not p.is_file():
                     raise InputError(self.map.marks.get(key, Mark(self.map.path)),
                                      f"{key[0]} {key[1] if key[0] == 'landmark' else name}: no atlas file {p}",
@@ -64,13 +74,33 @@ class Atlas:
 
 
 def read_atlas_mesh(path: Path):
-    """(vertices in metres, faces) of an atlas PLY (millimetres); refused by name when missing."""
-    import trimesh
+    """(vertices (V, 3) float64 in metres, faces (F, 3) int64) of an atlas mesh (PLY or OBJ,
+    millimetres), read strictly (axdf_cli.formats: counts checked against the file's length,
+    every face naming a vertex of the file) and refused by name unless it is one closed,
+    consistently wound surface of finite coordinates within ``tol.ATLAS_MAX_REACH`` of the
+    atlas' origin and at least ``tol.ATLAS_MIN_EXTENT`` across."""
+    from axdf_cli.formats import load_triangles_and_bytes
+    from axdf_cli.geometry.mesh import surface_problem
 
+    where = Mark(str(path))
+    allowed = "a closed triangle surface in millimetres (PLY or OBJ), as the atlas map's files: pattern names"
     if not Path(path).is_file():
-        raise InputError(Mark(str(path)), "atlas file not found", "a mesh the atlas map's files: pattern names")
-    m = trimesh.load(str(path), force="mesh", process=False)
-    return np.asarray(m.vertices, dtype=np.float64) * 1e-3, np.asarray(m.faces, dtype=np.int64)
+        raise InputError(where, "atlas file not found", allowed)
+    (v, _, f), _ = load_triangles_and_bytes(path)
+    v, f = np.asarray(v, np.float64) * 1e-3, np.asarray(f, np.int64)
+    bad = np.flatnonzero(~np.isfinite(v).all(axis=1))
+    if len(bad):
+        raise InputError(where, f"has {len(bad)} non-finite vertices (the first, vertex {int(bad[0])})",
+                         "finite coordinates (millimetres)")
+    problem = surface_problem(f, len(v))
+    if problem:
+        raise InputError(where, problem, allowed)
+    extent, far = float(np.ptp(v, axis=0).max()), float(np.abs(v).max())
+    if not extent >= tol.ATLAS_MIN_EXTENT or far > tol.ATLAS_MAX_REACH:
+        raise InputError(where, f"is {extent * 1e3:.4g} mm across, {far * 1e3:.4g} mm from the origin at most",
+                         f"a surface at least {tol.ATLAS_MIN_EXTENT * 1e3:g} mm across within "
+                         f"{tol.ATLAS_MAX_REACH:g} m of the atlas' origin (millimetres)")
+    return v, f
 
 
 def sphere_fit(points: np.ndarray) -> tuple[np.ndarray, float]:
@@ -180,6 +210,21 @@ def register(atlas: Atlas, skel, rest: np.ndarray, bone_meshes: dict, side: str,
     la, lm = atlas_landmarks(atlas, side), model_landmarks(skel, rest, amap, side)
     src = np.array([la[k] for k in names])
     dst = np.array([lm[k] for k in names])
+    for pts, whose in ((src, "the atlas' cartilages' sphere centres"), (dst, f"skeleton {skel.name}'s bone origins")):
+        sv = np.linalg.svd(pts - pts.mean(axis=0), compute_uv=False)
+        if not (np.isfinite(sv).all() and sv[0] > tol.ATLAS_MIN_EXTENT and sv[1] > tol.ATLAS_LANDMARK_SPREAD * sv[0]):
+            raise InputError(amap.marks.get("landmarks", Mark(amap.path)),
+                             f"side {side}'s landmarks ({', '.join(names)}) are {whose} on one line or point",
+                             "landmarks that span a plane (joint centres of both hips, the knee and the ankle)")
+    for k, (atlas_bones, bone, both) in enumerate(amap.bones):
+        mb = f"{bone}_{side}"
+        if mb not in bone_meshes:
+            has = mb in skel.bone_index
+            raise InputError(amap.marks.get(("bone", k), Mark(amap.path)),
+                             f"bone {bone}: skeleton {skel.name}'s bone {mb} " +
+                             ("has no mesh to pull the atlas' bones onto" if has else "does not exist"),
+                             f"{did_you_mean(mb, list(bone_meshes))}a bone of --onto with a mesh (without the "
+                             "side suffix _r, _l)")
     # the other leg's landmark only fixes the turn about the leg's long axis: weighted less
     s, R, t = similarity(src, dst, [tol.ATLAS_OTHER_HIP_WEIGHT if amap.landmarks[k][1] else 1.0 for k in names])
     reg = Registration(side, s, R, t, la, lm)
@@ -189,8 +234,6 @@ def register(atlas: Atlas, skel, rest: np.ndarray, bone_meshes: dict, side: str,
     groups = []
     for k, (atlas_bones, bone, both) in enumerate(amap.bones):
         mb = f"{bone}_{side}"
-        if mb not in bone_meshes:
-            continue
         pts = [_samples(*read_atlas_mesh(atlas.path(side, "Bone", n)), tol.ATLAS_BONE_SAMPLES, tol.FIT_SEED + k)
                for n in atlas_bones]
         groups.append((mb, reg.rigid(np.concatenate(pts)), both))

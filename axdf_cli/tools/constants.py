@@ -214,3 +214,19 @@ ATLAS_SPLIT_SPACING = 0.0015
 # a spindle still keep their volume (docs/FIT.md)
 ATLAS_MIN_IOU = 0.5
 ATLAS_MAX_VOLUME_FACTOR = 1.5
+# an atlas map's lists, bounded so that a small map cannot make the command read thousands of
+# meshes: model muscles (gait2392 has 43 a side), split groups, landmarks (4 used; each a
+# sphere fit), bone pairs (3 used) and the atlas names of one entry (6 at most used)
+ATLAS_MAX_MUSCLES = 500
+ATLAS_MAX_LANDMARKS = 32
+ATLAS_MAX_BONES = 64
+ATLAS_MAX_NAMES = 64
+# an atlas mesh (millimetres, read strictly: counts against the file's length) is at least
+# ATLAS_MIN_EXTENT metres across (a cartilage collapsed to a point fits no sphere) and within
+# ATLAS_MAX_REACH metres of the atlas' origin (a scan frame's origin is arbitrary, but a vertex
+# at 1e30 mm is no anatomy)
+ATLAS_MIN_EXTENT = 1e-3
+ATLAS_MAX_REACH = 100.0
+# the landmarks (atlas and model alike) must span a plane: their second spread (singular value)
+# at least this share of the first (gait2392's hips, knee and ankle: ~0.1)
+ATLAS_LANDMARK_SPREAD = 1e-3

@@ -104,6 +104,14 @@ def _load(path: Path, where: Mark):
 
     if path.suffix.lower() == ".stl":
         check_stl(path, where)
+    else:  # PLY, OBJ: axdf's own strict reader first (counts against the file, faces naming its vertices)
+        from axdf_cli.fileio.yamlio import read_input
+        from axdf_cli.formats import MeshReadError, read_mesh
+
+        try:
+            read_mesh(read_input(path, str(path), MESH_ALLOWED), path.suffix.lower())
+        except MeshReadError as e:
+            raise InputError(where, str(e), MESH_ALLOWED) from None
     try:
         mesh = trimesh.load(str(path), force="mesh", process=False)
     except Exception as e:  # trimesh raises many kinds on a bad file

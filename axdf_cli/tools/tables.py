@@ -15,6 +15,7 @@ from functools import lru_cache
 from pathlib import Path
 
 from axdf_cli.errors import InputError, Mark
+from axdf_cli.tools import constants as tol
 from axdf_cli.fileio.yamlio import Fields, check_name, did_you_mean, item_marks, load_yaml
 
 DATA = Path(__file__).resolve().parent.parent / "data"
@@ -28,18 +29,25 @@ PLACEHOLDERS = "{s} (l, r), {S} (L, R), {side} (Left, Right)"
 NEEDED_LANDMARKS = ("hip_l", "hip_r", "knee_l", "knee_r", "ankle_l", "ankle_r")
 
 
-def _names(value, where: Mark, what: str) -> tuple:
-    """A non-empty list of names."""
-    if not isinstance(value, list) or not value:
+def _names(value, where: Mark, what: str, most: int | None = None, empty: bool = False) -> tuple:
+    """A non-empty (``empty``: possibly empty) list of at most ``most`` names."""
+    if not isinstance(value, list) or not (value or empty):
         raise InputError(where, f"{what} is not a list of names", f"{what}: a list of one name or more, [A, B]")
+    if most is not None and len(value) > most:
+        raise InputError(where, f"{what} lists {len(value)} names", f"{what}: at most {most}")
     return tuple(check_name(v, m, what) for v, m in zip(value, item_marks(value, where)))
 
 
-def _entries(f: Fields, key: str) -> list:
-    """(key, value, key mark, value mark) of the mapping ``key`` of ``f`` (required, not empty)."""
-    m = f.mapping(key, required=True)
+def _entries(f: Fields, key: str, optional: bool = False, most: int | None = None) -> list:
+    """(key, value, key mark, value mark) of the mapping ``key`` of ``f`` (required, not empty;
+    ``optional``: absent or empty gives none), of at most ``most`` entries."""
+    m = f.mapping(key, required=not optional)
     if not m:
+        if optional:
+            return []
         raise InputError(f.vmark(key), f"{key} is empty", f"{key}: one entry or more")
+    if most is not None and len(m) > most:
+        raise InputError(f.vmark(key), f"{key} has {len(m)} entries", f"{key}: at most {most}")
     return [(k, v, m.key_mark(k), m.value_mark(k)) for k, v in m.items()]
 
 
@@ -238,29 +246,47 @@ def load_atlas_map(path: Path | str) -> AtlasMap:
         raise InputError(Mark(path), "atlas map not found", "a YAML atlas map (atlases/gait2392.yaml shows one)")
     f = Fields(load_yaml(path), Mark(path), "the atlas map",
                keys=("files", "credit", "muscles", "split", "kept", "unused", "sides", "landmarks", "bones"))
-    marks: dict = {"files": f.vmark("files"), "sides": f.vmark("sides")}
+    marks: dict = {"files": f.vmark("files"), "sides": f.vmark("sides"), "landmarks": f.vmark("landmarks")}
     files = f.string("files", required=True)
     import string
 
     try:
-        used = {fld for _, fld, _, _ in string.Formatter().parse(files) if fld is not None}
+        parsed = list(string.Formatter().parse(files))
     except ValueError as e:
         raise InputError(f.vmark("files"), f"files: {e}", "a pattern with {folder}, {kind} and {name}") from None
-    if not used <= set(FILE_FIELDS) or "name" not in used or Path(files).is_absolute() or ".." in Path(files).parts:
-        raise InputError(f.vmark("files"), f"files: {files!r} is not an atlas file pattern",
+    used = {fld for _, fld, _, _ in parsed if fld is not None}
+    spec = next((f"{{{fld}{'!' + conv if conv else ''}{':' + sp if sp else ''}}}" for _, fld, sp, conv in parsed
+                 if fld is not None and (sp or conv)), None)
+    if not used <= set(FILE_FIELDS) or "name" not in used or Path(files).is_absolute() or ".." in Path(files).parts \
+            or spec is not None:
+        raise InputError(f.vmark("files"), f"files: {files!r} is not an atlas file pattern"
+                         + (f" ({spec}: a placeholder takes no format or conversion)" if spec else ""),
                          "a relative path with {name} and, as needed, {folder} (the side's folder) and {kind} "
                          "(Muscle, Bone, Cartilage), e.g. \"{folder}/VHF_{folder}_{kind}_{name}_smooth.ply\"")
     credit = f.string("credit", default="")
+    model: dict = {}  # model muscle -> where the map first names it
+
+    def once(name, where: Mark, what: str):
+        if name in model:
+            raise InputError(where, f"{what} {name} is named twice (first at line {model[name].line})",
+                             "each model muscle once, in one of muscles:, split: parts and kept:")
+        model[name] = where
+
+    most = tol.ATLAS_MAX_NAMES
     muscles = {}
-    for k, v, km, vm in _entries(f, "muscles"):
-        muscles[check_name(k, km, "muscle")] = _names(v, vm, f"muscle {k}'s atlas names")
+    for k, v, km, vm in _entries(f, "muscles", most=tol.ATLAS_MAX_MUSCLES):
+        once(k, km, "muscle")
+        muscles[check_name(k, km, "muscle")] = _names(v, vm, f"muscle {k}'s atlas names", most)
         marks[("muscle", k)] = vm
     split = {}
-    for k, v, km, vm in _entries(f, "split"):
+    for k, v, km, vm in _entries(f, "split", optional=True, most=tol.ATLAS_MAX_MUSCLES):
         marks[("muscle", k)] = vm
         s = Fields(v, vm, f"split {k}", keys=("atlas", "parts"))
-        split[check_name(k, km, "group")] = (_names(s.raw("atlas", required=True), s.vmark("atlas"), "atlas"),
-                                             _names(s.raw("parts", required=True), s.vmark("parts"), "parts"))
+        parts = _names(s.raw("parts", required=True), s.vmark("parts"), "parts", most)
+        for q, qm in zip(parts, item_marks(s.raw("parts"), s.vmark("parts"))):
+            once(q, qm, f"split {k}'s part")
+        split[check_name(k, km, "group")] = (_names(s.raw("atlas", required=True), s.vmark("atlas"), "atlas", most),
+                                             parts)
     sides = {}
     for k, v, km, vm in _entries(f, "sides"):
         sides[_known(k, km, ("r", "l"), "side")] = check_name(v, vm, f"side {k}'s folder")
@@ -269,7 +295,7 @@ def load_atlas_map(path: Path | str) -> AtlasMap:
         raise InputError(f.vmark("sides"), "sides has no " + " ".join(s for s in ("r", "l") if s not in sides),
                          "sides: {r: FOLDER, l: FOLDER}")
     landmarks = {}
-    for k, v, km, vm in _entries(f, "landmarks"):
+    for k, v, km, vm in _entries(f, "landmarks", most=tol.ATLAS_MAX_LANDMARKS):
         lm = Fields(v, vm, f"landmark {k}", keys=("cartilage", "leg", "bone"))
         landmarks[check_name(k, km, "landmark")] = (lm.name("cartilage", required=True),
                                                     lm.choice("leg", ("same", "other"), required=True) == "other",
@@ -279,12 +305,17 @@ def load_atlas_map(path: Path | str) -> AtlasMap:
         raise InputError(f.vmark("landmarks"), f"landmarks has {len(landmarks)} entries",
                          "three landmarks or more (a similarity in 3D)")
     seq = f.seq("bones", required=True, min_len=1)
+    if len(seq) > tol.ATLAS_MAX_BONES:
+        raise InputError(f.vmark("bones"), f"bones has {len(seq)} entries", f"bones: at most {tol.ATLAS_MAX_BONES}")
     bones = []
     for i, (item, m) in enumerate(zip(seq, item_marks(seq, f.vmark("bones")))):
         b = Fields(item, m, "a bone pair", keys=("atlas", "bone", "both"))
-        bones.append((_names(b.raw("atlas", required=True), b.vmark("atlas"), "atlas"),
+        bones.append((_names(b.raw("atlas", required=True), b.vmark("atlas"), "atlas", most),
                       b.name("bone", required=True), b.boolean("both", required=True)))
         marks[("bone", i)] = m
-    kept = _names(f.raw("kept", required=True), f.vmark("kept"), "kept")
-    unused = _names(f.raw("unused", required=True), f.vmark("unused"), "unused")
+    kept = _names(f.raw("kept", default=[]), f.vmark("kept") if f.has("kept") else Mark(path), "kept", empty=True)
+    for q, qm in zip(kept, item_marks(f.raw("kept", default=[]), f.vmark("kept") if f.has("kept") else Mark(path))):
+        once(q, qm, "kept muscle")
+    unused = _names(f.raw("unused", default=[]), f.vmark("unused") if f.has("unused") else Mark(path), "unused",
+                    empty=True)
     return AtlasMap(muscles, split, kept, unused, sides, landmarks, tuple(bones), files, credit, path, marks)
