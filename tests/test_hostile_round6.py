@@ -32,6 +32,7 @@ import pytest
 from cli_in_folder import run_cli
 from conftest import REPO_ROOT, all_files
 from osim_common import DATA
+from test_fit_hostile import SKELETON as FIT_LEG
 
 VHF = DATA / "atlas" / "visible_human_female"
 SKELETON = REPO_ROOT / "poses" / "skeletons" / "gait2392.yaml"
@@ -333,19 +334,7 @@ def test_overwrite_never_empties_an_input_folder(at, capsys):
 
 # ============================================================================ 2. axdf fit
 
-LEG = """\
-skeleton: leg
-coordinates:
-  hip: {type: rotation, range: [-30, 120]}
-bones:
-  - name: pelvis
-    offset: [0, 0, 1.0]
-  - name: femur
-    parent: pelvis
-    offset: [0, 0, -0.05]
-    dofs:
-      - {coord: hip, type: rotation, axis: [1, 0, 0]}
-"""
+LEG = FIT_LEG  # the two-bone leg of test_fit_hostile
 
 
 def _ellipsoid(shift=(0.03, 0.0, 0.7), scale=(0.02, 0.02, 0.12), subdiv: int = 3):

@@ -41,6 +41,8 @@ for the sinks; it changes no muscle.
 """
 from __future__ import annotations
 
+import os
+
 from dataclasses import dataclass
 
 import numpy as np
@@ -117,7 +119,7 @@ class WornRest:
     grown: int  # how many points were grown over
 
 
-def _bone_points(skin, plan, rest_world) -> list:
+def _bone_points(skin, plan) -> list:
     """[(bone index, (N, 3) bone-local points)]: each worn bone's mesh vertices and triangle
     centroids (a coarse mesh's faces bulge between its vertices); a bone the skin does not wear
     (gait2392's ground) is left out."""
@@ -138,7 +140,7 @@ def worn_rest(skin, plan) -> WornRest:
     rest_world = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
     muscle = np.concatenate([np.zeros((0, 3))] + [m.rest_vertices.astype(np.float64) for m in plan.models])
     bone = np.concatenate([np.zeros((0, 3))] + [local @ rest_world[b, :3, :3].T + rest_world[b, :3, 3]
-                                                for b, local in _bone_points(skin, plan, rest_world)])
+                                                for b, local in _bone_points(skin, plan)])
     v = np.ascontiguousarray(skin.vertices, dtype=np.float64)
     faces = np.ascontiguousarray(skin.faces, dtype=np.int64)
     pts = np.concatenate([muscle, bone])
@@ -174,7 +176,7 @@ def build(skin, plan, worn: WornRest | None = None) -> SkinModel:
     pts = [muscle[muscle_points]]
     bone_points = []
     n_bone = 0
-    for b, local in _bone_points(skin, plan, rest_world):
+    for b, local in _bone_points(skin, plan):
         world = local @ rest_world[b, :3, :3].T + rest_world[b, :3, 3]
         n_bone += len(local)
         keep = np.isfinite(tree.query(world, k=1, distance_upper_bound=reach)[0])
@@ -372,8 +374,6 @@ class SkinStage(StageBase):
         w = self.worn(plan)
         if w.muscle_outside <= tol.SKIN_FOREIGN_MUSCLE_SHARE and w.bone_outside <= tol.SKIN_FOREIGN_BONE_SHARE:
             return []
-        import os
-
         dirs = sorted({os.path.dirname(str(m.source)) for m in plan.muscles if getattr(m, "source", None)})
         folder = os.path.commonpath(dirs) if dirs else "MUSCLES_DIR"
         return [f"skin {self.skin.name}: {100 * w.muscle_outside:.1f}% of the muscle vertices and "
