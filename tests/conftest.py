@@ -44,7 +44,7 @@ TIERS = {
                     "render_jobs", "render_output", "retarget", "retarget_myobody", "stages", "transfer",
                     "transfer_paths", "retarget_fit", "first_hour", "first_hour_two", "framing", "outputs_per_frame", "fit",
                     "skin", "skin_stage", "atlas", "atlas_cli", "skin_outputs", "dataset_skin", "volume_twist", "run_identity",
-                    "one_height", "layers"),
+                    "one_height", "layers", "partition"),
     "judges": ("blender", "mjcf_judge", "opensim_judge", "osim_fk", "osim_muscles"),
     "hostile": ("compare_hostile", "fuzz_yaml", "hostile", "inputs_hostile", "robustness", "safety", "hostile_import",
                 "hostile_run", "hostile_skin", "fit_hostile", "hostile_round6"),

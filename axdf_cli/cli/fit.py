@@ -1,16 +1,17 @@
 """Fit muscle meshes as AxDf muscles: ``axdf fit MESH [MESH ...] --skeleton SKEL --out DIR``.
 
 Each closed muscle surface (STL, PLY, OBJ), given in the skeleton's rest frame in ``--units``,
-becomes one ordinary muscle file ``DIR/muscles/STEM.yaml``: an axis of 5 control points
-through its medial curve bound to the nearest bones, ``--sections`` outlines of 8 points
-fitted so that the model's rest surface passes through the mesh, tendons where its ends are
-thin (axdf_cli/tools/fit.py; docs/FIT.md). DIR also receives ``fit_report.json`` and ``FIT.md``
-(each fit's IoU, surface distance and volume ratio, measured on the written file) and
-``manifest.json``: DIR is the command's own folder (``--overwrite`` replaces an earlier fit
-there; docs/OUTPUTS.md). ``--transform FILE`` carries meshes from another frame (an atlas' scan
-frame) into the skeleton's rest frame first. A mesh that is missing, open, inconsistently wound,
-without volume, of several pieces or far from every bone writes nothing (exit 2), and every such
-mesh of the batch is named at once; slivers of a mesh are dropped and said so on stderr.
+becomes one ordinary muscle file ``DIR/muscles/STEM.yaml``: an axis of 5 control points through
+its medial curve bound to the nearest bones, ``--sections`` outlines of 8 points fitted so that
+the model's rest surface passes through the mesh, tendons where its ends are thin
+(axdf_cli/tools/fit.py; docs/FIT.md); ``--inside`` keeps each fitted surface inside its mesh.
+DIR also receives ``fit_report.json`` and ``FIT.md`` (each fit's IoU, surface distance and
+volume ratio, measured on the written file) and ``manifest.json``: DIR is the command's own
+folder (``--overwrite`` replaces an earlier fit there; docs/OUTPUTS.md). ``--transform FILE``
+carries meshes from another frame (an atlas' scan frame) into the skeleton's rest frame first.
+A mesh that is missing, open, inconsistently wound, without volume, of several pieces or far
+from every bone writes nothing (exit 2), and every such mesh of the batch is named at once;
+slivers of a mesh are dropped and said so on stderr.
 """
 from __future__ import annotations
 
@@ -35,6 +36,9 @@ def add_args(p) -> None:
     p.add_argument("--paths", default=None, metavar="DIR",
                    help="the model's muscle files: a mesh binds only to the bones the file of its name there "
                         "spans (its path's and those between), so a muscle across two joints hangs on each")
+    p.add_argument("--inside", action="store_true",
+                   help="keep each fitted surface inside its mesh (bounded sections; for meshes that share no space, "
+                        "such as axdf atlas --partition's territories, the fits then share none)")
     p.add_argument("--allow-outside", action="store_true",
                    help="allow paths inside YAML files to leave the project folder tree")
     add_overwrite_arg(p)
@@ -60,7 +64,7 @@ def run(args) -> int:
 
     res = build_fit([Path(m) for m in args.meshes], Path(args.skeleton), args.units, args.sections, policy, told,
                     paths=None if args.paths is None else Path(args.paths),
-                    transform=None if args.transform is None else Path(args.transform))
+                    transform=None if args.transform is None else Path(args.transform), inside=args.inside)
     for rel, data in res.files.items():
         out.add(Path(args.out) / rel, data, "output")
     write_outputs(out, inputs=res.inputs, overwrite=args.overwrite, input_dirs=dirs)
@@ -79,5 +83,9 @@ def run(args) -> int:
         print(f"fitted {len(ms)} muscles into {Path(args.out) / 'muscles'} ({res.report['sections']} sections): "
               f"IoU {worst['iou']:.3f} (least, {worst['muscle']}), volume ratio "
               f"{min(m['volume_ratio'] for m in ms):.3f}..{max(m['volume_ratio'] for m in ms):.3f}")
+        if args.inside:
+            far = max(ms, key=lambda m: m["outside_over_1mm"])
+            print(f"inside: {100 * far['outside_over_1mm']:.2f}% of {far['muscle']}'s vertices more than 1 mm outside "
+                  f"its mesh (most), farthest {max(m['outside_farthest_mm'] for m in ms):.1f} mm")
         print(f"report: {Path(args.out) / SUMMARY}")
     return 0

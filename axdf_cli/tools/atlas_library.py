@@ -185,13 +185,17 @@ def _check_model(atlas: at.Atlas, old: Path, sides) -> None:
 
 
 def build_library(atlas: at.Atlas, skeleton_path: Path, old: Path, sides=("r",), sections: int | None = None,
-                  on_muscle=None, on_phase=None, fit: bool = True) -> tuple[dict, dict]:
+                  on_muscle=None, on_phase=None, fit: bool = True, partition: bool = False) -> tuple[dict, dict]:
     """What ``axdf atlas`` writes (path relative to its folder -> bytes) and the report:
     ``registered/NAME.ply`` (each carried atlas muscle), ``landmarks_SIDE.yaml`` (each side's
     landmark similarity as an ``axdf fit --transform`` file), ``atlas_report.json`` and, with
     ``fit``, the library ``muscles/`` (one file per model muscle and the credit README.md).
     ``old``: the model's own muscle folder (paths, and the muscles the atlas lacks).
-    ``on_phase(text)`` is told as each phase starts; ``on_muscle(name, entry)`` as each fit ends."""
+    ``on_phase(text)`` is told as each phase starts; ``on_muscle(name, entry)`` as each fit ends.
+    ``partition``: also the registered atlas as a partition of space, ``territories/NAME.ply``
+    and the report's ``partition`` (axdf_cli/tools/atlas_partition.py); the library is then
+    fitted to the territories, each fit kept inside its own (``axdf fit --inside``), and
+    measured against the registered mesh as well (each fit's ``atlas``)."""
     from axdf_cli.tools.fit import build_fit
 
     tell = on_phase or (lambda text: None)
@@ -208,15 +212,27 @@ def build_library(atlas: at.Atlas, skeleton_path: Path, old: Path, sides=("r",),
         files[f"landmarks_{side}.yaml"] = transform_file(atlas, reg, skel, skeleton_path).encode()
     for name, pv, pf in carried:
         files[f"{REGISTERED}/{name}.ply"] = ply_bytes(pv, pf)
+    if partition:
+        from axdf_cli.tools.atlas_partition import TERRITORIES, build_partition
+
+        terr, report["partition"] = build_partition(carried, old, sides, skel, rest, bones, tell)
+        for name, (tv, tf) in terr.items():
+            files[f"{TERRITORIES}/{name}.ply"] = ply_bytes(tv, tf)
     if fit:
+        # with the partition, each muscle's territory is fitted (the muscles the atlas lacks
+        # too: their shapes clipped to the room left), each fit held inside it
+        folder = TERRITORIES if partition else REGISTERED
+        names = sorted(terr) if partition else [name for name, _, _ in carried]
         with tempfile.TemporaryDirectory(prefix="axdf-atlas-") as tmp:
             meshes = []
-            for name, _, _ in carried:
+            for name in names:
                 out = Path(tmp) / f"{name}.ply"
-                out.write_bytes(files[f"{REGISTERED}/{name}.ply"])
+                out.write_bytes(files[f"{folder}/{name}.ply"])
                 meshes.append(out)
-            tell(f"fitting {len(meshes)} muscles")
-            res = build_fit(meshes, skeleton_path, "m", sections, on_muscle=on_muscle, paths=old)
+            tell(f"fitting {len(meshes)} muscles" + (" into their territories" if partition else ""))
+            res = build_fit(meshes, skeleton_path, "m", sections, on_muscle=on_muscle, paths=old, inside=partition)
+        if partition:
+            _measure_against_atlas(res, carried, skel, rest)
         failed = {m["muscle"] for m in res.report["muscles"] if not fit_holds(m)}
         for rel, data in res.files.items():
             if rel.startswith(f"{LIBRARY}/") and Path(rel).stem not in failed:
@@ -230,6 +246,21 @@ def build_library(atlas: at.Atlas, skeleton_path: Path, old: Path, sides=("r",),
         files[f"{LIBRARY}/README.md"] = library_readme(atlas, skel, old, sides, report).encode()
     files[REPORT] = (json.dumps(report, indent=1, sort_keys=True, default=float) + "\n").encode()
     return files, report
+
+
+def _measure_against_atlas(res, carried: list, skel, rest) -> None:
+    """Each fit of a territory also measured against its registered atlas mesh (what the
+    territory was cut from): the report entry's ``atlas`` (IoU, distances, volume ratio)."""
+    import trimesh
+
+    from axdf_cli.tools.fit import measure_file
+
+    source = {name: (v, f) for name, v, f in carried}
+    for m in res.report["muscles"]:
+        if m["muscle"] in source:
+            rel = m["file"]
+            mesh = trimesh.Trimesh(*source[m["muscle"]], process=False)
+            m["atlas"] = measure_file(res.files[rel].decode(), rel, mesh, skel, rest)
 
 
 def library_readme(atlas: at.Atlas, skel, old: Path, sides, report: dict) -> str:

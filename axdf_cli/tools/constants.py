@@ -129,6 +129,14 @@ FIT_REFINE_ROUNDS = 8
 FIT_DENSE_DESIGN_BYTES = 64 * 2**20
 FIT_SMOOTH = 1e-3
 FIT_POINT_WEIGHT = 0.005
+# A fit bounded by a territory (``axdf atlas``'s partition, axdf_cli/geometry/partition.py):
+# rounds in which every dense surface sample less than FIT_BOUND_MARGIN inside its territory is
+# held on a plane that margin inside (point to plane, along the field's gradient) with
+# FIT_BOUND_WEIGHT times a data point's weight; the planes accumulate, so the surface settles
+# inside (an active-set least squares, one-sided in effect).
+FIT_BOUND_ROUNDS = 8
+FIT_BOUND_MARGIN = 0.00025
+FIT_BOUND_WEIGHT = 50.0
 FIT_SMOOTH_AROUND = 1e-3
 # The written surface's resolution: rows along per section (+ 8, at least FIT_ALONG_MIN) and
 # vertices around, fine enough that the tessellation of the fitted surface changes its
@@ -204,6 +212,11 @@ ATLAS_OTHER_HIP_WEIGHT = 0.1
 # (the warp leaves the model's coarse bones millimetres off the atlas' where a muscle lies on
 # them)
 ATLAS_BONE_MARGIN = 0.001
+# The partition of the registered atlas (axdf_cli/geometry/partition.py): the grid spacing (m)
+# and the gap (m) neighbouring territories keep; bones win over muscles, the atlas' muscles
+# over the model's muscles it lacks (those take the room left).
+ATLAS_PARTITION_SPACING = 0.001
+ATLAS_PARTITION_GAP = 0.0005
 # the grid spacing (m) on which an atlas muscle shared by a model group (gluteus maximus ->
 # glut_max1..3) is cut into closed parts (winding number, marching cubes)
 ATLAS_SPLIT_SPACING = 0.0015

@@ -19,6 +19,7 @@ import numpy as np
 
 from axdf_cli.tools import constants as tol
 from axdf_cli.errors import InputError, Mark, raise_all
+from axdf_cli.geometry.partition import MeshField
 from axdf_cli.fileio.yamlio import NAME_ALLOWED, is_name
 from axdf_cli.importers import emit
 from axdf_cli.model.muscle import OCT, AxisPoint, MuscleModel, MuscleSpec, Section, outline_area
@@ -147,12 +148,13 @@ def tendon_fractions(areas: np.ndarray, arc: np.ndarray) -> tuple[float, float]:
 
 
 def fit_one(mesh, name: str, n_sections: int, skel: Skeleton, rest: np.ndarray, geometry: list,
-            origin: np.ndarray | None = None, line=None, color=None):
+            origin: np.ndarray | None = None, line=None, color=None, bound=None):
     """One mesh (metres) → (the muscle's YAML text, its report entry without the measures).
     ``origin``: a world point the axis starts at the end nearer to (a model's origin);
     ``line``: a model's path (:class:`~axdf_cli.model.paths.PathSpec`), written beside the
     fitted axis as the muscle's line of action (its length, as the model's); ``color``: the
-    muscle's colour (default: :func:`default_color` of its name)."""
+    muscle's colour (default: :func:`default_color` of its name); ``bound``: a territory the
+    surface stays inside (:func:`~axdf_cli.tools.fit_sections.fit_rows`)."""
     import trimesh
 
     samples, face = trimesh.sample.sample_surface(mesh, tol.FIT_SAMPLES, seed=tol.FIT_SEED)
@@ -173,7 +175,7 @@ def fit_one(mesh, name: str, n_sections: int, skel: Skeleton, rest: np.ndarray, 
     c, r, s = frames(sec_t)
     poles = fs.curve_points(ctrl, np.array([0.0, 1.0]))
     rows = fs.RowFit(c, r, s, poles)
-    xy = fs.fit_rows(mesh, rows, frames, samples, np.asarray(mesh.face_normals)[face])
+    xy = fs.fit_rows(mesh, rows, frames, samples, np.asarray(mesh.face_normals)[face], bound)
     areas = np.abs([outline_area(o) for o in xy])
     arc = np.interp(sec_t, model.ts, model.arc)
     tendons = tendon_fractions(areas, arc)
@@ -192,13 +194,21 @@ def fit_one(mesh, name: str, n_sections: int, skel: Skeleton, rest: np.ndarray, 
     return text, entry
 
 
-def measure_file(text: str, path: str, mesh, skel: Skeleton, rest: np.ndarray) -> dict:
+def measure_file(text: str, path: str, mesh, skel: Skeleton, rest: np.ndarray, bound=None) -> dict:
     """The written file read back by the muscle spec loader and evaluated at the rest pose by
-    the muscle model, compared with its mesh."""
+    the muscle model, compared with its mesh; with ``bound`` (the mesh's
+    :class:`~axdf_cli.geometry.partition.MeshField`) also the share of the written surface's
+    vertices more than 0.25 and 1 mm outside the mesh, and the farthest (mm)."""
     spec = parse_muscle_text(text, path)[0]
     model = MuscleModel(spec, skel.bone_index, rest, skel)
-    return fs.measure(np.asarray(mesh.vertices), np.asarray(mesh.faces), model.rest_vertices.astype(np.float64),
-                      np.asarray(model.faces, dtype=np.int64), seed=tol.FIT_SEED)
+    got = model.rest_vertices.astype(np.float64)
+    out = fs.measure(np.asarray(mesh.vertices), np.asarray(mesh.faces), got,
+                     np.asarray(model.faces, dtype=np.int64), seed=tol.FIT_SEED)
+    if bound is not None:
+        away = np.maximum(-bound.value(got), 0.0)
+        out.update({"outside_over_0.25mm": float((away > 2.5e-4).mean()), "outside_over_1mm": float((away > 1e-3).mean()),
+                    "outside_farthest_mm": float(1000.0 * away.max())})
+    return out
 
 
 def bone_gap(points: np.ndarray, geometry: list) -> tuple[float, int]:
@@ -255,13 +265,17 @@ def _read_all(mesh_paths, scale, transform, skel, rest, geometry, paths, policy,
 
 def build_fit(mesh_paths: list[Path], skeleton_path: Path | str, units: str = "m", sections: int | None = None,
               policy: RefPolicy | None = None, on_muscle=None, paths: Path | None = None,
-              transform: Path | None = None) -> FitOutputs:
+              transform: Path | None = None, inside: bool = False) -> FitOutputs:
     """Fit every mesh; the bytes of ``muscles/STEM.yaml`` per mesh, the report's two files.
     Every mesh is read and checked before any is fitted, and every refusal is raised at once
     (one :class:`~axdf_cli.errors.InputErrors`). ``on_muscle(name, entry)`` is told as each fit
     is measured. ``paths``: a folder of the model's muscle files; each mesh binds only to the
     bones of the file of its name there (:func:`model_bones`). ``transform``: a ``--transform``
-    file, the map from the meshes' frame (metres after ``units``) into the rest frame."""
+    file, the map from the meshes' frame (metres after ``units``) into the rest frame.
+    ``inside``: each fit is kept inside its own mesh (:func:`fit_one`'s ``bound``: the mesh's
+    :class:`~axdf_cli.geometry.partition.MeshField`), and the report says how far it is not.
+    For meshes that share no space (``axdf atlas --partition``'s territories) the fits then
+    share none either."""
     scale = unit_scale(units)
     n = tol.FIT_SECTIONS_DEFAULT if sections is None else sections
     if not tol.FIT_SECTIONS_MIN <= n <= tol.FIT_SECTIONS_MAX:
@@ -283,17 +297,20 @@ def build_fit(mesh_paths: list[Path], skeleton_path: Path | str, units: str = "m
             own = [g if i in keep else None for i, g in enumerate(geometry)]
             if all(g is None for g in own):  # the path's bones have no meshes: their segments then
                 own = [g if i in keep else None for i, g in enumerate(bone_geometry(skel, rest, skeleton_path, False))]
-        text, entry = fit_one(mesh, name, n, skel, rest, own, origin, line, color)
+        bound = MeshField(mesh.vertices, mesh.faces) if inside else None
+        text, entry = fit_one(mesh, name, n, skel, rest, own, origin, line, color, bound)
         rel = f"muscles/{name}.yaml"
         entry.update({"file": rel, "mesh": p.name})
         if got.dropped:
             entry.update({"dropped_pieces": got.dropped, "dropped_volume_share": got.dropped_share})
-        entry.update(measure_file(text, rel, mesh, skel, rest))
+        entry.update(measure_file(text, rel, mesh, skel, rest, bound))
         files[rel] = text.encode()
         entries.append(entry)
         if on_muscle is not None:
             on_muscle(name, entry)
     report = {"skeleton": skeleton_path.name, "units": units, "sections": n, "muscles": entries}
+    if inside:
+        report["inside"] = True
     if transform is not None:
         report["transform"] = Path(transform).name
     files[REPORT] = (json.dumps(report, indent=1, sort_keys=True) + "\n").encode()
@@ -314,6 +331,11 @@ def summary(report: dict) -> str:
         lines.append(f"| {m['muscle']} | {m['iou']:.3f} | {m['distance_mean_mm']:.2f} mm | "
                      f"{m['distance_median_mm']:.2f} mm | {m['volume_ratio']:.3f} | "
                      f"{m['tendons'][0]:g}, {m['tendons'][1]:g} | {', '.join(dict.fromkeys(m['bones']))} |")
+    if report.get("inside"):
+        ms = report["muscles"]
+        lines += ["", "Kept inside each mesh (`--inside`): vertices of the written surface more than 1 mm outside "
+                  "their mesh: " + "; ".join(f"{m['muscle']} {100 * m['outside_over_1mm']:.2f}% "
+                                            f"(farthest {m['outside_farthest_mm']:.1f} mm)" for m in ms) + "."]
     dropped = [m for m in report["muscles"] if m.get("dropped_pieces")]
     if dropped:
         lines += ["", f"Slivers dropped (closed pieces under {100 * tol.FIT_MIN_PIECE_SHARE:g}% of a mesh's volume): " +

@@ -307,11 +307,14 @@ def greville(n_sections: int) -> np.ndarray:
     return 0.5 * (k[1:-2] + k[2:-1])[1:-1]
 
 
-def fit_rows(mesh, rows: RowFit, frames, samples: np.ndarray, normals: np.ndarray) -> np.ndarray:
+def fit_rows(mesh, rows: RowFit, frames, samples: np.ndarray, normals: np.ndarray, bound=None) -> np.ndarray:
     """In-plane control points (N, 8, 2) of the sections of ``rows`` fitted to ``mesh``:
     cut outlines first, then closest-point refinement. ``frames(t)`` → (c, r, s) (M, 3)
     each, the rest axis' frame at parameters t; ``samples`` (S, 3) the mesh's surface and
-    ``normals`` (S, 3) its normals there."""
+    ``normals`` (S, 3) its normals there. ``bound``: a field the surface is kept
+    tol.FIT_BOUND_MARGIN inside (:func:`_bounded`): ``value(points (P, 3))`` → (P,) metres,
+    positive inside, and ``inward(points)`` → (P, 3) the direction it grows in
+    (:class:`~axdf_cli.geometry.partition.MeshField`)."""
     import igl
     from scipy.spatial import cKDTree
 
@@ -329,13 +332,42 @@ def fit_rows(mesh, rows: RowFit, frames, samples: np.ndarray, normals: np.ndarra
     fn = np.asarray(mesh.face_normals, dtype=np.float64)
     gu = np.repeat((np.arange(2 * m) + 0.5) / (2 * m), 2 * around)
     gv = np.tile(np.arange(2 * around) / (2 * around), 2 * m)
-    for _ in range(tol.FIT_REFINE_ROUNDS):
+    def data(xy):
         g = rows.evaluate(xy, gu, gv)
         _, face, near = igl.point_mesh_squared_distance(g, V, F)
         _, idx = cKDTree(g).query(samples)
         pw = tol.FIT_POINT_WEIGHT
-        xy = rows.solve([(gu, gv, near, 1.0, fn[face]), (gu[idx], gv[idx], samples, 1.0, normals),
-                         (gu, gv, near, pw, None), (gu[idx], gv[idx], samples, pw, None)])
+        return [(gu, gv, near, 1.0, fn[face]), (gu[idx], gv[idx], samples, 1.0, normals),
+                (gu, gv, near, pw, None), (gu[idx], gv[idx], samples, pw, None)]
+
+    for _ in range(tol.FIT_REFINE_ROUNDS):
+        xy = rows.solve(data(xy))
+    if bound is not None:
+        xy = _bounded(rows, xy, data, bound, gu, gv)
+    return xy
+
+
+def _bounded(rows: RowFit, xy: np.ndarray, data, bound, gu: np.ndarray, gv: np.ndarray) -> np.ndarray:
+    """The fit ``xy`` kept inside a territory: tol.FIT_BOUND_ROUNDS rounds in which each dense
+    sample (gu, gv) less than tol.FIT_BOUND_MARGIN inside (``bound``'s value) is held on the
+    plane that margin inside, across the field's inward direction, with tol.FIT_BOUND_WEIGHT a
+    data point's weight; held samples stay held (the active set only grows), and the data's
+    closest points are found again each round."""
+    held_u, held_v, held_t, held_n = [], [], [], []
+    for _ in range(tol.FIT_BOUND_ROUNDS):
+        g = rows.evaluate(xy, gu, gv)
+        val = bound.value(g)
+        bad = np.flatnonzero(val < tol.FIT_BOUND_MARGIN)
+        if len(bad) == 0:
+            break
+        n_in = bound.inward(g[bad])
+        held_u.append(gu[bad])
+        held_v.append(gv[bad])
+        held_t.append(g[bad] + (tol.FIT_BOUND_MARGIN - val[bad])[:, None] * n_in)
+        held_n.append(n_in)
+        hu = np.concatenate(held_u)
+        w = tol.FIT_BOUND_WEIGHT * len(hu) / len(gu)
+        xy = rows.solve(data(xy) + [(hu, np.concatenate(held_v), np.concatenate(held_t), w, np.concatenate(held_n))])
     return xy
 
 
