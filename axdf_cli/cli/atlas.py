@@ -92,7 +92,9 @@ def run(args) -> int:
             worst = min(fitted, key=lambda m: m["iou"]) if fitted else None
             line += (f"; library {Path(args.out) / LIBRARY}: {len(fitted)} fitted"
                      + (f" (IoU {worst['iou']:.3f} least, {worst['muscle']})" if worst else "")
-                     + f", {len(report['failed'])} fits refused, {len(report['kept'])} copied")
+                     + f", {len(report['failed'])} fits refused, {len(report['kept'])} copied"
+                     + (f", {len(report['weak'])} kept below the bar inside their territories" if report.get("weak")
+                        else ""))
         print(line)
         if "partition" in report:
             pr = report["partition"]

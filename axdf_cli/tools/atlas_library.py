@@ -233,7 +233,13 @@ def build_library(atlas: at.Atlas, skeleton_path: Path, old: Path, sides=("r",),
             res = build_fit(meshes, skeleton_path, "m", sections, on_muscle=on_muscle, paths=old, inside=partition)
         if partition:
             _measure_against_atlas(res, carried, skel, rest)
-        failed = {m["muscle"] for m in res.report["muscles"] if not fit_holds(m)}
+        # a fit below the bar is refused (the model's own muscle copied instead), but not a fit
+        # into a territory: the model's muscle would cross its neighbours', where the fit shares
+        # no space; it is kept and listed (``weak``)
+        weak = [m["muscle"] for m in res.report["muscles"] if not fit_holds(m)]
+        failed = set() if partition else set(weak)
+        if partition:
+            report["weak"] = weak
         for rel, data in res.files.items():
             if rel.startswith(f"{LIBRARY}/") and Path(rel).stem not in failed:
                 files[rel] = data
