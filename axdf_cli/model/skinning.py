@@ -25,8 +25,8 @@ import numpy as np
 
 from axdf_cli.model.skin import blend, njit, normals_volume
 
-#: The skinning methods a skin file's ``skinning:`` may name (the first is the default when
-#: the file names none: the one ``make bench``'s comparison measured best, docs/SKIN.md).
+#: The skinning methods a skin file's ``skinning:`` may name (the default, for a file that
+#: names none, is :data:`axdf_cli.pipeline.skin_stage.DEFAULT_SKINNING`: docs/SKIN.md).
 SKINNING = ("linear", "dual_quaternion", "delta_mush")
 
 

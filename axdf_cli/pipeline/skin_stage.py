@@ -9,8 +9,9 @@ inside; more than ``tol.SKIN_FOREIGN_MUSCLE_SHARE`` of the muscle vertices (or
 ``tol.SKIN_FOREIGN_BONE_SHARE`` of the bone points) outside is a run warning naming the
 command that refits the skin (:meth:`SkinStage.warnings`). Each frame, in order:
 
-1. **skinning**: linear blend of the skin's rest mesh by its bones' world transforms relative
-   to rest (the bones :func:`~axdf_cli.model.skeleton.forward_kinematics` gives the chunk);
+1. **skinning**: the skin's rest mesh by its bones' world transforms relative to rest, by the
+   skin file's ``skinning:`` (default :data:`DEFAULT_SKINNING`, delta mush;
+   :mod:`axdf_cli.model.skinning`) (the bones :func:`~axdf_cli.model.skeleton.forward_kinematics` gives the chunk);
    with the skin's ``jiggle:``, each vertex lags behind that as a damped spring would
    (:func:`jiggle_coefficients`);
 2. **push**: every candidate point (a muscle or bone mesh vertex, or a bone triangle's
@@ -67,8 +68,9 @@ SKIN_NAME = "skin"
 #: of the worn bones' points (their meshes' vertices and triangle centroids) outside the skin,
 #: by the same test.
 SKIN_COLUMNS = ("volume", "volume_ratio", "outside", "push", "bone_outside")
-#: The skinning method of a skin file that names none (docs/SKIN.md: measured against the others).
-DEFAULT_SKINNING = "linear"
+#: The skinning method of a skin file that names none (docs/SKIN.md: measured against the
+#: others by make bench, it folds the fewest vertices over the walks' and the hop's flexion).
+DEFAULT_SKINNING = "delta_mush"
 #: The run's table of the skin's measures: a row per frame.
 SKIN_CSV = "skin.csv"
 
