@@ -378,6 +378,12 @@ SKIN_JIGGLE_TAPS = 512
 # bulge, not a spike. Each pass also widens the bulges and adds to the skin's volume, which
 # the volume step below takes back: a few passes are enough for smooth bulges.
 SKIN_RELAX_ITERATIONS = 3
+# Delta mush (the skin file's skinning: delta_mush): the skinned mesh is smoothed by
+# SKIN_MUSH_ITERATIONS passes of uniform Laplacian smoothing of SKIN_MUSH_STEP before its rest
+# detail is put back. MakeHuman's edges are 1-3 cm: 10 passes of 0.5 spread over a few cm,
+# the width of a crease, and leave a limb's cross-section to the deltas.
+SKIN_MUSH_ITERATIONS = 10
+SKIN_MUSH_STEP = 0.5
 # The volume step after the relax holds the skin at its volume as worn at rest (soft tissue is
 # incompressible): the excess the pushes and the relax add is taken back from vertices with
 # room under them, each in by a common depth of at most SKIN_VOLUME_MAX_SHIFT metres (about the

@@ -36,8 +36,8 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 TIERS = {
     "unit": ("axis_points", "batch", "bspline", "coupled", "formats_table", "house", "inputs", "jiggle_law",
              "kernel", "keypoints", "muscle", "paths", "path_inside", "rmf", "writers_fast", "render_settings",
-             "dataset_sampling", "runtime", "jiggle_preroll", "bvh_units", "fit_unit", "skin_unit", "bench_page", "tables",
-             "geometry"),
+             "dataset_sampling", "runtime", "jiggle_preroll", "bvh_units", "fit_unit", "skin_unit", "skinning", "bench_page",
+             "tables", "geometry"),
     "integration": ("bellies", "bench_smoke", "bvh_import", "camera", "cli", "compare", "compare_formats", "contact",
                     "dataset", "dataset_amodal", "dataset_bench", "dataset_labels", "gait2392", "jiggle_run",
                     "meshes", "mjcf_import", "osim_cli", "outputs", "pack", "packed", "rajagopal", "render_cli",

@@ -76,3 +76,40 @@ def push_out_of_meshes(points: np.ndarray, meshes, margin: float, signed: bool =
         out[into] = c + margin * d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
         moved += len(into)
     return out, moved
+
+
+#: How far out along a skin vertex's normal the fold test looks (m): a point 2 mm out from the
+#: skin that lies inside it is skin folded onto skin (a crease collapsed into itself).
+FOLD_DISTANCE = 0.002
+
+
+def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(V, 3) float64: area-weighted unit vertex normals (outward on a mesh wound outward;
+    zero at a vertex on no triangle or only degenerate ones)."""
+    v = np.asarray(vertices, np.float64)
+    f = np.asarray(faces, np.int64)
+    # fn[t] = (v[f1] - v[f0]) x (v[f2] - v[f0]), twice the triangle's area along its normal
+    fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    n = np.zeros_like(v)
+    for c in range(3):
+        np.add.at(n, f[:, c], fn)
+    r = np.linalg.norm(n, axis=1, keepdims=True)
+    return np.divide(n, r, out=np.zeros_like(n), where=r > 0)
+
+
+def folded(vertices: np.ndarray, faces: np.ndarray, distance: float = FOLD_DISTANCE,
+           normals: np.ndarray | None = None) -> np.ndarray:
+    """(V,) bool: which vertices of the closed mesh (vertices (V, 3), faces (T, 3)) are folded:
+    the point ``distance`` out along the vertex's outward normal (``normals`` (V, 3), else
+    :func:`vertex_normals`) lies inside the mesh by the winding number. On a surface that
+    folds into itself (a crease collapsed, skin through skin) that point is under the other
+    side; on an unfolded one it is outside wherever the surface is flatter than ``distance``."""
+    v = np.asarray(vertices, np.float64)
+    n = vertex_normals(v, faces) if normals is None else np.asarray(normals, np.float64)
+    return inside(v, faces, v + distance * n)
+
+
+def folded_share(vertices: np.ndarray, faces: np.ndarray, distance: float = FOLD_DISTANCE,
+                 normals: np.ndarray | None = None) -> float:
+    """The share (0 to 1) of the mesh's vertices that are :func:`folded`."""
+    return float(folded(vertices, faces, distance, normals).mean()) if len(vertices) else 0.0

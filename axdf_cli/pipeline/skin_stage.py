@@ -9,8 +9,9 @@ inside; more than ``tol.SKIN_FOREIGN_MUSCLE_SHARE`` of the muscle vertices (or
 ``tol.SKIN_FOREIGN_BONE_SHARE`` of the bone points) outside is a run warning naming the
 command that refits the skin (:meth:`SkinStage.warnings`). Each frame, in order:
 
-1. **skinning**: linear blend of the skin's rest mesh by its bones' world transforms relative
-   to rest (the bones :func:`~axdf_cli.model.skeleton.forward_kinematics` gives the chunk);
+1. **skinning**: the skin's rest mesh by its bones' world transforms relative to rest, by the
+   skin file's ``skinning:`` (default :data:`DEFAULT_SKINNING`, delta mush;
+   :mod:`axdf_cli.model.skinning`) (the bones :func:`~axdf_cli.model.skeleton.forward_kinematics` gives the chunk);
    with the skin's ``jiggle:``, each vertex lags behind that as a damped spring would
    (:func:`jiggle_coefficients`);
 2. **push**: every candidate point (a muscle or bone mesh vertex, or a bone triangle's
@@ -54,6 +55,7 @@ from axdf_cli.geometry.grow import grow_over
 from axdf_cli.geometry.winding import inside
 from axdf_cli.model import skin as kernels
 from axdf_cli.model.skeleton import forward_kinematics
+from axdf_cli.model.skinning import mush_rest, skin_points
 from axdf_cli.parts import COLORS, Kind, Part, PartFrames, Table
 from axdf_cli.pipeline.stage import RunInputs, Scope, StageBase
 
@@ -66,6 +68,9 @@ SKIN_NAME = "skin"
 #: of the worn bones' points (their meshes' vertices and triangle centroids) outside the skin,
 #: by the same test.
 SKIN_COLUMNS = ("volume", "volume_ratio", "outside", "push", "bone_outside")
+#: The skinning method of a skin file that names none (docs/SKIN.md: measured against the
+#: others by make bench, it folds the fewest vertices over the walks' and the hop's flexion).
+DEFAULT_SKINNING = "delta_mush"
 #: The run's table of the skin's measures: a row per frame.
 SKIN_CSV = "skin.csv"
 
@@ -97,6 +102,8 @@ class SkinModel:
     room: np.ndarray  # (V,) how far each skin vertex may come in from where it is skinned (m)
     jiggle: tuple | None = None  # (coefficients (J,), their step in frames, each vertex's gain (V,), the pose)
     n_bone_points: int = 0  # every point of the worn bones (vertices and triangle centroids), candidates or not
+    skinning: str = DEFAULT_SKINNING  # the method (axdf_cli.model.skinning.SKINNING)
+    mush: tuple | None = None  # delta_mush: (faces, ring_ptr, ring_idx, iterations, step, rest deltas (V, 3))
 
 
 def ring(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -152,10 +159,11 @@ def worn_rest(skin, plan) -> WornRest:
     return WornRest(v, share[0], share[1], int(out.sum()))
 
 
-def build(skin, plan, worn: WornRest | None = None) -> SkinModel:
+def build(skin, plan, worn: WornRest | None = None, skinning: str | None = None) -> SkinModel:
     """The stage's model: the skin's 1-ring, and the candidate points (muscle and bone
     vertices near the rest skin as worn, :func:`worn_rest`) with their nearest rest skin
-    vertices and target depths."""
+    vertices and target depths; ``skinning`` (else the skin file's, else
+    :data:`DEFAULT_SKINNING`) the method, with its delta mush deltas when it is ``delta_mush``."""
     skel = plan.pose.skeleton
     rest_world = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
     bones = np.array([skel.bone_index[b] for b in skin.bones], dtype=np.int64)
@@ -205,7 +213,10 @@ def build(skin, plan, worn: WornRest | None = None) -> SkinModel:
     model = SkinModel(v, faces, np.ascontiguousarray(skin.weights, dtype=np.float64), bones,
                       np.linalg.inv(rest_world[bones]), ptr, idx, muscle_points, bone_points, cand, pairs,
                       np.ascontiguousarray(target), np.ascontiguousarray(spread), int(len(muscle)), 1.0, room,
-                      n_bone_points=n_bone)
+                      n_bone_points=n_bone, skinning=skinning or skin.skinning or DEFAULT_SKINNING)
+    if model.skinning == "delta_mush":
+        model.mush = (faces, ptr, idx, tol.SKIN_MUSH_ITERATIONS, tol.SKIN_MUSH_STEP,
+                      mush_rest(v, faces, ptr, idx, tol.SKIN_MUSH_ITERATIONS, tol.SKIN_MUSH_STEP))
     model.rest_volume = float(skin_frame(model, rest_world, p, keep=False)[2][0])  # the skin as worn at rest
     return model
 
@@ -312,16 +323,24 @@ def keep_volume(model: SkinModel, x: np.ndarray, n: np.ndarray, offset: np.ndarr
             out += d
 
 
+def skinned(model: SkinModel, world: np.ndarray) -> np.ndarray:
+    """(V, 3) float64: the rest skin skinned by ``world`` (B, 4, 4), the skeleton's bones' world
+    transforms, by the model's method (:func:`~axdf_cli.model.skinning.skin_points`), before
+    any jiggle or push."""
+    rel = np.ascontiguousarray((world[model.bones] @ model.inv_rest)[:, :3, :])  # (K, 3, 4)
+    x = np.empty((len(model.rest), 3))
+    skin_points(model.skinning, model.weights, rel, model.rest, x, model.mush)
+    return x
+
+
 def skin_frame(model: SkinModel, world: np.ndarray, points: np.ndarray, keep: bool = True, lag=None) -> tuple:
     """One frame: the skin skinned by ``world`` (B, 4, 4) (and moved by its jiggle's ``lag``,
     (V, 3)), pushed over ``points`` (the
     candidates' world positions, (N, 3)), relaxed and (``keep``) held at its rest volume →
     (positions (V, 3), normals (V, 3), measures (len(SKIN_COLUMNS),) with the outside shares
     still to divide)."""
-    rel = np.ascontiguousarray((world[model.bones] @ model.inv_rest)[:, :3, :])  # (K, 3, 4)
     nv = len(model.rest)
-    x, n = np.empty((nv, 3)), np.empty((nv, 3))
-    kernels.blend(model.weights, rel, model.rest, x)
+    x, n = skinned(model, world), np.empty((nv, 3))
     if lag is not None:
         x += lag
     kernels.normals_volume(x, model.faces, n)
@@ -393,6 +412,7 @@ class SkinStage(StageBase):
         self.skin = skin
         self.jiggle = jiggle  # False: the run's --no-jiggle (a job's jiggle: false) stills the skin too
         self._worn: WornRest | None = None
+        self.skinning = skin.skinning or DEFAULT_SKINNING
 
     @property
     def settings(self) -> dict:
@@ -402,7 +422,10 @@ class SkinStage(StageBase):
                "spread": [tol.SKIN_SPREAD_IN, tol.SKIN_SPREAD_OUT], "jiggle_memory": tol.SKIN_JIGGLE_MEMORY,
                "relax": tol.SKIN_RELAX_ITERATIONS,
                "volume": {"max_shift": tol.SKIN_VOLUME_MAX_SHIFT, "taper": tol.SKIN_VOLUME_TAPER,
-                          "rounds": tol.SKIN_VOLUME_ROUNDS}}
+                          "rounds": tol.SKIN_VOLUME_ROUNDS},
+               "skinning": self.skinning}
+        if self.skinning == "delta_mush":
+            out["mush"] = {"iterations": tol.SKIN_MUSH_ITERATIONS, "step": tol.SKIN_MUSH_STEP}
         j = self.skin.jiggle
         if j is not None:  # (a skin without one keeps its runs' settings as they were)
             out["jiggle"] = {"frequency": j.frequency, "damping_ratio": j.damping_ratio, "amount": j.amount,

@@ -29,10 +29,11 @@ from axdf_cli import tolerances as tol
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.fileio.yamlio import Fields, load_yaml
 from axdf_cli.geometry.mesh import surface_problem
+from axdf_cli.model.skinning import SKINNING
 from axdf_cli.specs.refs import RefPolicy
 
 SKIN_KEYS = ("skin", "skeleton", "family", "mesh", "weights", "fat", "stature", "height", "fat_source", "regions",
-             "jiggle", "segments")
+             "jiggle", "segments", "skinning")
 JIGGLE_KEYS = ("frequency", "damping_ratio", "amount")
 #: Bounds of a skin's ``jiggle:``: an underdamped spring (it rings, and its ring has died away
 #: within a few seconds of frames), at most 100 Hz (soft tissue wobbles at a few Hz to tens).
@@ -69,6 +70,7 @@ class Skin:
     jiggle: "SkinJiggle | None" = None
     segments: dict | None = None  # segment -> (from bone, to bone, length (m)) of the skeleton it was fitted to
     marks: dict | None = None  # key -> Mark of its value in the skin file (skeleton, stature, segments)
+    skinning: str | None = None  # the skin stage's method (axdf_cli.model.skinning.SKINNING); None: the default
 
 
 @dataclass(frozen=True)
@@ -193,6 +195,7 @@ def load_skin(path: Path | str, skeleton=None, policy: RefPolicy | None = None) 
         r.done()
     mesh_p, weights_p, fat_p = (_file(f, k, path, policy) for k in ("mesh", "weights", "fat"))
     jiggle = _jiggle(f) if f.has("jiggle") else None
+    skinning = f.choice("skinning", SKINNING)
     marks = {k: f.vmark(k) for k in ("skeleton", "stature", "segments") if f.has(k)}
     segments = _segments(f, marks) if f.has("segments") else None
     f.done()
@@ -257,7 +260,7 @@ def load_skin(path: Path | str, skeleton=None, policy: RefPolicy | None = None) 
                          "a fat_mm for every region of the fat map")
     skin = Skin(name, skel_name, family, np.asarray(v, dtype=np.float64), np.asarray(faces, dtype=np.int64),
                 bones, dense, fat, region.astype(np.int64), regions, stature, height,
-                (path, mesh_p, weights_p, fat_p), jiggle, segments, marks)
+                (path, mesh_p, weights_p, fat_p), jiggle, segments, marks, skinning)
     if skeleton is not None:
         check_fitted(skin, skeleton, Mark(str(path)))
     return skin
