@@ -55,7 +55,11 @@ def test_a_signal_at_any_moment_exits_130_with_no_partial_output(tmp_path):
         out, err = p.communicate(timeout=120)
         case = (k, round(delay, 3), sig.name, p.returncode, err[-400:])
         assert "Traceback" not in err and "Exception ignored" not in err, case
-        if alive:
+        if alive and p.returncode == 0:
+            # the signal came as the command was leaving, its work done (a race no delay rules
+            # out on a loaded machine): then its output is whole, never a part
+            assert report.is_file() and not err.rstrip().endswith("axdf: interrupted"), case
+        elif alive:
             landed += 1
             assert p.returncode == 130 and err.rstrip().endswith("axdf: interrupted"), case
         else:
