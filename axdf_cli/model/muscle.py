@@ -14,12 +14,12 @@ axis; their closest point is elsewhere in a bend (the inner side past the centre
 a little along) or where another part of the axis comes nearer (a folded or flat axis). A
 closest point farther along the rest axis from the section's t than the point is from the
 section's centre lies on another part: the point is bound at its section's t instead (the
-atlas quadratus femoris: 42 of its 128 points, whose closest points lay up to 0.74 away in
-t). Bound there, a point was carried by another part's frame and turned about
-another part's tangent by another part's share of the twist: its section came apart, and a
-twist of a turn wrung the muscle inside out (its exact volume had no solution; docs/FIT.md,
-"Volume under twist"). A closest point within that reach (a bend's: gait2392's iliacus,
-arm26's triceps) is kept.
+atlas quadratus femoris: 42 of its 128 points, whose closest points lie up to 0.74 away in
+t). Bound at such a point, it would be carried by another part's frame and turned about
+another part's tangent by another part's share of the twist: its section would come apart
+(a roll near a full turn wrung that muscle inside out, its exact volume without a solution;
+docs/FIT.md, "Volume under twist"). A closest point within that reach (a bend's: gait2392's
+iliacus, arm26's triceps) is kept.
 
 Frames. The start vector R(0) is fixed in the origin bone (the bone of the first axis
 point), so a rigid motion of the skeleton moves the muscle rigidly. The insertion bone's
