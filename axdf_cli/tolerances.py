@@ -26,13 +26,6 @@ RMF_MAX_FRAME_ERROR_RAD = 1e-4
 # converge quadratically; 8 iterations reach machine precision on any shipped axis.
 BIND_NEWTON_ITERS = 8
 BIND_DENSE_SAMPLES_PER_SPAN = 64
-# ... held within BIND_SECTION_SLACK of the point's own section's t (axdf_cli/model/muscle.py):
-# a section lies in the plane normal to the axis at its t, so its points' closest points are
-# its t, which the search finds to its rounding (< 1e-13 on every shipped library) and keeps,
-# bits and all; a point whose closest point lies elsewhere (another part of a folded axis, or
-# past the centre of curvature of a tight bend: up to 0.84 away on the atlas library, 0.25 on
-# myoarm, 0.05 on arm26) is bound at its section's t instead, so that its section moves as one.
-BIND_SECTION_SLACK = 1e-9
 
 # Gauss-Legendre points per knot span for axis arc length: a quadratic B-spline's speed is
 # smooth inside a span, 8 points give ~1e-12 relative error.

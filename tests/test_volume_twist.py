@@ -49,9 +49,10 @@ def quad_fem():
 
 def test_a_section_is_bound_on_its_own_part_of_the_axis_and_keeps_the_volume_at_any_twist(quad_fem):
     """Every third frame of the hip twist, every branch of the roll from -3 to +3 turns: the
-    exact volume is found, within 1e-9 of the rest volume. (Its points bound at their closest
-    points, up to 0.74 of the axis away from their sections, it kept -5% of its volume at the
-    first frame under a roll of -360 degrees and 2.5% at frame 27 under -347.)"""
+    exact volume is found, within 1e-9 of the rest volume. (With 42 of its points bound at
+    closest points on another part of the axis, up to 0.74 of it away from their sections, it
+    kept -5% of its volume at the first frame under a roll of -360 degrees and 2.5% at frame 27
+    under -347.)"""
     from axdf_cli import tolerances as tol
 
     model, rest, world = quad_fem
@@ -67,8 +68,9 @@ def test_a_section_is_bound_on_its_own_part_of_the_axis_and_keeps_the_volume_at_
             assert tol.SCALE_MIN < res.scale[0] < tol.SCALE_MAX
     sec_t = np.repeat([s.t for s in model.spec.sections], 8)
     closest = model._closest_t(model._axis_points(rest[None])[0], model.rest_control_points, sec_t)
-    assert np.abs(closest - sec_t).max() > 0.7  # the closest points lie elsewhere on this axis
-    assert np.abs(model.bind_t - sec_t).max() <= tol.BIND_SECTION_SLACK + 1e-15  # (t ± slack, rounded)
+    moved = model.bind_t != closest  # the points whose closest point lies on another part of the axis
+    assert moved.sum() == 42 and np.abs(closest - sec_t)[moved].min() > 0.1, np.abs(closest - sec_t)[moved]
+    np.testing.assert_array_equal(model.bind_t[moved], sec_t[moved])  # ... bound at their section's t
 
 
 def test_the_hip_twist_keeps_quad_fem_r_at_its_volume(tmp_path, capsys, repo_root):

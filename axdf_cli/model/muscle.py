@@ -8,14 +8,18 @@ in the axis frame (T, R, S) at t, where T = C'/|C'| and (R, S) is rotation-minim
 (double reflection, Wang et al. 2008). Deformed, ``P' = C(t) + k (u T + v R + w S)`` in the
 new frame, rotated about T by the twist at t.
 
-A section's points are bound on its own part of the axis: t is held within
-``BIND_SECTION_SLACK`` (1e-9) of the section's t. A section lies in the plane normal to the
-axis at its t, so that is every point's closest point unless another part of the axis comes
-nearer (a folded or flat axis: the atlas quadratus femoris' points found theirs up to 0.74
-away) or the point lies past the centre of curvature of a tight bend. Bound there, a point
-was carried by another part's frame, turned about another part's tangent by another part's
-share of the twist: the section came apart, and a twist of a turn wrung the muscle inside out
-(its exact volume had no solution; docs/FIT.md, "Volume under twist").
+A section's points are bound on its own part of the axis. A section lies in the plane normal
+to the axis at its t, so that t is a stationary point of each of its points' distance to the
+axis; their closest point is elsewhere in a bend (the inner side past the centre of curvature:
+a little along) or where another part of the axis comes nearer (a folded or flat axis). A
+closest point farther along the rest axis from the section's t than the point is from the
+section's centre lies on another part: the point is bound at its section's t instead (the
+atlas quadratus femoris: 42 of its 128 points, whose closest points lie up to 0.74 away in
+t). Bound at such a point, it would be carried by another part's frame and turned about
+another part's tangent by another part's share of the twist: its section would come apart
+(a roll near a full turn wrung that muscle inside out, its exact volume without a solution;
+docs/FIT.md, "Volume under twist"). A closest point within that reach (a bend's: gait2392's
+iliacus, arm26's triceps) is kept.
 
 Frames. The start vector R(0) is fixed in the origin bone (the bone of the first axis
 point), so a rigid motion of the skeleton moves the muscle rigidly. The insertion bone's
@@ -328,10 +332,13 @@ class MuscleModel:
     def _stage_binding(self, rest_p, x, t, r, p_rest, cp_t) -> None:
         """Bind every control point once: closest rest-axis parameter t and offset (u, v, w)
         in the frame there; the bases at those t and the rest arc fraction of each."""
-        # on its own section's part of the axis (module doc): the closest point found there
-        # keeps its bits, one found on another part of the axis gives way to the section's t
+        # on its section's own part of the axis (module doc): a closest point farther along the
+        # rest axis from the section's t than the point is from the section's centre lies on
+        # another part of it, and the point is bound at its section's t
         closest = self._closest_t(rest_p[0], p_rest, cp_t)
-        self.bind_t = np.clip(closest, cp_t - tol.BIND_SECTION_SLACK, cp_t + tol.BIND_SECTION_SLACK)
+        along = np.abs(np.interp(closest, self.ts, self.arc) - np.interp(cp_t, self.ts, self.arc)) * self.l0
+        offset = np.linalg.norm(p_rest - bspline.basis_matrix(self.knots, 2, cp_t) @ rest_p[0], axis=1)
+        self.bind_t = np.where(along > offset, cp_t, closest)
         self.bind_j = self._sample_index(self.bind_t)
         cb, tb, rb, sb = self._frames_at(rest_p, x, t, r, self.bind_t, self.bind_j)
         off = p_rest - cb[0]
