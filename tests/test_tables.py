@@ -54,10 +54,12 @@ def test_the_atlas_map_is_gait2392s():
     assert a.sides == {"r": "Right", "l": "Left"}
     assert a.muscles["semiten"] == ("Semitendinosus", "Semitendonosus") and len(a.muscles) == 29
     assert a.split["glut_max"] == (("GluteusMaximus",), ("glut_max1", "glut_max2", "glut_max3"))
-    assert a.landmarks == {"hip": ("FemurHead", False, "femur"), "hip_other": ("FemurHead", True, "femur"),
-                           "knee": ("FemurDistal", False, "tibia"), "ankle": ("Talus", False, "talus")}
-    assert a.bones[0] == (("Tibia", "Fibula"), "tibia", True)
-    assert a.bones[2][1:] == ("calcn", False) and a.bones[2][0][0] == "Calcaneous"
+    assert {k: (v.cartilage, v.other, v.bone) for k, v in a.landmarks.items()} == {
+        "hip": ("FemurHead", False, "femur"), "hip_other": ("FemurHead", True, "femur"),
+        "knee": ("FemurDistal", False, "tibia"), "ankle": ("Talus", False, "talus")}
+    assert a.bones[0] == (("Tibia", "Fibula"), "tibia", True, False)
+    assert a.bones[2][1:] == ("calcn", False, False) and a.bones[2][0][0] == "Calcaneous"
+    assert a.suffixes == {"r": ("_r", "_r"), "l": ("_l", "_l")} and a.close == ()
     assert "ercspn" in a.kept and "Plantaris" in a.unused
 
 
@@ -154,3 +156,28 @@ def test_a_rig_bone_the_body_lacks_is_refused_at_its_entry(tmp_path):
 def test_a_broken_atlas_map_is_refused_where_it_is(tmp_path, old, new, token, says):
     err = refused(T.load_atlas_map, *broken(tmp_path, ATLAS_MAP, old, new, token))
     assert says in str(err)
+
+
+def test_atlas_map_of_bodyparts3d_resolves_every_file():
+    """atlases/myoarm.yaml: side words in names, a globbed pattern, centroid landmarks and
+    suffixes per side; every landmark's and warped bone's file and every muscle resolves to one
+    file of the BodyParts3D folder (when the shared data is here)."""
+    from pathlib import Path
+
+    from axdf_cli.tools.atlas import Atlas
+    from axdf_cli.tools.tables import load_atlas_map
+
+    m = load_atlas_map(Path(__file__).resolve().parent.parent / "atlases" / "myoarm.yaml")
+    assert m.muscle_name("DELT1", "r") == "DELT1" and m.bone_name("humerus", "r") == "humerus_r"
+    assert m.muscle_name("DELT1", "l") == "DELT1_l" and m.on_side("DELT1", "r") and not m.on_side("DELT1_l", "r")
+    assert m.landmarks["humerus"].centroid == ("{Side}_humerus",) and m.landmarks["humerus"].cartilage is None
+    root = Path(__file__).resolve().parents[2] / "shared" / "data" / "atlas" / "bodyparts3d_upper"
+    if not root.is_dir():
+        import pytest
+        pytest.skip("no BodyParts3D atlas in ../shared/data")
+    atlas = Atlas(root, m)
+    atlas.check(["r", "l"])
+    for src in list(m.muscles.values()) + [a for a, _ in m.split.values()]:
+        for side in ("r", "l"):
+            assert atlas.path(side, "Muscle", src[0]).is_file(), (side, src)
+    assert atlas.path("l", "Muscle", "Clavicular_part_of_{side}_deltoid").name == "FMA34681_Clavicular_part_of_left_deltoid.ply"

@@ -44,10 +44,21 @@ class Atlas:
     map: AtlasMap
 
     def path(self, side: str, kind: str, name: str, where: Mark | None = None) -> Path:
-        """The atlas file of a structure (kind Bone, Cartilage, Muscle) on a side ('r', 'l');
-        refused (at ``where``, else the map's files:) where it, a link resolved, leaves the
-        atlas folder."""
-        p = Path(self.root) / self.map.files.format(folder=self.map.sides[side], kind=kind, name=name)
+        """The atlas file of a structure (kind Bone, Cartilage, Muscle) on a side ('r', 'l'):
+        the map's files: pattern, the name's ``{side}``/``{Side}`` the side's word; a pattern
+        with ``*`` is matched in the folder (one file, else refused). Refused (at ``where``,
+        else the map's files:) where it, a link resolved, leaves the atlas folder."""
+        word = self.map.sides[side]
+        name = name.replace("{side}", word.lower()).replace("{Side}", word[:1].upper() + word[1:].lower())
+        rel = self.map.files.format(folder=word, kind=kind, name=name)
+        p = Path(self.root) / rel
+        if any(c in rel for c in "*?["):
+            found = sorted(Path(self.root).glob(rel))
+            if len(found) > 1:
+                raise InputError(where or self.map.marks.get("files", Mark(self.map.path)),
+                                 f"{kind.lower()} {name}: {len(found)} atlas files match {rel} "
+                                 f"({', '.join(q.name for q in found[:3])})", "a pattern and names that match one file")
+            p = found[0] if found else Path(self.root) / rel.replace("*", "")
         root = os.path.realpath(self.root)
         real = os.path.realpath(p)
         if os.path.lexists(p) and real != root and not real.startswith(root.rstrip(os.sep) + os.sep):
@@ -57,14 +68,27 @@ class Atlas:
         return p
 
     def check(self, sides) -> None:
-        """Refuse, at the map's line, a landmark's or a warped bone's file the folder lacks."""
+        """Refuse, at the map's line, a side the map lacks, or a landmark's or a warped bone's
+        file the folder lacks."""
         if not Path(self.root).is_dir():
             raise InputError(Mark(str(self.root)), "atlas folder not found",
                              f"the folder the map's files: pattern ({self.map.files}) is read in")
         for side in sides:
-            need = [(("landmark", k), "Cartilage", cart, _leg(side, other))
-                    for k, (cart, other, _) in self.map.landmarks.items()]
-            need += [(("bone", i), "Bone", n, side) for i, (names, _, _) in enumerate(self.map.bones) for n in names]
+            if side not in self.map.sides:
+                raise InputError(self.map.marks.get("sides", Mark(self.map.path)),
+                                 f"side {side} is not in the map's sides ({', '.join(self.map.sides)})",
+                                 "--sides among the map's sides")
+        for side in sides:
+            need = []
+            for k, lm in self.map.landmarks.items():
+                s = _leg(side, lm.other)
+                if s not in self.map.sides:
+                    raise InputError(self.map.marks.get(("landmark", k), Mark(self.map.path)),
+                                     f"landmark {k} is on side {s}, which the map's sides lack",
+                                     "leg: same, or both sides in sides:")
+                need += [(("landmark", k), "Cartilage", lm.cartilage, s)] if lm.cartilage else \
+                    [(("landmark", k), "Bone", n, s) for n in lm.centroid]
+            need += [(("bone", i), "Bone", n, side) for i, (names, *_) in enumerate(self.map.bones) for n in names]
             for key, kind, name, s in need:
                 p = self.path(s, kind, name, self.map.marks.get(key))
                 if not p.is_file():
@@ -73,12 +97,13 @@ class Atlas:
                                      f"a {kind.lower()} of {self.root} by the map's files: pattern ({self.map.files})")
 
 
-def read_atlas_mesh(path: Path):
+def read_atlas_mesh(path: Path, closed: bool = True):
     """(vertices (V, 3) float64 in metres, faces (F, 3) int64) of an atlas mesh (PLY or OBJ,
     millimetres), read strictly (axdf_cli.formats: counts checked against the file's length,
     every face naming a vertex of the file) and refused by name unless it is one closed,
-    consistently wound surface of finite coordinates within ``tol.ATLAS_MAX_REACH`` of the
-    atlas' origin and at least ``tol.ATLAS_MIN_EXTENT`` across."""
+    consistently wound surface (``closed`` False: any triangle surface, for the map's ``close:``)
+    of finite coordinates within ``tol.ATLAS_MAX_REACH`` of the atlas' origin and at least
+    ``tol.ATLAS_MIN_EXTENT`` across."""
     from axdf_cli.formats import load_triangles_and_bytes
     from axdf_cli.geometry.mesh import surface_problem
 
@@ -92,7 +117,7 @@ def read_atlas_mesh(path: Path):
     if len(bad):
         raise InputError(where, f"has {len(bad)} non-finite vertices (the first, vertex {int(bad[0])})",
                          "finite coordinates (millimetres)")
-    problem = surface_problem(f, len(v))
+    problem = surface_problem(f, len(v)) if closed else None
     if problem:
         raise InputError(where, problem, allowed)
     extent, far = float(np.ptp(v, axis=0).max()), float(np.abs(v).max())
@@ -116,27 +141,51 @@ def _leg(side: str, other: bool) -> str:
     return ("l" if side == "r" else "r") if other else side
 
 
+def surface_centroid(v: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """The area-weighted centroid of a triangle surface (open or closed): the same point on two
+    meshes of one bone however their vertices are spread."""
+    t = v[f]
+    area = 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
+    return (area @ t.mean(axis=1)) / max(float(area.sum()), 1e-300)
+
+
 def atlas_landmarks(atlas: Atlas, side: str) -> dict[str, np.ndarray]:
-    """The atlas' joint centres (metres, the atlas' frame) for the leg of ``side``: the centres
-    of the spheres fitted to the map's cartilages (``landmarks:``)."""
-    def centre(s, name):
-        return sphere_fit(read_atlas_mesh(atlas.path(s, "Cartilage", name))[0])[0]
+    """The atlas' landmarks (metres, the atlas' frame) for ``side``: the centres of the spheres
+    fitted to the map's cartilages, or the surface centroids of the map's bones."""
+    def point(s, lm):
+        if lm.cartilage:
+            return sphere_fit(read_atlas_mesh(atlas.path(s, "Cartilage", lm.cartilage))[0])[0]
+        parts = [read_atlas_mesh(atlas.path(s, "Bone", n)) for n in lm.centroid]
+        v = np.concatenate([p[0] for p in parts])
+        f = np.concatenate([p[1] + o for p, o in zip(parts, np.cumsum([0] + [len(p[0]) for p in parts[:-1]]))])
+        return surface_centroid(v, f)
 
-    return {k: centre(_leg(side, other), cart) for k, (cart, other, _) in atlas.map.landmarks.items()}
+    return {k: point(_leg(side, lm.other), lm) for k, lm in atlas.map.landmarks.items()}
 
 
-def model_landmarks(skel, rest: np.ndarray, amap: AtlasMap, side: str) -> dict[str, np.ndarray]:
-    """The skeleton's joint centres at rest (world, metres) for the leg of ``side``: the origins
-    of the map's landmark bones (gait2392's: the femur's, the other femur's, the tibia's and
-    the talus')."""
-    names = {k: f"{bone}_{_leg(side, other)}" for k, (_, other, bone) in amap.landmarks.items()}
+def model_landmarks(skel, rest: np.ndarray, amap: AtlasMap, side: str, bone_meshes: dict | None = None) \
+        -> dict[str, np.ndarray]:
+    """The skeleton's landmarks at rest (world, metres) for ``side``: the rest origins of the
+    map's landmark bones (gait2392's: the femur's, the other femur's, the tibia's and the
+    talus'), or, for a ``centroid:`` landmark, the surface centroid of the bone's mesh."""
+    names = {k: amap.bone_name(lm.bone, _leg(side, lm.other), lm.midline) for k, lm in amap.landmarks.items()}
+    out = {}
     for k, n in names.items():
+        lm = amap.landmarks[k]
         if n not in skel.bone_index:
             raise InputError(amap.marks.get(("landmark", k), Mark(amap.path)),
                              f"landmark {k}: skeleton {skel.name} has no bone {n!r}",
                              f"{did_you_mean(n, list(skel.bone_index))}a bone of the skeleton --onto names "
-                             "(its name without the side suffix _r, _l)")
-    return {k: rest[skel.bone_index[n], :3, 3].astype(np.float64) for k, n in names.items()}
+                             "(its name without the side suffix)")
+        if lm.centroid:
+            if not bone_meshes or n not in bone_meshes:
+                raise InputError(amap.marks.get(("landmark", k), Mark(amap.path)),
+                                 f"landmark {k}: skeleton {skel.name}'s bone {n} has no mesh to take a centroid of",
+                                 "centroid: landmarks on bones with meshes (else cartilage:, the bone's origin)")
+            out[k] = surface_centroid(*bone_meshes[n])
+        else:
+            out[k] = rest[skel.bone_index[n], :3, 3].astype(np.float64)
+    return out
 
 
 def similarity(src: np.ndarray, dst: np.ndarray, weight: np.ndarray | None = None) -> tuple[float, np.ndarray, np.ndarray]:
@@ -207,7 +256,7 @@ def register(atlas: Atlas, skel, rest: np.ndarray, bone_meshes: dict, side: str,
     smoothing = tol.ATLAS_WARP_SMOOTHING if smoothing is None else smoothing
     amap = atlas.map
     names = tuple(amap.landmarks)
-    la, lm = atlas_landmarks(atlas, side), model_landmarks(skel, rest, amap, side)
+    la, lm = atlas_landmarks(atlas, side), model_landmarks(skel, rest, amap, side, bone_meshes)
     src = np.array([la[k] for k in names])
     dst = np.array([lm[k] for k in names])
     for pts, whose in ((src, "the atlas' cartilages' sphere centres"), (dst, f"skeleton {skel.name}'s bone origins")):
@@ -215,9 +264,9 @@ def register(atlas: Atlas, skel, rest: np.ndarray, bone_meshes: dict, side: str,
         if not (np.isfinite(sv).all() and sv[0] > tol.ATLAS_MIN_EXTENT and sv[1] > tol.ATLAS_LANDMARK_SPREAD * sv[0]):
             raise InputError(amap.marks.get("landmarks", Mark(amap.path)),
                              f"side {side}'s landmarks ({', '.join(names)}) are {whose} on one line or point",
-                             "landmarks that span a plane (joint centres of both hips, the knee and the ankle)")
-    for k, (atlas_bones, bone, both) in enumerate(amap.bones):
-        mb = f"{bone}_{side}"
+                             "landmarks that span a plane (e.g. joint centres of both hips, the knee and the ankle)")
+    for k, (atlas_bones, bone, both, midline) in enumerate(amap.bones):
+        mb = amap.bone_name(bone, side, midline)
         if mb not in bone_meshes:
             has = mb in skel.bone_index
             raise InputError(amap.marks.get(("bone", k), Mark(amap.path)),
@@ -226,14 +275,14 @@ def register(atlas: Atlas, skel, rest: np.ndarray, bone_meshes: dict, side: str,
                              f"{did_you_mean(mb, list(bone_meshes))}a bone of --onto with a mesh (without the "
                              "side suffix _r, _l)")
     # the other leg's landmark only fixes the turn about the leg's long axis: weighted less
-    s, R, t = similarity(src, dst, [tol.ATLAS_OTHER_HIP_WEIGHT if amap.landmarks[k][1] else 1.0 for k in names])
+    s, R, t = similarity(src, dst, [tol.ATLAS_OTHER_HIP_WEIGHT if amap.landmarks[k].other else 1.0 for k in names])
     reg = Registration(side, s, R, t, la, lm)
     lm_res = np.linalg.norm(reg.rigid(src) - dst, axis=1)
     reg.report = {"side": side, "scale": s, "landmark_residual_mm": dict(zip(names, (lm_res * 1e3).round(2).tolist()))}
     # the bones: samples in the similarity's frame, each with its model bone
     groups = []
-    for k, (atlas_bones, bone, both) in enumerate(amap.bones):
-        mb = f"{bone}_{side}"
+    for k, (atlas_bones, bone, both, midline) in enumerate(amap.bones):
+        mb = amap.bone_name(bone, side, midline)
         pts = [_samples(*read_atlas_mesh(atlas.path(side, "Bone", n)), tol.ATLAS_BONE_SAMPLES, tol.FIT_SEED + k)
                for n in atlas_bones]
         groups.append((mb, reg.rigid(np.concatenate(pts)), both))

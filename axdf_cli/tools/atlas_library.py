@@ -23,6 +23,7 @@ from axdf_cli.tools import constants as tol
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.geometry.winding import inside_share, push_out_of_meshes, winding_numbers
 from axdf_cli.tools import atlas as at
+from axdf_cli.tools.atlas_partition import TERRITORIES
 
 REPORT = "atlas_report.json"
 REGISTERED = "registered"  # the carried atlas meshes, world metres at rest, under the model's names
@@ -56,7 +57,7 @@ def split_parts(v: np.ndarray, f: np.ndarray, centres: np.ndarray, spacing: floa
     import igl
 
     d = centres[-1] - centres[0]
-    d = d / np.linalg.norm(d)
+    d = d / np.linalg.norm(d) if len(centres) > 1 else np.array([1.0, 0.0, 0.0])  # one part: the mesh closed
     s = centres @ d
     cuts = (s[1:] + s[:-1]) / 2.0
     lo, hi = v.min(axis=0) - 2 * spacing, v.max(axis=0) + 2 * spacing
@@ -130,10 +131,10 @@ def registered_meshes(atlas: at.Atlas, skel, rest, bones: dict, old: Path, sides
         if registrations is not None:
             registrations[side] = reg
         side_rep = dict(reg.report, muscles={})
-        ta = find_atlas(atlas, side, ["TibialisAnterior"]) if f"tibia_{side}" in bones else None
+        ta = find_atlas(atlas, side, ["TibialisAnterior"]) if names.bone_name("tibia", side) in bones else None
         if ta is not None:
             tv = at.read_atlas_mesh(ta)[0]
-            tib = bones[f"tibia_{side}"]
+            tib = bones[names.bone_name("tibia", side)]
             side_rep["tib_ant_inside_tibia"] = {"landmarks": inside_share(*tib, reg.apply(tv, warp=False)),
                                                 "warp": inside_share(*tib, reg.apply(tv))}
         jobs = [(m, [m], list(src)) for m, src in names.muscles.items()] + \
@@ -142,17 +143,22 @@ def registered_meshes(atlas: at.Atlas, skel, rest, bones: dict, old: Path, sides
             p = find_atlas(atlas, side, src)
             if p is None:
                 continue
-            v, fc = at.read_atlas_mesh(p)
+            closed = any(atlas.path(side, "Muscle", n) == p for n in names.close)
+            v, fc = at.read_atlas_mesh(p, closed=not closed)
             w = reg.apply(v)
+            if closed:  # an open surface: closed by its winding numbers on a grid
+                w, fc = split_parts(w, fc, np.zeros((1, 3)), tol.ATLAS_SPLIT_SPACING)[0]
             pieces = [(w, fc)] if len(parts) == 1 else split_parts(
-                w, fc, np.array([path_centroid(old, f"{q}_{side}", skel, rest) for q in parts]), tol.ATLAS_SPLIT_SPACING)
+                w, fc, np.array([path_centroid(old, names.muscle_name(q, side), skel, rest) for q in parts]),
+                tol.ATLAS_SPLIT_SPACING)
             for q, (pv, pf) in zip(parts, pieces):
                 # (signed: w > 0.5, as the shipped library was made; gait2392's torso is wound inconsistently)
                 pv, moved = push_out_of_meshes(pv, bones.values(), tol.ATLAS_BONE_MARGIN, signed=True)
-                name = f"{q}_{side}"
+                name = names.muscle_name(q, side)
                 meshes.append((name, pv, pf))
                 side_rep["muscles"][name] = {"atlas": p.name, "pushed_out_of_bones": moved,
-                                             "part": f"{parts.index(q) + 1}/{len(parts)}" if len(parts) > 1 else None}
+                                             "part": f"{parts.index(q) + 1}/{len(parts)}" if len(parts) > 1 else None,
+                                             **({"closed": True} if closed else {})}
         sides_rep[side] = side_rep
     return meshes, sides_rep
 
@@ -178,9 +184,10 @@ def _check_model(atlas: at.Atlas, old: Path, sides) -> None:
     for key, parts in [(m, [m]) for m in atlas.map.muscles] + [(g, list(p)) for g, (_, p) in atlas.map.split.items()]:
         for q in parts:
             for side in sides:
-                if not (Path(old) / f"{q}_{side}.yaml").is_file():
+                name = atlas.map.muscle_name(q, side)
+                if not (Path(old) / f"{name}.yaml").is_file():
                     raise InputError(atlas.map.marks.get(("muscle", key), Mark(atlas.map.path)),
-                                     f"muscle {q}: {old} has no {q}_{side}.yaml",
+                                     f"muscle {q}: {old} has no {name}.yaml",
                                      "a muscle of the model's library (--muscles), without its side suffix")
 
 
@@ -213,9 +220,9 @@ def build_library(atlas: at.Atlas, skeleton_path: Path, old: Path, sides=("r",),
     for name, pv, pf in carried:
         files[f"{REGISTERED}/{name}.ply"] = ply_bytes(pv, pf)
     if partition:
-        from axdf_cli.tools.atlas_partition import TERRITORIES, build_partition
+        from axdf_cli.tools.atlas_partition import build_partition
 
-        terr, report["partition"] = build_partition(carried, old, sides, skel, rest, bones, tell)
+        terr, report["partition"] = build_partition(carried, old, sides, skel, rest, bones, tell, atlas.map)
         for name, (tv, tf) in terr.items():
             files[f"{TERRITORIES}/{name}.ply"] = ply_bytes(tv, tf)
     if fit:

@@ -52,7 +52,8 @@ def depth_shares(meshes: dict, bones: dict) -> dict:
             "deepest_mm": float(1000.0 * d.max()), "inside_bone_over_1mm": float((db > 1e-3).mean())}
 
 
-def build_partition(carried: list, old: Path, sides, skel, rest, bones: dict, tell=None) -> tuple[dict, dict]:
+def build_partition(carried: list, old: Path, sides, skel, rest, bones: dict, tell=None, amap=None) \
+        -> tuple[dict, dict]:
     """The partition of the registered atlas ``carried`` [(name, V, F)], the model's muscles of
     ``old`` on ``sides`` it lacks and the bones (name -> (V, F)): (territory meshes name -> (V,
     F), the report's ``partition`` entry)."""
@@ -63,7 +64,8 @@ def build_partition(carried: list, old: Path, sides, skel, rest, bones: dict, te
     tell = tell or (lambda text: None)
     have = {n for n, _, _ in carried}
     lacks = sorted(p.stem for p in Path(old).glob("*.yaml")
-                   if p.stem not in have and any(p.stem.endswith(f"_{s}") for s in sides))
+                   if p.stem not in have and any(amap.on_side(p.stem, s) if amap is not None
+                                                 else p.stem.endswith(f"_{s}") for s in sides))
     kept = model_rest_meshes(old, lacks, skel, rest)
     tissues = [Tissue(n, v, f, 1) for n, v, f in carried]
     tissues += [Tissue(n, v, f, 0) for n, (v, f) in kept.items()]

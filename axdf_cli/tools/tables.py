@@ -16,7 +16,7 @@ from pathlib import Path
 
 from axdf_cli.errors import InputError, Mark
 from axdf_cli.tools import constants as tol
-from axdf_cli.fileio.yamlio import Fields, check_name, did_you_mean, item_marks, load_yaml
+from axdf_cli.fileio.yamlio import NAME_ALLOWED, Fields, check_name, did_you_mean, is_name, item_marks, load_yaml
 
 DATA = Path(__file__).resolve().parent.parent / "data"
 RIG_FILE = DATA / "makehuman" / "bone_map.yaml"
@@ -219,24 +219,78 @@ def families() -> tuple:
 
 #: The placeholders of an atlas map's ``files:`` pattern.
 FILE_FIELDS = ("folder", "kind", "name")
+#: The placeholders an atlas name may hold: the side's folder word lowercased and capitalised
+#: (BodyParts3D spells a side inside its names: ``Clavicular_part_of_{side}_deltoid``).
+NAME_FIELDS = ("side", "Side")
+
+
+@dataclass(frozen=True)
+class Landmark:
+    """One landmark of an atlas map: an atlas point against a model point.
+
+    ``cartilage``: the centre of the sphere fitted to that atlas cartilage, against the model
+    bone's rest origin (a joint centre). ``centroid``: the surface centroid of those atlas
+    bones, against the surface centroid of the model bone's mesh at rest (an atlas without
+    joint cartilages, BodyParts3D). Exactly one of the two is given."""
+
+    bone: str  # the model bone, without its side suffix (unless ``midline``)
+    cartilage: str | None = None
+    centroid: tuple = ()
+    other: bool = False  # of the other side (the pelvis' width fixes the turn about the leg)
+    midline: bool = False  # the model bone has no side suffix (a torso, a spine)
 
 
 @dataclass(frozen=True)
 class AtlasMap:
     """An atlas onto a model (the map file's own doc; atlases/gait2392.yaml). Model names lack
-    the side suffix (``_r``, ``_l`` is added per side)."""
+    the side suffix (added per side: ``sides:``, by default ``_r``, ``_l``)."""
 
     muscles: dict  # model muscle -> atlas muscles, the first that exists on the side
     split: dict  # model group -> (atlas muscles, the group's model muscles in order)
     kept: tuple  # model muscles the atlas lacks
     unused: tuple  # atlas muscles the model has none for
-    sides: dict  # side suffix -> the atlas' folder of that side
-    landmarks: dict  # landmark -> (atlas cartilage, of the other side?, model bone)
-    bones: tuple  # (atlas bones, model bone, correspondences both ways?)
-    files: str = "{folder}/{name}.ply"  # an atlas file's path in its folder ({folder}, {kind}, {name})
+    sides: dict  # side -> the atlas' folder (or word) of that side
+    landmarks: dict  # landmark -> Landmark
+    bones: tuple  # (atlas bones, model bone, correspondences both ways?, midline?)
+    files: str = "{folder}/{name}.ply"  # an atlas file's path in its folder ({folder}, {kind}, {name}; * globs)
     credit: str = ""  # the atlas' credit and licence, written with what is derived from it
     path: str = ""  # the map file
     marks: dict = field(default_factory=dict, compare=False)  # ("landmark", k) | ("bone", i) | key -> Mark
+    suffixes: dict = field(default_factory=dict)  # side -> (the model muscles' suffix, the model bones')
+    close: tuple = ()  # atlas muscles that are open surfaces, closed by their winding numbers
+
+    def muscle_name(self, name: str, side: str) -> str:
+        """A model muscle's name on a side (its suffix added)."""
+        return name + self.suffixes.get(side, (f"_{side}", f"_{side}"))[0]
+
+    def on_side(self, name: str, side: str) -> bool:
+        """Whether a model muscle's name is of ``side``: it ends with that side's suffix, or, where
+        that suffix is empty, with no other side's."""
+        sfx = {s: self.suffixes.get(s, (f"_{s}", f"_{s}"))[0] for s in ("r", "l")}
+        if sfx[side]:
+            return name.endswith(sfx[side])
+        return not any(v and name.endswith(v) for s, v in sfx.items() if s != side)
+
+    def bone_name(self, name: str, side: str, midline: bool = False) -> str:
+        """A model bone's name on a side (its suffix added, unless a midline bone)."""
+        return name if midline else name + self.suffixes.get(side, (f"_{side}", f"_{side}"))[1]
+
+
+def _atlas_names(value, where: Mark, what: str, most: int | None = None, empty: bool = False) -> tuple:
+    """Names of atlas files: names, each of which may hold ``{side}`` and ``{Side}``."""
+    if not isinstance(value, list) or not (value or empty):
+        raise InputError(where, f"{what} is not a list of names", f"{what}: a list of one name or more, [A, B]")
+    if most is not None and len(value) > most:
+        raise InputError(where, f"{what} lists {len(value)} names", f"{what}: at most {most}")
+    out = []
+    for v, m in zip(value, item_marks(value, where)):
+        bare = v.replace("{side}", "x").replace("{Side}", "X") if isinstance(v, str) else v
+        if not is_name(bare):
+            raise InputError(m, f"{what}: {v!r} is not an atlas name",
+                             f"{NAME_ALLOWED}; {{side}} and {{Side}} stand for the side's word (lower case, "
+                             "capitalised)")
+        out.append(v)
+    return tuple(out)
 
 
 def load_atlas_map(path: Path | str) -> AtlasMap:
@@ -245,7 +299,7 @@ def load_atlas_map(path: Path | str) -> AtlasMap:
     if not Path(path).is_file():
         raise InputError(Mark(path), "atlas map not found", "a YAML atlas map (atlases/gait2392.yaml shows one)")
     f = Fields(load_yaml(path), Mark(path), "the atlas map",
-               keys=("files", "credit", "muscles", "split", "kept", "unused", "sides", "landmarks", "bones"))
+               keys=("files", "credit", "muscles", "split", "kept", "unused", "sides", "landmarks", "bones", "close"))
     marks: dict = {"files": f.vmark("files"), "sides": f.vmark("sides"), "landmarks": f.vmark("landmarks")}
     files = f.string("files", required=True)
     import string
@@ -276,7 +330,7 @@ def load_atlas_map(path: Path | str) -> AtlasMap:
     muscles = {}
     for k, v, km, vm in _entries(f, "muscles", most=tol.ATLAS_MAX_MUSCLES):
         once(k, km, "muscle")
-        muscles[check_name(k, km, "muscle")] = _names(v, vm, f"muscle {k}'s atlas names", most)
+        muscles[check_name(k, km, "muscle")] = _atlas_names(v, vm, f"muscle {k}'s atlas names", most)
         marks[("muscle", k)] = vm
     split = {}
     for k, v, km, vm in _entries(f, "split", optional=True, most=tol.ATLAS_MAX_MUSCLES):
@@ -285,21 +339,32 @@ def load_atlas_map(path: Path | str) -> AtlasMap:
         parts = _names(s.raw("parts", required=True), s.vmark("parts"), "parts", most)
         for q, qm in zip(parts, item_marks(s.raw("parts"), s.vmark("parts"))):
             once(q, qm, f"split {k}'s part")
-        split[check_name(k, km, "group")] = (_names(s.raw("atlas", required=True), s.vmark("atlas"), "atlas", most),
+        split[check_name(k, km, "group")] = (_atlas_names(s.raw("atlas", required=True), s.vmark("atlas"), "atlas", most),
                                              parts)
-    sides = {}
+    sides, suffixes = {}, {}
     for k, v, km, vm in _entries(f, "sides"):
-        sides[_known(k, km, ("r", "l"), "side")] = check_name(v, vm, f"side {k}'s folder")
+        side = _known(k, km, ("r", "l"), "side")
+        if isinstance(v, dict):
+            sf = Fields(v, vm, f"side {k}", keys=("folder", "muscles", "bones"))
+            sides[side] = sf.name("folder", required=True)
+            suffixes[side] = tuple(_suffix(sf, key, f"_{side}") for key in ("muscles", "bones"))
+        else:
+            sides[side] = check_name(v, vm, f"side {k}'s folder")
+            suffixes[side] = (f"_{side}", f"_{side}")
         marks[("side", k)] = vm
-    if set(sides) != {"r", "l"}:
-        raise InputError(f.vmark("sides"), "sides has no " + " ".join(s for s in ("r", "l") if s not in sides),
-                         "sides: {r: FOLDER, l: FOLDER}")
     landmarks = {}
     for k, v, km, vm in _entries(f, "landmarks", most=tol.ATLAS_MAX_LANDMARKS):
-        lm = Fields(v, vm, f"landmark {k}", keys=("cartilage", "leg", "bone"))
-        landmarks[check_name(k, km, "landmark")] = (lm.name("cartilage", required=True),
-                                                    lm.choice("leg", ("same", "other"), required=True) == "other",
-                                                    lm.name("bone", required=True))
+        lm = Fields(v, vm, f"landmark {k}", keys=("cartilage", "centroid", "leg", "bone", "midline"))
+        if lm.has("cartilage") == lm.has("centroid"):
+            raise InputError(vm, f"landmark {k} has {'both' if lm.has('cartilage') else 'neither'} cartilage: and "
+                             "centroid:", "one of cartilage: ATLAS (a sphere's centre against the bone's origin) or "
+                             "centroid: [ATLAS, ...] (the bones' surface centroid against the bone mesh's)")
+        cart = _atlas_names([lm.raw("cartilage")], lm.vmark("cartilage"), "cartilage")[0] if lm.has("cartilage") \
+            else None
+        cent = _atlas_names(lm.raw("centroid"), lm.vmark("centroid"), "centroid", most) if lm.has("centroid") else ()
+        landmarks[check_name(k, km, "landmark")] = Landmark(
+            lm.name("bone", required=True), cart, cent, lm.choice("leg", ("same", "other"), default="same") == "other",
+            lm.boolean("midline", default=False))
         marks[("landmark", k)] = vm
     if len(landmarks) < 3:
         raise InputError(f.vmark("landmarks"), f"landmarks has {len(landmarks)} entries",
@@ -309,13 +374,28 @@ def load_atlas_map(path: Path | str) -> AtlasMap:
         raise InputError(f.vmark("bones"), f"bones has {len(seq)} entries", f"bones: at most {tol.ATLAS_MAX_BONES}")
     bones = []
     for i, (item, m) in enumerate(zip(seq, item_marks(seq, f.vmark("bones")))):
-        b = Fields(item, m, "a bone pair", keys=("atlas", "bone", "both"))
-        bones.append((_names(b.raw("atlas", required=True), b.vmark("atlas"), "atlas", most),
-                      b.name("bone", required=True), b.boolean("both", required=True)))
+        b = Fields(item, m, "a bone pair", keys=("atlas", "bone", "both", "midline"))
+        bones.append((_atlas_names(b.raw("atlas", required=True), b.vmark("atlas"), "atlas", most),
+                      b.name("bone", required=True), b.boolean("both", required=True),
+                      b.boolean("midline", default=False)))
         marks[("bone", i)] = m
     kept = _names(f.raw("kept", default=[]), f.vmark("kept") if f.has("kept") else Mark(path), "kept", empty=True)
     for q, qm in zip(kept, item_marks(f.raw("kept", default=[]), f.vmark("kept") if f.has("kept") else Mark(path))):
         once(q, qm, "kept muscle")
     unused = _names(f.raw("unused", default=[]), f.vmark("unused") if f.has("unused") else Mark(path), "unused",
                     empty=True)
-    return AtlasMap(muscles, split, kept, unused, sides, landmarks, tuple(bones), files, credit, path, marks)
+    close = _atlas_names(f.raw("close", default=[]), f.vmark("close") if f.has("close") else Mark(path), "close",
+                         most=tol.ATLAS_MAX_MUSCLES, empty=True)
+    return AtlasMap(muscles, split, kept, unused, sides, landmarks, tuple(bones), files, credit, path, marks,
+                    suffixes, close)
+
+
+def _suffix(f: Fields, key: str, default: str) -> str:
+    """A side's name suffix (``muscles:`` or ``bones:``): empty, or '_' and a name."""
+    v = f.raw(key, default=default)
+    if v is None:
+        v = ""
+    if not isinstance(v, str) or (v and not is_name(v)):
+        raise InputError(f.vmark(key), f"{key}: {v!r} is not a name suffix",
+                         f"{key}: the suffix the model adds to its names on that side, e.g. '_r', or '' for none")
+    return v
