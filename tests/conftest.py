@@ -43,7 +43,7 @@ TIERS = {
                     "meshes", "mjcf_import", "osim_cli", "outputs", "pack", "packed", "rajagopal", "render_cli",
                     "render_jobs", "render_output", "retarget", "retarget_myobody", "stages", "transfer",
                     "transfer_paths", "retarget_fit", "first_hour", "first_hour_two", "framing", "outputs_per_frame", "fit",
-                    "skin", "skin_stage", "atlas", "atlas_cli", "skin_outputs", "dataset_skin", "volume_twist", "run_identity",
+                    "skin", "skin_stage", "atlas", "atlas_myoarm", "atlas_cli", "skin_outputs", "dataset_skin", "volume_twist", "run_identity",
                     "one_height", "layers", "partition"),
     "judges": ("blender", "mjcf_judge", "opensim_judge", "osim_fk", "osim_muscles"),
     "hostile": ("compare_hostile", "fuzz_yaml", "hostile", "inputs_hostile", "robustness", "safety", "hostile_import",

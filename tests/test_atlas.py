@@ -102,6 +102,52 @@ def test_split_parts_are_closed_and_keep_the_volume():
     assert vols[1] == pytest.approx(0.08 * np.pi * 0.03 ** 2, rel=0.05)  # the middle slab: a cylinder
 
 
+def test_pieces_apart_are_joined_into_one_and_one_piece_is_left_as_it_is():
+    import trimesh
+
+    from axdf_cli.tools.atlas_library import one_piece, signed_volume
+
+    a = trimesh.creation.box(extents=[0.02, 0.02, 0.04])
+    b = a.copy()
+    b.apply_translation([0.0, 0.0, 0.046])  # 6 mm apart
+    both = trimesh.util.concatenate([a, b])
+    v, f, width = one_piece(np.asarray(both.vertices), np.asarray(both.faces), 0.0015)
+    t = trimesh.Trimesh(v, f, process=True)
+    assert t.is_watertight and t.body_count == 1
+    assert 0.0015 <= width <= 0.006
+    # the bridge adds volume, but no more than the gap's box
+    assert 2 * a.volume * 0.95 <= signed_volume(v, f) <= 2 * a.volume + 0.02 * 0.02 * 0.006 * 1.3
+    v1, f1, w1 = one_piece(np.asarray(a.vertices), np.asarray(a.faces), 0.0015)
+    assert w1 == 0.0 and v1 is not None and np.array_equal(f1, np.asarray(a.faces))
+
+
+def test_rigid_icp_finds_a_bone_turned_about_its_long_axis_and_blend_follows_it():
+    import trimesh
+
+    from axdf_cli.tools.atlas import Registration, rigid_icp
+
+    bone = trimesh.creation.box(extents=[0.03, 0.015, 0.25])  # flat and long: its turn is seen
+    ang = np.radians(20.0)
+    R = np.array([[np.cos(ang), -np.sin(ang), 0.0], [np.sin(ang), np.cos(ang), 0.0], [0.0, 0.0, 1.0]])
+    t = np.array([0.004, -0.003, 0.01])
+    model = (np.asarray(bone.vertices) @ R.T + t, np.asarray(bone.faces))
+    x, _ = trimesh.sample.sample_surface_even(bone, 400, seed=1)
+    ms, _ = trimesh.sample.sample_surface_even(trimesh.Trimesh(*model), 400, seed=2)
+    Rf, tf = rigid_icp(np.asarray(x), model, np.asarray(ms))
+    # off by no more than 2 degrees (the samples' spacing, 8 mm, limits point-to-point ICP)
+    off = np.degrees(np.arccos(np.clip((np.trace(Rf.T @ R) - 1) / 2, -1, 1)))
+    assert off < 2.0
+    before = np.degrees(np.arccos((np.trace(R) - 1) / 2))
+    assert before == pytest.approx(20.0)
+    assert np.abs(tf - t).max() < 0.002
+    reg = Registration("r", 1.0, np.eye(3), np.zeros(3), {}, {}, pieces={"bone": (np.asarray(x), Rf, tf)})
+    p = np.array([[0.05, 0.0, 0.0], [0.0, 0.04, 0.1]])
+    assert reg.apply(p) == pytest.approx(p @ Rf.T + tf, abs=1e-9)  # one bone: its motion
+    # along a muscle from that bone to no bone: the origin moves with it, the insertion stays
+    ends = (("bone", p[0]), (None, p[1]))
+    assert reg.along(p, ends) == pytest.approx(np.stack([p[0] @ Rf.T + tf, p[1]]), abs=1e-9)
+
+
 def test_push_out_moves_a_point_out_of_a_bone():
     import trimesh
 

@@ -152,6 +152,7 @@ def test_a_rig_bone_the_body_lacks_is_refused_at_its_entry(tmp_path):
     ("kept: [", "keep: [", "keep", "unknown key 'keep' in the atlas map"),
     ('files: "{folder}/VHF_', 'files: "../{folder}/VHF_', "\"../", "is not an atlas file pattern"),
     ('files: "{folder}/VHF_', 'files: "{side}/VHF_', "\"{side}", "is not an atlas file pattern"),
+    ("kept: [", "articulated: 1\nkept: [", "1\n", "articulated must be true or false"),
 ])
 def test_a_broken_atlas_map_is_refused_where_it_is(tmp_path, old, new, token, says):
     err = refused(T.load_atlas_map, *broken(tmp_path, ATLAS_MAP, old, new, token))
@@ -171,6 +172,8 @@ def test_atlas_map_of_bodyparts3d_resolves_every_file():
     assert m.muscle_name("DELT1", "r") == "DELT1" and m.bone_name("humerus", "r") == "humerus_r"
     assert m.muscle_name("DELT1", "l") == "DELT1_l" and m.on_side("DELT1", "r") and not m.on_side("DELT1_l", "r")
     assert m.landmarks["humerus"].centroid == ("{Side}_humerus",) and m.landmarks["humerus"].cartilage is None
+    assert m.articulated and not load_atlas_map(Path(__file__).resolve().parent.parent / "atlases" /
+                                                "gait2392.yaml").articulated
     root = Path(__file__).resolve().parents[2] / "shared" / "data" / "atlas" / "bodyparts3d_upper"
     if not root.is_dir():
         import pytest

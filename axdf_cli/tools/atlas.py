@@ -214,6 +214,36 @@ class Registration:
     landmarks_model: dict
     warp: object | None = None  # RBFInterpolator of the displacement after the similarity
     report: dict = field(default_factory=dict)
+    pieces: dict = field(default_factory=dict)  # an articulated map's model bone -> (samples (P, 3), R, t)
+
+    def blend(self, y: np.ndarray) -> np.ndarray:
+        """Points after the similarity moved by the bones' rigid motions blended as dual
+        quaternions (Kavan et al. 2008: no collapse at a joint that turns), each weighted by
+        1 / d^k of its distance d to that bone's samples (normalised): a point near one bone
+        moves with it, one between bones with a blend."""
+        from scipy.spatial import cKDTree
+
+        d = np.stack([cKDTree(x).query(y)[0] for x, _, _ in self.pieces.values()], axis=1)
+        w = 1.0 / np.maximum(d, tol.ATLAS_BLEND_NEAR) ** tol.ATLAS_BLEND_POWER
+        return _blend(w / w.sum(axis=1, keepdims=True), [(R, t) for _, R, t in self.pieces.values()], y)
+
+    def along(self, points: np.ndarray, ends: tuple) -> np.ndarray:
+        """Atlas points of one muscle (P, 3) in the model's rest frame, moved with its two ends'
+        bones: ``ends`` ((origin bone | None, origin point), (insertion bone | None, insertion
+        point)), model bones of :attr:`pieces` (None: no motion after the similarity) and rest
+        points (world). Each point's weight is its place along the line between the ends
+        (smoothstep), so a muscle twists along its length as a forearm's do when the radius turns
+        about the ulna, instead of shearing across it where a blend by distance would."""
+        (b0, p0), (b1, p1) = ends
+        y = self.rigid(points)
+        motion = [(np.eye(3), np.zeros(3)) if b is None else self.pieces[b][1:] for b in (b0, b1)]
+        if b0 == b1:
+            R, t = motion[0]
+            return y @ R.T + t
+        d = p1 - p0
+        s = np.clip((y - p0) @ d / max(float(d @ d), 1e-12), 0.0, 1.0)
+        s = s * s * (3.0 - 2.0 * s)
+        return _blend(np.stack([1.0 - s, s], axis=1), motion, y)
 
     def rigid(self, points: np.ndarray) -> np.ndarray:
         return self.scale * points @ self.rotation.T + self.shift
@@ -221,12 +251,25 @@ class Registration:
     def apply(self, points: np.ndarray, warp: bool = True) -> np.ndarray:
         """Atlas points (P, 3, metres) in the model's rest frame: the similarity, then the warp."""
         y = self.rigid(points)
+        if warp and self.pieces:
+            return self.blend(y)
         if warp and self.warp is not None:
             out = np.empty_like(y)
             for i in range(0, len(y), tol.ATLAS_WARP_CHUNK):
                 out[i:i + tol.ATLAS_WARP_CHUNK] = y[i:i + tol.ATLAS_WARP_CHUNK] + self.warp(y[i:i + tol.ATLAS_WARP_CHUNK])
             return out
         return y
+
+
+def _blend(w: np.ndarray, motions: list, y: np.ndarray) -> np.ndarray:
+    """Points (P, 3) moved by rigid motions [(R, t)] blended as dual quaternions with weights w
+    (P, K) (Kavan et al. 2008: no collapse where the motions turn apart)."""
+    from axdf_cli.model.skinning import blend_dq, dual_quaternions
+
+    rel = np.stack([np.concatenate([R, t[:, None]], axis=1) for R, t in motions])
+    out = np.empty_like(y)
+    blend_dq(np.ascontiguousarray(w), dual_quaternions(rel), np.ascontiguousarray(y), out)
+    return out
 
 
 def _samples(v: np.ndarray, f: np.ndarray, n: int, seed: int) -> np.ndarray:
@@ -287,10 +330,18 @@ def register(atlas: Atlas, skel, rest: np.ndarray, bone_meshes: dict, side: str,
                for n in atlas_bones]
         groups.append((mb, reg.rigid(np.concatenate(pts)), both))
     reg.report["bones_before"] = _bone_residual(groups, bone_meshes, lambda p: p)
-    if rounds == 0:
+    if rounds == 0 and not amap.articulated:
         return reg
     lm_y = reg.rigid(src)
     model_samples = {mb: _samples(*bone_meshes[mb], tol.ATLAS_BONE_SAMPLES, tol.FIT_SEED) for mb, _, both in groups if both}
+    if amap.articulated:  # each bone placed rigidly on its model bone; the space between blends them
+        for mb, x, _ in groups:
+            R, t = rigid_icp(x, bone_meshes[mb], model_samples.get(mb))
+            reg.pieces[mb] = (x, R, t)
+        reg.report["bones_after"] = _bone_residual(groups, bone_meshes, reg.blend)
+        reg.report["landmarks_after_mm"] = dict(zip(names, (np.linalg.norm(reg.blend(lm_y) - dst, axis=1)
+                                                                 * 1e3).round(3).tolist()))
+        return reg
     for _ in range(rounds):
         current = (lambda p: p) if reg.warp is None else (lambda p: p + reg.warp(p))
         xs, ys = [lm_y], [dst]
@@ -316,6 +367,29 @@ def register(atlas: Atlas, skel, rest: np.ndarray, bone_meshes: dict, side: str,
     reg.report["landmarks_after_mm"] = dict(zip(names, (np.linalg.norm(lm_y + reg.warp(lm_y) - dst, axis=1)
                                                              * 1e3).round(3).tolist()))
     return reg
+
+
+def rigid_icp(x: np.ndarray, mesh: tuple, model_samples: np.ndarray | None = None) -> tuple:
+    """The rigid motion (R (3, 3), t) that places one bone's points ``x`` (P, 3) on ``mesh``
+    (iterative closest points; each round a Kabsch fit to the points' nearest on the mesh and,
+    where ``model_samples`` are given, to the model samples that chose each point)."""
+    import igl
+    from scipy.spatial import cKDTree
+
+    V, F = mesh[0], mesh[1].astype(np.int64)
+    R, t = np.eye(3), np.zeros(3)
+    for _ in range(tol.ATLAS_RIGID_ROUNDS):
+        y = x @ R.T + t
+        _, _, near = igl.point_mesh_squared_distance(y, V, F)
+        a, b = [x], [near]
+        if model_samples is not None:
+            _, j = cKDTree(y).query(model_samples)
+            a.append(x[j])
+            b.append(model_samples)
+        a, b = np.concatenate(a), np.concatenate(b)
+        _, R, _ = similarity(a, b)
+        t = b.mean(axis=0) - R @ a.mean(axis=0)
+    return R, t
 
 
 def _bone_residual(groups, bone_meshes, move) -> dict:

@@ -49,6 +49,25 @@ def path_centroid(folder: Path, name: str, skel, rest: np.ndarray) -> np.ndarray
                     for p in pts], axis=0)
 
 
+def path_ends(folder: Path, name: str, skel, rest: np.ndarray, pieces: dict) -> tuple:
+    """A model muscle's two ends for :meth:`~axdf_cli.tools.atlas.Registration.along`: for its
+    path's first and last point, the registered bone it moves with (the point's bone or its
+    nearest ancestor among ``pieces``; None where there is none, e.g. the thorax) and the
+    point at rest (world)."""
+    from axdf_cli.specs import load_muscle_file
+
+    spec = load_muscle_file(Path(folder) / f"{name}.yaml")[0]
+    pts = spec.path.points if spec.path is not None else spec.axis
+    ends = []
+    for p in (pts[0], pts[-1]):
+        i = skel.bone_index[p.bone]
+        x = rest[i, :3, :3] @ np.asarray(p.at) + rest[i, :3, 3]
+        while i >= 0 and skel.bones[i].name not in pieces:
+            i = skel.bones[i].parent
+        ends.append((skel.bones[i].name if i >= 0 else None, x))
+    return tuple(ends)
+
+
 def split_parts(v: np.ndarray, f: np.ndarray, centres: np.ndarray, spacing: float) -> list[tuple]:
     """A closed mesh (V, F) cut into len(centres) closed parts by planes across the line from
     the first centre to the last, each halfway between neighbouring centres' projections:
@@ -76,6 +95,47 @@ def split_parts(v: np.ndarray, f: np.ndarray, centres: np.ndarray, spacing: floa
         V, F, _ = igl.marching_cubes(field, grid, int(n[0]), int(n[1]), int(n[2]), 0.0)
         parts.append((np.asarray(V, np.float64), np.asarray(F, np.int64)))
     return parts
+
+
+def signed_volume(v: np.ndarray, f: np.ndarray) -> float:
+    """A closed mesh's volume (positive when wound outward)."""
+    a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
+    return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
+
+
+def one_piece(v: np.ndarray, f: np.ndarray, spacing: float) -> tuple:
+    """A closed mesh as one piece: unchanged where every piece but one is a sliver (under
+    tol.FIT_MIN_PIECE_SHARE of the volume; the fit drops those), else its inside (winding
+    numbers on a grid) closed morphologically by the fewest grid steps that join the pieces
+    above the share (at most tol.ATLAS_JOIN_STEPS), the rest dropped, turned back into a
+    surface (marching cubes). Returns (V, F, the bridge's width in metres, 0 if unchanged)."""
+    import igl
+    import trimesh
+    from scipy import ndimage
+
+    parts = trimesh.Trimesh(v, f, process=True).split(only_watertight=False)
+    vols = np.array([abs(signed_volume(q.vertices, q.faces)) for q in parts])
+    if (vols / max(vols.sum(), 1e-300) >= tol.FIT_MIN_PIECE_SHARE).sum() <= 1:
+        return v, f, 0.0
+    pad = tol.ATLAS_JOIN_STEPS + 2
+    lo, hi = v.min(axis=0) - pad * spacing, v.max(axis=0) + pad * spacing
+    n = np.ceil((hi - lo) / spacing).astype(int) + 1
+    axes = [lo[i] + spacing * np.arange(n[i]) for i in range(3)]
+    grid = np.stack([a.ravel(order="F") for a in np.meshgrid(*axes, indexing="ij")], axis=1)
+    w = winding_numbers(v, f, grid).reshape(n, order="F")
+    inside = w > 0.5
+    for k in range(1, tol.ATLAS_JOIN_STEPS + 1):
+        closed = ndimage.binary_closing(inside, structure=ndimage.generate_binary_structure(3, 1), iterations=k,
+                                        border_value=0)
+        lab, m = ndimage.label(closed | inside)
+        sizes = np.bincount(lab.ravel())[1:]
+        if m and (sizes / sizes.sum() >= tol.FIT_MIN_PIECE_SHARE).sum() == 1:
+            break
+    keep = lab == 1 + int(np.argmax(sizes))
+    field = np.where(keep & ~inside, -0.5, np.where(keep, 0.5 - w, np.maximum(0.5 - w, 1e-3)))
+    field[np.abs(field) < 1e-3] = 1e-3  # a corner on the surface makes triangles that merge away
+    V, F, _ = igl.marching_cubes(field.ravel(order="F"), grid, int(n[0]), int(n[1]), int(n[2]), 0.0)
+    return np.asarray(V, np.float64), np.asarray(F, np.int64), k * spacing
 
 
 def ply_bytes(v: np.ndarray, f: np.ndarray) -> bytes:
@@ -145,20 +205,28 @@ def registered_meshes(atlas: at.Atlas, skel, rest, bones: dict, old: Path, sides
                 continue
             closed = any(atlas.path(side, "Muscle", n) == p for n in names.close)
             v, fc = at.read_atlas_mesh(p, closed=not closed)
-            w = reg.apply(v)
+            # an articulated map carries each muscle with the bones of its ends (a split group's:
+            # its first part's origin, its last part's insertion)
+            w = reg.apply(v) if not reg.pieces else reg.along(v, (
+                path_ends(old, names.muscle_name(parts[0], side), skel, rest, reg.pieces)[0],
+                path_ends(old, names.muscle_name(parts[-1], side), skel, rest, reg.pieces)[1]))
+            kept = None if closed else round(signed_volume(w, fc) / signed_volume(reg.apply(v, warp=False), fc), 3)
             if closed:  # an open surface: closed by its winding numbers on a grid
                 w, fc = split_parts(w, fc, np.zeros((1, 3)), tol.ATLAS_SPLIT_SPACING)[0]
             pieces = [(w, fc)] if len(parts) == 1 else split_parts(
                 w, fc, np.array([path_centroid(old, names.muscle_name(q, side), skel, rest) for q in parts]),
                 tol.ATLAS_SPLIT_SPACING)
             for q, (pv, pf) in zip(parts, pieces):
+                pv, pf, joined = one_piece(pv, pf, tol.ATLAS_SPLIT_SPACING)
                 # (signed: w > 0.5, as the shipped library was made; gait2392's torso is wound inconsistently)
                 pv, moved = push_out_of_meshes(pv, bones.values(), tol.ATLAS_BONE_MARGIN, signed=True)
                 name = names.muscle_name(q, side)
                 meshes.append((name, pv, pf))
                 side_rep["muscles"][name] = {"atlas": p.name, "pushed_out_of_bones": moved,
                                              "part": f"{parts.index(q) + 1}/{len(parts)}" if len(parts) > 1 else None,
-                                             **({"closed": True} if closed else {})}
+                                             **({"closed": True} if closed else {}),
+                                             **({"volume_kept": kept} if atlas.map.articulated and kept else {}),
+                                             **({"joined_mm": round(joined * 1e3, 1)} if joined else {})}
         sides_rep[side] = side_rep
     return meshes, sides_rep
 

@@ -204,6 +204,11 @@ ATLAS_WARP_ROUNDS = 5
 ATLAS_WARP_SMOOTHING = 1e-6
 # points per evaluation of the warp (memory: chunk x centres x 8 bytes)
 ATLAS_WARP_CHUNK = 20000
+# an articulated map's bones: rounds of rigid closest points each
+ATLAS_RIGID_ROUNDS = 100
+# the blend of the bones' motions: weight 1 / max(d, NEAR)^POWER of the distance d (m) to a bone
+ATLAS_BLEND_POWER = 4
+ATLAS_BLEND_NEAR = 0.002
 # the other hip's weight in the landmarks' similarity: it only turns the leg about its long
 # axis (hip, knee and ankle are nearly on a line); at full weight the atlas' narrower pelvis
 # pulls the leg's scale and leaves centimetres at every joint
@@ -220,6 +225,9 @@ ATLAS_PARTITION_GAP = 0.0005
 # the grid spacing (m) on which an atlas muscle shared by a model group (gluteus maximus ->
 # glut_max1..3) is cut into closed parts (winding number, marching cubes)
 ATLAS_SPLIT_SPACING = 0.0015
+# an atlas muscle in separate pieces (BodyParts3D's extensor carpi ulnaris, a split part cut
+# across tendons) is joined by a morphological closing of at most this many grid steps
+ATLAS_JOIN_STEPS = 8
 # an atlas muscle's fit is shipped only with at least this IoU with its mesh and its volume
 # within this factor of the mesh's; else the model's own muscle is kept: a muscle whose tendon
 # turns round a bone (the flexor hallucis longus under the foot) is not one belly along one

@@ -59,7 +59,8 @@ def muscle_name(path: Path) -> str:
 
 def bone_geometry(skel: Skeleton, rest: np.ndarray, skeleton_path: Path, meshes: bool = True) -> list:
     """Per bone what a point is bound to by nearness: ('mesh', world vertices, faces) where the
-    skeleton has bone meshes (only those bones then; ``meshes`` False: never), else
+    skeleton has bone meshes (only those bones then, and the bones welded to one of them;
+    ``meshes`` False: never), else
     ('segments', (k, 2, 3)) from its origin to each child's origin (a leaf: its origin)."""
     from axdf_cli.geometry.bones import load_bone_mesh
 
@@ -72,6 +73,14 @@ def bone_geometry(skel: Skeleton, rest: np.ndarray, skeleton_path: Path, meshes:
             v, f, _ = load_bone_mesh(b.mesh, str(skeleton_path))
             w = v.astype(np.float64) @ rest[i, :3, :3].T + rest[i, :3, 3]
             out.append(("mesh", w, np.asarray(f, dtype=np.int64)))
+        # a bone without a mesh welded to an ancestor with one (no coordinate between: myoarm's
+        # chest_r on its torso) is as near as that mesh, so a muscle's trunk end binds to it
+        for i, b in enumerate(skel.bones):
+            j = i
+            while out[j] is None and not skel.bones[j].dofs and skel.bones[j].parent >= 0:
+                j = skel.bones[j].parent
+            if out[i] is None and out[j] is not None:
+                out[i] = out[j]
         return out
     origins = rest[:, :3, 3]
     out = []

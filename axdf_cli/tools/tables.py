@@ -258,6 +258,7 @@ class AtlasMap:
     marks: dict = field(default_factory=dict, compare=False)  # ("landmark", k) | ("bone", i) | key -> Mark
     suffixes: dict = field(default_factory=dict)  # side -> (the model muscles' suffix, the model bones')
     close: tuple = ()  # atlas muscles that are open surfaces, closed by their winding numbers
+    articulated: bool = False  # each atlas bone first placed rigidly on its model bone, then the warp
 
     def muscle_name(self, name: str, side: str) -> str:
         """A model muscle's name on a side (its suffix added)."""
@@ -299,7 +300,8 @@ def load_atlas_map(path: Path | str) -> AtlasMap:
     if not Path(path).is_file():
         raise InputError(Mark(path), "atlas map not found", "a YAML atlas map (atlases/gait2392.yaml shows one)")
     f = Fields(load_yaml(path), Mark(path), "the atlas map",
-               keys=("files", "credit", "muscles", "split", "kept", "unused", "sides", "landmarks", "bones", "close"))
+               keys=("files", "credit", "muscles", "split", "kept", "unused", "sides", "landmarks", "bones", "close",
+                     "articulated"))
     marks: dict = {"files": f.vmark("files"), "sides": f.vmark("sides"), "landmarks": f.vmark("landmarks")}
     files = f.string("files", required=True)
     import string
@@ -387,7 +389,7 @@ def load_atlas_map(path: Path | str) -> AtlasMap:
     close = _atlas_names(f.raw("close", default=[]), f.vmark("close") if f.has("close") else Mark(path), "close",
                          most=tol.ATLAS_MAX_MUSCLES, empty=True)
     return AtlasMap(muscles, split, kept, unused, sides, landmarks, tuple(bones), files, credit, path, marks,
-                    suffixes, close)
+                    suffixes, close, f.boolean("articulated", default=False))
 
 
 def _suffix(f: Fields, key: str, default: str) -> str:

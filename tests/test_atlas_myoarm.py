@@ -1,0 +1,144 @@
+"""BodyParts3D's upper body registered onto myoarm (atlases/myoarm.yaml, an articulated map)
+and the library made from it (muscles/myoarm_atlas, CC BY-SA 2.1 JP, `make atlas-myoarm`).
+
+Without data: the shipped library keeps every myoarm muscle's name and path (its line of
+action's length is the imported muscle's over the elbow's flexion to the last digit) and
+credits BodyParts3D under its licence. With ../shared/data's atlas: the registration places
+each arm bone within a few millimetres of myoarm's, and carries the muscles without crushing
+them: the median volume kept is within 3% of the atlas's, the forearm's too, where BodyParts3D's
+radius is turned about 98 degrees against myoarm's."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from osim_common import DATA, REPO
+
+ATLAS = DATA / "atlas" / "bodyparts3d_upper"
+LIB = REPO / "muscles" / "myoarm_atlas"
+OLD = REPO / "muscles" / "myoarm"
+SKELETON = REPO / "poses" / "skeletons" / "myoarm.yaml"
+MAP = REPO / "atlases" / "myoarm.yaml"
+needs_atlas = pytest.mark.skipif(not (ATLAS / "muscles").is_dir(),
+                                 reason=f"the BodyParts3D atlas not found at {ATLAS} (../shared/data)")
+needs_lib = pytest.mark.skipif(not LIB.is_dir(), reason="muscles/myoarm_atlas not made (make atlas-myoarm)")
+FOREARM = ("ECRB", "ECRL", "ECU", "EDM", "FCR", "FCU", "PL", "PT", "SUP", "APL", "EPB", "EPL", "FPL", "BRD")
+
+
+@needs_lib
+def test_library_keeps_every_model_name_and_credits_its_atlas():
+    from axdf_cli.specs import load_muscle_file
+
+    old = sorted(p.name for p in OLD.glob("*.yaml"))
+    assert sorted(p.name for p in LIB.glob("*.yaml")) == old
+    report = json.loads((LIB / "atlas_report.json").read_text())
+    fitted = {m["muscle"] for m in report["fitted"]}
+    assert {"DELT1", "DELT2", "DELT3", "PECM1", "PECM2", "PECM3", "LAT1", "LAT2", "LAT3", "BIClong",
+            "TRIlong", "FCR"} <= fitted
+    for name in old:
+        (spec,) = load_muscle_file(LIB / name)
+        if spec.name in fitted:
+            assert spec.axis and spec.sections[0].outline is not None, name
+    readme = (LIB / "README.md").read_text()
+    assert "BodyParts3D" in readme and ("CC BY-SA 2.1" in readme or "Share Alike 2.1" in readme)
+
+
+@needs_lib
+def test_library_lengths_are_the_models_paths():
+    """Every fitted muscle keeps myoarm's path as its line of action (MuJoCo's ten_length, which
+    the importer passes): its length over the elbow's flexion is the imported muscle's."""
+    from axdf_cli.model.muscle import MuscleModel
+    from axdf_cli.model.pose import sample_coordinates
+    from axdf_cli.model.skeleton import forward_kinematics
+    from axdf_cli.specs import RefPolicy, load_muscle_file, load_skeleton
+    from axdf_cli.specs.pose import load_pose
+
+    skel = load_skeleton(SKELETON, RefPolicy())
+    rest = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
+    q = sample_coordinates(load_pose(REPO / "poses" / "myoarm_elbow.yaml"), np.arange(0, 58, 8))
+    world = forward_kinematics(skel, q)
+    fitted = {m["muscle"] for m in json.loads((LIB / "atlas_report.json").read_text())["fitted"]}
+    assert len(fitted) >= 45
+    for name in sorted(fitted):
+        (new,) = load_muscle_file(LIB / f"{name}.yaml")
+        (old,) = load_muscle_file(OLD / f"{name}.yaml")
+        line = MuscleModel(new, skel.bone_index, rest, skel).line_length(world, q)
+        np.testing.assert_allclose(line, MuscleModel(old, skel.bone_index, rest, skel).axis_length(world, q),
+                                   rtol=1e-12, err_msg=name)
+
+
+@needs_atlas
+def test_articulated_registration_places_the_bones_and_keeps_the_volumes():
+    from axdf_cli.tools.atlas import Atlas
+    from axdf_cli.tools.atlas_library import registered_meshes, rest_state
+    from axdf_cli.tools.tables import load_atlas_map
+
+    skel, rest, bones = rest_state(SKELETON)
+    meshes, sides = registered_meshes(Atlas(ATLAS, load_atlas_map(MAP)), skel, rest, bones, OLD, ("r",))
+    rep = sides["r"]
+    for bone, d in rep["bones_after"].items():
+        assert d["mean_mm"] < 5.0, (bone, d)
+    kept = {n: m["volume_kept"] for n, m in rep["muscles"].items() if "volume_kept" in m}
+    assert len(kept) >= 45
+    assert abs(np.median(list(kept.values())) - 1.0) < 0.03
+    assert abs(np.median([kept[n] for n in FOREARM]) - 1.0) < 0.05
+    assert min(kept.values()) > 0.6 and max(kept.values()) < 1.4
+    if LIB.is_dir():  # the library was fitted to these meshes
+        recorded = json.loads((LIB / "atlas_report.json").read_text())["sides"]["r"]["muscles"]
+        assert rep["muscles"] == recorded
+
+
+def _widest_aspect(meshes) -> float:
+    """The aspect ratio (the square root of the principal moments' ratio) of the widest cut
+    across a group's principal axis, the group's bundles unioned (inside any by winding
+    number): the measure of scripts/atlas_measure.py, over the union."""
+    from axdf_cli.geometry.winding import inside
+
+    v = np.concatenate([m[0] for m in meshes])
+    c = v.mean(axis=0)
+    ax = np.linalg.svd(v - c, full_matrices=False)[2][0]
+    a = np.cross(ax, [1.0, 0.0, 0.0] if abs(ax[0]) < 0.9 else [0.0, 1.0, 0.0])
+    a /= np.linalg.norm(a)
+    b = np.cross(ax, a)
+    u = np.arange(-0.25, 0.25 + 1e-9, 0.003)
+    U, V = (g.ravel() for g in np.meshgrid(u, u, indexing="ij"))
+    s = (v - c) @ ax
+    best = (0, 0.0)
+    for t in np.linspace(s.min(), s.max(), 32)[1:-1]:
+        pts = c + t * ax + U[:, None] * a + V[:, None] * b
+        ins = np.zeros(len(pts), bool)
+        for m in meshes:
+            ins |= inside(*m, pts, signed=True)
+        if ins.sum() > best[0]:
+            q = np.stack([U[ins], V[ins]], axis=1)
+            q = q - q.mean(axis=0)
+            ev = np.linalg.eigvalsh(q.T @ q / len(q))
+            best = (int(ins.sum()), float(np.sqrt(ev[1] / max(ev[0], 1e-30))))
+    return best[1]
+
+
+@needs_lib
+def test_pectoralis_and_latissimus_are_sheets():
+    """Pectoralis major and latissimus dorsi (their bundles unioned) are sheets at rest, as the
+    atlas' are (BodyParts3D registered: 4.3 and 4.4): aspect ratio at least 3.5 at the widest
+    cut, where myoarm's imported tubes have 3.0 and 1.5."""
+    from axdf_cli.model.muscle import MuscleModel
+    from axdf_cli.model.skeleton import forward_kinematics
+    from axdf_cli.specs import RefPolicy, load_muscle_file, load_skeleton
+
+    skel = load_skeleton(SKELETON, RefPolicy())
+    rest = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
+
+    def group(folder, names):
+        out = []
+        for n in names:
+            (spec,) = load_muscle_file(folder / f"{n}.yaml")
+            m = MuscleModel(spec, skel.bone_index, rest, skel)
+            out.append((np.asarray(m.rest_vertices, np.float64), np.asarray(m.faces, np.int64)))
+        return out
+
+    for names in (["PECM1", "PECM2", "PECM3"], ["LAT1", "LAT2", "LAT3"]):
+        assert _widest_aspect(group(LIB, names)) >= 3.5, names
+    assert _widest_aspect(group(OLD, ["LAT1", "LAT2", "LAT3"])) < 2.0  # the tubes: the measure can fail
