@@ -38,7 +38,7 @@ MJCF_MESHES := --max-faces 2000 --mesh-edge 0.004
 # the camera and fail every image.
 GOLDEN_CAMERA ?= $(if $(wildcard tests/golden/camera.json),--camera tests/golden/camera.json)
 
-.PHONY: all setup setup-test sysdeps warm demo dataset test test-fast bench golden clean import import-mjcf pack pack-check lock blender skin atlas atlas-myoarm
+.PHONY: all setup setup-test sysdeps warm demo dataset test test-fast bench golden clean import import-mjcf pack pack-check lock blender skin atlas atlas-myoarm atlas-myobody
 
 all: demo
 
@@ -251,6 +251,26 @@ atlas-myoarm: $(STAMP)
 	cp -r $(ATLAS_ARM_OUT)/muscles muscles/myoarm_atlas.partial
 	cp $(ATLAS_ARM_OUT)/atlas_report.json muscles/myoarm_atlas.partial/
 	rm -rf muscles/myoarm_atlas && mv muscles/myoarm_atlas.partial muscles/myoarm_atlas
+
+# muscles/myobody_atlas: myobody's arms and shoulders from BodyParts3D (atlases/myoarm.yaml, both
+# sides) and its legs from the Visible Human (atlases/rajagopal_legs.yaml), one run onto the
+# other's library; the folder keeps BodyParts3D's licence, CC BY-SA 2.1 JP, and credits both
+# (about 15 minutes on two cores).
+ATLAS_BODY_OUT ?= build/atlas_myobody
+atlas-myobody: $(STAMP)
+	$(BIN)/axdf atlas $(ATLAS_UPPER) --onto poses/skeletons/myobody.yaml --map atlases/myoarm.yaml \
+	  --muscles muscles/myobody --sides r,l --out $(ATLAS_BODY_OUT)_upper --overwrite
+	$(BIN)/axdf atlas $(ATLAS) --onto poses/skeletons/myobody.yaml --map atlases/rajagopal_legs.yaml \
+	  --muscles $(ATLAS_BODY_OUT)_upper/muscles --sides r,l --out $(ATLAS_BODY_OUT)_legs --overwrite
+	rm -rf muscles/myobody_atlas.partial
+	cp -r $(ATLAS_BODY_OUT)_legs/muscles muscles/myobody_atlas.partial
+	{ cat $(ATLAS_BODY_OUT)_legs/muscles/README.md; echo; echo "## The arms and shoulders"; echo; \
+	  sed -n '3p' $(ATLAS_BODY_OUT)_upper/muscles/README.md; echo; \
+	  sed -n '/^## Credit/,$$p' $(ATLAS_BODY_OUT)_upper/muscles/README.md | tail -n +3; } \
+	  > muscles/myobody_atlas.partial/README.md
+	cp $(ATLAS_BODY_OUT)_upper/atlas_report.json muscles/myobody_atlas.partial/atlas_report_upper.json
+	cp $(ATLAS_BODY_OUT)_legs/atlas_report.json muscles/myobody_atlas.partial/atlas_report_legs.json
+	rm -rf muscles/myobody_atlas && mv muscles/myobody_atlas.partial muscles/myobody_atlas
 
 import-mjcf: $(TEST_STAMP)
 	$(BIN)/python scripts/myo_sim_xml.py myoarm $(MYO)/myoarm.xml

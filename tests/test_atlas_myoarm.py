@@ -1,5 +1,7 @@
 """BodyParts3D's upper body registered onto myoarm (atlases/myoarm.yaml, an articulated map)
-and the library made from it (muscles/myoarm_atlas, CC BY-SA 2.1 JP, `make atlas-myoarm`).
+and the library made from it (muscles/myoarm_atlas, CC BY-SA 2.1 JP, `make atlas-myoarm`);
+myobody's (muscles/myobody_atlas, `make atlas-myobody`: the same map on both arms, then the
+Visible Human's legs by atlases/rajagopal_legs.yaml) where it is made.
 
 Without data: the shipped library keeps every myoarm muscle's name and path (its line of
 action's length is the imported muscle's over the elbow's flexion to the last digit) and
@@ -24,46 +26,69 @@ MAP = REPO / "atlases" / "myoarm.yaml"
 needs_atlas = pytest.mark.skipif(not (ATLAS / "muscles").is_dir(),
                                  reason=f"the BodyParts3D atlas not found at {ATLAS} (../shared/data)")
 needs_lib = pytest.mark.skipif(not LIB.is_dir(), reason="muscles/myoarm_atlas not made (make atlas-myoarm)")
+BODY = REPO / "muscles" / "myobody_atlas"
+# library, the model's library, its skeleton, a pose and frames of it, the fits' reports, the arms' suffixes
+LIBS = {
+    "myoarm": (LIB, OLD, SKELETON, "myoarm_elbow.yaml", np.arange(0, 58, 8), ["atlas_report.json"], [""]),
+    "myobody": (BODY, REPO / "muscles" / "myobody", REPO / "poses" / "skeletons" / "myobody.yaml",
+                "myobody_gait.yaml", np.arange(0, 124, 30), ["atlas_report_upper.json", "atlas_report_legs.json"],
+                ["", "_l"]),
+}
+per_lib = pytest.mark.parametrize("which", [
+    "myoarm", pytest.param("myobody", marks=pytest.mark.skipif(not BODY.is_dir(), reason="make atlas-myobody"))])
+
+
+def _fitted(which: str) -> set:
+    lib, _, _, _, _, reports, _ = LIBS[which]
+    return {m["muscle"] for r in reports for m in json.loads((lib / r).read_text())["fitted"]}
 FOREARM = ("ECRB", "ECRL", "ECU", "EDM", "FCR", "FCU", "PL", "PT", "SUP", "APL", "EPB", "EPL", "FPL", "BRD")
 
 
 @needs_lib
-def test_library_keeps_every_model_name_and_credits_its_atlas():
+@per_lib
+def test_library_keeps_every_model_name_and_credits_its_atlas(which):
     from axdf_cli.specs import load_muscle_file
 
-    old = sorted(p.name for p in OLD.glob("*.yaml"))
-    assert sorted(p.name for p in LIB.glob("*.yaml")) == old
-    report = json.loads((LIB / "atlas_report.json").read_text())
-    fitted = {m["muscle"] for m in report["fitted"]}
-    assert {"DELT1", "DELT2", "DELT3", "PECM1", "PECM2", "PECM3", "LAT1", "LAT2", "LAT3", "BIClong",
-            "TRIlong", "FCR"} <= fitted
+    lib, old_dir, _, _, _, _, suffixes = LIBS[which]
+    old = sorted(p.name for p in old_dir.glob("*.yaml"))
+    assert sorted(p.name for p in lib.glob("*.yaml")) == old
+    fitted = _fitted(which)
+    for sfx in suffixes:
+        assert {f"{n}{sfx}" for n in ("DELT1", "DELT2", "DELT3", "PECM1", "PECM2", "PECM3", "LAT1", "LAT2", "LAT3",
+                                      "BIClong", "TRIlong", "FCR")} <= fitted
+    if which == "myobody":
+        assert {"vaslat_r", "vaslat_l", "gasmed_r", "glmax1_l", "tibant_r"} <= fitted
     for name in old:
-        (spec,) = load_muscle_file(LIB / name)
+        (spec,) = load_muscle_file(lib / name)[:1]
         if spec.name in fitted:
             assert spec.axis and spec.sections[0].outline is not None, name
-    readme = (LIB / "README.md").read_text()
-    assert "BodyParts3D" in readme and ("CC BY-SA 2.1" in readme or "Share Alike 2.1" in readme)
+    readme = (lib / "README.md").read_text()
+    assert "BodyParts3D" in readme and "CC BY-SA 2.1 JP" in readme
+    if which == "myobody":
+        assert "Visible Human" in readme
 
 
 @needs_lib
-def test_library_lengths_are_the_models_paths():
-    """Every fitted muscle keeps myoarm's path as its line of action (MuJoCo's ten_length, which
-    the importer passes): its length over the elbow's flexion is the imported muscle's."""
+@per_lib
+def test_library_lengths_are_the_models_paths(which):
+    """Every fitted muscle keeps the model's path as its line of action (MuJoCo's ten_length,
+    which the importer passes): its length over the pose is the imported muscle's."""
     from axdf_cli.model.muscle import MuscleModel
     from axdf_cli.model.pose import sample_coordinates
     from axdf_cli.model.skeleton import forward_kinematics
     from axdf_cli.specs import RefPolicy, load_muscle_file, load_skeleton
     from axdf_cli.specs.pose import load_pose
 
-    skel = load_skeleton(SKELETON, RefPolicy())
+    lib, old_dir, skeleton, pose, frames, _, _ = LIBS[which]
+    skel = load_skeleton(skeleton, RefPolicy())
     rest = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
-    q = sample_coordinates(load_pose(REPO / "poses" / "myoarm_elbow.yaml"), np.arange(0, 58, 8))
+    q = sample_coordinates(load_pose(REPO / "poses" / pose), frames)
     world = forward_kinematics(skel, q)
-    fitted = {m["muscle"] for m in json.loads((LIB / "atlas_report.json").read_text())["fitted"]}
+    fitted = _fitted(which)
     assert len(fitted) >= 45
     for name in sorted(fitted):
-        (new,) = load_muscle_file(LIB / f"{name}.yaml")
-        (old,) = load_muscle_file(OLD / f"{name}.yaml")
+        (new,) = load_muscle_file(lib / f"{name}.yaml")
+        (old,) = load_muscle_file(old_dir / f"{name}.yaml")
         line = MuscleModel(new, skel.bone_index, rest, skel).line_length(world, q)
         np.testing.assert_allclose(line, MuscleModel(old, skel.bone_index, rest, skel).axis_length(world, q),
                                    rtol=1e-12, err_msg=name)
@@ -120,7 +145,8 @@ def _widest_aspect(meshes) -> float:
 
 
 @needs_lib
-def test_pectoralis_and_latissimus_are_sheets():
+@per_lib
+def test_pectoralis_and_latissimus_are_sheets(which):
     """Pectoralis major and latissimus dorsi (their bundles unioned) are sheets at rest, as the
     atlas' are (BodyParts3D registered: 4.3 and 4.4): aspect ratio at least 3.5 at the widest
     cut, where myoarm's imported tubes have 3.0 and 1.5."""
@@ -128,7 +154,8 @@ def test_pectoralis_and_latissimus_are_sheets():
     from axdf_cli.model.skeleton import forward_kinematics
     from axdf_cli.specs import RefPolicy, load_muscle_file, load_skeleton
 
-    skel = load_skeleton(SKELETON, RefPolicy())
+    lib, old_dir, skeleton, _, _, _, suffixes = LIBS[which]
+    skel = load_skeleton(skeleton, RefPolicy())
     rest = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
 
     def group(folder, names):
@@ -139,6 +166,7 @@ def test_pectoralis_and_latissimus_are_sheets():
             out.append((np.asarray(m.rest_vertices, np.float64), np.asarray(m.faces, np.int64)))
         return out
 
-    for names in (["PECM1", "PECM2", "PECM3"], ["LAT1", "LAT2", "LAT3"]):
-        assert _widest_aspect(group(LIB, names)) >= 3.5, names
-    assert _widest_aspect(group(OLD, ["LAT1", "LAT2", "LAT3"])) < 2.0  # the tubes: the measure can fail
+    for sfx in suffixes:
+        for names in (["PECM1", "PECM2", "PECM3"], ["LAT1", "LAT2", "LAT3"]):
+            assert _widest_aspect(group(lib, [n + sfx for n in names])) >= 3.5, (names, sfx)
+    assert _widest_aspect(group(old_dir, ["LAT1", "LAT2", "LAT3"])) < 2.0  # the tubes: the measure can fail

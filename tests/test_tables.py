@@ -184,3 +184,19 @@ def test_atlas_map_of_bodyparts3d_resolves_every_file():
         for side in ("r", "l"):
             assert atlas.path(side, "Muscle", src[0]).is_file(), (side, src)
     assert atlas.path("l", "Muscle", "Clavicular_part_of_{side}_deltoid").name == "FMA34681_Clavicular_part_of_left_deltoid.ply"
+
+
+def test_rajagopal_legs_map_names_myobodys_leg_muscles():
+    """atlases/rajagopal_legs.yaml: the Visible Human's legs under Rajagopal's names, every one a
+    muscle of myobody on both sides, carried articulated."""
+    from pathlib import Path
+
+    from axdf_cli.tools.tables import load_atlas_map
+
+    repo = Path(__file__).resolve().parent.parent
+    m = load_atlas_map(repo / "atlases" / "rajagopal_legs.yaml")
+    assert m.articulated
+    names = list(m.muscles) + [q for _, parts in m.split.values() for q in parts] + list(m.kept)
+    for side in ("r", "l"):
+        for n in names:
+            assert (repo / "muscles" / "myobody" / f"{m.muscle_name(n, side)}.yaml").is_file(), (n, side)
