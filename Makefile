@@ -181,10 +181,19 @@ import: $(STAMP)
 	$(MAKE) --no-print-directory import-mjcf
 
 # MakeHuman's CC0 body fitted to gait2392 and pushed out over its packed muscles at rest:
-# skins/gait2392/ (the skin of poses/jobs/gait2392_walk_skin.yaml; docs/SKIN.md). Seconds.
+# skins/gait2392/ (the skin of poses/jobs/gait2392_walk_skin.yaml; docs/SKIN.md). And the
+# whole body's, skins/myobody/, over muscles/myobody_atlas (poses/jobs/myobody_atlas_walk.yaml). Seconds.
 skin: $(STAMP)
 	$(BIN)/axdf skin --skeleton poses/skeletons/gait2392.yaml --muscles muscles/gait2392_packed --push \
 	  --out skins/gait2392 --overwrite
+	$(BIN)/axdf skin --skeleton poses/skeletons/myobody.yaml --muscles muscles/myobody_atlas --push \
+	  --out skins/myobody --overwrite
+	printf '%s\n' "# skins/myobody" "" \
+	  "MakeHuman's hm08 body (CC0) fitted to myobody's skeleton by \`axdf skin --push\` and grown over" \
+	  "muscles/myobody_atlas, whose arms and shoulders derive from BodyParts3D (© The Database Center for" \
+	  "Life Science, CC Attribution-Share Alike 2.1 Japan; Mitsuhashi N. et al., Nucleic Acids Research 37" \
+	  "(2009) D782-D785, doi:10.1093/nar/gkn613). The skin's shape follows those muscles, so this folder" \
+	  "keeps that licence, CC BY-SA 2.1 JP. Made by \`make skin\`." > skins/myobody/README.md
 
 # gait2392's muscles packed at the rest pose and polished over 16 frames of the walk (axdf pack
 # --pose: no overlap, volumes kept, section outlines): muscles/gait2392_packed/ (PACK.md), the

@@ -44,11 +44,13 @@ so figures are noisy and only ratios taken in the same run are compared with tar
 13. skin: the skin stage (``axdf run --skin``) over the gait2392 walk and the CMU walk onto
    gait2392 (packed muscles, contact on): its ms per frame against the muscles plus contact,
    measured side by side, the skin's volume against rest, muscle vertices outside it.
+14. whole_body: a frame of myobody's 416 atlas muscles (contact, skins/myobody) beside one of
+   gait2392's 92 (contact, skins/gait2392): the muscles alone, with contact, with the skin.
 
 Each section is a module of :mod:`benchmarks.sections` (rows 1-3 and wrapping: ``evaluation``;
 4: ``writers``; 5: ``render``; 6: ``end_to_end``; 7: ``dataset``; 8: ``packed``; 9: ``contact``,
 with the packed library's report; 10: ``render_jobs``; 11: ``retarget``; 12: ``jiggle``; 13:
-``skin``; and ``compiled``: a whole run of the walk stretched to 1051 frames at 48x24 into npz
+``skin``; 14: ``whole_body``; and ``compiled``: a whole run of the walk stretched to 1051 frames at 48x24 into npz
 against tofile of the same bytes; 92 muscles x 1 frame; a chunk's outputs into fresh memory
 against steady state; numba's first-run compile cost). ``--only NAME[,NAME...]`` measures only
 those sections (``python -m benchmarks.bench --help`` lists them).
@@ -91,6 +93,7 @@ HELP = {
     "retarget": "the retargeting fit and its Jacobian",
     "jiggle": "the jiggle stage",
     "skin": "the skin stage over the walks",
+    "whole_body": "myobody's 416 atlas muscles, contact and skin beside gait2392's frame",
     "long": "10,000 frames x all muscles: peak memory (as --long)",
 }
 

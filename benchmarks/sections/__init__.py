@@ -18,6 +18,7 @@ SECTIONS = {
     "retarget": "retargeting (axdf retarget)",
     "jiggle": "jiggle",
     "skin": "the skin stage",
+    "whole_body": "a frame of the whole body beside gait2392's",
     "long": "--long: peak memory over 10,000 frames",
 }
 #: the sections a run measures without --only (``long``: with --long)
