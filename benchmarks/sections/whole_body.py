@@ -10,6 +10,7 @@ import dataclasses
 import time
 
 from benchmarks.common import NO_CONTACT, ROOT, Table, mark
+from benchmarks.sections.jiggle import time_chunks
 from benchmarks.settings import Run
 
 UNIT = False
@@ -23,20 +24,8 @@ VARIANTS = (("muscles alone", NO_CONTACT, False), ("muscles + contact", {}, Fals
             ("muscles + contact + skin", {}, True))
 
 
-def seconds(plan) -> float:
-    """Wall seconds of evaluating every frame of ``plan`` (its stages' starts included)."""
-    from axdf_cli.pipeline.evaluate import evaluate_plan
-
-    t0 = time.perf_counter()
-    for _, results in evaluate_plan(plan):
-        for _ in results:
-            pass
-    return time.perf_counter() - t0
-
-
 def case_ms(job, frames: str) -> tuple[dict, int]:
-    """ms per frame of each variant of ``job`` over ``frames`` (warmed on two frames first),
-    and the number of muscles."""
+    """ms per frame of each variant of ``job`` over ``frames`` (warmed on two frames first)."""
     from axdf_cli.pipeline.plan import plan_run
     from axdf_cli.pipeline.skin_stage import SkinStage
     from axdf_cli.specs import load_job
@@ -52,9 +41,9 @@ def case_ms(job, frames: str) -> tuple[dict, int]:
             t0 = time.perf_counter()
             stage.start(plan)
             start = time.perf_counter() - t0
-        seconds(dataclasses.replace(plan, frames=plan.frames[:2]))  # compiled code and caches warm
-        out[name] = (seconds(plan) - start) / len(plan.frames) * 1e3
-    return out, len(plan.models)
+        time_chunks(dataclasses.replace(plan, frames=plan.frames[:2]), 1)  # compiled code and caches warm
+        out[name] = (time_chunks(plan, 1) - start) / len(plan.frames) * 1e3
+    return out
 
 
 def rows(table: Table, run: Run) -> list[str]:
@@ -62,19 +51,16 @@ def rows(table: Table, run: Run) -> list[str]:
     for label, job, frames, quick in CASES:
         if not job.is_file():
             continue
-        ms, n = case_ms(job, quick if run.quick else frames)
-        measured.append((label, frames if not run.quick else quick, ms, n))
+        ms = case_ms(job, quick if run.quick else frames)
+        measured.append((label, frames if not run.quick else quick, ms))
     table.section("a frame of the whole body beside gait2392's (evaluate_plan, ms per frame; the skin stage's "
                   "start once per run left out)")
-    base = measured[0][2] if measured and measured[0][3] == 92 else None
-    for label, frames, ms, n in measured:
+    base = measured[0][2] if measured and measured[0][0] == CASES[0][0] else None
+    for k, (label, frames, ms) in enumerate(measured):
+        compared = k > 0 and base is not None  # the first case (gait2392) is the reference
         for name, _, _ in VARIANTS:
-            ref = base[name] if base is not None else None
-            ratio = ms[name] / ref if ref else None
-            target = ""
-            if n != 92 and name == VARIANTS[-1][0] and ratio is not None:
-                target = f"<= 5x {mark(ratio <= 5.0)}"
+            ratio = ms[name] / base[name] if compared else None
+            target = f"<= 5x {mark(ratio <= 5.0)}" if compared and name == VARIANTS[-1][0] else ""
             table.add(f"{label}, frames {frames}: {name}", f"{ms[name]:.0f} ms",
-                      f"gait2392 {ref:.0f} ms" if ref and n != 92 else "",
-                      f"{ratio:.2f}x" if ratio and n != 92 else "", target)
+                      f"gait2392 {base[name]:.0f} ms" if compared else "", f"{ratio:.2f}x" if compared else "", target)
     return []
