@@ -23,8 +23,15 @@ def test_the_rig_is_makehumans():
     assert rig.parts["toes_r"] == ("foot_r", ("toe1-1.R", "toe2-1.R", "toe3-1.R", "toe4-1.R", "toe5-1.R"))
     assert list(rig.parts)[:6] == ["pelvis", "abdomen", "chest", "neck", "head", "thigh_l"]
     assert rig.segments["trunk"] == (None, "hip_c", "shoulder_c")
-    assert rig.segments["hand_l"] == ("forearm_l", "wrist_l", None)
-    assert list(rig.segments)[-1] == "head" and len(rig.segments) == 14
+    assert rig.segments["hand_l"] == ("forearm_l", "wrist_l", "knuckle3_l")
+    assert rig.segments["finger2_3_r"] == ("finger2_2_r", "dip2_r", None)  # the fingertip: carried
+    assert list(rig.segments)[-1] == "head" and len(rig.segments) == 14 + 2 + 2 * 15
+    # a finger on a skeleton without finger bones moves with the hand; the forearm's distal half
+    # takes half the palm's turn
+    assert rig.fallback["finger1_1_l"] == "hand_l" and rig.fallback["forearm2_r"] == "forearm_r"
+    assert len(rig.fallback) == 2 * 16 and not set(rig.fallback.values()) & set(rig.fallback)
+    assert rig.across["hand_l"] == ("knuckle2_l", "knuckle5_l") and rig.turn["forearm2_l"] == 0.5
+    assert rig.landmarks["cmc1_l"] == ("finger1-1.L",) and rig.landmarks["dip5_r"] == ("finger5-3.R",)
     assert rig.keep_length == {"foot_l", "foot_r"}
     assert rig.landmarks["toe_l"] == ("toe2-1.L",) and rig.landmarks["neck"] == ("neck01",)
     assert rig.centres == {"hip_c": ("hip_l", "hip_r"), "shoulder_c": ("shoulder_l", "shoulder_r")}
@@ -46,6 +53,12 @@ def test_the_families_are_the_joint_map():
     assert cmu.landmarks["hip_l"] == "LeftHip" and cmu.landmarks["wrist_r"] == "RightWrist"
     assert cmu.bind["hand_l"] == "lhand" and cmu.bind["hand_r"] == "rhand" and cmu.back == 0.0
     assert all(set(f.bind) == set(T.rig().parts) for f in fams.values())
+    # myobody has finger bones; the others hold the fingers on the hand
+    my = fams["myobody"]
+    assert my.bind["finger1_1_l"] == "firstmc_l" and my.bind["finger3_2_r"] == "midph3_r"
+    assert my.landmarks["knuckle2_l"] == "2proxph_l" and my.landmarks["ip1_r"] == "distal_thumb_r"
+    assert fams["Rajagopal2016"].bind["finger4_3_l"] == "hand_l" and g.bind["finger2_1_r"] == "torso"
+    assert cmu.bind["finger5_1_r"] == "rhand" and my.bind["forearm2_l"] == my.bind["forearm_l"] == "radius_l"
 
 
 def test_the_atlas_map_is_gait2392s():
@@ -127,6 +140,15 @@ def test_a_family_that_binds_no_bone_for_a_part_is_refused_at_its_bind(tmp_path)
     ("  hand_r: {segment: hand_r,", "  hand_r: {segment: hand,", "hand,", "unknown segment 'hand'"),
     ("  head: {parent: trunk, from: neck,", "  head: {parent: trunk, from: nek,", "nek", "unknown landmark 'nek'"),
     ("keep_length: true}\n  upperarm_l", "keep_length: 1}\n  upperarm_l", "1}", "keep_length must be true or false"),
+    # a finger bound as a part that is not there
+    ("bones: [finger2-1.L], as: hand_l}", "bones: [finger2-1.L], as: hands_l}", "hands_l", "unknown part 'hands_l'"),
+    # across: two landmarks, turn: a share, and only with across:
+    ("to: pip3_l, across: [knuckle2_l, knuckle5_l]}", "to: pip3_l, across: [knuckle2_l]}", "[knuckle2_l]",
+     "across names 1 landmarks"),
+    ("to: wrist_r, across: [knuckle2_r, knuckle5_r], turn: 0.5}", "to: wrist_r, across: [knuckle2_r, knuckle5_r], "
+     "turn: 2}", "2}", "turn"),
+    ("from: ip1_r, to: null, across: [knuckle2_r, knuckle5_r]}", "from: ip1_r, to: null, turn: 0.5}", "0.5",
+     "has turn: but no across:"),
 ])
 def test_a_broken_rig_is_refused_where_it_is(tmp_path, old, new, token, says):
     err = refused(T.load_rig, *broken(tmp_path, T.RIG_FILE, old, new, token))

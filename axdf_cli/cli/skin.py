@@ -73,7 +73,9 @@ def run(args) -> int:
         before = outside(fit.vertices, pts)
         m = {"muscles": n_muscles, "vertices": len(pts), "outside_before": before}
         if args.push:  # over the bones' meshes too (a skull larger than the body's head)
-            wears = set(fit.bones)
+            from axdf_cli.model.skeleton import bones_below
+
+            wears = {skel.bones[i].name for i in bones_below(skel, {skel.bone_index[b] for b in fit.bones})}
             worn = rest_bone_meshes(skel, args.skeleton, lambda b: b.name in wears, cap=True).values()
             meshes = [(v, f) for v, f, _ in worn]
             bone_pts = bone_points(meshes)

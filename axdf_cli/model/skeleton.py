@@ -326,6 +326,18 @@ def bones_between(skel: "Skeleton", bones: set[int]) -> set[int]:
     return full
 
 
+def bones_below(skel: "Skeleton", bones: set[int]) -> set[int]:
+    """``bones`` and every bone below one of them on the skeleton's tree: what a skin bound to
+    ``bones`` holds inside it (myobody's patella hangs from the femur, its talus from the
+    tibia), and not a root above them (gait2392's ground)."""
+    out, grew = set(bones), True
+    while grew:
+        new = {i for i, bone in enumerate(skel.bones) if bone.parent in out} - out
+        out |= new
+        grew = bool(new)
+    return out
+
+
 def bone_of(index: dict[str, int], bone: str, mark) -> int:
     """The index of bone ``bone`` in a skeleton's ``bone_index``; an unknown name is an
     :class:`InputError` at ``mark`` naming the skeleton's bones."""

@@ -54,7 +54,7 @@ from axdf_cli import tolerances as tol
 from axdf_cli.geometry.grow import grow_over
 from axdf_cli.geometry.winding import inside
 from axdf_cli.model import skin as kernels
-from axdf_cli.model.skeleton import forward_kinematics
+from axdf_cli.model.skeleton import bones_below, forward_kinematics
 from axdf_cli.model.skinning import mush_rest, skin_points
 from axdf_cli.parts import COLORS, Kind, Part, PartFrames, Table
 from axdf_cli.pipeline.stage import RunInputs, Scope, StageBase
@@ -128,9 +128,11 @@ class WornRest:
 
 def _bone_points(skin, plan) -> list:
     """[(bone index, (N, 3) bone-local points)]: each worn bone's mesh vertices and triangle
-    centroids (a coarse mesh's faces bulge between its vertices); a bone the skin does not wear
-    (gait2392's ground) is left out."""
-    weighed = set(plan.pose.skeleton.bone_index[b] for b in skin.bones)
+    centroids (a coarse mesh's faces bulge between its vertices). The worn bones are those the
+    skin is bound to and every bone below them (:func:`~axdf_cli.model.skeleton.bones_below`:
+    a patella, a talus); a root above them (gait2392's ground) is left out."""
+    skel = plan.pose.skeleton
+    weighed = bones_below(skel, {skel.bone_index[b] for b in skin.bones})
     out = []
     for b, (bv, bf, _) in sorted(plan.contact_meshes.items()):
         if b in weighed:

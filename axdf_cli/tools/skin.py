@@ -130,7 +130,7 @@ class Fit:
     bones: list  # skeleton bones the weights name
     weights: np.ndarray  # (V, len(bones)) rows sum to 1
     parts: list  # body part names
-    part_of: np.ndarray  # (V,) index into parts: the part that moves the vertex most
+    part_of: np.ndarray  # (V,) index into parts: the part that moves the vertex most (a part with as: counted as that one)
     stature: float  # the skeleton's estimated stature (m)
     height: float  # the fitted body's, head top to sole, standing (m)
     rest_height: float  # its extent along Z at the skeleton's rest pose (m)
@@ -168,15 +168,26 @@ def skeleton_stature(skel: Skeleton) -> float | None:
     return None if fam is None else stature(skeleton_landmarks(skel, fam)[0])
 
 
+def _turned(axis_mh, axis_sk, F_mh, F_sk, across, share: float) -> np.ndarray:
+    """The turn about the skeleton's bone (``axis_sk``) from the frames the hips give
+    (``F_mh``, ``F_sk``) to those the ``across`` directions (MakeHuman's, the skeleton's) give,
+    ``share`` of it (a rotation matrix)."""
+    from scipy.spatial.transform import Rotation
+
+    M = _frame(axis_sk, across[1]) @ _frame(axis_mh, across[0]).T @ (F_sk @ F_mh.T).T
+    return Rotation.from_rotvec(share * Rotation.from_matrix(M).as_rotvec()).as_matrix()
+
+
 def _maps(mh: dict, sk: dict, s: float, up: np.ndarray | None, turn: bool, back: float = 0.0) -> dict:
     """segment -> (A, t), x -> A x + t. ``turn`` False: the same scaling with no turn (the body
     standing as MakeHuman stands), every segment hung from its parent."""
-    ref_mh = np.array([1.0, 0.0, 0.0])  # MakeHuman's left
-    ref_sk = sk["hip_l"] - sk["hip_r"]
     maps: dict = {}
     keep_length = rig().keep_length
     for seg, (parent, prox, dist) in rig().segments.items():
         fitted = dist is not None and dist in sk and prox in sk
+        ref_mh, ref_sk = np.array([1.0, 0.0, 0.0]), sk["hip_l"] - sk["hip_r"]  # MakeHuman's left, the skeleton's
+        a, b = rig().across.get(seg, ("", ""))
+        across = (mh[b] - mh[a], sk[b] - sk[a]) if a in sk and b in sk and a in mh and b in mh else None
         if parent is None:
             axis_mh = mh[dist] - mh[prox]
             if fitted:
@@ -194,6 +205,8 @@ def _maps(mh: dict, sk: dict, s: float, up: np.ndarray | None, turn: bool, back:
             F_mh = _frame(axis_mh, ref_mh)
             F_sk = _frame(axis_sk, ref_sk) if turn else F_mh
             A = F_sk @ np.diag([k, s, s]) @ F_mh.T
+            if turn and across is not None:
+                A = _turned(axis_mh, axis_sk, F_mh, F_sk, across, rig().turn.get(seg, 1.0)) @ A
             pa, pt = maps[parent]
             anchor = sk[prox] if turn else pa @ mh[prox] + pt
         else:  # carried by the parent: its turn, the overall scale
@@ -305,7 +318,9 @@ def fit_body(skel: Skeleton, body: Body, where: Mark) -> Fit:
     if not (np.isfinite(rest).all() and np.isfinite(w).all() and np.isfinite([S, height, s]).all() and s > 0):
         raise InputError(where, f"the body fitted to skeleton {skel.name!r} is not finite (its joints at rest "
                          "are degenerate)", "a skeleton whose joints at rest are those of a body (docs/SKIN.md)")
-    return Fit(fam.name, rest, standing, body.faces, bones, w, parts, pw.argmax(axis=1), S, height,
+    of = np.zeros((len(parts), len(parts)))  # a part with as: counts as that part (a finger, the hand)
+    of[np.arange(len(parts)), [parts.index(rig().fallback.get(p, p)) for p in parts]] = 1.0
+    return Fit(fam.name, rest, standing, body.faces, bones, w, parts, (pw @ of).argmax(axis=1), S, height,
                float(rest[:, 2].max() - rest[:, 2].min()), s, segments=segment_record(fam, sk))
 
 

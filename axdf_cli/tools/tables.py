@@ -71,6 +71,9 @@ class Rig:
     centres: dict  # centre -> (landmark, landmark): their midpoint
     lower_belly: str  # the rig bone moving with the pelvis whose skin has the belly's fat
     bone_marks: dict = field(default_factory=dict, compare=False)  # rig bone -> where it is first named
+    fallback: dict = field(default_factory=dict)  # part -> the part it is bound as where a family binds it no bone
+    across: dict = field(default_factory=dict)  # segment -> (landmark, landmark): the direction fixing its turn
+    turn: dict = field(default_factory=dict)  # segment -> the share (0..1) of its across: turn it takes
 
 
 def load_rig(path: Path | str = RIG_FILE) -> Rig:
@@ -96,9 +99,9 @@ def load_rig(path: Path | str = RIG_FILE) -> Rig:
             _known(p, m, landmarks, "landmark")
         centres[check_name(k, km, "centre")] = pair
     points = list(landmarks) + list(centres)
-    segments, keep = {}, set()
+    segments, keep, across, turn = {}, set(), {}, {}
     for k, v, km, vm in _entries(f, "segments"):
-        s = Fields(v, vm, f"segment {k}", keys=("parent", "from", "to", "keep_length"))
+        s = Fields(v, vm, f"segment {k}", keys=("parent", "from", "to", "keep_length", "across", "turn"))
         parent = s.raw("parent", required=True)
         if parent is not None and parent not in segments:
             raise InputError(s.vmark("parent"), f"segment {k}'s parent {parent!r} is not a segment before it",
@@ -109,18 +112,33 @@ def load_rig(path: Path | str = RIG_FILE) -> Rig:
             _known(dist, s.vmark("to"), points, "landmark")
         if s.boolean("keep_length", default=False):
             keep.add(k)
+        if s.has("across"):
+            pair = _names(s.raw("across"), s.vmark("across"), f"segment {k}'s across")
+            if len(pair) != 2 or pair[0] == pair[1]:
+                raise InputError(s.vmark("across"), f"segment {k}'s across names {len(pair)} landmarks"
+                                 if len(pair) != 2 else f"segment {k}'s across names {pair[0]} twice",
+                                 "across: [FROM, TO], two landmarks: the direction from one to the other")
+            for p, m in zip(pair, item_marks(s.raw("across"), s.vmark("across"))):
+                _known(p, m, points, "landmark")
+            across[k] = pair
+            turn[k] = float(s.number("turn", default=1.0, lo=0.0, hi=1.0))
+        elif s.has("turn"):
+            raise InputError(s.vmark("turn"), f"segment {k} has turn: but no across:",
+                             "turn: the share of the turn its across: landmarks give; give both or neither")
         segments[check_name(k, km, "segment")] = (parent, prox, dist)
     if next(iter(segments.values()))[0] is not None:
         raise InputError(f.vmark("segments"), "the first segment has a parent", "the root segment first (parent: null)")
-    parts = {}
+    parts, fallback = {}, {}
     for k, v, km, vm in _entries(f, "parts"):
-        p = Fields(v, vm, f"part {k}", keys=("segment", "bones"))
+        p = Fields(v, vm, f"part {k}", keys=("segment", "bones", "as"))
         seg = _known(p.name("segment", required=True), p.vmark("segment"), list(segments), "segment")
+        if p.has("as"):
+            fallback[k] = _known(p.name("as"), p.vmark("as"), [q for q in parts if q not in fallback], "part")
         parts[check_name(k, km, "part")] = (seg, bones(p.raw("bones", required=True), p.vmark("bones"),
                                                        f"part {k}'s bones"))
     belly = f.name("lower_belly", required=True)
     marks.setdefault(belly, f.vmark("lower_belly"))
-    return Rig(parts, segments, frozenset(keep), landmarks, centres, belly, marks)
+    return Rig(parts, segments, frozenset(keep), landmarks, centres, belly, marks, fallback, across, turn)
 
 
 @lru_cache(maxsize=None)
@@ -172,6 +190,7 @@ def _family(item, where: Mark, the_rig: Rig) -> Family:
     name = f.name("name", required=True)
     landmarks = _sided(f, "landmarks", list(the_rig.landmarks), "landmark")
     bind = _sided(f, "bind", list(the_rig.parts), "part")
+    bind.update({p: bind[q] for p, q in the_rig.fallback.items() if p not in bind and q in bind})
     unbound = [p for p in the_rig.parts if p not in bind]
     if unbound:
         raise InputError(f.vmark("bind"), f"family {name} binds no bone for part{'s' if len(unbound) > 1 else ''} "
