@@ -326,16 +326,28 @@ def test_a_fast_pose_jiggles_in_bounded_memory_and_no_jiggle_stills_it(tmp_path,
 
 
 def test_a_skin_on_a_skeleton_of_other_proportions_is_refused(tmp_path, capsys):
-    """gait2392 with 1.6 times longer shanks: the shipped skin (no segments:) puts the feet's
-    joints outside it; a skin that records its segments names the shanks and their lengths.
-    Both say how to refit it. Within the tolerance (2% longer) it is worn."""
+    """gait2392 with 1.6 times longer shanks: a skin without segments: (an older skin file)
+    puts the feet's joints outside it; a skin that records its segments (the shipped one, a
+    fresh fit) names the shanks and their lengths. Both say how to refit it. Within the
+    tolerance (2% longer) it is worn."""
     long_ = _skeleton_copy(tmp_path, SKELETON.read_text().replace("offset: [0.0, -0.43, 0.0]",
                                                                   "offset: [0.0, -0.688, 0.0]"))
     pose = _pose_on(tmp_path, long_)
     out = tmp_path / "out"
-    skin_line = _line(SKIN / "skin.yaml", "skeleton")
-    _refused(capsys, _run(out, SKIN / "skin.yaml", pose=pose), f"skin.yaml:{skin_line}:11:",
+    old = tmp_path / "old_skin"
+    shutil.copytree(SKIN, old)
+    text = (old / "skin.yaml").read_text()
+    start = text.index("segments:\n")
+    end = text.index("\n", text.index("\n", start) + 1)
+    while text[end + 1:end + 3] == "  ":  # the indented entries under segments:
+        end = text.index("\n", end + 1)
+    (old / "skin.yaml").write_text(text[:start] + text[end + 1:])
+    assert "segments:" not in (old / "skin.yaml").read_text()
+    skin_line = _line(old / "skin.yaml", "skeleton")
+    _refused(capsys, _run(out, old / "skin.yaml", pose=pose), f"skin.yaml:{skin_line}:11:",
              "lie outside its rest mesh (calcn_r", f"axdf skin --skeleton {long_}")
+    _refused(capsys, _run(out, SKIN / "skin.yaml", pose=pose), "shank_l (tibia_l to talus_l) 0.430 m, here 0.688 m",
+             f"axdf skin --skeleton {long_}")
     rc, _, err = run_main(["skin", "--skeleton", SKELETON, "--out", tmp_path / "fresh", "-q"], capsys)
     assert rc == 0, err
     fresh = tmp_path / "fresh" / "skin.yaml"
