@@ -168,3 +168,36 @@ def test_every_view_shows_the_whole_body_hands_included(built, tmp_path, capsys)
     rc, _, err = run_main(["dataset", "build", cropped, "--out", tmp_path / "out", "--quiet"], capsys)
     assert rc == 0, err
     assert outside(tmp_path / "out") > 0.001
+
+
+def test_the_whole_body_data_set_labels_all_416_muscles(tmp_path, capsys):
+    """poses/datasets/myobody_skin.yaml (myobody_atlas under skins/myobody), built here at its
+    first frame from one view: dataset.json names all 416 muscles, the skin and its parts; the
+    opaque body fills the image whole (every skin vertex inside it, hands included); the
+    muscle-under-skin pass names only those muscles, and many of them (a body, not a few
+    tubes)."""
+    from axdf_cli.dataset.labels import project
+
+    spec = REPO_ROOT / "poses" / "datasets" / "myobody_skin.yaml"
+    text = spec.read_text().replace('frames: "0:248:62"', 'frames: "0:1"').replace("views: 2", "views: 1")
+    assert 'frames: "0:1"' in text and "views: 1" in text
+    one = tmp_path / "one.yaml"
+    one.write_text(re.sub(r"(?<=[ {])((?:\.\./)+)", lambda m: f"{spec.parent}/{m.group(1)}", text))
+    rc, _, err = run_main(["dataset", "build", one, "--out", tmp_path / "out", "--quiet"], capsys)
+    assert rc == 0, err
+    root = tmp_path / "out"
+    meta = json.loads((root / "dataset.json").read_text())
+    muscles = {int(k): v["name"] for k, v in meta["ids"].items() if v["kind"] == "muscle"}
+    assert len(muscles) == 416 and {"DELT1_l", "LAT1", "addmagMid_l"} <= set(muscles.values())
+    skin_id = next(int(k) for k, v in meta["ids"].items() if v["kind"] == "skin")
+    seq = root / "seq_00000"
+    lab = np.load(seq / "labels.npz")
+    ch = read_exr(seq / "views" / str(lab["view_names"][0]) / "0000.exr")
+    skin = ch["id"] == skin_id
+    assert skin.mean() > 0.05
+    under = set(np.unique(ch["under.id"][skin]).tolist()) - {0}
+    assert under <= set(muscles) and len(under) >= 60, len(under)
+    W, H = meta["render"]["size"]
+    pts = load_triangles_and_bytes(seq / "meshes/skin/skin_0000.ply")[0][0][None].astype(np.float64)
+    uv, z = project(lab["K"], lab["world_to_camera"], pts)
+    assert (z > 0).all() and ((uv[..., 0] >= 0) & (uv[..., 0] <= W) & (uv[..., 1] >= 0) & (uv[..., 1] <= H)).all()
