@@ -42,6 +42,7 @@ per_lib = pytest.mark.parametrize("which", [
 def _fitted(which: str) -> set:
     lib, _, _, _, _, reports, _ = LIBS[which]
     return {m["muscle"] for r in reports for m in json.loads((lib / r).read_text())["fitted"]}
+ADDED = ("TRAP1", "TRAP2", "TRAP3", "RHMAJ", "RHMIN", "LEVSCAP")  # atlases/myoarm.yaml's added:
 FOREARM = ("ECRB", "ECRL", "ECU", "EDM", "FCR", "FCU", "PL", "PT", "SUP", "APL", "EPB", "EPL", "FPL", "BRD")
 
 
@@ -52,7 +53,8 @@ def test_library_keeps_every_model_name_and_credits_its_atlas(which):
 
     lib, old_dir, _, _, _, _, suffixes = LIBS[which]
     old = sorted(p.name for p in old_dir.glob("*.yaml"))
-    assert sorted(p.name for p in lib.glob("*.yaml")) == old
+    added = [f"{n}{sfx}.yaml" for n in ADDED for sfx in suffixes]
+    assert sorted(p.name for p in lib.glob("*.yaml")) == sorted(old + added)
     fitted = _fitted(which)
     for sfx in suffixes:
         assert {f"{n}{sfx}" for n in ("DELT1", "DELT2", "DELT3", "PECM1", "PECM2", "PECM3", "LAT1", "LAT2", "LAT3",
@@ -87,12 +89,71 @@ def test_library_lengths_are_the_models_paths(which):
     world = forward_kinematics(skel, q)
     fitted = _fitted(which)
     assert len(fitted) >= 45
-    for name in sorted(fitted):
+    added = set(json.loads((lib / LIBS[which][5][0]).read_text())["added"])  # (no path: theirs is the axis)
+    for name in sorted(fitted - added):
         (new,) = load_muscle_file(lib / f"{name}.yaml")
         (old,) = load_muscle_file(old_dir / f"{name}.yaml")
         line = MuscleModel(new, skel.bone_index, rest, skel).line_length(world, q)
         np.testing.assert_allclose(line, MuscleModel(old, skel.bone_index, rest, skel).axis_length(world, q),
                                    rtol=1e-12, err_msg=name)
+
+
+@needs_lib
+@per_lib
+def test_the_shoulder_girdle_is_added_as_shape_muscles_on_its_bones(which):
+    """The trapezius (three parts), rhomboids and levator scapulae, which myoarm and myobody lack,
+    are in the library as shape muscles: no path (their length is their axis'), the axis from
+    their first bone to their last (trapezius' transverse part: the thorax to the scapula), each
+    within 0.8 IoU of its registered atlas mesh (0.87-0.93 when made), and the README names them."""
+    from axdf_cli.specs import RefPolicy, load_muscle_file, load_skeleton
+    from axdf_cli.tools.tables import load_atlas_map
+
+    lib, _, skeleton, _, _, reports, suffixes = LIBS[which]
+    amap = load_atlas_map(MAP)
+    skel = load_skeleton(skeleton, RefPolicy())
+    fits = {m["muscle"]: m for r in reports for m in json.loads((lib / r).read_text())["fitted"]}
+    upper = json.loads((lib / reports[0]).read_text())
+    assert sorted(upper["added"]) == sorted(n + sfx for n in ADDED for sfx in suffixes)
+    for n in ADDED:
+        for sfx, side in zip(suffixes, ("r", "l")):
+            (spec,) = load_muscle_file(lib / f"{n}{sfx}.yaml")
+            bones = amap.added_bones(n, side, skel.bone_index)
+            assert spec.path is None and spec.axis[0].bone == bones[0] and spec.axis[-1].bone == bones[-1], n
+            assert {p.bone for p in spec.axis} <= set(bones), n
+            assert fits[n + sfx]["iou"] >= 0.8 and 0.9 <= fits[n + sfx]["volume_ratio"] <= 1.1, (n, fits[n + sfx])
+    assert "shape muscles" in (lib / "README.md").read_text() and "TRAP2" in (lib / "README.md").read_text()
+
+
+def _line_col(path: Path, text: str) -> tuple[int, int]:
+    line = next(i for i, t in enumerate(path.read_text().splitlines(), 1) if text in t)
+    return line, path.read_text().splitlines()[line - 1].index("{atlas") + 1
+
+
+@needs_atlas
+@pytest.mark.parametrize("case", ["has it", "no such bone"])
+def test_an_added_muscle_the_model_has_or_on_a_bone_it_lacks_is_refused_at_the_map(tmp_path, capsys, case):
+    import shutil
+
+    from cli_in_folder import run_cli
+
+    lib, amap = OLD, MAP
+    if case == "has it":
+        lib = tmp_path / "lib"
+        shutil.copytree(OLD, lib)
+        shutil.copy(OLD / "DELT1.yaml", lib / "TRAP2.yaml")
+    else:
+        amap = tmp_path / "map.yaml"
+        amap.write_text(MAP.read_text().replace("bones: [torso, scapula]}\n  TRAP3", "bones: [torso, shoulderblade]}\n"
+                                                "  TRAP3"))
+    capsys.readouterr()
+    rc = run_cli(tmp_path, "atlas", str(ATLAS), "--onto", str(SKELETON), "--map", str(amap), "--muscles", str(lib),
+                 "--sides", "r", "--out", "out", "--quiet")
+    err = capsys.readouterr().err
+    assert rc == 2 and "Traceback" not in err and not (tmp_path / "out").exists(), err
+    line, col = _line_col(amap, "  TRAP2: {atlas")
+    assert err.startswith(f"{amap}:{line}:{col}: added muscle TRAP2: "), err
+    assert ("has TRAP2.yaml already; added: names muscles the model lacks" in err if case == "has it" else
+            "bone 'shoulderblade' is not a bone with a mesh of" in err), err
 
 
 @needs_atlas
@@ -180,7 +241,7 @@ RAISE = REPO / "poses" / "jobs" / "myobody_atlas_raise.yaml"
 
 @pytest.mark.skipif(not (BODY.is_dir() and SKIN.is_file()), reason="make atlas-myobody, then make skin")
 def _under_the_skin(job: Path, frames: tuple, tmp_path: Path, capsys, monkeypatch) -> list:
-    """Run ``job`` at ``frames`` (all 416 atlas muscles, contact, skins/myobody) and measure each
+    """Run ``job`` at ``frames`` (all 416 atlas muscles and the 12 added, contact, skins/myobody) and measure each
     written frame by libigl's winding numbers: (frame, share of the muscle vertices outside the
     skin, share of the bones' mesh vertices outside it, placed by the run's bones.csv), after
     checking the skin keeps its volume within 3%."""
@@ -202,7 +263,8 @@ def _under_the_skin(job: Path, frames: tuple, tmp_path: Path, capsys, monkeypatc
     plan = plan_run(load_job(job), frames_arg=str(frames[0]))
     names = {i: n for n, i in plan.pose.skeleton.bone_index.items()}
     rows = list(csv.DictReader((run / "stats.csv").open()))
-    assert len({r["muscle"] for r in rows}) == 416 and len(rows) == 416 * len(frames)
+    n = 416 + 2 * len(ADDED)  # (myobody's muscles and the shoulder girdle's added ones)
+    assert len({r["muscle"] for r in rows}) == n and len(rows) == n * len(frames)
     skin = list(csv.DictReader((run / "skin.csv").open()))
     assert [int(r["frame"]) for r in skin] == list(frames)
     assert all(abs(float(r["volume_ratio"]) - 1) <= 0.03 for r in skin), skin
@@ -227,7 +289,7 @@ def _under_the_skin(job: Path, frames: tuple, tmp_path: Path, capsys, monkeypatc
 
 def test_the_whole_body_walks_under_its_skin(tmp_path, capsys, monkeypatch):
     """skins/myobody (make skin: MakeHuman's body pushed over muscles/myobody_atlas) validates as
-    a skin of myobody, and poses/jobs/myobody_atlas_walk.yaml runs all 416 atlas muscles with
+    a skin of myobody, and poses/jobs/myobody_atlas_walk.yaml runs all 416 atlas muscles (and the 12 added) with
     contact under it: at the walk's first frame and mid-stride, by winding numbers, at most 0.5%
     of the muscle vertices lie outside the skin (measured: 0.001-0.002%), at most 0.1% of the
     bones' mesh vertices do (measured: none of 132,063; the fingers and patellae were 2.6-6.7%

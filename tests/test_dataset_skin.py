@@ -172,7 +172,8 @@ def test_every_view_shows_the_whole_body_hands_included(built, tmp_path, capsys)
 
 def test_the_whole_body_data_set_labels_all_416_muscles(tmp_path, capsys):
     """poses/datasets/myobody_skin.yaml (myobody_atlas under skins/myobody), built here at its
-    first frame from one view: dataset.json names all 416 muscles, the skin and its parts; the
+    first frame from one view: dataset.json names all 416 muscles (and the 12 shape muscles of
+    the shoulder girdle the atlas adds), the skin and its parts; the
     opaque body fills the image whole (every skin vertex inside it, hands included); the
     muscle-under-skin pass names only those muscles, and many of them (a body, not a few
     tubes)."""
@@ -188,7 +189,7 @@ def test_the_whole_body_data_set_labels_all_416_muscles(tmp_path, capsys):
     root = tmp_path / "out"
     meta = json.loads((root / "dataset.json").read_text())
     muscles = {int(k): v["name"] for k, v in meta["ids"].items() if v["kind"] == "muscle"}
-    assert len(muscles) == 416 and {"DELT1_l", "LAT1", "addmagMid_l"} <= set(muscles.values())
+    assert len(muscles) == 416 + 12 and {"DELT1_l", "LAT1", "addmagMid_l", "TRAP2_l"} <= set(muscles.values())
     skin_id = next(int(k) for k, v in meta["ids"].items() if v["kind"] == "skin")
     seq = root / "seq_00000"
     lab = np.load(seq / "labels.npz")

@@ -181,6 +181,19 @@ def test_a_broken_atlas_map_is_refused_where_it_is(tmp_path, old, new, token, sa
     assert says in str(err)
 
 
+MYOARM_MAP = ATLAS_MAP.parent / "myoarm.yaml"
+
+
+@pytest.mark.parametrize("old,new,token,says", [
+    ("  RHMIN: {atlas:", "  RHMIN: {atlass:", "atlass", "unknown key 'atlass' in added muscle RHMIN"),
+    ("bones: [neck, scapula]}", "bones: neck}", "neck}", "added muscle LEVSCAP's bones is not a list"),
+    ("  RHMAJ: {atlas:", "  DELT1: {atlas:", "DELT1: {", "added muscle DELT1 is named twice"),
+])
+def test_a_broken_added_muscle_is_refused_where_it_is(tmp_path, old, new, token, says):
+    err = refused(T.load_atlas_map, *broken(tmp_path, MYOARM_MAP, old, new, token))
+    assert says in str(err)
+
+
 def test_atlas_map_of_bodyparts3d_resolves_every_file():
     """atlases/myoarm.yaml: side words in names, a globbed pattern, centroid landmarks and
     suffixes per side; every landmark's and warped bone's file and every muscle resolves to one
@@ -202,7 +215,12 @@ def test_atlas_map_of_bodyparts3d_resolves_every_file():
         pytest.skip("no BodyParts3D atlas in ../shared/data")
     atlas = Atlas(root, m)
     atlas.check(["r", "l"])
-    for src in list(m.muscles.values()) + [a for a, _ in m.split.values()]:
+    # the shoulder girdle's muscles myoarm lacks: shape muscles on their bones
+    assert m.added["TRAP2"] == (("Transverse_part_of_{side}_trapezius",), ("torso", "scapula"))
+    assert set(m.added) == {"TRAP1", "TRAP2", "TRAP3", "RHMAJ", "RHMIN", "LEVSCAP"}
+    assert m.added_bones("TRAP1", "l", {"head", "neck", "clavicle_l"}) == ["head", "neck", "clavicle_l"]
+    assert m.added_bones("TRAP1", "l", {"head", "neck", "clavicle_r"}) is None
+    for src in list(m.muscles.values()) + [a for a, _ in m.split.values()] + [a for a, _ in m.added.values()]:
         for side in ("r", "l"):
             assert atlas.path(side, "Muscle", src[0]).is_file(), (side, src)
     assert atlas.path("l", "Muscle", "Clavicular_part_of_{side}_deltoid").name == "FMA34681_Clavicular_part_of_left_deltoid.ply"

@@ -68,6 +68,33 @@ def path_ends(folder: Path, name: str, skel, rest: np.ndarray, pieces: dict) -> 
     return tuple(ends)
 
 
+def bone_ends(points: np.ndarray, names: list[str], bones: dict) -> tuple[np.ndarray, np.ndarray]:
+    """The two ends of an added muscle's points (P, 3, world at rest): the mean of those nearer
+    its first bone's mesh than any other of its bones' (``names``; ``bones``: name -> (V, F)),
+    and of those nearer its last's."""
+    import igl
+
+    d = np.stack([igl.point_mesh_squared_distance(points, bones[n][0], bones[n][1].astype(np.int64))[0]
+                  for n in names], axis=1)
+    near = np.argmin(d, axis=1)
+    return tuple(points[near == k].mean(axis=0) if (near == k).any() else points[np.argmin(d[:, k])]
+                 for k in (0, len(names) - 1))
+
+
+def added_ends(points: np.ndarray, names: list[str], skel, bones: dict, pieces: dict) -> tuple:
+    """An added muscle's two ends for :meth:`~axdf_cli.tools.atlas.Registration.along`, as
+    :func:`path_ends` gives a model muscle's: each end's registered bone (its first or last bone,
+    or that bone's nearest ancestor among ``pieces``; None for none, e.g. the thorax) and the
+    point (:func:`bone_ends`)."""
+    out = []
+    for name, x in zip((names[0], names[-1]), bone_ends(points, names, bones)):
+        i = skel.bone_index[name]
+        while i >= 0 and skel.bones[i].name not in pieces:
+            i = skel.bones[i].parent
+        out.append((skel.bones[i].name if i >= 0 else None, x))
+    return tuple(out)
+
+
 def split_parts(v: np.ndarray, f: np.ndarray, centres: np.ndarray, spacing: float) -> list[tuple]:
     """A closed mesh (V, F) cut into len(centres) closed parts by planes across the line from
     the first centre to the last, each halfway between neighbouring centres' projections:
@@ -198,7 +225,8 @@ def registered_meshes(atlas: at.Atlas, skel, rest, bones: dict, old: Path, sides
             side_rep["tib_ant_inside_tibia"] = {"landmarks": inside_share(*tib, reg.apply(tv, warp=False)),
                                                 "warp": inside_share(*tib, reg.apply(tv))}
         jobs = [(m, [m], list(src)) for m, src in names.muscles.items()] + \
-               [(g, list(parts), list(src)) for g, (src, parts) in names.split.items()]
+               [(g, list(parts), list(src)) for g, (src, parts) in names.split.items()] + \
+               [(m, [m], list(src)) for m, (src, _) in names.added.items()]
         for key, parts, src in jobs:
             p = find_atlas(atlas, side, src)
             if p is None:
@@ -206,10 +234,16 @@ def registered_meshes(atlas: at.Atlas, skel, rest, bones: dict, old: Path, sides
             closed = any(atlas.path(side, "Muscle", n) == p for n in names.close)
             v, fc = at.read_atlas_mesh(p, closed=not closed)
             # an articulated map carries each muscle with the bones of its ends (a split group's:
-            # its first part's origin, its last part's insertion)
-            w = reg.apply(v) if not reg.pieces else reg.along(v, (
-                path_ends(old, names.muscle_name(parts[0], side), skel, rest, reg.pieces)[0],
-                path_ends(old, names.muscle_name(parts[-1], side), skel, rest, reg.pieces)[1]))
+            # its first part's origin, its last part's insertion; an added muscle's: its first and
+            # last bone's)
+            if not reg.pieces:
+                w = reg.apply(v)
+            elif key in names.added:
+                w = reg.along(v, added_ends(reg.rigid(v), names.added_bones(key, side, skel.bone_index), skel, bones,
+                                            reg.pieces))
+            else:
+                w = reg.along(v, (path_ends(old, names.muscle_name(parts[0], side), skel, rest, reg.pieces)[0],
+                                  path_ends(old, names.muscle_name(parts[-1], side), skel, rest, reg.pieces)[1]))
             kept = None if closed else round(signed_volume(w, fc) / signed_volume(reg.apply(v, warp=False), fc), 3)
             if closed:  # an open surface: closed by its winding numbers on a grid
                 w, fc = split_parts(w, fc, np.zeros((1, 3)), tol.ATLAS_SPLIT_SPACING)[0]
@@ -259,6 +293,28 @@ def _check_model(atlas: at.Atlas, old: Path, sides) -> None:
                                      "a muscle of the model's library (--muscles), without its side suffix")
 
 
+def _check_added(atlas: at.Atlas, old: Path, sides, skel, bones: dict) -> dict:
+    """Refuse, at the map's line, an added muscle the model has already or whose bones the
+    skeleton lacks or has no mesh of; else each added muscle's name on each side -> its bones."""
+    out = {}
+    for key, (_, names) in atlas.map.added.items():
+        where = atlas.map.marks.get(("muscle", key), Mark(atlas.map.path))
+        for side in sides:
+            name = atlas.map.muscle_name(key, side)
+            if (Path(old) / f"{name}.yaml").is_file():
+                raise InputError(where, f"added muscle {key}: {old} has {name}.yaml already",
+                                 "added: names muscles the model lacks (a model muscle goes in muscles: or split:)")
+            got = atlas.map.added_bones(key, side, bones)  # (bones with meshes)
+            if got is None:
+                lack = next(b for b in names if not {atlas.map.bone_name(b, side), b} & set(bones))
+                raise InputError(where, f"added muscle {key}: bone {lack!r} is not a bone with a mesh of "
+                                 f"{skel.name} on side {side}",
+                                 "bones of the skeleton with meshes, without the side suffix (a midline bone as "
+                                 "it is), the origin's first and the insertion's last")
+            out[name] = got
+    return out
+
+
 def build_library(atlas: at.Atlas, skeleton_path: Path, old: Path, sides=("r",), sections: int | None = None,
                   on_muscle=None, on_phase=None, fit: bool = True, partition: bool = False) -> tuple[dict, dict]:
     """What ``axdf atlas`` writes (path relative to its folder -> bytes) and the report:
@@ -278,6 +334,7 @@ def build_library(atlas: at.Atlas, skeleton_path: Path, old: Path, sides=("r",),
     atlas.check(sides)
     _check_model(atlas, old, sides)
     skel, rest, bones = rest_state(skeleton_path)
+    added = _check_added(atlas, old, sides, skel, bones)
     report = {"atlas": str(Path(atlas.root).name), "map": Path(atlas.map.path).name, "skeleton": skeleton_path.name,
               "sides": {}, "fitted": [], "failed": [], "kept": []}
     files: dict[str, bytes] = {}
@@ -305,7 +362,10 @@ def build_library(atlas: at.Atlas, skeleton_path: Path, old: Path, sides=("r",),
                 out.write_bytes(files[f"{folder}/{name}.ply"])
                 meshes.append(out)
             tell(f"fitting {len(meshes)} muscles" + (" into their territories" if partition else ""))
-            res = build_fit(meshes, skeleton_path, "m", sections, on_muscle=on_muscle, paths=old, inside=partition)
+            source = {name: pv for name, pv, _ in carried}
+            shape = {name: (bs, bone_ends(source[name], bs, bones)[0]) for name, bs in added.items() if name in source}
+            res = build_fit(meshes, skeleton_path, "m", sections, on_muscle=on_muscle, paths=old, inside=partition,
+                            added=shape)
         if partition:
             _measure_against_atlas(res, carried, skel, rest)
         # a fit below the bar is refused (the model's own muscle copied instead), but not a fit
@@ -320,6 +380,7 @@ def build_library(atlas: at.Atlas, skeleton_path: Path, old: Path, sides=("r",),
                 files[rel] = data
         report["fitted"] = [m for m in res.report["muscles"] if m["muscle"] not in failed]
         report["failed"] = [m for m in res.report["muscles"] if m["muscle"] in failed]
+        report["added"] = sorted(m["muscle"] for m in report["fitted"] if m["muscle"] in added)
         for p in sorted(old.glob("*.yaml")):
             if f"{LIBRARY}/{p.name}" not in files:
                 files[f"{LIBRARY}/{p.name}"] = p.read_bytes()
@@ -353,7 +414,10 @@ def library_readme(atlas: at.Atlas, skel, old: Path, sides, report: dict) -> str
             + ("(landmarks, then each bone placed rigidly on the model's and each muscle carried by the bones "
                "of its ends) " if atlas.map.articulated else "(landmarks, then a thin-plate warp onto the model's "
                "bones) ") + "and fitted as axis muscles under "
-            f"{skel.name}'s names. {len(report['fitted'])} are fitted; the rest ({len(report['kept'])}: the sides not "
+            f"{skel.name}'s names. {len(report['fitted'])} are fitted"
+            + (f", {len(report['added'])} of them shape muscles {skel.name} lacks, added on their bones without a "
+               f"path (their length is their axis'): {', '.join(report['added'])}" if report.get("added") else "")
+            + f"; the rest ({len(report['kept'])}: the sides not "
             f"registered, what the atlas lacks and the fits that did not hold) are copied from {old.name}. "
             "atlas_report.json holds the registration's residuals and each fit's error.\n\n"
             f"## Credit\n\n{credit}\n")

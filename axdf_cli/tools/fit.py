@@ -157,13 +157,14 @@ def tendon_fractions(areas: np.ndarray, arc: np.ndarray) -> tuple[float, float]:
 
 
 def fit_one(mesh, name: str, n_sections: int, skel: Skeleton, rest: np.ndarray, geometry: list,
-            origin: np.ndarray | None = None, line=None, color=None, bound=None):
+            origin: np.ndarray | None = None, line=None, color=None, bound=None, shape: bool = False):
     """One mesh (metres) → (the muscle's YAML text, its report entry without the measures).
     ``origin``: a world point the axis starts at the end nearer to (a model's origin);
     ``line``: a model's path (:class:`~axdf_cli.model.paths.PathSpec`), written beside the
     fitted axis as the muscle's line of action (its length, as the model's); ``color``: the
     muscle's colour (default: :func:`default_color` of its name); ``bound``: a territory the
-    surface stays inside (:func:`~axdf_cli.tools.fit_sections.fit_rows`)."""
+    surface stays inside (:func:`~axdf_cli.tools.fit_sections.fit_rows`); ``shape``: a muscle the
+    model lacks (its header says so: no path, its length is its axis')."""
     import trimesh
 
     samples, face = trimesh.sample.sample_surface(mesh, tol.FIT_SAMPLES, seed=tol.FIT_SEED)
@@ -193,7 +194,8 @@ def fit_one(mesh, name: str, n_sections: int, skel: Skeleton, rest: np.ndarray, 
                       tuple(Section(float(t), None, 0.0, tuple((float(a), float(b)) for a, b in o))
                             for t, o in zip(sec_t, xy)),
                       tendons=tendons, resolution=(along, tol.FIT_OUTPUT_AROUND), path=line)
-    kept = "; its path, the model's line of action" if line is not None else ""
+    kept = "; its path, the model's line of action" if line is not None else \
+        "; a shape muscle the model lacks: no path, its length is its axis'" if shape else ""
     text = emit.dump_yaml(emit.rounded(muscle_doc(spec)),
                           header=f"{name}: fitted by `axdf fit` to its mesh ({n_sections} sections{kept}; "
                                  f"report: {REPORT}).")
@@ -241,9 +243,11 @@ def bone_gap(points: np.ndarray, geometry: list) -> tuple[float, int]:
     return float(np.sqrt(best)), which
 
 
-def _read_all(mesh_paths, scale, transform, skel, rest, geometry, paths, policy, units) -> tuple:
+def _read_all(mesh_paths, scale, transform, skel, rest, geometry, paths, policy, units, added=None) -> tuple:
     """Every mesh read and checked (with its muscle name and, under ``paths``, its model's
-    bones) before any is fitted; every refusal of the batch at once."""
+    bones; ``added``'s muscles: their given bones and origin) before any is fitted; every
+    refusal of the batch at once."""
+    added = added or {}
     meshes, names, errors, allowed = [], {}, [], {}
     for p in map(Path, mesh_paths):
         try:
@@ -263,7 +267,10 @@ def _read_all(mesh_paths, scale, transform, skel, rest, geometry, paths, policy,
                                  "--muscles DIR --out DIR --register-only`, then fit DIR/registered/*.ply; docs/ATLAS.md), "
                                  "or carry them with --transform FILE (a 4x4 matrix into the rest frame; docs/FIT.md, "
                                  f"\"Meshes in another frame\"), or check --units (now {units})")
-            if paths is not None:
+            if name in added:  # a shape muscle the model lacks: no path, its own bones
+                bones, origin = added[name]
+                allowed[name] = ({skel.bone_index[b] for b in bones}, np.asarray(origin, dtype=np.float64), None, None)
+            elif paths is not None:
                 allowed[name] = model_bones(paths, name, skel, rest, policy)
             meshes.append((p, name, got))
         except InputError as e:
@@ -274,7 +281,7 @@ def _read_all(mesh_paths, scale, transform, skel, rest, geometry, paths, policy,
 
 def build_fit(mesh_paths: list[Path], skeleton_path: Path | str, units: str = "m", sections: int | None = None,
               policy: RefPolicy | None = None, on_muscle=None, paths: Path | None = None,
-              transform: Path | None = None, inside: bool = False) -> FitOutputs:
+              transform: Path | None = None, inside: bool = False, added: dict | None = None) -> FitOutputs:
     """Fit every mesh; the bytes of ``muscles/STEM.yaml`` per mesh, the report's two files.
     Every mesh is read and checked before any is fitted, and every refusal is raised at once
     (one :class:`~axdf_cli.errors.InputErrors`). ``on_muscle(name, entry)`` is told as each fit
@@ -284,7 +291,8 @@ def build_fit(mesh_paths: list[Path], skeleton_path: Path | str, units: str = "m
     ``inside``: each fit is kept inside its own mesh (:func:`fit_one`'s ``bound``: the mesh's
     :class:`~axdf_cli.geometry.partition.MeshField`), and the report says how far it is not.
     For meshes that share no space (``axdf atlas --partition``'s territories) the fits then
-    share none either."""
+    share none either. ``added``: muscles the model lacks (``axdf atlas``'s ``added:``), name ->
+    (the bones they bind to, a world point their axis starts near): fitted without a path."""
     scale = unit_scale(units)
     n = tol.FIT_SECTIONS_DEFAULT if sections is None else sections
     if not tol.FIT_SECTIONS_MIN <= n <= tol.FIT_SECTIONS_MAX:
@@ -295,7 +303,7 @@ def build_fit(mesh_paths: list[Path], skeleton_path: Path | str, units: str = "m
     skel = load_skeleton(skeleton_path, policy or RefPolicy())
     rest = forward_kinematics(skel, skel.rest_coordinates()[None])[0]
     geometry = bone_geometry(skel, rest, skeleton_path)
-    meshes, allowed = _read_all(mesh_paths, scale, matrix, skel, rest, geometry, paths, policy, units)
+    meshes, allowed = _read_all(mesh_paths, scale, matrix, skel, rest, geometry, paths, policy, units, added)
     files: dict[str, bytes] = {}
     entries = []
     for p, name, got in meshes:
@@ -307,7 +315,7 @@ def build_fit(mesh_paths: list[Path], skeleton_path: Path | str, units: str = "m
             if all(g is None for g in own):  # the path's bones have no meshes: their segments then
                 own = [g if i in keep else None for i, g in enumerate(bone_geometry(skel, rest, skeleton_path, False))]
         bound = MeshField(mesh.vertices, mesh.faces) if inside else None
-        text, entry = fit_one(mesh, name, n, skel, rest, own, origin, line, color, bound)
+        text, entry = fit_one(mesh, name, n, skel, rest, own, origin, line, color, bound, shape=name in (added or {}))
         rel = f"muscles/{name}.yaml"
         entry.update({"file": rel, "mesh": p.name})
         if got.dropped:
@@ -325,7 +333,8 @@ def build_fit(mesh_paths: list[Path], skeleton_path: Path | str, units: str = "m
     files[REPORT] = (json.dumps(report, indent=1, sort_keys=True) + "\n").encode()
     files[SUMMARY] = summary(report).encode()
     inputs = [skeleton_path] + [Path(b.mesh) for b in skel.bones if b.mesh] + [p for p, _, _ in meshes] + \
-        [Path(paths) / f"{name}.yaml" for name in allowed] + ([Path(transform)] if transform is not None else [])
+        [Path(paths) / f"{name}.yaml" for name in allowed if name not in (added or {})] + \
+        ([Path(transform)] if transform is not None else [])
     return FitOutputs(files, report, [str(p) for p in inputs])
 
 

@@ -278,6 +278,7 @@ class AtlasMap:
     suffixes: dict = field(default_factory=dict)  # side -> (the model muscles' suffix, the model bones')
     close: tuple = ()  # atlas muscles that are open surfaces, closed by their winding numbers
     articulated: bool = False  # each atlas bone first placed rigidly on its model bone, then the warp
+    added: dict = field(default_factory=dict)  # shape muscle the model lacks -> (atlas muscles, its bones)
 
     def muscle_name(self, name: str, side: str) -> str:
         """A model muscle's name on a side (its suffix added)."""
@@ -290,6 +291,17 @@ class AtlasMap:
         if sfx[side]:
             return name.endswith(sfx[side])
         return not any(v and name.endswith(v) for s, v in sfx.items() if s != side)
+
+    def added_bones(self, name: str, side: str, bones) -> list[str] | None:
+        """An added muscle's bones on a side as the skeleton (``bones``: its bone names) names
+        them: each with the side's suffix, or as written (a midline bone); None if one is neither."""
+        out = []
+        for b in self.added[name][1]:
+            got = next((c for c in (self.bone_name(b, side), b) if c in bones), None)
+            if got is None:
+                return None
+            out.append(got)
+        return out
 
     def bone_name(self, name: str, side: str, midline: bool = False) -> str:
         """A model bone's name on a side (its suffix added, unless a midline bone)."""
@@ -320,7 +332,7 @@ def load_atlas_map(path: Path | str) -> AtlasMap:
         raise InputError(Mark(path), "atlas map not found", "a YAML atlas map (atlases/gait2392.yaml shows one)")
     f = Fields(load_yaml(path), Mark(path), "the atlas map",
                keys=("files", "credit", "muscles", "split", "kept", "unused", "sides", "landmarks", "bones", "close",
-                     "articulated"))
+                     "articulated", "added"))
     marks: dict = {"files": f.vmark("files"), "sides": f.vmark("sides"), "landmarks": f.vmark("landmarks")}
     files = f.string("files", required=True)
     import string
@@ -344,7 +356,7 @@ def load_atlas_map(path: Path | str) -> AtlasMap:
     def once(name, where: Mark, what: str):
         if name in model:
             raise InputError(where, f"{what} {name} is named twice (first at line {model[name].line})",
-                             "each model muscle once, in one of muscles:, split: parts and kept:")
+                             "each muscle once, in one of muscles:, split: parts, added: and kept:")
         model[name] = where
 
     most = tol.ATLAS_MAX_NAMES
@@ -362,6 +374,14 @@ def load_atlas_map(path: Path | str) -> AtlasMap:
             once(q, qm, f"split {k}'s part")
         split[check_name(k, km, "group")] = (_atlas_names(s.raw("atlas", required=True), s.vmark("atlas"), "atlas", most),
                                              parts)
+    added = {}
+    for k, v, km, vm in _entries(f, "added", optional=True, most=tol.ATLAS_MAX_MUSCLES):
+        once(k, km, "added muscle")
+        marks[("muscle", k)] = vm
+        a = Fields(v, vm, f"added muscle {k}", keys=("atlas", "bones"))
+        added[check_name(k, km, "muscle")] = (
+            _atlas_names(a.raw("atlas", required=True), a.vmark("atlas"), "atlas", most),
+            _names(a.raw("bones", required=True), a.vmark("bones"), f"added muscle {k}'s bones", most))
     sides, suffixes = {}, {}
     for k, v, km, vm in _entries(f, "sides"):
         side = _known(k, km, ("r", "l"), "side")
@@ -408,7 +428,7 @@ def load_atlas_map(path: Path | str) -> AtlasMap:
     close = _atlas_names(f.raw("close", default=[]), f.vmark("close") if f.has("close") else Mark(path), "close",
                          most=tol.ATLAS_MAX_MUSCLES, empty=True)
     return AtlasMap(muscles, split, kept, unused, sides, landmarks, tuple(bones), files, credit, path, marks,
-                    suffixes, close, f.boolean("articulated", default=False))
+                    suffixes, close, f.boolean("articulated", default=False), added)
 
 
 def _suffix(f: Fields, key: str, default: str) -> str:
