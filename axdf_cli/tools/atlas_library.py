@@ -295,7 +295,8 @@ def _check_model(atlas: at.Atlas, old: Path, sides) -> None:
 
 def _check_added(atlas: at.Atlas, old: Path, sides, skel, bones: dict) -> dict:
     """Refuse, at the map's line, an added muscle the model has already or whose bones the
-    skeleton lacks or has no mesh of; else each added muscle's name on each side -> its bones."""
+    skeleton lacks or has no mesh of; else each added muscle's name on each side -> (its bones,
+    the map's name)."""
     out = {}
     for key, (_, names) in atlas.map.added.items():
         where = atlas.map.marks.get(("muscle", key), Mark(atlas.map.path))
@@ -311,7 +312,7 @@ def _check_added(atlas: at.Atlas, old: Path, sides, skel, bones: dict) -> dict:
                                  f"{skel.name} on side {side}",
                                  "bones of the skeleton with meshes, without the side suffix (a midline bone as "
                                  "it is), the origin's first and the insertion's last")
-            out[name] = got
+            out[name] = (got, key)
     return out
 
 
@@ -327,6 +328,7 @@ def build_library(atlas: at.Atlas, skeleton_path: Path, old: Path, sides=("r",),
     and the report's ``partition`` (axdf_cli/tools/atlas_partition.py); the library is then
     fitted to the territories, each fit kept inside its own (``axdf fit --inside``), and
     measured against the registered mesh as well (each fit's ``atlas``)."""
+    from axdf_cli.specs.muscle import default_color
     from axdf_cli.tools.fit import build_fit
 
     tell = on_phase or (lambda text: None)
@@ -363,7 +365,9 @@ def build_library(atlas: at.Atlas, skeleton_path: Path, old: Path, sides=("r",),
                 meshes.append(out)
             tell(f"fitting {len(meshes)} muscles" + (" into their territories" if partition else ""))
             source = {name: pv for name, pv, _ in carried}
-            shape = {name: (bs, bone_ends(source[name], bs, bones)[0]) for name, bs in added.items() if name in source}
+            # (a side's colour is the other's, as the model's muscles are: that of the map's name)
+            shape = {name: (bs, bone_ends(source[name], bs, bones)[0], default_color(key))
+                     for name, (bs, key) in added.items() if name in source}
             res = build_fit(meshes, skeleton_path, "m", sections, on_muscle=on_muscle, paths=old, inside=partition,
                             added=shape)
         if partition:

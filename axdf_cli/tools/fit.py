@@ -268,8 +268,8 @@ def _read_all(mesh_paths, scale, transform, skel, rest, geometry, paths, policy,
                                  "or carry them with --transform FILE (a 4x4 matrix into the rest frame; docs/FIT.md, "
                                  f"\"Meshes in another frame\"), or check --units (now {units})")
             if name in added:  # a shape muscle the model lacks: no path, its own bones
-                bones, origin = added[name]
-                allowed[name] = ({skel.bone_index[b] for b in bones}, np.asarray(origin, dtype=np.float64), None, None)
+                bones, origin, color = added[name]
+                allowed[name] = ({skel.bone_index[b] for b in bones}, np.asarray(origin, dtype=np.float64), None, color)
             elif paths is not None:
                 allowed[name] = model_bones(paths, name, skel, rest, policy)
             meshes.append((p, name, got))
@@ -292,7 +292,7 @@ def build_fit(mesh_paths: list[Path], skeleton_path: Path | str, units: str = "m
     :class:`~axdf_cli.geometry.partition.MeshField`), and the report says how far it is not.
     For meshes that share no space (``axdf atlas --partition``'s territories) the fits then
     share none either. ``added``: muscles the model lacks (``axdf atlas``'s ``added:``), name ->
-    (the bones they bind to, a world point their axis starts near): fitted without a path."""
+    (the bones they bind to, a world point their axis starts near, their colour): fitted without a path."""
     scale = unit_scale(units)
     n = tol.FIT_SECTIONS_DEFAULT if sections is None else sections
     if not tol.FIT_SECTIONS_MIN <= n <= tol.FIT_SECTIONS_MAX:

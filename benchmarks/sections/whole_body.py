@@ -1,6 +1,6 @@
 """Row 14, whole_body: a frame of the whole body (poses/jobs/myobody_atlas_walk.yaml: myobody's
-416 atlas muscles on the CMU walk, contact on, under skins/myobody) beside a frame of gait2392's
-(poses/jobs/gait2392_walk_skin.yaml: 92 packed muscles on the measured walk under
+416 atlas muscles and 12 added, on the CMU walk, contact on, under skins/myobody) beside a
+frame of gait2392's (poses/jobs/gait2392_walk_skin.yaml: 92 packed muscles on the measured walk under
 skins/gait2392), each through ``evaluate_plan``: the muscles alone, with contact, and with
 contact and the skin, ms per frame (the skin stage's start, once per run, left out). The
 target: the whole body's full frame at most 5x gait2392's."""
