@@ -61,11 +61,17 @@ def path_ends(folder: Path, name: str, skel, rest: np.ndarray, pieces: dict) -> 
     ends = []
     for p in (pts[0], pts[-1]):
         i = skel.bone_index[p.bone]
-        x = rest[i, :3, :3] @ np.asarray(p.at) + rest[i, :3, 3]
-        while i >= 0 and skel.bones[i].name not in pieces:
-            i = skel.bones[i].parent
-        ends.append((skel.bones[i].name if i >= 0 else None, x))
+        ends.append((moving_piece(skel, p.bone, pieces), rest[i, :3, :3] @ np.asarray(p.at) + rest[i, :3, 3]))
     return tuple(ends)
+
+
+def moving_piece(skel, bone: str, pieces: dict) -> str | None:
+    """The registered bone a model bone moves with: itself or its nearest ancestor among
+    ``pieces``; None where there is none (the thorax)."""
+    i = skel.bone_index[bone]
+    while i >= 0 and skel.bones[i].name not in pieces:
+        i = skel.bones[i].parent
+    return skel.bones[i].name if i >= 0 else None
 
 
 def bone_ends(points: np.ndarray, names: list[str], bones: dict) -> tuple[np.ndarray, np.ndarray]:
@@ -86,13 +92,8 @@ def added_ends(points: np.ndarray, names: list[str], skel, bones: dict, pieces: 
     :func:`path_ends` gives a model muscle's: each end's registered bone (its first or last bone,
     or that bone's nearest ancestor among ``pieces``; None for none, e.g. the thorax) and the
     point (:func:`bone_ends`)."""
-    out = []
-    for name, x in zip((names[0], names[-1]), bone_ends(points, names, bones)):
-        i = skel.bone_index[name]
-        while i >= 0 and skel.bones[i].name not in pieces:
-            i = skel.bones[i].parent
-        out.append((skel.bones[i].name if i >= 0 else None, x))
-    return tuple(out)
+    return tuple((moving_piece(skel, name, pieces), x)
+                 for name, x in zip((names[0], names[-1]), bone_ends(points, names, bones)))
 
 
 def split_parts(v: np.ndarray, f: np.ndarray, centres: np.ndarray, spacing: float) -> list[tuple]:
